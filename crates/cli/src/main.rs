@@ -1,0 +1,3 @@
+//! The `volmorph` command-line tool.
+
+fn main() {}

@@ -1,0 +1,1 @@
+//! volmorph-mesh: Indexed polygon meshes, OBJ/STL/PLY/OFF, normals and validation.

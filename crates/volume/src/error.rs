@@ -1,0 +1,65 @@
+use volmorph_io::IoError;
+
+/// Errors of volume construction, sampling and file I/O.
+#[derive(Debug, thiserror::Error)]
+pub enum VolumeError {
+    /// Reading or writing bytes failed (includes truncation and impossible sizes).
+    #[error(transparent)]
+    Io(#[from] IoError),
+    /// The geometry is unusable: zero dims, non-positive or non-finite spacing, singular or
+    /// non-finite direction, non-finite origin.
+    #[error("invalid geometry: {0}")]
+    Geometry(String),
+    /// A data buffer does not have one value per voxel.
+    #[error("data has {got} values but dims {dims:?} need {expected}")]
+    LengthMismatch {
+        /// Volume dims.
+        dims: [usize; 3],
+        /// Voxel count the dims imply.
+        expected: usize,
+        /// Values supplied.
+        got: usize,
+    },
+    /// A file is malformed for its format.
+    #[error("{format}: {message}")]
+    Format {
+        /// Format name ("NIfTI-1", "MetaImage", …).
+        format: &'static str,
+        /// What is wrong, in terms of the file's own fields.
+        message: String,
+    },
+    /// A valid file uses a feature volmorph does not handle (e.g. a 5-D NIfTI image).
+    #[error("unsupported: {0}")]
+    Unsupported(String),
+    /// An error attributed to a file path.
+    #[error("{path}: {source}")]
+    File {
+        /// The file concerned.
+        path: String,
+        /// What went wrong.
+        #[source]
+        source: Box<VolumeError>,
+    },
+}
+
+impl VolumeError {
+    /// Shorthand for a [`VolumeError::Format`] error.
+    pub fn format(format: &'static str, message: impl Into<String>) -> Self {
+        Self::Format {
+            format,
+            message: message.into(),
+        }
+    }
+
+    /// Attach a file path to this error (no-op if it already carries one).
+    #[must_use]
+    pub fn at(self, path: &std::path::Path) -> Self {
+        match self {
+            e @ Self::File { .. } => e,
+            e => Self::File {
+                path: path.display().to_string(),
+                source: Box::new(e),
+            },
+        }
+    }
+}

@@ -1,0 +1,22 @@
+//! Sampled volumes with physical geometry.
+//!
+//! * [`Geometry`] — dims, spacing, origin and 3×3 direction, ITK convention:
+//!   `physical = origin + direction · (spacing ⊙ index)`, x fastest in memory.
+//! * [`Volume<T>`] — a typed voxel array on a [`Geometry`]; [`AnyVolume`] when the type is only
+//!   known at run time (files).
+//! * [`Voxel`] / [`VoxelType`] — the supported voxel types and their conversions.
+//!
+//! Everything here works in physical coordinates (millimetres for medical images) in `f64`.
+
+mod error;
+mod geometry;
+mod volume;
+mod voxel;
+
+pub use error::VolumeError;
+pub use geometry::Geometry;
+pub use volume::{AnyVolume, Volume};
+pub use voxel::{Voxel, VoxelType};
+
+/// Re-export of the vector types used in the public API.
+pub use glam::{DMat3, DVec3};

@@ -1,0 +1,366 @@
+use rayon::prelude::*;
+
+use crate::{Geometry, VolumeError, Voxel, VoxelType};
+
+/// A typed voxel array on a physical [`Geometry`].
+///
+/// Invariant: `data.len() == geometry.len()` and the geometry is valid
+/// ([`Geometry::validate`]). Data is stored x fastest (see [`Geometry::offset`]).
+#[derive(Debug, Clone, PartialEq)]
+pub struct Volume<T> {
+    geometry: Geometry,
+    data: Vec<T>,
+}
+
+impl<T: Voxel> Volume<T> {
+    /// Wrap `data` on `geometry`.
+    ///
+    /// # Errors
+    /// [`VolumeError::Geometry`] if the geometry is invalid, [`VolumeError::LengthMismatch`] if
+    /// `data` does not hold exactly one value per voxel.
+    pub fn new(geometry: Geometry, data: Vec<T>) -> Result<Self, VolumeError> {
+        geometry.validate()?;
+        if data.len() != geometry.len() {
+            return Err(VolumeError::LengthMismatch {
+                dims: geometry.dims,
+                expected: geometry.len(),
+                got: data.len(),
+            });
+        }
+        Ok(Self { geometry, data })
+    }
+
+    /// A volume with every voxel set to `value`.
+    ///
+    /// # Errors
+    /// [`VolumeError::Geometry`] if the geometry is invalid.
+    pub fn filled(geometry: Geometry, value: T) -> Result<Self, VolumeError> {
+        geometry.validate()?;
+        Ok(Self {
+            data: vec![value; geometry.len()],
+            geometry,
+        })
+    }
+
+    /// A volume whose voxel `(i, j, k)` is `f(i, j, k)`, evaluated in parallel over z-slices.
+    ///
+    /// # Errors
+    /// [`VolumeError::Geometry`] if the geometry is invalid.
+    pub fn from_fn<F>(geometry: Geometry, f: F) -> Result<Self, VolumeError>
+    where
+        F: Fn(usize, usize, usize) -> T + Sync,
+    {
+        let mut v = Self::filled(geometry, T::default())?;
+        v.par_fill_with(f);
+        Ok(v)
+    }
+
+    /// Overwrite every voxel with `f(i, j, k)`, in parallel over z-slices.
+    pub fn par_fill_with<F>(&mut self, f: F)
+    where
+        F: Fn(usize, usize, usize) -> T + Sync,
+    {
+        let [nx, ny, _] = self.geometry.dims;
+        self.data
+            .par_chunks_mut(nx * ny)
+            .enumerate()
+            .for_each(|(k, slab)| {
+                for (j, row) in slab.chunks_exact_mut(nx).enumerate() {
+                    for (i, v) in row.iter_mut().enumerate() {
+                        *v = f(i, j, k);
+                    }
+                }
+            });
+    }
+
+    /// The physical geometry.
+    #[must_use]
+    pub fn geometry(&self) -> &Geometry {
+        &self.geometry
+    }
+
+    /// Replace the geometry, keeping the voxels (dims must stay the same).
+    ///
+    /// # Errors
+    /// [`VolumeError::Geometry`] if the new geometry is invalid or has other dims.
+    pub fn set_geometry(&mut self, geometry: Geometry) -> Result<(), VolumeError> {
+        geometry.validate()?;
+        if geometry.dims != self.geometry.dims {
+            return Err(VolumeError::Geometry(format!(
+                "cannot change dims from {:?} to {:?}",
+                self.geometry.dims, geometry.dims
+            )));
+        }
+        self.geometry = geometry;
+        Ok(())
+    }
+
+    /// Voxel counts along i, j, k.
+    #[must_use]
+    pub fn dims(&self) -> [usize; 3] {
+        self.geometry.dims
+    }
+
+    /// Number of voxels.
+    #[must_use]
+    pub fn len(&self) -> usize {
+        self.data.len()
+    }
+
+    /// Always `false` for a valid volume (dims are ≥ 1); present for API symmetry.
+    #[must_use]
+    pub fn is_empty(&self) -> bool {
+        self.data.is_empty()
+    }
+
+    /// The voxels, x fastest.
+    #[must_use]
+    pub fn data(&self) -> &[T] {
+        &self.data
+    }
+
+    /// Mutable voxels, x fastest.
+    pub fn data_mut(&mut self) -> &mut [T] {
+        &mut self.data
+    }
+
+    /// Take the voxel buffer.
+    #[must_use]
+    pub fn into_data(self) -> Vec<T> {
+        self.data
+    }
+
+    /// Voxel `(i, j, k)`, or `None` outside the grid.
+    #[inline]
+    #[must_use]
+    pub fn get(&self, i: usize, j: usize, k: usize) -> Option<T> {
+        self.geometry
+            .contains_index(i, j, k)
+            .then(|| self.data[self.geometry.offset(i, j, k)])
+    }
+
+    /// Mutable voxel `(i, j, k)`, or `None` outside the grid.
+    #[inline]
+    pub fn get_mut(&mut self, i: usize, j: usize, k: usize) -> Option<&mut T> {
+        if self.geometry.contains_index(i, j, k) {
+            let o = self.geometry.offset(i, j, k);
+            Some(&mut self.data[o])
+        } else {
+            None
+        }
+    }
+
+    /// The z-slice `k` as a contiguous `nx·ny` slice, or `None` if `k` is out of range.
+    #[must_use]
+    pub fn z_slice(&self, k: usize) -> Option<&[T]> {
+        let n = self.geometry.dims[0] * self.geometry.dims[1];
+        self.data.get(k * n..(k + 1) * n)
+    }
+
+    /// Apply `f` to every voxel, producing a volume of another type on the same geometry.
+    #[must_use]
+    pub fn map<U: Voxel, F: Fn(T) -> U + Sync>(&self, f: F) -> Volume<U> {
+        Volume {
+            geometry: self.geometry,
+            data: self.data.par_iter().map(|&v| f(v)).collect(),
+        }
+    }
+
+    /// Convert to voxel type `U` with [`Voxel::from_f64`] (rounding, saturating).
+    #[must_use]
+    pub fn cast<U: Voxel>(&self) -> Volume<U> {
+        self.map(|v| U::from_f64(v.to_f64()))
+    }
+
+    /// Convert to `U` after the linear map `v ↦ v·slope + inter` (computed in `f64`).
+    #[must_use]
+    pub fn cast_scaled<U: Voxel>(&self, slope: f64, inter: f64) -> Volume<U> {
+        self.map(|v| U::from_f64(v.to_f64().mul_add(slope, inter)))
+    }
+}
+
+impl<T: Voxel> std::ops::Index<[usize; 3]> for Volume<T> {
+    type Output = T;
+    /// # Panics
+    /// If the index is outside the grid.
+    fn index(&self, [i, j, k]: [usize; 3]) -> &T {
+        assert!(
+            self.geometry.contains_index(i, j, k),
+            "voxel ({i}, {j}, {k}) outside dims {:?}",
+            self.geometry.dims
+        );
+        &self.data[self.geometry.offset(i, j, k)]
+    }
+}
+
+impl<T: Voxel> std::ops::IndexMut<[usize; 3]> for Volume<T> {
+    /// # Panics
+    /// If the index is outside the grid.
+    fn index_mut(&mut self, [i, j, k]: [usize; 3]) -> &mut T {
+        assert!(
+            self.geometry.contains_index(i, j, k),
+            "voxel ({i}, {j}, {k}) outside dims {:?}",
+            self.geometry.dims
+        );
+        let o = self.geometry.offset(i, j, k);
+        &mut self.data[o]
+    }
+}
+
+/// A volume whose voxel type is known only at run time (as read from a file).
+#[derive(Debug, Clone, PartialEq)]
+#[allow(missing_docs)] // one variant per VoxelType, named alike
+pub enum AnyVolume {
+    U8(Volume<u8>),
+    I8(Volume<i8>),
+    U16(Volume<u16>),
+    I16(Volume<i16>),
+    U32(Volume<u32>),
+    I32(Volume<i32>),
+    F32(Volume<f32>),
+    F64(Volume<f64>),
+}
+
+/// Run `$body` with `$v` bound to the typed volume inside an [`AnyVolume`].
+///
+/// ```
+/// use volmorph_volume::{AnyVolume, Geometry, Volume, with_volume};
+/// let any = AnyVolume::from(Volume::filled(Geometry::new([2, 2, 2]), 7u16).unwrap());
+/// let n = with_volume!(&any, v => v.len());
+/// assert_eq!(n, 8);
+/// ```
+#[macro_export]
+macro_rules! with_volume {
+    ($any:expr, $v:ident => $body:expr) => {
+        match $any {
+            $crate::AnyVolume::U8($v) => $body,
+            $crate::AnyVolume::I8($v) => $body,
+            $crate::AnyVolume::U16($v) => $body,
+            $crate::AnyVolume::I16($v) => $body,
+            $crate::AnyVolume::U32($v) => $body,
+            $crate::AnyVolume::I32($v) => $body,
+            $crate::AnyVolume::F32($v) => $body,
+            $crate::AnyVolume::F64($v) => $body,
+        }
+    };
+}
+
+macro_rules! any_from {
+    ($($t:ty => $tag:ident),*) => {$(
+        impl From<Volume<$t>> for AnyVolume {
+            fn from(v: Volume<$t>) -> Self { AnyVolume::$tag(v) }
+        }
+    )*};
+}
+any_from!(u8 => U8, i8 => I8, u16 => U16, i16 => I16, u32 => U32, i32 => I32, f32 => F32, f64 => F64);
+
+impl AnyVolume {
+    /// The run-time voxel type.
+    #[must_use]
+    pub fn voxel_type(&self) -> VoxelType {
+        match self {
+            Self::U8(_) => VoxelType::U8,
+            Self::I8(_) => VoxelType::I8,
+            Self::U16(_) => VoxelType::U16,
+            Self::I16(_) => VoxelType::I16,
+            Self::U32(_) => VoxelType::U32,
+            Self::I32(_) => VoxelType::I32,
+            Self::F32(_) => VoxelType::F32,
+            Self::F64(_) => VoxelType::F64,
+        }
+    }
+
+    /// The physical geometry.
+    #[must_use]
+    pub fn geometry(&self) -> &Geometry {
+        with_volume!(self, v => v.geometry())
+    }
+
+    /// Replace the geometry (same dims).
+    ///
+    /// # Errors
+    /// As [`Volume::set_geometry`].
+    pub fn set_geometry(&mut self, geometry: Geometry) -> Result<(), VolumeError> {
+        with_volume!(self, v => v.set_geometry(geometry))
+    }
+
+    /// Convert to a typed volume of `U` (rounding and saturating, see [`Voxel::from_f64`]).
+    #[must_use]
+    pub fn to_typed<U: Voxel>(&self) -> Volume<U> {
+        with_volume!(self, v => v.cast::<U>())
+    }
+
+    /// Convert to another run-time type, optionally through `v·slope + inter`.
+    #[must_use]
+    pub fn cast(&self, to: VoxelType, slope: f64, inter: f64) -> AnyVolume {
+        macro_rules! go {
+            ($t:ty) => {
+                with_volume!(self, v => AnyVolume::from(v.cast_scaled::<$t>(slope, inter)))
+            };
+        }
+        match to {
+            VoxelType::U8 => go!(u8),
+            VoxelType::I8 => go!(i8),
+            VoxelType::U16 => go!(u16),
+            VoxelType::I16 => go!(i16),
+            VoxelType::U32 => go!(u32),
+            VoxelType::I32 => go!(i32),
+            VoxelType::F32 => go!(f32),
+            VoxelType::F64 => go!(f64),
+        }
+    }
+
+    /// The voxels as raw native-endian bytes.
+    #[must_use]
+    pub fn as_bytes(&self) -> &[u8] {
+        with_volume!(self, v => bytemuck::cast_slice(v.data()))
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use glam::DVec3;
+
+    #[test]
+    fn new_checks_length_and_geometry() {
+        let g = Geometry::new([2, 3, 4]);
+        assert!(Volume::new(g, vec![0u8; 24]).is_ok());
+        assert!(matches!(
+            Volume::new(g, vec![0u8; 23]),
+            Err(VolumeError::LengthMismatch {
+                expected: 24,
+                got: 23,
+                ..
+            })
+        ));
+        assert!(Volume::new(Geometry::new([2, 0, 4]), Vec::<u8>::new()).is_err());
+    }
+
+    #[test]
+    fn from_fn_is_x_fastest() {
+        let v = Volume::from_fn(Geometry::new([3, 4, 5]), |i, j, k| {
+            (i + 10 * j + 100 * k) as u16
+        })
+        .unwrap();
+        assert_eq!(v.data()[1], 1);
+        assert_eq!(v.data()[3], 10);
+        assert_eq!(v.data()[12], 100);
+        assert_eq!(v[[2, 3, 4]], 432);
+        assert_eq!(v.get(3, 0, 0), None);
+        assert_eq!(v.z_slice(1).unwrap()[0], 100);
+    }
+
+    #[test]
+    fn cast_rounds_saturates_and_keeps_geometry() {
+        let g = Geometry::new([2, 1, 1]).with_origin(DVec3::new(1.0, 2.0, 3.0));
+        let v = Volume::new(g, vec![-5.6f32, 300.4]).unwrap();
+        let any = AnyVolume::from(v);
+        let u = any.cast(VoxelType::U8, 1.0, 0.0);
+        assert_eq!(u.voxel_type(), VoxelType::U8);
+        assert_eq!(u.as_bytes(), &[0, 255]);
+        assert_eq!(u.geometry(), &g);
+        let s = any.cast(VoxelType::I16, 2.0, 1.0);
+        assert_eq!(s.to_typed::<i16>().data(), &[-10, 602]);
+    }
+}
