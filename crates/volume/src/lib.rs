@@ -9,6 +9,7 @@
 //! Everything here works in physical coordinates (millimetres for medical images) in `f64`.
 
 mod error;
+pub mod format;
 mod geometry;
 mod volume;
 mod voxel;
