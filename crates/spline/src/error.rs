@@ -200,6 +200,18 @@ pub enum SplineError {
         /// Row of the failure.
         row: usize,
     },
+    /// A [`crate::BasisTable`] was built for another knot vector than the spline's `axis`.
+    #[error("basis table for axis {axis} was built for a different knot vector")]
+    TableMismatch {
+        /// The axis.
+        axis: usize,
+    },
+    /// Gradients were requested from a [`crate::BasisTable`] built without derivatives.
+    #[error("basis table for axis {axis} has no tabulated derivatives")]
+    MissingDerivatives {
+        /// The axis.
+        axis: usize,
+    },
     /// A size computation overflowed or exceeds [`crate::MAX_ALLOC_BYTES`].
     #[error("requested size is too large: {0}")]
     TooLarge(String),

@@ -14,6 +14,8 @@
 //!   evaluation of values and first derivatives.
 //! * [`TensorBSpline::refine`] / [`TensorBSpline::insert_knot`] — Boehm insertion and A5.4
 //!   refinement per axis; [`TensorBSpline::bezier_pieces`] — [`BezierPiece`]s per span box.
+//! * [`BasisTable`] and [`TensorBSpline::eval_grid_into`] — parallel evaluation on parameter
+//!   grids with precomputed basis tables (True §5.2).
 //! * [`TensorBSpline::derivative`] — derivative control nets (Martin & Cohen §2.1).
 //! * [`interpolate_greville`], [`Interpolator`], [`Collocation`] — separable tensor-product
 //!   interpolation (Martin & Cohen §3) with banded LU per axis.
@@ -26,6 +28,7 @@ pub mod bernstein;
 pub mod bezier;
 mod derivative;
 mod error;
+pub mod grid;
 pub mod interpolate;
 pub mod knots;
 mod refine;
@@ -38,6 +41,7 @@ pub use basis::{
 pub use bernstein::{bernstein, bernstein_derivative_into, bernstein_into};
 pub use bezier::{BezierCell, BezierPatch, BezierPiece, BezierSegment};
 pub use error::SplineError;
+pub use grid::BasisTable;
 pub use interpolate::{Collocation, Interpolator, interpolate_greville};
 pub use knots::{KnotSpan, KnotVector, MAX_DEGREE};
 pub use spline::{BSplineCurve, BSplineSurface, BSplineVolume, MAX_ALLOC_BYTES, TensorBSpline};
