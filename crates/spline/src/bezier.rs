@@ -253,6 +253,27 @@ impl<const N: usize> BezierPiece<N> {
         Ok(out)
     }
 
+    /// Subdivide the piece along `axis` at the interior parameter `u` (de Casteljau, via knot
+    /// insertion): two Bézier pieces of the same degrees covering `[start, u]` and `[u, end]` of
+    /// that axis, with the same span label.
+    ///
+    /// # Errors
+    /// [`SplineError::InvalidAxis`], or [`SplineError::KnotOutsideDomain`] unless
+    /// `start < u < end`.
+    pub fn split(&self, axis: usize, u: f64) -> Result<(Self, Self), SplineError> {
+        let (l, r) = self.to_bspline()?.split(axis, u)?;
+        let piece = |s: TensorBSpline<N>| Self {
+            degrees: self.degrees,
+            domain: s.domain(),
+            span: self.span,
+            dim: self.dim,
+            rational: self.rational,
+            counts: self.counts,
+            coefs: s.homogeneous_coefficients().to_vec(),
+        };
+        Ok((piece(l), piece(r)))
+    }
+
     /// The same piece as a single-span clamped B-spline on its domain box.
     ///
     /// # Errors
@@ -391,6 +412,18 @@ mod tests {
         }
         let b = p[0].to_bspline().unwrap();
         assert!((b.eval([0.3]).unwrap()[0] - c.eval([0.3]).unwrap()[0]).abs() < 1e-14);
+    }
+
+    #[test]
+    fn piece_split_is_de_casteljau() {
+        // Quadratic 0, 1, 0 on [0, 1] split at 0.5: left net 0, 1/2, 1/2; right 1/2, 1/2, 0.
+        let p = BezierSegment::new([2], [[0.0, 1.0]], [0], 1, false, vec![0.0, 1.0, 0.0]).unwrap();
+        let (l, r) = p.split(0, 0.5).unwrap();
+        assert_eq!(l.homogeneous_coefficients(), &[0.0, 0.5, 0.5]);
+        assert_eq!(r.homogeneous_coefficients(), &[0.5, 0.5, 0.0]);
+        assert_eq!((l.domain(), r.domain()), ([[0.0, 0.5]], [[0.5, 1.0]]));
+        assert!(p.split(0, 1.0).is_err());
+        assert!(p.split(1, 0.5).is_err());
     }
 
     #[test]

@@ -91,6 +91,62 @@ impl<const N: usize> TensorBSpline<N> {
     }
 }
 
+impl<const N: usize> TensorBSpline<N> {
+    /// Subdivide along `axis` at the interior parameter `u`: `u` is inserted until it has
+    /// multiplicity `p + 1`, and the net is cut there. The first result covers `[a, u]`, the
+    /// second `[u, b]` of that axis; together they represent the spline exactly (Martin & Cohen
+    /// §5.1 isolate isosurfaces and slices by such subdivision). Other axes are unchanged.
+    ///
+    /// # Errors
+    /// [`SplineError::InvalidAxis`], or [`SplineError::KnotOutsideDomain`] unless
+    /// `a < u < b` strictly.
+    ///
+    /// ```
+    /// use volmorph_spline::{BSplineCurve, KnotVector};
+    /// let kv = KnotVector::clamped_uniform(3, 6, [0.0, 3.0]).unwrap();
+    /// let c = BSplineCurve::new([kv], 1, vec![0.0, 1.0, -1.0, 2.0, 0.0, 1.0]).unwrap();
+    /// let (l, r) = c.split(0, 1.2).unwrap();
+    /// assert_eq!(l.domain(), [[0.0, 1.2]]);
+    /// assert_eq!(r.domain(), [[1.2, 3.0]]);
+    /// assert!((l.eval([0.7]).unwrap()[0] - c.eval([0.7]).unwrap()[0]).abs() < 1e-12);
+    /// assert!((r.eval([2.5]).unwrap()[0] - c.eval([2.5]).unwrap()[0]).abs() < 1e-12);
+    /// ```
+    pub fn split(&self, axis: usize, u: f64) -> Result<(Self, Self), SplineError> {
+        Self::check_axis(axis)?;
+        let kv = &self.knots()[axis];
+        let [start, end] = kv.domain();
+        if !(u > start && u < end) {
+            return Err(SplineError::KnotOutsideDomain {
+                value: u,
+                start,
+                end,
+            });
+        }
+        let p = kv.degree();
+        let times = p + 1 - kv.multiplicity(u);
+        let r = self.insert_knot(axis, u, times)?;
+        let rk = r.knots()[axis].knots();
+        // First copy of u; the run is s ..= s + p.
+        let s = rk.partition_point(|&k| k < u);
+        let left_kv = KnotVector::new(p, rk[..=s + p].to_vec())?;
+        let right_kv = KnotVector::new(p, rk[s..].to_vec())?;
+        let (outer, len, inner) = r.axis_blocks(axis);
+        let src = r.homogeneous_coefficients();
+        let right_len = len - s;
+        let mut left = Vec::with_capacity(outer * s * inner);
+        let mut right = Vec::with_capacity(outer * right_len * inner);
+        for o in 0..outer {
+            let blk = &src[o * len * inner..(o + 1) * len * inner];
+            left.extend_from_slice(&blk[..s * inner]);
+            right.extend_from_slice(&blk[s * inner..]);
+        }
+        Ok((
+            r.with_axis(axis, left_kv, left),
+            r.with_axis(axis, right_kv, right),
+        ))
+    }
+}
+
 /// A5.4 on one block: `src` holds `n` rows of `inner` values, `dst` receives `n + r` rows.
 /// `x` is sorted and inside the domain; `ubar` is the merged knot vector.
 fn refine_block(

@@ -168,6 +168,30 @@ fn check_refinement_and_extraction<const N: usize>(
     let u = rng.uniform(lo, hi);
     let one = s.insert_knot(axis, u, 1).unwrap();
     assert_same_function(rng, s, &one, 8)?;
+    // Subdivision: both halves agree with the spline on their parts of the domain.
+    let axis = rng.below(N);
+    let [lo, hi] = s.knots()[axis].domain();
+    let u = rng.uniform(lo + 0.01 * (hi - lo), hi - 0.01 * (hi - lo));
+    let (left, right) = s.split(axis, u).unwrap();
+    let mut vh = vec![0.0; s.dim()];
+    let mut vf = vec![0.0; s.dim()];
+    for _ in 0..6 {
+        let half = if rng.below(2) == 0 { &left } else { &right };
+        let mut t = random_params(rng, half.knots());
+        if std::ptr::eq(half, &left) && t[axis] == u {
+            // The full spline evaluates the right piece at u; the left half its left piece.
+            t[axis] = lo + 0.5 * (u - lo);
+        }
+        half.eval_into(t, &mut vh).unwrap();
+        s.eval_into(t, &mut vf).unwrap();
+        prop_assert!(
+            max_abs_diff(&vh, &vf) <= 1e-12,
+            "split at {}: {:?} vs {:?}",
+            u,
+            vh,
+            vf
+        );
+    }
     // Bézier extraction: every piece reproduces the spline on its box (right-open boxes).
     let pieces = s.bezier_pieces().unwrap();
     let expect: usize = s.knots().iter().map(KnotVector::num_spans).product();
