@@ -24,6 +24,8 @@
 //! of an unclamped knot vector fall outside it at the ends, so use clamped knot vectors (as
 //! Martin & Cohen do) or supply sites explicitly.
 
+use rayon::prelude::*;
+
 use crate::basis::{BASIS_BUF, basis_unchecked};
 use crate::spline::checked_count;
 use crate::{KnotVector, SplineError, TensorBSpline};
@@ -290,9 +292,10 @@ impl<const N: usize> Interpolator<N> {
         for a in 0..N {
             let inner = counts[..a].iter().product::<usize>() * dim;
             let line = counts[a] * inner;
-            for block in data.chunks_exact_mut(line) {
-                self.axes[a].solve_in_place(block, inner)?;
-            }
+            // Independent lines (blocks) are solved in parallel; each solve is sequential and
+            // sweeps whole contiguous rows of `inner` values.
+            data.par_chunks_exact_mut(line)
+                .try_for_each(|block| self.axes[a].solve_in_place(block, inner))?;
         }
         Ok(())
     }

@@ -6,11 +6,14 @@
 //! the homogeneous coefficients, so rational splines are refined exactly in `P^w` space. Along
 //! axis `a` of a tensor product the control net is viewed as `outer × len × inner` blocks
 //! (axis 0 fastest, see [`crate::spline`]); each step combines two whole `inner`-length
-//! contiguous rows, so the sweep runs once per outer block and its inner loops vectorize.
+//! contiguous rows, so the sweep runs once per outer block (blocks in parallel with rayon) and
+//! its inner loops vectorize.
 //!
 //! Inserted knots must lie in the closed domain and no multiplicity may exceed `p + 1`.
 //! Insertion never changes the spline (the geometry and every attribute are identical as
 //! functions of the parameters), which the tests check to 1e-12.
+
+use rayon::prelude::*;
 
 use crate::{KnotVector, SplineError, TensorBSpline};
 
@@ -47,16 +50,10 @@ impl<const N: usize> TensorBSpline<N> {
         let total = crate::spline::checked_count(&[outer, new_len, inner])?;
         let mut out = vec![0.0; total];
         let src = self.homogeneous_coefficients();
-        for o in 0..outer {
-            refine_block(
-                kv,
-                refined.knots(),
-                &x,
-                &src[o * len * inner..(o + 1) * len * inner],
-                &mut out[o * new_len * inner..(o + 1) * new_len * inner],
-                inner,
-            );
-        }
+        debug_assert_eq!(src.len(), outer * len * inner);
+        out.par_chunks_mut(new_len * inner)
+            .zip(src.par_chunks(len * inner))
+            .for_each(|(dst, blk)| refine_block(kv, refined.knots(), &x, blk, dst, inner));
         Ok(self.with_axis(axis, refined, out))
     }
 

@@ -567,6 +567,10 @@ pub(crate) fn check_out(got: usize, expected: usize) -> Result<(), SplineError> 
     }
 }
 
+/// Largest homogeneous dimension evaluated with register accumulators (points with weights,
+/// RGBA-like attribute tuples); larger ones take the general path.
+const SMALL_HDIM: usize = 8;
+
 /// A borrowed homogeneous control net, shared by B-spline and Bézier evaluation.
 pub(crate) struct Net<'a, const N: usize> {
     pub coefs: &'a [f64],
@@ -580,6 +584,141 @@ impl<const N: usize> Net<'_, N> {
     /// per-axis basis values (`vals[a][..orders[a]]`) and optionally first derivatives.
     /// Writes the (projected, for rational nets) value and gradient (axis-major).
     pub fn contract(
+        &self,
+        first: [usize; N],
+        orders: [usize; N],
+        vals: &[[f64; BASIS_BUF]; N],
+        ders: Option<&[[f64; BASIS_BUF]; N]>,
+        value: &mut [f64],
+        grad: Option<&mut [f64]>,
+    ) {
+        let hdim = self.dim + usize::from(self.rational);
+        if hdim <= SMALL_HDIM {
+            self.contract_small(first, orders, vals, ders, value, grad);
+        } else {
+            self.contract_general(first, orders, vals, ders, value, grad);
+        }
+    }
+
+    fn strides(&self) -> [usize; N] {
+        let hdim = self.dim + usize::from(self.rational);
+        let mut strides = [0usize; N];
+        let mut s = hdim;
+        for (stride, &count) in strides.iter_mut().zip(self.counts) {
+            *stride = s;
+            s *= count;
+        }
+        strides
+    }
+
+    /// Sum-factorised contraction with register accumulators, for `hdim <= SMALL_HDIM`: each
+    /// axis-0 row of the sub-net is first reduced with the axis-0 basis, then scaled by the
+    /// product of the other axes' basis values.
+    fn contract_small(
+        &self,
+        first: [usize; N],
+        orders: [usize; N],
+        vals: &[[f64; BASIS_BUF]; N],
+        ders: Option<&[[f64; BASIS_BUF]; N]>,
+        value: &mut [f64],
+        grad: Option<&mut [f64]>,
+    ) {
+        let dim = self.dim;
+        let hdim = dim + usize::from(self.rational);
+        let strides = self.strides();
+        let mut acc = [0.0; SMALL_HDIM];
+        let mut gacc = [[0.0; SMALL_HDIM]; N];
+        let mut idx = [0usize; N];
+        let o0 = orders[0];
+        loop {
+            let mut w_outer = 1.0;
+            let mut base = first[0] * strides[0];
+            for a in 1..N {
+                w_outer *= vals[a][idx[a]];
+                base += (first[a] + idx[a]) * strides[a];
+            }
+            let row = &self.coefs[base..base + o0 * hdim];
+            let mut rv = [0.0; SMALL_HDIM];
+            let mut rd = [0.0; SMALL_HDIM];
+            match ders {
+                None => {
+                    for (c, &b) in row.chunks_exact(hdim).zip(&vals[0][..o0]) {
+                        for k in 0..hdim {
+                            rv[k] += b * c[k];
+                        }
+                    }
+                    for k in 0..hdim {
+                        acc[k] += w_outer * rv[k];
+                    }
+                }
+                Some(d) => {
+                    for ((c, &b), &db) in
+                        row.chunks_exact(hdim).zip(&vals[0][..o0]).zip(&d[0][..o0])
+                    {
+                        for k in 0..hdim {
+                            rv[k] += b * c[k];
+                            rd[k] += db * c[k];
+                        }
+                    }
+                    for k in 0..hdim {
+                        acc[k] += w_outer * rv[k];
+                        gacc[0][k] += w_outer * rd[k];
+                    }
+                    for a in 1..N {
+                        let mut dw = d[a][idx[a]];
+                        for b in 1..N {
+                            if b != a {
+                                dw *= vals[b][idx[b]];
+                            }
+                        }
+                        for k in 0..hdim {
+                            gacc[a][k] += dw * rv[k];
+                        }
+                    }
+                }
+            }
+            let mut a = 1;
+            while a < N {
+                idx[a] += 1;
+                if idx[a] < orders[a] {
+                    break;
+                }
+                idx[a] = 0;
+                a += 1;
+            }
+            if a >= N {
+                break;
+            }
+        }
+        if self.rational {
+            let inv = 1.0 / acc[dim];
+            for (v, &x) in value.iter_mut().zip(&acc[..dim]) {
+                *v = x * inv;
+            }
+            if let Some(g) = grad {
+                for a in 0..N {
+                    let wa = gacc[a][dim];
+                    for ((gv, &x), &v) in g[a * dim..(a + 1) * dim]
+                        .iter_mut()
+                        .zip(&gacc[a][..dim])
+                        .zip(value.iter())
+                    {
+                        *gv = (x - wa * v) * inv;
+                    }
+                }
+            }
+        } else {
+            value.copy_from_slice(&acc[..dim]);
+            if let Some(g) = grad {
+                for a in 0..N {
+                    g[a * dim..(a + 1) * dim].copy_from_slice(&gacc[a][..dim]);
+                }
+            }
+        }
+    }
+
+    /// Contraction for any `hdim`, accumulating directly into the output buffers.
+    fn contract_general(
         &self,
         first: [usize; N],
         orders: [usize; N],
@@ -748,6 +887,35 @@ mod tests {
             Err(SplineError::ParameterOutsideDomain { axis: 1, .. })
         ));
         assert!(s.eval_into([0.5, 0.5], &mut []).is_err());
+    }
+
+    #[test]
+    fn wide_values_take_the_general_path_consistently() {
+        // A rational volume with 9 components (hdim 10 > SMALL_HDIM) against the 9 scalar
+        // volumes with the same weights (hdim 2, fast path).
+        let ks = [
+            KnotVector::clamped_uniform(2, 4, [0.0, 1.0]).unwrap(),
+            KnotVector::uniform(1, 3, [0.0, 2.0]).unwrap(),
+            KnotVector::clamped(3, &[0.5], [0.0, 1.0]).unwrap(),
+        ];
+        let n = 4 * 3 * 5;
+        let pts: Vec<f64> = (0..9 * n)
+            .map(|i| (f64::from(i as u32) * 0.71).sin())
+            .collect();
+        let w: Vec<f64> = (0..n).map(|i| 1.5 + (f64::from(i as u32)).cos()).collect();
+        let wide = BSplineVolume::new_rational(ks.clone(), 9, pts.clone(), w.clone()).unwrap();
+        let t = [0.3, 1.7, 0.61];
+        let (wv, wg) = wide.eval_with_gradient(t).unwrap();
+        for c in 0..9 {
+            let comp: Vec<f64> = (0..n).map(|i| pts[9 * i + c]).collect();
+            let s = BSplineVolume::new_rational(ks.clone(), 1, comp, w.clone()).unwrap();
+            let (v, g) = s.eval_with_gradient(t).unwrap();
+            assert!((v[0] - wv[c]).abs() < 1e-14);
+            for a in 0..3 {
+                assert!((g[a] - wg[a * 9 + c]).abs() < 1e-12);
+            }
+            assert!((s.eval(t).unwrap()[0] - wide.eval(t).unwrap()[c]).abs() < 1e-14);
+        }
     }
 
     #[test]
