@@ -203,7 +203,8 @@ impl BasisWorkspace {
     /// the workspace already has this degree.
     ///
     /// # Errors
-    /// [`SplineError::InvalidSpan`] or [`SplineError::BufferLength`].
+    /// [`SplineError::InvalidSpan`], [`SplineError::BufferLength`], or
+    /// [`SplineError::TooLarge`] if `(order + 1)·(p + 1)` overflows.
     pub fn derivs_into(
         &mut self,
         kv: &KnotVector,
@@ -215,7 +216,11 @@ impl BasisWorkspace {
         check_span(kv, span)?;
         let p = kv.degree();
         let w = p + 1;
-        check_len(out.len(), (order + 1) * w)?;
+        let needed = order
+            .checked_add(1)
+            .and_then(|o| o.checked_mul(w))
+            .ok_or_else(|| SplineError::TooLarge(format!("derivative order {order}")))?;
+        check_len(out.len(), needed)?;
         if p != self.degree {
             *self = Self::new(p);
         }
@@ -290,14 +295,18 @@ impl BasisWorkspace {
 /// `(order + 1) × (p + 1)` table, row `k` = k-th derivatives.
 ///
 /// # Errors
-/// As [`BasisWorkspace::derivs_into`].
+/// As [`BasisWorkspace::derivs_into`], plus [`SplineError::TooLarge`] for an absurd `order`.
 pub fn basis_derivs(
     kv: &KnotVector,
     span: usize,
     u: f64,
     order: usize,
 ) -> Result<Vec<f64>, SplineError> {
-    let mut out = vec![0.0; (order + 1) * (kv.degree() + 1)];
+    let len = order
+        .checked_add(1)
+        .ok_or_else(|| SplineError::TooLarge(format!("derivative order {order}")))
+        .and_then(|o| crate::spline::checked_count(&[o, kv.degree() + 1]))?;
+    let mut out = vec![0.0; len];
     BasisWorkspace::new(kv.degree()).derivs_into(kv, span, u, order, &mut out)?;
     Ok(out)
 }

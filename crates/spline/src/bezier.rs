@@ -66,6 +66,7 @@ impl<const N: usize> BezierPiece<N> {
         rational: bool,
         coefs: Vec<f64>,
     ) -> Result<Self, SplineError> {
+        const { assert!(N >= 1, "a Bézier piece needs at least one parametric axis") };
         for (&degree, &[start, end]) in degrees.iter().zip(&domain) {
             if degree > MAX_DEGREE {
                 return Err(SplineError::DegreeTooHigh {

@@ -169,6 +169,16 @@ pub enum SplineError {
         /// The axis.
         axis: usize,
     },
+    /// An operation needs a higher degree along `axis`.
+    #[error("axis {axis} has degree {degree}; at least {min} is required")]
+    DegreeTooLow {
+        /// The axis.
+        axis: usize,
+        /// Its degree.
+        degree: usize,
+        /// Minimum degree.
+        min: usize,
+    },
     /// The derivative of a rational spline is not a rational spline of the same form.
     #[error(
         "the derivative of a rational spline is not a spline of the same kind; \

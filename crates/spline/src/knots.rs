@@ -420,6 +420,45 @@ impl KnotVector {
             .collect()
     }
 
+    /// The knot vector affinely mapped so that its domain becomes `domain` exactly
+    /// (`u ↦ c + (u − a)·(d − c)/(b − a)`); equal knots stay bit-equal, so multiplicities are
+    /// preserved. A spline with rescaled knots and unchanged control values is the same spline
+    /// reparametrised.
+    ///
+    /// # Errors
+    /// [`SplineError::EmptyDomain`] unless `domain` is finite with `c < d`; the errors of
+    /// [`KnotVector::new`] if the mapped knots overflow.
+    ///
+    /// ```
+    /// use volmorph_spline::KnotVector;
+    /// let kv = KnotVector::uniform(3, 9, [0.0, 6.0]).unwrap();
+    /// let unit = kv.rescaled([0.0, 1.0]).unwrap();
+    /// assert_eq!(unit.domain(), [0.0, 1.0]);
+    /// assert_eq!(unit.knots()[0], -0.5);
+    /// ```
+    pub fn rescaled(&self, domain: [f64; 2]) -> Result<Self, SplineError> {
+        let [c, d] = domain;
+        if !(c.is_finite() && d.is_finite() && c < d) {
+            return Err(SplineError::EmptyDomain { start: c, end: d });
+        }
+        let [a, b] = self.domain();
+        let scale = (d - c) / (b - a);
+        let knots = self
+            .knots
+            .iter()
+            .map(|&u| {
+                if u == a {
+                    c
+                } else if u == b {
+                    d
+                } else {
+                    c + (u - a) * scale
+                }
+            })
+            .collect();
+        Self::new(self.degree, knots)
+    }
+
     /// The knot vector obtained by merging the sorted knots `new_knots` into this one
     /// (the knot vector of [`crate::TensorBSpline::refine`]).
     ///

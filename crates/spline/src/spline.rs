@@ -164,6 +164,12 @@ impl<const N: usize> TensorBSpline<N> {
         rational: bool,
         coefs: Vec<f64>,
     ) -> Result<Self, SplineError> {
+        const {
+            assert!(
+                N >= 1,
+                "a tensor-product spline needs at least one parametric axis"
+            )
+        };
         if dim == 0 {
             return Err(SplineError::ZeroDimension);
         }
@@ -204,6 +210,12 @@ impl<const N: usize> TensorBSpline<N> {
         rational: bool,
         coefs: Vec<f64>,
     ) -> Self {
+        const {
+            assert!(
+                N >= 1,
+                "a tensor-product spline needs at least one parametric axis"
+            )
+        };
         let counts = counts_of(&knots);
         debug_assert_eq!(
             coefs.len(),
@@ -216,6 +228,47 @@ impl<const N: usize> TensorBSpline<N> {
             rational,
             coefs,
         }
+    }
+
+    /// The identity map of parameter space: `dim = N` and control point `(i_0, …, i_{N−1})` at
+    /// the Greville abscissae `(ξ^0_{i_0}, …, ξ^{N−1}_{i_{N−1}})`. By the linear precision of
+    /// B-splines (`Σ ξ_i N_{i,p}(u) = u` for `p ≥ 1`) it evaluates to its parameters with unit
+    /// Jacobian everywhere in the domain: the undeformed lattice of True's warps and of Feng's
+    /// identity-Jacobian FFD.
+    ///
+    /// # Errors
+    /// [`SplineError::DegreeTooLow`] if an axis has degree 0, [`SplineError::TooLarge`].
+    ///
+    /// ```
+    /// use volmorph_spline::{BSplineVolume, KnotVector};
+    /// let k = KnotVector::uniform(3, 9, [0.0, 6.0]).unwrap();
+    /// let id = BSplineVolume::identity([k.clone(), k.clone(), k]).unwrap();
+    /// let (v, g) = id.eval_with_gradient([1.25, 4.5, 6.0]).unwrap();
+    /// assert!((v[0] - 1.25).abs() < 1e-14 && (v[1] - 4.5).abs() < 1e-14 && (v[2] - 6.0).abs() < 1e-14);
+    /// assert!((g[0] - 1.0).abs() < 1e-14 && g[1].abs() < 1e-14 && (g[8] - 1.0).abs() < 1e-14);
+    /// ```
+    pub fn identity(knots: [KnotVector; N]) -> Result<Self, SplineError> {
+        for (axis, k) in knots.iter().enumerate() {
+            if k.degree() == 0 {
+                return Err(SplineError::DegreeTooLow {
+                    axis,
+                    degree: 0,
+                    min: 1,
+                });
+            }
+        }
+        let counts = counts_of(&knots);
+        let n = checked_count(&counts)?;
+        let greville: Vec<Vec<f64>> = knots.iter().map(KnotVector::greville).collect();
+        let mut coefs = Vec::with_capacity(checked_count(&[n, N])?);
+        for lin in 0..n {
+            let mut rest = lin;
+            for (a, g) in greville.iter().enumerate() {
+                coefs.push(g[rest % counts[a]]);
+                rest /= counts[a];
+            }
+        }
+        Self::new(knots, N, coefs)
     }
 
     /// The knot vectors, one per axis.
@@ -410,6 +463,25 @@ impl<const N: usize> TensorBSpline<N> {
     pub fn homogeneous(&self) -> Self {
         let r = self.to_rational();
         Self::from_parts_unchecked(r.knots, r.dim + 1, false, r.coefs)
+    }
+
+    /// The same spline with each axis affinely reparametrised onto `domain[a]` (knot vectors
+    /// mapped by [`KnotVector::rescaled`]; control values unchanged). Martin & Cohen normalise
+    /// every geometry and attribute volume to the unit cube this way.
+    ///
+    /// # Errors
+    /// As [`KnotVector::rescaled`].
+    pub fn reparametrized(&self, domain: [[f64; 2]; N]) -> Result<Self, SplineError> {
+        let mut knots = self.knots.clone();
+        for (k, d) in knots.iter_mut().zip(domain) {
+            *k = k.rescaled(d)?;
+        }
+        Ok(Self::from_parts_unchecked(
+            knots,
+            self.dim,
+            self.rational,
+            self.coefs.clone(),
+        ))
     }
 
     /// Replace the knot vector of `axis` and the coefficients (internal, used by refinement).

@@ -469,6 +469,53 @@ proptest! {
     }
 }
 
+proptest! {
+    #![proptest_config(ProptestConfig::with_cases(64))]
+
+    #[test]
+    fn identity_lattice_is_the_identity(seed in any::<u64>()) {
+        let mut rng = Rng(seed);
+        let knots: [KnotVector; 3] = std::array::from_fn(|_| {
+            let p = 1 + rng.below(4);
+            random_knots(&mut rng, p, p, 4)
+        });
+        let id = TensorBSpline::identity(knots.clone()).unwrap();
+        for _ in 0..10 {
+            let t = random_params(&mut rng, &knots);
+            let (v, g) = id.eval_with_gradient(t).unwrap();
+            for a in 0..3 {
+                prop_assert!((v[a] - t[a]).abs() <= 1e-12 * (1.0 + t[a].abs()));
+                for c in 0..3 {
+                    let want = if a == c { 1.0 } else { 0.0 };
+                    prop_assert!((g[a * 3 + c] - want).abs() <= 1e-10);
+                }
+            }
+        }
+    }
+
+    #[test]
+    fn reparametrization_composes_with_the_affine_map(seed in any::<u64>()) {
+        let mut rng = Rng(seed);
+        let p = rng.below(6);
+        let kv = random_knots(&mut rng, p, p + 1, 5);
+        let rational = rng.below(2) == 0;
+        let c = random_spline(&mut rng, [kv.clone()], 2, rational);
+        let r = c.reparametrized([[0.0, 1.0]]).unwrap();
+        let [a, b] = kv.domain();
+        for _ in 0..10 {
+            let s = rng.uniform(0.0, 1.0);
+            let u = (a + s * (b - a)).min(b);
+            let (x, y) = (r.eval([s]).unwrap(), c.eval([u]).unwrap());
+            // Away from breakpoints the pieces agree; the affine map can move a parameter
+            // across a breakpoint by one ulp, so compare with a tolerance on both sides.
+            let near_knot = kv.breakpoints().iter().any(|&(k, _)| (k - u).abs() < 1e-9);
+            if !near_knot {
+                prop_assert!(max_abs_diff(&x, &y) <= 1e-9);
+            }
+        }
+    }
+}
+
 #[test]
 fn derivative_of_clamped_curve_matches_martin_cohen_formula() {
     // Cubic, knots 0,0,0,0,1,3,4,4,4,4: Q_i = 3 (P_{i+1} - P_i) / (u_{i+4} - u_{i+1}).
