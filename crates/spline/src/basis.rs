@@ -179,9 +179,11 @@ pub struct BasisWorkspace {
 }
 
 impl BasisWorkspace {
-    /// Workspace for knot vectors of degree `degree` (allocates `(p+1)² + 2(p+1)` values).
+    /// Workspace for knot vectors of degree `degree` (allocates `(p+1)² + 2(p+1)` values;
+    /// `degree` is capped at [`MAX_DEGREE`], the largest degree a [`KnotVector`] can have).
     #[must_use]
     pub fn new(degree: usize) -> Self {
+        let degree = degree.min(MAX_DEGREE);
         let w = degree + 1;
         Self {
             degree,

@@ -22,9 +22,9 @@ use crate::SplineError;
 /// assert!((b[1] - 3.0 * 0.25 * 0.75 * 0.75).abs() < 1e-15);
 /// ```
 pub fn bernstein_into(degree: usize, t: f64, out: &mut [f64]) -> Result<(), SplineError> {
-    if out.len() < degree + 1 {
+    if out.len() <= degree {
         return Err(SplineError::BufferLength {
-            expected: degree + 1,
+            expected: degree.saturating_add(1),
             got: out.len(),
         });
     }
@@ -68,9 +68,9 @@ pub fn bernstein_derivative_into(
     t: f64,
     out: &mut [f64],
 ) -> Result<(), SplineError> {
-    if out.len() < degree + 1 {
+    if out.len() <= degree {
         return Err(SplineError::BufferLength {
-            expected: degree + 1,
+            expected: degree.saturating_add(1),
             got: out.len(),
         });
     }
@@ -110,7 +110,12 @@ pub fn bernstein(i: usize, n: usize, t: f64) -> f64 {
     for k in 0..i.min(n - i) {
         c = c * (n - k) as f64 / (k + 1) as f64;
     }
-    c * t.powi(i as i32) * (1.0 - t).powi((n - i) as i32)
+    c * pow(t, i) * pow(1.0 - t, n - i)
+}
+
+/// `x^e` by repeated squaring for exponents that fit in `i32`, `powf` beyond.
+fn pow(x: f64, e: usize) -> f64 {
+    i32::try_from(e).map_or_else(|_| x.powf(e as f64), |e| x.powi(e))
 }
 
 #[cfg(test)]

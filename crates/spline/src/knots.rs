@@ -125,7 +125,8 @@ impl KnotVector {
     ///
     /// # Errors
     /// [`SplineError::TooFewControlPoints`] if `num_ctrl < degree + 1`,
-    /// [`SplineError::EmptyDomain`] if `domain` is not finite with `a < b`, and the errors of
+    /// [`SplineError::EmptyDomain`] if `domain` is not finite with `a < b`,
+    /// [`SplineError::TooLarge`] for an absurd `num_ctrl`, and the errors of
     /// [`KnotVector::new`].
     pub fn uniform(degree: usize, num_ctrl: usize, domain: [f64; 2]) -> Result<Self, SplineError> {
         check_count_and_domain(degree, num_ctrl, domain)?;
@@ -174,9 +175,10 @@ impl KnotVector {
     /// control points.
     ///
     /// # Errors
-    /// [`SplineError::EmptyDomain`] for a bad `domain`,
+    /// [`SplineError::DegreeTooHigh`], [`SplineError::EmptyDomain`] for a bad `domain`,
     /// [`SplineError::InteriorKnotOutsideDomain`], and the errors of [`KnotVector::new`].
     pub fn clamped(degree: usize, interior: &[f64], domain: [f64; 2]) -> Result<Self, SplineError> {
+        check_degree(degree)?;
         let [a, b] = domain;
         if !(a.is_finite() && b.is_finite() && a < b) {
             return Err(SplineError::EmptyDomain { start: a, end: b });
@@ -508,11 +510,28 @@ impl KnotVector {
     }
 }
 
+fn check_degree(degree: usize) -> Result<(), SplineError> {
+    if degree > MAX_DEGREE {
+        Err(SplineError::DegreeTooHigh {
+            degree,
+            max: MAX_DEGREE,
+        })
+    } else {
+        Ok(())
+    }
+}
+
 fn check_count_and_domain(
     degree: usize,
     num_ctrl: usize,
     domain: [f64; 2],
 ) -> Result<(), SplineError> {
+    check_degree(degree)?;
+    // The knot vector holds num_ctrl + degree + 1 values.
+    num_ctrl
+        .checked_add(degree + 1)
+        .ok_or_else(|| SplineError::TooLarge(format!("{num_ctrl} control points")))
+        .and_then(|m| crate::spline::checked_count(&[m]))?;
     if num_ctrl < degree + 1 {
         return Err(SplineError::TooFewControlPoints {
             degree,
@@ -574,6 +593,15 @@ mod tests {
             Err(SplineError::DegreeTooHigh { .. })
         ));
         assert!(KnotVector::uniform(3, 3, [0.0, 1.0]).is_err());
+        assert!(matches!(
+            KnotVector::uniform(3, usize::MAX, [0.0, 1.0]),
+            Err(SplineError::TooLarge(_))
+        ));
+        assert!(matches!(
+            KnotVector::clamped_uniform(usize::MAX, 4, [0.0, 1.0]),
+            Err(SplineError::DegreeTooHigh { .. })
+        ));
+        assert!(KnotVector::clamped(usize::MAX, &[], [0.0, 1.0]).is_err());
         assert!(KnotVector::clamped(2, &[1.5], [0.0, 1.0]).is_err());
         assert!(KnotVector::clamped(2, &[0.5], [1.0, 1.0]).is_err());
     }

@@ -801,12 +801,7 @@ impl<const N: usize> Net<'_, N> {
     ) {
         let dim = self.dim;
         let hdim = dim + usize::from(self.rational);
-        let mut strides = [0usize; N];
-        let mut s = hdim;
-        for (stride, &count) in strides.iter_mut().zip(self.counts) {
-            *stride = s;
-            s *= count;
-        }
+        let strides = self.strides();
         value.fill(0.0);
         if let Some(g) = grad.as_deref_mut() {
             g.fill(0.0);
