@@ -103,16 +103,29 @@ pub enum Phantom {
     /// with radius [`ROUNDED_BOX_RADIUS`] (a Minkowski sum of a box and a ball), centred at the
     /// origin. Exact SDF.
     RoundedBox,
-    /// A block of sculpting clay: a slab of 1.5 × 1.0 × 0.9 with slightly rounded edges
-    /// (radius 0.08), pierced along y by a round hole (radius 0.18, axis at x = −0.35, z = 0),
-    /// with a round-bottomed groove along y in the top face (radius 0.14, axis at x = 0.4,
-    /// z = 0.45) and a ball-shaped bump of radius 0.2 on the front face (−y), centred at
-    /// (0.2, −0.5, −0.1). The hole, groove and bump edges are filleted. The block has no
-    /// mirror symmetry, so flipped or swapped axes show. 1-Lipschitz bound.
+    /// A block of sculpting clay: a slab of 1.5 × 1.0 × 0.9 (x × y × z, centred at the
+    /// origin) with rounded edges (radius 0.12), pierced along y by a round hole (radius 0.18,
+    /// axis at x = −0.35, z = 0), with a round-bottomed groove along y in the top face (radius
+    /// 0.14, axis at x = 0.4, z = 0.45) and a ball-shaped bump of radius 0.2 on the front face
+    /// (−y), centred at (0.2, −0.5, −0.1). The edges of the hole and groove and the foot of
+    /// the bump are smoothly blended, as if worked by hand. The block has no mirror symmetry,
+    /// so flipped or swapped axes show after a deformation. 1-Lipschitz bound.
     ClayBlock,
-    /// A teapot, z up: an ellipsoidal body with a flat base, a domed lid with a rim bead and a
-    /// knob, a bent tapering spout towards +x and a ring handle towards −x, joined by smooth
-    /// unions. 1-Lipschitz bound.
+    /// A teapot, z up, in the spirit of True's sculpted teapot (§7, Figs. 9–10):
+    ///
+    /// * body: ellipsoid centred at (0, 0, −0.1) with semi-axes (0.5, 0.5, 0.4), cut flat at
+    ///   the base z = −0.45 and at the shoulder z = 0.22 (both edges rounded);
+    /// * lid: a dome (semi-axes 0.25, 0.25, 0.16 about (0, 0, 0.2)) narrower than the
+    ///   shoulder, so a ledge shows around it; knob: a ball of radius 0.1 at (0, 0, 0.45);
+    /// * spout towards +x: two tapering-then-flaring segments (radius 0.12 → 0.09 → 0.1) from
+    ///   inside the body at (0.36, 0, −0.18) through (0.6, 0, 0.04) to (0.76, 0, 0.25);
+    /// * handle towards −x: a ring (torus about the y axis at (−0.635, 0, −0.05), radii 0.17
+    ///   and 0.075) whose inner half is buried in the body; the hole around (−0.64, 0, −0.05)
+    ///   is open.
+    ///
+    /// The parts are joined by smooth unions. No part is thinner than 0.15, two voxels at
+    /// True's 30³, so the density isosurface follows the model there. Symmetric in y only.
+    /// 1-Lipschitz bound.
     Teapot,
 }
 
@@ -151,7 +164,9 @@ impl Phantom {
             Self::ClayBlock => {
                 "block of clay with a through hole along y, a groove on top and a bump on the front"
             }
-            Self::Teapot => "teapot: body, lid with knob, spout towards +x, handle towards -x",
+            Self::Teapot => {
+                "teapot, z up: body, lid with knob, spout towards +x, handle towards -x"
+            }
         }
     }
 
@@ -367,14 +382,6 @@ fn ellipsoid(p: DVec3, c: DVec3, radii: DVec3) -> f64 {
     (((p - c) / radii).length() - 1.0) * radii.min_element()
 }
 
-/// Exact: segment `a`–`b` thickened by `radius`.
-#[inline]
-fn capsule(p: DVec3, a: DVec3, b: DVec3, radius: f64) -> f64 {
-    let ab = b - a;
-    let t = ((p - a).dot(ab) / ab.length_squared()).clamp(0.0, 1.0);
-    (p - a - ab * t).length() - radius
-}
-
 /// Convex hull of the balls `(a, ra)` and `(b, rb)`: a cone frustum capped by the two spheres.
 /// Requires `|ra − rb| < |b − a|` (neither ball contains the other).
 ///
@@ -430,7 +437,7 @@ mod clay {
     /// Outer half extents of the slab.
     pub(super) const HALF: DVec3 = DVec3::new(0.75, 0.5, 0.45);
     /// Edge rounding of the slab.
-    const EDGE_RADIUS: f64 = 0.08;
+    const EDGE_RADIUS: f64 = 0.12;
     /// Through hole along y: axis at (x, z) = (HOLE_X, 0).
     const HOLE_X: f64 = -0.35;
     const HOLE_RADIUS: f64 = 0.18;
@@ -440,9 +447,9 @@ mod clay {
     /// Bump on the front (−y) face.
     pub(super) const BUMP_CENTER: DVec3 = DVec3::new(0.2, -0.5, -0.1);
     pub(super) const BUMP_RADIUS: f64 = 0.2;
-    /// Fillet radii of the cuts and of the bump.
-    const CUT_BLEND: f64 = 0.04;
-    const BUMP_BLEND: f64 = 0.06;
+    /// Blend widths ([`smax`]/[`smin`] `k`) of the hole and groove edges and of the bump.
+    const CUT_BLEND: f64 = 0.12;
+    const BUMP_BLEND: f64 = 0.12;
 
     pub(super) fn sdf(p: DVec3) -> f64 {
         let slab = rounded_box(p, HALF, EDGE_RADIUS);
@@ -459,54 +466,52 @@ mod clay {
 mod teapot {
     use glam::{DVec2, DVec3};
 
-    use super::{capsule, ellipsoid, round_cone, smin, torus_z};
+    use super::{ellipsoid, round_cone, smax, smin};
 
     /// Body: ellipsoid cut flat at the base and open at the top where the lid sits.
     const BODY_CENTER: DVec3 = DVec3::new(0.0, 0.0, -0.1);
-    pub(super) const BODY_RADII: DVec3 = DVec3::new(0.52, 0.52, 0.40);
+    pub(super) const BODY_RADII: DVec3 = DVec3::new(0.5, 0.5, 0.4);
     pub(super) const BASE_Z: f64 = -0.45;
     const SHOULDER_Z: f64 = 0.22;
-    /// Lid: a flat dome with a bead around its rim.
+    /// Lid: a dome, narrower than the opening so that a ledge shows around it.
     const LID_CENTER: DVec3 = DVec3::new(0.0, 0.0, 0.2);
-    const LID_RADII: DVec3 = DVec3::new(0.3, 0.3, 0.14);
-    const RIM_MAJOR: f64 = 0.31;
-    const RIM_MINOR: f64 = 0.03;
-    /// Knob: a ball on a short neck.
-    const NECK_BOTTOM: DVec3 = DVec3::new(0.0, 0.0, 0.3);
-    const NECK_TOP: DVec3 = DVec3::new(0.0, 0.0, 0.42);
-    const NECK_RADIUS: f64 = 0.035;
-    pub(super) const KNOB_CENTER: DVec3 = DVec3::new(0.0, 0.0, 0.44);
-    pub(super) const KNOB_RADIUS: f64 = 0.07;
+    const LID_RADII: DVec3 = DVec3::new(0.25, 0.25, 0.16);
+    /// Knob: a ball resting on the top of the lid, joined to it by a fillet that reads as a
+    /// short neck.
+    pub(super) const KNOB_CENTER: DVec3 = DVec3::new(0.0, 0.0, 0.45);
+    pub(super) const KNOB_RADIUS: f64 = 0.1;
     /// Spout: two tapering segments rooted inside the body, bending upwards.
-    const SPOUT_ROOT: DVec3 = DVec3::new(0.38, 0.0, -0.18);
-    const SPOUT_ROOT_RADIUS: f64 = 0.11;
-    const SPOUT_BEND: DVec3 = DVec3::new(0.62, 0.0, 0.05);
-    const SPOUT_BEND_RADIUS: f64 = 0.075;
-    pub(super) const SPOUT_TIP: DVec3 = DVec3::new(0.80, 0.0, 0.26);
-    pub(super) const SPOUT_TIP_RADIUS: f64 = 0.05;
+    const SPOUT_ROOT: DVec3 = DVec3::new(0.36, 0.0, -0.18);
+    const SPOUT_ROOT_RADIUS: f64 = 0.12;
+    const SPOUT_BEND: DVec3 = DVec3::new(0.6, 0.0, 0.04);
+    const SPOUT_BEND_RADIUS: f64 = 0.09;
+    pub(super) const SPOUT_TIP: DVec3 = DVec3::new(0.76, 0.0, 0.25);
+    pub(super) const SPOUT_TIP_RADIUS: f64 = 0.1;
     /// Handle: a torus in the xz plane (axis along y) whose inner half is inside the body.
-    pub(super) const HANDLE_CENTER: DVec3 = DVec3::new(-0.64, 0.0, -0.05);
-    pub(super) const HANDLE_MAJOR: f64 = 0.18;
-    pub(super) const HANDLE_MINOR: f64 = 0.06;
-    /// Blend radii of the smooth unions.
-    const LID_BLEND: f64 = 0.02;
-    const KNOB_BLEND: f64 = 0.04;
+    pub(super) const HANDLE_CENTER: DVec3 = DVec3::new(-0.635, 0.0, -0.05);
+    pub(super) const HANDLE_MAJOR: f64 = 0.17;
+    pub(super) const HANDLE_MINOR: f64 = 0.075;
+    /// Blend widths ([`smin`]/[`smax`] `k`) of the base and shoulder edges and of the joints.
+    const EDGE_BLEND: f64 = 0.1;
+    const LID_BLEND: f64 = 0.06;
+    const KNOB_BLEND: f64 = 0.08;
     const SPOUT_BLEND: f64 = 0.08;
-    const HANDLE_BLEND: f64 = 0.04;
+    const HANDLE_BLEND: f64 = 0.06;
 
     pub(super) fn sdf(p: DVec3) -> f64 {
-        let body = ellipsoid(p, BODY_CENTER, BODY_RADII)
-            .max(BASE_Z - p.z)
-            .max(p.z - SHOULDER_Z);
+        let body = smax(
+            smax(
+                ellipsoid(p, BODY_CENTER, BODY_RADII),
+                BASE_Z - p.z,
+                EDGE_BLEND,
+            ),
+            p.z - SHOULDER_Z,
+            EDGE_BLEND,
+        );
 
         let lid = ellipsoid(p, LID_CENTER, LID_RADII);
-        let rim = torus_z(p - DVec3::new(0.0, 0.0, SHOULDER_Z), RIM_MAJOR, RIM_MINOR);
-        let knob = smin(
-            capsule(p, NECK_BOTTOM, NECK_TOP, NECK_RADIUS),
-            (p - KNOB_CENTER).length() - KNOB_RADIUS,
-            KNOB_BLEND,
-        );
-        let top = smin(smin(lid, rim, LID_BLEND), knob, KNOB_BLEND);
+        let knob = (p - KNOB_CENTER).length() - KNOB_RADIUS;
+        let top = smin(lid, knob, KNOB_BLEND);
 
         let spout = smin(
             round_cone(
@@ -540,6 +545,14 @@ mod teapot {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    /// Exact: segment `a`–`b` thickened by `radius`.
+    #[inline]
+    fn capsule(p: DVec3, a: DVec3, b: DVec3, radius: f64) -> f64 {
+        let ab = b - a;
+        let t = ((p - a).dot(ab) / ab.length_squared()).clamp(0.0, 1.0);
+        (p - a - ab * t).length() - radius
+    }
 
     #[test]
     fn names_round_trip_and_errors_list_names() {
