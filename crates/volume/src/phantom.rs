@@ -297,15 +297,22 @@ pub fn ramp_width(geometry: &Geometry) -> f64 {
 }
 
 /// The density byte for signed distance `sdf` with ramp half width `w` (> 0):
-/// `round(clamp(127.5 · (1 − sdf / w), 0, 255))`, rounding halves up. So `sdf ≤ −w` gives 255,
-/// `sdf ≥ w` gives 0, and the un-quantised ramp passes 127.5 exactly at `sdf = 0`; True's
-/// iso value 127 lies `w / 255` outside the zero set. NaN gives 0.
+/// `round(clamp(127.5 − 127.5 · sdf / w, 0, 255))`, rounding halves up. So `sdf ≤ −w` gives
+/// 255, `sdf ≥ w` gives 0, and the un-quantised ramp passes 127.5 exactly at `sdf = 0` (stored
+/// as 128); True's iso value 127 lies `w / 255` outside the zero set. NaN gives 0.
 #[inline]
 #[must_use]
 pub fn density_value(sdf: f64, w: f64) -> u8 {
-    let v = 127.5 * (1.0 - sdf / w);
-    // `u8::from_f64` rounds half away from zero and saturates (NaN → 0).
-    u8::from_f64(v.clamp(0.0, 255.0))
+    ramp(sdf, 127.5 / w)
+}
+
+/// `round(clamp(127.5 − sdf · scale, 0, 255))`, halves up; the per-voxel kernel of
+/// [`density_value`] with `scale = 127.5 / w` hoisted out of the loop.
+#[inline]
+fn ramp(sdf: f64, scale: f64) -> u8 {
+    let v = (127.5 - sdf * scale).clamp(0.0, 255.0);
+    // `v` is in [0, 255] or NaN: adding ½ and truncating rounds half up, and NaN casts to 0.
+    (v + 0.5) as u8
 }
 
 /// The phantom's signed distance ([`Phantom::sdf`], negative inside) sampled at the voxel
@@ -329,14 +336,37 @@ pub fn signed_distance(ph: Phantom, dims: [usize; 3]) -> Result<Volume<f32>, Vol
 /// As [`geometry`].
 pub fn density(ph: Phantom, dims: [usize; 3]) -> Result<Volume<u8>, VolumeError> {
     let g = geometry(dims)?;
-    let w = ramp_width(&g);
-    sample(ph, g, |d| density_value(d, w))
+    let scale = 127.5 / ramp_width(&g);
+    sample(ph, g, |d| ramp(d, scale))
 }
 
-/// Evaluate `map(sdf)` at every voxel centre of the axis-aligned grid `g`.
+/// Evaluate `map(sdf)` at every voxel centre of the axis-aligned grid `g`. The phantom is
+/// dispatched once, outside the loop, so each SDF is inlined into its own voxel loop.
 fn sample<T: Voxel>(
     ph: Phantom,
     g: Geometry,
+    map: impl Fn(f64) -> T + Sync,
+) -> Result<Volume<T>, VolumeError> {
+    match ph {
+        Phantom::Sphere => sample_with(g, |p| p.length() - SPHERE_RADIUS, map),
+        Phantom::Torus => sample_with(
+            g,
+            |p| torus_z(p, TORUS_MAJOR_RADIUS, TORUS_MINOR_RADIUS),
+            map,
+        ),
+        Phantom::RoundedBox => sample_with(
+            g,
+            |p| rounded_box(p, ROUNDED_BOX_HALF_EXTENTS, ROUNDED_BOX_RADIUS),
+            map,
+        ),
+        Phantom::ClayBlock => sample_with(g, clay::sdf, map),
+        Phantom::Teapot => sample_with(g, teapot::sdf, map),
+    }
+}
+
+fn sample_with<T: Voxel>(
+    g: Geometry,
+    sdf: impl Fn(DVec3) -> f64 + Sync,
     map: impl Fn(f64) -> T + Sync,
 ) -> Result<Volume<T>, VolumeError> {
     // Per-axis voxel-centre coordinates, bit-identical to `Geometry::index_to_physical` for an
@@ -347,7 +377,7 @@ fn sample<T: Voxel>(
             .collect()
     };
     let (xs, ys, zs) = (axis(0), axis(1), axis(2));
-    Volume::from_fn(g, |i, j, k| map(ph.sdf(DVec3::new(xs[i], ys[j], zs[k]))))
+    Volume::from_fn(g, |i, j, k| map(sdf(DVec3::new(xs[i], ys[j], zs[k]))))
 }
 
 // ---------------------------------------------------------------------------------------------
@@ -379,7 +409,8 @@ fn cylinder_y(p: DVec3, x0: f64, z0: f64, radius: f64) -> f64 {
 /// Its gradient has norm ≤ `min(radii) · max(1 / radii) = 1`.
 #[inline]
 fn ellipsoid(p: DVec3, c: DVec3, radii: DVec3) -> f64 {
-    (((p - c) / radii).length() - 1.0) * radii.min_element()
+    // With constant `radii` (all call sites) the reciprocal folds at compile time.
+    (((p - c) * radii.recip()).length() - 1.0) * radii.min_element()
 }
 
 /// Convex hull of the balls `(a, ra)` and `(b, rb)`: a cone frustum capped by the two spheres.
@@ -411,14 +442,15 @@ fn round_cone(p: DVec3, a: DVec3, ra: f64, b: DVec3, rb: f64) -> f64 {
     }
 }
 
-/// Polynomial smooth minimum (smooth union) with blend radius `k > 0`:
-/// `min(a, b) − k/4 · max(1 − |a − b| / k, 0)²`. Its partial derivatives are in `[0, 1]` and
+/// Polynomial smooth minimum (smooth union) with blend width `k > 0`:
+/// `min(a, b) − max(k − |a − b|, 0)² / (4k)`. Its partial derivatives are in `[0, 1]` and
 /// sum to 1, so it maps 1-Lipschitz functions to a 1-Lipschitz function; it equals `min`
 /// where `|a − b| ≥ k` and never exceeds it (the blend only adds material).
 #[inline]
 fn smin(a: f64, b: f64, k: f64) -> f64 {
-    let h = (1.0 - (a - b).abs() / k).max(0.0);
-    a.min(b) - 0.25 * k * h * h
+    let h = (k - (a - b).abs()).max(0.0);
+    // With a constant `k` (all call sites) `0.25 / k` folds at compile time.
+    a.min(b) - h * h * (0.25 / k)
 }
 
 /// Smooth maximum (smooth intersection / difference), `−smin(−a, −b, k)`; only removes
