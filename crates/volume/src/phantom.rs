@@ -29,13 +29,16 @@
 //! at voxel centres and maps it through the antialiased ramp of [`density_value`]:
 //!
 //! ```text
-//! value = round(clamp(127.5 · (1 − sdf / w), 0, 255)),   w = RAMP_VOXELS · max(spacing)
+//! value = round(clamp(127.5 − 127.5 · sdf / w, 0, 255)),   w = RAMP_VOXELS · max(spacing)
 //! ```
 //!
-//! so voxels deeper than `w` inside are 255, voxels farther than `w` outside are 0, and the
-//! 127.5 level of the un-quantised ramp is exactly the SDF's zero set. The ramp is
-//! `2 · RAMP_VOXELS = 3` voxels wide along the coarsest axis, enough for linear interpolation
-//! of the density to place the surface within a fraction of a voxel.
+//! (halves rounded up), so voxels deeper than `w` inside are 255, voxels farther than `w`
+//! outside are 0, and the 127.5 level of the un-quantised ramp is exactly the SDF's zero set.
+//! The ramp is `2 · RAMP_VOXELS = 3` voxels wide along the coarsest axis (wider in true
+//! distance where a composite's SDF bound has a gradient below 1), enough for linear
+//! interpolation of the density to place the surface within half a voxel of the zero set
+//! wherever the model has no detail finer than about two voxels; the phantoms are designed so
+//! that this holds already at True's 30³.
 //!
 //! ```
 //! use volmorph_volume::phantom::{self, Phantom};
@@ -124,8 +127,8 @@ pub enum Phantom {
     ///   is open.
     ///
     /// The parts are joined by smooth unions. No part is thinner than 0.15, two voxels at
-    /// True's 30³, so the density isosurface follows the model there. Symmetric in y only.
-    /// 1-Lipschitz bound.
+    /// True's 30³, so the density isosurface follows the model there. Mirror-symmetric about
+    /// the plane y = 0 only. 1-Lipschitz bound.
     Teapot,
 }
 
@@ -223,9 +226,9 @@ impl Phantom {
     #[must_use]
     pub fn sdf(&self, p: DVec3) -> f64 {
         match self {
-            Self::Sphere => p.length() - SPHERE_RADIUS,
-            Self::Torus => torus_z(p, TORUS_MAJOR_RADIUS, TORUS_MINOR_RADIUS),
-            Self::RoundedBox => rounded_box(p, ROUNDED_BOX_HALF_EXTENTS, ROUNDED_BOX_RADIUS),
+            Self::Sphere => sphere_sdf(p),
+            Self::Torus => torus_sdf(p),
+            Self::RoundedBox => rounded_box_sdf(p),
             Self::ClayBlock => clay::sdf(p),
             Self::Teapot => teapot::sdf(p),
         }
@@ -348,17 +351,9 @@ fn sample<T: Voxel>(
     map: impl Fn(f64) -> T + Sync,
 ) -> Result<Volume<T>, VolumeError> {
     match ph {
-        Phantom::Sphere => sample_with(g, |p| p.length() - SPHERE_RADIUS, map),
-        Phantom::Torus => sample_with(
-            g,
-            |p| torus_z(p, TORUS_MAJOR_RADIUS, TORUS_MINOR_RADIUS),
-            map,
-        ),
-        Phantom::RoundedBox => sample_with(
-            g,
-            |p| rounded_box(p, ROUNDED_BOX_HALF_EXTENTS, ROUNDED_BOX_RADIUS),
-            map,
-        ),
+        Phantom::Sphere => sample_with(g, sphere_sdf, map),
+        Phantom::Torus => sample_with(g, torus_sdf, map),
+        Phantom::RoundedBox => sample_with(g, rounded_box_sdf, map),
         Phantom::ClayBlock => sample_with(g, clay::sdf, map),
         Phantom::Teapot => sample_with(g, teapot::sdf, map),
     }
@@ -378,6 +373,24 @@ fn sample_with<T: Voxel>(
     };
     let (xs, ys, zs) = (axis(0), axis(1), axis(2));
     Volume::from_fn(g, |i, j, k| map(sdf(DVec3::new(xs[i], ys[j], zs[k]))))
+}
+
+/// [`Phantom::Sphere`].
+#[inline]
+fn sphere_sdf(p: DVec3) -> f64 {
+    p.length() - SPHERE_RADIUS
+}
+
+/// [`Phantom::Torus`].
+#[inline]
+fn torus_sdf(p: DVec3) -> f64 {
+    torus_z(p, TORUS_MAJOR_RADIUS, TORUS_MINOR_RADIUS)
+}
+
+/// [`Phantom::RoundedBox`].
+#[inline]
+fn rounded_box_sdf(p: DVec3) -> f64 {
+    rounded_box(p, ROUNDED_BOX_HALF_EXTENTS, ROUNDED_BOX_RADIUS)
 }
 
 // ---------------------------------------------------------------------------------------------
@@ -405,8 +418,9 @@ fn cylinder_y(p: DVec3, x0: f64, z0: f64, radius: f64) -> f64 {
     DVec2::new(p.x - x0, p.z - z0).length() - radius
 }
 
-/// Bound: ellipsoid of semi-axes `radii` centred at `c`, as `(|(p − c) / radii| − 1) · min(radii)`.
-/// Its gradient has norm ≤ `min(radii) · max(1 / radii) = 1`.
+/// Bound: ellipsoid of semi-axes `radii` centred at `c`, as
+/// `(|(p − c) / radii| − 1) · min(radii)`. Its gradient has norm ≤ `min(radii) · max(1 / radii)
+/// = 1`, and at the surface ≥ `min(radii) / max(radii)`.
 #[inline]
 fn ellipsoid(p: DVec3, c: DVec3, radii: DVec3) -> f64 {
     // With constant `radii` (all call sites) the reciprocal folds at compile time.
@@ -426,6 +440,10 @@ fn ellipsoid(p: DVec3, c: DVec3, radii: DVec3) -> f64 {
 fn round_cone(p: DVec3, a: DVec3, ra: f64, b: DVec3, rb: f64) -> f64 {
     let axis = b - a;
     let len = axis.length();
+    debug_assert!(
+        (ra - rb).abs() < len,
+        "one ball of the round cone contains the other"
+    );
     let e = axis / len;
     let pa = p - a;
     let h = pa.dot(e);
@@ -528,6 +546,7 @@ mod teapot {
     const LID_BLEND: f64 = 0.06;
     const KNOB_BLEND: f64 = 0.08;
     const SPOUT_BLEND: f64 = 0.08;
+    const BEND_BLEND: f64 = 0.06;
     const HANDLE_BLEND: f64 = 0.06;
 
     pub(super) fn sdf(p: DVec3) -> f64 {
@@ -560,7 +579,7 @@ mod teapot {
                 SPOUT_TIP,
                 SPOUT_TIP_RADIUS,
             ),
-            LID_BLEND,
+            BEND_BLEND,
         );
 
         // Torus around the y axis: the roles of y and z swap.
