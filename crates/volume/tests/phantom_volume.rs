@@ -191,7 +191,7 @@ fn density_is_saturated_beyond_the_ramp_and_follows_the_formula() {
                     // Inside is above the iso value, outside below.
                     assert_eq!(
                         v > ISO_VALUE,
-                        s < 0.0,
+                        s <= 0.0,
                         "{ph} ({i},{j},{k}) sdf {s} value {v}"
                     );
                 }
