@@ -11,6 +11,7 @@
 mod error;
 pub mod format;
 mod geometry;
+pub mod phantom;
 mod volume;
 mod voxel;
 
