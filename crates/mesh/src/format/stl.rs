@@ -2,10 +2,10 @@
 //!
 //! **Detection.** A file whose size is exactly `84 + 50·n` bytes, `n` being the little-endian
 //! `u32` at byte 80, is binary — even when its 80-byte header starts with `solid`, as many
-//! exporters write. Otherwise a file starting with `solid` is parsed as ASCII; should that
-//! fail on data that is not text, it is parsed as binary after all (to report the binary
-//! problem, e.g. truncation). Any other file is binary; bytes after the last declared
-//! triangle are ignored.
+//! exporters write. Otherwise a file starting with `solid` and free of control bytes other
+//! than whitespace is parsed as ASCII. Any other file is binary (so a truncated binary file
+//! whose header starts with `solid` is reported as truncated binary); bytes after the last
+//! declared triangle are ignored.
 //!
 //! **Topology.** STL stores each triangle's three corners by value. The reader merges corners
 //! whose coordinates are exactly equal (same bit patterns, with `-0.0` equal to `0.0`) into
@@ -72,6 +72,14 @@ impl Welder {
     }
 }
 
+/// No control bytes other than whitespace: binary STL data (float bit patterns, counts)
+/// practically always contains some, text never does. Bytes ≥ 0x80 are allowed (UTF-8 names).
+fn is_text(bytes: &[u8]) -> bool {
+    !bytes
+        .iter()
+        .any(|&c| (c < 0x20 && !c.is_ascii_whitespace()) || c == 0x7f)
+}
+
 fn looks_like_ascii(bytes: &[u8]) -> bool {
     let mut t = bytes;
     while let Some((&c, rest)) = t.split_first() {
@@ -99,19 +107,8 @@ pub fn read_stl_bytes(bytes: &[u8]) -> Result<Mesh, MeshError> {
             return read_binary(bytes);
         }
     }
-    if looks_like_ascii(bytes) {
-        match read_ascii(bytes) {
-            Ok(m) => return Ok(m),
-            Err(e) => {
-                let texty = bytes
-                    .iter()
-                    .take(4096)
-                    .all(|&c| c.is_ascii_graphic() || c.is_ascii_whitespace());
-                if texty || bytes.len() < HEADER {
-                    return Err(e);
-                }
-            }
-        }
+    if looks_like_ascii(bytes) && (bytes.len() < HEADER || is_text(bytes)) {
+        return read_ascii(bytes);
     }
     read_binary(bytes)
 }
