@@ -607,36 +607,42 @@ impl Mesh {
         exact.reserve(n);
         let mut kept: Vec<DVec3> = Vec::new();
         if tolerance > 0.0 {
-            // Uniform grid with cell size `tolerance`: heads of per-cell linked lists of kept
-            // vertices; candidates lie in the 27 cells around the query.
+            // Uniform grid with cell size 2·tolerance: the ball of radius `tolerance` around a
+            // point meets at most two cells per axis (its own and the neighbour on the side
+            // the point is nearer to), so 8 cells hold every candidate. Cells keep the heads of
+            // linked lists of kept vertices.
             let mut heads: FastMap<[i64; 3], u32> = FastMap::default();
             let mut next: Vec<u32> = Vec::new();
-            let inv = 1.0 / tolerance;
+            let inv = 0.5 / tolerance;
             let tol2 = tolerance * tolerance;
             for &p in &self.positions {
                 let id = if p.is_finite() {
-                    let c = (p * inv).floor();
+                    let q = p * inv;
+                    let c = q.floor();
+                    let side = (q - c).cmplt(DVec3::splat(0.5));
                     let cell = [c.x as i64, c.y as i64, c.z as i64];
-                    let mut found = None;
-                    for dz in -1..=1i64 {
-                        for dy in -1..=1i64 {
-                            for dx in -1..=1i64 {
-                                let key = [
-                                    cell[0].saturating_add(dx),
-                                    cell[1].saturating_add(dy),
-                                    cell[2].saturating_add(dz),
-                                ];
-                                let mut cur = heads.get(&key).copied().unwrap_or(u32::MAX);
-                                while cur != u32::MAX {
-                                    let k = cur as usize;
-                                    if kept[k].distance_squared(p) <= tol2
-                                        && found.is_none_or(|f: u32| cur < f)
-                                    {
-                                        found = Some(cur);
-                                    }
-                                    cur = next[k];
-                                }
+                    let step = [
+                        if side.x { -1 } else { 1 },
+                        if side.y { -1 } else { 1 },
+                        if side.z { -1 } else { 1 },
+                    ];
+                    let mut found: Option<u32> = None;
+                    for corner in 0..8 {
+                        let key: [i64; 3] = std::array::from_fn(|a| {
+                            if corner >> a & 1 == 1 {
+                                cell[a].saturating_add(step[a])
+                            } else {
+                                cell[a]
                             }
+                        });
+                        let mut cur = heads.get(&key).copied().unwrap_or(u32::MAX);
+                        while cur != u32::MAX {
+                            let k = cur as usize;
+                            if kept[k].distance_squared(p) <= tol2 && found.is_none_or(|f| cur < f)
+                            {
+                                found = Some(cur);
+                            }
+                            cur = next[k];
                         }
                     }
                     match found {

@@ -52,8 +52,10 @@ struct Welder {
 
 impl Welder {
     fn with_capacity(corners: usize) -> Self {
+        // A closed triangle mesh has about half as many vertices as triangles (V ≈ F/2, so
+        // corners / 6); the map grows if the surface is more fragmented.
         let mut map = FastMap::default();
-        map.reserve(corners / 2);
+        map.reserve(corners / 6);
         let mut b = Builder::new();
         b.indices.reserve(corners);
         b.offsets.reserve(corners / 3 + 1);
