@@ -11,8 +11,8 @@ pub enum Location {
     Line(usize),
     /// 0-based byte offset into binary data.
     Byte(usize),
-    /// No finer location than "this file" (e.g. a count mismatch found at the end).
-    File,
+    /// The file's header as a whole (e.g. a required declaration is missing).
+    Header,
 }
 
 impl fmt::Display for Location {
@@ -20,7 +20,7 @@ impl fmt::Display for Location {
         match self {
             Self::Line(l) => write!(f, "line {l}"),
             Self::Byte(b) => write!(f, "byte {b}"),
-            Self::File => f.write_str("file"),
+            Self::Header => f.write_str("header"),
         }
     }
 }
@@ -93,11 +93,12 @@ impl MeshError {
         }
     }
 
-    /// Attach a file path to this error (no-op if it already carries one).
+    /// Attach a file path to this error (no-op if it already carries one, including an
+    /// operating-system error of [`MeshError::Io`], which names its path itself).
     #[must_use]
     pub fn at(self, path: &std::path::Path) -> Self {
         match self {
-            e @ Self::File { .. } => e,
+            e @ (Self::File { .. } | Self::Io(IoError::Os { .. })) => e,
             e => Self::File {
                 path: path.display().to_string(),
                 source: Box::new(e),

@@ -198,7 +198,8 @@ fn files_by_extension_with_gzip() {
     assert!(e.to_string().contains("gzip"), "{e}");
     let e = read(&dir.path().join("missing.obj")).unwrap_err();
     assert!(e.to_string().contains("missing.obj"), "{e}");
-    assert!(matches!(e, MeshError::File { .. }));
+    assert!(matches!(e, MeshError::Io(_)));
+    assert_eq!(e.to_string().matches("missing.obj").count(), 1, "{e}");
     // Corrupt gzip stream.
     std::fs::write(dir.path().join("bad.ply.gz"), [0x1f, 0x8b, 8, 0, 1, 2, 3]).unwrap();
     assert!(read(&dir.path().join("bad.ply.gz")).is_err());
@@ -654,6 +655,13 @@ fn malformed_ply_header() {
         b"ply\nformat ascii 1.0\nelement vertex 1\nproperty float x\nproperty float y\nend_header\n1 2\n",
     ));
     assert!(msg.contains("no 'z'"), "{msg}");
+    let e =
+        read_ply_bytes(b"ply\nformat ascii 1.0\nelement vertex 0\nproperty float x\nend_header\n")
+            .unwrap_err();
+    assert_eq!(
+        e.to_string(),
+        "PLY header: vertex element has no 'y' property"
+    );
     let (_, _, msg) = parse_err(read_ply_bytes(
         b"ply\nformat ascii 1.0\nelement vertex 0\nproperty float x\nproperty float y\nproperty float z\n\
           element face 0\nproperty list uchar int corners\nend_header\n",

@@ -326,7 +326,7 @@ struct Roles {
 }
 
 fn find_roles(h: &Header) -> Result<Roles, MeshError> {
-    let ferr = |m: String| MeshError::parse(MeshFormat::Ply, Location::File, m);
+    let ferr = |m: String| MeshError::parse(MeshFormat::Ply, Location::Header, m);
     let mut roles = Roles {
         vertex: None,
         xyz: [0; 3],
