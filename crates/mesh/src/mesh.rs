@@ -501,24 +501,24 @@ impl Mesh {
     }
 
     /// Signed volume enclosed by the faces (divergence theorem over the fan triangulation:
-    /// Σ v₀ · (vᵢ × vᵢ₊₁) / 6). Positive for a closed, outward-oriented surface; meaningless
-    /// for an open one.
+    /// Σ (v₀ − c) · ((vᵢ − c) × (vᵢ₊₁ − c)) / 6, with the reference point `c` at the centre of
+    /// the bounding box to limit cancellation far from the origin). Positive for a closed,
+    /// outward-oriented surface; for an open surface the value depends on `c` and is not a
+    /// volume. Faces with out-of-range indices are skipped.
     #[must_use]
     pub fn signed_volume(&self) -> f64 {
         let p = &self.positions;
+        let c = self
+            .bounding_box()
+            .map_or(DVec3::ZERO, |(lo, hi)| 0.5 * (lo + hi));
         let mut sum = 0.0;
         for face in self.faces() {
-            let Some((&i0, rest)) = face.split_first() else {
+            if face.len() < 3 || face.iter().any(|&i| i as usize >= p.len()) {
                 continue;
-            };
-            let (Some(&v0), true) = (
-                p.get(i0 as usize),
-                rest.iter().all(|&i| (i as usize) < p.len()),
-            ) else {
-                continue;
-            };
-            for w in rest.windows(2) {
-                sum += v0.dot(p[w[0] as usize].cross(p[w[1] as usize]));
+            }
+            let v0 = p[face[0] as usize] - c;
+            for w in face[1..].windows(2) {
+                sum += v0.dot((p[w[0] as usize] - c).cross(p[w[1] as usize] - c));
             }
         }
         sum / 6.0
@@ -604,7 +604,6 @@ impl Mesh {
         let n = self.positions.len();
         let mut remap = Vec::with_capacity(n);
         let mut exact: FastMap<BitKey, u32> = FastMap::default();
-        exact.reserve(n);
         let mut kept: Vec<DVec3> = Vec::new();
         if tolerance > 0.0 {
             // Uniform grid with cell size 2·tolerance: the ball of radius `tolerance` around a
@@ -666,6 +665,7 @@ impl Mesh {
                 remap.push(id);
             }
         } else {
+            exact.reserve(n);
             for &p in &self.positions {
                 let id = *exact.entry(BitKey::new(p)).or_insert_with(|| {
                     kept.push(p);

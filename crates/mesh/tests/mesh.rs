@@ -314,3 +314,14 @@ fn remove_unreferenced() {
     assert_eq!(remap[3], u32::MAX);
     assert_eq!(m, cube());
 }
+
+#[test]
+fn signed_volume_is_translation_invariant_far_away() {
+    let mut c = cube();
+    c.transform(|p| p * 1e-3 + DVec3::new(1e7, -2e7, 3e7));
+    // The stored box (edges rounded to the coordinates' ulp) has this exact volume.
+    let (lo, hi) = c.bounding_box().unwrap();
+    let exact = (hi - lo).x * (hi - lo).y * (hi - lo).z;
+    let v = c.signed_volume();
+    assert!((v - exact).abs() < 1e-12 * exact, "{v} vs {exact}");
+}

@@ -166,12 +166,23 @@ pub(crate) fn parse_i64(tok: &[u8]) -> Option<i64> {
         return None;
     }
     let mut v: i64 = 0;
-    for &b in digits {
-        let d = b.wrapping_sub(b'0');
-        if d > 9 {
-            return None;
+    if digits.len() <= 18 {
+        // At most 18 digits cannot overflow: no checks in the common case.
+        for &b in digits {
+            let d = b.wrapping_sub(b'0');
+            if d > 9 {
+                return None;
+            }
+            v = v * 10 - i64::from(d);
         }
-        v = v.checked_mul(10)?.checked_sub(i64::from(d))?;
+    } else {
+        for &b in digits {
+            let d = b.wrapping_sub(b'0');
+            if d > 9 {
+                return None;
+            }
+            v = v.checked_mul(10)?.checked_sub(i64::from(d))?;
+        }
     }
     if neg { Some(v) } else { v.checked_neg() }
 }
@@ -216,6 +227,11 @@ mod tests {
         assert_eq!(parse_i64(b"-"), None);
         assert_eq!(parse_i64(b"1x"), None);
         assert_eq!(parse_i64(b"1.0"), None);
+        assert_eq!(
+            parse_i64(b"999999999999999999"),
+            Some(999_999_999_999_999_999)
+        );
+        assert_eq!(parse_i64(b"-000000000000000000000042"), Some(-42));
     }
 
     #[test]
