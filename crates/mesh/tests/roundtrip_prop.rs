@@ -97,3 +97,51 @@ proptest! {
         prop_assert!((t.signed_volume() - m.signed_volume()).abs() <= 1e-12 * (1.0 + m.signed_volume().abs()));
     }
 }
+
+/// Arbitrary bytes after a plausible start: readers return errors or valid meshes, never
+/// panic.
+fn hostile() -> impl Strategy<Value = (MeshFormat, Vec<u8>)> {
+    let prefixes: [(MeshFormat, &'static [u8]); 8] = [
+        (MeshFormat::Obj, b"v 0 0 0\nv 1 0 0\nv 0 1 0\n"),
+        (MeshFormat::Off, b"OFF\n3 1 0\n"),
+        (MeshFormat::Ply, b"ply\nformat ascii 1.0\n"),
+        (
+            MeshFormat::Ply,
+            b"ply\nformat binary_little_endian 1.0\nelement vertex 2\nproperty float x\n\
+              property float y\nproperty float z\nelement face 1\n\
+              property list uchar int vertex_indices\nend_header\n",
+        ),
+        (
+            MeshFormat::Ply,
+            b"ply\nformat binary_big_endian 1.0\nelement vertex 3\nproperty list int int x\n",
+        ),
+        (
+            MeshFormat::Stl,
+            b"solid s\nfacet normal 0 0 1\nouter loop\n",
+        ),
+        (MeshFormat::Stl, b""),
+        (MeshFormat::Obj, b""),
+    ];
+    (
+        0..prefixes.len(),
+        prop::collection::vec(any::<u8>(), 0..400),
+    )
+        .prop_map(move |(k, tail)| {
+            let (format, prefix) = prefixes[k];
+            let mut bytes = prefix.to_vec();
+            bytes.extend(tail);
+            (format, bytes)
+        })
+}
+
+proptest! {
+    #![proptest_config(ProptestConfig::with_cases(512))]
+
+    #[test]
+    fn readers_survive_hostile_bytes((format, bytes) in hostile()) {
+        if let Ok(m) = read_bytes(&bytes, format) {
+            let r = m.validate();
+            prop_assert!(r.out_of_range_faces.is_empty() && r.small_faces.is_empty());
+        }
+    }
+}

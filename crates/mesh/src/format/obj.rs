@@ -18,7 +18,7 @@ use std::io::Write;
 use glam::DVec3;
 
 use super::Builder;
-use super::text::{Lines, Words, parse_f64, parse_i64, show, write_f64};
+use super::text::{Lines, Words, parse_f64, parse_i64, show, write_f64, write_uint};
 use crate::error::Location;
 use crate::{Mesh, MeshError, MeshFormat};
 
@@ -143,7 +143,7 @@ pub fn write_obj<W: Write>(w: &mut W, mesh: &Mesh) -> Result<(), MeshError> {
     for face in mesh.faces() {
         w.write_all(b"f")?;
         for &i in face {
-            write!(w, " {}", u64::from(i) + 1)?;
+            write_uint(w, b' ', u64::from(i) + 1)?;
         }
         w.write_all(b"\n")?;
     }

@@ -20,7 +20,7 @@ use std::io::Write;
 use glam::DVec3;
 
 use super::Builder;
-use super::text::{Lines, Words, parse_f64, parse_i64, show, write_f64};
+use super::text::{Lines, Words, parse_f64, parse_i64, show, write_f64, write_uint};
 use crate::error::Location;
 use crate::{Mesh, MeshError, MeshFormat};
 
@@ -186,7 +186,7 @@ pub fn write_off<W: Write>(w: &mut W, mesh: &Mesh) -> Result<(), MeshError> {
     for face in mesh.faces() {
         write!(w, "{}", face.len())?;
         for &i in face {
-            write!(w, " {i}")?;
+            write_uint(w, b' ', u64::from(i))?;
         }
         w.write_all(b"\n")?;
     }

@@ -25,7 +25,9 @@ use std::io::Write;
 use glam::DVec3;
 
 use super::Builder;
-use super::text::{Tokens, parse_f32, parse_f64, parse_i64, show, write_f32, write_f64};
+use super::text::{
+    Tokens, parse_f32, parse_f64, parse_i64, show, write_f32, write_f64, write_uint,
+};
 use crate::error::Location;
 use crate::{Mesh, MeshError, MeshFormat};
 
@@ -726,7 +728,7 @@ pub fn write_ply<W: Write>(
             for face in mesh.faces() {
                 write!(w, "{}", face.len())?;
                 for &i in face {
-                    write!(w, " {i}")?;
+                    write_uint(w, b' ', u64::from(i))?;
                 }
                 w.write_all(b"\n")?;
             }

@@ -187,6 +187,25 @@ pub(crate) fn parse_i64(tok: &[u8]) -> Option<i64> {
     if neg { Some(v) } else { v.checked_neg() }
 }
 
+/// Write `sep` followed by the decimal digits of `v` (no formatting machinery: this runs
+/// once per face corner).
+#[inline]
+pub(crate) fn write_uint<W: Write + ?Sized>(w: &mut W, sep: u8, mut v: u64) -> io::Result<()> {
+    let mut buf = [0u8; 21];
+    let mut i = buf.len();
+    loop {
+        i -= 1;
+        buf[i] = b'0' + (v % 10) as u8;
+        v /= 10;
+        if v == 0 {
+            break;
+        }
+    }
+    i -= 1;
+    buf[i] = sep;
+    w.write_all(&buf[i..])
+}
+
 /// Write `x` as the shortest decimal that parses back to exactly `x` (positional notation
 /// for moderate magnitudes, exponent notation otherwise; `NaN`, `inf`, `-inf` for
 /// non-finite values, `-0` keeps its sign).
@@ -268,6 +287,15 @@ mod tests {
             write_f32(&mut s, x).unwrap();
             assert_eq!(parse_f32(&s).unwrap().to_bits(), x.to_bits());
         }
+    }
+
+    #[test]
+    fn unsigned_integers() {
+        let mut s = Vec::new();
+        for v in [0, 7, 10, 4_294_967_295, u64::MAX] {
+            write_uint(&mut s, b' ', v).unwrap();
+        }
+        assert_eq!(s, b" 0 7 10 4294967295 18446744073709551615");
     }
 
     #[test]
