@@ -370,6 +370,37 @@ impl Mesh {
             .unwrap_or(0)
     }
 
+    /// The fan triangles of every face, in face order, without building a new mesh: polygon
+    /// `(v0, v1, …, vk)` yields `[v0, vi, vi+1]` for `i = 1..k` (see [`Mesh::triangulated`]).
+    pub fn fan_triangles(&self) -> impl Iterator<Item = [u32; 3]> + '_ {
+        self.faces().flat_map(|face| {
+            let v0 = face.first().copied().unwrap_or(0);
+            face.get(1..)
+                .unwrap_or(&[])
+                .windows(2)
+                .map(move |w| [v0, w[0], w[1]])
+        })
+    }
+
+    /// Append `other`'s vertices and faces (its indices shifted past this mesh's vertices).
+    ///
+    /// # Errors
+    /// [`MeshError::TooLarge`] if the result would exceed the 32-bit limits; `self` is then
+    /// unchanged.
+    pub fn append(&mut self, other: &Mesh) -> Result<(), MeshError> {
+        let nv = self.positions.len();
+        let nc = self.indices.len();
+        check_vertex_count(nv + other.positions.len())?;
+        check_corner_count(nc + other.indices.len())?;
+        self.positions.extend_from_slice(&other.positions);
+        // Out-of-range indices of an unvalidated `other` stay out of range (saturating).
+        self.indices
+            .extend(other.indices.iter().map(|&i| i.saturating_add(nv as u32)));
+        self.offsets
+            .extend(other.offsets[1..].iter().map(|&o| o + nc as u32));
+        Ok(())
+    }
+
     /// Fan-triangulate every face: polygon `(v0, v1, …, vk)` becomes triangles
     /// `(v0, vi, vi+1)` for `i = 1..k`, which keeps the orientation and is exact for convex
     /// polygons. Triangles stay as they are; faces with fewer than three vertices (possible

@@ -325,3 +325,22 @@ fn signed_volume_is_translation_invariant_far_away() {
     let v = c.signed_volume();
     assert!((v - exact).abs() < 1e-12 * exact, "{v} vs {exact}");
 }
+
+#[test]
+fn fan_triangles_and_append() {
+    let m = mixed();
+    let tris: Vec<[u32; 3]> = m.fan_triangles().collect();
+    let t = m.triangulated().unwrap();
+    assert_eq!(tris.len(), t.face_count());
+    assert!(tris.iter().zip(t.faces()).all(|(a, b)| a.as_slice() == b));
+    let mut two = cube();
+    let mut moved = cube();
+    moved.transform(|p| p + DVec3::splat(5.0));
+    two.append(&moved).unwrap();
+    assert_eq!((two.vertex_count(), two.face_count()), (16, 12));
+    assert_eq!(two.face(6), &[8, 10, 11, 9]);
+    let r = two.validate();
+    assert!(r.is_closed_manifold());
+    assert_eq!((r.components, r.euler_characteristic), (2, 4));
+    assert!((two.signed_volume() - 2.0).abs() < 1e-12);
+}

@@ -251,28 +251,24 @@ fn read_ascii(bytes: &[u8]) -> Result<Mesh, MeshError> {
     Ok(w.b.finish())
 }
 
-/// Iterate the fan triangles of `mesh` as corner positions.
+/// Call `f` with the corner positions of every fan triangle of `mesh` (whose indices the
+/// caller checked).
 fn for_each_triangle<F>(mesh: &Mesh, mut f: F) -> Result<(), MeshError>
 where
     F: FnMut([DVec3; 3]) -> Result<(), MeshError>,
 {
     let p = mesh.positions();
-    for face in mesh.faces() {
-        let Some((&i0, rest)) = face.split_first() else {
-            continue;
+    for t in mesh.fan_triangles() {
+        let get = |i: u32| {
+            p.get(i as usize)
+                .copied()
+                .ok_or(MeshError::IndexOutOfRange {
+                    face: 0,
+                    index: u64::from(i),
+                    vertex_count: p.len(),
+                })
         };
-        for e in rest.windows(2) {
-            let get = |i: u32| {
-                p.get(i as usize)
-                    .copied()
-                    .ok_or(MeshError::IndexOutOfRange {
-                        face: 0,
-                        index: u64::from(i),
-                        vertex_count: p.len(),
-                    })
-            };
-            f([get(i0)?, get(e[0])?, get(e[1])?])?;
-        }
+        f([get(t[0])?, get(t[1])?, get(t[2])?])?;
     }
     Ok(())
 }
