@@ -212,7 +212,6 @@ pub fn write_with(path: &Path, mesh: &Mesh, options: &MeshWriteOptions) -> Resul
                 "writing gzip-compressed meshes; drop the .gz suffix".into(),
             ));
         }
-        check_writable(mesh)?;
         volmorph_io::write_atomic(path, |w| write_to(w, mesh, format, options))
     };
     run().map_err(|e| e.at(path))
@@ -228,7 +227,6 @@ pub fn write_to<W: Write>(
     format: MeshFormat,
     options: &MeshWriteOptions,
 ) -> Result<(), MeshError> {
-    check_writable(mesh)?;
     match format {
         MeshFormat::Obj => obj::write_obj(w, mesh),
         MeshFormat::Stl => stl::write_stl(w, mesh, options.binary),
@@ -260,8 +258,9 @@ pub fn to_bytes(
     Ok(out)
 }
 
-/// Refuse meshes no file format can represent faithfully.
-fn check_writable(mesh: &Mesh) -> Result<(), MeshError> {
+/// Refuse meshes no file format can represent faithfully: out-of-range indices, faces of
+/// fewer than three vertices.
+pub(crate) fn check_writable(mesh: &Mesh) -> Result<(), MeshError> {
     let n = mesh.vertex_count();
     for (f, face) in mesh.faces().enumerate() {
         if face.len() < 3 {

@@ -123,8 +123,11 @@ pub fn read_obj_bytes(bytes: &[u8]) -> Result<Mesh, MeshError> {
 /// Write `mesh` as OBJ text (positions and faces only).
 ///
 /// # Errors
+/// [`MeshError::IndexOutOfRange`] / [`MeshError::FaceTooSmall`] for a mesh built with
+/// [`Mesh::from_csr_unvalidated`] that has such faces (nothing is written then);
 /// [`MeshError::Write`] when the writer fails.
 pub fn write_obj<W: Write>(w: &mut W, mesh: &Mesh) -> Result<(), MeshError> {
+    super::check_writable(mesh)?;
     writeln!(
         w,
         "# volmorph mesh: {} vertices, {} faces",

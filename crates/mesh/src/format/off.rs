@@ -167,8 +167,11 @@ pub fn read_off_bytes(bytes: &[u8]) -> Result<Mesh, MeshError> {
 /// Write `mesh` as OFF text.
 ///
 /// # Errors
+/// [`MeshError::IndexOutOfRange`] / [`MeshError::FaceTooSmall`] for a mesh built with
+/// [`Mesh::from_csr_unvalidated`] that has such faces (nothing is written then);
 /// [`MeshError::Write`] when the writer fails.
 pub fn write_off<W: Write>(w: &mut W, mesh: &Mesh) -> Result<(), MeshError> {
+    super::check_writable(mesh)?;
     write!(
         w,
         "OFF\n# volmorph mesh\n{} {} 0\n",

@@ -672,6 +672,8 @@ fn read_ascii(h: &Header, roles: &Roles, data: &[u8]) -> Result<Mesh, MeshError>
 /// `single_precision` (see the module documentation).
 ///
 /// # Errors
+/// [`MeshError::IndexOutOfRange`] / [`MeshError::FaceTooSmall`] for a mesh built with
+/// [`Mesh::from_csr_unvalidated`] that has such faces (nothing is written then);
 /// [`MeshError::Write`] when the writer fails.
 pub fn write_ply<W: Write>(
     w: &mut W,
@@ -679,6 +681,7 @@ pub fn write_ply<W: Write>(
     encoding: PlyEncoding,
     single_precision: bool,
 ) -> Result<(), MeshError> {
+    super::check_writable(mesh)?;
     let max_len = mesh.max_face_len();
     let count_ty = if max_len <= 255 {
         Scalar::U8
