@@ -1,0 +1,321 @@
+//! Mesh file formats, chosen by file extension.
+//!
+//! | extension | format | read | write | module |
+//! | --- | --- | --- | --- | --- |
+//! | `.obj` | Wavefront OBJ (geometry only) | ✓ | text | [`obj`] |
+//! | `.stl` | STL, ASCII or binary | ✓ (auto-detected) | binary (default) or ASCII | [`stl`] |
+//! | `.ply` | PLY, ASCII / binary little- or big-endian | ✓ | binary LE (default), BE or ASCII | [`ply`] |
+//! | `.off` | OFF (also `COFF`, `NOFF`, `STOFF`, …) | ✓ | text | [`off`] |
+//!
+//! Any of these may carry a `.gz` suffix (`dragon.ply.gz`); compressed input is detected by
+//! its gzip magic number whatever the name, and decompressed transparently. Writing always
+//! produces uncompressed files (a `.gz` output path is refused rather than mislabelled).
+//!
+//! **Readers** return a mesh whose faces are all in range and have at least three vertices;
+//! an out-of-range or zero index, a face with fewer than three vertices, a truncated file, a
+//! bad token or an impossible count is a [`MeshError`] naming the format, the line (text) or
+//! byte offset (binary) and what is wrong — never a panic, and never an allocation larger than
+//! the data present can justify. Non-finite coordinates (`nan`, `inf`) are **accepted** as
+//! data: they are what the file says, and [`Mesh::validate`] reports them. Each reader has a
+//! `read_*_bytes(&[u8])` entry point working on uncompressed bytes (for tests and fuzzing).
+//!
+//! **Writers** refuse a mesh with out-of-range indices or faces of fewer than three vertices
+//! (possible only through [`Mesh::from_csr_unvalidated`]) and go through
+//! [`volmorph_io::write_atomic`] so a failure leaves no partial file.
+//!
+//! **Exactness.** OBJ, OFF and ASCII PLY write the shortest decimal that parses back to the
+//! same `f64`, and binary PLY writes `double` coordinates by default, so positions round-trip
+//! bit for bit (also `-0.0`, infinities; NaN payloads are not preserved by text formats). STL
+//! stores `f32`: coordinates are rounded to the nearest `f32` on write, so only
+//! `f32`-representable coordinates round-trip exactly; PLY with
+//! [`MeshWriteOptions::single_precision`] likewise.
+
+pub mod obj;
+pub mod off;
+pub mod ply;
+pub mod stl;
+pub(crate) mod text;
+
+use std::fmt;
+use std::io::Write;
+use std::path::Path;
+
+use crate::{Mesh, MeshError};
+
+/// A mesh file format.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash)]
+pub enum MeshFormat {
+    /// Wavefront OBJ (`.obj`).
+    Obj,
+    /// STL, ASCII or binary (`.stl`).
+    Stl,
+    /// Stanford PLY (`.ply`).
+    Ply,
+    /// Object File Format (`.off`).
+    Off,
+}
+
+impl MeshFormat {
+    /// Every supported format.
+    pub const ALL: [MeshFormat; 4] = [Self::Obj, Self::Stl, Self::Ply, Self::Off];
+
+    /// Choose the format from `path`'s extension, case-insensitively, ignoring one trailing
+    /// `.gz` (`mesh.PLY.gz` is PLY).
+    ///
+    /// # Errors
+    /// [`MeshError::Unsupported`] for an unknown or missing extension.
+    pub fn from_path(path: &Path) -> Result<Self, MeshError> {
+        let name = path
+            .file_name()
+            .map(|n| n.to_string_lossy().to_ascii_lowercase())
+            .unwrap_or_default();
+        let base = name.strip_suffix(".gz").unwrap_or(&name);
+        let ext = base.rsplit_once('.').map(|(_, e)| e).unwrap_or("");
+        match ext {
+            "obj" => Ok(Self::Obj),
+            "stl" => Ok(Self::Stl),
+            "ply" => Ok(Self::Ply),
+            "off" => Ok(Self::Off),
+            _ => Err(MeshError::Unsupported(format!(
+                "cannot tell the mesh format of {} from its extension \
+                 (known: .obj .stl .ply .off, optionally followed by .gz)",
+                path.display()
+            ))),
+        }
+    }
+
+    /// Human-readable name.
+    #[must_use]
+    pub fn name(self) -> &'static str {
+        match self {
+            Self::Obj => "OBJ",
+            Self::Stl => "STL",
+            Self::Ply => "PLY",
+            Self::Off => "OFF",
+        }
+    }
+
+    /// The usual file extension, without the dot.
+    #[must_use]
+    pub fn extension(self) -> &'static str {
+        match self {
+            Self::Obj => "obj",
+            Self::Stl => "stl",
+            Self::Ply => "ply",
+            Self::Off => "off",
+        }
+    }
+}
+
+impl fmt::Display for MeshFormat {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        f.write_str(self.name())
+    }
+}
+
+/// How to encode a mesh file. Options a format does not have are ignored.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub struct MeshWriteOptions {
+    /// Binary encoding for the formats that have one (STL, PLY); `false` writes ASCII.
+    /// OBJ and OFF are always text. Default `true`.
+    pub binary: bool,
+    /// Binary PLY byte order: `true` writes `binary_big_endian`. Default `false`
+    /// (little-endian, what most tools write).
+    pub big_endian: bool,
+    /// PLY coordinates as `float` instead of `double` (rounded to nearest; half the size,
+    /// no longer exact). STL is always single precision; OBJ and OFF always write the exact
+    /// shortest `f64` text. Default `false`.
+    pub single_precision: bool,
+}
+
+impl Default for MeshWriteOptions {
+    fn default() -> Self {
+        Self {
+            binary: true,
+            big_endian: false,
+            single_precision: false,
+        }
+    }
+}
+
+impl MeshWriteOptions {
+    /// ASCII encoding, double precision.
+    #[must_use]
+    pub fn ascii() -> Self {
+        Self {
+            binary: false,
+            ..Self::default()
+        }
+    }
+}
+
+/// Read a mesh file, choosing the format by extension ([`MeshFormat::from_path`]) and
+/// decompressing gzip input transparently.
+///
+/// # Errors
+/// [`MeshError::Unsupported`] for an unknown extension, [`MeshError::Io`] when the file cannot
+/// be read, and the format reader's errors; all carry the path ([`MeshError::File`]).
+pub fn read(path: &Path) -> Result<Mesh, MeshError> {
+    let run = || {
+        let format = MeshFormat::from_path(path)?;
+        let bytes = volmorph_io::read_maybe_gz(path)?;
+        read_bytes(&bytes, format)
+    };
+    run().map_err(|e| e.at(path))
+}
+
+/// Parse a mesh from bytes in `format`, decompressing them first if they are gzip data.
+///
+/// # Errors
+/// [`MeshError::Io`] for a corrupt gzip stream, and the format reader's errors.
+pub fn read_bytes(bytes: &[u8], format: MeshFormat) -> Result<Mesh, MeshError> {
+    if volmorph_io::is_gzip(bytes) {
+        let raw = volmorph_io::gunzip(bytes).map_err(|source| volmorph_io::IoError::Os {
+            path: "gzip stream".into(),
+            source,
+        })?;
+        return read_bytes(&raw, format);
+    }
+    match format {
+        MeshFormat::Obj => obj::read_obj_bytes(bytes),
+        MeshFormat::Stl => stl::read_stl_bytes(bytes),
+        MeshFormat::Ply => ply::read_ply_bytes(bytes),
+        MeshFormat::Off => off::read_off_bytes(bytes),
+    }
+}
+
+/// Write `mesh` to `path` with [`MeshWriteOptions::default`] (binary STL and PLY), choosing
+/// the format by extension.
+///
+/// # Errors
+/// See [`write_with`].
+pub fn write(path: &Path, mesh: &Mesh) -> Result<(), MeshError> {
+    write_with(path, mesh, &MeshWriteOptions::default())
+}
+
+/// Write `mesh` to `path` in the format its extension names, atomically (temporary file and
+/// rename).
+///
+/// # Errors
+/// [`MeshError::Unsupported`] for an unknown extension or a `.gz` path,
+/// [`MeshError::IndexOutOfRange`] / [`MeshError::FaceTooSmall`] for an invalid mesh,
+/// [`MeshError::TooLarge`] when STL cannot count the triangles, and I/O failures; all carry
+/// the path.
+pub fn write_with(path: &Path, mesh: &Mesh, options: &MeshWriteOptions) -> Result<(), MeshError> {
+    let run = || {
+        let format = MeshFormat::from_path(path)?;
+        if path
+            .file_name()
+            .is_some_and(|n| n.to_string_lossy().to_ascii_lowercase().ends_with(".gz"))
+        {
+            return Err(MeshError::Unsupported(
+                "writing gzip-compressed meshes; drop the .gz suffix".into(),
+            ));
+        }
+        volmorph_io::write_atomic(path, |w| write_to(w, mesh, format, options))
+    };
+    run().map_err(|e| e.at(path))
+}
+
+/// Encode `mesh` in `format` into any writer.
+///
+/// # Errors
+/// As [`write_with`], without the path.
+pub fn write_to<W: Write>(
+    w: &mut W,
+    mesh: &Mesh,
+    format: MeshFormat,
+    options: &MeshWriteOptions,
+) -> Result<(), MeshError> {
+    match format {
+        MeshFormat::Obj => obj::write_obj(w, mesh),
+        MeshFormat::Stl => stl::write_stl(w, mesh, options.binary),
+        MeshFormat::Ply => ply::write_ply(
+            w,
+            mesh,
+            match (options.binary, options.big_endian) {
+                (false, _) => ply::PlyEncoding::Ascii,
+                (true, false) => ply::PlyEncoding::BinaryLittleEndian,
+                (true, true) => ply::PlyEncoding::BinaryBigEndian,
+            },
+            options.single_precision,
+        ),
+        MeshFormat::Off => off::write_off(w, mesh),
+    }
+}
+
+/// Encode `mesh` in `format` into a byte vector.
+///
+/// # Errors
+/// As [`write_to`].
+pub fn to_bytes(
+    mesh: &Mesh,
+    format: MeshFormat,
+    options: &MeshWriteOptions,
+) -> Result<Vec<u8>, MeshError> {
+    let mut out = Vec::new();
+    write_to(&mut out, mesh, format, options)?;
+    Ok(out)
+}
+
+/// Refuse meshes no file format can represent faithfully: out-of-range indices, faces of
+/// fewer than three vertices.
+pub(crate) fn check_writable(mesh: &Mesh) -> Result<(), MeshError> {
+    let n = mesh.vertex_count();
+    for (f, face) in mesh.faces().enumerate() {
+        if face.len() < 3 {
+            return Err(MeshError::FaceTooSmall {
+                face: f,
+                len: face.len(),
+            });
+        }
+        if let Some(&bad) = face.iter().find(|&&i| i as usize >= n) {
+            return Err(MeshError::IndexOutOfRange {
+                face: f,
+                index: u64::from(bad),
+                vertex_count: n,
+            });
+        }
+    }
+    Ok(())
+}
+
+/// Shared builder for readers: positions and CSR faces with the 32-bit limits enforced.
+pub(crate) struct Builder {
+    pub(crate) positions: Vec<glam::DVec3>,
+    pub(crate) indices: Vec<u32>,
+    pub(crate) offsets: Vec<u32>,
+}
+
+impl Builder {
+    pub(crate) fn new() -> Self {
+        Self {
+            positions: Vec::new(),
+            indices: Vec::new(),
+            offsets: vec![0],
+        }
+    }
+
+    /// Close the face whose indices were pushed since the previous call. The caller checked
+    /// the indices and the face size.
+    #[inline]
+    pub(crate) fn end_face(&mut self) -> Result<(), MeshError> {
+        let n = self.indices.len();
+        crate::mesh::check_corner_count(n)?;
+        self.offsets.push(n as u32);
+        Ok(())
+    }
+
+    #[inline]
+    pub(crate) fn push_vertex(&mut self, p: glam::DVec3) -> Result<(), MeshError> {
+        if self.positions.len() >= crate::mesh::MAX_ELEMENTS {
+            crate::mesh::check_vertex_count(self.positions.len() + 1)?;
+        }
+        self.positions.push(p);
+        Ok(())
+    }
+
+    pub(crate) fn finish(self) -> Mesh {
+        Mesh::from_parts_trusted(self.positions, self.indices, self.offsets)
+    }
+}

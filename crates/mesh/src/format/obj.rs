@@ -1,0 +1,154 @@
+//! Wavefront OBJ, geometry only.
+//!
+//! **Read.** `v x y z [w] [r g b]` gives a position (`w` and vertex colours are ignored).
+//! `f` (and the old `fo`) gives a polygon whose vertices are written `i`, `i/t`, `i//n` or
+//! `i/t/n`; only the position index `i` is used. Indices are 1-based; negative indices count
+//! back from the most recent vertex (`-1` is the last one defined so far). Index 0, an index
+//! past the vertices in the file, or a face with fewer than three vertices is an error.
+//! Everything after `#` on a line is a comment. Other statements — `vt`, `vn`, `vp`, `o`,
+//! `g`, `s`, `usemtl`, `mtllib`, `l` (polylines), `p` (points), free-form curve and surface
+//! statements — are ignored, as are unknown keywords. Backslash line continuation is not
+//! supported.
+//!
+//! **Write.** A comment line, one `v x y z` line per vertex (shortest round-trip decimals, so
+//! reading gives back the same `f64` bits) and one `f a b c …` line per face (1-based).
+
+use std::io::Write;
+
+use glam::DVec3;
+
+use super::Builder;
+use super::text::{Lines, Words, parse_f64, parse_i64, show, write_f64, write_uint};
+use crate::error::Location;
+use crate::{Mesh, MeshError, MeshFormat};
+
+fn err(line: usize, message: impl Into<String>) -> MeshError {
+    MeshError::parse(MeshFormat::Obj, Location::Line(line), message)
+}
+
+/// Parse an OBJ file from its (uncompressed) bytes.
+///
+/// # Errors
+/// [`MeshError::Parse`] naming the line for a malformed `v` or `f` statement, index 0, an
+/// index outside the vertices, or a face with fewer than three vertices;
+/// [`MeshError::TooLarge`] beyond the 32-bit limits.
+pub fn read_obj_bytes(bytes: &[u8]) -> Result<Mesh, MeshError> {
+    let mut b = Builder::new();
+    // Largest positive (1-based) index seen, and its line: positive indices may in principle
+    // refer forward, so they are checked against the final vertex count.
+    let mut max_index: (u64, usize) = (0, 0);
+    for (line_no, raw) in Lines::new(bytes, 1) {
+        let line = match raw.iter().position(|&c| c == b'#') {
+            Some(n) => &raw[..n],
+            None => raw,
+        };
+        let mut words = Words::new(line);
+        let Some(keyword) = words.next() else {
+            continue;
+        };
+        match keyword {
+            b"v" => {
+                let mut c = [0.0; 3];
+                for (k, slot) in c.iter_mut().enumerate() {
+                    let tok = words.next().ok_or_else(|| {
+                        err(line_no, format!("vertex has {k} coordinates, needs 3"))
+                    })?;
+                    *slot = parse_f64(tok).ok_or_else(|| {
+                        err(line_no, format!("bad vertex coordinate '{}'", show(tok)))
+                    })?;
+                }
+                b.push_vertex(DVec3::from_array(c))?;
+            }
+            b"f" | b"fo" => {
+                let start = b.indices.len();
+                let nv = b.positions.len() as i64;
+                for tok in words {
+                    let idx_part = match tok.iter().position(|&c| c == b'/') {
+                        Some(n) => &tok[..n],
+                        None => tok,
+                    };
+                    let i = parse_i64(idx_part)
+                        .ok_or_else(|| err(line_no, format!("bad face vertex '{}'", show(tok))))?;
+                    let zero_based = if i > 0 {
+                        let i = i as u64;
+                        if i > max_index.0 {
+                            max_index = (i, line_no);
+                        }
+                        i - 1
+                    } else if i < 0 {
+                        let r = nv + i;
+                        if r < 0 {
+                            return Err(err(
+                                line_no,
+                                format!(
+                                    "relative index {i} reaches before the first vertex \
+                                     ({nv} defined so far)"
+                                ),
+                            ));
+                        }
+                        r as u64
+                    } else {
+                        return Err(err(line_no, "index 0 (OBJ indices start at 1)"));
+                    };
+                    if zero_based >= u64::from(u32::MAX) {
+                        return Err(err(line_no, format!("index {i} is out of range")));
+                    }
+                    b.indices.push(zero_based as u32);
+                }
+                let k = b.indices.len() - start;
+                if k < 3 {
+                    return Err(err(
+                        line_no,
+                        format!("face has {k} vertices; a polygon needs at least 3"),
+                    ));
+                }
+                b.end_face()?;
+            }
+            _ => {}
+        }
+    }
+    if max_index.0 > b.positions.len() as u64 {
+        return Err(err(
+            max_index.1,
+            format!(
+                "index {} is out of range: the file has {} vertices",
+                max_index.0,
+                b.positions.len()
+            ),
+        ));
+    }
+    Ok(b.finish())
+}
+
+/// Write `mesh` as OBJ text (positions and faces only).
+///
+/// # Errors
+/// [`MeshError::IndexOutOfRange`] / [`MeshError::FaceTooSmall`] for a mesh built with
+/// [`Mesh::from_csr_unvalidated`] that has such faces (nothing is written then);
+/// [`MeshError::Write`] when the writer fails.
+pub fn write_obj<W: Write>(w: &mut W, mesh: &Mesh) -> Result<(), MeshError> {
+    super::check_writable(mesh)?;
+    writeln!(
+        w,
+        "# volmorph mesh: {} vertices, {} faces",
+        mesh.vertex_count(),
+        mesh.face_count()
+    )?;
+    for p in mesh.positions() {
+        w.write_all(b"v ")?;
+        write_f64(w, p.x)?;
+        w.write_all(b" ")?;
+        write_f64(w, p.y)?;
+        w.write_all(b" ")?;
+        write_f64(w, p.z)?;
+        w.write_all(b"\n")?;
+    }
+    for face in mesh.faces() {
+        w.write_all(b"f")?;
+        for &i in face {
+            write_uint(w, b' ', u64::from(i) + 1)?;
+        }
+        w.write_all(b"\n")?;
+    }
+    Ok(())
+}

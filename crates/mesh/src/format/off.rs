@@ -1,0 +1,197 @@
+//! Object File Format (OFF), as written by Geomview, CGAL, MeshLab and the Princeton shape
+//! benchmark.
+//!
+//! **Read.** The optional first keyword is `OFF`, possibly with the Geomview prefixes `ST`
+//! (texture coordinates), `C` (colour) and `N` (normal) — `COFF`, `NOFF`, `STCNOFF`, … —
+//! whose extra per-vertex values are ignored; `4OFF`, `nOFF` (other dimensions) and
+//! `OFF BINARY` are refused as unsupported. The counts `vertices faces [edges]` follow, on
+//! the header line or the next one (the edge count is ignored). Then one vertex per line:
+//! the first three numbers are `x y z`, anything after them (colours, normals, texture
+//! coordinates) is ignored. Then one face per line: `n i₁ … iₙ` with 0-based indices,
+//! optionally followed by a colour, which is ignored. `#` starts a comment anywhere on a
+//! line; blank lines are skipped. The format is read line by line as every common writer
+//! produces it; content after the declared faces is ignored.
+//!
+//! **Write.** `OFF`, a comment, `V F 0`, vertices with shortest round-trip decimals (exact
+//! `f64` round trip), faces as `n i₁ … iₙ`.
+
+use std::io::Write;
+
+use glam::DVec3;
+
+use super::Builder;
+use super::text::{Lines, Words, parse_f64, parse_i64, show, write_f64, write_uint};
+use crate::error::Location;
+use crate::{Mesh, MeshError, MeshFormat};
+
+fn err(line: usize, message: impl Into<String>) -> MeshError {
+    MeshError::parse(MeshFormat::Off, Location::Line(line), message)
+}
+
+/// Non-blank lines with comments removed.
+fn content_lines(bytes: &[u8]) -> impl Iterator<Item = (usize, &[u8])> {
+    Lines::new(bytes, 1).filter_map(|(no, raw)| {
+        let line = match raw.iter().position(|&c| c == b'#') {
+            Some(n) => &raw[..n],
+            None => raw,
+        };
+        Words::new(line).next().is_some().then_some((no, line))
+    })
+}
+
+fn parse_count(tok: Option<&[u8]>, what: &str, line: usize) -> Result<usize, MeshError> {
+    let tok = tok.ok_or_else(|| err(line, format!("missing {what} count")))?;
+    parse_i64(tok)
+        .and_then(|v| usize::try_from(v).ok())
+        .ok_or_else(|| err(line, format!("bad {what} count '{}'", show(tok))))
+}
+
+/// Parse an OFF file from its (uncompressed) bytes.
+///
+/// # Errors
+/// [`MeshError::Parse`] naming the line for a malformed header or count, fewer vertex or face
+/// lines than declared, a bad coordinate, a face with fewer than three vertices, fewer
+/// indices than it declares, or an index outside the vertices; [`MeshError::Unsupported`]
+/// for `4OFF`, `nOFF` and binary OFF.
+pub fn read_off_bytes(bytes: &[u8]) -> Result<Mesh, MeshError> {
+    let mut lines = content_lines(bytes);
+    let (mut line_no, first) = lines
+        .next()
+        .ok_or_else(|| err(1, "empty file (no OFF header or counts)"))?;
+    let mut words = Words::new(first);
+    let mut head = words.clone().next().unwrap_or(b"");
+    if let Some(prefix) = head.strip_suffix(b"OFF") {
+        words.next();
+        let mut p = prefix;
+        if let Some(r) = p.strip_prefix(b"ST") {
+            p = r;
+        }
+        if let Some(r) = p.strip_prefix(b"C") {
+            p = r;
+        }
+        if let Some(r) = p.strip_prefix(b"N") {
+            p = r;
+        }
+        if p == b"4" || p == b"n" || p.ends_with(b"4") || p.ends_with(b"n") {
+            return Err(MeshError::Unsupported(format!(
+                "OFF variant '{}' (only 3-D OFF is read)",
+                show(head)
+            )));
+        }
+        if !p.is_empty() {
+            return Err(err(line_no, format!("unknown OFF header '{}'", show(head))));
+        }
+        head = words.clone().next().unwrap_or(b"");
+        if head.eq_ignore_ascii_case(b"BINARY") {
+            return Err(MeshError::Unsupported("binary OFF".into()));
+        }
+        if head.is_empty() {
+            let (n, l) = lines
+                .next()
+                .ok_or_else(|| err(line_no, "file ends before the vertex and face counts"))?;
+            line_no = n;
+            words = Words::new(l);
+        }
+    }
+    let nv = parse_count(words.next(), "vertex", line_no)?;
+    let nf = parse_count(words.next(), "face", line_no)?;
+    crate::mesh::check_vertex_count(nv)?;
+
+    let mut b = Builder::new();
+    // Every vertex line holds at least "0 0 0\n" (6 bytes), every face line "3 0 0 0\n".
+    b.positions.reserve_exact(nv.min(bytes.len() / 6));
+    b.offsets.reserve(nf.min(bytes.len() / 8));
+    b.indices
+        .reserve((3 * nf.min(bytes.len() / 8)).min(bytes.len()));
+    let mut last_line = line_no;
+    for v in 0..nv {
+        let (no, line) = lines.next().ok_or_else(|| {
+            err(
+                last_line,
+                format!("file ends after {v} of the {nv} declared vertices"),
+            )
+        })?;
+        last_line = no;
+        let mut w = Words::new(line);
+        let mut c = [0.0; 3];
+        for (k, slot) in c.iter_mut().enumerate() {
+            let tok = w
+                .next()
+                .ok_or_else(|| err(no, format!("vertex {v} has {k} coordinates, needs 3")))?;
+            *slot = parse_f64(tok)
+                .ok_or_else(|| err(no, format!("bad coordinate '{}' of vertex {v}", show(tok))))?;
+        }
+        b.positions.push(DVec3::from_array(c));
+    }
+    for f in 0..nf {
+        let (no, line) = lines.next().ok_or_else(|| {
+            err(
+                last_line,
+                format!("file ends after {f} of the {nf} declared faces"),
+            )
+        })?;
+        last_line = no;
+        let mut w = Words::new(line);
+        let n_tok = w.next().unwrap_or(b"");
+        let n = parse_i64(n_tok).ok_or_else(|| {
+            err(
+                no,
+                format!("bad vertex count '{}' of face {f}", show(n_tok)),
+            )
+        })?;
+        if n < 3 {
+            return Err(err(
+                no,
+                format!("face {f} has {n} vertices; a polygon needs at least 3"),
+            ));
+        }
+        for k in 0..n {
+            let tok = w
+                .next()
+                .ok_or_else(|| err(no, format!("face {f} declares {n} vertices but lists {k}")))?;
+            let i = parse_i64(tok)
+                .ok_or_else(|| err(no, format!("bad index '{}' in face {f}", show(tok))))?;
+            if i < 0 || i as u64 >= nv as u64 {
+                return Err(err(
+                    no,
+                    format!("face {f} refers to vertex {i}, but there are {nv} vertices"),
+                ));
+            }
+            b.indices.push(i as u32);
+        }
+        b.end_face()?;
+    }
+    Ok(b.finish())
+}
+
+/// Write `mesh` as OFF text.
+///
+/// # Errors
+/// [`MeshError::IndexOutOfRange`] / [`MeshError::FaceTooSmall`] for a mesh built with
+/// [`Mesh::from_csr_unvalidated`] that has such faces (nothing is written then);
+/// [`MeshError::Write`] when the writer fails.
+pub fn write_off<W: Write>(w: &mut W, mesh: &Mesh) -> Result<(), MeshError> {
+    super::check_writable(mesh)?;
+    write!(
+        w,
+        "OFF\n# volmorph mesh\n{} {} 0\n",
+        mesh.vertex_count(),
+        mesh.face_count()
+    )?;
+    for p in mesh.positions() {
+        write_f64(w, p.x)?;
+        w.write_all(b" ")?;
+        write_f64(w, p.y)?;
+        w.write_all(b" ")?;
+        write_f64(w, p.z)?;
+        w.write_all(b"\n")?;
+    }
+    for face in mesh.faces() {
+        write!(w, "{}", face.len())?;
+        for &i in face {
+            write_uint(w, b' ', u64::from(i))?;
+        }
+        w.write_all(b"\n")?;
+    }
+    Ok(())
+}

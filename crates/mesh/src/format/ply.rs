@@ -1,0 +1,774 @@
+//! Stanford PLY: `ascii`, `binary_little_endian` and `binary_big_endian`, version 1.0.
+//!
+//! **Read.** The header's `element`/`property` declarations drive the parse. The `vertex`
+//! element must have scalar properties `x`, `y`, `z`, of any scalar type (`char`/`int8`,
+//! `uchar`/`uint8`, `short`/`int16`, `ushort`/`uint16`, `int`/`int32`, `uint`/`uint32`,
+//! `float`/`float32`, `double`/`float64`); they are converted exactly to `f64` (an ASCII
+//! value declared `float` is parsed to the nearest `f32`, as a binary one would be stored).
+//! The `face` element's list property `vertex_indices` (or `vertex_index`) gives the polygons;
+//! its count and index types may be any integer type (a float index must be integral). Every
+//! other element and property — normals, colours, texture coordinates, `edge`, `material`,
+//! lists — is skipped, by its declared size in binary files. `comment` and `obj_info` lines
+//! are ignored. A file without a `face` element is a point cloud (a mesh without faces).
+//! Data after the last declared element is ignored.
+//!
+//! Counts in the header are never trusted for allocation: memory is reserved only as far as
+//! the remaining data can hold, and a binary element of fixed size whose declared count does
+//! not fit in the file is refused before reading it.
+//!
+//! **Write.** `vertex` with `double` (or `float`, on request) `x y z`, and `face` with
+//! `property list uchar int vertex_indices` (wider count/index types only when a face has
+//! more than 255 vertices or there are more than 2³¹ vertices).
+
+use std::io::Write;
+
+use glam::DVec3;
+
+use super::Builder;
+use super::text::{
+    Tokens, parse_f32, parse_f64, parse_i64, show, write_f32, write_f64, write_uint,
+};
+use crate::error::Location;
+use crate::{Mesh, MeshError, MeshFormat};
+
+/// Encoding of a PLY file.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum PlyEncoding {
+    /// `format ascii 1.0`.
+    Ascii,
+    /// `format binary_little_endian 1.0`.
+    BinaryLittleEndian,
+    /// `format binary_big_endian 1.0`.
+    BinaryBigEndian,
+}
+
+impl PlyEncoding {
+    fn keyword(self) -> &'static str {
+        match self {
+            Self::Ascii => "ascii",
+            Self::BinaryLittleEndian => "binary_little_endian",
+            Self::BinaryBigEndian => "binary_big_endian",
+        }
+    }
+}
+
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+enum Scalar {
+    I8,
+    U8,
+    I16,
+    U16,
+    I32,
+    U32,
+    F32,
+    F64,
+}
+
+impl Scalar {
+    fn parse(name: &[u8]) -> Option<Self> {
+        Some(match name {
+            b"char" | b"int8" => Self::I8,
+            b"uchar" | b"uint8" => Self::U8,
+            b"short" | b"int16" => Self::I16,
+            b"ushort" | b"uint16" => Self::U16,
+            b"int" | b"int32" => Self::I32,
+            b"uint" | b"uint32" => Self::U32,
+            b"float" | b"float32" => Self::F32,
+            b"double" | b"float64" => Self::F64,
+            _ => return None,
+        })
+    }
+
+    fn size(self) -> usize {
+        match self {
+            Self::I8 | Self::U8 => 1,
+            Self::I16 | Self::U16 => 2,
+            Self::I32 | Self::U32 | Self::F32 => 4,
+            Self::F64 => 8,
+        }
+    }
+
+    /// Decode a binary value; `b` holds at least `size()` bytes.
+    #[inline]
+    fn read_f64(self, b: &[u8], big: bool) -> f64 {
+        macro_rules! get {
+            ($t:ty, $n:literal) => {{
+                let mut a = [0u8; $n];
+                a.copy_from_slice(&b[..$n]);
+                if big {
+                    <$t>::from_be_bytes(a)
+                } else {
+                    <$t>::from_le_bytes(a)
+                }
+            }};
+        }
+        match self {
+            Self::I8 => f64::from(b[0] as i8),
+            Self::U8 => f64::from(b[0]),
+            Self::I16 => f64::from(get!(i16, 2)),
+            Self::U16 => f64::from(get!(u16, 2)),
+            Self::I32 => f64::from(get!(i32, 4)),
+            Self::U32 => f64::from(get!(u32, 4)),
+            Self::F32 => f64::from(get!(f32, 4)),
+            Self::F64 => get!(f64, 8),
+        }
+    }
+
+    /// Decode a binary integer (floats must be integral and within ±2⁵³).
+    #[inline]
+    fn read_int(self, b: &[u8], big: bool) -> Option<i64> {
+        let v = self.read_f64(b, big);
+        if matches!(self, Self::F32 | Self::F64) {
+            (v.fract() == 0.0 && v.abs() <= 9_007_199_254_740_992.0).then_some(v as i64)
+        } else {
+            Some(v as i64)
+        }
+    }
+
+    /// Parse an ASCII value as this type would hold it.
+    #[inline]
+    fn parse_value(self, tok: &[u8]) -> Option<f64> {
+        match self {
+            Self::F32 => parse_f32(tok).map(f64::from),
+            Self::F64 => parse_f64(tok),
+            _ => parse_i64(tok).map(|v| v as f64),
+        }
+    }
+
+    /// Parse an ASCII integer (floats must be integral).
+    #[inline]
+    fn parse_int(self, tok: &[u8]) -> Option<i64> {
+        match self {
+            Self::F32 | Self::F64 => {
+                let v = parse_f64(tok)?;
+                (v.fract() == 0.0 && v.abs() <= 9_007_199_254_740_992.0).then_some(v as i64)
+            }
+            _ => parse_i64(tok),
+        }
+    }
+}
+
+#[derive(Debug, Clone)]
+enum Kind {
+    Scalar(Scalar),
+    List { count: Scalar, item: Scalar },
+}
+
+#[derive(Debug, Clone)]
+struct Property {
+    name: String,
+    kind: Kind,
+}
+
+#[derive(Debug, Clone)]
+struct Element {
+    name: String,
+    count: usize,
+    props: Vec<Property>,
+}
+
+impl Element {
+    /// Byte size of one item if every property is a scalar.
+    fn fixed_size(&self) -> Option<usize> {
+        self.props.iter().try_fold(0usize, |acc, p| match p.kind {
+            Kind::Scalar(s) => Some(acc + s.size()),
+            Kind::List { .. } => None,
+        })
+    }
+}
+
+struct Header {
+    encoding: PlyEncoding,
+    elements: Vec<Element>,
+    /// Byte offset of the data.
+    data_start: usize,
+    /// Line number of the first data line (for ASCII error messages).
+    data_line: usize,
+}
+
+fn herr(line: usize, m: impl Into<String>) -> MeshError {
+    MeshError::parse(MeshFormat::Ply, Location::Line(line), m)
+}
+
+fn parse_header(bytes: &[u8]) -> Result<Header, MeshError> {
+    let mut pos = 0usize;
+    let mut line_no = 0usize;
+    let mut encoding = None;
+    let mut elements: Vec<Element> = Vec::new();
+    loop {
+        line_no += 1;
+        let rest = &bytes[pos..];
+        let Some(nl) = rest.iter().position(|&c| c == b'\n') else {
+            return Err(herr(
+                line_no,
+                if line_no == 1 {
+                    "not a PLY file (no header line)".to_string()
+                } else {
+                    "header ended without 'end_header'".to_string()
+                },
+            ));
+        };
+        let line = &rest[..nl];
+        pos += nl + 1;
+        let mut words = super::text::Words::new(line);
+        let first = words.next();
+        if line_no == 1 {
+            if first != Some(b"ply") || words.next().is_some() {
+                return Err(herr(1, "not a PLY file (first line must be 'ply')"));
+            }
+            continue;
+        }
+        let Some(kw) = first else {
+            continue; // tolerate blank header lines
+        };
+        match kw {
+            b"comment" | b"obj_info" => {}
+            b"format" => {
+                let enc = match words.next() {
+                    Some(b"ascii") => PlyEncoding::Ascii,
+                    Some(b"binary_little_endian") => PlyEncoding::BinaryLittleEndian,
+                    Some(b"binary_big_endian") => PlyEncoding::BinaryBigEndian,
+                    other => {
+                        return Err(herr(
+                            line_no,
+                            format!("unknown format '{}'", show(other.unwrap_or(b""))),
+                        ));
+                    }
+                };
+                match words.next() {
+                    Some(b"1.0" | b"1") => {}
+                    other => {
+                        return Err(herr(
+                            line_no,
+                            format!(
+                                "unsupported PLY version '{}' (only 1.0)",
+                                show(other.unwrap_or(b""))
+                            ),
+                        ));
+                    }
+                }
+                if encoding.replace(enc).is_some() {
+                    return Err(herr(line_no, "second 'format' line"));
+                }
+            }
+            b"element" => {
+                let (Some(name), Some(count)) = (words.next(), words.next()) else {
+                    return Err(herr(line_no, "'element' needs a name and a count"));
+                };
+                let count = parse_i64(count)
+                    .and_then(|c| usize::try_from(c).ok())
+                    .ok_or_else(|| herr(line_no, format!("bad element count '{}'", show(count))))?;
+                let name = String::from_utf8_lossy(name).into_owned();
+                if elements.iter().any(|e| e.name == name) {
+                    return Err(herr(line_no, format!("element '{name}' declared twice")));
+                }
+                elements.push(Element {
+                    name,
+                    count,
+                    props: Vec::new(),
+                });
+            }
+            b"property" => {
+                let Some(el) = elements.last_mut() else {
+                    return Err(herr(line_no, "'property' before any 'element'"));
+                };
+                let ty = words
+                    .next()
+                    .ok_or_else(|| herr(line_no, "'property' needs a type"))?;
+                let scalar = |w: Option<&[u8]>| {
+                    let w = w.unwrap_or(b"");
+                    Scalar::parse(w).ok_or_else(|| {
+                        herr(line_no, format!("unknown property type '{}'", show(w)))
+                    })
+                };
+                let kind = if ty == b"list" {
+                    let count = scalar(words.next())?;
+                    if matches!(count, Scalar::F32 | Scalar::F64) {
+                        return Err(herr(line_no, "a list count type must be an integer type"));
+                    }
+                    let item = scalar(words.next())?;
+                    Kind::List { count, item }
+                } else {
+                    Kind::Scalar(scalar(Some(ty))?)
+                };
+                let name = words
+                    .next()
+                    .ok_or_else(|| herr(line_no, "'property' needs a name"))?;
+                el.props.push(Property {
+                    name: String::from_utf8_lossy(name).into_owned(),
+                    kind,
+                });
+            }
+            b"end_header" => break,
+            other => {
+                return Err(herr(
+                    line_no,
+                    format!("unknown header keyword '{}'", show(other)),
+                ));
+            }
+        }
+    }
+    let encoding = encoding.ok_or_else(|| herr(line_no, "header has no 'format' line"))?;
+    Ok(Header {
+        encoding,
+        elements,
+        data_start: pos,
+        data_line: line_no + 1,
+    })
+}
+
+/// What the reader does with each element's properties.
+struct Roles {
+    vertex: Option<usize>,
+    /// Property indices of x, y, z in the vertex element.
+    xyz: [usize; 3],
+    face: Option<usize>,
+    /// Property index of the face index list.
+    face_list: usize,
+}
+
+fn find_roles(h: &Header) -> Result<Roles, MeshError> {
+    let ferr = |m: String| MeshError::parse(MeshFormat::Ply, Location::Header, m);
+    let mut roles = Roles {
+        vertex: None,
+        xyz: [0; 3],
+        face: None,
+        face_list: 0,
+    };
+    for (ei, el) in h.elements.iter().enumerate() {
+        if el.name == "vertex" {
+            roles.vertex = Some(ei);
+            for (k, axis) in ["x", "y", "z"].into_iter().enumerate() {
+                let pi = el
+                    .props
+                    .iter()
+                    .position(|p| p.name == axis)
+                    .ok_or_else(|| ferr(format!("vertex element has no '{axis}' property")))?;
+                if !matches!(el.props[pi].kind, Kind::Scalar(_)) {
+                    return Err(ferr(format!("vertex property '{axis}' is a list")));
+                }
+                roles.xyz[k] = pi;
+            }
+        } else if el.name == "face" {
+            roles.face = Some(ei);
+            let pi = el
+                .props
+                .iter()
+                .position(|p| p.name == "vertex_indices")
+                .or_else(|| el.props.iter().position(|p| p.name == "vertex_index"))
+                .ok_or_else(|| {
+                    ferr("face element has no 'vertex_indices' or 'vertex_index' list".into())
+                })?;
+            if !matches!(el.props[pi].kind, Kind::List { .. }) {
+                return Err(ferr(format!(
+                    "face property '{}' is not a list",
+                    el.props[pi].name
+                )));
+            }
+            roles.face_list = pi;
+        }
+    }
+    if roles.face.is_some() && roles.vertex.is_none() {
+        return Err(ferr("file has faces but no vertex element".into()));
+    }
+    Ok(roles)
+}
+
+/// Parse a PLY file from its (uncompressed) bytes.
+///
+/// # Errors
+/// [`MeshError::Parse`] for a malformed header (with its line), a missing `x`/`y`/`z` or face
+/// index list, truncated or malformed data (byte offset for binary, line for ASCII), a face
+/// with fewer than three vertices or an index outside the vertices;
+/// [`MeshError::TooLarge`] beyond the 32-bit limits.
+pub fn read_ply_bytes(bytes: &[u8]) -> Result<Mesh, MeshError> {
+    let h = parse_header(bytes)?;
+    let roles = find_roles(&h)?;
+    let nv = roles.vertex.map_or(0, |v| h.elements[v].count);
+    crate::mesh::check_vertex_count(nv)?;
+    let data = &bytes[h.data_start..];
+    match h.encoding {
+        PlyEncoding::Ascii => read_ascii(&h, &roles, data),
+        PlyEncoding::BinaryLittleEndian => read_binary(&h, &roles, data, h.data_start, false),
+        PlyEncoding::BinaryBigEndian => read_binary(&h, &roles, data, h.data_start, true),
+    }
+}
+
+fn face_len_error(loc: Location, face: usize, k: i64) -> MeshError {
+    MeshError::parse(
+        MeshFormat::Ply,
+        loc,
+        format!("face {face} has {k} vertices; a polygon needs at least 3"),
+    )
+}
+
+fn index_error(loc: Location, face: usize, i: Option<i64>, nv: usize) -> MeshError {
+    MeshError::parse(
+        MeshFormat::Ply,
+        loc,
+        match i {
+            Some(i) => format!("face {face} refers to vertex {i}, but there are {nv} vertices"),
+            None => format!("face {face} has a non-integer vertex index"),
+        },
+    )
+}
+
+fn read_binary(
+    h: &Header,
+    roles: &Roles,
+    data: &[u8],
+    base: usize,
+    big: bool,
+) -> Result<Mesh, MeshError> {
+    let mut b = Builder::new();
+    let nv = roles.vertex.map_or(0, |v| h.elements[v].count);
+    let mut pos = 0usize;
+    let trunc = |pos: usize, what: String| {
+        MeshError::parse(
+            MeshFormat::Ply,
+            Location::Byte(base + pos),
+            format!("data ends inside {what} (truncated file)"),
+        )
+    };
+    for (ei, el) in h.elements.iter().enumerate() {
+        let is_vertex = roles.vertex == Some(ei);
+        let is_face = roles.face == Some(ei);
+        if el.props.is_empty() {
+            continue; // occupies no bytes
+        }
+        if let Some(stride) = el.fixed_size() {
+            let need = (el.count as u128) * (stride as u128);
+            let avail = (data.len() - pos) as u128;
+            if need > avail {
+                return Err(MeshError::parse(
+                    MeshFormat::Ply,
+                    Location::Byte(base + pos),
+                    format!(
+                        "element '{}' declares {} items of {stride} bytes ({need} bytes) but \
+                         only {avail} bytes remain (truncated file or wrong count)",
+                        el.name, el.count
+                    ),
+                ));
+            }
+            let need = need as usize;
+            if is_vertex {
+                let mut offs = [0usize; 3];
+                let mut tys = [Scalar::F32; 3];
+                for k in 0..3 {
+                    let pi = roles.xyz[k];
+                    offs[k] = el.props[..pi]
+                        .iter()
+                        .map(|p| match p.kind {
+                            Kind::Scalar(s) => s.size(),
+                            Kind::List { .. } => 0,
+                        })
+                        .sum();
+                    if let Kind::Scalar(s) = el.props[pi].kind {
+                        tys[k] = s;
+                    }
+                }
+                b.positions.reserve_exact(el.count);
+                for item in data[pos..pos + need].chunks_exact(stride) {
+                    let c = |k: usize| tys[k].read_f64(&item[offs[k]..], big);
+                    b.positions.push(DVec3::new(c(0), c(1), c(2)));
+                }
+            }
+            pos += need;
+            continue;
+        }
+        // Elements with lists: item by item.
+        let min_item: usize = el
+            .props
+            .iter()
+            .map(|p| match p.kind {
+                Kind::Scalar(s) => s.size(),
+                Kind::List { count, .. } => count.size(),
+            })
+            .sum();
+        let cap = el.count.min((data.len() - pos) / min_item.max(1));
+        if is_vertex {
+            b.positions.reserve_exact(cap);
+        }
+        if is_face {
+            b.offsets.reserve(cap);
+            b.indices
+                .reserve(cap.saturating_mul(3).min(data.len() - pos));
+        }
+        for item in 0..el.count {
+            let mut xyz = [0.0f64; 3];
+            for (pi, p) in el.props.iter().enumerate() {
+                match p.kind {
+                    Kind::Scalar(s) => {
+                        let bytes = data
+                            .get(pos..pos + s.size())
+                            .ok_or_else(|| trunc(pos, format!("{} {item}", el.name)))?;
+                        if is_vertex && let Some(k) = roles.xyz.iter().position(|&x| x == pi) {
+                            xyz[k] = s.read_f64(bytes, big);
+                        }
+                        pos += s.size();
+                    }
+                    Kind::List { count, item: it } => {
+                        let cb = data
+                            .get(pos..pos + count.size())
+                            .ok_or_else(|| trunc(pos, format!("{} {item}", el.name)))?;
+                        let n = count.read_int(cb, big).unwrap_or(-1);
+                        if n < 0 {
+                            return Err(MeshError::parse(
+                                MeshFormat::Ply,
+                                Location::Byte(base + pos),
+                                format!("negative list length {n} in {} {item}", el.name),
+                            ));
+                        }
+                        pos += count.size();
+                        let len = (n as usize)
+                            .checked_mul(it.size())
+                            .filter(|&l| l <= data.len() - pos)
+                            .ok_or_else(|| {
+                                trunc(pos, format!("the {n}-item list of {} {item}", el.name))
+                            })?;
+                        if is_face && pi == roles.face_list {
+                            if n < 3 {
+                                return Err(face_len_error(Location::Byte(base + pos), item, n));
+                            }
+                            for v in data[pos..pos + len].chunks_exact(it.size()) {
+                                let i = it.read_int(v, big);
+                                match i {
+                                    Some(i) if i >= 0 && (i as u64) < nv as u64 => {
+                                        b.indices.push(i as u32);
+                                    }
+                                    _ => {
+                                        return Err(index_error(
+                                            Location::Byte(base + pos),
+                                            item,
+                                            i,
+                                            nv,
+                                        ));
+                                    }
+                                }
+                            }
+                        }
+                        pos += len;
+                    }
+                }
+            }
+            if is_vertex {
+                b.positions.push(DVec3::from_array(xyz));
+            }
+            if is_face {
+                b.end_face()?;
+            }
+        }
+    }
+    Ok(b.finish())
+}
+
+fn need<'a>(t: &mut Tokens<'a>, el: &Element, item: usize) -> Result<&'a [u8], MeshError> {
+    t.next_token().ok_or_else(|| {
+        MeshError::parse(
+            MeshFormat::Ply,
+            Location::Line(t.line),
+            format!(
+                "data ends in {} {item} of {} (truncated file or wrong count)",
+                el.name, el.count
+            ),
+        )
+    })
+}
+
+fn read_ascii(h: &Header, roles: &Roles, data: &[u8]) -> Result<Mesh, MeshError> {
+    let mut b = Builder::new();
+    let nv = roles.vertex.map_or(0, |v| h.elements[v].count);
+    let mut t = Tokens::new(data, h.data_line);
+    let err = |line: usize, m: String| MeshError::parse(MeshFormat::Ply, Location::Line(line), m);
+    for (ei, el) in h.elements.iter().enumerate() {
+        let is_vertex = roles.vertex == Some(ei);
+        let is_face = roles.face == Some(ei);
+        if el.props.is_empty() {
+            continue;
+        }
+        // Each item takes at least one token of at least two bytes (value and separator).
+        let cap = el.count.min(data.len() / 2);
+        if is_vertex {
+            b.positions.reserve_exact(cap);
+        }
+        if is_face {
+            b.offsets.reserve(cap);
+            b.indices.reserve(cap.saturating_mul(3).min(data.len() / 2));
+        }
+        for item in 0..el.count {
+            let mut xyz = [0.0f64; 3];
+            for (pi, p) in el.props.iter().enumerate() {
+                match p.kind {
+                    Kind::Scalar(s) => {
+                        let tok = need(&mut t, el, item)?;
+                        if is_vertex && let Some(k) = roles.xyz.iter().position(|&x| x == pi) {
+                            xyz[k] = s.parse_value(tok).ok_or_else(|| {
+                                err(
+                                    t.line,
+                                    format!(
+                                        "bad {} value '{}' for vertex {item}",
+                                        p.name,
+                                        show(tok)
+                                    ),
+                                )
+                            })?;
+                        }
+                    }
+                    Kind::List { count, item: it } => {
+                        let tok = need(&mut t, el, item)?;
+                        let n = count.parse_int(tok).filter(|&n| n >= 0).ok_or_else(|| {
+                            err(
+                                t.line,
+                                format!("bad list length '{}' in {} {item}", show(tok), el.name),
+                            )
+                        })?;
+                        let wanted = is_face && pi == roles.face_list;
+                        if wanted && n < 3 {
+                            return Err(face_len_error(Location::Line(t.line), item, n));
+                        }
+                        for _ in 0..n {
+                            let tok = need(&mut t, el, item)?;
+                            if wanted {
+                                let i = it.parse_int(tok);
+                                match i {
+                                    Some(i) if i >= 0 && (i as u64) < nv as u64 => {
+                                        b.indices.push(i as u32);
+                                    }
+                                    Some(_) => {
+                                        return Err(index_error(
+                                            Location::Line(t.line),
+                                            item,
+                                            i,
+                                            nv,
+                                        ));
+                                    }
+                                    None => {
+                                        return Err(err(
+                                            t.line,
+                                            format!(
+                                                "bad vertex index '{}' in face {item}",
+                                                show(tok)
+                                            ),
+                                        ));
+                                    }
+                                }
+                            }
+                        }
+                    }
+                }
+            }
+            if is_vertex {
+                b.positions.push(DVec3::from_array(xyz));
+            }
+            if is_face {
+                b.end_face()?;
+            }
+        }
+    }
+    Ok(b.finish())
+}
+
+/// Write `mesh` as PLY in `encoding`, with `float` instead of `double` coordinates when
+/// `single_precision` (see the module documentation).
+///
+/// # Errors
+/// [`MeshError::IndexOutOfRange`] / [`MeshError::FaceTooSmall`] for a mesh built with
+/// [`Mesh::from_csr_unvalidated`] that has such faces (nothing is written then);
+/// [`MeshError::Write`] when the writer fails.
+pub fn write_ply<W: Write>(
+    w: &mut W,
+    mesh: &Mesh,
+    encoding: PlyEncoding,
+    single_precision: bool,
+) -> Result<(), MeshError> {
+    super::check_writable(mesh)?;
+    let max_len = mesh.max_face_len();
+    let count_ty = if max_len <= 255 {
+        Scalar::U8
+    } else if max_len <= 65535 {
+        Scalar::U16
+    } else {
+        Scalar::U32
+    };
+    let index_ty = if mesh.vertex_count() <= i32::MAX as usize {
+        Scalar::I32
+    } else {
+        Scalar::U32
+    };
+    let name = |s: Scalar| match s {
+        Scalar::U8 => "uchar",
+        Scalar::U16 => "ushort",
+        Scalar::U32 => "uint",
+        _ => "int",
+    };
+    let coord = if single_precision { "float" } else { "double" };
+    write!(
+        w,
+        "ply\nformat {} 1.0\ncomment volmorph mesh\nelement vertex {}\n\
+         property {coord} x\nproperty {coord} y\nproperty {coord} z\n\
+         element face {}\nproperty list {} {} vertex_indices\nend_header\n",
+        encoding.keyword(),
+        mesh.vertex_count(),
+        mesh.face_count(),
+        name(count_ty),
+        name(index_ty)
+    )?;
+    match encoding {
+        PlyEncoding::Ascii => {
+            for p in mesh.positions() {
+                for (k, x) in p.to_array().into_iter().enumerate() {
+                    if k > 0 {
+                        w.write_all(b" ")?;
+                    }
+                    if single_precision {
+                        write_f32(w, x as f32)?;
+                    } else {
+                        write_f64(w, x)?;
+                    }
+                }
+                w.write_all(b"\n")?;
+            }
+            for face in mesh.faces() {
+                write!(w, "{}", face.len())?;
+                for &i in face {
+                    write_uint(w, b' ', u64::from(i))?;
+                }
+                w.write_all(b"\n")?;
+            }
+        }
+        PlyEncoding::BinaryLittleEndian | PlyEncoding::BinaryBigEndian => {
+            let big = encoding == PlyEncoding::BinaryBigEndian;
+            macro_rules! put {
+                ($v:expr) => {
+                    if big {
+                        w.write_all(&$v.to_be_bytes())?
+                    } else {
+                        w.write_all(&$v.to_le_bytes())?
+                    }
+                };
+            }
+            for p in mesh.positions() {
+                for x in p.to_array() {
+                    if single_precision {
+                        put!(x as f32);
+                    } else {
+                        put!(x);
+                    }
+                }
+            }
+            for face in mesh.faces() {
+                let n = face.len();
+                match count_ty {
+                    Scalar::U8 => put!(n as u8),
+                    Scalar::U16 => put!(n as u16),
+                    _ => put!(n as u32),
+                }
+                for &i in face {
+                    // Both index types hold `i` with the same bit pattern.
+                    put!(i);
+                }
+            }
+        }
+    }
+    Ok(())
+}
