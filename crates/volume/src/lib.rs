@@ -11,6 +11,9 @@
 mod error;
 pub mod format;
 mod geometry;
+pub mod sample;
+pub mod slice;
+pub mod stats;
 mod volume;
 mod voxel;
 
