@@ -41,8 +41,14 @@
 //!   (`±∞` clamp to the edge; NaN gives NaN).
 //! * [`Boundary::Mirror`] — the volume is extended by whole-sample mirror symmetry about the
 //!   first and last voxel centres (period `2(n − 1)`): each coordinate is reflected into
-//!   `[0, n − 1]` first. This is the extension the B-spline prefilter assumes, so for the cubic
-//!   kernel the mirrored spline is one smooth function. Non-finite coordinates give NaN.
+//!   `[0, n − 1]` first (the kernels, including the nearest-neighbour tie rule, then apply to
+//!   the reflected coordinate). This is the extension the B-spline prefilter assumes, so for
+//!   the cubic kernel the mirrored spline is one smooth function. Non-finite coordinates give
+//!   NaN.
+//!
+//! Under every policy, a cubic query near the edge of `[0, n − 1]` reads its out-of-range
+//! neighbour coefficients from the same mirror extension the prefilter used, so the spline
+//! still interpolates the edge voxels exactly.
 //!
 //! Along an axis with a single voxel every coordinate inside the domain maps to index 0.
 //!
@@ -444,6 +450,9 @@ fn fold(x: f64, n: usize, boundary: Boundary) -> Option<f64> {
 /// Reflect finite `x` into `[0, last]` (whole-sample symmetry, period `2·last`).
 #[inline]
 fn mirror_coordinate(x: f64, last: f64) -> f64 {
+    if (0.0..=last).contains(&x) {
+        return x;
+    }
     if last == 0.0 {
         return 0.0;
     }
@@ -492,12 +501,18 @@ fn cubic_axis(x: f64, n: usize) -> ([usize; 4], [f64; 4]) {
     let fl = x.floor();
     let t = x - fl;
     let i = fl as isize;
-    let idx = [
-        mirror_index(i - 1, n),
-        mirror_index(i, n),
-        mirror_index(i + 1, n),
-        mirror_index(i + 2, n),
-    ];
+    let idx = if i >= 1 && i + 2 < n as isize {
+        // Interior: no reflection needed (the common case).
+        let i = i.unsigned_abs();
+        [i - 1, i, i + 1, i + 2]
+    } else {
+        [
+            mirror_index(i - 1, n),
+            mirror_index(i, n),
+            mirror_index(i + 1, n),
+            mirror_index(i + 2, n),
+        ]
+    };
     let t2 = t * t;
     let t3 = t2 * t;
     let s = 1.0 - t;

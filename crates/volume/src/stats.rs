@@ -344,7 +344,7 @@ fn select_ranks<T: Voxel>(data: &[T], ranks: &[u64]) -> Vec<f64> {
                     }
                     below += h;
                 }
-                *s = ((prefix << d) | digit, s.1 - below);
+                *s = ((prefix << d) | digit, s.1.saturating_sub(below));
             }
         }
         known += d;
