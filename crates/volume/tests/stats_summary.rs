@@ -240,3 +240,50 @@ fn display_is_a_compact_summary() {
         "{clean}"
     );
 }
+
+mod prop {
+    use super::*;
+    use proptest::prelude::*;
+
+    proptest! {
+        #![proptest_config(ProptestConfig::with_cases(64))]
+
+        #[test]
+        fn quantiles_of_random_f32_match_sorting(
+            values in proptest::collection::vec(
+                prop_oneof![
+                    8 => -1e6f32..1e6f32,
+                    1 => Just(f32::NAN),
+                    1 => Just(0.0f32),
+                    1 => Just(-0.0f32),
+                ],
+                1..300,
+            ),
+            probs in proptest::collection::vec(0.0f64..=1.0, 1..6),
+        ) {
+            let reference: Vec<f64> = values.iter().map(|&v| f64::from(v)).collect();
+            let got = quantiles(&line(values), &probs).unwrap();
+            for (&p, g) in probs.iter().zip(&got) {
+                let want = reference_quantile(&reference, p);
+                prop_assert!(g == &want || (g.is_nan() && want.is_nan()), "p {p}: {g} vs {want}");
+            }
+        }
+
+        #[test]
+        fn statistics_of_random_i32_match_naive(
+            values in proptest::collection::vec(any::<i32>(), 1..2000),
+        ) {
+            let s = Statistics::of(&line(values.clone()));
+            let x: Vec<f64> = values.iter().map(|&v| f64::from(v)).collect();
+            let n = x.len() as f64;
+            let sum: f64 = x.iter().sum();
+            let mean = sum / n;
+            let var = x.iter().map(|v| (v - mean) * (v - mean)).sum::<f64>() / n;
+            prop_assert!((s.sum - sum).abs() <= 1e-6 * x.iter().map(|v| v.abs()).sum::<f64>() + 1e-9);
+            prop_assert!((s.mean - mean).abs() <= 1e-9 * (1.0 + mean.abs().max(var.sqrt())));
+            prop_assert!((s.std - var.sqrt()).abs() <= 1e-9 * (1.0 + var.sqrt()));
+            prop_assert_eq!(s.min, x.iter().copied().fold(f64::MAX, f64::min));
+            prop_assert_eq!(s.max, x.iter().copied().fold(f64::MIN, f64::max));
+        }
+    }
+}
