@@ -1,0 +1,319 @@
+//! Pinhole and orthographic cameras.
+//!
+//! Conventions (world coordinates are f64, right-handed):
+//!
+//! * The camera looks along `forward = normalize(target − eye)`; `right = forward × up`
+//!   (normalised) points to increasing image x and `up` (re-orthogonalised as
+//!   `right × forward`) to decreasing image y.
+//! * Image coordinates are continuous: x from 0 at the left edge to `width` at the right
+//!   edge, y from 0 at the **top** edge to `height` at the bottom edge. Pixel `(i, j)` covers
+//!   `[i, i+1) × [j, j+1)`, so pixel (0, 0) is the top-left pixel and its centre is
+//!   (0.5, 0.5) — the same layout as [`RgbaImage`](crate::RgbaImage).
+//! * Depth is the distance along `forward` from the eye (for orthographic cameras, from the
+//!   plane through the eye perpendicular to `forward`).
+
+use glam::DVec3;
+
+use crate::error::RenderError;
+use crate::geometry::{Aabb, Ray};
+use crate::image::pixel_count;
+
+/// How a [`Camera`] maps the world onto its image plane.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub enum Projection {
+    /// Pinhole camera with vertical field of view `fov_y` (full angle, radians, in (0, π)).
+    /// The horizontal field follows from the image's aspect ratio (square pixels).
+    Perspective {
+        /// Full vertical field-of-view angle, radians.
+        fov_y: f64,
+    },
+    /// Parallel projection showing a slab `view_height` world units tall (width from the
+    /// aspect ratio); all rays share the direction `forward`.
+    Orthographic {
+        /// Height of the visible region, world units.
+        view_height: f64,
+    },
+}
+
+impl Projection {
+    fn validate(self) -> Result<Self, RenderError> {
+        match self {
+            Projection::Perspective { fov_y } => {
+                if !(fov_y > 0.0 && fov_y < std::f64::consts::PI) {
+                    return Err(RenderError::invalid(format!(
+                        "perspective fov_y must be in (0, π) radians, got {fov_y}"
+                    )));
+                }
+            }
+            Projection::Orthographic { view_height } => {
+                if !(view_height > 0.0 && view_height.is_finite()) {
+                    return Err(RenderError::invalid(format!(
+                        "orthographic view_height must be finite and > 0, got {view_height}"
+                    )));
+                }
+            }
+        }
+        Ok(self)
+    }
+}
+
+/// Relative margin [`Camera::fit_bounds`] leaves around the framed box (5 %).
+pub const FIT_MARGIN: f64 = 1.05;
+
+/// A camera with an orthonormal frame, a projection and an image size in pixels.
+///
+/// See the [module documentation](self) for the image-coordinate and depth conventions.
+///
+/// ```
+/// use glam::DVec3;
+/// use volmorph_render::{Camera, Projection};
+/// let cam = Camera::look_at(DVec3::new(0.0, 0.0, 10.0), DVec3::ZERO, DVec3::Y,
+///                           Projection::Perspective { fov_y: 0.8 }, 64, 48).unwrap();
+/// let ray = cam.ray(10, 20);
+/// let (x, y, depth) = cam.project(ray.at(7.0)).unwrap();
+/// assert!((x - 10.5).abs() < 1e-9 && (y - 20.5).abs() < 1e-9 && depth > 0.0);
+/// // The target is in the middle of the picture.
+/// let (cx, cy, d) = cam.project(DVec3::ZERO).unwrap();
+/// assert!((cx - 32.0).abs() < 1e-9 && (cy - 24.0).abs() < 1e-9 && (d - 10.0).abs() < 1e-9);
+/// ```
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Camera {
+    eye: DVec3,
+    forward: DVec3,
+    right: DVec3,
+    up: DVec3,
+    projection: Projection,
+    width: u32,
+    height: u32,
+}
+
+impl Camera {
+    /// A camera at `eye` looking at `target`, with `up` giving the upward direction of the
+    /// picture (it need not be perpendicular to the view direction, only not parallel to it),
+    /// rendering `width × height` pixels.
+    ///
+    /// # Errors
+    /// [`RenderError::InvalidArgument`] for non-finite vectors, `eye == target`, `up` zero or
+    /// parallel to the view direction, or an invalid projection parameter;
+    /// [`RenderError::Size`] for a zero or oversized image.
+    pub fn look_at(
+        eye: DVec3,
+        target: DVec3,
+        up: DVec3,
+        projection: Projection,
+        width: u32,
+        height: u32,
+    ) -> Result<Self, RenderError> {
+        pixel_count(width.into(), height.into(), 1)?;
+        let projection = projection.validate()?;
+        if !(eye.is_finite() && target.is_finite() && up.is_finite()) {
+            return Err(RenderError::invalid(format!(
+                "camera vectors must be finite: eye {eye}, target {target}, up {up}"
+            )));
+        }
+        let forward = (target - eye).try_normalize().ok_or_else(|| {
+            RenderError::invalid(format!("camera eye and target coincide at {eye}"))
+        })?;
+        let right = forward.cross(up).try_normalize().ok_or_else(|| {
+            RenderError::invalid(format!(
+                "camera up {up} is zero or parallel to the view direction {forward}"
+            ))
+        })?;
+        let up = right.cross(forward);
+        Ok(Self {
+            eye,
+            forward,
+            right,
+            up,
+            projection,
+            width,
+            height,
+        })
+    }
+
+    /// Eye position (perspective centre; for orthographic cameras, the centre of the image
+    /// plane).
+    #[must_use]
+    pub fn eye(&self) -> DVec3 {
+        self.eye
+    }
+
+    /// Unit viewing direction.
+    #[must_use]
+    pub fn forward(&self) -> DVec3 {
+        self.forward
+    }
+
+    /// Unit vector towards increasing image x.
+    #[must_use]
+    pub fn right(&self) -> DVec3 {
+        self.right
+    }
+
+    /// Unit vector towards decreasing image y (the picture's up), perpendicular to
+    /// `forward` and `right`.
+    #[must_use]
+    pub fn up(&self) -> DVec3 {
+        self.up
+    }
+
+    /// The projection.
+    #[must_use]
+    pub fn projection(&self) -> Projection {
+        self.projection
+    }
+
+    /// Image width in pixels.
+    #[must_use]
+    pub fn width(&self) -> u32 {
+        self.width
+    }
+
+    /// Image height in pixels.
+    #[must_use]
+    pub fn height(&self) -> u32 {
+        self.height
+    }
+
+    /// Width / height.
+    #[must_use]
+    pub fn aspect(&self) -> f64 {
+        f64::from(self.width) / f64::from(self.height)
+    }
+
+    /// Half extents of the image plane: at unit distance for perspective (tangents of the
+    /// half angles), in world units for orthographic.
+    fn half_extents(&self) -> (f64, f64) {
+        let half_h = match self.projection {
+            Projection::Perspective { fov_y } => (0.5 * fov_y).tan(),
+            Projection::Orthographic { view_height } => 0.5 * view_height,
+        };
+        (half_h * self.aspect(), half_h)
+    }
+
+    /// Continuous image coordinates → normalised device coordinates in [−1, 1] (y up).
+    fn ndc(&self, x: f64, y: f64) -> (f64, f64) {
+        (
+            2.0 * x / f64::from(self.width) - 1.0,
+            1.0 - 2.0 * y / f64::from(self.height),
+        )
+    }
+
+    /// The ray through the centre of pixel `(px, py)`, i.e. [`Camera::ray_at`]`(px + 0.5,
+    /// py + 0.5)`. Pixels outside the image give rays outside the view, by extrapolation.
+    #[must_use]
+    pub fn ray(&self, px: u32, py: u32) -> Ray {
+        self.ray_at(f64::from(px) + 0.5, f64::from(py) + 0.5)
+    }
+
+    /// The ray through continuous image point `(x, y)` (x right from the left edge, y down
+    /// from the top edge, in pixels; use fractional offsets for supersampling).
+    ///
+    /// Perspective rays start at the eye; orthographic rays start on the plane through the
+    /// eye perpendicular to `forward` and all have direction `forward`. `dir` is unit length.
+    #[must_use]
+    pub fn ray_at(&self, x: f64, y: f64) -> Ray {
+        let (sx, sy) = self.ndc(x, y);
+        let (hw, hh) = self.half_extents();
+        match self.projection {
+            Projection::Perspective { .. } => {
+                let d = self.forward + (sx * hw) * self.right + (sy * hh) * self.up;
+                Ray {
+                    origin: self.eye,
+                    dir: d.normalize_or(self.forward),
+                }
+            }
+            Projection::Orthographic { .. } => Ray {
+                origin: self.eye + (sx * hw) * self.right + (sy * hh) * self.up,
+                dir: self.forward,
+            },
+        }
+    }
+
+    /// Where world point `p` lands: `(x, y, depth)` in continuous image coordinates (pixel
+    /// centres at half-integers) and depth along `forward`. Inverse of
+    /// [`Camera::ray_at`]: every point of `ray_at(x, y)` in front of the camera projects to
+    /// `(x, y)`. Points outside the view project outside `[0, width] × [0, height]`.
+    ///
+    /// Returns `None` for points behind the camera (depth ≤ 0 for perspective, < 0 for
+    /// orthographic) and for non-finite points.
+    #[must_use]
+    pub fn project(&self, p: DVec3) -> Option<(f64, f64, f64)> {
+        let d = p - self.eye;
+        let depth = d.dot(self.forward);
+        let (hw, hh) = self.half_extents();
+        let (sx, sy) = match self.projection {
+            Projection::Perspective { .. } => {
+                if depth.is_nan() || depth <= 0.0 {
+                    return None;
+                }
+                (
+                    d.dot(self.right) / (depth * hw),
+                    d.dot(self.up) / (depth * hh),
+                )
+            }
+            Projection::Orthographic { .. } => {
+                if depth.is_nan() || depth < 0.0 {
+                    return None;
+                }
+                (d.dot(self.right) / hw, d.dot(self.up) / hh)
+            }
+        };
+        let x = 0.5 * (sx + 1.0) * f64::from(self.width);
+        let y = 0.5 * (1.0 - sy) * f64::from(self.height);
+        (x.is_finite() && y.is_finite()).then_some((x, y, depth))
+    }
+
+    /// A copy of this camera moved (and, for orthographic cameras, zoomed) so that the whole
+    /// box `[min, max]` is in view with a [`FIT_MARGIN`] margin, keeping the viewing
+    /// direction, up vector, field of view and image size.
+    ///
+    /// Perspective: the eye backs off along `−forward` from the box centre until the box's
+    /// bounding sphere fits in the narrower of the two view angles. Orthographic: the view
+    /// height is set to the box's extent across the view (in both image directions), and the
+    /// eye is placed in front of the whole box. Every corner of the box then projects inside
+    /// the image at positive depth.
+    ///
+    /// # Errors
+    /// [`RenderError::InvalidArgument`] when the corners are not finite, `min > max` on an
+    /// axis, or the box is a single point (nothing to frame).
+    pub fn fit_bounds(&self, min: DVec3, max: DVec3) -> Result<Camera, RenderError> {
+        let bbox = Aabb::new(min, max)?;
+        let center = bbox.center();
+        let radius = 0.5 * bbox.size().length();
+        if !(radius > 0.0 && radius.is_finite()) {
+            return Err(RenderError::invalid(format!(
+                "cannot frame a box of zero or non-finite size: min {min}, max {max}"
+            )));
+        }
+        let mut cam = *self;
+        match self.projection {
+            Projection::Perspective { .. } => {
+                let (hw, hh) = self.half_extents();
+                let half_angle = hw.atan().min(hh.atan());
+                let dist = FIT_MARGIN * radius / half_angle.sin();
+                cam.eye = center - dist * self.forward;
+            }
+            Projection::Orthographic { .. } => {
+                let (ex, ey) = bbox
+                    .corners()
+                    .iter()
+                    .fold((0.0_f64, 0.0_f64), |(ex, ey), c| {
+                        let d = *c - center;
+                        (
+                            ex.max(d.dot(self.right).abs()),
+                            ey.max(d.dot(self.up).abs()),
+                        )
+                    });
+                let half_h = ey.max(ex / self.aspect());
+                // A box seen end-on (all corners on the axis) still gets a visible slab.
+                let half_h = if half_h > 0.0 { half_h } else { radius };
+                cam.projection = Projection::Orthographic {
+                    view_height: 2.0 * FIT_MARGIN * half_h,
+                };
+                cam.eye = center - 2.0 * radius * self.forward;
+            }
+        }
+        Ok(cam)
+    }
+}
