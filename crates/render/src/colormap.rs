@@ -472,12 +472,17 @@ const RGB_TO_XYZ: [[f64; 3]; 3] = [
     [0.2126, 0.7152, 0.0722],
     [0.0193, 0.1192, 0.9505],
 ];
-/// CIEXYZ (D65) → linear sRGB, IEC 61966-2-1.
-const XYZ_TO_RGB: [[f64; 3]; 3] = [
-    [3.2406, -1.5372, -0.4986],
-    [-0.9689, 1.8758, 0.0415],
-    [0.0557, -0.2040, 1.0570],
-];
+/// Inverse of a 3×3 matrix by cofactors (used for CIEXYZ → linear sRGB, so the two
+/// conversions are exact inverses of each other rather than two rounded published tables).
+fn invert3(m: &[[f64; 3]; 3]) -> [[f64; 3]; 3] {
+    let c = |r: usize, k: usize| {
+        let (r1, r2) = ((r + 1) % 3, (r + 2) % 3);
+        let (k1, k2) = ((k + 1) % 3, (k + 2) % 3);
+        m[r1][k1] * m[r2][k2] - m[r1][k2] * m[r2][k1]
+    };
+    let det = m[0][0] * c(0, 0) + m[0][1] * c(0, 1) + m[0][2] * c(0, 2);
+    std::array::from_fn(|i| std::array::from_fn(|j| c(j, i) / det))
+}
 /// Reference white: the XYZ of linear RGB (1, 1, 1) under [`RGB_TO_XYZ`], so white has
 /// a* = b* = 0 exactly.
 const WHITE: [f64; 3] = [0.9505, 1.0, 1.089];
@@ -553,7 +558,7 @@ fn srgb_from_msh([m, s, h]: [f64; 3]) -> [f64; 3] {
         WHITE[1] * lab_f_inv(fy),
         WHITE[2] * lab_f_inv(fy - b / 200.0),
     ];
-    mat_vec(&XYZ_TO_RGB, xyz).map(|c| 255.0 * srgb_encode(c))
+    mat_vec(&invert3(&RGB_TO_XYZ), xyz).map(|c| 255.0 * srgb_encode(c))
 }
 
 /// Moreland's hue adjustment: the hue to give an unsaturated colour of magnitude `m_unsat`
@@ -596,4 +601,228 @@ fn interpolate_msh(mut c1: [f64; 3], mut c2: [f64; 3], mut t: f64) -> [f64; 3] {
         (1.0 - t) * c1[1] + t * c2[1],
         (1.0 - t) * c1[2] + t * c2[2],
     ]
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// Relative luminance Y (linear-light, BT.709 primaries) of an 8-bit sRGB colour.
+    fn luminance(c: [u8; 3]) -> f64 {
+        let lin = c.map(|v| srgb_decode(f64::from(v) / 255.0));
+        0.2126 * lin[0] + 0.7152 * lin[1] + 0.0722 * lin[2]
+    }
+
+    fn close(a: [u8; 3], b: [u8; 3], tol: i32) -> bool {
+        (0..3).all(|i| (i32::from(a[i]) - i32::from(b[i])).abs() <= tol)
+    }
+
+    #[test]
+    fn grey_is_exact() {
+        for (i, e) in Colormap::Grey.lut().iter().enumerate() {
+            assert_eq!(*e, [i as u8; 3]);
+        }
+        assert_eq!(Colormap::Grey.map(0.0), [0; 3]);
+        assert_eq!(Colormap::Grey.map(1.0), [255; 3]);
+        assert_eq!(Colormap::Grey.map(100.0 / 255.0), [100; 3]);
+        assert_eq!(Colormap::Grey.map(-3.0), [0; 3]);
+        assert_eq!(Colormap::Grey.map(f32::NAN), [0; 3]);
+        assert_eq!(Colormap::Grey.map(f32::INFINITY), [255; 3]);
+    }
+
+    #[test]
+    fn published_endpoint_and_anchor_colours() {
+        let viridis = Colormap::Viridis.lut();
+        assert_eq!(viridis[0], [0x44, 0x01, 0x54]);
+        assert_eq!(viridis[255], [0xFD, 0xE7, 0x25]);
+        // The published five-class viridis palette (#3B528B, #21918C, #5EC962) at t = ¼, ½, ¾
+        // as sampled from the 256-entry table (entries 64, 128, 192).
+        assert!(
+            close(viridis[64], [0x3B, 0x52, 0x8B], 1),
+            "{:?}",
+            viridis[64]
+        );
+        assert!(
+            close(viridis[128], [0x21, 0x91, 0x8C], 1),
+            "{:?}",
+            viridis[128]
+        );
+        assert!(
+            close(viridis[192], [0x5E, 0xC9, 0x62], 1),
+            "{:?}",
+            viridis[192]
+        );
+
+        let hot = Colormap::Hot.lut();
+        assert_eq!(hot[0], [0, 0, 0]);
+        assert_eq!(hot[255], [255, 255, 255]);
+        // Piecewise ramps: entry 48 (t = 0.188) is half red, 144 (t = 0.565) half yellow.
+        assert_eq!(hot[48], [128, 0, 0]);
+        assert_eq!(hot[144], [255, 129, 0]);
+        assert_eq!(hot[96][0], 255);
+        assert_eq!(hot[95][1], 0);
+        assert_eq!(hot[191][2], 0);
+
+        let turbo = Colormap::Turbo.lut();
+        assert_eq!(turbo[0], [0x30, 0x12, 0x3B]);
+        assert_eq!(turbo[255], [0x7A, 0x04, 0x03]);
+
+        let cw = Colormap::CoolWarm.lut();
+        assert_eq!(cw[0], [59, 76, 192]);
+        assert_eq!(cw[255], [180, 4, 38]);
+        // Moreland's neutral midpoint, Msh (88, 0, 0) ≈ sRGB (221, 221, 221).
+        assert!(close(cw[127], [221, 221, 221], 1), "{:?}", cw[127]);
+        assert!(close(cw[128], [221, 221, 221], 1), "{:?}", cw[128]);
+    }
+
+    #[test]
+    fn sequential_maps_have_increasing_luminance() {
+        for map in [Colormap::Grey, Colormap::Hot] {
+            let y: Vec<f64> = map.lut().iter().map(|&c| luminance(c)).collect();
+            assert!(y.windows(2).all(|w| w[1] >= w[0]), "{map}");
+            assert!(y[255] > y[0]);
+        }
+        // Viridis is monotone in lightness by design; after rounding to 8 bits, adjacent
+        // entries may dip by less than one quantisation step (the published table does too),
+        // so require strict increase over every two entries and no dip beyond rounding.
+        let y: Vec<f64> = Colormap::Viridis
+            .lut()
+            .iter()
+            .map(|&c| luminance(c))
+            .collect();
+        assert!(y.windows(3).all(|w| w[2] > w[0]));
+        assert!(y.windows(2).all(|w| w[1] > w[0] - 1e-3));
+    }
+
+    #[test]
+    fn diverging_map_is_symmetric_in_lightness_and_lightest_in_the_middle() {
+        let cw = Colormap::CoolWarm.lut();
+        let y: Vec<f64> = cw.iter().map(|&c| luminance(c)).collect();
+        let peak = (0..256).max_by(|&a, &b| y[a].total_cmp(&y[b])).unwrap_or(0);
+        assert!((126..=129).contains(&peak), "peak at {peak}");
+        // Near white one 8-bit step of green moves Y by ≈ 0.005, so adjacent rounded entries
+        // may zig-zag by that much; over eight entries lightness must move the right way.
+        assert!(y[..=127].windows(9).all(|w| w[8] > w[0]));
+        assert!(y[128..].windows(9).all(|w| w[8] < w[0]));
+        assert!(y.windows(2).all(|w| (w[1] - w[0]).abs() < 0.01));
+        // Moreland designed both ends with matched lightness.
+        assert!((y[0] - y[255]).abs() < 0.03, "{} vs {}", y[0], y[255]);
+        assert!(Colormap::CoolWarm.is_diverging() && !Colormap::Viridis.is_diverging());
+    }
+
+    #[test]
+    fn bspline_reproduces_its_end_control_points_and_linear_data() {
+        assert_eq!(clamped_cubic_bspline(&VIRIDIS_CP, 0.0), VIRIDIS_CP[0]);
+        assert_eq!(clamped_cubic_bspline(&VIRIDIS_CP, 1.0), VIRIDIS_CP[23]);
+        // Control points at the Greville abscissae of a linear function reproduce it.
+        let n = 10;
+        let seg = (n - 3) as f64;
+        let greville: Vec<[f64; 3]> = (0..n)
+            .map(|i| {
+                let knot = |k: usize| (k.saturating_sub(3).min(n - 3)) as f64 / seg;
+                let g = (knot(i + 1) + knot(i + 2) + knot(i + 3)) / 3.0;
+                [g, 2.0 * g + 1.0, 5.0]
+            })
+            .collect();
+        for k in 0..=20 {
+            let t = f64::from(k) / 20.0;
+            let p = clamped_cubic_bspline(&greville, t);
+            assert!((p[0] - t).abs() < 1e-12 && (p[1] - (2.0 * t + 1.0)).abs() < 1e-12);
+            assert!((p[2] - 5.0).abs() < 1e-12);
+        }
+    }
+
+    #[test]
+    fn msh_round_trip() {
+        for rgb in [
+            [59.0, 76.0, 192.0],
+            [180.0, 4.0, 38.0],
+            [255.0, 255.0, 255.0],
+            [10.0, 200.0, 90.0],
+        ] {
+            let back = srgb_from_msh(msh_from_srgb(rgb));
+            for c in 0..3 {
+                assert!((back[c] - rgb[c]).abs() < 1e-6, "{rgb:?} → {back:?}");
+            }
+        }
+    }
+
+    #[test]
+    fn names_round_trip() {
+        for map in Colormap::ALL {
+            assert_eq!(map.name().parse::<Colormap>().unwrap(), map);
+            assert_eq!(map.to_string(), map.name());
+        }
+        assert_eq!("Gray".parse::<Colormap>().unwrap(), Colormap::Grey);
+        assert_eq!(
+            " cool-warm ".parse::<Colormap>().unwrap(),
+            Colormap::CoolWarm
+        );
+        let err = "jett".parse::<Colormap>().unwrap_err().to_string();
+        assert!(err.contains("jett") && err.contains("viridis"), "{err}");
+    }
+
+    #[test]
+    fn map_picks_the_nearest_entry() {
+        let lut = Colormap::Turbo.lut();
+        assert_eq!(Colormap::Turbo.map(0.5 / 255.0 - 1e-4), lut[0]);
+        assert_eq!(Colormap::Turbo.map(0.5 / 255.0 + 1e-4), lut[1]);
+        assert_eq!(Colormap::Turbo.map(200.0 / 255.0), lut[200]);
+    }
+
+    #[test]
+    fn render_scalar_styles() {
+        let w = Window::from_range(-1.0, 1.0).unwrap();
+        let style = ScalarStyle::new(w, Colormap::CoolWarm)
+            .with_nan_color([1, 2, 3, 4])
+            .with_diverging_center(0.5)
+            .unwrap();
+        assert_eq!(style.normalize(-1.0), Some(0.0));
+        assert_eq!(style.normalize(-0.25), Some(0.25));
+        assert_eq!(style.normalize(0.5), Some(0.5));
+        assert_eq!(style.normalize(0.75), Some(0.75));
+        assert_eq!(style.normalize(1.0), Some(1.0));
+        assert_eq!(style.normalize(7.0), Some(1.0));
+        assert_eq!(style.normalize(f32::NAN), None);
+        assert_eq!(style.color(f32::NAN), [1, 2, 3, 4]);
+        assert_eq!(style.color(-1.0), [59, 76, 192, 255]);
+        // A centre outside the window widens it.
+        let outside = ScalarStyle::new(w, Colormap::Grey)
+            .with_diverging_center(3.0)
+            .unwrap();
+        assert_eq!(outside.normalize(3.0), Some(0.5));
+        assert_eq!(outside.normalize(-1.0), Some(0.0));
+        assert_eq!(outside.normalize(5.0), Some(1.0));
+        assert!(
+            ScalarStyle::new(w, Colormap::Grey)
+                .with_diverging_center(f64::NAN)
+                .is_err()
+        );
+
+        // The parallel renderer agrees with the per-value colour on a larger field.
+        let (width, height) = (157u32, 93u32);
+        let values: Vec<f32> = (0..width * height)
+            .map(|i| {
+                if i % 37 == 0 {
+                    f32::NAN
+                } else {
+                    ((i as f32) * 0.013).sin()
+                }
+            })
+            .collect();
+        let img = render_scalar_with(&values, width, height, &style).unwrap();
+        for (p, &v) in img.pixels().iter().zip(&values) {
+            assert_eq!(*p, style.color(v));
+        }
+        let field = crate::ScalarImage::from_values(width, height, values.clone()).unwrap();
+        assert_eq!(field.to_rgba(&style), img);
+        assert!(matches!(
+            render_scalar(&values, width, height + 1, &w, Colormap::Grey),
+            Err(RenderError::LengthMismatch { .. })
+        ));
+        assert!(matches!(
+            render_scalar(&[], 0, 0, &w, Colormap::Grey),
+            Err(RenderError::Size { .. })
+        ));
+    }
 }

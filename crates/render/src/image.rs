@@ -545,3 +545,170 @@ pub(crate) fn check_len(
         })
     }
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use proptest::prelude::*;
+
+    #[test]
+    fn blend_over_hand_values_and_identities() {
+        let red = [255, 0, 0, 255];
+        let blue = [0, 0, 255, 255];
+        assert_eq!(blend_over(red, blue), red);
+        assert_eq!(blend_over([1, 2, 3, 0], blue), blue);
+        // 25 % white over opaque black: 63.75 → 64.
+        assert_eq!(
+            blend_over([255, 255, 255, 64], [0, 0, 0, 255]),
+            [64, 64, 64, 255]
+        );
+        // Two half-transparent layers: α = 0.5 + 0.5·0.5 = 0.75; red weight 2/3.
+        let c = blend_over([255, 0, 0, 255 / 2 + 1], [0, 0, 255, 255 / 2 + 1]);
+        assert_eq!(c[3], 192);
+        assert!((i32::from(c[0]) - 170).abs() <= 1 && (i32::from(c[2]) - 85).abs() <= 1);
+        // Nothing over nothing stays nothing.
+        assert_eq!(blend_over([0; 4], [0; 4]), [0; 4]);
+    }
+
+    proptest! {
+        #[test]
+        fn blend_over_properties(src in any::<[u8; 4]>(), dst in any::<[u8; 4]>()) {
+            let out = blend_over(src, dst);
+            // Output alpha is the Porter–Duff α, never below either input's.
+            let a = f64::from(src[3]) / 255.0;
+            let b = f64::from(dst[3]) / 255.0;
+            let expect = 255.0 * (a + b * (1.0 - a));
+            prop_assert!((f64::from(out[3]) - expect).abs() <= 0.5 + 1e-9);
+            prop_assert!(out[3] >= src[3].max(dst[3]));
+            // Over a transparent background the source is unchanged.
+            prop_assert_eq!(blend_over(src, [dst[0], dst[1], dst[2], 0]),
+                            if src[3] == 0 { [dst[0], dst[1], dst[2], 0] } else { src });
+            // Colour is a convex combination of the inputs.
+            for c in 0..3 {
+                prop_assert!(out[c] >= src[c].min(dst[c]) && out[c] <= src[c].max(dst[c]));
+            }
+            if dst[3] == 255 {
+                prop_assert_eq!(out[3], 255);
+            }
+        }
+    }
+
+    #[test]
+    fn layout_is_row_major_top_row_first() {
+        let img = RgbaImage::from_fn(4, 3, |x, y| [x as u8, y as u8, 0, 255]).unwrap();
+        assert_eq!(img.pixels().len(), 12);
+        for y in 0..3 {
+            for x in 0..4 {
+                assert_eq!(
+                    img.pixels()[(y * 4 + x) as usize],
+                    [x as u8, y as u8, 0, 255]
+                );
+                assert_eq!(img.get(x, y), Some([x as u8, y as u8, 0, 255]));
+            }
+        }
+        assert_eq!(img.row(2).unwrap()[3], [3, 2, 0, 255]);
+        assert_eq!(img.row(3), None);
+        assert_eq!(img.get(4, 0), None);
+        assert_eq!(img.get(0, 3), None);
+        assert_eq!(&img.as_bytes()[4..8], &[1, 0, 0, 255]);
+    }
+
+    #[test]
+    fn put_blend_fill_and_flip() {
+        let mut img = RgbaImage::new(3, 3, [0, 0, 0, 255]).unwrap();
+        assert!(img.put(2, 1, [9, 9, 9, 255]));
+        assert!(!img.put(3, 1, [9, 9, 9, 255]));
+        assert!(!img.blend(0, 7, [9, 9, 9, 255]));
+        assert!(img.blend(0, 0, [255, 255, 255, 128]));
+        assert_eq!(img.get(0, 0), Some([128, 128, 128, 255]));
+        assert_eq!(img.get(2, 1), Some([9, 9, 9, 255]));
+
+        let mut f = RgbaImage::from_fn(2, 5, |x, y| [x as u8, y as u8, 1, 2]).unwrap();
+        let orig = f.clone();
+        f.flip_vertical();
+        for y in 0..5 {
+            assert_eq!(f.row(y), orig.row(4 - y));
+        }
+        f.flip_vertical();
+        assert_eq!(f, orig);
+
+        img.fill([1, 2, 3, 4]);
+        assert!(img.pixels().iter().all(|&p| p == [1, 2, 3, 4]));
+    }
+
+    #[test]
+    fn sizes_are_checked_before_allocation() {
+        assert!(matches!(
+            RgbaImage::new(0, 5, [0; 4]),
+            Err(RenderError::Size { .. })
+        ));
+        assert!(matches!(
+            RgbaImage::new(1 << 20, 1 << 20, [0; 4]),
+            Err(RenderError::Size { .. })
+        ));
+        assert!(matches!(
+            ScalarImage::new(u32::MAX, u32::MAX, 0.0),
+            Err(RenderError::Size { .. })
+        ));
+        assert!(matches!(
+            RgbaImage::from_pixels(2, 2, vec![[0; 4]; 3]),
+            Err(RenderError::LengthMismatch {
+                expected: 4,
+                got: 3,
+                ..
+            })
+        ));
+        assert!(ScalarImage::from_values(3, 2, vec![0.0; 5]).is_err());
+        assert!(RgbaImage::from_grey8(3, 2, &[0; 7]).is_err());
+    }
+
+    #[test]
+    fn compositing_images() {
+        let top =
+            RgbaImage::from_fn(2, 1, |x, _| [255, 0, 0, if x == 0 { 255 } else { 0 }]).unwrap();
+        let flat = top.composite_over([0, 0, 255, 255]);
+        assert_eq!(flat.pixels(), &[[255, 0, 0, 255], [0, 0, 255, 255]]);
+        assert_eq!(top.to_rgb([0, 255, 0]), vec![[255, 0, 0], [0, 255, 0]]);
+
+        let mut base = RgbaImage::new(2, 1, [0, 0, 255, 255]).unwrap();
+        base.draw_over(&top).unwrap();
+        assert_eq!(base, flat);
+        let wrong = RgbaImage::new(1, 2, [0; 4]).unwrap();
+        assert!(matches!(
+            base.draw_over(&wrong),
+            Err(RenderError::InvalidArgument(_))
+        ));
+
+        let grey = RgbaImage::from_grey8(2, 1, &[7, 200]).unwrap();
+        assert_eq!(grey.pixels(), &[[7, 7, 7, 255], [200, 200, 200, 255]]);
+    }
+
+    #[test]
+    fn scalar_image_accumulates_and_converts() {
+        let mut s = ScalarImage::new(3, 2, 0.0).unwrap();
+        assert!(s.add(1, 1, 2.0));
+        assert!(s.add(1, 1, 0.5));
+        assert!(!s.add(3, 0, 1.0));
+        assert!(s.put(0, 0, f32::NAN));
+        assert!(s.put(2, 0, -4.0));
+        assert_eq!(s.get(1, 1), Some(2.5));
+        assert_eq!(s.values()[4], 2.5);
+        assert_eq!(s.finite_range(), Some((-4.0, 2.5)));
+        assert_eq!(finite_range(&[f32::NAN, f32::INFINITY]), None);
+
+        let w = Window::from_range(0.0, 2.0).unwrap();
+        let s = ScalarImage::from_values(5, 1, vec![f32::NAN, -1.0, 0.5, 1.0, 9.0]).unwrap();
+        assert_eq!(s.to_grey8(&w), vec![0, 0, 64, 128, 255]);
+        assert_eq!(s.to_grey16(&w), vec![0, 0, 16384, 32768, 65535]);
+
+        let f = ScalarImage::from_fn(4, 3, |x, y| (x * 10 + y) as f32).unwrap();
+        assert_eq!(f.get(3, 2), Some(32.0));
+        assert_eq!(f.values()[2 * 4 + 3], 32.0);
+
+        let rgba =
+            RgbaImage::from_pixels(2, 1, vec![[255, 255, 255, 0], [255, 0, 0, 255]]).unwrap();
+        let l = ScalarImage::luma_of(&rgba);
+        assert!((l.values()[0] - 255.0).abs() < 1e-3);
+        assert!((l.values()[1] - 0.2126 * 255.0).abs() < 1e-3);
+    }
+}

@@ -160,3 +160,96 @@ fn percentile_of(v: &mut [f32], p: f64) -> f64 {
         _ => a,
     }
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use proptest::prelude::*;
+
+    #[test]
+    fn breakpoints_of_the_window() {
+        let w = Window::new(100.0, 50.0).unwrap();
+        assert_eq!((w.lower(), w.upper()), (75.0, 125.0));
+        assert_eq!(w.normalize(75.0), Some(0.0));
+        assert_eq!(w.normalize(70.0), Some(0.0));
+        assert_eq!(w.normalize(87.5), Some(0.25));
+        assert_eq!(w.normalize(100.0), Some(0.5));
+        assert_eq!(w.normalize(125.0), Some(1.0));
+        assert_eq!(w.normalize(1e30), Some(1.0));
+        assert_eq!(w.normalize(f32::INFINITY), Some(1.0));
+        assert_eq!(w.normalize(f32::NEG_INFINITY), Some(0.0));
+        assert_eq!(w.normalize(f32::NAN), None);
+    }
+
+    #[test]
+    fn zero_width_is_a_threshold() {
+        let w = Window::from_range(3.0, 3.0).unwrap();
+        assert_eq!(w.width(), 0.0);
+        assert_eq!(w.normalize(2.999), Some(0.0));
+        assert_eq!(w.normalize(3.0), Some(0.5));
+        assert_eq!(w.normalize(3.001), Some(1.0));
+    }
+
+    #[test]
+    fn invalid_windows_are_refused() {
+        assert!(Window::new(f64::NAN, 1.0).is_err());
+        assert!(Window::new(0.0, -1.0).is_err());
+        assert!(Window::new(0.0, f64::INFINITY).is_err());
+        assert!(Window::new(f64::MAX, f64::MAX).is_err());
+        assert!(Window::from_range(2.0, 1.0).is_err());
+        assert!(Window::from_range(0.0, f64::NAN).is_err());
+        let r = Window::from_range(-f64::MAX, f64::MAX);
+        assert!(r.is_err(), "span overflows f64");
+    }
+
+    #[test]
+    fn percentiles_interpolate_between_order_statistics() {
+        let v = [4.0, f32::NAN, 1.0, 3.0, f32::NEG_INFINITY, 2.0];
+        let w = Window::from_percentiles(&v, 0.0, 100.0).unwrap();
+        assert_eq!((w.lower(), w.upper()), (1.0, 4.0));
+        // rank 0.25·3 = 0.75 → 1.75; rank 0.5·3 = 1.5 → 2.5.
+        let w = Window::from_percentiles(&v, 25.0, 50.0).unwrap();
+        assert_eq!((w.lower(), w.upper()), (1.75, 2.5));
+        let w = Window::from_percentiles(&[5.0], 10.0, 90.0).unwrap();
+        assert_eq!((w.lower(), w.upper(), w.width()), (5.0, 5.0, 0.0));
+        assert!(Window::from_percentiles(&[f32::NAN, f32::INFINITY], 0.0, 100.0).is_err());
+        assert!(Window::from_percentiles(&[1.0], 60.0, 40.0).is_err());
+        assert!(Window::from_percentiles(&[1.0], -1.0, 40.0).is_err());
+        assert!(Window::from_percentiles(&[1.0], 0.0, 100.5).is_err());
+    }
+
+    proptest! {
+        #[test]
+        fn percentiles_match_a_sorting_reference(
+            v in proptest::collection::vec(-1e6f32..1e6, 1..60),
+            lo in 0.0f64..100.0,
+            span in 0.0f64..100.0,
+        ) {
+            let hi = (lo + span).min(100.0);
+            let mut sorted: Vec<f64> = v.iter().map(|&x| f64::from(x)).collect();
+            sorted.sort_by(f64::total_cmp);
+            let reference = |p: f64| {
+                let rank = p / 100.0 * (sorted.len() - 1) as f64;
+                let i = rank.floor() as usize;
+                let j = (i + 1).min(sorted.len() - 1);
+                sorted[i] + (rank - i as f64) * (sorted[j] - sorted[i])
+            };
+            let w = Window::from_percentiles(&v, lo, hi).unwrap();
+            let tol = 1e-6 * (1.0 + sorted[sorted.len() - 1].abs().max(sorted[0].abs()));
+            prop_assert!((w.lower() - reference(lo)).abs() <= tol);
+            prop_assert!((w.upper() - reference(hi)).abs() <= tol);
+        }
+
+        #[test]
+        fn normalize_is_monotone_and_bounded(
+            c in -1e3f64..1e3, width in 0.0f64..1e3, a in -3e3f32..3e3, b in -3e3f32..3e3,
+        ) {
+            let w = Window::new(c, width).unwrap();
+            let (ta, tb) = (w.normalize(a).unwrap(), w.normalize(b).unwrap());
+            prop_assert!((0.0..=1.0).contains(&ta) && (0.0..=1.0).contains(&tb));
+            if a <= b {
+                prop_assert!(ta <= tb);
+            }
+        }
+    }
+}
