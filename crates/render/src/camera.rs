@@ -317,3 +317,208 @@ impl Camera {
         Ok(cam)
     }
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use proptest::prelude::*;
+
+    const PERSP: Projection = Projection::Perspective { fov_y: 0.9 };
+    const ORTHO: Projection = Projection::Orthographic { view_height: 3.0 };
+
+    fn cameras(width: u32, height: u32) -> Vec<Camera> {
+        let eye = DVec3::new(2.0, -3.0, 5.0);
+        let target = DVec3::new(0.5, 0.25, -0.5);
+        [PERSP, ORTHO]
+            .into_iter()
+            .map(|p| Camera::look_at(eye, target, DVec3::Z, p, width, height).unwrap())
+            .collect()
+    }
+
+    #[test]
+    fn pixel_centre_rays_project_back_to_their_pixel() {
+        for cam in cameras(7, 5) {
+            for py in 0..5 {
+                for px in 0..7 {
+                    let r = cam.ray(px, py);
+                    assert!((r.dir.length() - 1.0).abs() < 1e-12);
+                    for t in [0.5, 1.0, 4.0, 20.0] {
+                        let (x, y, depth) = cam.project(r.at(t)).unwrap();
+                        assert!((x - (f64::from(px) + 0.5)).abs() < 1e-9, "{x} vs {px}");
+                        assert!((y - (f64::from(py) + 0.5)).abs() < 1e-9, "{y} vs {py}");
+                        assert!((depth - t * r.dir.dot(cam.forward())).abs() < 1e-9);
+                        assert!(depth > 0.0);
+                    }
+                }
+            }
+        }
+    }
+
+    #[test]
+    fn centre_ray_points_at_the_target() {
+        let target = DVec3::new(0.5, 0.25, -0.5);
+        // Odd size: the middle pixel's centre is the image centre.
+        for cam in cameras(9, 7) {
+            let r = cam.ray(4, 3);
+            assert!((r.dir - cam.forward()).length() < 1e-12);
+            let to_target = target - r.origin;
+            assert!(to_target.cross(r.dir).length() < 1e-12, "ray misses target");
+            assert!(to_target.dot(r.dir) > 0.0);
+            let (x, y, _) = cam.project(target).unwrap();
+            assert!((x - 4.5).abs() < 1e-9 && (y - 3.5).abs() < 1e-9);
+        }
+        // Even size: the image centre lies between pixels.
+        for cam in cameras(8, 6) {
+            let r = cam.ray_at(4.0, 3.0);
+            assert!((target - r.origin).cross(r.dir).length() < 1e-12);
+        }
+    }
+
+    #[test]
+    fn image_axes_have_the_documented_orientation() {
+        for cam in cameras(8, 6) {
+            let target = DVec3::new(0.5, 0.25, -0.5);
+            let (x0, y0, _) = cam.project(target).unwrap();
+            let (xr, yr, _) = cam.project(target + 0.1 * cam.right()).unwrap();
+            let (xu, yu, _) = cam.project(target + 0.1 * cam.up()).unwrap();
+            assert!(xr > x0 && (yr - y0).abs() < 1e-9, "right is +x");
+            assert!(yu < y0 && (xu - x0).abs() < 1e-9, "up is −y (row 0 on top)");
+            // World up (+Z) appears upwards in the picture.
+            assert!(cam.up().dot(DVec3::Z) > 0.0);
+            assert!(cam.right().dot(cam.forward()).abs() < 1e-15);
+            assert!(cam.up().dot(cam.forward()).abs() < 1e-15);
+        }
+    }
+
+    #[test]
+    fn field_of_view_and_view_height_reach_the_image_edges() {
+        let fov = 0.9_f64;
+        let cam = Camera::look_at(DVec3::ZERO, -DVec3::Z, DVec3::Y, PERSP, 10, 4).unwrap();
+        // A point at half the vertical field above the axis lands on the top edge.
+        let p = DVec3::new(0.0, (0.5 * fov).tan(), -1.0);
+        let (x, y, d) = cam.project(p).unwrap();
+        assert!((x - 5.0).abs() < 1e-9 && y.abs() < 1e-9 && (d - 1.0).abs() < 1e-12);
+        // Horizontal field follows the aspect ratio (square pixels).
+        let p = DVec3::new(2.5 * (0.5 * fov).tan(), 0.0, -1.0);
+        let (x, _, _) = cam.project(p).unwrap();
+        assert!((x - 10.0).abs() < 1e-9);
+
+        let cam = Camera::look_at(DVec3::ZERO, -DVec3::Z, DVec3::Y, ORTHO, 10, 4).unwrap();
+        let (x, y, _) = cam.project(DVec3::new(-3.75, -1.5, -7.0)).unwrap();
+        assert!(x.abs() < 1e-9 && (y - 4.0).abs() < 1e-9);
+    }
+
+    #[test]
+    fn orthographic_rays_are_parallel() {
+        let cam = cameras(6, 4)[1];
+        let d0 = cam.ray(0, 0).dir;
+        for py in 0..4 {
+            for px in 0..6 {
+                let r = cam.ray(px, py);
+                assert_eq!(r.dir, d0);
+                assert_eq!(r.dir, cam.forward());
+                // Origins lie on the plane through the eye perpendicular to the view.
+                assert!((r.origin - cam.eye()).dot(cam.forward()).abs() < 1e-12);
+            }
+        }
+        // Adjacent pixel origins are one pixel (view_height / height) apart.
+        let step = (cam.ray(1, 0).origin - cam.ray(0, 0).origin).length();
+        assert!((step - 3.0 / 4.0).abs() < 1e-12);
+    }
+
+    #[test]
+    fn points_behind_the_camera_do_not_project() {
+        let [persp, ortho] = cameras(4, 4)[..] else {
+            unreachable!("two cameras")
+        };
+        for cam in [persp, ortho] {
+            assert!(cam.project(cam.eye() - cam.forward()).is_none());
+            assert!(cam.project(DVec3::splat(f64::NAN)).is_none());
+        }
+        assert!(persp.project(persp.eye()).is_none());
+        // Orthographic: on the eye plane is still in view (depth 0).
+        assert_eq!(ortho.project(ortho.eye()).map(|p| p.2), Some(0.0));
+    }
+
+    #[test]
+    fn look_at_refuses_degenerate_input() {
+        let ok = |e, t, u, p, w, h| Camera::look_at(e, t, u, p, w, h);
+        assert!(ok(DVec3::ONE, DVec3::ONE, DVec3::Z, PERSP, 4, 4).is_err());
+        assert!(ok(DVec3::ZERO, DVec3::Z, DVec3::Z, PERSP, 4, 4).is_err());
+        assert!(ok(DVec3::ZERO, DVec3::X, DVec3::ZERO, PERSP, 4, 4).is_err());
+        assert!(ok(DVec3::ZERO, DVec3::X, DVec3::Z, PERSP, 0, 4).is_err());
+        assert!(ok(DVec3::ZERO, DVec3::X, DVec3::Z, PERSP, 1 << 20, 1 << 20).is_err());
+        let bad_fov = Projection::Perspective {
+            fov_y: std::f64::consts::PI,
+        };
+        assert!(ok(DVec3::ZERO, DVec3::X, DVec3::Z, bad_fov, 4, 4).is_err());
+        let bad_fov = Projection::Perspective { fov_y: f64::NAN };
+        assert!(ok(DVec3::ZERO, DVec3::X, DVec3::Z, bad_fov, 4, 4).is_err());
+        let bad_h = Projection::Orthographic { view_height: 0.0 };
+        assert!(ok(DVec3::ZERO, DVec3::X, DVec3::Z, bad_h, 4, 4).is_err());
+        let nan = DVec3::new(f64::NAN, 0.0, 0.0);
+        assert!(ok(nan, DVec3::X, DVec3::Z, PERSP, 4, 4).is_err());
+        // Non-perpendicular up is fine.
+        assert!(
+            ok(
+                DVec3::ZERO,
+                DVec3::X,
+                DVec3::new(1.0, 0.0, 1.0),
+                PERSP,
+                4,
+                4
+            )
+            .is_ok()
+        );
+    }
+
+    #[test]
+    fn fit_bounds_refuses_bad_boxes() {
+        let cam = cameras(4, 4)[0];
+        assert!(cam.fit_bounds(DVec3::ONE, DVec3::ZERO).is_err());
+        assert!(cam.fit_bounds(DVec3::ONE, DVec3::ONE).is_err());
+        assert!(cam.fit_bounds(DVec3::ZERO, DVec3::splat(f64::NAN)).is_err());
+    }
+
+    proptest! {
+        #![proptest_config(ProptestConfig::with_cases(128))]
+        #[test]
+        fn fit_bounds_frames_every_corner(
+            dir in proptest::array::uniform3(-1.0f64..1.0),
+            lo in proptest::array::uniform3(-50.0f64..50.0),
+            ext in proptest::array::uniform3(0.0f64..30.0),
+            width in 1u32..300,
+            height in 1u32..300,
+            fov in 0.05f64..3.0,
+            ortho in any::<bool>(),
+        ) {
+            let dir = DVec3::from_array(dir);
+            prop_assume!(dir.length() > 0.1 && dir.normalize().cross(DVec3::Z).length() > 0.05);
+            let projection = if ortho {
+                Projection::Orthographic { view_height: 1.0 }
+            } else {
+                Projection::Perspective { fov_y: fov }
+            };
+            let cam = Camera::look_at(DVec3::ZERO, dir, DVec3::Z, projection, width, height)
+                .unwrap();
+            let lo = DVec3::from_array(lo);
+            let hi = lo + DVec3::from_array(ext);
+            prop_assume!(ext.iter().any(|&e| e > 1e-3));
+            let fitted = cam.fit_bounds(lo, hi).unwrap();
+            prop_assert!((fitted.forward() - cam.forward()).length() < 1e-15);
+            let (w, h) = (f64::from(width), f64::from(height));
+            let mut max_reach = 0.0_f64;
+            for c in Aabb::new(lo, hi).unwrap().corners() {
+                let (x, y, d) = fitted.project(c).expect("corner in front of the camera");
+                prop_assert!(d > 0.0);
+                prop_assert!((0.0..=w).contains(&x) && (0.0..=h).contains(&y),
+                    "corner {c} at ({x}, {y}) outside {w}×{h}");
+                max_reach = max_reach.max((2.0 * x / w - 1.0).abs()).max((2.0 * y / h - 1.0).abs());
+            }
+            if ortho {
+                // Orthographic framing is tight up to the margin.
+                prop_assert!(max_reach > 1.0 / FIT_MARGIN - 1e-9, "reach {max_reach}");
+            }
+        }
+    }
+}

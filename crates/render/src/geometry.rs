@@ -174,3 +174,149 @@ impl Aabb {
         Some((t0, t1))
     }
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use proptest::prelude::*;
+
+    fn unit() -> Aabb {
+        Aabb::new(DVec3::ZERO, DVec3::ONE).unwrap()
+    }
+
+    fn ray(o: [f64; 3], d: [f64; 3]) -> Ray {
+        Ray::new(DVec3::from_array(o), DVec3::from_array(d)).unwrap()
+    }
+
+    #[test]
+    fn hand_cases() {
+        let b = unit();
+        // Straight through along x.
+        assert_eq!(
+            b.intersect(&ray([-1.0, 0.5, 0.5], [1.0, 0.0, 0.0])),
+            Some((1.0, 2.0))
+        );
+        // Miss: parallel to x, above the box.
+        assert_eq!(b.intersect(&ray([-1.0, 1.5, 0.5], [1.0, 0.0, 0.0])), None);
+        // Miss: oblique, passing beside the box.
+        assert_eq!(b.intersect(&ray([-1.0, 0.5, 0.5], [1.0, 2.0, 0.0])), None);
+        // Box behind the origin.
+        assert_eq!(b.intersect(&ray([2.0, 0.5, 0.5], [1.0, 0.0, 0.0])), None);
+        // Starting inside: t0 = 0, exit at the far face.
+        assert_eq!(
+            b.intersect(&ray([0.25, 0.5, 0.5], [1.0, 0.0, 0.0])),
+            Some((0.0, 0.75))
+        );
+        assert_eq!(
+            b.intersect(&ray([0.5, 0.5, 0.5], [0.0, 0.0, -1.0])),
+            Some((0.0, 0.5))
+        );
+        // Grazing: running along the top face (y = max) is a hit on the closed box.
+        assert_eq!(
+            b.intersect(&ray([-1.0, 1.0, 0.5], [1.0, 0.0, 0.0])),
+            Some((1.0, 2.0))
+        );
+        // Grazing: along an edge.
+        assert_eq!(
+            b.intersect(&ray([-1.0, 1.0, 1.0], [1.0, 0.0, 0.0])),
+            Some((1.0, 2.0))
+        );
+        // Grazing: touching the edge x = 0, y = 1 at a single point.
+        let (t0, t1) = b
+            .intersect(&ray([-1.0, 0.0, 0.5], [1.0, 1.0, 0.0]))
+            .unwrap();
+        assert!((t0 - 2f64.sqrt()).abs() < 1e-12 && (t1 - t0).abs() < 1e-12);
+        // Just outside the face: miss.
+        assert_eq!(
+            b.intersect(&ray([-1.0, 1.0 + 1e-12, 0.5], [1.0, 0.0, 0.0])),
+            None
+        );
+        // Flat box hit across its thickness.
+        let flat = Aabb::new(DVec3::new(0.0, 0.0, 2.0), DVec3::new(1.0, 1.0, 2.0)).unwrap();
+        assert_eq!(
+            flat.intersect(&ray([0.5, 0.5, 0.0], [0.0, 0.0, 1.0])),
+            Some((2.0, 2.0))
+        );
+        // A NaN direction hits nothing.
+        let nan = Ray {
+            origin: DVec3::splat(0.5),
+            dir: DVec3::new(f64::NAN, 0.0, 1.0),
+        };
+        assert_eq!(b.intersect(&nan), None);
+        // A denormal direction component on the face plane: treated as on the plane now.
+        let tiny = Ray {
+            origin: DVec3::new(0.0, 0.5, 0.5),
+            dir: DVec3::new(f64::MIN_POSITIVE / 4.0, 0.0, 1.0),
+        };
+        assert_eq!(b.intersect(&tiny), Some((0.0, 0.5)));
+    }
+
+    #[test]
+    fn constructors_validate() {
+        assert!(Ray::new(DVec3::ZERO, DVec3::ZERO).is_err());
+        assert!(Ray::new(DVec3::ZERO, DVec3::new(f64::NAN, 0.0, 0.0)).is_err());
+        assert!(Ray::new(DVec3::splat(f64::INFINITY), DVec3::X).is_err());
+        let r = Ray::new(DVec3::ZERO, DVec3::new(3.0, 4.0, 0.0)).unwrap();
+        assert!((r.dir.length() - 1.0).abs() < 1e-15);
+        assert!((r.at(5.0) - DVec3::new(3.0, 4.0, 0.0)).length() < 1e-14);
+
+        assert!(Aabb::new(DVec3::ONE, DVec3::ZERO).is_err());
+        assert!(Aabb::new(DVec3::ZERO, DVec3::splat(f64::INFINITY)).is_err());
+        let b =
+            Aabb::from_points([DVec3::new(1.0, -2.0, 3.0), DVec3::new(-1.0, 2.0, 0.0)]).unwrap();
+        assert_eq!(b.min(), DVec3::new(-1.0, -2.0, 0.0));
+        assert_eq!(b.max(), DVec3::new(1.0, 2.0, 3.0));
+        assert_eq!(b.center(), DVec3::new(0.0, 0.0, 1.5));
+        assert_eq!(b.size(), DVec3::new(2.0, 4.0, 3.0));
+        assert!(Aabb::from_points(std::iter::empty()).is_none());
+        let c = b.corners();
+        assert_eq!(c[0], b.min());
+        assert_eq!(c[7], b.max());
+        assert_eq!(c[5], DVec3::new(1.0, -2.0, 3.0));
+        assert!(c.iter().all(|&p| b.contains(p)));
+        assert!(!b.contains(DVec3::new(0.0, 0.0, 3.0001)));
+    }
+
+    proptest! {
+        #[test]
+        fn intersection_interval_agrees_with_point_membership(
+            o in proptest::array::uniform3(-3.0f64..3.0),
+            d in proptest::array::uniform3(-1.0f64..1.0),
+            lo in proptest::array::uniform3(-1.0f64..0.0),
+            ext in proptest::array::uniform3(0.0f64..2.0),
+        ) {
+            let Ok(r) = Ray::new(DVec3::from_array(o), DVec3::from_array(d)) else {
+                return Ok(());
+            };
+            let lo = DVec3::from_array(lo);
+            let b = Aabb::new(lo, lo + DVec3::from_array(ext)).unwrap();
+            let grown = Aabb::new(b.min() - 1e-9, b.max() + 1e-9).unwrap();
+            let shrunk_contains = |p: DVec3| {
+                p.cmpgt(b.min() + 1e-9).all() && p.cmplt(b.max() - 1e-9).all()
+            };
+            match b.intersect(&r) {
+                Some((t0, t1)) => {
+                    prop_assert!(0.0 <= t0 && t0 <= t1);
+                    for k in 0..=8 {
+                        let t = t0 + (t1 - t0) * f64::from(k) / 8.0;
+                        prop_assert!(grown.contains(r.at(t)), "t {t} in [{t0}, {t1}]");
+                    }
+                    // Outside the interval the ray is outside the (shrunk) box.
+                    for k in 1..=20 {
+                        let dt = f64::from(k) * 0.05 + 1e-6;
+                        prop_assert!(!shrunk_contains(r.at(t1 + dt)));
+                        if t0 - dt >= 0.0 {
+                            prop_assert!(!shrunk_contains(r.at(t0 - dt)));
+                        }
+                    }
+                }
+                None => {
+                    for k in 0..=400 {
+                        let t = f64::from(k) * 0.025;
+                        prop_assert!(!shrunk_contains(r.at(t)), "missed point at t {t}");
+                    }
+                }
+            }
+        }
+    }
+}
