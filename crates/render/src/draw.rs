@@ -238,3 +238,118 @@ impl<'a> Overlay<'a> {
         }
     }
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    const BG: [u8; 4] = [0, 0, 0, 255];
+    const INK: [u8; 4] = [255, 255, 255, 255];
+    /// Translucent ink: a pixel blended twice would differ from one blended once.
+    const TINT: [u8; 4] = [255, 0, 0, 100];
+
+    fn marked(img: &RgbaImage) -> Vec<(u32, u32)> {
+        let mut v = Vec::new();
+        for y in 0..img.height() {
+            for x in 0..img.width() {
+                if img.get(x, y) != Some(BG) {
+                    v.push((x, y));
+                }
+            }
+        }
+        v
+    }
+
+    fn all_blended_once(img: &RgbaImage) -> bool {
+        let once = crate::blend_over(TINT, BG);
+        marked(img)
+            .iter()
+            .all(|&(x, y)| img.get(x, y) == Some(once))
+    }
+
+    #[test]
+    fn lines_visit_the_expected_pixels() {
+        let mut img = RgbaImage::new(8, 8, BG).unwrap();
+        draw_line(&mut img, (1.5, 6.5), (1.5, 2.5), INK);
+        assert_eq!(marked(&img), (2..=6).map(|y| (1, y)).collect::<Vec<_>>());
+
+        let mut img = RgbaImage::new(8, 8, BG).unwrap();
+        draw_line(&mut img, (0.5, 0.5), (7.5, 7.5), TINT);
+        assert_eq!(marked(&img), (0..8).map(|i| (i, i)).collect::<Vec<_>>());
+        assert!(all_blended_once(&img));
+
+        // A shallow line has one pixel per column.
+        let mut img = RgbaImage::new(10, 4, BG).unwrap();
+        draw_line(&mut img, (0.5, 0.5), (9.5, 3.5), TINT);
+        let m = marked(&img);
+        assert_eq!(m.len(), 10);
+        assert!((0..10).all(|x| m.iter().filter(|p| p.0 == x).count() == 1));
+        assert!(all_blended_once(&img));
+    }
+
+    #[test]
+    fn lines_are_clipped_and_bounded() {
+        let mut img = RgbaImage::new(6, 4, BG).unwrap();
+        draw_line(&mut img, (-1e12, 2.5), (1e12, 2.5), INK);
+        assert_eq!(marked(&img), (0..6).map(|x| (x, 2)).collect::<Vec<_>>());
+
+        let mut img = RgbaImage::new(6, 4, BG).unwrap();
+        draw_line(&mut img, (-5.0, -5.0), (-1.0, 100.0), INK);
+        draw_line(&mut img, (f64::NAN, 1.0), (3.0, 1.0), INK);
+        draw_line(&mut img, (0.0, 1.0), (f64::INFINITY, 1.0), INK);
+        assert!(marked(&img).is_empty());
+    }
+
+    #[test]
+    fn markers_have_the_documented_shapes() {
+        let c = (4.5, 4.5);
+        let count = |m: Marker, r: f64| {
+            let mut img = RgbaImage::new(9, 9, BG).unwrap();
+            draw_marker(&mut img, c, r, m, TINT);
+            assert!(all_blended_once(&img), "{m:?}");
+            marked(&img)
+        };
+        assert_eq!(count(Marker::Plus, 2.0).len(), 9);
+        let cross = count(Marker::Cross, 2.0);
+        assert_eq!(cross.len(), 9);
+        assert!(cross.contains(&(2, 2)) && cross.contains(&(6, 2)) && cross.contains(&(4, 4)));
+        let square = count(Marker::Square, 2.0);
+        assert_eq!(square.len(), 16);
+        assert!(!square.contains(&(4, 4)) && square.contains(&(2, 2)) && square.contains(&(6, 6)));
+        // Lattice points within distance 2 of a lattice point: 13.
+        assert_eq!(count(Marker::Disc, 2.0).len(), 13);
+        // Tiny markers still mark the centre pixel.
+        for m in [Marker::Plus, Marker::Cross, Marker::Square, Marker::Disc] {
+            assert_eq!(count(m, 0.0), vec![(4, 4)], "{m:?}");
+        }
+        let mut img = RgbaImage::new(9, 9, BG).unwrap();
+        draw_marker(&mut img, (4.1, 4.1), 0.3, Marker::Disc, INK);
+        assert_eq!(marked(&img), vec![(4, 4)]);
+        // Invalid radius or centre draws nothing; markers near the border are clipped.
+        let mut img = RgbaImage::new(9, 9, BG).unwrap();
+        draw_marker(&mut img, c, -1.0, Marker::Disc, INK);
+        draw_marker(&mut img, (f64::NAN, 1.0), 1.0, Marker::Plus, INK);
+        assert!(marked(&img).is_empty());
+        draw_marker(&mut img, (0.5, 0.5), 3.0, Marker::Disc, INK);
+        assert!(marked(&img).iter().all(|&(x, y)| x <= 3 && y <= 3));
+        assert_eq!(img.get(0, 0), Some(INK));
+    }
+
+    #[test]
+    fn rectangles_cover_pixel_centres_inside() {
+        let mut img = RgbaImage::new(8, 8, BG).unwrap();
+        fill_rect(&mut img, (5.6, 1.5), (2.4, 3.49), TINT);
+        let m = marked(&img);
+        // Centres 2.5‥5.5 across, 1.5 and 2.5 down (1.5 is on the closed boundary).
+        assert_eq!(m.len(), 4 * 2);
+        assert!(
+            m.iter()
+                .all(|&(x, y)| (2..=5).contains(&x) && (1..=2).contains(&y))
+        );
+        assert!(all_blended_once(&img));
+        fill_rect(&mut img, (-100.0, -100.0), (100.0, 0.4), INK);
+        assert_eq!(marked(&img).len(), 8);
+        fill_rect(&mut img, (-100.0, -100.0), (100.0, 0.5), INK);
+        assert_eq!(marked(&img).len(), 8 + 8);
+    }
+}
