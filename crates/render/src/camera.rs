@@ -85,6 +85,9 @@ pub struct Camera {
     projection: Projection,
     width: u32,
     height: u32,
+    /// Half extents of the image plane (see [`Camera::half_extents`]), cached.
+    half_w: f64,
+    half_h: f64,
 }
 
 impl Camera {
@@ -120,7 +123,7 @@ impl Camera {
             ))
         })?;
         let up = right.cross(forward);
-        Ok(Self {
+        let mut cam = Self {
             eye,
             forward,
             right,
@@ -128,7 +131,22 @@ impl Camera {
             projection,
             width,
             height,
-        })
+            half_w: 0.0,
+            half_h: 0.0,
+        };
+        cam.set_projection(projection);
+        Ok(cam)
+    }
+
+    /// Install a validated projection and refresh the cached half extents: at unit distance
+    /// for perspective (tangents of the half angles), in world units for orthographic.
+    fn set_projection(&mut self, projection: Projection) {
+        self.projection = projection;
+        self.half_h = match projection {
+            Projection::Perspective { fov_y } => (0.5 * fov_y).tan(),
+            Projection::Orthographic { view_height } => 0.5 * view_height,
+        };
+        self.half_w = self.half_h * self.aspect();
     }
 
     /// Eye position (perspective centre; for orthographic cameras, the centre of the image
@@ -184,11 +202,7 @@ impl Camera {
     /// Half extents of the image plane: at unit distance for perspective (tangents of the
     /// half angles), in world units for orthographic.
     fn half_extents(&self) -> (f64, f64) {
-        let half_h = match self.projection {
-            Projection::Perspective { fov_y } => (0.5 * fov_y).tan(),
-            Projection::Orthographic { view_height } => 0.5 * view_height,
-        };
-        (half_h * self.aspect(), half_h)
+        (self.half_w, self.half_h)
     }
 
     /// Continuous image coordinates → normalised device coordinates in [−1, 1] (y up).
@@ -308,9 +322,9 @@ impl Camera {
                 let half_h = ey.max(ex / self.aspect());
                 // A box seen end-on (all corners on the axis) still gets a visible slab.
                 let half_h = if half_h > 0.0 { half_h } else { radius };
-                cam.projection = Projection::Orthographic {
+                cam.set_projection(Projection::Orthographic {
                     view_height: 2.0 * FIT_MARGIN * half_h,
-                };
+                });
                 cam.eye = center - 2.0 * radius * self.forward;
             }
         }

@@ -12,7 +12,7 @@ use rayon::prelude::*;
 
 use crate::error::RenderError;
 use crate::image::{RgbaImage, check_len, pixel_count};
-use crate::window::Window;
+use crate::window::{Normalizer, Window};
 
 /// Number of entries in every colour-map lookup table.
 pub const LUT_SIZE: usize = 256;
@@ -234,40 +234,29 @@ impl ScalarStyle {
     #[must_use]
     #[inline]
     pub fn normalize(&self, v: f32) -> Option<f32> {
-        let Some(c) = self.center else {
-            return self.window.normalize(v);
-        };
-        if v.is_nan() {
-            return None;
+        self.normalizer().apply(v)
+    }
+
+    fn normalizer(&self) -> Normalizer {
+        match self.center {
+            None => self.window.normalizer(),
+            Some(c) => Normalizer::new(self.window.lower().min(c), c, self.window.upper().max(c)),
         }
-        let v = f64::from(v);
-        let lo = self.window.lower().min(c);
-        let hi = self.window.upper().max(c);
-        let t = if v < c {
-            if c > lo {
-                0.5 * ((v - lo) / (c - lo)).max(0.0)
-            } else {
-                0.0
-            }
-        } else if v > c {
-            if hi > c {
-                0.5 + 0.5 * ((v - c) / (hi - c)).min(1.0)
-            } else {
-                1.0
-            }
-        } else {
-            0.5
-        };
-        Some(t as f32)
     }
 
     /// The RGBA colour of value `v`.
     #[must_use]
     #[inline]
     pub fn color(&self, v: f32) -> [u8; 4] {
-        match self.normalize(v) {
+        self.color_with(&self.normalizer(), self.colormap.lut(), v)
+    }
+
+    /// [`ScalarStyle::color`] with the mapping and table prepared (hot loops).
+    #[inline]
+    fn color_with(&self, norm: &Normalizer, lut: &Lut, v: f32) -> [u8; 4] {
+        match norm.apply(v) {
             Some(t) => {
-                let [r, g, b] = self.colormap.map(t);
+                let [r, g, b] = lut[lut_index(t)];
                 [r, g, b, 255]
             }
             None => self.nan_color,
@@ -277,11 +266,13 @@ impl ScalarStyle {
     /// Map `values` into `out` (same length), rows of `width` in parallel.
     pub(crate) fn map_into(&self, values: &[f32], out: &mut [[u8; 4]], width: usize) {
         let width = width.max(1);
+        let lut = self.colormap.lut();
+        let norm = self.normalizer();
         out.par_chunks_mut(width)
             .zip(values.par_chunks(width))
             .for_each(|(dst, src)| {
                 for (d, &v) in dst.iter_mut().zip(src) {
-                    *d = self.color(v);
+                    *d = self.color_with(&norm, lut, v);
                 }
             });
     }

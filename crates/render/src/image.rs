@@ -494,20 +494,21 @@ impl ScalarImage {
     /// 8-bit grey levels `round(255 · window(v))`; NaN becomes 0.
     #[must_use]
     pub fn to_grey8(&self, window: &Window) -> Vec<u8> {
+        let norm = window.normalizer();
         self.values
             .par_iter()
-            .map(|&v| window.normalize(v).map_or(0, |t| (t * 255.0 + 0.5) as u8))
+            .map(|&v| norm.apply(v).map_or(0, |t| (t * 255.0 + 0.5) as u8))
             .collect()
     }
 
     /// 16-bit grey levels `round(65535 · window(v))`; NaN becomes 0.
     #[must_use]
     pub fn to_grey16(&self, window: &Window) -> Vec<u16> {
+        let norm = window.normalizer();
         self.values
             .par_iter()
             .map(|&v| {
-                window
-                    .normalize(v)
+                norm.apply(v)
                     .map_or(0, |t| (f64::from(t) * 65535.0 + 0.5) as u16)
             })
             .collect()

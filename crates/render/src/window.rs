@@ -129,20 +129,61 @@ impl Window {
     #[must_use]
     #[inline]
     pub fn normalize(&self, v: f32) -> Option<f32> {
+        self.normalizer().apply(v)
+    }
+
+    /// The precomputed form of this window for per-pixel loops.
+    pub(crate) fn normalizer(&self) -> Normalizer {
+        Normalizer::new(self.lower(), self.center, self.upper())
+    }
+}
+
+/// A two-slope mapping `lo → 0`, `mid → ½`, `hi → 1` (`lo ≤ mid ≤ hi`), linear on each side
+/// and clamped outside, with the slopes precomputed so per-pixel work is one subtraction and
+/// one multiplication. A plain window is the case `mid = center`; a zero-width side maps
+/// everything beyond `mid` straight to the end value.
+#[derive(Debug, Clone, Copy)]
+pub(crate) struct Normalizer {
+    lo: f64,
+    mid: f64,
+    hi: f64,
+    /// ½ / (mid − lo), used only for lo < v < mid.
+    slope_lo: f64,
+    /// ½ / (hi − mid), used only for mid < v < hi.
+    slope_hi: f64,
+}
+
+impl Normalizer {
+    pub(crate) fn new(lo: f64, mid: f64, hi: f64) -> Self {
+        Self {
+            lo,
+            mid,
+            hi,
+            slope_lo: if mid > lo { 0.5 / (mid - lo) } else { 0.0 },
+            slope_hi: if hi > mid { 0.5 / (hi - mid) } else { 0.0 },
+        }
+    }
+
+    /// `v` mapped into [0, 1]; `None` for NaN. The breakpoints are exact: `mid → ½`,
+    /// `v ≤ lo → 0`, `v ≥ hi → 1`.
+    #[inline]
+    pub(crate) fn apply(&self, v: f32) -> Option<f32> {
         if v.is_nan() {
             return None;
         }
         let v = f64::from(v);
-        let t = if self.width > 0.0 {
-            ((v - self.lower()) / self.width).clamp(0.0, 1.0)
-        } else if v < self.center {
-            0.0
-        } else if v > self.center {
-            1.0
-        } else {
+        let t = if v == self.mid {
             0.5
+        } else if v <= self.lo {
+            0.0
+        } else if v >= self.hi {
+            1.0
+        } else if v < self.mid {
+            (v - self.lo) * self.slope_lo
+        } else {
+            0.5 + (v - self.mid) * self.slope_hi
         };
-        Some(t as f32)
+        Some(t.clamp(0.0, 1.0) as f32)
     }
 }
 
