@@ -62,7 +62,12 @@ pub const FIT_MARGIN: f64 = 1.05;
 
 /// A camera with an orthonormal frame, a projection and an image size in pixels.
 ///
-/// See the [module documentation](self) for the image-coordinate and depth conventions.
+/// Conventions: the camera looks along `forward`; `right` points to increasing image x and
+/// `up` to decreasing image y. Image coordinates are continuous, x from 0 at the left edge to
+/// `width`, y from 0 at the **top** edge to `height`; pixel `(i, j)` covers
+/// `[i, i+1) × [j, j+1)`, so pixel (0, 0) is the top-left pixel with its centre at
+/// (0.5, 0.5), matching [`RgbaImage`](crate::RgbaImage). Depth is the distance along
+/// `forward` from the eye (orthographic: from the plane through the eye).
 ///
 /// ```
 /// use glam::DVec3;
@@ -288,6 +293,20 @@ impl Camera {
     /// eye is placed in front of the whole box. Every corner of the box then projects inside
     /// the image at positive depth.
     ///
+    /// ```
+    /// use glam::DVec3;
+    /// use volmorph_render::{Aabb, Camera, Projection};
+    /// let cam = Camera::look_at(DVec3::new(1.0, 2.0, 3.0), DVec3::ZERO, DVec3::Z,
+    ///                           Projection::Perspective { fov_y: 0.6 }, 320, 200).unwrap();
+    /// let (min, max) = (DVec3::new(-10.0, 0.0, 5.0), DVec3::new(30.0, 8.0, 9.0));
+    /// let framed = cam.fit_bounds(min, max).unwrap();
+    /// for corner in Aabb::new(min, max).unwrap().corners() {
+    ///     let (x, y, depth) = framed.project(corner).unwrap();
+    ///     assert!((0.0..=320.0).contains(&x) && (0.0..=200.0).contains(&y) && depth > 0.0);
+    /// }
+    /// assert_eq!(framed.forward(), cam.forward());
+    /// ```
+    ///
     /// # Errors
     /// [`RenderError::InvalidArgument`] when the corners are not finite, `min > max` on an
     /// axis, or the box is a single point (nothing to frame).
@@ -496,6 +515,40 @@ mod tests {
 
     proptest! {
         #![proptest_config(ProptestConfig::with_cases(128))]
+        #[test]
+        fn project_inverts_ray_at_for_random_cameras(
+            eye in proptest::array::uniform3(-20.0f64..20.0),
+            target in proptest::array::uniform3(-20.0f64..20.0),
+            up in proptest::array::uniform3(-1.0f64..1.0),
+            fov in 0.05f64..3.0,
+            view_height in 0.01f64..100.0,
+            width in 1u32..2000,
+            height in 1u32..2000,
+            fx in 0.0f64..1.0,
+            fy in 0.0f64..1.0,
+            t in 0.01f64..100.0,
+            ortho in any::<bool>(),
+        ) {
+            let projection = if ortho {
+                Projection::Orthographic { view_height }
+            } else {
+                Projection::Perspective { fov_y: fov }
+            };
+            let Ok(cam) = Camera::look_at(
+                DVec3::from_array(eye), DVec3::from_array(target), DVec3::from_array(up),
+                projection, width, height,
+            ) else {
+                return Ok(());
+            };
+            let (x, y) = (fx * f64::from(width), fy * f64::from(height));
+            let r = cam.ray_at(x, y);
+            prop_assert!((r.dir.length() - 1.0).abs() < 1e-12);
+            let (px, py, depth) = cam.project(r.at(t)).expect("in front");
+            let tol = 1e-7 * f64::from(width.max(height));
+            prop_assert!((px - x).abs() < tol && (py - y).abs() < tol, "({px}, {py}) vs ({x}, {y})");
+            prop_assert!((depth - t * r.dir.dot(cam.forward())).abs() < 1e-9 * (1.0 + t));
+        }
+
         #[test]
         fn fit_bounds_frames_every_corner(
             dir in proptest::array::uniform3(-1.0f64..1.0),

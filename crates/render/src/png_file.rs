@@ -163,8 +163,9 @@ pub fn encode_png_rgba(img: &RgbaImage) -> Result<Vec<u8>, RenderError> {
     Ok(out)
 }
 
-/// Read a PNG file into 8-bit RGBA (see the [module documentation](self) for what is
-/// decoded). Grey becomes `[g, g, g, 255]`, palette entries are looked up, `tRNS`
+/// Read a PNG file into 8-bit RGBA: any colour type (grey, grey+alpha, RGB, RGBA, palette),
+/// any bit depth (1–16), interlaced or not; gamma, colour-profile and sBIT chunks are
+/// ignored (samples are taken as stored). Grey becomes `[g, g, g, 255]`, palette entries are looked up, `tRNS`
 /// transparency becomes alpha, sub-8-bit samples are scaled to 0‥=255 and 16-bit samples
 /// are rounded to the nearest 8-bit value (`round(v · 255 / 65535)`). Only the first frame
 /// of an animated PNG is read.
