@@ -28,6 +28,10 @@ pub enum VolumeError {
         /// What is wrong, in terms of the file's own fields.
         message: String,
     },
+    /// An argument is outside what the operation accepts (a slice position outside the
+    /// volume, a probability outside [0, 1], an output buffer of the wrong length, …).
+    #[error("invalid argument: {0}")]
+    InvalidArgument(String),
     /// A valid file uses a feature volmorph does not handle (e.g. a 5-D NIfTI image).
     #[error("unsupported: {0}")]
     Unsupported(String),

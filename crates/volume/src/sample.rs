@@ -316,7 +316,7 @@ impl<'a> Sampler<'a> {
     /// saturate and map NaN to 0).
     ///
     /// # Errors
-    /// [`VolumeError::LengthMismatch`] (with dims `[indices.len(), 1, 1]`) if `out` does not
+    /// [`VolumeError::InvalidArgument`] if `out` does not
     /// have one slot per index.
     pub fn sample_index_batch<O: Voxel>(
         &self,
@@ -332,7 +332,7 @@ impl<'a> Sampler<'a> {
     /// parallel. Values are converted with [`Voxel::from_f64`].
     ///
     /// # Errors
-    /// [`VolumeError::LengthMismatch`] (with dims `[points.len(), 1, 1]`) if `out` does not
+    /// [`VolumeError::InvalidArgument`] if `out` does not
     /// have one slot per point.
     pub fn sample_physical_batch<O: Voxel>(
         &self,
@@ -438,11 +438,9 @@ fn check_batch(points: usize, out: usize) -> Result<(), VolumeError> {
     if points == out {
         Ok(())
     } else {
-        Err(VolumeError::LengthMismatch {
-            dims: [points, 1, 1],
-            expected: points,
-            got: out,
-        })
+        Err(VolumeError::InvalidArgument(format!(
+            "{points} points need an output slice of {points} values, got {out}"
+        )))
     }
 }
 

@@ -139,7 +139,7 @@ impl Slice {
 /// Resolve `pos` to a continuous index along `axis` of `geometry`, in `[0, n − 1]`.
 ///
 /// # Errors
-/// [`VolumeError::Geometry`] if the position is not finite or its index lies outside
+/// [`VolumeError::InvalidArgument`] if the position is not finite or its index lies outside
 /// `[0, n − 1]` by more than [`POSITION_TOLERANCE`].
 pub fn slice_index(
     geometry: &Geometry,
@@ -157,7 +157,7 @@ pub fn slice_index(
     };
     let last = n.saturating_sub(1) as f64;
     if !index.is_finite() || index < -POSITION_TOLERANCE || index > last + POSITION_TOLERANCE {
-        return Err(VolumeError::Geometry(format!(
+        return Err(VolumeError::InvalidArgument(format!(
             "slice position {pos:?} along {axis} is index {index}, outside the volume's \
              [0, {last}]"
         )));
@@ -168,7 +168,7 @@ pub fn slice_index(
 /// Extract the slice of `volume` perpendicular to `axis` at `pos` (any voxel type).
 ///
 /// # Errors
-/// As [`slice_index`]: [`VolumeError::Geometry`] for a non-finite or out-of-range position.
+/// As [`slice_index`]: [`VolumeError::InvalidArgument`] for a non-finite or out-of-range position.
 pub fn extract(volume: &AnyVolume, axis: Axis, pos: SlicePosition) -> Result<Slice, VolumeError> {
     crate::with_volume!(volume, v => extract_typed(v, axis, pos))
 }
@@ -179,7 +179,7 @@ pub fn extract(volume: &AnyVolume, axis: Axis, pos: SlicePosition) -> Result<Sli
 /// planes `k₀` and `k₀ + 1` they are `(1 − t)·v(k₀) + t·v(k₀ + 1)`, computed in `f64`.
 ///
 /// # Errors
-/// As [`slice_index`]: [`VolumeError::Geometry`] for a non-finite or out-of-range position.
+/// As [`slice_index`]: [`VolumeError::InvalidArgument`] for a non-finite or out-of-range position.
 pub fn extract_typed<T: Voxel>(
     volume: &Volume<T>,
     axis: Axis,

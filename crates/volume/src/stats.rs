@@ -367,10 +367,10 @@ fn select_ranks<T: Voxel>(data: &[T], ranks: &[u64]) -> Vec<f64> {
 /// `1 + 6·probs.len()` for `f64`; no copy of the data.
 ///
 /// # Errors
-/// [`VolumeError::Unsupported`] if a probability is NaN or outside `[0, 1]`.
+/// [`VolumeError::InvalidArgument`] if a probability is NaN or outside `[0, 1]`.
 pub fn quantiles<T: Voxel>(volume: &Volume<T>, probs: &[f64]) -> Result<Vec<f64>, VolumeError> {
     if let Some(p) = probs.iter().find(|p| !(0.0..=1.0).contains(*p)) {
-        return Err(VolumeError::Unsupported(format!(
+        return Err(VolumeError::InvalidArgument(format!(
             "quantile probability {p} is not in [0, 1]"
         )));
     }

@@ -164,7 +164,10 @@ fn positions_outside_the_volume_are_errors() {
         (Axis::X, SlicePosition::Physical(f64::NAN)),
     ] {
         let err = extract(&v, axis, pos).unwrap_err();
-        assert!(matches!(err, VolumeError::Geometry(_)), "{axis} {pos:?}");
+        assert!(
+            matches!(err, VolumeError::InvalidArgument(_)),
+            "{axis} {pos:?}"
+        );
         assert!(err.to_string().contains("outside"), "{err}");
     }
     // Rounding-level overshoot is accepted and clamped.

@@ -220,7 +220,7 @@ fn quantile_probabilities_are_validated() {
     for bad in [-0.1, 1.5, f64::NAN] {
         assert!(matches!(
             quantiles(&v, &[0.5, bad]),
-            Err(VolumeError::Unsupported(_))
+            Err(VolumeError::InvalidArgument(_))
         ));
     }
     assert!(quantiles(&v, &[]).unwrap().is_empty());
