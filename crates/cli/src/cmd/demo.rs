@@ -8,7 +8,7 @@ use std::fmt::Write as _;
 use std::path::PathBuf;
 
 use anyhow::Context;
-use volmorph_render::{Colormap, Window, render_scalar, write_png_rgba};
+use volmorph_render::{Colormap, Window};
 use volmorph_volume::AnyVolume;
 use volmorph_volume::format;
 use volmorph_volume::phantom::Phantom;
@@ -96,15 +96,16 @@ fn write_slice_png(
 ) -> anyhow::Result<()> {
     let s = slice::extract(vol, axis, SlicePosition::Index(middle(vol, axis)))?;
     match kind {
-        Kind::Density => write_picture(png, &s, Colormap::Grey),
-        Kind::Sdf => {
-            // Distances in model units: ±0.5 spans most of the frame around the surface.
-            let w = Window {
+        Kind::Density => write_picture(png, &s, None, Colormap::Grey),
+        // Distances in model units: ±0.5 around the surface, blue inside, red outside.
+        Kind::Sdf => write_picture(
+            png,
+            &s,
+            Some(Window {
                 center: 0.0,
                 width: 1.0,
-            };
-            let img = render_scalar(&s.values, s.width, s.height, w, Colormap::CoolWarm);
-            write_png_rgba(png, &img).with_context(|| format!("cannot write {}", png.display()))
-        }
+            }),
+            Colormap::CoolWarm,
+        ),
     }
 }

@@ -129,8 +129,14 @@ fn resize_nearest(img: &RgbaImage, fx: f64, fy: f64) -> RgbaImage {
     })
 }
 
-/// Write the picture of `s` to `path` (used by the demo).
-pub fn write_picture(path: &Path, s: &Slice, colormap: Colormap) -> anyhow::Result<()> {
-    let img = picture(s, None, colormap, true, 2);
+/// Write the picture of `s` to `path` at twice its size with the physical aspect ratio
+/// (used by the demo).
+pub fn write_picture(
+    path: &Path,
+    s: &Slice,
+    window: Option<Window>,
+    colormap: Colormap,
+) -> anyhow::Result<()> {
+    let img = picture(s, window, colormap, true, 2);
     write_png_rgba(path, &img).with_context(|| format!("cannot write {}", path.display()))
 }
