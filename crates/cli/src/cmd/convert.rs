@@ -1,0 +1,160 @@
+//! `volmorph convert`: any volume format to any, with type casting and rescaling.
+
+use std::path::PathBuf;
+
+use anyhow::{Context, bail};
+use volmorph_volume::format::{self, WriteOptions, raw::RawSpec};
+use volmorph_volume::stats::Statistics;
+use volmorph_volume::{AnyVolume, DVec3, VoxelType};
+
+use crate::{args, progress};
+
+/// Arguments of `volmorph convert`.
+#[derive(Debug, clap::Args)]
+pub struct Args {
+    /// Input volume; the format is chosen by extension.
+    pub input: PathBuf,
+    /// Output volume; the format is chosen by extension.
+    pub output: PathBuf,
+    /// Output voxel type (u8, i8, u16, i16, u32, i32, f32, f64). Default: the input's.
+    /// Values are rounded to nearest and saturated to the type's range.
+    #[arg(long = "type", value_name = "TYPE")]
+    pub voxel_type: Option<String>,
+    /// Map the input's value range [min, max] linearly onto the output range (the output
+    /// type's full range for integer types, [0, 1] for float types, or --range).
+    #[arg(long)]
+    pub rescale: bool,
+    /// Output range for --rescale, as "LO,HI".
+    #[arg(long, value_name = "LO,HI", requires = "rescale")]
+    pub range: Option<String>,
+    /// Compress the voxel data (MetaImage, NRRD; NIfTI compresses by the .gz extension).
+    #[arg(long)]
+    pub compress: bool,
+    /// Compression level 0-9.
+    #[arg(long, default_value_t = 6, value_parser = clap::value_parser!(u32).range(0..=9))]
+    pub level: u32,
+    /// For a .raw input: dims "NX,NY,NZ".
+    #[arg(long, value_name = "NX,NY,NZ")]
+    pub raw_dims: Option<String>,
+    /// For a .raw input: voxel type.
+    #[arg(long, value_name = "TYPE")]
+    pub raw_type: Option<String>,
+    /// For a .raw input: voxel spacing "SX,SY,SZ" (default 1,1,1).
+    #[arg(long, value_name = "SX,SY,SZ")]
+    pub raw_spacing: Option<String>,
+    /// For a .raw input: origin "X,Y,Z" (default 0,0,0).
+    #[arg(long, value_name = "X,Y,Z")]
+    pub raw_origin: Option<String>,
+    /// For a .raw input: bytes to skip before the voxels.
+    #[arg(long, default_value_t = 0)]
+    pub raw_header_bytes: u64,
+    /// For a .raw input: voxels are big-endian.
+    #[arg(long)]
+    pub raw_big_endian: bool,
+}
+
+/// Run `volmorph convert`.
+pub fn run(args: &Args) -> anyhow::Result<()> {
+    let pb = progress::bar(3);
+    pb.set_message(format!("reading {}", args.input.display()));
+    let input = read_input(args)?;
+    pb.inc(1);
+    pb.set_message("converting");
+    let out_type = match &args.voxel_type {
+        Some(t) => parse_type(t)?,
+        None => input.voxel_type(),
+    };
+    let (slope, inter) = if args.rescale {
+        let st = Statistics::of_any(&input);
+        if st.finite_count == 0 {
+            bail!("{}: no finite values to rescale", args.input.display());
+        }
+        let (lo, hi) = match &args.range {
+            Some(r) => {
+                let [a, b] = args::pair(r)?;
+                (a, b)
+            }
+            None if out_type.is_float() => (0.0, 1.0),
+            None => out_type.range(),
+        };
+        rescale_coefficients(st.min, st.max, lo, hi)
+    } else {
+        (1.0, 0.0)
+    };
+    let output = if out_type == input.voxel_type() && slope == 1.0 && inter == 0.0 {
+        input
+    } else {
+        input.cast(out_type, slope, inter)
+    };
+    pb.inc(1);
+    pb.set_message(format!("writing {}", args.output.display()));
+    let opts = WriteOptions {
+        compress: args.compress,
+        level: args.level,
+    };
+    format::write_with(&args.output, &output, &opts)
+        .with_context(|| format!("cannot write {}", args.output.display()))?;
+    pb.finish_and_clear();
+    Ok(())
+}
+
+fn read_input(args: &Args) -> anyhow::Result<AnyVolume> {
+    let is_raw = format::Format::from_path(&args.input).ok() == Some(format::Format::Raw);
+    if !is_raw {
+        return format::read(&args.input)
+            .with_context(|| format!("cannot read volume {}", args.input.display()));
+    }
+    let dims = args
+        .raw_dims
+        .as_deref()
+        .context("a .raw input needs --raw-dims NX,NY,NZ")?;
+    let ty = args
+        .raw_type
+        .as_deref()
+        .context("a .raw input needs --raw-type TYPE")?;
+    let mut spec = RawSpec::new(args::triple(dims)?, parse_type(ty)?);
+    spec.big_endian = args.raw_big_endian;
+    spec.header_bytes = args.raw_header_bytes;
+    if let Some(s) = &args.raw_spacing {
+        spec.spacing = DVec3::from_array(args::triple(s)?);
+    }
+    if let Some(o) = &args.raw_origin {
+        spec.origin = DVec3::from_array(args::triple(o)?);
+    }
+    format::raw::read(&args.input, &spec)
+        .with_context(|| format!("cannot read raw volume {}", args.input.display()))
+}
+
+/// Parse a voxel type name, listing the valid ones on error.
+pub fn parse_type(s: &str) -> anyhow::Result<VoxelType> {
+    VoxelType::parse(s).with_context(|| {
+        let names: Vec<_> = VoxelType::ALL.iter().map(|t| t.name()).collect();
+        format!(
+            "unknown voxel type {s:?} (expected one of {})",
+            names.join(", ")
+        )
+    })
+}
+
+/// Slope and intercept mapping [min, max] onto [lo, hi]; a constant input maps to lo.
+fn rescale_coefficients(min: f64, max: f64, lo: f64, hi: f64) -> (f64, f64) {
+    if max > min {
+        let slope = (hi - lo) / (max - min);
+        (slope, lo - min * slope)
+    } else {
+        (0.0, lo)
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn rescale_maps_range_endpoints() {
+        let (s, i) = rescale_coefficients(-1024.0, 3071.0, 0.0, 255.0);
+        assert!(((-1024.0f64).mul_add(s, i)).abs() < 1e-12);
+        assert!((3071.0f64.mul_add(s, i) - 255.0).abs() < 1e-12);
+        assert_eq!(rescale_coefficients(5.0, 5.0, 0.0, 1.0), (0.0, 0.0));
+    }
+}

@@ -1,0 +1,143 @@
+//! `volmorph info`: header, geometry and value statistics of a volume file.
+
+use std::fmt::Write as _;
+use std::path::PathBuf;
+
+use anyhow::Context;
+use volmorph_volume::format::{self, VolumeFile};
+use volmorph_volume::stats::Statistics;
+
+use crate::progress;
+
+/// Arguments of `volmorph info`.
+#[derive(Debug, clap::Args)]
+pub struct Args {
+    /// Volume file (.nii, .nii.gz, .mha, .mhd, .nrrd, .nhdr, .vtk).
+    pub input: PathBuf,
+    /// Also print every header field of the file.
+    #[arg(long)]
+    pub header: bool,
+    /// Skip the value statistics (header and geometry only).
+    #[arg(long)]
+    pub no_stats: bool,
+    /// Print a JSON object instead of text (geometry in full precision; for scripts).
+    #[arg(long)]
+    pub json: bool,
+}
+
+/// Run `volmorph info`.
+pub fn run(args: &Args) -> anyhow::Result<()> {
+    let pb = progress::spinner(format!("reading {}", args.input.display()));
+    let file = format::read_with_header(&args.input)
+        .with_context(|| format!("cannot read volume {}", args.input.display()))?;
+    let stats = (!args.no_stats).then(|| Statistics::of_any(&file.volume));
+    pb.finish_and_clear();
+    if args.json {
+        println!("{}", json(&file, stats.as_ref()));
+    } else {
+        print!(
+            "{}",
+            report(&args.input, &file, stats.as_ref(), args.header)
+        );
+    }
+    Ok(())
+}
+
+/// The JSON object `volmorph info --json` prints: `format`, `voxel_type`, `dims`, `spacing`,
+/// `origin`, `direction` (row-major 3×3, ITK/LPS), `header` (field → value) and `stats`.
+pub fn json(file: &VolumeFile, stats: Option<&Statistics>) -> serde_json::Value {
+    let g = file.volume.geometry();
+    let d = g.direction.transpose().to_cols_array_2d(); // rows of the direction matrix
+    let header: serde_json::Map<String, serde_json::Value> = file
+        .header
+        .fields
+        .iter()
+        .map(|(k, v)| (k.clone(), serde_json::Value::from(v.clone())))
+        .collect();
+    let mut v = serde_json::json!({
+        "format": file.format.name(),
+        "voxel_type": file.volume.voxel_type().name(),
+        "dims": g.dims,
+        "spacing": g.spacing.to_array(),
+        "origin": g.origin.to_array(),
+        "direction": d,
+        "header": header,
+    });
+    if let Some(st) = stats {
+        v["stats"] = serde_json::json!({
+            "count": st.count,
+            "finite_count": st.finite_count,
+            "min": st.min,
+            "max": st.max,
+            "mean": st.mean,
+            "std": st.std,
+        });
+    }
+    v
+}
+
+/// The text `volmorph info` prints.
+pub fn report(
+    path: &std::path::Path,
+    file: &VolumeFile,
+    stats: Option<&Statistics>,
+    header: bool,
+) -> String {
+    let g = file.volume.geometry();
+    let mut s = String::new();
+    let _ = writeln!(s, "file:       {}", path.display());
+    let _ = writeln!(s, "format:     {}", file.format.name());
+    let _ = writeln!(s, "voxel type: {}", file.volume.voxel_type());
+    let _ = writeln!(
+        s,
+        "dims:       {} x {} x {} ({} voxels)",
+        g.dims[0],
+        g.dims[1],
+        g.dims[2],
+        g.len()
+    );
+    let _ = writeln!(s, "spacing:    {}", vec3(g.spacing.to_array()));
+    let _ = writeln!(s, "origin:     {}", vec3(g.origin.to_array()));
+    let d = g.direction;
+    let _ = writeln!(
+        s,
+        "direction:  {}  (columns: i, j, k axes; ITK/LPS convention)",
+        [d.x_axis, d.y_axis, d.z_axis]
+            .map(|c| vec3(c.to_array()))
+            .join(" ")
+    );
+    let (lo, hi) = g.physical_bounds();
+    let _ = writeln!(
+        s,
+        "bounds:     {} .. {}  (voxel centres, physical)",
+        vec3(lo.to_array()),
+        vec3(hi.to_array())
+    );
+    if let Some(st) = stats {
+        let _ = writeln!(s, "values:     {st}");
+    }
+    if header && !file.header.fields.is_empty() {
+        let _ = writeln!(s, "header:");
+        let w = file
+            .header
+            .fields
+            .iter()
+            .map(|(k, _)| k.len())
+            .max()
+            .unwrap_or(0);
+        for (k, v) in &file.header.fields {
+            let _ = writeln!(s, "  {k:<w$}  {v}");
+        }
+    }
+    s
+}
+
+fn vec3(v: [f64; 3]) -> String {
+    format!("({}, {}, {})", num(v[0]), num(v[1]), num(v[2]))
+}
+
+fn num(x: f64) -> String {
+    let r = format!("{x:.6}");
+    let r = r.trim_end_matches('0').trim_end_matches('.');
+    if r == "-0" { "0".into() } else { r.into() }
+}

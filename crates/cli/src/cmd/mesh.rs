@@ -1,0 +1,83 @@
+//! `volmorph mesh …`: polygon mesh tasks.
+
+use std::path::PathBuf;
+
+use anyhow::Context;
+use volmorph_mesh::{self as mesh, MeshWriteOptions};
+
+use crate::progress;
+
+/// Mesh subcommands.
+#[derive(Debug, clap::Subcommand)]
+pub enum Command {
+    /// Print counts, bounding box and a validation report of a mesh file.
+    #[command(after_help = "Example:\n  volmorph mesh info bunny.obj")]
+    Info(InfoArgs),
+    /// Convert a mesh between OBJ, STL, PLY and OFF (format by extension).
+    #[command(
+        after_help = "Examples:\n  volmorph mesh convert dragon.ply.gz dragon.stl\n  volmorph mesh convert part.stl part.ply --ascii"
+    )]
+    Convert(ConvertArgs),
+}
+
+/// Arguments of `volmorph mesh info`.
+#[derive(Debug, clap::Args)]
+pub struct InfoArgs {
+    /// Mesh file (.obj, .stl, .ply, .off, optionally .gz-compressed).
+    pub input: PathBuf,
+}
+
+/// Arguments of `volmorph mesh convert`.
+#[derive(Debug, clap::Args)]
+pub struct ConvertArgs {
+    /// Input mesh.
+    pub input: PathBuf,
+    /// Output mesh; the format is chosen by extension.
+    pub output: PathBuf,
+    /// Write ASCII STL/PLY instead of binary.
+    #[arg(long)]
+    pub ascii: bool,
+}
+
+/// Run a mesh subcommand.
+pub fn run(cmd: &Command) -> anyhow::Result<()> {
+    match cmd {
+        Command::Info(a) => info(a),
+        Command::Convert(a) => convert(a),
+    }
+}
+
+fn info(a: &InfoArgs) -> anyhow::Result<()> {
+    let pb = progress::spinner(format!("reading {}", a.input.display()));
+    let m =
+        mesh::read(&a.input).with_context(|| format!("cannot read mesh {}", a.input.display()))?;
+    let report = m.validate();
+    pb.finish_and_clear();
+    println!("file:     {}", a.input.display());
+    println!("vertices: {}", m.vertex_count());
+    println!("faces:    {}", m.face_count());
+    match m.bounding_box() {
+        Some((lo, hi)) => println!(
+            "bounds:   ({}, {}, {}) .. ({}, {}, {})",
+            lo.x, lo.y, lo.z, hi.x, hi.y, hi.z
+        ),
+        None => println!("bounds:   (empty)"),
+    }
+    println!("{report}");
+    Ok(())
+}
+
+fn convert(a: &ConvertArgs) -> anyhow::Result<()> {
+    let pb = progress::spinner(format!("reading {}", a.input.display()));
+    let m =
+        mesh::read(&a.input).with_context(|| format!("cannot read mesh {}", a.input.display()))?;
+    pb.set_message(format!("writing {}", a.output.display()));
+    let opts = MeshWriteOptions {
+        binary: !a.ascii,
+        ..MeshWriteOptions::default()
+    };
+    mesh::write_with(&a.output, &m, &opts)
+        .with_context(|| format!("cannot write {}", a.output.display()))?;
+    pb.finish_and_clear();
+    Ok(())
+}

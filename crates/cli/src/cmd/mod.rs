@@ -1,0 +1,8 @@
+//! One module per subcommand.
+
+pub mod convert;
+pub mod demo;
+pub mod info;
+pub mod mesh;
+pub mod phantom;
+pub mod slice;

@@ -1,0 +1,142 @@
+//! `volmorph slice`: a PNG picture of an axis-aligned slice.
+
+use std::path::{Path, PathBuf};
+
+use anyhow::{Context, bail};
+use volmorph_render::{Colormap, RgbaImage, Window, render_scalar, write_png_rgba};
+use volmorph_volume::AnyVolume;
+use volmorph_volume::format;
+use volmorph_volume::slice::{self, Axis, Slice, SlicePosition};
+
+use crate::args;
+
+/// Arguments of `volmorph slice`.
+#[derive(Debug, clap::Args)]
+pub struct Args {
+    /// Input volume.
+    pub input: PathBuf,
+    /// Output PNG file.
+    #[arg(short, long)]
+    pub output: PathBuf,
+    /// Slice normal: the index axis x (i), y (j) or z (k).
+    #[arg(long, default_value = "z", value_parser = parse_axis)]
+    pub axis: Axis,
+    /// Slice at this (possibly fractional) voxel index along the axis. Default: the middle.
+    #[arg(long, conflicts_with = "position")]
+    pub index: Option<f64>,
+    /// Slice at this physical position (mm along the axis direction from the origin).
+    #[arg(long, allow_hyphen_values = true)]
+    pub position: Option<f64>,
+    /// Window "CENTER,WIDTH" (e.g. 40,400 for CT soft tissue). Default: the 0.5-99.5
+    /// percentile range of the slice.
+    #[arg(long, value_name = "CENTER,WIDTH", allow_hyphen_values = true)]
+    pub window: Option<String>,
+    /// Colour map: grey, hot, viridis, turbo, cool-warm.
+    #[arg(long, default_value = "grey")]
+    pub colormap: String,
+    /// Draw pixels with the physical aspect ratio (resamples anisotropic voxels).
+    #[arg(long)]
+    pub physical_aspect: bool,
+    /// Integer magnification (nearest neighbour).
+    #[arg(long, default_value_t = 1, value_parser = clap::value_parser!(u32).range(1..=64))]
+    pub scale: u32,
+}
+
+fn parse_axis(s: &str) -> Result<Axis, String> {
+    match s.to_ascii_lowercase().as_str() {
+        "x" | "i" => Ok(Axis::X),
+        "y" | "j" => Ok(Axis::Y),
+        "z" | "k" => Ok(Axis::Z),
+        _ => Err(format!("unknown axis {s:?} (expected x, y or z)")),
+    }
+}
+
+/// Run `volmorph slice`.
+pub fn run(args: &Args) -> anyhow::Result<()> {
+    let vol = format::read(&args.input)
+        .with_context(|| format!("cannot read volume {}", args.input.display()))?;
+    let pos = match (args.index, args.position) {
+        (Some(i), _) => SlicePosition::Index(i),
+        (None, Some(p)) => SlicePosition::Physical(p),
+        (None, None) => SlicePosition::Index(middle(&vol, args.axis)),
+    };
+    let colormap: Colormap = args.colormap.parse().map_err(|e| anyhow::anyhow!("{e}"))?;
+    let window = match &args.window {
+        Some(w) => {
+            let [c, w] = args::pair(w)?;
+            if !(w > 0.0 && c.is_finite() && w.is_finite()) {
+                bail!("window width must be positive and finite, got {w}");
+            }
+            Some(Window {
+                center: c,
+                width: w,
+            })
+        }
+        None => None,
+    };
+    let s = slice::extract(&vol, args.axis, pos)
+        .with_context(|| format!("cannot take the slice of {}", args.input.display()))?;
+    let img = picture(&s, window, colormap, args.physical_aspect, args.scale);
+    write_png_rgba(&args.output, &img)
+        .with_context(|| format!("cannot write {}", args.output.display()))?;
+    Ok(())
+}
+
+/// Middle index along `axis`.
+pub fn middle(vol: &AnyVolume, axis: Axis) -> f64 {
+    let d = vol.geometry().dims;
+    let n = match axis {
+        Axis::X => d[0],
+        Axis::Y => d[1],
+        Axis::Z => d[2],
+    };
+    ((n - 1) / 2) as f64
+}
+
+/// Colour a slice: window (default: 0.5–99.5 percentiles), optional physical aspect and
+/// integer magnification.
+pub fn picture(
+    s: &Slice,
+    window: Option<Window>,
+    colormap: Colormap,
+    physical_aspect: bool,
+    scale: u32,
+) -> RgbaImage {
+    let window = window.unwrap_or_else(|| Window::from_percentiles(&s.values, 0.5, 99.5));
+    let img = render_scalar(&s.values, s.width, s.height, window, colormap);
+    let (sx, sy) = if physical_aspect {
+        let [px, py] = s.pixel_spacing;
+        let m = px.min(py);
+        (px / m, py / m)
+    } else {
+        (1.0, 1.0)
+    };
+    let f = f64::from(scale);
+    resize_nearest(&img, sx * f, sy * f)
+}
+
+/// Nearest-neighbour resize by factors `fx`, `fy` (≥ 1 in practice).
+fn resize_nearest(img: &RgbaImage, fx: f64, fy: f64) -> RgbaImage {
+    if fx == 1.0 && fy == 1.0 {
+        return img.clone();
+    }
+    let w = ((img.width as f64 * fx).round() as usize).max(1);
+    let h = ((img.height as f64 * fy).round() as usize).max(1);
+    RgbaImage::from_fn(w, h, |x, y| {
+        let sx = ((x as f64 + 0.5) / fx) as usize;
+        let sy = ((y as f64 + 0.5) / fy) as usize;
+        img.get(sx.min(img.width - 1), sy.min(img.height - 1))
+    })
+}
+
+/// Write the picture of `s` to `path` at twice its size with the physical aspect ratio
+/// (used by the demo).
+pub fn write_picture(
+    path: &Path,
+    s: &Slice,
+    window: Option<Window>,
+    colormap: Colormap,
+) -> anyhow::Result<()> {
+    let img = picture(s, window, colormap, true, 2);
+    write_png_rgba(path, &img).with_context(|| format!("cannot write {}", path.display()))
+}

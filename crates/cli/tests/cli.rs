@@ -1,0 +1,218 @@
+//! End-to-end tests of the `volmorph` binary: commands chain, errors name the file and exit
+//! with status 1 (never a panic), and failed writes leave no file behind.
+
+use std::path::{Path, PathBuf};
+use std::process::{Command, Output};
+
+fn volmorph(args: &[&dyn AsRef<std::ffi::OsStr>]) -> Output {
+    Command::new(env!("CARGO_BIN_EXE_volmorph"))
+        .args(args.iter().map(|a| a.as_ref()))
+        .output()
+        .expect("the volmorph binary runs")
+}
+
+fn ok(args: &[&dyn AsRef<std::ffi::OsStr>]) -> String {
+    let out = volmorph(args);
+    assert!(
+        out.status.success(),
+        "volmorph failed: {}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    String::from_utf8(out.stdout).expect("utf-8 output")
+}
+
+/// Runs a command that must fail cleanly; returns its standard error.
+fn fails(args: &[&dyn AsRef<std::ffi::OsStr>]) -> String {
+    let out = volmorph(args);
+    let err = String::from_utf8_lossy(&out.stderr).into_owned();
+    assert_eq!(out.status.code(), Some(1), "expected exit 1, stderr: {err}");
+    assert!(!err.contains("panicked"), "panic: {err}");
+    err
+}
+
+fn info_json(path: &Path) -> serde_json::Value {
+    serde_json::from_str(&ok(&[&"info", &"--json", &path])).expect("info --json prints JSON")
+}
+
+fn raw_bytes(dir: &Path, path: &Path) -> Vec<u8> {
+    let raw: PathBuf = dir.join(format!(
+        "{}.raw",
+        path.file_name().unwrap().to_string_lossy()
+    ));
+    ok(&[&"convert", &path, &raw]);
+    std::fs::read(raw).unwrap()
+}
+
+#[test]
+fn phantom_then_info_reports_geometry_and_statistics() {
+    let dir = tempfile::tempdir().unwrap();
+    let p = dir.path().join("sphere.nii.gz");
+    ok(&[&"phantom", &"sphere", &"-o", &p, &"--dims", &"20,16,12"]);
+    let j = info_json(&p);
+    assert_eq!(j["format"], "NIfTI-1");
+    assert_eq!(j["voxel_type"], "u8");
+    assert_eq!(j["dims"], serde_json::json!([20, 16, 12]));
+    let origin: Vec<f64> = serde_json::from_value(j["origin"].clone()).unwrap();
+    assert!(origin.iter().all(|o| (o + 1.1).abs() < 1e-6), "{origin:?}");
+    assert_eq!(j["stats"]["max"], 255.0);
+    assert_eq!(j["stats"]["min"], 0.0);
+    let text = ok(&[&"info", &p, &"--header"]);
+    assert!(text.contains("dims:       20 x 16 x 12"), "{text}");
+    assert!(text.contains("sform_code"), "{text}");
+}
+
+#[test]
+fn convert_chain_through_every_format_keeps_voxels_and_geometry() {
+    let dir = tempfile::tempdir().unwrap();
+    let d = dir.path();
+    let src = d.join("torus.nii");
+    ok(&[&"phantom", &"torus", &"-o", &src, &"--kind", &"sdf", &"--size", &"17"]);
+    let want = raw_bytes(d, &src);
+    let want_geo = info_json(&src);
+    let mut prev = src.clone();
+    for (name, extra) in [
+        ("a.mha", None),
+        ("b.mhd", Some("--compress")),
+        ("c.nrrd", Some("--compress")),
+        ("d.nhdr", None),
+        ("e.vtk", None),
+        ("f.nii.gz", None),
+    ] {
+        let next = d.join(name);
+        match extra {
+            Some(x) => ok(&[&"convert", &prev, &next, &x]),
+            None => ok(&[&"convert", &prev, &next]),
+        };
+        assert_eq!(raw_bytes(d, &next), want, "voxels changed in {name}");
+        let geo = info_json(&next);
+        for key in ["dims", "spacing", "origin", "direction", "voxel_type"] {
+            assert_eq!(geo[key], want_geo[key], "{key} changed in {name}");
+        }
+        prev = next;
+    }
+}
+
+#[test]
+fn convert_casts_and_rescales() {
+    let dir = tempfile::tempdir().unwrap();
+    let src = dir.path().join("box.mha");
+    let dst = dir.path().join("box_i16.nrrd");
+    ok(&[&"phantom", &"rounded-box", &"-o", &src, &"--kind", &"sdf", &"--size", &"12"]);
+    ok(&[&"convert", &src, &dst, &"--type", &"i16", &"--rescale", &"--range", &"-1000,1000"]);
+    let j = info_json(&dst);
+    assert_eq!(j["voxel_type"], "i16");
+    assert_eq!(j["stats"]["min"], -1000.0);
+    assert_eq!(j["stats"]["max"], 1000.0);
+}
+
+#[test]
+fn slice_writes_a_png_of_the_expected_size() {
+    let dir = tempfile::tempdir().unwrap();
+    let src = dir.path().join("teapot.nii");
+    let png = dir.path().join("cut.png");
+    ok(&[&"phantom", &"teapot", &"-o", &src, &"--dims", &"24,20,10"]);
+    ok(&[&"slice", &src, &"-o", &png, &"--axis", &"y", &"--index", &"9.5"]);
+    let bytes = std::fs::read(&png).unwrap();
+    assert_eq!(&bytes[..8], b"\x89PNG\r\n\x1a\n");
+    let w = u32::from_be_bytes(bytes[16..20].try_into().unwrap());
+    let h = u32::from_be_bytes(bytes[20..24].try_into().unwrap());
+    assert_eq!((w, h), (24, 10), "a Y slice is nx wide and nz high");
+    ok(&[&"slice", &src, &"-o", &png, &"--position", &"0", &"--scale", &"3"]);
+    let bytes = std::fs::read(&png).unwrap();
+    let w = u32::from_be_bytes(bytes[16..20].try_into().unwrap());
+    assert_eq!(w, 72);
+}
+
+#[test]
+fn errors_name_the_file_and_exit_1() {
+    let dir = tempfile::tempdir().unwrap();
+    let missing = dir.path().join("nope.nii");
+    let err = fails(&[&"info", &missing]);
+    assert!(err.contains("nope.nii"), "{err}");
+
+    let corrupt = dir.path().join("corrupt.nii.gz");
+    std::fs::write(&corrupt, b"\x1f\x8b\x08\x00garbage").unwrap();
+    let err = fails(&[&"info", &corrupt]);
+    assert!(err.contains("corrupt.nii.gz"), "{err}");
+
+    let short = dir.path().join("short.mha");
+    std::fs::write(
+        &short,
+        b"ObjectType = Image\nNDims = 3\nDimSize = 100000 100000 100000\nElementType = MET_FLOAT\nElementDataFile = LOCAL\n",
+    )
+    .unwrap();
+    fails(&[&"info", &short]);
+
+    let unknown = dir.path().join("x.png");
+    std::fs::write(&unknown, b"not a volume").unwrap();
+    let err = fails(&[&"info", &unknown]);
+    assert!(err.contains("x.png"), "{err}");
+
+    fails(&[&"phantom", &"dodecahedron", &"-o", &dir.path().join("d.nii")]);
+    fails(&[&"convert", &corrupt, &dir.path().join("out.nii"), &"--type", &"u7"]);
+}
+
+#[test]
+fn a_failed_write_leaves_no_file() {
+    let dir = tempfile::tempdir().unwrap();
+    let src = dir.path().join("oblique.nrrd");
+    // A NRRD with an oblique direction: VTK legacy cannot store it, so writing must fail.
+    let data = vec![7u8; 8];
+    let mut file = b"NRRD0004\ntype: uchar\ndimension: 3\nsizes: 2 2 2\nspace: left-posterior-superior\nspace directions: (0.6,0.8,0) (-0.8,0.6,0) (0,0,1)\nspace origin: (0,0,0)\nencoding: raw\n\n".to_vec();
+    file.extend_from_slice(&data);
+    std::fs::write(&src, file).unwrap();
+    let out = dir.path().join("out.vtk");
+    let err = fails(&[&"convert", &src, &out]);
+    assert!(err.contains("out.vtk"), "{err}");
+    assert!(!out.exists());
+    let leftovers: Vec<_> = std::fs::read_dir(dir.path())
+        .unwrap()
+        .map(|e| e.unwrap().file_name())
+        .collect();
+    assert_eq!(leftovers.len(), 1, "temporary files left: {leftovers:?}");
+}
+
+#[test]
+fn mesh_info_and_convert() {
+    let dir = tempfile::tempdir().unwrap();
+    let obj = dir.path().join("cube.obj");
+    std::fs::write(
+        &obj,
+        "v 0 0 0\nv 1 0 0\nv 1 1 0\nv 0 1 0\nv 0 0 1\nv 1 0 1\nv 1 1 1\nv 0 1 1\n\
+         f 1 4 3 2\nf 5 6 7 8\nf 1 2 6 5\nf 2 3 7 6\nf 3 4 8 7\nf 4 1 5 8\n",
+    )
+    .unwrap();
+    let text = ok(&[&"mesh", &"info", &obj]);
+    assert!(text.contains("vertices: 8"), "{text}");
+    assert!(text.contains("faces:    6"), "{text}");
+    for ext in ["ply", "off", "stl", "obj"] {
+        let out = dir.path().join(format!("cube2.{ext}"));
+        ok(&[&"mesh", &"convert", &obj, &out]);
+        let text = ok(&[&"mesh", &"info", &out]);
+        let faces = if ext == "stl" { 12 } else { 6 };
+        assert!(text.contains("vertices: 8"), "{ext}: {text}");
+        assert!(text.contains(&format!("faces:    {faces}")), "{ext}: {text}");
+    }
+    let bad = dir.path().join("bad.obj");
+    std::fs::write(&bad, "v 0 0 0\nf 1 2 3\n").unwrap();
+    let err = fails(&[&"mesh", &"info", &bad]);
+    assert!(err.contains("bad.obj"), "{err}");
+}
+
+#[test]
+fn demo_writes_every_model() {
+    let dir = tempfile::tempdir().unwrap();
+    let out = dir.path().join("demo");
+    ok(&[&"demo", &"--out", &out, &"--size", &"16"]);
+    for name in ["sphere", "torus", "rounded-box", "clay-block", "teapot"] {
+        for f in [
+            format!("{name}.nii.gz"),
+            format!("{name}_sdf.nii.gz"),
+            format!("{name}_z.png"),
+            format!("{name}_sdf_x.png"),
+        ] {
+            assert!(out.join(&f).exists(), "missing {f}");
+        }
+    }
+    assert!(out.join("index.txt").exists());
+}
