@@ -42,6 +42,11 @@ fn err(msg: impl Into<String>) -> VolumeError {
     VolumeError::format(FMT, msg)
 }
 
+/// A token as shown in an error message: at most 40 characters, control bytes escaped.
+fn show(t: &str) -> String {
+    t.chars().take(40).flat_map(char::escape_default).collect()
+}
+
 /// Whitespace-separated tokens over header bytes, with positions.
 struct Tokens<'a> {
     bytes: &'a [u8],
@@ -90,7 +95,7 @@ fn parse_type(t: &str) -> Result<VoxelType, VolumeError> {
                  unsigned_int float double)"
             )));
         }
-        _ => return Err(err(format!("unknown scalar type `{t}`"))),
+        _ => return Err(err(format!("unknown scalar type `{}`", show(t)))),
     })
 }
 
@@ -143,17 +148,23 @@ fn parse_header(bytes: &[u8]) -> Result<Vtk, VolumeError> {
     let binary = match form.as_str() {
         "ASCII" => false,
         "BINARY" => true,
-        _ => return Err(err(format!("expected ASCII or BINARY, found `{form}`"))),
+        _ => {
+            return Err(err(format!(
+                "expected ASCII or BINARY, found `{}`",
+                show(&form)
+            )));
+        }
     };
     fields.push(("format".into(), form));
     let kw = tk.next("DATASET")?;
     if !kw.eq_ignore_ascii_case("DATASET") {
-        return Err(err(format!("expected DATASET, found `{kw}`")));
+        return Err(err(format!("expected DATASET, found `{}`", show(kw))));
     }
     let ds = tk.next("the dataset type")?;
     if !ds.eq_ignore_ascii_case("STRUCTURED_POINTS") {
         return Err(VolumeError::Unsupported(format!(
-            "VTK dataset {ds} (only STRUCTURED_POINTS)"
+            "VTK dataset {} (only STRUCTURED_POINTS)",
+            show(ds)
         )));
     }
     fields.push(("DATASET".into(), ds.to_string()));
@@ -163,7 +174,8 @@ fn parse_header(bytes: &[u8]) -> Result<Vtk, VolumeError> {
     let mut spacing = DVec3::ONE;
     let mut origin = DVec3::ZERO;
     let npts = loop {
-        let kw = tk.next("POINT_DATA")?.to_ascii_lowercase();
+        let raw_kw = tk.next("POINT_DATA")?;
+        let kw = raw_kw.to_ascii_lowercase();
         match kw.as_str() {
             "dimensions" => {
                 let mut d = [0usize; 3];
@@ -216,7 +228,7 @@ fn parse_header(bytes: &[u8]) -> Result<Vtk, VolumeError> {
             _ => {
                 return Err(err(format!(
                     "unrecognized keyword `{}` in the dataset header",
-                    kw.chars().take(40).collect::<String>()
+                    show(raw_kw)
                 )));
             }
         }
@@ -228,10 +240,15 @@ fn parse_header(bytes: &[u8]) -> Result<Vtk, VolumeError> {
             "POINT_DATA {npts} does not match DIMENSIONS {dims:?} ({n} points)"
         )));
     }
+    let geometry = Geometry::new(dims)
+        .with_spacing(spacing)
+        .with_origin(origin + spacing * index_origin);
+    geometry.validate().map_err(|e| err(e.to_string()))?;
     let attr = tk.next("SCALARS")?;
     if !attr.eq_ignore_ascii_case("SCALARS") {
         return Err(VolumeError::Unsupported(format!(
-            "VTK point data `{attr}` (only SCALARS)"
+            "VTK point data `{}` (only SCALARS)",
+            show(attr)
         )));
     }
     let name = tk.next("the SCALARS name")?.to_string();
@@ -240,6 +257,16 @@ fn parse_header(bytes: &[u8]) -> Result<Vtk, VolumeError> {
     let mut next = tk.next("LOOKUP_TABLE")?;
     let mut ncomp = "1".to_string();
     if !next.eq_ignore_ascii_case("LOOKUP_TABLE") {
+        if !next
+            .bytes()
+            .all(|b| b.is_ascii_digit() || b == b'-' || b == b'+')
+        {
+            return Err(err(format!(
+                "expected LOOKUP_TABLE (or a component count) after `SCALARS {} {ty}`, found `{}`",
+                show(&name),
+                show(next)
+            )));
+        }
         let c = text_header::parse_size(FMT, "SCALARS component count", next)?;
         if c != 1 {
             return Err(VolumeError::Unsupported(format!(
@@ -252,7 +279,8 @@ fn parse_header(bytes: &[u8]) -> Result<Vtk, VolumeError> {
     fields.push(("SCALARS".into(), format!("{name} {ty} {ncomp}")));
     if !next.eq_ignore_ascii_case("LOOKUP_TABLE") {
         return Err(err(format!(
-            "expected LOOKUP_TABLE after SCALARS, found `{next}`"
+            "expected LOOKUP_TABLE after SCALARS, found `{}`",
+            show(next)
         )));
     }
     let table = tk.next("the LOOKUP_TABLE name")?;
@@ -268,10 +296,6 @@ fn parse_header(bytes: &[u8]) -> Result<Vtk, VolumeError> {
     } else {
         tk.pos
     };
-    let geometry = Geometry::new(dims)
-        .with_spacing(spacing)
-        .with_origin(origin + spacing * index_origin);
-    geometry.validate().map_err(|e| err(e.to_string()))?;
     Ok(Vtk {
         geometry,
         voxel_type,
