@@ -434,3 +434,54 @@ fn timing_256_cubed() {
     }
     let _ = Path::new(".");
 }
+
+mod fuzz {
+    use super::*;
+    use proptest::prelude::*;
+
+    fn seed_files() -> Vec<Vec<u8>> {
+        static SEEDS: std::sync::OnceLock<Vec<Vec<u8>>> = std::sync::OnceLock::new();
+        SEEDS.get_or_init(make_seeds).clone()
+    }
+
+    fn make_seeds() -> Vec<Vec<u8>> {
+        let dir = tempfile::tempdir().unwrap();
+        let mut out = Vec::new();
+        for (vt, compress) in [(VoxelType::I16, false), (VoxelType::F32, true)] {
+            let p = dir.path().join("s.mha");
+            let vol = random_volume(vt, oblique(), 9);
+            format::write_with(&p, &vol, &WriteOptions { compress, level: 1 }).unwrap();
+            out.push(std::fs::read(&p).unwrap());
+        }
+        out.push(
+            b"NDims = 2\nDimSize = 2 2\nBinaryData = False\nElementType = MET_INT\n\
+ElementDataFile = LOCAL\n1 2 3 4\n"
+                .to_vec(),
+        );
+        out
+    }
+
+    proptest! {
+        #![proptest_config(ProptestConfig::with_cases(300))]
+        /// Corrupted files give an error or a valid volume, never a panic.
+        #[test]
+        fn mutated_files_never_panic(
+            which in 0usize..3,
+            edits in proptest::collection::vec((any::<u16>(), any::<u8>()), 1..6),
+            cut in any::<u16>(),
+        ) {
+            let mut b = seed_files().swap_remove(which);
+            for (pos, byte) in edits {
+                let i = pos as usize % b.len();
+                b[i] = byte;
+            }
+            if cut % 3 == 0 {
+                b.truncate(cut as usize % (b.len() + 1));
+            }
+            if let Ok((v, _)) = metaimage::read_bytes(&b) {
+                prop_assert!(v.geometry().validate().is_ok());
+                prop_assert_eq!(v.as_bytes().len(), v.geometry().len() * v.voxel_type().size());
+            }
+        }
+    }
+}

@@ -125,6 +125,7 @@ fn axis_aligned_round_trip_is_bit_exact() {
 const SLICER_RAS: &str = "NRRD0004
 # Complete NRRD file format specification at:
 # http://teem.sourceforge.net/nrrd/format.html
+type:=a key named like a field is not the field
 type: short
 dimension: 3
 space: right-anterior-superior
@@ -496,4 +497,58 @@ fn huge_header_line_and_missing_data_file() {
     .unwrap();
     let e = format::read(&p).unwrap_err().to_string();
     assert!(e.contains("gone.raw") && e.contains("not found"), "{e}");
+}
+
+mod fuzz {
+    use super::*;
+    use proptest::prelude::*;
+
+    fn seed_files() -> Vec<Vec<u8>> {
+        static SEEDS: std::sync::OnceLock<Vec<Vec<u8>>> = std::sync::OnceLock::new();
+        SEEDS.get_or_init(make_seeds).clone()
+    }
+
+    fn make_seeds() -> Vec<Vec<u8>> {
+        let dir = tempfile::tempdir().unwrap();
+        let mut out = Vec::new();
+        for (vt, compress) in [(VoxelType::U16, false), (VoxelType::F64, true)] {
+            let p = dir.path().join("s.nrrd");
+            let vol = random_volume(vt, oblique(), 4);
+            format::write_with(&p, &vol, &WriteOptions { compress, level: 1 }).unwrap();
+            out.push(std::fs::read(&p).unwrap());
+        }
+        let mut b = format!("{SLICER_RAS}\n").into_bytes();
+        b.extend_from_slice(&[1u8; 16]);
+        out.push(b);
+        out.push(
+            b"NRRD0004\ntype: float\ndimension: 4\nsizes: 1 2 2 1\nkinds: vector domain domain \
+list\nspacings: NaN 1 2 NaN\nencoding: ascii\n\n1 2 3 4\n"
+                .to_vec(),
+        );
+        out
+    }
+
+    proptest! {
+        #![proptest_config(ProptestConfig::with_cases(300))]
+        /// Corrupted files give an error or a valid volume, never a panic.
+        #[test]
+        fn mutated_files_never_panic(
+            which in 0usize..4,
+            edits in proptest::collection::vec((any::<u16>(), any::<u8>()), 1..6),
+            cut in any::<u16>(),
+        ) {
+            let mut b = seed_files().swap_remove(which);
+            for (pos, byte) in edits {
+                let i = pos as usize % b.len();
+                b[i] = byte;
+            }
+            if cut % 3 == 0 {
+                b.truncate(cut as usize % (b.len() + 1));
+            }
+            if let Ok((v, _)) = nrrd::read_bytes(&b) {
+                prop_assert!(v.geometry().validate().is_ok());
+                prop_assert_eq!(v.as_bytes().len(), v.geometry().len() * v.voxel_type().size());
+            }
+        }
+    }
 }

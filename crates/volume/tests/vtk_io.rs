@@ -247,3 +247,49 @@ fn malformed_files_are_clear_errors() {
     assert!(vtk::read_bytes(&b).is_err());
     assert!(t.elapsed().as_secs_f64() < 2.0);
 }
+
+mod fuzz {
+    use super::*;
+    use proptest::prelude::*;
+
+    fn seed_files() -> Vec<Vec<u8>> {
+        static SEEDS: std::sync::OnceLock<Vec<Vec<u8>>> = std::sync::OnceLock::new();
+        SEEDS.get_or_init(make_seeds).clone()
+    }
+
+    fn make_seeds() -> Vec<Vec<u8>> {
+        let dir = tempfile::tempdir().unwrap();
+        let p = dir.path().join("s.vtk");
+        format::write(&p, &random_volume(VoxelType::I32, aligned(), 2)).unwrap();
+        vec![
+            std::fs::read(&p).unwrap(),
+            b"# vtk DataFile Version 2.0\nx\nASCII\nDATASET STRUCTURED_POINTS\nEXTENT 0 1 0 1 0 0\n\
+SPACING 1 2 3\nORIGIN 0 0 0\nPOINT_DATA 4\nSCALARS a double 1\nLOOKUP_TABLE t\n1 2 3 4\n"
+                .to_vec(),
+        ]
+    }
+
+    proptest! {
+        #![proptest_config(ProptestConfig::with_cases(300))]
+        /// Corrupted files give an error or a valid volume, never a panic.
+        #[test]
+        fn mutated_files_never_panic(
+            which in 0usize..2,
+            edits in proptest::collection::vec((any::<u16>(), any::<u8>()), 1..6),
+            cut in any::<u16>(),
+        ) {
+            let mut b = seed_files().swap_remove(which);
+            for (pos, byte) in edits {
+                let i = pos as usize % b.len();
+                b[i] = byte;
+            }
+            if cut % 3 == 0 {
+                b.truncate(cut as usize % (b.len() + 1));
+            }
+            if let Ok((v, _)) = vtk::read_bytes(&b) {
+                prop_assert!(v.geometry().validate().is_ok());
+                prop_assert_eq!(v.as_bytes().len(), v.geometry().len() * v.voxel_type().size());
+            }
+        }
+    }
+}

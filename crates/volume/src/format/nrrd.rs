@@ -260,6 +260,8 @@ fn parse_header(bytes: &[u8], complete: bool) -> Result<Nrrd, VolumeError> {
         }
     }
     let mut fields: Vec<(String, String)> = vec![("magic".into(), magic)];
+    // Indices into `fields` of real NRRD fields (not `key:=value` pairs).
+    let mut field_idx: Vec<usize> = Vec::new();
     let mut data_offset = None;
     let mut line_no = 1usize;
     loop {
@@ -287,6 +289,7 @@ fn parse_header(bytes: &[u8], complete: bool) -> Result<Nrrd, VolumeError> {
                 fields.push((line[..i].to_string(), line[i + 2..].to_string()));
             }
             (_, Some(i)) => {
+                field_idx.push(fields.len());
                 fields.push((
                     line[..i].trim().to_ascii_lowercase(),
                     line[i + 2..].trim().to_string(),
@@ -301,9 +304,9 @@ fn parse_header(bytes: &[u8], complete: bool) -> Result<Nrrd, VolumeError> {
         }
     }
     let get = |names: &[&str]| {
-        fields
+        field_idx
             .iter()
-            .skip(1)
+            .map(|&i| &fields[i])
             .find(|(k, _)| names.contains(&k.as_str()))
             .map(|(_, v)| v.as_str())
     };
