@@ -1,7 +1,6 @@
 //! MetaImage reading and writing: round trips, hand-written headers, malformed input.
 
 use std::io::Write;
-use std::path::Path;
 
 use volmorph_volume::format::{self, Format, WriteOptions, metaimage};
 use volmorph_volume::{AnyVolume, DMat3, DVec3, Geometry, Volume, VolumeError, VoxelType};
@@ -420,7 +419,14 @@ fn timing_256_cubed() {
     let dir = tempfile::tempdir().unwrap();
     let g = Geometry::new([256, 256, 256]);
     let vol = random_volume(VoxelType::I16, g, 3);
-    for (name, compress) in [("a.mha", false), ("b.mhd", false), ("c.mha", true)] {
+    for (name, compress) in [
+        ("a.mha", false),
+        ("b.mhd", false),
+        ("c.mha", true),
+        ("d.nrrd", false),
+        ("e.nrrd", true),
+        ("f.vtk", false),
+    ] {
         let p = dir.path().join(name);
         let opts = WriteOptions { compress, level: 1 };
         let t = std::time::Instant::now();
@@ -432,7 +438,6 @@ fn timing_256_cubed() {
         assert_eq!(r.as_bytes(), vol.as_bytes());
         println!("{name} compress={compress}: write {w:?}, read {rd:?}");
     }
-    let _ = Path::new(".");
 }
 
 mod fuzz {
@@ -484,4 +489,25 @@ ElementDataFile = LOCAL\n1 2 3 4\n"
             }
         }
     }
+}
+
+/// Every file of the malformed corpus is refused with an error (never a panic), both by
+/// path and, for single-file forms, from memory.
+#[test]
+fn malformed_corpus_is_refused() {
+    let dir = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("tests/corpus/metaimage");
+    let mut n = 0;
+    for entry in std::fs::read_dir(&dir).unwrap() {
+        let p = entry.unwrap().path();
+        let e = format::read(&p).expect_err(&p.display().to_string());
+        assert!(
+            e.to_string()
+                .contains(&*p.file_name().unwrap().to_string_lossy()),
+            "{e}"
+        );
+        let bytes = std::fs::read(&p).unwrap();
+        assert!(metaimage::read_bytes(&bytes).is_err(), "{}", p.display());
+        n += 1;
+    }
+    assert!(n >= 6, "corpus missing: {}", dir.display());
 }

@@ -6,6 +6,9 @@
 //! the fields) and `#` comments; it ends at the first empty line (attached data follow it)
 //! or at the end of a detached header.
 //!
+//! In the [`Header`], the magic line comes first as `("magic", "NRRD0004")`; field names
+//! are lower-cased (`"space directions"`), `key:=value` keys are kept as written.
+//!
 //! # Fields used
 //! * `type` — every C spelling NRRD allows for 8/16/32-bit integers, `float` and `double`
 //!   (`signed char`, `uchar`, `unsigned short int`, `int16_t`, …). 64-bit integers and
@@ -14,7 +17,9 @@
 //!   i, j, k (fewer give `nz = 1`, `ny = 1`). A non-spatial axis (a space direction `none`,
 //!   or a kind other than `domain`/`space`/`???`) is accepted only with size 1 and dropped,
 //!   so a 4-D scalar volume with a trailing `size 1` axis reads as 3-D; larger non-spatial
-//!   axes (vectors, time series) are refused as unsupported.
+//!   axes (vectors, time series) are refused as unsupported. With fewer than three spatial
+//!   axes the missing direction columns are completed orthonormally (identity padding when
+//!   the given ones lie in the xy plane, as ITK embeds 2-D images).
 //! * `encoding` — `raw`, `gzip`/`gz`, `ascii`/`text`/`txt`; `bzip2`, `hex` and `zrl` are
 //!   refused as unsupported. `endian` is required for multi-byte binary data.
 //! * `space` / `space dimension`, `space directions`, `space origin` — the geometry: the

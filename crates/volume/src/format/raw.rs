@@ -5,7 +5,7 @@
 //! with a `.raw` path) stores the voxels little-endian with no header, so **the geometry
 //! (spacing, origin, direction) and even the dims and voxel type are not stored** — write a
 //! MetaImage `.mhd` instead when the file must describe itself: it is the same raw data file
-//! plus a small text header.
+//! plus a small text header. [`WriteOptions`] are ignored: raw output is never compressed.
 
 use std::path::Path;
 

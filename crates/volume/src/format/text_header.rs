@@ -30,6 +30,10 @@ const MAX_DEFLATE_RATIO: u64 = 1032;
 /// Elements converted per chunk when swapping byte order on write.
 const WRITE_CHUNK: usize = 1 << 16;
 
+/// Decompressed bytes after the voxels read while looking for the end of a compressed
+/// stream (to verify its checksum) before giving up on reaching it.
+const MAX_TRAILING: u64 = 1 << 20;
+
 /// Largest ASCII token accepted for one voxel value.
 const MAX_TOKEN: usize = 128;
 
@@ -222,8 +226,9 @@ pub(crate) fn fmt_f64(v: f64) -> String {
 }
 
 /// Complete a direction matrix from its first `k` columns (`k` = 1 or 2, the image's
-/// spatial axes): the missing columns are made orthonormal to the given ones, keeping a
-/// right-handed frame when possible.
+/// spatial axes). Columns lying in the xy plane are padded with the identity (`+z`), as ITK
+/// embeds a 2-D direction matrix in 3-D; otherwise the missing columns are made orthonormal
+/// to the given ones (`a × b` for the third).
 pub(crate) fn complete_direction(cols: &[glam::DVec3]) -> glam::DMat3 {
     use glam::{DMat3, DVec3};
     match cols {
@@ -231,6 +236,7 @@ pub(crate) fn complete_direction(cols: &[glam::DVec3]) -> glam::DMat3 {
             let (b, c) = a.normalize_or_zero().any_orthonormal_pair();
             DMat3::from_cols(*a, b, c)
         }
+        [a, b] if a.z == 0.0 && b.z == 0.0 => DMat3::from_cols(*a, *b, DVec3::Z),
         [a, b] => {
             let c = a.cross(*b).normalize_or_zero();
             let c = if c == DVec3::ZERO { DVec3::Z } else { c };
@@ -514,13 +520,27 @@ fn decode_typed<T: AsciiVoxel>(
                 skip_bytes(fmt, &mut *dec, spec.decoded_skip, what)?;
             }
             let v = read_binary(fmt, &mut *dec, n, spec.big_endian, what)?;
-            if spec.exact {
-                let mut one = [0u8; 1];
-                if fill(&mut *dec, &mut one).map_err(|e| corrupt(fmt, what, &e))? != 0 {
-                    return Err(VolumeError::format(
-                        fmt,
-                        format!("{what} data hold more than the {nbytes} bytes expected"),
-                    ));
+            // Read on to the end of the stream so its checksum is verified; a corrupt stream
+            // can otherwise decode to plausible voxels.
+            let mut sink = [0u8; 4096];
+            let mut extra = 0u64;
+            loop {
+                match dec.read(&mut sink) {
+                    Ok(0) => break,
+                    Ok(k) => {
+                        extra += k as u64;
+                        if spec.exact {
+                            return Err(VolumeError::format(
+                                fmt,
+                                format!("{what} data hold more than the {nbytes} bytes expected"),
+                            ));
+                        }
+                        if extra > MAX_TRAILING {
+                            break;
+                        }
+                    }
+                    Err(e) if e.kind() == io::ErrorKind::Interrupted => {}
+                    Err(e) => return Err(corrupt(fmt, what, &e)),
                 }
             }
             Ok(v)

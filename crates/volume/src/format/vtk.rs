@@ -14,6 +14,9 @@
 //! `numComp` must be 1. Other attributes (`VECTORS`, `COLOR_SCALARS`, `FIELD`, `CELL_DATA`)
 //! and other datasets are refused as unsupported.
 //!
+//! The [`Header`] lists `version`, `title`, `format`, then the dataset keywords in upper
+//! case (`DIMENSIONS`, `SPACING`, …, `SCALARS` as `name type components`, `LOOKUP_TABLE`).
+//!
 //! # Geometry
 //! The index-to-physical map is `origin + spacing ⊙ index` (direction = identity). An
 //! `EXTENT` starting at `(i0, j0, k0)` moves the origin to `origin + spacing ⊙ (i0, j0, k0)`.
