@@ -217,6 +217,16 @@ fn detached_data_file_with_header_size() {
     .unwrap();
     let v = format::read(&hdr).unwrap();
     assert_eq!(v.to_typed::<i16>().data(), &[3, 4]);
+
+    // A hand-edited detached header whose last line has no newline.
+    std::fs::write(
+        &hdr,
+        "NDims = 3\nDimSize = 1 1 2\nElementType = MET_SHORT\nHeaderSize = 18\n\
+         ElementDataFile = data/img.raw",
+    )
+    .unwrap();
+    let v = format::read(&hdr).unwrap();
+    assert_eq!(v.to_typed::<i16>().data(), &[2, 3]);
 }
 
 fn read_err(bytes: &[u8]) -> VolumeError {

@@ -4,6 +4,8 @@
 //! The header is text, one `Key = Value` per line; `ElementDataFile` must be the last key
 //! and, when it is `LOCAL`, the voxels start on the byte after its line.
 //!
+//! The [`Header`] lists every `Key = Value` pair in file order, keys as written.
+//!
 //! # Geometry
 //! * `DimSize` — voxel counts, x fastest. `NDims` 2 reads as a single slice (`nz = 1`);
 //!   `NDims` 4 is accepted only with a fourth size of 1.
@@ -121,12 +123,14 @@ fn element_type_name(t: VoxelType) -> &'static str {
     }
 }
 
-fn parse_header(bytes: &[u8]) -> Result<Meta, VolumeError> {
+/// Parse the header in `bytes`; `complete` says that `bytes` is the whole file (so a last
+/// line without a newline is a full line, not a cut-off one).
+fn parse_header(bytes: &[u8], complete: bool) -> Result<Meta, VolumeError> {
     let mut lines = Lines::new(bytes);
     let mut fields: Vec<(String, String)> = Vec::new();
     let mut line_no = 0usize;
     let mut found_data_file = false;
-    while let Some(line) = lines.next_line(true) {
+    while let Some(line) = lines.next_line(complete) {
         line_no += 1;
         let t = line.trim();
         if t.is_empty() {
@@ -356,7 +360,7 @@ fn decode(meta: &Meta, input: Input<'_>, detached: bool) -> Result<AnyVolume, Vo
 /// unsupported element type, …) and for a header that names a detached data file (use
 /// [`crate::format::read`] with the header's path).
 pub fn read_bytes(bytes: &[u8]) -> Result<(AnyVolume, Header), VolumeError> {
-    let meta = parse_header(bytes)?;
+    let meta = parse_header(bytes, bytes.len() <= text_header::MAX_HEADER_BYTES)?;
     if let Some(f) = &meta.data_file {
         return Err(VolumeError::Unsupported(format!(
             "MetaImage header names the data file `{f}`: reading it needs the header's path"
@@ -367,8 +371,8 @@ pub fn read_bytes(bytes: &[u8]) -> Result<(AnyVolume, Header), VolumeError> {
 }
 
 pub(crate) fn read(path: &Path) -> Result<(AnyVolume, Header), VolumeError> {
-    let (prefix, _) = text_header::read_prefix(path)?;
-    let meta = parse_header(&prefix)?;
+    let (prefix, len) = text_header::read_prefix(path)?;
+    let meta = parse_header(&prefix, prefix.len() as u64 == len)?;
     let v = match &meta.data_file {
         None => decode(&meta, Input::File(path), false)?,
         Some(name) => {
