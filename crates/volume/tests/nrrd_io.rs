@@ -418,7 +418,7 @@ fn malformed_headers_are_clear_errors() {
     );
     assert_format_err(
         &with(&format!("{sp}space directions: (1,0,0) (0,0,0) (0,0,1)\n")),
-        "zero length",
+        "zero or non-finite length",
     );
     assert_format_err(
         &with(&format!("{sp}space directions: (1,0,0) (0,1,0)\n")),

@@ -466,7 +466,7 @@ fn parse_header(bytes: &[u8], complete: bool) -> Result<Nrrd, VolumeError> {
             let len = p.length();
             if !(len > 0.0 && len.is_finite()) {
                 return Err(err(format!(
-                    "space directions: the vector of axis {a} has zero length"
+                    "space directions: the vector of axis {a} has zero or non-finite length"
                 )));
             }
             g.spacing[i] = len;
