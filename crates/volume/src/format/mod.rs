@@ -17,6 +17,7 @@ pub mod metaimage;
 pub mod nifti;
 pub mod nrrd;
 pub mod raw;
+mod text_header;
 pub mod vtk;
 
 use std::path::Path;
