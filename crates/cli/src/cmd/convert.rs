@@ -25,7 +25,7 @@ pub struct Args {
     #[arg(long)]
     pub rescale: bool,
     /// Output range for --rescale, as "LO,HI".
-    #[arg(long, value_name = "LO,HI", requires = "rescale")]
+    #[arg(long, value_name = "LO,HI", requires = "rescale", allow_hyphen_values = true)]
     pub range: Option<String>,
     /// Compress the voxel data (MetaImage, NRRD; NIfTI compresses by the .gz extension).
     #[arg(long)]
@@ -66,7 +66,7 @@ pub fn run(args: &Args) -> anyhow::Result<()> {
     };
     let (slope, inter) = if args.rescale {
         let st = Statistics::of_any(&input);
-        if st.finite_count == 0 {
+        if st.finite == 0 {
             bail!("{}: no finite values to rescale", args.input.display());
         }
         let (lo, hi) = match &args.range {

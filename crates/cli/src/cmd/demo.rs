@@ -101,10 +101,7 @@ fn write_slice_png(
         Kind::Sdf => write_picture(
             png,
             &s,
-            Some(Window {
-                center: 0.0,
-                width: 1.0,
-            }),
+            Some(Window::new(0.0, 1.0)?),
             Colormap::CoolWarm,
         ),
     }

@@ -66,7 +66,7 @@ pub fn json(file: &VolumeFile, stats: Option<&Statistics>) -> serde_json::Value 
     if let Some(st) = stats {
         v["stats"] = serde_json::json!({
             "count": st.count,
-            "finite_count": st.finite_count,
+            "finite": st.finite,
             "min": st.min,
             "max": st.max,
             "mean": st.mean,

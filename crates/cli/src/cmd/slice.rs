@@ -60,23 +60,20 @@ pub fn run(args: &Args) -> anyhow::Result<()> {
         (None, Some(p)) => SlicePosition::Physical(p),
         (None, None) => SlicePosition::Index(middle(&vol, args.axis)),
     };
-    let colormap: Colormap = args.colormap.parse().map_err(|e| anyhow::anyhow!("{e}"))?;
+    let colormap: Colormap = args.colormap.parse()?;
     let window = match &args.window {
         Some(w) => {
             let [c, w] = args::pair(w)?;
-            if !(w > 0.0 && c.is_finite() && w.is_finite()) {
-                bail!("window width must be positive and finite, got {w}");
+            if !(w > 0.0) {
+                bail!("window width must be positive, got {w}");
             }
-            Some(Window {
-                center: c,
-                width: w,
-            })
+            Some(Window::new(c, w)?)
         }
         None => None,
     };
     let s = slice::extract(&vol, args.axis, pos)
         .with_context(|| format!("cannot take the slice of {}", args.input.display()))?;
-    let img = picture(&s, window, colormap, args.physical_aspect, args.scale);
+    let img = picture(&s, window, colormap, args.physical_aspect, args.scale)?;
     write_png_rgba(&args.output, &img)
         .with_context(|| format!("cannot write {}", args.output.display()))?;
     Ok(())
@@ -93,17 +90,25 @@ pub fn middle(vol: &AnyVolume, axis: Axis) -> f64 {
     ((n - 1) / 2) as f64
 }
 
-/// Colour a slice: window (default: 0.5–99.5 percentiles), optional physical aspect and
-/// integer magnification.
+/// Colour a slice: window (default: 0.5–99.5 percentiles of its finite values, or their
+/// range when that is flat), optional physical aspect and integer magnification.
+///
+/// # Errors
+/// When the slice has no finite value to window, or the picture would be too large.
 pub fn picture(
     s: &Slice,
     window: Option<Window>,
     colormap: Colormap,
     physical_aspect: bool,
     scale: u32,
-) -> RgbaImage {
-    let window = window.unwrap_or_else(|| Window::from_percentiles(&s.values, 0.5, 99.5));
-    let img = render_scalar(&s.values, s.width, s.height, window, colormap);
+) -> anyhow::Result<RgbaImage> {
+    let window = match window {
+        Some(w) => w,
+        None => Window::from_percentiles(&s.values, 0.5, 99.5)
+            .context("the slice has no finite values to choose a window from")?,
+    };
+    let (w, h) = (u32::try_from(s.width)?, u32::try_from(s.height)?);
+    let img = render_scalar(&s.values, w, h, &window, colormap)?;
     let (sx, sy) = if physical_aspect {
         let [px, py] = s.pixel_spacing;
         let m = px.min(py);
@@ -115,18 +120,23 @@ pub fn picture(
     resize_nearest(&img, sx * f, sy * f)
 }
 
-/// Nearest-neighbour resize by factors `fx`, `fy` (≥ 1 in practice).
-fn resize_nearest(img: &RgbaImage, fx: f64, fy: f64) -> RgbaImage {
+/// Nearest-neighbour resize by factors `fx`, `fy` ≥ 1.
+fn resize_nearest(img: &RgbaImage, fx: f64, fy: f64) -> anyhow::Result<RgbaImage> {
     if fx == 1.0 && fy == 1.0 {
-        return img.clone();
+        return Ok(img.clone());
     }
-    let w = ((img.width as f64 * fx).round() as usize).max(1);
-    let h = ((img.height as f64 * fy).round() as usize).max(1);
-    RgbaImage::from_fn(w, h, |x, y| {
-        let sx = ((x as f64 + 0.5) / fx) as usize;
-        let sy = ((y as f64 + 0.5) / fy) as usize;
-        img.get(sx.min(img.width - 1), sy.min(img.height - 1))
-    })
+    let (iw, ih) = (img.width(), img.height());
+    let w = (f64::from(iw) * fx).round();
+    let h = (f64::from(ih) * fy).round();
+    if !(w <= f64::from(u16::MAX) && h <= f64::from(u16::MAX)) {
+        bail!("picture of {w} x {h} pixels is too large; lower --scale");
+    }
+    let (w, h) = ((w as u32).max(1), (h as u32).max(1));
+    Ok(RgbaImage::from_fn(w, h, |x, y| {
+        let sx = ((f64::from(x) + 0.5) / fx) as u32;
+        let sy = ((f64::from(y) + 0.5) / fy) as u32;
+        img.get(sx.min(iw - 1), sy.min(ih - 1)).unwrap_or([0; 4])
+    })?)
 }
 
 /// Write the picture of `s` to `path` at twice its size with the physical aspect ratio
@@ -137,6 +147,6 @@ pub fn write_picture(
     window: Option<Window>,
     colormap: Colormap,
 ) -> anyhow::Result<()> {
-    let img = picture(s, window, colormap, true, 2);
+    let img = picture(s, window, colormap, true, 2)?;
     write_png_rgba(path, &img).with_context(|| format!("cannot write {}", path.display()))
 }
