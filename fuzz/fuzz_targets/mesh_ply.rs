@@ -1,0 +1,9 @@
+//! Fuzz the ply mesh parser: any byte string must give a mesh or an error, never a panic,
+//! a hang or an unbounded allocation.
+#![no_main]
+
+use libfuzzer_sys::fuzz_target;
+
+fuzz_target!(|data: &[u8]| {
+    let _ = volmorph_mesh::read_ply_bytes(data);
+});
