@@ -66,7 +66,9 @@ fn convert_chain_through_every_format_keeps_voxels_and_geometry() {
     let dir = tempfile::tempdir().unwrap();
     let d = dir.path();
     let src = d.join("torus.nii");
-    ok(&[&"phantom", &"torus", &"-o", &src, &"--kind", &"sdf", &"--size", &"17"]);
+    ok(&[
+        &"phantom", &"torus", &"-o", &src, &"--kind", &"sdf", &"--size", &"17",
+    ]);
     let want = raw_bytes(d, &src);
     let want_geo = info_json(&src);
     let mut prev = src.clone();
@@ -97,8 +99,26 @@ fn convert_casts_and_rescales() {
     let dir = tempfile::tempdir().unwrap();
     let src = dir.path().join("box.mha");
     let dst = dir.path().join("box_i16.nrrd");
-    ok(&[&"phantom", &"rounded-box", &"-o", &src, &"--kind", &"sdf", &"--size", &"12"]);
-    ok(&[&"convert", &src, &dst, &"--type", &"i16", &"--rescale", &"--range", &"-1000,1000"]);
+    ok(&[
+        &"phantom",
+        &"rounded-box",
+        &"-o",
+        &src,
+        &"--kind",
+        &"sdf",
+        &"--size",
+        &"12",
+    ]);
+    ok(&[
+        &"convert",
+        &src,
+        &dst,
+        &"--type",
+        &"i16",
+        &"--rescale",
+        &"--range",
+        &"-1000,1000",
+    ]);
     let j = info_json(&dst);
     assert_eq!(j["voxel_type"], "i16");
     assert_eq!(j["stats"]["min"], -1000.0);
@@ -111,13 +131,24 @@ fn slice_writes_a_png_of_the_expected_size() {
     let src = dir.path().join("teapot.nii");
     let png = dir.path().join("cut.png");
     ok(&[&"phantom", &"teapot", &"-o", &src, &"--dims", &"24,20,10"]);
-    ok(&[&"slice", &src, &"-o", &png, &"--axis", &"y", &"--index", &"9.5"]);
+    ok(&[
+        &"slice", &src, &"-o", &png, &"--axis", &"y", &"--index", &"9.5",
+    ]);
     let bytes = std::fs::read(&png).unwrap();
     assert_eq!(&bytes[..8], b"\x89PNG\r\n\x1a\n");
     let w = u32::from_be_bytes(bytes[16..20].try_into().unwrap());
     let h = u32::from_be_bytes(bytes[20..24].try_into().unwrap());
     assert_eq!((w, h), (24, 10), "a Y slice is nx wide and nz high");
-    ok(&[&"slice", &src, &"-o", &png, &"--position", &"0", &"--scale", &"3"]);
+    ok(&[
+        &"slice",
+        &src,
+        &"-o",
+        &png,
+        &"--position",
+        &"0",
+        &"--scale",
+        &"3",
+    ]);
     let bytes = std::fs::read(&png).unwrap();
     let w = u32::from_be_bytes(bytes[16..20].try_into().unwrap());
     assert_eq!(w, 72);
@@ -148,8 +179,19 @@ fn errors_name_the_file_and_exit_1() {
     let err = fails(&[&"info", &unknown]);
     assert!(err.contains("x.png"), "{err}");
 
-    fails(&[&"phantom", &"dodecahedron", &"-o", &dir.path().join("d.nii")]);
-    fails(&[&"convert", &corrupt, &dir.path().join("out.nii"), &"--type", &"u7"]);
+    fails(&[
+        &"phantom",
+        &"dodecahedron",
+        &"-o",
+        &dir.path().join("d.nii"),
+    ]);
+    fails(&[
+        &"convert",
+        &corrupt,
+        &dir.path().join("out.nii"),
+        &"--type",
+        &"u7",
+    ]);
 }
 
 #[test]
@@ -191,7 +233,10 @@ fn mesh_info_and_convert() {
         let text = ok(&[&"mesh", &"info", &out]);
         let faces = if ext == "stl" { 12 } else { 6 };
         assert!(text.contains("vertices: 8"), "{ext}: {text}");
-        assert!(text.contains(&format!("faces:    {faces}")), "{ext}: {text}");
+        assert!(
+            text.contains(&format!("faces:    {faces}")),
+            "{ext}: {text}"
+        );
     }
     let bad = dir.path().join("bad.obj");
     std::fs::write(&bad, "v 0 0 0\nf 1 2 3\n").unwrap();

@@ -74,11 +74,16 @@ where
         Some(p) if !p.as_os_str().is_empty() => p,
         _ => Path::new("."),
     };
-    let mut tmp = tempfile::Builder::new()
-        .prefix(".volmorph-")
-        .suffix(".partial")
-        .tempfile_in(dir)
-        .map_err(os)?;
+    let mut builder = tempfile::Builder::new();
+    builder.prefix(".volmorph-").suffix(".partial");
+    // Temporary files are private (0600) by default; an output file gets the ordinary
+    // permissions of a new file (0666 less the process umask, applied by the OS at creation).
+    #[cfg(unix)]
+    {
+        use std::os::unix::fs::PermissionsExt;
+        builder.permissions(std::fs::Permissions::from_mode(0o666));
+    }
+    let mut tmp = builder.tempfile_in(dir).map_err(os)?;
     {
         let mut w = BufWriter::with_capacity(1 << 20, tmp.as_file_mut());
         f(&mut w)?;
@@ -257,6 +262,21 @@ mod tests {
         })
         .unwrap();
         assert_eq!(std::fs::read(&p).unwrap(), b"new");
+    }
+
+    #[cfg(unix)]
+    #[test]
+    fn atomic_write_gives_ordinary_file_permissions() {
+        use std::os::unix::fs::PermissionsExt;
+        let dir = tempfile::tempdir().unwrap();
+        let p = dir.path().join("out.bin");
+        write_atomic::<IoError, _>(&p, |_| Ok(())).unwrap();
+        let mode = std::fs::metadata(&p).unwrap().permissions().mode() & 0o777;
+        // The same mode as a file created the ordinary way (0666 less the umask).
+        let plain = dir.path().join("plain.bin");
+        std::fs::File::create(&plain).unwrap();
+        let want = std::fs::metadata(&plain).unwrap().permissions().mode() & 0o777;
+        assert_eq!(mode, want, "mode {mode:o}, ordinary files get {want:o}");
     }
 
     #[test]

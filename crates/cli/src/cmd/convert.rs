@@ -25,7 +25,12 @@ pub struct Args {
     #[arg(long)]
     pub rescale: bool,
     /// Output range for --rescale, as "LO,HI".
-    #[arg(long, value_name = "LO,HI", requires = "rescale", allow_hyphen_values = true)]
+    #[arg(
+        long,
+        value_name = "LO,HI",
+        requires = "rescale",
+        allow_hyphen_values = true
+    )]
     pub range: Option<String>,
     /// Compress the voxel data (MetaImage, NRRD; NIfTI compresses by the .gz extension).
     #[arg(long)]

@@ -98,11 +98,6 @@ fn write_slice_png(
     match kind {
         Kind::Density => write_picture(png, &s, None, Colormap::Grey),
         // Distances in model units: ±0.5 around the surface, blue inside, red outside.
-        Kind::Sdf => write_picture(
-            png,
-            &s,
-            Some(Window::new(0.0, 1.0)?),
-            Colormap::CoolWarm,
-        ),
+        Kind::Sdf => write_picture(png, &s, Some(Window::new(0.0, 1.0)?), Colormap::CoolWarm),
     }
 }
