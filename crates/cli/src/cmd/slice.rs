@@ -27,8 +27,8 @@ pub struct Args {
     /// Slice at this physical position (mm along the axis direction from the origin).
     #[arg(long, allow_hyphen_values = true)]
     pub position: Option<f64>,
-    /// Window "CENTER,WIDTH" (e.g. 40,400 for CT soft tissue). Default: the 0.5-99.5
-    /// percentile range of the slice.
+    /// Window "CENTER,WIDTH" (e.g. 40,400 for CT soft tissue; width 0 thresholds at CENTER).
+    /// Default: the 0.5-99.5 percentile range of the slice.
     #[arg(long, value_name = "CENTER,WIDTH", allow_hyphen_values = true)]
     pub window: Option<String>,
     /// Colour map: grey, hot, viridis, turbo, cool-warm.
@@ -64,9 +64,6 @@ pub fn run(args: &Args) -> anyhow::Result<()> {
     let window = match &args.window {
         Some(w) => {
             let [c, w] = args::pair(w)?;
-            if !(w > 0.0) {
-                bail!("window width must be positive, got {w}");
-            }
             Some(Window::new(c, w)?)
         }
         None => None,
