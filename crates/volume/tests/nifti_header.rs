@@ -588,6 +588,11 @@ fn corrupt_or_truncated_gzip_is_a_clear_error() {
     let e = read_bytes(&bad).unwrap_err().to_string();
     assert!(e.contains("NIfTI-1"), "{e}");
     expect_err(&gz[..30], "");
+    // A stream whose CRC-32 trailer does not match its content.
+    let mut bad_crc = gz.clone();
+    let n = bad_crc.len();
+    bad_crc[n - 8] ^= 0xff;
+    expect_err(&bad_crc, "gzip");
     // Not a gzip body after the magic at all.
     expect_err(
         &[0x1f, 0x8b, 8, 0, 0, 0, 0, 0, 0, 3, 1, 2, 3, 4, 5, 6],

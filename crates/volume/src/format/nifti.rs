@@ -83,11 +83,12 @@
 //! # Performance
 //!
 //! The data are read straight into the final voxel buffer, whose size is checked
-//! ([`volmorph_io::checked_len`]) and reserved exactly (a refused allocation is an error)
-//! before anything is read; a gzip stream is decoded incrementally into that buffer, without
-//! an intermediate copy. The buffer is filled in 4 MiB steps, each byte-swapped in place while
-//! still in cache when the file is big-endian, so a stream that holds less than its header
-//! claims costs only what it holds. Rescaling runs in parallel.
+//! ([`volmorph_io::checked_len`]) before anything is allocated. A plain file, whose size has
+//! been checked to cover the data, is read in one call into a zeroed buffer of exactly that
+//! size. A gzip stream is decoded incrementally into a buffer reserved at exactly that size
+//! (a refused allocation is an error), in 4 MiB steps, so a stream that holds less than its
+//! header claims costs only what it holds. Big-endian data are swapped in place; rescaling
+//! runs in parallel.
 
 use std::fs::File;
 use std::io::{self, BufRead, BufReader, Read, Write};
@@ -115,6 +116,9 @@ const XFORM_SCANNER_ANAT: i16 = 1;
 const WRITE_XYZT_UNITS: u8 = 10;
 /// Chunk for parallel in-place work on voxel buffers (elements).
 const PAR_CHUNK: usize = 1 << 16;
+/// Most bytes decoded after the voxel data of a gzip stream to reach its CRC trailer (a
+/// NIfTI file normally ends with its data; longer tails are left unchecked).
+const GZ_TAIL_LIMIT: u64 = 1 << 20;
 /// Bytes decoded per step when reading voxel data (fits in L2/L3 while it is swapped).
 const READ_CHUNK_BYTES: usize = 1 << 22;
 
@@ -315,7 +319,9 @@ impl RawHeader {
                 .collect::<Vec<_>>()
                 .join(" "),
         );
-        push("intent_p1 p2 p3", list(&self.intent_p));
+        push("intent_p1", self.intent_p[0].to_string());
+        push("intent_p2", self.intent_p[1].to_string());
+        push("intent_p3", self.intent_p[2].to_string());
         push("intent_code", self.intent_code.to_string());
         push(
             "datatype",
@@ -1040,13 +1046,13 @@ fn itk_geometry(h: &RawHeader, layout: &Layout) -> Result<Geometry, VolumeError>
     if source != Source::Neither {
         let flip = [-1.0, -1.0, 1.0];
         for a in 0..ndim {
-            origin[a] = flip[a] * f64::from(m[a][3]);
+            origin[a] = flip[a] * f64::from(m[a][3]) + 0.0;
         }
         let mut cols = [DVec3::X, DVec3::Y, DVec3::Z];
         for (j, col) in cols.iter_mut().enumerate().take(ndim) {
             let mut c = DVec3::ZERO;
             for i in 0..ndim {
-                c[i] = flip[i] * f64::from(m[i][j]);
+                c[i] = flip[i] * f64::from(m[i][j]) + 0.0; // + 0.0: no negative zeros
             }
             let n = c.length();
             *col = if n == 0.0 { c } else { c / n };
@@ -1057,7 +1063,7 @@ fn itk_geometry(h: &RawHeader, layout: &Layout) -> Result<Geometry, VolumeError>
     for a in 0..3 {
         if spacing[a] < 0.0 {
             spacing[a] = -spacing[a];
-            let c = -direction.col(a);
+            let c = DVec3::ZERO - direction.col(a); // no negative zeros
             *direction.col_mut(a) = c;
         }
     }
@@ -1125,17 +1131,46 @@ fn skip<R: Read>(r: &mut R, n: u64, what: &str) -> Result<(), VolumeError> {
     Ok(())
 }
 
-/// Read `layout.len` voxels into a buffer reserved at exactly that size. The buffer is
-/// filled (and byte-swapped) in cache-sized chunks, so memory is touched only as data arrive:
-/// a stream that claims more data than it holds fails after reading what it has, and a size
-/// the allocator refuses is an error, not an abort.
+/// Read `layout.len` voxels.
+///
+/// When `length_checked` (a plain file whose size covers the data), the buffer is allocated
+/// zeroed at exactly the checked size — fresh zero pages from the OS, no user-space fill — and
+/// read in one call, then byte-swapped in parallel if needed. Otherwise (a gzip stream, whose
+/// length is unknown until decoded) the buffer is reserved at exactly that size and filled,
+/// and byte-swapped while still in cache, in 4 MiB steps, so memory is touched only as data
+/// arrive: a stream that holds less than its header claims fails after reading what it has,
+/// and a size the allocator refuses is an error, not an abort.
 fn read_typed<T: Voxel, R: Read>(
     r: &mut R,
     layout: &Layout,
     big_endian: bool,
+    length_checked: bool,
 ) -> Result<Vec<T>, VolumeError> {
     let n = layout.len;
     let size = T::TYPE.size();
+    let swap = size > 1 && big_endian != cfg!(target_endian = "big");
+    let truncated = |got: usize| {
+        err(format!(
+            "truncated data: {n} voxels of {} need {} bytes, the data end after {got}",
+            T::TYPE,
+            layout.data_bytes(),
+        ))
+    };
+    if length_checked {
+        let mut data = vec![T::default(); n];
+        let got = fill(r, bytemuck::cast_slice_mut(&mut data), "voxel data")?;
+        if got < layout.data_bytes() {
+            return Err(truncated(got));
+        }
+        if swap {
+            data.par_chunks_mut(PAR_CHUNK).for_each(|c| {
+                for v in c {
+                    *v = v.swap_bytes();
+                }
+            });
+        }
+        return Ok(data);
+    }
     let mut data: Vec<T> = Vec::new();
     data.try_reserve_exact(n).map_err(|_| {
         err(format!(
@@ -1144,22 +1179,15 @@ fn read_typed<T: Voxel, R: Read>(
             T::TYPE
         ))
     })?;
-    let swap = size > 1 && big_endian != cfg!(target_endian = "big");
     let per_chunk = (READ_CHUNK_BYTES / size).max(1);
     while data.len() < n {
         let start = data.len();
         let end = (start + per_chunk).min(n);
         data.resize(end, T::default());
         let chunk = &mut data[start..end];
-        let want = chunk.len() * size;
         let got = fill(r, bytemuck::cast_slice_mut(chunk), "voxel data")?;
-        if got < want {
-            return Err(err(format!(
-                "truncated data: {n} voxels of {} need {} bytes, the data end after {}",
-                T::TYPE,
-                layout.data_bytes(),
-                start * size + got
-            )));
+        if got < chunk.len() * size {
+            return Err(truncated(start * size + got));
         }
         if swap {
             for v in chunk.iter_mut() {
@@ -1214,8 +1242,9 @@ where
     })
 }
 
-/// Parse a header from a stream positioned at byte 0, then read the voxels; `file_len` (when
-/// known) lets a short file be refused before anything is allocated.
+/// Parse a header from a stream positioned at byte 0, then read the voxels. `file_len` is the
+/// size of a plain file (lets a short file be refused before anything is allocated); `None`
+/// means a gzip stream, which is decoded to its end after the data so that its CRC is checked.
 fn read_stream<R: Read>(
     r: &mut R,
     file_len: Option<u64>,
@@ -1247,9 +1276,14 @@ fn read_stream<R: Read>(
     skip(r, (layout.offset - HEADER_SIZE) as u64, "extensions")?;
     let rescale = rescale_of(&h);
     let be = h.big_endian;
+    let checked = file_len.is_some();
     macro_rules! go {
         ($t:ty) => {
-            build(geometry, read_typed::<$t, _>(r, &layout, be)?, rescale)?
+            build(
+                geometry,
+                read_typed::<$t, _>(r, &layout, be, checked)?,
+                rescale,
+            )?
         };
     }
     let volume = match layout.voxel_type {
@@ -1262,6 +1296,11 @@ fn read_stream<R: Read>(
         VoxelType::F32 => go!(f32),
         VoxelType::F64 => go!(f64),
     };
+    if file_len.is_none() {
+        // The gzip trailer (CRC-32, size) is verified only when the decoder reaches it.
+        io::copy(&mut r.take(GZ_TAIL_LIMIT), &mut io::sink())
+            .map_err(|e| io_err(e, "after the voxel data"))?;
+    }
     Ok((volume, h.fields()))
 }
 
