@@ -1,8 +1,9 @@
 //! NIfTI-1 single-file volumes (`.nii`, and gzip-compressed `.nii.gz`).
 //!
-//! Geometry follows `itk::NiftiImageIO` (with `nifti1_io` underneath) rule for rule, because ITK
-//! is volmorph's geometry reference: a file read here lands on the same physical grid as in
-//! ITK/SimpleITK/ANTs, and a file written here is read back by them as written.
+//! Geometry follows `itk::NiftiImageIO` (ITK 5.3/5.4, with `nifti1_io` underneath) rule for
+//! rule, because ITK is volmorph's geometry reference: a file read here lands on the same
+//! physical grid as in ITK/SimpleITK/ANTs, and a file written here is read back by them as
+//! written.
 //!
 //! # Header
 //!
