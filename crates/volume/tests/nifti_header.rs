@@ -341,7 +341,7 @@ fn negative_or_zero_pixdim_and_units_follow_itk() {
         g.direction,
         DMat3::from_diagonal(DVec3::new(-1.0, 1.0, 1.0))
     );
-    // Metres: spacing × 1000; ITK leaves the origin alone.
+    // Metres: spacing and origin × 1000.
     let mut h = Hdr::new();
     h.xyzt_units = 1 | 8;
     h.qform_code = 1;
@@ -349,7 +349,7 @@ fn negative_or_zero_pixdim_and_units_follow_itk() {
     h.pixdim = [1.0, 0.001, 0.002, 0.003, 1.0, 1.0, 1.0, 1.0];
     let g = *read(&h).geometry();
     assert_vec(g.spacing, DVec3::new(1.0, 2.0, 3.0), 1e-6);
-    assert_eq!(g.origin, DVec3::new(-0.5, -0.25, 0.125));
+    assert_eq!(g.origin, DVec3::new(-500.0, -250.0, 125.0));
     // Microns: × 1/1000.
     h.xyzt_units = 3;
     h.pixdim = [1.0, 500.0, 500.0, 500.0, 1.0, 1.0, 1.0, 1.0];
@@ -384,6 +384,97 @@ fn two_dimensional_and_trailing_unit_dimensions() {
     h.dim = [4, 2, 3, 4, 2, 1, 1, 1];
     let e = read_bytes(&h.file()).unwrap_err();
     assert!(matches!(e, VolumeError::Unsupported(_)), "{e}");
+}
+
+/// Geometries SimpleITK 2.5.7 (ITK 5.4) reads from these same hand-built headers, printed at
+/// full precision: volmorph must produce the identical `f64` values.
+#[test]
+fn hand_built_headers_match_simpleitk_bit_for_bit() {
+    let rows = |d: [f64; 9]| cols([d[0], d[3], d[6]], [d[1], d[4], d[7]], [d[2], d[5], d[8]]);
+    // qform 90° about z.
+    let mut h = Hdr::new();
+    h.qform_code = 1;
+    h.quatern = [0.0, 0.0, std::f32::consts::FRAC_1_SQRT_2];
+    h.qoffset = [10.0, 20.0, 30.0];
+    h.pixdim = [1.0, 2.0, 3.0, 4.0, 1.0, 1.0, 1.0, 1.0];
+    let g = *read(&h).geometry();
+    assert_eq!(g.origin, DVec3::new(-10.0, -20.0, 30.0));
+    assert_eq!(g.spacing, DVec3::new(2.0, 3.0, 4.0));
+    assert_eq!(
+        g.direction,
+        rows([
+            -3.422854177870248e-08,
+            0.9999999999999994,
+            0.0,
+            -0.9999999999999996,
+            -3.422854177870247e-08,
+            0.0,
+            0.0,
+            0.0,
+            1.0
+        ])
+    );
+    // General quaternion, qfac −1, qform_code 2.
+    let mut h = Hdr::new();
+    h.qform_code = 2;
+    h.quatern = [0.1, 0.2, 0.3];
+    h.qoffset = [-5.0, 6.0, 7.0];
+    h.pixdim = [-1.0, 0.5, 0.75, 1.25, 1.0, 1.0, 1.0, 1.0];
+    let g = *read(&h).geometry();
+    assert_eq!(g.origin, DVec3::new(5.0, -6.0, 7.0));
+    assert_eq!(g.spacing, DVec3::new(0.5, 0.75, 1.25));
+    assert_eq!(
+        g.direction,
+        rows([
+            -0.7399999966700175,
+            0.5164171551889915,
+            0.4309447310430553,
+            -0.5964171186695812,
+            -0.7999999669709889,
+            -0.06547236475864433,
+            -0.3109447305973344,
+            0.305472379558162,
+            -0.9000000045772999
+        ])
+    );
+    // Microns, odd values everywhere.
+    let mut h = Hdr::new();
+    h.qform_code = 1;
+    h.xyzt_units = 3;
+    h.quatern = [0.2, -0.1, 0.05];
+    h.qoffset = [0.1, -0.3, 1234.567];
+    h.pixdim = [1.0, 0.3, 0.7, 1.1, 1.0, 1.0, 1.0, 1.0];
+    let g = *read(&h).geometry();
+    assert_eq!(
+        g.origin.to_array(),
+        [
+            -0.00010000000149011613,
+            0.00030000001192092895,
+            1.2345670166015625
+        ]
+    );
+    assert_eq!(
+        g.spacing.to_array(),
+        [
+            0.00030000001192092895,
+            0.000699999988079071,
+            0.001100000023841858
+        ]
+    );
+    assert_eq!(
+        g.direction,
+        rows([
+            -0.9749999993642898,
+            0.13733960543793244,
+            0.174679225266997,
+            -0.057339608618155395,
+            -0.9150000033276053,
+            0.3993584562967755,
+            0.21467922704153639,
+            0.3793584409086413,
+            0.8999999953579877
+        ])
+    );
 }
 
 // ------------------------------------------------------------------------------------------

@@ -130,9 +130,9 @@ fn plain_file_layout_is_header_extender_data() {
     assert_eq!(field(&h, "dim"), "3 5 4 3 1 1 1 1");
     assert_eq!(field(&h, "xyzt_units"), "10 (space: mm, time: s)");
     // LPS (i → −y, j → +z, k → −x) is RAS (i → +y, j → +z, k → +x): qfac +1, srow scaled.
-    assert_eq!(field(&h, "pixdim"), "1 0.5 1.25 2 1 1 1 1");
-    assert_eq!(field(&h, "srow_x"), "0 0 2 10.5");
-    assert_eq!(field(&h, "srow_y"), "0.5 0 0 -4.25");
+    assert_eq!(field(&h, "pixdim"), "1 0.5 1.25 2 0 0 0 0");
+    assert_eq!(field(&h, "srow_x"), "0 -0 2 10.5");
+    assert_eq!(field(&h, "srow_y"), "0.5 -0 0 -4.25");
     assert_eq!(field(&h, "srow_z"), "0 1.25 0 2.5");
 }
 
@@ -230,8 +230,8 @@ fn skewed_direction_keeps_exact_sform_and_reads_back_orthonormal() {
     format::write(&p, &v).unwrap();
     let f = format::read_with_header(&p).unwrap();
     // The exact skewed matrix, LPS → RAS, scaled by spacing, is in the sform …
-    assert_eq!(field(&f.header, "srow_x"), "-1 -1.2 0 0");
-    assert_eq!(field(&f.header, "srow_y"), "0 -1.6 0 0");
+    assert_eq!(field(&f.header, "srow_x"), "-1 -1.2 -0 -0");
+    assert_eq!(field(&f.header, "srow_y"), "-0 -1.6 -0 -0");
     assert_eq!(field(&f.header, "srow_z"), "0 0 4 0");
     // … and ITK's rules read the (orthonormal) qform: the closest rotation to the skew.
     let d = f.volume.geometry().direction;

@@ -3,7 +3,10 @@
 //! Geometry follows `itk::NiftiImageIO` (ITK 5.3/5.4, with `nifti1_io` underneath) rule for
 //! rule, because ITK is volmorph's geometry reference: a file read here lands on the same
 //! physical grid as in ITK/SimpleITK/ANTs, and a file written here is read back by them as
-//! written.
+//! written. This is checked against SimpleITK 2.5.7 (ITK 5.4): files ITK wrote read to ITK's
+//! `f64` geometry bit for bit, hand-built headers likewise, and volmorph writes the header
+//! bytes ITK writes (apart from `descrip`) — see `tests/nifti_itk_reference.rs` and
+//! `tests/nifti_header.rs`.
 //!
 //! # Header
 //!
@@ -49,10 +52,10 @@
 //!    `j = normalise(−M₀ⱼ, −M₁ⱼ, M₂ⱼ)` (computed in `f64` from the `f32` matrix). For a 1-D or
 //!    2-D image only the leading 1×1 or 2×2 block is used (normalised over that block), and
 //!    the missing axes get spacing 1, origin 0 and a unit direction, as ITK's reader does.
-//! 6. *Spacing* is `pixdim[1..=3]` (never the matrix column lengths), times 1000 when
-//!    `xyzt_units` says metres and 1/1000 when it says microns. ITK does not scale the origin
-//!    by the unit, and neither does volmorph. A negative `pixdim` gives a positive spacing and
-//!    a negated direction column (ITK's `ImageFileReader`).
+//! 6. *Spacing* is `pixdim[1..=3]` (never the matrix column lengths). Spacing and origin are
+//!    multiplied by 1000 when `xyzt_units` says metres and by 1/1000 when it says microns
+//!    (millimetres out). A negative `pixdim` gives a positive spacing and a negated direction
+//!    column (ITK's `ImageFileReader`).
 //!
 //! # Voxel values
 //!
@@ -70,10 +73,12 @@
 //! magic `n+1`, `xyzt_units = 10` (millimetres, seconds — what ITK writes), `dim[0] = 3`, gzip
 //! when the name ends in `.gz` (level [`WriteOptions::level`]). As in ITK's
 //! `SetNIfTIOrientationFromImageIO`, the LPS direction is converted to RAS (rows 0 and 1
-//! negated), made orthogonal by the polar decomposition of `nifti1_io`
-//! (`nifti_make_orthog_mat44`) and stored as quaternion, `qfac` (`pixdim[0]`) and offsets, with
-//! `qform_code = 1`; `srow_*` holds the same matrix with columns scaled by the spacing and
-//! `sform_code = 1`; origin `(−o₀, −o₁, o₂)`. A direction that is **not** orthonormal (the
+//! negated) in single precision, made orthogonal by `nifti1_io`'s `nifti_make_orthog_mat44`
+//! (rows normalised, polar decomposition) and stored as quaternion, `qfac` (`pixdim[0]`) and
+//! offsets (`nifti_mat44_to_quatern`), with `qform_code = 1`; `srow_*` holds the same matrix
+//! with columns scaled by the spacing and `sform_code = 1`; origin `(−o₀, −o₁, o₂)`;
+//! `pixdim[4..8] = 0`. Arithmetic follows `nifti1_io`'s mix of single and double precision, so
+//! the bytes are ITK's (negative zeros included). A direction that is **not** orthonormal (the
 //! column-normalised direction fails ITK's own `R·Rᵀ = I` test at 1e-4) cannot be expressed
 //! as a quaternion: its exact RAS matrix is written to `srow_*` (`sform_code = 1`) and the
 //! polar (closest orthogonal) rotation to the qform. ITK reads such a file through the qform —
@@ -685,60 +690,92 @@ fn inverse33(m: &Mat33) -> Mat33 {
     ]
 }
 
-/// Largest row 1-norm.
-fn rownorm(m: &Mat33) -> f64 {
-    m.iter()
-        .map(|r| r.iter().map(|v| f64::from(v.abs())).sum::<f64>())
-        .fold(0.0, f64::max)
+/// `nifti_mat33_rownorm`: largest row 1-norm (double sums, single-precision result).
+fn rownorm(m: &Mat33) -> f32 {
+    let r = |i: usize| {
+        (f64::from(m[i][0].abs()) + f64::from(m[i][1].abs()) + f64::from(m[i][2].abs())) as f32
+    };
+    r(0).max(r(1)).max(r(2))
 }
 
-/// Largest column 1-norm.
-fn colnorm(m: &Mat33) -> f64 {
-    (0..3)
-        .map(|j| (0..3).map(|i| f64::from(m[i][j].abs())).sum::<f64>())
-        .fold(0.0, f64::max)
+/// `nifti_mat33_colnorm`: largest column 1-norm (double sums, single-precision result).
+fn colnorm(m: &Mat33) -> f32 {
+    let c = |j: usize| {
+        (f64::from(m[0][j].abs()) + f64::from(m[1][j].abs()) + f64::from(m[2][j].abs())) as f32
+    };
+    c(0).max(c(1)).max(c(2))
 }
 
-/// `nifti_mat33_polar`: the orthogonal factor of the polar decomposition, by the scaled Newton
-/// iteration `X ← ½(γX + γ⁻¹X⁻ᵀ)` (scaling while far from convergence), single-precision
-/// storage as in `nifti1_io`. A singular input is nudged along the diagonal first.
+/// `nifti_mat33_polar`: the orthogonal factor of the polar decomposition by Higham's scaled
+/// Newton iteration `X ← ½(γX + γ⁻¹X⁻ᵀ)` (scaled while far from convergence), with the
+/// single-precision scalars and storage of `nifti1_io`, so results agree with it bit for bit.
+/// A singular input is nudged along the diagonal first, as there.
 fn polar33(a: &Mat33) -> Mat33 {
     let mut x = *a;
-    let mut det = det33(&x);
+    let mut gam = det33(&x) as f32;
     let mut guard = 0;
-    while det == 0.0 && guard < 100 {
-        let g = (0.00001 * (0.001 + rownorm(&x))) as f32;
+    while gam == 0.0 && guard < 1000 {
+        gam = (0.00001 * (0.001 + f64::from(rownorm(&x)))) as f32;
         for (i, row) in x.iter_mut().enumerate() {
-            row[i] += g;
+            row[i] += gam;
         }
-        det = det33(&x);
+        gam = det33(&x) as f32;
         guard += 1;
     }
-    let mut dif = 1.0f64;
+    let mut dif = 1.0f32;
     let mut z = x;
     for _ in 0..=100 {
         let y = inverse33(&x);
-        let (gam, gmi) = if dif > 0.3 {
-            let alp = (rownorm(&x) * colnorm(&x)).sqrt();
-            let bet = (rownorm(&y) * colnorm(&y)).sqrt();
-            let gam = (bet / alp).sqrt();
-            (gam, 1.0 / gam)
+        let (g, gmi) = if f64::from(dif) > 0.3 {
+            let alp = f64::from(rownorm(&x) * colnorm(&x)).sqrt() as f32;
+            let bet = f64::from(rownorm(&y) * colnorm(&y)).sqrt() as f32;
+            let g = f64::from(bet / alp).sqrt() as f32;
+            (g, (1.0 / f64::from(g)) as f32)
         } else {
-            (1.0, 1.0)
+            (1.0f32, 1.0f32)
         };
-        dif = 0.0;
+        let mut d = 0.0f64;
         for i in 0..3 {
             for j in 0..3 {
-                z[i][j] = (0.5 * (gam * f64::from(x[i][j]) + gmi * f64::from(y[j][i]))) as f32;
-                dif += f64::from((z[i][j] - x[i][j]).abs());
+                z[i][j] = 0.5 * (g * x[i][j] + gmi * y[j][i]);
+                d += f64::from((z[i][j] - x[i][j]).abs());
             }
         }
-        if dif < 3e-6 {
+        dif = d as f32;
+        if f64::from(dif) < 3e-6 {
             break;
         }
         x = z;
     }
     z
+}
+
+/// `nifti_make_orthog_mat44`'s 3×3: normalise each row (a zero row becomes a unit vector; a
+/// zero third row the cross product of the first two), then take the polar factor.
+fn make_orthog33(rows: Mat33) -> Mat33 {
+    let mut q = rows;
+    for i in 0..3 {
+        let [a, b, c] = q[i];
+        let val = f64::from(a * a + b * b + c * c);
+        if val > 0.0 {
+            let inv = 1.0 / val.sqrt();
+            q[i] = q[i].map(|v| (f64::from(v) * inv) as f32);
+        } else if i < 2 {
+            q[i] = [0.0; 3];
+            q[i][i] = 1.0;
+        } else {
+            q[2] = [
+                q[0][1] * q[1][2] - q[0][2] * q[1][1],
+                q[0][2] * q[1][0] - q[0][0] * q[1][2],
+                q[0][0] * q[1][1] - q[0][1] * q[1][0],
+            ];
+        }
+    }
+    polar33(&q)
+}
+
+fn transpose33(m: &Mat33) -> Mat33 {
+    std::array::from_fn(|i| std::array::from_fn(|j| m[j][i]))
 }
 
 /// `nifti_mat44_to_quatern` for a matrix with unit columns: returns `(b, c, d, qfac)`.
@@ -1047,7 +1084,7 @@ fn itk_geometry(h: &RawHeader, layout: &Layout) -> Result<Geometry, VolumeError>
     if source != Source::Neither {
         let flip = [-1.0, -1.0, 1.0];
         for a in 0..ndim {
-            origin[a] = flip[a] * f64::from(m[a][3]) + 0.0;
+            origin[a] = flip[a] * f64::from(m[a][3]) * unit_scale + 0.0;
         }
         let mut cols = [DVec3::X, DVec3::Y, DVec3::Z];
         for (j, col) in cols.iter_mut().enumerate().take(ndim) {
@@ -1373,8 +1410,9 @@ fn write_xform(g: &Geometry) -> Result<WriteXform, VolumeError> {
             *v = to_f32(flip[i] * g.direction.col(j)[i], "direction")?;
         }
     }
-    // nifti_make_orthog_mat44: normalise each direction vector, then take the polar factor.
-    let ortho = polar33(&normalized_columns_f32(&dir));
+    // ITK passes the three RAS direction vectors as the rows of nifti_make_orthog_mat44 and
+    // transposes the result, so the columns of `ortho` are the orthogonalised directions.
+    let ortho = transpose33(&make_orthog33(transpose33(&dir)));
     let (quatern, qfac) = mat33_to_quatern(&ortho);
     let offset = [
         to_f32(-g.origin.x, "origin x")?,
@@ -1401,13 +1439,13 @@ fn write_xform(g: &Geometry) -> Result<WriteXform, VolumeError> {
         }
         srow[i][3] = offset[i];
     }
-    // Canonical zeros: −0.0 (from negating a zero) is stored as +0.0.
-    let z = |v: f32| v + 0.0;
+    // Zeros keep the sign ITK's arithmetic gives them (e.g. −0 from negating a zero), so the
+    // header bytes are the ones ITK writes.
     Ok(WriteXform {
-        quatern: quatern.map(z),
+        quatern,
         qfac,
-        offset: offset.map(z),
-        srow: srow.map(|r| r.map(z)),
+        offset,
+        srow,
     })
 }
 
@@ -1448,10 +1486,10 @@ fn encode_header(v: &AnyVolume) -> Result<[u8; WRITE_VOX_OFFSET], VolumeError> {
         g.spacing.x as f32,
         g.spacing.y as f32,
         g.spacing.z as f32,
-        1.0,
-        1.0,
-        1.0,
-        1.0,
+        0.0,
+        0.0,
+        0.0,
+        0.0,
     ];
     for (i, p) in pixdim.iter().enumerate() {
         put(76 + 4 * i, &p.to_le_bytes());
