@@ -129,25 +129,29 @@ def check_nibabel(vm: Volmorph, tmp: Path) -> None:
     affine = np.eye(4)
     affine[:3, :3] = rot @ np.diag(spacing)
     affine[:3, 3] = [12.5, -40.25, 7.0]
-    img = nib.Nifti1Image(data_xyz, affine)
-    img.set_qform(affine, code=1)
-    img.set_sform(affine, code=1)
-    for ext in (".nii", ".nii.gz"):
-        p = tmp / f"nib{ext}"
-        nib.save(img, p)
-        info = vm.info(p)
-        lps = np.diag([-1.0, -1.0, 1.0])
-        ok, why = check_geometry(f"nibabel→volmorph {ext}", info, spacing, lps @ affine[:3, 3], lps @ rot)
-        same = np.array_equal(vm.voxels(p, tmp), data_zyx)
-        record(f"nibabel writes {ext}, volmorph reads", "PASS" if ok and same else "FAIL",
-               why if not ok else ("" if same else "voxels differ"))
-        # volmorph writes, nibabel reads
-        out = tmp / f"vm_from_nib{ext}"
-        vm.run("convert", p, out)
-        back = nib.load(out)
-        ok2 = close(back.affine, affine, 1e-5) and np.array_equal(np.asanyarray(back.dataobj), data_xyz)
-        record(f"volmorph writes {ext}, nibabel reads", "PASS" if ok2 else "FAIL",
-               "" if ok2 else f"affine {back.affine.tolist()}")
+    for forms in ("sform+qform", "sform only"):
+        img = nib.Nifti1Image(data_xyz, affine)
+        if forms == "sform only":
+            img.set_qform(None, code=0)
+        else:
+            img.set_qform(affine, code=1)
+        img.set_sform(affine, code=1)
+        for ext in (".nii", ".nii.gz"):
+            p = tmp / f"nib{ext}"
+            nib.save(img, p)
+            info = vm.info(p)
+            lps = np.diag([-1.0, -1.0, 1.0])
+            ok, why = check_geometry("", info, spacing, lps @ affine[:3, 3], lps @ rot)
+            same = np.array_equal(vm.voxels(p, tmp), data_zyx)
+            record(f"nibabel writes {ext} ({forms}), volmorph reads", "PASS" if ok and same else "FAIL",
+                   why if not ok else ("" if same else "voxels differ"))
+            # volmorph writes, nibabel reads
+            out = tmp / f"vm_from_nib{ext}"
+            vm.run("convert", p, out)
+            back = nib.load(out)
+            ok2 = close(back.affine, affine, 1e-5) and np.array_equal(np.asanyarray(back.dataobj), data_xyz)
+            record(f"volmorph writes {ext} ({forms} source), nibabel reads", "PASS" if ok2 else "FAIL",
+                   "" if ok2 else f"affine {back.affine.tolist()}")
 
 
 # ---------------------------------------------------------------- SimpleITK
