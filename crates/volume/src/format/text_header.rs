@@ -416,21 +416,12 @@ pub(crate) fn decode(
     geometry.validate()?;
     let vt = spec.voxel_type;
     let n = volmorph_io::checked_len(&geometry.dims, vt.size())?;
-    macro_rules! go {
-        ($t:ty) => {
-            AnyVolume::from(Volume::new(geometry, decode_typed::<$t>(input, spec, n)?)?)
-        };
-    }
-    Ok(match vt {
-        VoxelType::U8 => go!(u8),
-        VoxelType::I8 => go!(i8),
-        VoxelType::U16 => go!(u16),
-        VoxelType::I16 => go!(i16),
-        VoxelType::U32 => go!(u32),
-        VoxelType::I32 => go!(i32),
-        VoxelType::F32 => go!(f32),
-        VoxelType::F64 => go!(f64),
-    })
+    Ok(
+        crate::with_voxel_type!(vt, T => AnyVolume::from(Volume::new(
+        geometry,
+        decode_typed::<T>(input, spec, n)?
+    )?)),
+    )
 }
 
 fn decode_typed<T: AsciiVoxel>(
