@@ -154,8 +154,19 @@ impl Mesh {
         offsets: Vec<u32>,
     ) -> Result<Self, MeshError> {
         let mesh = Self::from_csr_unvalidated(positions, indices, offsets)?;
-        let n = mesh.positions.len();
-        for (f, face) in mesh.faces().enumerate() {
+        mesh.check_faces()?;
+        Ok(mesh)
+    }
+
+    /// Check that every face has at least three vertices and only in-range indices (what
+    /// [`Mesh::from_csr`] guarantees and every file writer requires, so that a mesh built with
+    /// [`Mesh::from_csr_unvalidated`] is refused before anything is written).
+    ///
+    /// # Errors
+    /// [`MeshError::FaceTooSmall`] or [`MeshError::IndexOutOfRange`] for the first bad face.
+    pub(crate) fn check_faces(&self) -> Result<(), MeshError> {
+        let n = self.positions.len();
+        for (f, face) in self.faces().enumerate() {
             if face.len() < 3 {
                 return Err(MeshError::FaceTooSmall {
                     face: f,
@@ -170,7 +181,7 @@ impl Mesh {
                 });
             }
         }
-        Ok(mesh)
+        Ok(())
     }
 
     /// A mesh from CSR arrays whose faces are *not* checked: indices may be out of range and

@@ -127,8 +127,7 @@ impl RgbaImage {
     /// [`RenderError::Size`] for zero or oversized dimensions, [`RenderError::LengthMismatch`]
     /// when `pixels.len() != width × height`.
     pub fn from_pixels(width: u32, height: u32, pixels: Vec<[u8; 4]>) -> Result<Self, RenderError> {
-        let n = pixel_count(width.into(), height.into(), 4)?;
-        check_len("pixels", width, height, n, pixels.len())?;
+        check_buffer("pixels", width, height, pixels.len())?;
         Ok(Self {
             width,
             height,
@@ -153,14 +152,7 @@ impl RgbaImage {
         F: Fn(u32, u32) -> [u8; 4] + Sync,
     {
         let mut img = Self::new(width, height, [0; 4])?;
-        img.pixels
-            .par_chunks_mut(width as usize)
-            .enumerate()
-            .for_each(|(y, row)| {
-                for (x, p) in row.iter_mut().enumerate() {
-                    *p = f(x as u32, y as u32);
-                }
-            });
+        fill_rows(&mut img.pixels, width, f);
         Ok(img)
     }
 
@@ -170,8 +162,7 @@ impl RgbaImage {
     /// [`RenderError::Size`] for zero or oversized dimensions, [`RenderError::LengthMismatch`]
     /// when `grey.len() != width × height`.
     pub fn from_grey8(width: u32, height: u32, grey: &[u8]) -> Result<Self, RenderError> {
-        let n = pixel_count(width.into(), height.into(), 4)?;
-        check_len("grey", width, height, n, grey.len())?;
+        check_buffer("grey", width, height, grey.len())?;
         Ok(Self {
             width,
             height,
@@ -362,8 +353,7 @@ impl ScalarImage {
     /// [`RenderError::Size`] for zero or oversized dimensions, [`RenderError::LengthMismatch`]
     /// when `values.len() != width × height`.
     pub fn from_values(width: u32, height: u32, values: Vec<f32>) -> Result<Self, RenderError> {
-        let n = pixel_count(width.into(), height.into(), 4)?;
-        check_len("values", width, height, n, values.len())?;
+        check_buffer("values", width, height, values.len())?;
         Ok(Self {
             width,
             height,
@@ -380,14 +370,7 @@ impl ScalarImage {
         F: Fn(u32, u32) -> f32 + Sync,
     {
         let mut img = Self::new(width, height, 0.0)?;
-        img.values
-            .par_chunks_mut(width as usize)
-            .enumerate()
-            .for_each(|(y, row)| {
-                for (x, v) in row.iter_mut().enumerate() {
-                    *v = f(x as u32, y as u32);
-                }
-            });
+        fill_rows(&mut img.values, width, f);
         Ok(img)
     }
 
@@ -525,6 +508,33 @@ pub fn finite_range(values: &[f32]) -> Option<(f32, f32)> {
             None => Some((v, v)),
             Some((lo, hi)) => Some((lo.min(v), hi.max(v))),
         })
+}
+
+/// Set `buf[y·width + x] = f(x, y)` for every element of the row-major `buf`, in parallel
+/// over rows (`f` is called exactly once per element, in no particular order).
+fn fill_rows<P: Send>(buf: &mut [P], width: u32, f: impl Fn(u32, u32) -> P + Sync) {
+    buf.par_chunks_mut(width as usize)
+        .enumerate()
+        .for_each(|(y, row)| {
+            for (x, p) in row.iter_mut().enumerate() {
+                *p = f(x as u32, y as u32);
+            }
+        });
+}
+
+/// Check the dimensions (as [`pixel_count`]) and that a buffer of `len` elements named
+/// `what` holds exactly `width × height` of them.
+///
+/// # Errors
+/// [`RenderError::Size`] or [`RenderError::LengthMismatch`].
+fn check_buffer(
+    what: &'static str,
+    width: u32,
+    height: u32,
+    len: usize,
+) -> Result<(), RenderError> {
+    let n = pixel_count(width.into(), height.into(), 4)?;
+    check_len(what, width, height, n, len)
 }
 
 pub(crate) fn check_len(

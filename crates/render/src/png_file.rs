@@ -422,113 +422,46 @@ mod tests {
                 .all(|p| p[3] == 255 && p[0] == p[1] && p[1] == p[2])
         );
 
-        // 4-bit grey: v → 17 v.
-        let png4 = build(
-            (3, 1),
-            ColorType::Grayscale,
-            BitDepth::Four,
-            None,
-            None,
-            &[0x5F, 0x00],
-        );
-        assert_eq!(
-            decode_png(&png4).unwrap().pixels(),
-            &[[85, 85, 85, 255], [255, 255, 255, 255], [0, 0, 0, 255]]
-        );
-
-        // 2-bit palette with tRNS on the first two entries.
         let palette = [10, 20, 30, 40, 50, 60, 70, 80, 90];
-        let trns = [0, 128];
-        let indices = [0b0001_1000u8]; // 0, 1, 2, 0
-        let pal = build(
-            (4, 1),
-            ColorType::Indexed,
-            BitDepth::Two,
-            Some(&palette),
-            Some(&trns),
-            &indices,
+        let be16 = |v: &[u16]| -> Vec<u8> { v.iter().flat_map(|x| x.to_be_bytes()).collect() };
+        let rgb16 = be16(&[0, 257 * 3, 65535, 129, 128, 32768]);
+        let rgba16 = be16(&[65535, 0, 257 * 200, 257 * 50]);
+        type Case<'a> = (
+            &'a str,
+            (u32, u32),
+            ColorType,
+            BitDepth,
+            Option<&'a [u8]>,
+            Option<&'a [u8]>,
+            &'a [u8],
+            &'a [[u8; 4]],
         );
-        assert_eq!(
-            decode_png(&pal).unwrap().pixels(),
-            &[
-                [10, 20, 30, 0],
-                [40, 50, 60, 128],
-                [70, 80, 90, 255],
-                [10, 20, 30, 0]
-            ]
-        );
-        // 8-bit palette without transparency.
-        let pal8 = build(
-            (2, 1),
-            ColorType::Indexed,
-            BitDepth::Eight,
-            Some(&palette),
-            None,
-            &[2, 1],
-        );
-        assert_eq!(
-            decode_png(&pal8).unwrap().pixels(),
-            &[[70, 80, 90, 255], [40, 50, 60, 255]]
-        );
-
-        // Grey with a tRNS key colour: grey 7 is transparent.
-        let key = build(
-            (2, 1),
-            ColorType::Grayscale,
-            BitDepth::Eight,
-            None,
-            Some(&[0, 7]),
-            &[7, 8],
-        );
-        assert_eq!(
-            decode_png(&key).unwrap().pixels(),
-            &[[7, 7, 7, 0], [8, 8, 8, 255]]
-        );
-
-        // Grey + alpha, 8 bits.
-        let ga = build(
-            (2, 1),
-            ColorType::GrayscaleAlpha,
-            BitDepth::Eight,
-            None,
-            None,
-            &[9, 100, 200, 255],
-        );
-        assert_eq!(
-            decode_png(&ga).unwrap().pixels(),
-            &[[9, 9, 9, 100], [200, 200, 200, 255]]
-        );
-
-        // RGB and RGBA, 16 bits: rounded to 8 bits.
-        let rgb16: Vec<u8> = [0u16, 257 * 3, 65535, 129, 128, 32768]
-            .iter()
-            .flat_map(|v| v.to_be_bytes())
-            .collect();
-        let p = build(
-            (2, 1),
-            ColorType::Rgb,
-            BitDepth::Sixteen,
-            None,
-            None,
-            &rgb16,
-        );
-        assert_eq!(
-            decode_png(&p).unwrap().pixels(),
-            &[[0, 3, 255, 255], [1, 0, 128, 255]]
-        );
-        let rgba16: Vec<u8> = [65535u16, 0, 257 * 200, 257 * 50]
-            .iter()
-            .flat_map(|v| v.to_be_bytes())
-            .collect();
-        let p = build(
-            (1, 1),
-            ColorType::Rgba,
-            BitDepth::Sixteen,
-            None,
-            None,
-            &rgba16,
-        );
-        assert_eq!(decode_png(&p).unwrap().pixels(), &[[255, 0, 200, 50]]);
+        #[rustfmt::skip]
+        let cases: [Case<'_>; 7] = [
+            // v → 17 v.
+            ("4-bit grey", (3, 1), ColorType::Grayscale, BitDepth::Four, None, None,
+             &[0x5F, 0x00], &[[85, 85, 85, 255], [255, 255, 255, 255], [0, 0, 0, 255]]),
+            // tRNS on the first two entries; indices 0, 1, 2, 0.
+            ("2-bit palette with tRNS", (4, 1), ColorType::Indexed, BitDepth::Two,
+             Some(&palette), Some(&[0, 128]), &[0b0001_1000],
+             &[[10, 20, 30, 0], [40, 50, 60, 128], [70, 80, 90, 255], [10, 20, 30, 0]]),
+            ("8-bit palette without transparency", (2, 1), ColorType::Indexed, BitDepth::Eight,
+             Some(&palette), None, &[2, 1], &[[70, 80, 90, 255], [40, 50, 60, 255]]),
+            // Grey 7 is transparent.
+            ("grey with a tRNS key colour", (2, 1), ColorType::Grayscale, BitDepth::Eight,
+             None, Some(&[0, 7]), &[7, 8], &[[7, 7, 7, 0], [8, 8, 8, 255]]),
+            ("grey + alpha, 8 bits", (2, 1), ColorType::GrayscaleAlpha, BitDepth::Eight,
+             None, None, &[9, 100, 200, 255], &[[9, 9, 9, 100], [200, 200, 200, 255]]),
+            // Rounded to 8 bits.
+            ("RGB, 16 bits", (2, 1), ColorType::Rgb, BitDepth::Sixteen, None, None,
+             &rgb16, &[[0, 3, 255, 255], [1, 0, 128, 255]]),
+            ("RGBA, 16 bits", (1, 1), ColorType::Rgba, BitDepth::Sixteen, None, None,
+             &rgba16, &[[255, 0, 200, 50]]),
+        ];
+        for (what, size, color, depth, pal, trns, data, expect) in cases {
+            let png = build(size, color, depth, pal, trns, data);
+            assert_eq!(decode_png(&png).unwrap().pixels(), expect, "{what}");
+        }
     }
 
     /// CRC-32 (ISO-HDLC, as PNG chunks use), bitwise.

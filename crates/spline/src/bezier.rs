@@ -12,7 +12,7 @@
 //! `t = (u − start)/(end − start)`; its domain is the closed box of its span.
 
 use crate::bernstein::{bernstein_derivative_unchecked, bernstein_unchecked};
-use crate::spline::{Net, check_out, checked_count};
+use crate::spline::{Net, checked_count, next_outer};
 use crate::{KnotVector, MAX_DEGREE, SplineError, TensorBSpline, basis::BASIS_BUF};
 
 /// A tensor-product Bézier (Bernstein) piece with `N` parametric axes on a parameter box.
@@ -198,15 +198,8 @@ impl<const N: usize> BezierPiece<N> {
     /// # Errors
     /// [`SplineError::ParameterOutsideDomain`] or [`SplineError::BufferLength`].
     pub fn eval_into(&self, params: [f64; N], out: &mut [f64]) -> Result<(), SplineError> {
-        check_out(out.len(), self.dim)?;
-        let t = self.local(params)?;
-        let mut vals = [[0.0; BASIS_BUF]; N];
-        for a in 0..N {
-            bernstein_unchecked(self.degrees[a], t[a], &mut vals[a]);
-        }
         self.net()
-            .contract([0; N], self.counts, &vals, None, &mut out[..self.dim], None);
-        Ok(())
+            .evaluate(out, None, |vals, ders| self.fill_basis(params, vals, ders))
     }
 
     /// Value and first partial derivatives with respect to the **global** parameters
@@ -220,28 +213,32 @@ impl<const N: usize> BezierPiece<N> {
         value: &mut [f64],
         gradient: &mut [f64],
     ) -> Result<(), SplineError> {
-        check_out(value.len(), self.dim)?;
-        check_out(gradient.len(), N * self.dim)?;
+        self.net().evaluate(value, Some(gradient), |vals, ders| {
+            self.fill_basis(params, vals, ders)
+        })
+    }
+
+    /// Fill the Bernstein values at `params` (and their first derivatives with respect to
+    /// the global parameters when `ders` is given) per axis; returns the first control index
+    /// (0) and the number of functions per axis.
+    fn fill_basis(
+        &self,
+        params: [f64; N],
+        vals: &mut [[f64; BASIS_BUF]; N],
+        mut ders: Option<&mut [[f64; BASIS_BUF]; N]>,
+    ) -> Result<([usize; N], [usize; N]), SplineError> {
         let t = self.local(params)?;
-        let mut vals = [[0.0; BASIS_BUF]; N];
-        let mut ders = [[0.0; BASIS_BUF]; N];
         for a in 0..N {
             bernstein_unchecked(self.degrees[a], t[a], &mut vals[a]);
-            bernstein_derivative_unchecked(self.degrees[a], 1, t[a], &mut ders[a]);
-            let scale = 1.0 / (self.domain[a][1] - self.domain[a][0]);
-            for d in &mut ders[a][..=self.degrees[a]] {
-                *d *= scale;
+            if let Some(d) = ders.as_deref_mut() {
+                bernstein_derivative_unchecked(self.degrees[a], 1, t[a], &mut d[a]);
+                let scale = 1.0 / (self.domain[a][1] - self.domain[a][0]);
+                for x in &mut d[a][..=self.degrees[a]] {
+                    *x *= scale;
+                }
             }
         }
-        self.net().contract(
-            [0; N],
-            self.counts,
-            &vals,
-            Some(&ders),
-            &mut value[..self.dim],
-            Some(&mut gradient[..N * self.dim]),
-        );
-        Ok(())
+        Ok(([0; N], self.counts))
     }
 
     /// Allocating form of [`BezierPiece::eval_into`].
@@ -360,16 +357,7 @@ impl<const N: usize> TensorBSpline<N> {
                     lin = lin * counts[a] + i;
                 }
                 coefs.extend_from_slice(&src[lin * hdim..(lin + orders[0]) * hdim]);
-                let mut a = 1;
-                while a < N {
-                    idx[a] += 1;
-                    if idx[a] < orders[a] {
-                        break;
-                    }
-                    idx[a] = 0;
-                    a += 1;
-                }
-                if a >= N {
+                if !next_outer(&mut idx, &orders) {
                     break;
                 }
             }

@@ -14,7 +14,7 @@
 use rayon::prelude::*;
 
 use crate::basis::{BASIS_BUF, basis_and_first_unchecked, basis_unchecked};
-use crate::spline::{Net, checked_count};
+use crate::spline::checked_count;
 use crate::{KnotVector, SplineError, TensorBSpline};
 
 /// Grid points per parallel work item: large enough to amortise scheduling, small enough to
@@ -197,13 +197,7 @@ impl<const N: usize> TensorBSpline<N> {
         if npts == 0 {
             return Ok(());
         }
-        let counts = self.counts();
-        let net = Net {
-            coefs: self.homogeneous_coefficients(),
-            counts: &counts,
-            dim,
-            rational: self.is_rational(),
-        };
+        let net = self.net();
         let orders: [usize; N] = std::array::from_fn(|a| tables[a].knots.degree() + 1);
         let run = |start: usize, vchunk: &mut [f64], mut gchunk: Option<&mut [f64]>| {
             let mut vals = [[0.0; BASIS_BUF]; N];

@@ -532,25 +532,8 @@ impl<const N: usize> TensorBSpline<N> {
     /// [`SplineError::ParameterOutsideDomain`] or [`SplineError::BufferLength`]
     /// (`out.len() < dim`).
     pub fn eval_into(&self, params: [f64; N], out: &mut [f64]) -> Result<(), SplineError> {
-        check_out(out.len(), self.dim)?;
-        let spans = self.spans(params)?;
-        let mut vals = [[0.0; BASIS_BUF]; N];
-        let mut first = [0; N];
-        let mut orders = [0; N];
-        for a in 0..N {
-            let p = self.knots[a].degree();
-            basis_unchecked(self.knots[a].knots(), p, spans[a], params[a], &mut vals[a]);
-            first[a] = spans[a] - p;
-            orders[a] = p + 1;
-        }
-        let net = Net {
-            coefs: &self.coefs,
-            counts: &self.counts,
-            dim: self.dim,
-            rational: self.rational,
-        };
-        net.contract(first, orders, &vals, None, &mut out[..self.dim], None);
-        Ok(())
+        self.net()
+            .evaluate(out, None, |vals, ders| self.fill_basis(params, vals, ders))
     }
 
     /// Evaluate the value and all first partial derivatives at `params`. `value[..dim]` receives
@@ -565,41 +548,53 @@ impl<const N: usize> TensorBSpline<N> {
         value: &mut [f64],
         gradient: &mut [f64],
     ) -> Result<(), SplineError> {
-        check_out(value.len(), self.dim)?;
-        check_out(gradient.len(), N * self.dim)?;
-        let spans = self.spans(params)?;
-        let mut vals = [[0.0; BASIS_BUF]; N];
-        let mut ders = [[0.0; BASIS_BUF]; N];
-        let mut first = [0; N];
-        let mut orders = [0; N];
-        for a in 0..N {
-            let p = self.knots[a].degree();
-            basis_and_first_unchecked(
-                self.knots[a].knots(),
-                p,
-                spans[a],
-                params[a],
-                &mut vals[a],
-                &mut ders[a],
-            );
-            first[a] = spans[a] - p;
-            orders[a] = p + 1;
-        }
-        let net = Net {
+        self.net().evaluate(value, Some(gradient), |vals, ders| {
+            self.fill_basis(params, vals, ders)
+        })
+    }
+
+    /// The control net in the form the contraction kernels read.
+    pub(crate) fn net(&self) -> Net<'_, N> {
+        Net {
             coefs: &self.coefs,
             counts: &self.counts,
             dim: self.dim,
             rational: self.rational,
-        };
-        net.contract(
-            first,
-            orders,
-            &vals,
-            Some(&ders),
-            &mut value[..self.dim],
-            Some(&mut gradient[..N * self.dim]),
-        );
-        Ok(())
+        }
+    }
+
+    /// Fill the non-zero basis values at `params` (and their first derivatives when `ders`
+    /// is given) per axis; returns the first control index and the number of functions per
+    /// axis.
+    fn fill_basis(
+        &self,
+        params: [f64; N],
+        vals: &mut [[f64; BASIS_BUF]; N],
+        mut ders: Option<&mut [[f64; BASIS_BUF]; N]>,
+    ) -> Result<([usize; N], [usize; N]), SplineError> {
+        let spans = self.spans(params)?;
+        let mut first = [0; N];
+        let mut orders = [0; N];
+        for a in 0..N {
+            let p = self.knots[a].degree();
+            let knots = self.knots[a].knots();
+            match ders.as_deref_mut() {
+                None => basis_unchecked(knots, p, spans[a], params[a], &mut vals[a]),
+                Some(d) => {
+                    basis_and_first_unchecked(
+                        knots,
+                        p,
+                        spans[a],
+                        params[a],
+                        &mut vals[a],
+                        &mut d[a],
+                    );
+                }
+            }
+            first[a] = spans[a] - p;
+            orders[a] = p + 1;
+        }
+        Ok((first, orders))
     }
 
     /// Allocating form of [`TensorBSpline::eval_into`].
@@ -672,6 +667,51 @@ impl<const N: usize> Net<'_, N> {
         }
     }
 
+    /// Evaluate into `value[..dim]` and, when `gradient` is given, the first partial
+    /// derivatives into `gradient[..N·dim]` (axis-major: `gradient[a·dim + c] = ∂S_c/∂u_a`).
+    /// `basis(vals, ders)` fills the per-axis basis values (and first derivatives when `ders`
+    /// is `Some`) and returns the first control index and the number of functions per axis.
+    /// No allocation.
+    ///
+    /// # Errors
+    /// [`SplineError::BufferLength`] for short buffers (checked first), else the error of
+    /// `basis`.
+    pub fn evaluate(
+        &self,
+        value: &mut [f64],
+        gradient: Option<&mut [f64]>,
+        basis: impl FnOnce(
+            &mut [[f64; BASIS_BUF]; N],
+            Option<&mut [[f64; BASIS_BUF]; N]>,
+        ) -> Result<([usize; N], [usize; N]), SplineError>,
+    ) -> Result<(), SplineError> {
+        let dim = self.dim;
+        check_out(value.len(), dim)?;
+        if let Some(g) = &gradient {
+            check_out(g.len(), N * dim)?;
+        }
+        let mut vals = [[0.0; BASIS_BUF]; N];
+        match gradient {
+            None => {
+                let (first, orders) = basis(&mut vals, None)?;
+                self.contract(first, orders, &vals, None, &mut value[..dim], None);
+            }
+            Some(g) => {
+                let mut ders = [[0.0; BASIS_BUF]; N];
+                let (first, orders) = basis(&mut vals, Some(&mut ders))?;
+                self.contract(
+                    first,
+                    orders,
+                    &vals,
+                    Some(&ders),
+                    &mut value[..dim],
+                    Some(&mut g[..N * dim]),
+                );
+            }
+        }
+        Ok(())
+    }
+
     fn strides(&self) -> [usize; N] {
         let hdim = self.dim + usize::from(self.rational);
         let mut strides = [0usize; N];
@@ -736,29 +776,15 @@ impl<const N: usize> Net<'_, N> {
                         acc[k] += w_outer * rv[k];
                         gacc[0][k] += w_outer * rd[k];
                     }
-                    for a in 1..N {
-                        let mut dw = d[a][idx[a]];
-                        for b in 1..N {
-                            if b != a {
-                                dw *= vals[b][idx[b]];
-                            }
-                        }
+                    for (a, ga) in gacc.iter_mut().enumerate().skip(1) {
+                        let dw = outer_derivative_weight(vals, d, &idx, a);
                         for k in 0..hdim {
-                            gacc[a][k] += dw * rv[k];
+                            ga[k] += dw * rv[k];
                         }
                     }
                 }
             }
-            let mut a = 1;
-            while a < N {
-                idx[a] += 1;
-                if idx[a] < orders[a] {
-                    break;
-                }
-                idx[a] = 0;
-                a += 1;
-            }
-            if a >= N {
+            if !next_outer(&mut idx, &orders) {
                 break;
             }
         }
@@ -819,14 +845,8 @@ impl<const N: usize> Net<'_, N> {
             }
             let mut dw = [0.0; N];
             if let Some(d) = ders {
-                for a in 1..N {
-                    let mut prod = d[a][idx[a]];
-                    for b in 1..N {
-                        if b != a {
-                            prod *= vals[b][idx[b]];
-                        }
-                    }
-                    dw[a] = prod;
+                for (a, w) in dw.iter_mut().enumerate().skip(1) {
+                    *w = outer_derivative_weight(vals, d, &idx, a);
                 }
             }
             for i0 in 0..orders[0] {
@@ -858,17 +878,7 @@ impl<const N: usize> Net<'_, N> {
                     }
                 }
             }
-            // Advance the odometer over axes 1..N.
-            let mut a = 1;
-            while a < N {
-                idx[a] += 1;
-                if idx[a] < orders[a] {
-                    break;
-                }
-                idx[a] = 0;
-                a += 1;
-            }
-            if a >= N {
+            if !next_outer(&mut idx, &orders) {
                 break;
             }
         }
@@ -886,6 +896,37 @@ impl<const N: usize> Net<'_, N> {
             }
         }
     }
+}
+
+/// Advance an odometer over the axes `1..N` (axis 0 is the contiguous inner loop, left at 0):
+/// `idx[a]` runs over `0..orders[a]`, axis 1 fastest. Returns `false` once every index has
+/// wrapped back to 0, i.e. after the last position.
+pub(crate) fn next_outer<const N: usize>(idx: &mut [usize; N], orders: &[usize; N]) -> bool {
+    for a in 1..N {
+        idx[a] += 1;
+        if idx[a] < orders[a] {
+            return true;
+        }
+        idx[a] = 0;
+    }
+    false
+}
+
+/// `∂/∂u_a` of the outer weight `∏_{b≥1} vals[b][idx[b]]` at the odometer position `idx`
+/// (axis `a ≥ 1`): the derivative of axis `a` times the values of the other outer axes.
+fn outer_derivative_weight<const N: usize>(
+    vals: &[[f64; BASIS_BUF]; N],
+    ders: &[[f64; BASIS_BUF]; N],
+    idx: &[usize; N],
+    a: usize,
+) -> f64 {
+    let mut w = ders[a][idx[a]];
+    for b in 1..N {
+        if b != a {
+            w *= vals[b][idx[b]];
+        }
+    }
+    w
 }
 
 // Keep the degree bound visible to readers of this module.

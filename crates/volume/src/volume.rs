@@ -245,6 +245,60 @@ macro_rules! with_volume {
     };
 }
 
+/// Run `$body` with the type alias `$t` bound to the Rust type of a [`VoxelType`].
+///
+/// The one dispatch from a run-time voxel type to generic code: readers decode into
+/// `Vec<$t>`, casts convert into `Volume<$t>`. Each arm evaluates `$body` once, so its
+/// value must have the same type for every voxel type (typically an [`AnyVolume`] or a
+/// `Result` of one).
+///
+/// ```
+/// use volmorph_volume::{VoxelType, with_voxel_type};
+/// let bytes = with_voxel_type!(VoxelType::I16, T => std::mem::size_of::<T>());
+/// assert_eq!(bytes, 2);
+/// let name = with_voxel_type!(VoxelType::F64, T => std::any::type_name::<T>());
+/// assert_eq!(name, "f64");
+/// ```
+#[macro_export]
+macro_rules! with_voxel_type {
+    ($vt:expr, $t:ident => $body:expr) => {
+        match $vt {
+            $crate::VoxelType::U8 => {
+                type $t = u8;
+                $body
+            }
+            $crate::VoxelType::I8 => {
+                type $t = i8;
+                $body
+            }
+            $crate::VoxelType::U16 => {
+                type $t = u16;
+                $body
+            }
+            $crate::VoxelType::I16 => {
+                type $t = i16;
+                $body
+            }
+            $crate::VoxelType::U32 => {
+                type $t = u32;
+                $body
+            }
+            $crate::VoxelType::I32 => {
+                type $t = i32;
+                $body
+            }
+            $crate::VoxelType::F32 => {
+                type $t = f32;
+                $body
+            }
+            $crate::VoxelType::F64 => {
+                type $t = f64;
+                $body
+            }
+        }
+    };
+}
+
 macro_rules! any_from {
     ($($t:ty => $tag:ident),*) => {$(
         impl From<Volume<$t>> for AnyVolume {
@@ -293,21 +347,7 @@ impl AnyVolume {
     /// Convert to another run-time type, optionally through `v·slope + inter`.
     #[must_use]
     pub fn cast(&self, to: VoxelType, slope: f64, inter: f64) -> AnyVolume {
-        macro_rules! go {
-            ($t:ty) => {
-                with_volume!(self, v => AnyVolume::from(v.cast_scaled::<$t>(slope, inter)))
-            };
-        }
-        match to {
-            VoxelType::U8 => go!(u8),
-            VoxelType::I8 => go!(i8),
-            VoxelType::U16 => go!(u16),
-            VoxelType::I16 => go!(i16),
-            VoxelType::U32 => go!(u32),
-            VoxelType::I32 => go!(i32),
-            VoxelType::F32 => go!(f32),
-            VoxelType::F64 => go!(f64),
-        }
+        with_voxel_type!(to, T => with_volume!(self, v => AnyVolume::from(v.cast_scaled::<T>(slope, inter))))
     }
 
     /// The voxels as raw native-endian bytes.

@@ -1,48 +1,12 @@
 //! MetaImage reading and writing: round trips, hand-written headers, malformed input.
 
+mod common;
+
+use common::{oblique, random_volume};
 use std::io::Write;
 
 use volmorph_volume::format::{self, Format, WriteOptions, metaimage};
 use volmorph_volume::{AnyVolume, DMat3, DVec3, Geometry, Volume, VolumeError, VoxelType};
-
-/// Pseudo-random voxel bits (every bit pattern, including NaN payloads for floats).
-fn random_volume(vt: VoxelType, g: Geometry, seed: u64) -> AnyVolume {
-    let mut s = seed | 1;
-    let mut next = move || {
-        s ^= s << 13;
-        s ^= s >> 7;
-        s ^= s << 17;
-        (s >> 24) as u8
-    };
-    macro_rules! mk {
-        ($t:ty) => {{
-            let mut v: Vec<$t> = vec![<$t>::default(); g.len()];
-            for b in bytemuck::cast_slice_mut::<$t, u8>(&mut v) {
-                *b = next();
-            }
-            AnyVolume::from(Volume::new(g, v).unwrap())
-        }};
-    }
-    match vt {
-        VoxelType::U8 => mk!(u8),
-        VoxelType::I8 => mk!(i8),
-        VoxelType::U16 => mk!(u16),
-        VoxelType::I16 => mk!(i16),
-        VoxelType::U32 => mk!(u32),
-        VoxelType::I32 => mk!(i32),
-        VoxelType::F32 => mk!(f32),
-        VoxelType::F64 => mk!(f64),
-    }
-}
-
-fn oblique() -> Geometry {
-    let rot =
-        DMat3::from_rotation_z(0.3) * DMat3::from_rotation_x(-0.7) * DMat3::from_rotation_y(0.1);
-    Geometry::new([5, 4, 3])
-        .with_spacing(DVec3::new(0.7, 1.3, 2.1))
-        .with_origin(DVec3::new(-12.345, 67.8, -0.001))
-        .with_direction(rot)
-}
 
 fn assert_same(a: &AnyVolume, b: &AnyVolume) {
     assert_eq!(a.voxel_type(), b.voxel_type());
@@ -230,25 +194,15 @@ fn detached_data_file_with_header_size() {
 }
 
 fn read_err(bytes: &[u8]) -> VolumeError {
-    match metaimage::read_bytes(bytes) {
-        Ok(_) => panic!("expected an error for {:?}", String::from_utf8_lossy(bytes)),
-        Err(e) => e,
-    }
+    common::read_err(metaimage::read_bytes, bytes)
 }
 
 fn assert_format_err(bytes: &[u8], needle: &str) {
-    let e = read_err(bytes);
-    assert!(
-        matches!(e, VolumeError::Format { .. } | VolumeError::Io(_)),
-        "{e:?}"
-    );
-    assert!(e.to_string().contains(needle), "`{e}` lacks `{needle}`");
+    common::assert_format_err(metaimage::read_bytes, bytes, needle);
 }
 
 fn assert_unsupported(bytes: &[u8], needle: &str) {
-    let e = read_err(bytes);
-    assert!(matches!(e, VolumeError::Unsupported(_)), "{e:?}");
-    assert!(e.to_string().contains(needle), "`{e}` lacks `{needle}`");
+    common::assert_unsupported(metaimage::read_bytes, bytes, needle);
 }
 
 const TAIL: &str = "ElementType = MET_UCHAR\nElementDataFile = LOCAL\n";
@@ -452,12 +406,6 @@ fn timing_256_cubed() {
 
 mod fuzz {
     use super::*;
-    use proptest::prelude::*;
-
-    fn seed_files() -> Vec<Vec<u8>> {
-        static SEEDS: std::sync::OnceLock<Vec<Vec<u8>>> = std::sync::OnceLock::new();
-        SEEDS.get_or_init(make_seeds).clone()
-    }
 
     fn make_seeds() -> Vec<Vec<u8>> {
         let dir = tempfile::tempdir().unwrap();
@@ -476,28 +424,10 @@ ElementDataFile = LOCAL\n1 2 3 4\n"
         out
     }
 
-    proptest! {
-        #![proptest_config(ProptestConfig::with_cases(300))]
-        /// Corrupted files give an error or a valid volume, never a panic.
-        #[test]
-        fn mutated_files_never_panic(
-            which in 0usize..3,
-            edits in proptest::collection::vec((any::<u16>(), any::<u8>()), 1..6),
-            cut in any::<u16>(),
-        ) {
-            let mut b = seed_files().swap_remove(which);
-            for (pos, byte) in edits {
-                let i = pos as usize % b.len();
-                b[i] = byte;
-            }
-            if cut % 3 == 0 {
-                b.truncate(cut as usize % (b.len() + 1));
-            }
-            if let Ok((v, _)) = metaimage::read_bytes(&b) {
-                prop_assert!(v.geometry().validate().is_ok());
-                prop_assert_eq!(v.as_bytes().len(), v.geometry().len() * v.voxel_type().size());
-            }
-        }
+    /// Corrupted files give an error or a valid volume, never a panic.
+    #[test]
+    fn mutated_files_never_panic() {
+        common::assert_mutations_never_panic(metaimage::read_bytes, &make_seeds());
     }
 }
 
@@ -505,19 +435,5 @@ ElementDataFile = LOCAL\n1 2 3 4\n"
 /// path and, for single-file forms, from memory.
 #[test]
 fn malformed_corpus_is_refused() {
-    let dir = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("tests/corpus/metaimage");
-    let mut n = 0;
-    for entry in std::fs::read_dir(&dir).unwrap() {
-        let p = entry.unwrap().path();
-        let e = format::read(&p).expect_err(&p.display().to_string());
-        assert!(
-            e.to_string()
-                .contains(&*p.file_name().unwrap().to_string_lossy()),
-            "{e}"
-        );
-        let bytes = std::fs::read(&p).unwrap();
-        assert!(metaimage::read_bytes(&bytes).is_err(), "{}", p.display());
-        n += 1;
-    }
-    assert!(n >= 6, "corpus missing: {}", dir.display());
+    common::assert_corpus_refused("metaimage", metaimage::read_bytes);
 }

@@ -5,7 +5,9 @@
 use std::path::Path;
 
 use volmorph_volume::format::{self, Format, WriteOptions, nifti};
-use volmorph_volume::{AnyVolume, DMat3, DVec3, Geometry, Volume, Voxel, VoxelType};
+use volmorph_volume::{
+    AnyVolume, DMat3, DVec3, Geometry, Volume, Voxel, VoxelType, with_voxel_type,
+};
 
 fn field<'a>(h: &'a format::Header, name: &str) -> &'a str {
     h.fields
@@ -63,16 +65,10 @@ where
 }
 
 fn all_types(g: Geometry) -> Vec<AnyVolume> {
-    vec![
-        volume_of::<u8>(g),
-        volume_of::<i8>(g),
-        volume_of::<u16>(g),
-        volume_of::<i16>(g),
-        volume_of::<u32>(g),
-        volume_of::<i32>(g),
-        volume_of::<f32>(g),
-        volume_of::<f64>(g),
-    ]
+    VoxelType::ALL
+        .iter()
+        .map(|&vt| with_voxel_type!(vt, T => volume_of::<T>(g)))
+        .collect()
 }
 
 fn write_read(dir: &Path, name: &str, v: &AnyVolume) -> format::VolumeFile {

@@ -1,48 +1,13 @@
 //! NRRD reading and writing: round trips, hand-written (Slicer/teem-style) headers,
 //! malformed input.
 
+mod common;
+
+use common::{oblique, random_volume};
 use std::io::Write;
 
 use volmorph_volume::format::{self, Format, WriteOptions, nrrd};
-use volmorph_volume::{AnyVolume, DMat3, DVec3, Geometry, Volume, VolumeError, VoxelType};
-
-fn random_volume(vt: VoxelType, g: Geometry, seed: u64) -> AnyVolume {
-    let mut s = seed | 1;
-    let mut next = move || {
-        s ^= s << 13;
-        s ^= s >> 7;
-        s ^= s << 17;
-        (s >> 24) as u8
-    };
-    macro_rules! mk {
-        ($t:ty) => {{
-            let mut v: Vec<$t> = vec![<$t>::default(); g.len()];
-            for b in bytemuck::cast_slice_mut::<$t, u8>(&mut v) {
-                *b = next();
-            }
-            AnyVolume::from(Volume::new(g, v).unwrap())
-        }};
-    }
-    match vt {
-        VoxelType::U8 => mk!(u8),
-        VoxelType::I8 => mk!(i8),
-        VoxelType::U16 => mk!(u16),
-        VoxelType::I16 => mk!(i16),
-        VoxelType::U32 => mk!(u32),
-        VoxelType::I32 => mk!(i32),
-        VoxelType::F32 => mk!(f32),
-        VoxelType::F64 => mk!(f64),
-    }
-}
-
-fn oblique() -> Geometry {
-    let rot =
-        DMat3::from_rotation_z(0.3) * DMat3::from_rotation_x(-0.7) * DMat3::from_rotation_y(0.1);
-    Geometry::new([5, 4, 3])
-        .with_spacing(DVec3::new(0.7, 1.3, 2.1))
-        .with_origin(DVec3::new(-12.345, 67.8, -0.001))
-        .with_direction(rot)
-}
+use volmorph_volume::{AnyVolume, DMat3, DVec3, Geometry, VolumeError, VoxelType};
 
 /// NRRD stores only `direction · diag(spacing)`: spacing and direction come back to within
 /// a few ulps, dims/origin/voxels exactly.
@@ -325,25 +290,15 @@ fn detached_header_with_skips() {
 }
 
 fn read_err(bytes: &[u8]) -> VolumeError {
-    match nrrd::read_bytes(bytes) {
-        Ok(_) => panic!("expected an error for {:?}", String::from_utf8_lossy(bytes)),
-        Err(e) => e,
-    }
+    common::read_err(nrrd::read_bytes, bytes)
 }
 
 fn assert_format_err(bytes: &[u8], needle: &str) {
-    let e = read_err(bytes);
-    assert!(
-        matches!(e, VolumeError::Format { .. } | VolumeError::Io(_)),
-        "{e:?}"
-    );
-    assert!(e.to_string().contains(needle), "`{e}` lacks `{needle}`");
+    common::assert_format_err(nrrd::read_bytes, bytes, needle);
 }
 
 fn assert_unsupported(bytes: &[u8], needle: &str) {
-    let e = read_err(bytes);
-    assert!(matches!(e, VolumeError::Unsupported(_)), "{e:?}");
-    assert!(e.to_string().contains(needle), "`{e}` lacks `{needle}`");
+    common::assert_unsupported(nrrd::read_bytes, bytes, needle);
 }
 
 fn with(fields: &str) -> Vec<u8> {
@@ -505,12 +460,6 @@ fn huge_header_line_and_missing_data_file() {
 
 mod fuzz {
     use super::*;
-    use proptest::prelude::*;
-
-    fn seed_files() -> Vec<Vec<u8>> {
-        static SEEDS: std::sync::OnceLock<Vec<Vec<u8>>> = std::sync::OnceLock::new();
-        SEEDS.get_or_init(make_seeds).clone()
-    }
 
     fn make_seeds() -> Vec<Vec<u8>> {
         let dir = tempfile::tempdir().unwrap();
@@ -532,28 +481,10 @@ list\nspacings: NaN 1 2 NaN\nencoding: ascii\n\n1 2 3 4\n"
         out
     }
 
-    proptest! {
-        #![proptest_config(ProptestConfig::with_cases(300))]
-        /// Corrupted files give an error or a valid volume, never a panic.
-        #[test]
-        fn mutated_files_never_panic(
-            which in 0usize..4,
-            edits in proptest::collection::vec((any::<u16>(), any::<u8>()), 1..6),
-            cut in any::<u16>(),
-        ) {
-            let mut b = seed_files().swap_remove(which);
-            for (pos, byte) in edits {
-                let i = pos as usize % b.len();
-                b[i] = byte;
-            }
-            if cut % 3 == 0 {
-                b.truncate(cut as usize % (b.len() + 1));
-            }
-            if let Ok((v, _)) = nrrd::read_bytes(&b) {
-                prop_assert!(v.geometry().validate().is_ok());
-                prop_assert_eq!(v.as_bytes().len(), v.geometry().len() * v.voxel_type().size());
-            }
-        }
+    /// Corrupted files give an error or a valid volume, never a panic.
+    #[test]
+    fn mutated_files_never_panic() {
+        common::assert_mutations_never_panic(nrrd::read_bytes, &make_seeds());
     }
 }
 
@@ -561,19 +492,5 @@ list\nspacings: NaN 1 2 NaN\nencoding: ascii\n\n1 2 3 4\n"
 /// path and, for single-file forms, from memory.
 #[test]
 fn malformed_corpus_is_refused() {
-    let dir = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("tests/corpus/nrrd");
-    let mut n = 0;
-    for entry in std::fs::read_dir(&dir).unwrap() {
-        let p = entry.unwrap().path();
-        let e = format::read(&p).expect_err(&p.display().to_string());
-        assert!(
-            e.to_string()
-                .contains(&*p.file_name().unwrap().to_string_lossy()),
-            "{e}"
-        );
-        let bytes = std::fs::read(&p).unwrap();
-        assert!(nrrd::read_bytes(&bytes).is_err(), "{}", p.display());
-        n += 1;
-    }
-    assert!(n >= 6, "corpus missing: {}", dir.display());
+    common::assert_corpus_refused("nrrd", nrrd::read_bytes);
 }

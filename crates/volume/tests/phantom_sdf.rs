@@ -2,47 +2,15 @@
 //! 1-Lipschitz bounds for all, the margin to the grid boundary, bounding boxes and the parts
 //! of the composite models.
 
+mod common;
+
+use common::SplitMix as Rng;
+
 use volmorph_volume::DVec3;
 use volmorph_volume::phantom::{
     self, GRID_EXTENT, MODEL_EXTENT, Phantom, ROUNDED_BOX_HALF_EXTENTS, ROUNDED_BOX_RADIUS,
     SPHERE_RADIUS, TORUS_MAJOR_RADIUS, TORUS_MINOR_RADIUS,
 };
-
-/// SplitMix64: a tiny deterministic generator, so the tests need no extra dependency.
-struct Rng(u64);
-
-impl Rng {
-    fn next_u64(&mut self) -> u64 {
-        self.0 = self.0.wrapping_add(0x9E37_79B9_7F4A_7C15);
-        let mut z = self.0;
-        z = (z ^ (z >> 30)).wrapping_mul(0xBF58_476D_1CE4_E5B9);
-        z = (z ^ (z >> 27)).wrapping_mul(0x94D0_49BB_1331_11EB);
-        z ^ (z >> 31)
-    }
-    /// Uniform in [0, 1).
-    fn unit(&mut self) -> f64 {
-        (self.next_u64() >> 11) as f64 / (1u64 << 53) as f64
-    }
-    fn range(&mut self, lo: f64, hi: f64) -> f64 {
-        lo + (hi - lo) * self.unit()
-    }
-    fn point(&mut self, half: f64) -> DVec3 {
-        DVec3::new(
-            self.range(-half, half),
-            self.range(-half, half),
-            self.range(-half, half),
-        )
-    }
-    fn direction(&mut self) -> DVec3 {
-        loop {
-            let v = self.point(1.0);
-            let l = v.length();
-            if l > 0.1 && l <= 1.0 {
-                return v / l;
-            }
-        }
-    }
-}
 
 /// Random points: uniform in the grid cube, and points concentrated near the surface (where
 /// an error in the distance formula would change the shape).

@@ -1,40 +1,12 @@
 //! The sampled phantoms: grid geometry, signed-distance and density volumes, the density ramp
 //! and its isosurface, determinism and error handling.
 
+mod common;
+
+use common::SplitMix as Rng;
+
 use volmorph_volume::phantom::{self, GRID_EXTENT, ISO_VALUE, Phantom, RAMP_VOXELS};
 use volmorph_volume::{DVec3, Geometry, Volume, VolumeError};
-
-/// SplitMix64: a tiny deterministic generator, so the tests need no extra dependency.
-struct Rng(u64);
-
-impl Rng {
-    fn next_u64(&mut self) -> u64 {
-        self.0 = self.0.wrapping_add(0x9E37_79B9_7F4A_7C15);
-        let mut z = self.0;
-        z = (z ^ (z >> 30)).wrapping_mul(0xBF58_476D_1CE4_E5B9);
-        z = (z ^ (z >> 27)).wrapping_mul(0x94D0_49BB_1331_11EB);
-        z ^ (z >> 31)
-    }
-    fn range(&mut self, lo: f64, hi: f64) -> f64 {
-        lo + (hi - lo) * ((self.next_u64() >> 11) as f64 / (1u64 << 53) as f64)
-    }
-    fn point(&mut self, half: f64) -> DVec3 {
-        DVec3::new(
-            self.range(-half, half),
-            self.range(-half, half),
-            self.range(-half, half),
-        )
-    }
-    fn direction(&mut self) -> DVec3 {
-        loop {
-            let v = self.point(1.0);
-            let l = v.length();
-            if l > 0.1 && l <= 1.0 {
-                return v / l;
-            }
-        }
-    }
-}
 
 fn centre(g: &Geometry, i: usize, j: usize, k: usize) -> DVec3 {
     g.index_to_physical(DVec3::new(i as f64, j as f64, k as f64))

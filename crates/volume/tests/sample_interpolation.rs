@@ -1,6 +1,10 @@
 //! Properties of the volume samplers: interpolation at voxel centres, polynomial
 //! reproduction, physical sampling, boundary policies and batch sampling.
 
+mod common;
+
+use common::Lcg;
+
 use volmorph_volume::sample::{
     Boundary, CUBIC_BSPLINE_POLE, Interpolation, Sampler, cubic_bspline_prefilter,
 };
@@ -12,18 +16,6 @@ const KERNELS: [Interpolation; 3] = [
     Interpolation::CubicBSpline,
 ];
 const BOUNDARIES: [Boundary; 3] = [Boundary::Constant(-7.0), Boundary::Clamp, Boundary::Mirror];
-
-/// Deterministic pseudo-random numbers in [0, 1) (64-bit LCG, high bits).
-struct Lcg(u64);
-impl Lcg {
-    fn next(&mut self) -> f64 {
-        self.0 = self
-            .0
-            .wrapping_mul(6_364_136_223_846_793_005)
-            .wrapping_add(1_442_695_040_888_963_407);
-        (self.0 >> 11) as f64 / (1u64 << 53) as f64
-    }
-}
 
 fn oblique(dims: [usize; 3]) -> Geometry {
     let rot = DMat3::from_rotation_z(0.4) * DMat3::from_rotation_y(-0.9);

@@ -1,18 +1,11 @@
 //! Statistics and quantiles of volumes against hand-computed and naive references.
 
+mod common;
+
+use common::Lcg;
+
 use volmorph_volume::stats::{Statistics, quantiles, quantiles_any};
 use volmorph_volume::{AnyVolume, Geometry, Volume, VolumeError, Voxel};
-
-struct Lcg(u64);
-impl Lcg {
-    fn next(&mut self) -> f64 {
-        self.0 = self
-            .0
-            .wrapping_mul(6_364_136_223_846_793_005)
-            .wrapping_add(1_442_695_040_888_963_407);
-        (self.0 >> 11) as f64 / (1u64 << 53) as f64
-    }
-}
 
 fn line<T: Voxel>(values: Vec<T>) -> Volume<T> {
     Volume::new(Geometry::new([values.len(), 1, 1]), values).unwrap()

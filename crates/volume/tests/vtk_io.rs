@@ -1,36 +1,10 @@
 //! VTK legacy STRUCTURED_POINTS reading and writing.
 
+mod common;
+
+use common::random_volume;
 use volmorph_volume::format::{self, Format, WriteOptions, vtk};
 use volmorph_volume::{AnyVolume, DMat3, DVec3, Geometry, Volume, VolumeError, VoxelType};
-
-fn random_volume(vt: VoxelType, g: Geometry, seed: u64) -> AnyVolume {
-    let mut s = seed | 1;
-    let mut next = move || {
-        s ^= s << 13;
-        s ^= s >> 7;
-        s ^= s << 17;
-        (s >> 24) as u8
-    };
-    macro_rules! mk {
-        ($t:ty) => {{
-            let mut v: Vec<$t> = vec![<$t>::default(); g.len()];
-            for b in bytemuck::cast_slice_mut::<$t, u8>(&mut v) {
-                *b = next();
-            }
-            AnyVolume::from(Volume::new(g, v).unwrap())
-        }};
-    }
-    match vt {
-        VoxelType::U8 => mk!(u8),
-        VoxelType::I8 => mk!(i8),
-        VoxelType::U16 => mk!(u16),
-        VoxelType::I16 => mk!(i16),
-        VoxelType::U32 => mk!(u32),
-        VoxelType::I32 => mk!(i32),
-        VoxelType::F32 => mk!(f32),
-        VoxelType::F64 => mk!(f64),
-    }
-}
 
 fn aligned() -> Geometry {
     Geometry::new([5, 4, 3])
@@ -131,10 +105,7 @@ SCALARS labels vtktypeint16 1\nLOOKUP_TABLE default\n"
 }
 
 fn assert_err(bytes: &[u8], unsupported: bool, needle: &str) {
-    let e = match vtk::read_bytes(bytes) {
-        Ok(_) => panic!("expected an error for {:?}", String::from_utf8_lossy(bytes)),
-        Err(e) => e,
-    };
+    let e = common::read_err(vtk::read_bytes, bytes);
     assert_eq!(
         matches!(e, VolumeError::Unsupported(_)),
         unsupported,
@@ -250,12 +221,6 @@ fn malformed_files_are_clear_errors() {
 
 mod fuzz {
     use super::*;
-    use proptest::prelude::*;
-
-    fn seed_files() -> Vec<Vec<u8>> {
-        static SEEDS: std::sync::OnceLock<Vec<Vec<u8>>> = std::sync::OnceLock::new();
-        SEEDS.get_or_init(make_seeds).clone()
-    }
 
     fn make_seeds() -> Vec<Vec<u8>> {
         let dir = tempfile::tempdir().unwrap();
@@ -269,28 +234,10 @@ SPACING 1 2 3\nORIGIN 0 0 0\nPOINT_DATA 4\nSCALARS a double 1\nLOOKUP_TABLE t\n1
         ]
     }
 
-    proptest! {
-        #![proptest_config(ProptestConfig::with_cases(300))]
-        /// Corrupted files give an error or a valid volume, never a panic.
-        #[test]
-        fn mutated_files_never_panic(
-            which in 0usize..2,
-            edits in proptest::collection::vec((any::<u16>(), any::<u8>()), 1..6),
-            cut in any::<u16>(),
-        ) {
-            let mut b = seed_files().swap_remove(which);
-            for (pos, byte) in edits {
-                let i = pos as usize % b.len();
-                b[i] = byte;
-            }
-            if cut % 3 == 0 {
-                b.truncate(cut as usize % (b.len() + 1));
-            }
-            if let Ok((v, _)) = vtk::read_bytes(&b) {
-                prop_assert!(v.geometry().validate().is_ok());
-                prop_assert_eq!(v.as_bytes().len(), v.geometry().len() * v.voxel_type().size());
-            }
-        }
+    /// Corrupted files give an error or a valid volume, never a panic.
+    #[test]
+    fn mutated_files_never_panic() {
+        common::assert_mutations_never_panic(vtk::read_bytes, &make_seeds());
     }
 }
 
@@ -298,19 +245,5 @@ SPACING 1 2 3\nORIGIN 0 0 0\nPOINT_DATA 4\nSCALARS a double 1\nLOOKUP_TABLE t\n1
 /// path and, for single-file forms, from memory.
 #[test]
 fn malformed_corpus_is_refused() {
-    let dir = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("tests/corpus/vtk");
-    let mut n = 0;
-    for entry in std::fs::read_dir(&dir).unwrap() {
-        let p = entry.unwrap().path();
-        let e = format::read(&p).expect_err(&p.display().to_string());
-        assert!(
-            e.to_string()
-                .contains(&*p.file_name().unwrap().to_string_lossy()),
-            "{e}"
-        );
-        let bytes = std::fs::read(&p).unwrap();
-        assert!(vtk::read_bytes(&bytes).is_err(), "{}", p.display());
-        n += 1;
-    }
-    assert!(n >= 6, "corpus missing: {}", dir.display());
+    common::assert_corpus_refused("vtk", vtk::read_bytes);
 }

@@ -258,28 +258,6 @@ pub fn to_bytes(
     Ok(out)
 }
 
-/// Refuse meshes no file format can represent faithfully: out-of-range indices, faces of
-/// fewer than three vertices.
-pub(crate) fn check_writable(mesh: &Mesh) -> Result<(), MeshError> {
-    let n = mesh.vertex_count();
-    for (f, face) in mesh.faces().enumerate() {
-        if face.len() < 3 {
-            return Err(MeshError::FaceTooSmall {
-                face: f,
-                len: face.len(),
-            });
-        }
-        if let Some(&bad) = face.iter().find(|&&i| i as usize >= n) {
-            return Err(MeshError::IndexOutOfRange {
-                face: f,
-                index: u64::from(bad),
-                vertex_count: n,
-            });
-        }
-    }
-    Ok(())
-}
-
 /// Shared builder for readers: positions and CSR faces with the 32-bit limits enforced.
 pub(crate) struct Builder {
     pub(crate) positions: Vec<glam::DVec3>,

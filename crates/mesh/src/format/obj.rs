@@ -18,7 +18,7 @@ use std::io::Write;
 use glam::DVec3;
 
 use super::Builder;
-use super::text::{Lines, Words, parse_f64, parse_i64, show, write_f64, write_uint};
+use super::text::{Lines, Words, parse_f64, parse_i64, show, write_face_indices, write_xyz};
 use crate::error::Location;
 use crate::{Mesh, MeshError, MeshFormat};
 
@@ -127,7 +127,7 @@ pub fn read_obj_bytes(bytes: &[u8]) -> Result<Mesh, MeshError> {
 /// [`Mesh::from_csr_unvalidated`] that has such faces (nothing is written then);
 /// [`MeshError::Write`] when the writer fails.
 pub fn write_obj<W: Write>(w: &mut W, mesh: &Mesh) -> Result<(), MeshError> {
-    super::check_writable(mesh)?;
+    mesh.check_faces()?;
     writeln!(
         w,
         "# volmorph mesh: {} vertices, {} faces",
@@ -136,19 +136,12 @@ pub fn write_obj<W: Write>(w: &mut W, mesh: &Mesh) -> Result<(), MeshError> {
     )?;
     for p in mesh.positions() {
         w.write_all(b"v ")?;
-        write_f64(w, p.x)?;
-        w.write_all(b" ")?;
-        write_f64(w, p.y)?;
-        w.write_all(b" ")?;
-        write_f64(w, p.z)?;
+        write_xyz(w, *p)?;
         w.write_all(b"\n")?;
     }
     for face in mesh.faces() {
         w.write_all(b"f")?;
-        for &i in face {
-            write_uint(w, b' ', u64::from(i) + 1)?;
-        }
-        w.write_all(b"\n")?;
+        write_face_indices(w, face, 1)?;
     }
     Ok(())
 }

@@ -20,7 +20,7 @@ use std::io::Write;
 use glam::DVec3;
 
 use super::Builder;
-use super::text::{Lines, Words, parse_f64, parse_i64, show, write_f64, write_uint};
+use super::text::{Lines, Words, parse_f64, parse_i64, show, write_face_indices, write_xyz};
 use crate::error::Location;
 use crate::{Mesh, MeshError, MeshFormat};
 
@@ -171,7 +171,7 @@ pub fn read_off_bytes(bytes: &[u8]) -> Result<Mesh, MeshError> {
 /// [`Mesh::from_csr_unvalidated`] that has such faces (nothing is written then);
 /// [`MeshError::Write`] when the writer fails.
 pub fn write_off<W: Write>(w: &mut W, mesh: &Mesh) -> Result<(), MeshError> {
-    super::check_writable(mesh)?;
+    mesh.check_faces()?;
     write!(
         w,
         "OFF\n# volmorph mesh\n{} {} 0\n",
@@ -179,19 +179,12 @@ pub fn write_off<W: Write>(w: &mut W, mesh: &Mesh) -> Result<(), MeshError> {
         mesh.face_count()
     )?;
     for p in mesh.positions() {
-        write_f64(w, p.x)?;
-        w.write_all(b" ")?;
-        write_f64(w, p.y)?;
-        w.write_all(b" ")?;
-        write_f64(w, p.z)?;
+        write_xyz(w, *p)?;
         w.write_all(b"\n")?;
     }
     for face in mesh.faces() {
         write!(w, "{}", face.len())?;
-        for &i in face {
-            write_uint(w, b' ', u64::from(i))?;
-        }
-        w.write_all(b"\n")?;
+        write_face_indices(w, face, 0)?;
     }
     Ok(())
 }

@@ -26,7 +26,7 @@ use glam::DVec3;
 
 use super::Builder;
 use super::text::{
-    Tokens, parse_f32, parse_f64, parse_i64, show, write_f32, write_f64, write_uint,
+    Tokens, parse_f32, parse_f64, parse_i64, show, write_f32, write_f64, write_face_indices,
 };
 use crate::error::Location;
 use crate::{Mesh, MeshError, MeshFormat};
@@ -681,7 +681,7 @@ pub fn write_ply<W: Write>(
     encoding: PlyEncoding,
     single_precision: bool,
 ) -> Result<(), MeshError> {
-    super::check_writable(mesh)?;
+    mesh.check_faces()?;
     let max_len = mesh.max_face_len();
     let count_ty = if max_len <= 255 {
         Scalar::U8
@@ -730,10 +730,7 @@ pub fn write_ply<W: Write>(
             }
             for face in mesh.faces() {
                 write!(w, "{}", face.len())?;
-                for &i in face {
-                    write_uint(w, b' ', u64::from(i))?;
-                }
-                w.write_all(b"\n")?;
+                write_face_indices(w, face, 0)?;
             }
         }
         PlyEncoding::BinaryLittleEndian | PlyEncoding::BinaryBigEndian => {

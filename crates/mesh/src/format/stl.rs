@@ -288,7 +288,7 @@ fn unit_normal(t: &[DVec3; 3]) -> DVec3 {
 /// [`MeshError::TooLarge`] if binary STL cannot count the triangles in its `u32`,
 /// [`MeshError::Write`] when the writer fails.
 pub fn write_stl<W: Write>(w: &mut W, mesh: &Mesh, binary: bool) -> Result<(), MeshError> {
-    super::check_writable(mesh)?;
+    mesh.check_faces()?;
     let tri_count: u64 = mesh.faces().map(|f| f.len().saturating_sub(2) as u64).sum();
     if binary {
         let n = u32::try_from(tri_count).map_err(|_| {

@@ -230,6 +230,29 @@ pub(crate) fn write_f32<W: Write + ?Sized>(w: &mut W, x: f32) -> io::Result<()> 
     }
 }
 
+/// Write a position as three shortest-round-trip numbers separated by single spaces (no
+/// line end).
+pub(crate) fn write_xyz<W: Write + ?Sized>(w: &mut W, p: glam::DVec3) -> io::Result<()> {
+    write_f64(w, p.x)?;
+    w.write_all(b" ")?;
+    write_f64(w, p.y)?;
+    w.write_all(b" ")?;
+    write_f64(w, p.z)
+}
+
+/// Write the vertex indices of a face, each preceded by a space and offset by `base` (1 for
+/// OBJ's one-based indices), then a line end.
+pub(crate) fn write_face_indices<W: Write + ?Sized>(
+    w: &mut W,
+    face: &[u32],
+    base: u64,
+) -> io::Result<()> {
+    for &i in face {
+        write_uint(w, b' ', u64::from(i) + base)?;
+    }
+    w.write_all(b"\n")
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;

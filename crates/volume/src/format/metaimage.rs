@@ -361,11 +361,7 @@ fn decode(meta: &Meta, input: Input<'_>, detached: bool) -> Result<AnyVolume, Vo
 /// [`crate::format::read`] with the header's path).
 pub fn read_bytes(bytes: &[u8]) -> Result<(AnyVolume, Header), VolumeError> {
     let meta = parse_header(bytes, bytes.len() <= text_header::MAX_HEADER_BYTES)?;
-    if let Some(f) = &meta.data_file {
-        return Err(VolumeError::Unsupported(format!(
-            "MetaImage header names the data file `{f}`: reading it needs the header's path"
-        )));
-    }
+    text_header::require_attached(FMT, meta.data_file.as_deref())?;
     let v = decode(&meta, Input::Bytes(bytes), false)?;
     Ok((v, meta.header))
 }
@@ -376,13 +372,7 @@ pub(crate) fn read(path: &Path) -> Result<(AnyVolume, Header), VolumeError> {
     let v = match &meta.data_file {
         None => decode(&meta, Input::File(path), false)?,
         Some(name) => {
-            let data = text_header::resolve_data_file(Some(path), name);
-            if !data.is_file() {
-                return Err(err(format!(
-                    "ElementDataFile `{name}` not found (looked for {})",
-                    data.display()
-                )));
-            }
+            let data = text_header::existing_data_file(FMT, "ElementDataFile", path, name)?;
             decode(&meta, Input::File(&data), true).map_err(|e| e.at(&data))?
         }
     };
@@ -475,16 +465,9 @@ pub(crate) fn write(
     options: &WriteOptions,
 ) -> Result<(), VolumeError> {
     volume.geometry().validate()?;
-    let name = path
-        .file_name()
-        .map(|n| n.to_string_lossy().into_owned())
-        .unwrap_or_default();
-    let detached = name.to_ascii_lowercase().ends_with(".mhd");
     let os = os_err(path);
-    if detached {
-        let stem = &name[..name.len() - 4];
-        let data_name = format!("{stem}.{}", if options.compress { "zraw" } else { "raw" });
-        let data_path = path.with_file_name(&data_name);
+    let data_ext = if options.compress { "zraw" } else { "raw" };
+    if let Some((data_name, data_path)) = text_header::detached_data_file(path, ".mhd", data_ext) {
         let dos = os_err(&data_path);
         let mut size = None;
         volmorph_io::write_atomic::<VolumeError, _>(&data_path, |w| {
@@ -495,10 +478,7 @@ pub(crate) fn write(
             }
             Ok(())
         })?;
-        let text = header_text(volume, size, &data_name);
-        volmorph_io::write_atomic::<VolumeError, _>(path, |w| {
-            w.write_all(text.as_bytes()).map_err(&os)
-        })
+        text_header::write_text(path, &header_text(volume, size, &data_name))
     } else if options.compress {
         let mut buf = Vec::new();
         let size = zlib(volume, options, &mut buf).map_err(&os)?;

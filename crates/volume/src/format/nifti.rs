@@ -1471,25 +1471,11 @@ fn read_stream<R: Read>(
     let rescale = rescale_of(&h);
     let be = h.big_endian;
     let checked = file_len.is_some();
-    macro_rules! go {
-        ($t:ty) => {
-            build(
-                geometry,
-                read_typed::<$t, _>(r, &layout, be, checked)?,
-                rescale,
-            )?
-        };
-    }
-    let volume = match layout.voxel_type {
-        VoxelType::U8 => go!(u8),
-        VoxelType::I8 => go!(i8),
-        VoxelType::U16 => go!(u16),
-        VoxelType::I16 => go!(i16),
-        VoxelType::U32 => go!(u32),
-        VoxelType::I32 => go!(i32),
-        VoxelType::F32 => go!(f32),
-        VoxelType::F64 => go!(f64),
-    };
+    let volume = crate::with_voxel_type!(layout.voxel_type, T => build(
+        geometry,
+        read_typed::<T, _>(r, &layout, be, checked)?,
+        rescale,
+    )?);
     if file_len.is_none() {
         // The gzip trailer (CRC-32, size) is verified only when the decoder reaches it.
         io::copy(&mut r.take(GZ_TAIL_LIMIT), &mut io::sink())

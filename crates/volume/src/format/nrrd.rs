@@ -591,11 +591,7 @@ fn decode(n: &Nrrd, input: Input<'_>, base: u64) -> Result<AnyVolume, VolumeErro
 /// the header's path).
 pub fn read_bytes(bytes: &[u8]) -> Result<(AnyVolume, Header), VolumeError> {
     let nrrd = parse_header(bytes, bytes.len() <= text_header::MAX_HEADER_BYTES)?;
-    if let Some(f) = &nrrd.data_file {
-        return Err(VolumeError::Unsupported(format!(
-            "NRRD header names the data file `{f}`: reading it needs the header's path"
-        )));
-    }
+    text_header::require_attached(FMT, nrrd.data_file.as_deref())?;
     let off = nrrd.data_offset.unwrap_or(bytes.len()) as u64;
     let v = decode(&nrrd, Input::Bytes(bytes), off)?;
     Ok((v, nrrd.header))
@@ -610,13 +606,7 @@ pub(crate) fn read(path: &Path) -> Result<(AnyVolume, Header), VolumeError> {
             decode(&nrrd, Input::File(path), off)?
         }
         Some(name) => {
-            let data = text_header::resolve_data_file(Some(path), name);
-            if !data.is_file() {
-                return Err(err(format!(
-                    "data file `{name}` not found (looked for {})",
-                    data.display()
-                )));
-            }
+            let data = text_header::existing_data_file(FMT, "data file", path, name)?;
             decode(&nrrd, Input::File(&data), 0).map_err(|e| e.at(&data))?
         }
     };
@@ -682,23 +672,17 @@ pub(crate) fn write(
     options: &WriteOptions,
 ) -> Result<(), VolumeError> {
     volume.geometry().validate()?;
-    let name = path
-        .file_name()
-        .map(|n| n.to_string_lossy().into_owned())
-        .unwrap_or_default();
     let os = os_err(path);
-    if name.to_ascii_lowercase().ends_with(".nhdr") {
-        let stem = &name[..name.len() - 5];
-        let data_name = format!("{stem}.{}", if options.compress { "raw.gz" } else { "raw" });
-        let data_path = path.with_file_name(&data_name);
+    let data_ext = if options.compress { "raw.gz" } else { "raw" };
+    if let Some((data_name, data_path)) = text_header::detached_data_file(path, ".nhdr", data_ext) {
         let dos = os_err(&data_path);
         volmorph_io::write_atomic::<VolumeError, _>(&data_path, |w| {
             write_data(w, volume, options).map_err(&dos)
         })?;
-        let text = header_text(volume, options.compress, Some(&data_name));
-        volmorph_io::write_atomic::<VolumeError, _>(path, |w| {
-            w.write_all(text.as_bytes()).map_err(&os)
-        })
+        text_header::write_text(
+            path,
+            &header_text(volume, options.compress, Some(&data_name)),
+        )
     } else {
         let text = header_text(volume, options.compress, None);
         volmorph_io::write_atomic::<VolumeError, _>(path, |w| {

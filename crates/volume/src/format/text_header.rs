@@ -416,21 +416,12 @@ pub(crate) fn decode(
     geometry.validate()?;
     let vt = spec.voxel_type;
     let n = volmorph_io::checked_len(&geometry.dims, vt.size())?;
-    macro_rules! go {
-        ($t:ty) => {
-            AnyVolume::from(Volume::new(geometry, decode_typed::<$t>(input, spec, n)?)?)
-        };
-    }
-    Ok(match vt {
-        VoxelType::U8 => go!(u8),
-        VoxelType::I8 => go!(i8),
-        VoxelType::U16 => go!(u16),
-        VoxelType::I16 => go!(i16),
-        VoxelType::U32 => go!(u32),
-        VoxelType::I32 => go!(i32),
-        VoxelType::F32 => go!(f32),
-        VoxelType::F64 => go!(f64),
-    })
+    Ok(
+        crate::with_voxel_type!(vt, T => AnyVolume::from(Volume::new(
+        geometry,
+        decode_typed::<T>(input, spec, n)?
+    )?)),
+    )
 }
 
 fn decode_typed<T: AsciiVoxel>(
@@ -768,6 +759,71 @@ pub(crate) fn resolve_data_file(header_path: Option<&Path>, name: &str) -> PathB
         Some(dir) => dir.join(p),
         None => p.to_path_buf(),
     }
+}
+
+/// Refuse, when reading from memory, a header that names a detached data file.
+///
+/// # Errors
+/// [`VolumeError::Unsupported`] naming the file when `data_file` is `Some`: reading it
+/// needs the header's path.
+pub(crate) fn require_attached(fmt: &str, data_file: Option<&str>) -> Result<(), VolumeError> {
+    match data_file {
+        Some(f) => Err(VolumeError::Unsupported(format!(
+            "{fmt} header names the data file `{f}`: reading it needs the header's path"
+        ))),
+        None => Ok(()),
+    }
+}
+
+/// The path of the data file `name` that the header at `header_path` names in its field
+/// `key` (see [`resolve_data_file`]).
+///
+/// # Errors
+/// [`VolumeError::Format`] naming the field, the name and the path looked for when no such
+/// file exists.
+pub(crate) fn existing_data_file(
+    fmt: &'static str,
+    key: &str,
+    header_path: &Path,
+    name: &str,
+) -> Result<PathBuf, VolumeError> {
+    let data = resolve_data_file(Some(header_path), name);
+    if data.is_file() {
+        Ok(data)
+    } else {
+        Err(VolumeError::format(
+            fmt,
+            format!("{key} `{name}` not found (looked for {})", data.display()),
+        ))
+    }
+}
+
+/// For a header written to `path` whose file name ends with `header_ext` (ASCII case
+/// ignored, e.g. `.mhd`), the name and path of its detached data file: the same stem with
+/// `data_ext` (e.g. `raw`) in the same directory. `None` when the name has another ending.
+pub(crate) fn detached_data_file(
+    path: &Path,
+    header_ext: &str,
+    data_ext: &str,
+) -> Option<(String, PathBuf)> {
+    let name = path.file_name()?.to_string_lossy();
+    let stem_len = name.len().checked_sub(header_ext.len())?;
+    let ext = name.get(stem_len..)?;
+    if !ext.eq_ignore_ascii_case(header_ext) {
+        return None;
+    }
+    let data_name = format!("{}.{data_ext}", name.get(..stem_len)?);
+    let data_path = path.with_file_name(&data_name);
+    Some((data_name, data_path))
+}
+
+/// Write `text` as the whole file at `path` (atomically).
+///
+/// # Errors
+/// I/O errors carrying the path.
+pub(crate) fn write_text(path: &Path, text: &str) -> Result<(), VolumeError> {
+    let os = os_err(path);
+    volmorph_io::write_atomic::<VolumeError, _>(path, |w| w.write_all(text.as_bytes()).map_err(&os))
 }
 
 /// Compression level for flate2 from a user level (clamped to 0–9).
