@@ -159,7 +159,21 @@ fn errors_name_the_file_and_exit_1() {
     let dir = tempfile::tempdir().unwrap();
     let missing = dir.path().join("nope.nii");
     let err = fails(&[&"info", &missing]);
-    assert!(err.contains("nope.nii"), "{err}");
+    assert_eq!(
+        err.matches("nope.nii").count(),
+        1,
+        "the file is named once: {err}"
+    );
+    let err = fails(&[&"convert", &missing, &dir.path().join("no").join("out.mha")]);
+    assert_eq!(err.matches("nope.nii").count(), 1, "{err}");
+    let out_of_reach = dir.path().join("no").join("out.mha");
+    let src = dir.path().join("s.mha");
+    ok(&[&"phantom", &"sphere", &"-o", &src, &"--size", &"4"]);
+    let err = fails(&[&"convert", &src, &out_of_reach]);
+    assert!(
+        err.contains("does not exist") && !err.contains(".partial"),
+        "{err}"
+    );
 
     let corrupt = dir.path().join("corrupt.nii.gz");
     std::fs::write(&corrupt, b"\x1f\x8b\x08\x00garbage").unwrap();

@@ -26,12 +26,15 @@ pub const MAX_ALLOC_BYTES: u64 = 64 << 30;
 #[derive(Debug, thiserror::Error)]
 pub enum IoError {
     /// An operating-system I/O failure, with the path involved.
-    #[error("{path}: {source}")]
+    ///
+    /// Displays as `path: error`; the underlying error is part of the message, not a separate
+    /// `source()`, so error chains do not repeat it.
+    #[error("{path}: {error}")]
     Os {
         /// File being read or written.
         path: String,
         /// Underlying error.
-        source: io::Error,
+        error: io::Error,
     },
     /// Input ended before a field could be read.
     #[error(transparent)]
@@ -66,10 +69,7 @@ where
     E: From<IoError>,
     F: FnOnce(&mut BufWriter<&mut File>) -> Result<(), E>,
 {
-    let os = |source: io::Error| IoError::Os {
-        path: path.display().to_string(),
-        source,
-    };
+    let os = |error| IoError::os(path, error);
     let dir = match path.parent() {
         Some(p) if !p.as_os_str().is_empty() => p,
         _ => Path::new("."),
@@ -83,7 +83,17 @@ where
         use std::os::unix::fs::PermissionsExt;
         builder.permissions(std::fs::Permissions::from_mode(0o666));
     }
-    let mut tmp = builder.tempfile_in(dir).map_err(os)?;
+    let mut tmp = builder.tempfile_in(dir).map_err(|e| {
+        // tempfile's message names the random temporary path; say what the user can act on.
+        let why = match e.kind() {
+            io::ErrorKind::NotFound => format!("folder {} does not exist", dir.display()),
+            io::ErrorKind::PermissionDenied => {
+                format!("no permission to create files in {}", dir.display())
+            }
+            kind => format!("cannot create a file in {}: {kind}", dir.display()),
+        };
+        os(io::Error::new(e.kind(), why))
+    })?;
     {
         let mut w = BufWriter::with_capacity(1 << 20, tmp.as_file_mut());
         f(&mut w)?;
@@ -92,6 +102,17 @@ where
     tmp.as_file().sync_all().map_err(os)?;
     tmp.persist(path).map_err(|e| os(e.error))?;
     Ok(())
+}
+
+impl IoError {
+    /// An [`IoError::Os`] for `error` while working on `path`.
+    #[must_use]
+    pub fn os(path: &Path, error: io::Error) -> Self {
+        Self::Os {
+            path: path.display().to_string(),
+            error,
+        }
+    }
 }
 
 /// `true` if `bytes` starts with the gzip magic number `1f 8b`.
@@ -106,10 +127,7 @@ pub fn is_gzip(bytes: &[u8]) -> bool {
 /// # Errors
 /// [`IoError::Os`] when the file cannot be read or the gzip stream is corrupt.
 pub fn read_maybe_gz(path: &Path) -> Result<Vec<u8>, IoError> {
-    let os = |source: io::Error| IoError::Os {
-        path: path.display().to_string(),
-        source,
-    };
+    let os = |error| IoError::os(path, error);
     let raw = std::fs::read(path).map_err(os)?;
     if is_gzip(&raw) {
         gunzip(&raw).map_err(os)
@@ -247,6 +265,19 @@ mod tests {
     }
 
     #[test]
+    fn atomic_write_into_missing_folder_names_the_folder() {
+        let dir = tempfile::tempdir().unwrap();
+        let p = dir.path().join("missing").join("out.bin");
+        let e = write_atomic::<IoError, _>(&p, |_| Ok(())).unwrap_err();
+        let msg = e.to_string();
+        assert!(
+            msg.contains("out.bin") && msg.contains("does not exist"),
+            "{msg}"
+        );
+        assert!(!msg.contains(".partial"), "{msg}");
+    }
+
+    #[test]
     fn atomic_write_replaces_existing_only_on_success() {
         let dir = tempfile::tempdir().unwrap();
         let p = dir.path().join("out.bin");
@@ -254,13 +285,8 @@ mod tests {
         let r: Result<(), IoError> = write_atomic(&p, |_| Err(IoError::Size("x".into())));
         assert!(r.is_err());
         assert_eq!(std::fs::read(&p).unwrap(), b"old");
-        write_atomic::<IoError, _>(&p, |w| {
-            w.write_all(b"new").map_err(|e| IoError::Os {
-                path: String::new(),
-                source: e,
-            })
-        })
-        .unwrap();
+        write_atomic::<IoError, _>(&p, |w| w.write_all(b"new").map_err(|e| IoError::os(&p, e)))
+            .unwrap();
         assert_eq!(std::fs::read(&p).unwrap(), b"new");
     }
 

@@ -73,13 +73,15 @@ pub enum MeshError {
     #[error("unsupported: {0}")]
     Unsupported(String),
     /// An error attributed to a file path.
-    #[error("{path}: {source}")]
+    ///
+    /// Displays as `path: error`; the inner error is part of the message, not a separate
+    /// `source()`, so error chains do not repeat it.
+    #[error("{path}: {error}")]
     File {
         /// The file concerned.
         path: String,
         /// What went wrong.
-        #[source]
-        source: Box<MeshError>,
+        error: Box<MeshError>,
     },
 }
 
@@ -101,7 +103,7 @@ impl MeshError {
             e @ (Self::File { .. } | Self::Io(IoError::Os { .. })) => e,
             e => Self::File {
                 path: path.display().to_string(),
-                source: Box::new(e),
+                error: Box::new(e),
             },
         }
     }

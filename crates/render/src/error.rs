@@ -42,13 +42,15 @@ pub enum RenderError {
     #[error("PNG decoding failed: {0}")]
     PngDecode(#[from] png::DecodingError),
     /// An error attributed to a file path.
-    #[error("{path}: {source}")]
+    ///
+    /// Displays as `path: error`; the inner error is part of the message, not a separate
+    /// `source()`, so error chains do not repeat it.
+    #[error("{path}: {error}")]
     File {
         /// The file concerned.
         path: String,
         /// What went wrong.
-        #[source]
-        source: Box<RenderError>,
+        error: Box<RenderError>,
     },
 }
 
@@ -66,7 +68,7 @@ impl RenderError {
             e @ (Self::File { .. } | Self::Io(IoError::Os { .. })) => e,
             e => Self::File {
                 path: path.display().to_string(),
-                source: Box::new(e),
+                error: Box::new(e),
             },
         }
     }

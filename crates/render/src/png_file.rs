@@ -175,12 +175,7 @@ pub fn encode_png_rgba(img: &RgbaImage) -> Result<Vec<u8>, RenderError> {
 /// declares an image over [`MAX_IMAGE_PIXELS`](crate::MAX_IMAGE_PIXELS) (checked before
 /// allocating); [`RenderError::PngDecode`] for corrupt or truncated data. Errors name `path`.
 pub fn read_png(path: &Path) -> Result<RgbaImage, RenderError> {
-    let file = File::open(path).map_err(|source| {
-        RenderError::Io(IoError::Os {
-            path: path.display().to_string(),
-            source,
-        })
-    })?;
+    let file = File::open(path).map_err(|source| RenderError::Io(IoError::os(path, source)))?;
     decode(BufReader::new(file)).map_err(|e| e.at(path))
 }
 

@@ -1,3 +1,5 @@
+use std::path::Path;
+
 use volmorph_io::IoError;
 
 /// Errors of volume construction, sampling and file I/O.
@@ -36,13 +38,15 @@ pub enum VolumeError {
     #[error("unsupported: {0}")]
     Unsupported(String),
     /// An error attributed to a file path.
-    #[error("{path}: {source}")]
+    ///
+    /// Displays as `path: error`; the inner error is part of the message, not a separate
+    /// `source()`, so error chains do not repeat it.
+    #[error("{path}: {error}")]
     File {
         /// The file concerned.
         path: String,
         /// What went wrong.
-        #[source]
-        source: Box<VolumeError>,
+        error: Box<VolumeError>,
     },
 }
 
@@ -57,12 +61,16 @@ impl VolumeError {
 
     /// Attach a file path to this error (no-op if it already carries one).
     #[must_use]
-    pub fn at(self, path: &std::path::Path) -> Self {
+    pub fn at(self, path: &Path) -> Self {
         match self {
             e @ Self::File { .. } => e,
+            // An OS error about this very file already names it.
+            Self::Io(IoError::Os { path: p, error }) if Path::new(&p) == path => {
+                Self::Io(IoError::Os { path: p, error })
+            }
             e => Self::File {
                 path: path.display().to_string(),
-                source: Box::new(e),
+                error: Box::new(e),
             },
         }
     }

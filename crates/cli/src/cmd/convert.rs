@@ -97,8 +97,7 @@ pub fn run(args: &Args) -> anyhow::Result<()> {
         compress: args.compress,
         level: args.level,
     };
-    format::write_with(&args.output, &output, &opts)
-        .with_context(|| format!("cannot write {}", args.output.display()))?;
+    format::write_with(&args.output, &output, &opts).context("cannot write")?;
     pb.finish_and_clear();
     Ok(())
 }
@@ -106,8 +105,7 @@ pub fn run(args: &Args) -> anyhow::Result<()> {
 fn read_input(args: &Args) -> anyhow::Result<AnyVolume> {
     let is_raw = format::Format::from_path(&args.input).ok() == Some(format::Format::Raw);
     if !is_raw {
-        return format::read(&args.input)
-            .with_context(|| format!("cannot read volume {}", args.input.display()));
+        return format::read(&args.input).context("cannot read volume");
     }
     let dims = args
         .raw_dims
@@ -126,8 +124,7 @@ fn read_input(args: &Args) -> anyhow::Result<AnyVolume> {
     if let Some(o) = &args.raw_origin {
         spec.origin = DVec3::from_array(args::triple(o)?);
     }
-    format::raw::read(&args.input, &spec)
-        .with_context(|| format!("cannot read raw volume {}", args.input.display()))
+    format::raw::read(&args.input, &spec).context("cannot read raw volume")
 }
 
 /// Parse a voxel type name, listing the valid ones on error.

@@ -51,8 +51,7 @@ pub fn run(args: &Args) -> anyhow::Result<()> {
             pb.set_message(stem.clone());
             let vol = make(model, dims, kind)?;
             let path = args.out.join(format!("{stem}.nii.gz"));
-            format::write(&path, &vol)
-                .with_context(|| format!("cannot write {}", path.display()))?;
+            format::write(&path, &vol).context("cannot write")?;
             let _ = writeln!(
                 index,
                 "{stem}.nii.gz  {}",

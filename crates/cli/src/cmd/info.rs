@@ -28,8 +28,7 @@ pub struct Args {
 /// Run `volmorph info`.
 pub fn run(args: &Args) -> anyhow::Result<()> {
     let pb = progress::spinner(format!("reading {}", args.input.display()));
-    let file = format::read_with_header(&args.input)
-        .with_context(|| format!("cannot read volume {}", args.input.display()))?;
+    let file = format::read_with_header(&args.input).context("cannot read volume")?;
     let stats = (!args.no_stats).then(|| Statistics::of_any(&file.volume));
     pb.finish_and_clear();
     if args.json {

@@ -49,8 +49,7 @@ pub fn run(cmd: &Command) -> anyhow::Result<()> {
 
 fn info(a: &InfoArgs) -> anyhow::Result<()> {
     let pb = progress::spinner(format!("reading {}", a.input.display()));
-    let m =
-        mesh::read(&a.input).with_context(|| format!("cannot read mesh {}", a.input.display()))?;
+    let m = mesh::read(&a.input).context("cannot read mesh")?;
     let report = m.validate();
     pb.finish_and_clear();
     println!("file:     {}", a.input.display());
@@ -69,15 +68,13 @@ fn info(a: &InfoArgs) -> anyhow::Result<()> {
 
 fn convert(a: &ConvertArgs) -> anyhow::Result<()> {
     let pb = progress::spinner(format!("reading {}", a.input.display()));
-    let m =
-        mesh::read(&a.input).with_context(|| format!("cannot read mesh {}", a.input.display()))?;
+    let m = mesh::read(&a.input).context("cannot read mesh")?;
     pb.set_message(format!("writing {}", a.output.display()));
     let opts = MeshWriteOptions {
         binary: !a.ascii,
         ..MeshWriteOptions::default()
     };
-    mesh::write_with(&a.output, &m, &opts)
-        .with_context(|| format!("cannot write {}", a.output.display()))?;
+    mesh::write_with(&a.output, &m, &opts).context("cannot write")?;
     pb.finish_and_clear();
     Ok(())
 }

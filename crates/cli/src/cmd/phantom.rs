@@ -50,8 +50,7 @@ pub fn run(args: &Args) -> anyhow::Result<()> {
     let pb = progress::spinner(format!("computing {} {dims:?}", model.name()));
     let vol = make(model, dims, args.kind)?;
     pb.set_message(format!("writing {}", args.output.display()));
-    format::write(&args.output, &vol)
-        .with_context(|| format!("cannot write {}", args.output.display()))?;
+    format::write(&args.output, &vol).context("cannot write")?;
     pb.finish_and_clear();
     Ok(())
 }

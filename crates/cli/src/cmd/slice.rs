@@ -53,8 +53,7 @@ fn parse_axis(s: &str) -> Result<Axis, String> {
 
 /// Run `volmorph slice`.
 pub fn run(args: &Args) -> anyhow::Result<()> {
-    let vol = format::read(&args.input)
-        .with_context(|| format!("cannot read volume {}", args.input.display()))?;
+    let vol = format::read(&args.input).context("cannot read volume")?;
     let pos = match (args.index, args.position) {
         (Some(i), _) => SlicePosition::Index(i),
         (None, Some(p)) => SlicePosition::Physical(p),
@@ -71,8 +70,7 @@ pub fn run(args: &Args) -> anyhow::Result<()> {
     let s = slice::extract(&vol, args.axis, pos)
         .with_context(|| format!("cannot take the slice of {}", args.input.display()))?;
     let img = picture(&s, window, colormap, args.physical_aspect, args.scale)?;
-    write_png_rgba(&args.output, &img)
-        .with_context(|| format!("cannot write {}", args.output.display()))?;
+    write_png_rgba(&args.output, &img).context("cannot write")?;
     Ok(())
 }
 
@@ -145,5 +143,5 @@ pub fn write_picture(
     colormap: Colormap,
 ) -> anyhow::Result<()> {
     let img = picture(s, window, colormap, true, 2)?;
-    write_png_rgba(path, &img).with_context(|| format!("cannot write {}", path.display()))
+    write_png_rgba(path, &img).context("cannot write")
 }

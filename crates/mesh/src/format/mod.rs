@@ -170,9 +170,9 @@ pub fn read(path: &Path) -> Result<Mesh, MeshError> {
 /// [`MeshError::Io`] for a corrupt gzip stream, and the format reader's errors.
 pub fn read_bytes(bytes: &[u8], format: MeshFormat) -> Result<Mesh, MeshError> {
     if volmorph_io::is_gzip(bytes) {
-        let raw = volmorph_io::gunzip(bytes).map_err(|source| volmorph_io::IoError::Os {
+        let raw = volmorph_io::gunzip(bytes).map_err(|error| volmorph_io::IoError::Os {
             path: "gzip stream".into(),
-            source,
+            error,
         })?;
         return read_bytes(&raw, format);
     }

@@ -109,7 +109,7 @@ use flate2::bufread::MultiGzDecoder;
 use flate2::write::GzEncoder;
 use glam::{DMat3, DVec3};
 use rayon::prelude::*;
-use volmorph_io::{ByteReader, IoError, Truncated, checked_len, is_gzip, write_atomic};
+use volmorph_io::{ByteReader, Truncated, checked_len, is_gzip, write_atomic};
 
 use super::{Header, WriteOptions};
 use crate::{AnyVolume, Geometry, Volume, VolumeError, Voxel, VoxelType, with_volume};
@@ -1503,12 +1503,7 @@ pub fn read_bytes(bytes: &[u8]) -> Result<(AnyVolume, Header), VolumeError> {
 
 /// Read a `.nii` or `.nii.gz` file (gzip detected by magic number).
 pub(crate) fn read(path: &Path) -> Result<(AnyVolume, Header), VolumeError> {
-    let os = |source: io::Error| {
-        VolumeError::Io(IoError::Os {
-            path: path.display().to_string(),
-            source,
-        })
-    };
+    let os = super::text_header::os_err(path);
     let file = File::open(path).map_err(os)?;
     let len = file.metadata().map_err(os)?.len();
     let mut br = BufReader::with_capacity(1 << 20, file);
@@ -1678,12 +1673,7 @@ pub(crate) fn write(path: &Path, v: &AnyVolume, o: &WriteOptions) -> Result<(), 
     let gz = path
         .file_name()
         .is_some_and(|n| n.to_string_lossy().to_ascii_lowercase().ends_with(".gz"));
-    let os = |source: io::Error| {
-        VolumeError::Io(IoError::Os {
-            path: path.display().to_string(),
-            source,
-        })
-    };
+    let os = super::text_header::os_err(path);
     write_atomic(path, |w| {
         if gz {
             let mut enc = GzEncoder::new(w, Compression::new(o.level.min(9)));

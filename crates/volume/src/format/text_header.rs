@@ -38,13 +38,8 @@ const MAX_TRAILING: u64 = 1 << 20;
 const MAX_TOKEN: usize = 128;
 
 /// Map an OS error to an [`IoError::Os`] carrying `path`.
-pub(crate) fn os_err(path: &Path) -> impl Fn(io::Error) -> VolumeError + '_ {
-    move |source| {
-        VolumeError::Io(IoError::Os {
-            path: path.display().to_string(),
-            source,
-        })
-    }
+pub(crate) fn os_err(path: &Path) -> impl Fn(io::Error) -> VolumeError + Copy + '_ {
+    move |source| VolumeError::Io(IoError::os(path, source))
 }
 
 /// The first bytes of a file (at most [`MAX_HEADER_BYTES`]) and the file's total length.
