@@ -96,7 +96,7 @@ fn write_slice_png(
     let s = slice::extract(vol, axis, SlicePosition::Index(middle(vol, axis)))?;
     match kind {
         Kind::Density => write_picture(png, &s, None, Colormap::Grey),
-        // Distances in model units: ±0.5 around the surface, blue inside, red outside.
-        Kind::Sdf => write_picture(png, &s, Some(Window::new(0.0, 1.0)?), Colormap::CoolWarm),
+        // Distances in model units: ±0.3 around the surface, blue inside, red outside.
+        Kind::Sdf => write_picture(png, &s, Some(Window::new(0.0, 0.6)?), Colormap::CoolWarm),
     }
 }
