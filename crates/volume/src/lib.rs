@@ -7,8 +7,8 @@
 //! * [`Voxel`] / [`VoxelType`] — the supported voxel types and their conversions.
 //! * [`sample`] — nearest, trilinear and prefiltered cubic B-spline interpolation at
 //!   continuous indices or physical points, with a stated boundary policy.
-//! * [`stats`] — value statistics and exact quantiles; [`slice`] — axis-aligned slices.
-//! * [`format`] — NIfTI-1, MetaImage, NRRD, VTK legacy and raw files, chosen by extension.
+//! * [`stats`] — value statistics and exact quantiles; [`slice`](mod@slice) — axis-aligned slices.
+//! * [`format`](mod@format) — NIfTI-1, MetaImage, NRRD, VTK legacy and raw files, chosen by extension.
 //! * [`phantom`] — the built-in models as u8 density and f32 signed distance.
 //!
 //! Everything here works in physical coordinates (millimetres for medical images) in `f64`.
