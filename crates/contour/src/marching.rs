@@ -144,20 +144,6 @@ impl<T: Voxel> Field<'_, T> {
         self.data[o].to_f64()
     }
 
-    #[inline]
-    fn inside(&self, v: f64) -> bool {
-        if self.below {
-            v <= self.level
-        } else {
-            v >= self.level
-        }
-    }
-
-    #[inline]
-    fn inside_at(&self, o: usize) -> bool {
-        self.inside(self.value(o))
-    }
-
     /// Index-space gradient at grid point `(i, j, k)` (offset `o`).
     fn gradient(&self, i: usize, j: usize, k: usize, o: usize) -> DVec3 {
         let sx = 1;
@@ -203,37 +189,226 @@ impl<T: Voxel> Field<'_, T> {
         (position, normal)
     }
 
-    /// Number of vertices owned by plane `k`: crossed x and y edges in the plane, and crossed
-    /// z edges from plane `k` to `k + 1`.
-    fn plane_count(&self, k: usize) -> usize {
-        let (nx, ny) = (self.nx, self.ny);
-        let base = k * nx * ny;
+    /// Classify plane `k` into `flags` (1 inside, 0 outside) and summarise each row of `nx`
+    /// samples in `rows` ([`ALL_OUT`], [`ALL_IN`] or [`MIXED`]).
+    fn classify(&self, k: usize, flags: &mut [u8], rows: &mut [u8]) {
+        let plane = self.nx * self.ny;
+        let src = &self.data[k * plane..(k + 1) * plane];
+        let level = self.level;
+        // Two plain loops (the comparison hoisted out) so that they vectorise.
+        if self.below {
+            for (f, v) in flags.iter_mut().zip(src) {
+                *f = u8::from(v.to_f64() <= level);
+            }
+        } else {
+            for (f, v) in flags.iter_mut().zip(src) {
+                *f = u8::from(v.to_f64() >= level);
+            }
+        }
+        let nx = self.nx;
+        for (r, row) in rows.iter_mut().zip(flags.chunks_exact(nx)) {
+            let inside: u32 = row.iter().map(|&f| u32::from(f)).sum();
+            *r = if inside == 0 {
+                ALL_OUT
+            } else if inside as usize == nx {
+                ALL_IN
+            } else {
+                MIXED
+            };
+        }
+    }
+
+    /// Number of vertices owned by plane `k` (flags `lo`, rows `lo_rows`): crossed x and y
+    /// edges in the plane, and crossed z edges to plane `k + 1` (flags `hi`, if any).
+    fn plane_count(&self, lo: &[u8], lo_rows: &[u8], hi: Option<(&[u8], &[u8])>) -> usize {
+        let nx = self.nx;
+        let differ = |a: &[u8], b: &[u8]| -> usize {
+            a.iter()
+                .zip(b)
+                .map(|(&x, &y)| u32::from(x ^ y))
+                .sum::<u32>() as usize
+        };
         let mut n = 0;
-        for j in 0..ny {
-            let row = base + j * nx;
-            let mut prev = self.inside_at(row);
-            for i in 0..nx {
-                let o = row + i;
-                let here = if i == 0 { prev } else { self.inside_at(o) };
-                if i > 0 && here != prev {
-                    n += 1;
-                }
-                if j + 1 < ny && here != self.inside_at(o + nx) {
-                    n += 1;
-                }
-                if k + 1 < self.nz && here != self.inside_at(o + nx * ny) {
-                    n += 1;
-                }
-                prev = here;
+        for (j, row) in lo.chunks_exact(nx).enumerate() {
+            if lo_rows[j] == MIXED {
+                n += differ(&row[..nx - 1], &row[1..]);
+            }
+            if j + 1 < self.ny && !uniform_alike(lo_rows[j], lo_rows[j + 1]) {
+                n += differ(row, &lo[(j + 1) * nx..(j + 2) * nx]);
+            }
+            if let Some((hi, hi_rows)) = hi
+                && !uniform_alike(lo_rows[j], hi_rows[j])
+            {
+                n += differ(row, &hi[j * nx..(j + 1) * nx]);
             }
         }
         n
+    }
+
+    /// Fill the x and y edge tables of plane `k` (classified in `flags`, `rows`), numbering
+    /// crossings from `first` in scan order (x edges row by row, then y edges). Writes the
+    /// vertices when `sink` is given (the plane is owned). Entries of uncrossed edges are left
+    /// as they were: the case table never refers to them. Returns the number of crossings.
+    #[allow(clippy::too_many_arguments)]
+    fn fill_xy(
+        &self,
+        k: usize,
+        first: usize,
+        ex: &mut [u32],
+        ey: &mut [u32],
+        flags: &[u8],
+        rows: &[u8],
+        mut sink: Option<&mut Sink<'_>>,
+    ) -> usize {
+        let (nx, ny) = (self.nx, self.ny);
+        let base = k * nx * ny;
+        let mut next = first;
+        for j in (0..ny).filter(|&j| rows[j] == MIXED) {
+            for i in 0..nx - 1 {
+                let l = j * nx + i;
+                if flags[l] != flags[l + 1] {
+                    if let Some(s) = sink.as_deref_mut() {
+                        s.put(next, self.vertex([i, j, k], base + l, 0));
+                    }
+                    ex[l] = next as u32;
+                    next += 1;
+                }
+            }
+        }
+        for j in (0..ny - 1).filter(|&j| !uniform_alike(rows[j], rows[j + 1])) {
+            for i in 0..nx {
+                let l = j * nx + i;
+                if flags[l] != flags[l + nx] {
+                    if let Some(s) = sink.as_deref_mut() {
+                        s.put(next, self.vertex([i, j, k], base + l, 1));
+                    }
+                    ey[l] = next as u32;
+                    next += 1;
+                }
+            }
+        }
+        next - first
+    }
+
+    /// Fill the z edge table between planes `k` and `k + 1`, numbering from `first` and
+    /// writing the vertices.
+    fn fill_z(&self, k: usize, first: usize, ez: &mut [u32], p: &Planes, sink: &mut Sink<'_>) {
+        let nx = self.nx;
+        let base = k * nx * self.ny;
+        let mut next = first;
+        for j in (0..self.ny).filter(|&j| !uniform_alike(p.brows[j], p.trows[j])) {
+            for i in 0..nx {
+                let l = j * nx + i;
+                if p.bin[l] != p.tin[l] {
+                    sink.put(next, self.vertex([i, j, k], base + l, 2));
+                    ez[l] = next as u32;
+                    next += 1;
+                }
+            }
+        }
+    }
+
+    /// Process the cell layers `layers` (cells between planes `k` and `k + 1`), writing the
+    /// vertices of the planes this slab owns and returning the triangles.
+    fn slab(
+        &self,
+        layers: std::ops::Range<usize>,
+        owns_top: bool,
+        offsets: &[usize],
+        sink: &mut Sink<'_>,
+        lookup: &EdgeLookup,
+    ) -> Vec<[u32; 3]> {
+        let plane = self.nx * self.ny;
+        let mut p = Planes {
+            bx: vec![NONE; plane],
+            by: vec![NONE; plane],
+            tx: vec![NONE; plane],
+            ty: vec![NONE; plane],
+            z: vec![NONE; plane],
+            bin: vec![0; plane],
+            tin: vec![0; plane],
+            brows: vec![0; self.ny],
+            trows: vec![0; self.ny],
+        };
+        let mut triangles = Vec::new();
+        let k0 = layers.start;
+        self.classify(k0, &mut p.bin, &mut p.brows);
+        let mut xy_count = self.fill_xy(
+            k0,
+            offsets[k0],
+            &mut p.bx,
+            &mut p.by,
+            &p.bin,
+            &p.brows,
+            Some(&mut *sink),
+        );
+        for k in layers.clone() {
+            let top = k + 1;
+            let owned = top < layers.end || owns_top;
+            self.classify(top, &mut p.tin, &mut p.trows);
+            let top_count = self.fill_xy(
+                top,
+                offsets[top],
+                &mut p.tx,
+                &mut p.ty,
+                &p.tin,
+                &p.trows,
+                if owned { Some(&mut *sink) } else { None },
+            );
+            let mut z = std::mem::take(&mut p.z);
+            self.fill_z(k, offsets[k] + xy_count, &mut z, &p, sink);
+            p.z = z;
+            self.cells(&p, lookup, &mut triangles);
+            std::mem::swap(&mut p.bx, &mut p.tx);
+            std::mem::swap(&mut p.by, &mut p.ty);
+            std::mem::swap(&mut p.bin, &mut p.tin);
+            std::mem::swap(&mut p.brows, &mut p.trows);
+            xy_count = top_count;
+        }
+        triangles
+    }
+
+    /// Triangles of one cell layer whose edge tables are in `p`.
+    fn cells(&self, p: &Planes, lookup: &EdgeLookup, out: &mut Vec<[u32; 3]>) {
+        let nx = self.nx;
+        let tables: [&[u32]; 5] = [&p.bx, &p.by, &p.tx, &p.ty, &p.z];
+        for j in 0..self.ny - 1 {
+            let r = [p.brows[j], p.brows[j + 1], p.trows[j], p.trows[j + 1]];
+            if r[0] != MIXED && r.iter().all(|&x| x == r[0]) {
+                continue; // the whole row of cells is inside or outside
+            }
+            let row = j * nx;
+            let b0 = &p.bin[row..row + nx];
+            let b1 = &p.bin[row + nx..row + 2 * nx];
+            let t0 = &p.tin[row..row + nx];
+            let t1 = &p.tin[row + nx..row + 2 * nx];
+            // Corner bits: x = 0 side in bits 0, 2, 4, 6; the x = 1 side is the next column's
+            // pattern shifted by one.
+            let column = |i: usize| b0[i] | (b1[i] << 2) | (t0[i] << 4) | (t1[i] << 6);
+            let mut left = column(0);
+            for i in 0..nx - 1 {
+                let right = column(i + 1);
+                let case = left | (right << 1);
+                left = right;
+                if case == 0 || case == 255 {
+                    continue;
+                }
+                let o = row + i;
+                for tri in CASES[usize::from(case)].triangles() {
+                    let v = tri.map(|e| {
+                        let e = usize::from(e);
+                        tables[lookup.slots[e]][o + lookup.deltas[e]]
+                    });
+                    out.push(if lookup.flip { [v[0], v[2], v[1]] } else { v });
+                }
+            }
+        }
     }
 }
 
 /// Scratch tables of one slab: edge → vertex index for the x and y edges of the bottom and
 /// top planes of the current cell layer and for the z edges between them, plus the inside
-/// flags of both planes.
+/// flags and row summaries of both planes.
 struct Planes {
     bx: Vec<u32>,
     by: Vec<u32>,
@@ -242,6 +417,8 @@ struct Planes {
     z: Vec<u32>,
     bin: Vec<u8>,
     tin: Vec<u8>,
+    brows: Vec<u8>,
+    trows: Vec<u8>,
 }
 
 /// Where vertices of one slab go: the slab's part of the global arrays, starting at global
@@ -261,176 +438,29 @@ impl Sink<'_> {
     }
 }
 
-impl<T: Voxel> Field<'_, T> {
-    /// Fill the x and y edge tables and inside flags of plane `k`, numbering crossings from
-    /// `first` in scan order (x edges row by row, then y edges). Writes the vertices when
-    /// `sink` is given (the plane is owned). Returns the number of crossings.
-    fn fill_xy(
-        &self,
-        k: usize,
-        first: usize,
-        ex: &mut [u32],
-        ey: &mut [u32],
-        flags: &mut [u8],
-        mut sink: Option<&mut Sink<'_>>,
-    ) -> usize {
-        let (nx, ny) = (self.nx, self.ny);
-        let base = k * nx * ny;
-        for (f, o) in flags.iter_mut().zip(base..) {
-            *f = u8::from(self.inside_at(o));
-        }
-        let mut next = first;
-        for j in 0..ny {
-            for i in 0..nx - 1 {
-                let l = j * nx + i;
-                ex[l] = if flags[l] == flags[l + 1] {
-                    NONE
-                } else {
-                    if let Some(s) = sink.as_deref_mut() {
-                        s.put(next, self.vertex([i, j, k], base + l, 0));
-                    }
-                    next += 1;
-                    (next - 1) as u32
-                };
-            }
-        }
-        for j in 0..ny - 1 {
-            for i in 0..nx {
-                let l = j * nx + i;
-                ey[l] = if flags[l] == flags[l + nx] {
-                    NONE
-                } else {
-                    if let Some(s) = sink.as_deref_mut() {
-                        s.put(next, self.vertex([i, j, k], base + l, 1));
-                    }
-                    next += 1;
-                    (next - 1) as u32
-                };
-            }
-        }
-        next - first
-    }
+/// Row summaries of a classified plane.
+const ALL_OUT: u8 = 0;
+const ALL_IN: u8 = 1;
+const MIXED: u8 = 2;
 
-    /// Fill the z edge table between planes `k` and `k + 1` (inside flags `lo`, `hi`),
-    /// numbering from `first` and writing the vertices.
-    fn fill_z(
-        &self,
-        k: usize,
-        first: usize,
-        ez: &mut [u32],
-        lo: &[u8],
-        hi: &[u8],
-        sink: &mut Sink<'_>,
-    ) {
-        let nx = self.nx;
-        let base = k * nx * self.ny;
-        let mut next = first;
-        for (l, e) in ez.iter_mut().enumerate() {
-            *e = if lo[l] == hi[l] {
-                NONE
-            } else {
-                sink.put(next, self.vertex([l % nx, l / nx, k], base + l, 2));
-                next += 1;
-                (next - 1) as u32
-            };
-        }
-    }
-
-    /// Process the cell layers `layers` (cells between planes `k` and `k + 1`), writing the
-    /// vertices of the planes this slab owns and returning the triangles.
-    #[allow(clippy::too_many_arguments)]
-    fn slab(
-        &self,
-        layers: std::ops::Range<usize>,
-        owns_top: bool,
-        offsets: &[usize],
-        sink: &mut Sink<'_>,
-        flip: bool,
-        deltas: &[usize; 12],
-        slots: &[usize; 12],
-    ) -> Vec<[u32; 3]> {
-        let plane = self.nx * self.ny;
-        let mut p = Planes {
-            bx: vec![NONE; plane],
-            by: vec![NONE; plane],
-            tx: vec![NONE; plane],
-            ty: vec![NONE; plane],
-            z: vec![NONE; plane],
-            bin: vec![0; plane],
-            tin: vec![0; plane],
-        };
-        let mut triangles = Vec::new();
-        let k0 = layers.start;
-        let mut xy_count = self.fill_xy(
-            k0,
-            offsets[k0],
-            &mut p.bx,
-            &mut p.by,
-            &mut p.bin,
-            Some(sink),
-        );
-        for k in layers.clone() {
-            let top = k + 1;
-            let owned = top < layers.end || owns_top;
-            let top_count = self.fill_xy(
-                top,
-                offsets[top],
-                &mut p.tx,
-                &mut p.ty,
-                &mut p.tin,
-                if owned { Some(&mut *sink) } else { None },
-            );
-            self.fill_z(k, offsets[k] + xy_count, &mut p.z, &p.bin, &p.tin, sink);
-            self.cells(&p, flip, deltas, slots, &mut triangles);
-            std::mem::swap(&mut p.bx, &mut p.tx);
-            std::mem::swap(&mut p.by, &mut p.ty);
-            std::mem::swap(&mut p.bin, &mut p.tin);
-            xy_count = top_count;
-        }
-        triangles
-    }
-
-    /// Triangles of one cell layer whose edge tables are in `p`.
-    fn cells(
-        &self,
-        p: &Planes,
-        flip: bool,
-        deltas: &[usize; 12],
-        slots: &[usize; 12],
-        out: &mut Vec<[u32; 3]>,
-    ) {
-        let nx = self.nx;
-        let tables: [&[u32]; 5] = [&p.bx, &p.by, &p.tx, &p.ty, &p.z];
-        let (b, t) = (&p.bin, &p.tin);
-        for j in 0..self.ny - 1 {
-            for i in 0..nx - 1 {
-                let o = j * nx + i;
-                let case = b[o]
-                    | (b[o + 1] << 1)
-                    | (b[o + nx] << 2)
-                    | (b[o + nx + 1] << 3)
-                    | (t[o] << 4)
-                    | (t[o + 1] << 5)
-                    | (t[o + nx] << 6)
-                    | (t[o + nx + 1] << 7);
-                if case == 0 || case == 255 {
-                    continue;
-                }
-                for tri in CASES[usize::from(case)].triangles() {
-                    let v = tri.map(|e| {
-                        let e = usize::from(e);
-                        tables[slots[e]][o + deltas[e]]
-                    });
-                    out.push(if flip { [v[0], v[2], v[1]] } else { v });
-                }
-            }
-        }
-    }
+/// Whether two rows are both uniform and on the same side (so no edge between them crosses).
+#[inline]
+fn uniform_alike(a: u8, b: u8) -> bool {
+    a == b && a != MIXED
 }
 
-/// For each cube edge: which table holds it (0 bottom x, 1 bottom y, 2 top x, 3 top y, 4 z)
-/// and its offset from the cell's lowest corner within that plane table.
-fn edge_tables(nx: usize) -> ([usize; 12], [usize; 12]) {
+/// How a cell finds the vertex index of each of its 12 edges, and whether triangles are
+/// reversed (mirrored geometry).
+struct EdgeLookup {
+    /// Table of each edge: 0 bottom x, 1 bottom y, 2 top x, 3 top y, 4 z.
+    slots: [usize; 12],
+    /// Offset of each edge's entry from the cell's lowest corner within its table.
+    deltas: [usize; 12],
+    flip: bool,
+}
+
+/// The edge lookup for rows of `nx` samples.
+fn edge_lookup(nx: usize, flip: bool) -> EdgeLookup {
     let mut deltas = [0; 12];
     let mut slots = [0; 12];
     for e in 0..12 {
@@ -443,15 +473,38 @@ fn edge_tables(nx: usize) -> ([usize; 12], [usize; 12]) {
             _ => 4,
         };
     }
-    (deltas, slots)
+    EdgeLookup {
+        slots,
+        deltas,
+        flip,
+    }
 }
 
 fn extract<T: Voxel>(field: &Field<'_, T>, flip: bool) -> Result<IsoSurface, ContourError> {
     let nz = field.nz;
     // Vertices owned by each plane, then their global numbering.
+    let (plane, ny) = (field.nx * field.ny, field.ny);
     let counts: Vec<usize> = (0..nz)
         .into_par_iter()
-        .map(|k| field.plane_count(k))
+        .map_init(
+            || {
+                (
+                    vec![0u8; plane],
+                    vec![0u8; ny],
+                    vec![0u8; plane],
+                    vec![0u8; ny],
+                )
+            },
+            |(lo, lo_rows, hi, hi_rows), k| {
+                field.classify(k, lo, lo_rows);
+                if k + 1 < nz {
+                    field.classify(k + 1, hi, hi_rows);
+                    field.plane_count(lo, lo_rows, Some((hi, hi_rows)))
+                } else {
+                    field.plane_count(lo, lo_rows, None)
+                }
+            },
+        )
         .collect();
     let mut offsets = Vec::with_capacity(nz + 1);
     let mut total = 0usize;
@@ -496,13 +549,11 @@ fn extract<T: Voxel>(field: &Field<'_, T>, flip: bool) -> Result<IsoSurface, Con
             },
         ));
     }
-    let (deltas, slots) = edge_tables(field.nx);
+    let lookup = edge_lookup(field.nx, flip);
     let per_slab: Vec<Vec<[u32; 3]>> = sinks
         .into_par_iter()
         .filter(|(r, _, _)| !r.is_empty())
-        .map(|(range, last, mut sink)| {
-            field.slab(range, last, &offsets, &mut sink, flip, &deltas, &slots)
-        })
+        .map(|(range, last, mut sink)| field.slab(range, last, &offsets, &mut sink, &lookup))
         .collect();
     let triangles: Vec<[u32; 3]> = per_slab.concat();
     fill_missing_normals(&positions, &triangles, &mut normals);
