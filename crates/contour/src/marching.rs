@@ -53,7 +53,9 @@ pub struct IsoSurface {
 /// (`origin + direction · (spacing ⊙ index)`). Every triangle using an edge uses that one
 /// vertex, so no two vertices share a position and there are no cracks.
 ///
-/// **Triangles.** From the 256-case table derived in `table.rs`: on a face with diagonal
+/// **Triangles.** From a 256-case table derived from the cube's topology (each face's
+/// crossings joined into oriented segments, the segments chained into loops, each loop
+/// fanned without diagonals across a cube face): on a face with diagonal
 /// inside corners the inside corners are always separated, a rule that depends on the face's
 /// four samples alone, so neighbouring cells agree and the surface is crack-free. Triangles
 /// are counter-clockwise seen from outside, so right-hand-rule normals point outward; a

@@ -418,6 +418,25 @@ proptest! {
         let report = s.mesh.validate();
         prop_assert!(report.is_clean(), "{}", report);
         assert_distinct_positions(&s.mesh);
+        // Exactly one vertex per grid edge whose ends are classified differently.
+        let inside = |x: f32| {
+            let x = f64::from(x);
+            if below { x <= level } else { x >= level }
+        };
+        let at = |i: usize, j: usize, k: usize| inside(data[i + dims[0] * (j + dims[1] * k)]);
+        let mut crossed = 0;
+        for k in 0..dims[2] {
+            for j in 0..dims[1] {
+                for i in 0..dims[0] {
+                    let here = at(i, j, k);
+                    crossed += usize::from(i + 1 < dims[0] && here != at(i + 1, j, k));
+                    crossed += usize::from(j + 1 < dims[1] && here != at(i, j + 1, k));
+                    crossed += usize::from(k + 1 < dims[2] && here != at(i, j, k + 1));
+                }
+            }
+        }
+        prop_assert_eq!(s.mesh.vertex_count(), crossed);
+        prop_assert_eq!(s.normals.len(), crossed);
         // Padded with outside samples, the surface closes.
         let outside = if below { 10.0 } else { -10.0 };
         let padded = pad(dims, &data, outside);
