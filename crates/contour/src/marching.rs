@@ -118,12 +118,14 @@ pub fn marching_cubes_any(
     with_volume!(volume, v => marching_cubes(v, level, options))
 }
 
-/// Marker of "no vertex on this edge" in the per-plane edge index tables.
+/// Initial content of the per-plane edge index tables. Entries of uncrossed edges are never
+/// read (the case table only names crossed edges), so they are not reset between planes.
 const NONE: u32 = u32::MAX;
 
 /// Bytes held per vertex (position and normal).
 const VERTEX_BYTES: usize = 2 * size_of::<DVec3>();
 
+/// The sampled field with its classification rule and geometry.
 struct Field<'a, T> {
     data: &'a [T],
     nx: usize,
