@@ -1,0 +1,593 @@
+//! Marching cubes over a whole volume, parallel over z-slabs.
+
+use glam::{DMat3, DVec3};
+use rayon::prelude::*;
+use volmorph_mesh::Mesh;
+use volmorph_volume::{AnyVolume, Volume, Voxel, with_volume};
+
+use crate::ContourError;
+use crate::table::{CASES, corner_offset, edge_corners};
+
+/// Smallest distance, as a fraction of the edge, between a surface vertex and either end of
+/// its grid edge. Keeps vertices of different edges apart (so no triangle is degenerate) when
+/// samples equal the level or lie extremely close to it; moves a vertex by at most this
+/// fraction of a voxel.
+pub const EDGE_MARGIN: f64 = 1e-6;
+
+/// Options of [`marching_cubes`].
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
+pub struct McOptions {
+    /// Which side of the level is the solid.
+    ///
+    /// `false` (default): a sample is **inside when `value ≥ level`**, as for densities and
+    /// intensities (True's density model, CT). `true`: inside when `value ≤ level`, as for
+    /// signed distances, which are negative inside. A sample exactly at the level is inside
+    /// either way; NaN samples are outside.
+    pub inside_below: bool,
+}
+
+/// A triangulated isosurface with per-vertex normals.
+#[derive(Debug, Clone, PartialEq)]
+pub struct IsoSurface {
+    /// Triangles counter-clockwise seen from outside (the right-hand-rule normal points from
+    /// the inside to the outside), vertices in physical coordinates.
+    pub mesh: Mesh,
+    /// Unit outward normal of each vertex (same order as the mesh positions), from the
+    /// gradient of the field: central differences at the grid points (one-sided on the volume
+    /// boundary), taken through the geometry to physical space and interpolated along the
+    /// vertex's edge. Where that gradient vanishes or is not finite, the normalised sum of the
+    /// area-weighted normals of the vertex's triangles is used instead.
+    pub normals: Vec<DVec3>,
+}
+
+/// Extract the isosurface `value = level` of `volume` by marching cubes (Lorensen & Cline,
+/// as used in True 1992 §5.6 to render warped voxmaps).
+///
+/// **Cells and sides.** Every cube of eight neighbouring voxel centres is a cell. Each sample
+/// is classified inside or outside as [`McOptions::inside_below`] says (by default inside
+/// when `value ≥ level`; a value equal to the level is always inside, NaN always outside).
+///
+/// **Vertices.** One vertex per grid edge whose ends are classified differently, placed by
+/// linear interpolation of the samples and clamped to stay at least [`EDGE_MARGIN`] of the
+/// edge away from either end, then mapped to physical space by the volume geometry
+/// (`origin + direction · (spacing ⊙ index)`). Every triangle using an edge uses that one
+/// vertex, so no two vertices share a position and there are no cracks.
+///
+/// **Triangles.** From a 256-case table derived from the cube's topology (each face's
+/// crossings joined into oriented segments, the segments chained into loops, each loop
+/// fanned without diagonals across a cube face): on a face with diagonal
+/// inside corners the inside corners are always separated, a rule that depends on the face's
+/// four samples alone, so neighbouring cells agree and the surface is crack-free. Triangles
+/// are counter-clockwise seen from outside, so right-hand-rule normals point outward; a
+/// direction matrix with negative determinant (a mirrored grid) is compensated by reversing
+/// every triangle.
+///
+/// **Topology.** Every mesh edge is used by one or two triangles with opposite orientations,
+/// and no triangle is degenerate. Where the inside region does not reach the volume boundary
+/// the surface is a closed, outward-oriented 2-manifold; where it does, the surface is open
+/// and its boundary lies on the faces of the grid's bounding box (close it by padding the
+/// volume with outside values).
+///
+/// The result is deterministic: vertex and triangle order do not depend on the thread count.
+///
+/// # Errors
+/// [`ContourError::NonFiniteLevel`] for a NaN or infinite level;
+/// [`ContourError::TooSmall`] if a dimension is below 2; [`ContourError::Volume`] for an
+/// invalid geometry; [`ContourError::TooManyVertices`] beyond 32-bit indices or the
+/// allocation limit; [`ContourError::Mesh`] beyond 32-bit face corners.
+pub fn marching_cubes<T: Voxel>(
+    volume: &Volume<T>,
+    level: f64,
+    options: &McOptions,
+) -> Result<IsoSurface, ContourError> {
+    if !level.is_finite() {
+        return Err(ContourError::NonFiniteLevel(level));
+    }
+    let geometry = volume.geometry();
+    let dims = geometry.dims;
+    if dims.iter().any(|&d| d < 2) {
+        return Err(ContourError::TooSmall { dims });
+    }
+    geometry.validate()?;
+    let m = geometry.index_to_physical_matrix();
+    let field = Field {
+        data: volume.data(),
+        nx: dims[0],
+        ny: dims[1],
+        nz: dims[2],
+        level,
+        below: options.inside_below,
+        origin: geometry.origin,
+        m,
+        m_inv_t: m.inverse().transpose(),
+        outward: if options.inside_below { 1.0 } else { -1.0 },
+    };
+    let flip = m.determinant() < 0.0;
+    extract(&field, flip)
+}
+
+/// [`marching_cubes`] for a volume whose voxel type is known only at run time.
+///
+/// # Errors
+/// As [`marching_cubes`].
+pub fn marching_cubes_any(
+    volume: &AnyVolume,
+    level: f64,
+    options: &McOptions,
+) -> Result<IsoSurface, ContourError> {
+    with_volume!(volume, v => marching_cubes(v, level, options))
+}
+
+/// Initial content of the per-plane edge index tables. Entries of uncrossed edges are never
+/// read (the case table only names crossed edges), so they are not reset between planes.
+const NONE: u32 = u32::MAX;
+
+/// Bytes held per vertex (position and normal).
+const VERTEX_BYTES: usize = 2 * size_of::<DVec3>();
+
+/// The sampled field with its classification rule and geometry.
+struct Field<'a, T> {
+    data: &'a [T],
+    nx: usize,
+    ny: usize,
+    nz: usize,
+    level: f64,
+    below: bool,
+    origin: DVec3,
+    /// Index step → physical step.
+    m: DMat3,
+    /// Index-space gradient → physical gradient.
+    m_inv_t: DMat3,
+    /// −1 when inside is above the level (outward = down the gradient), +1 otherwise.
+    outward: f64,
+}
+
+impl<T: Voxel> Field<'_, T> {
+    #[inline]
+    fn value(&self, o: usize) -> f64 {
+        self.data[o].to_f64()
+    }
+
+    /// Index-space gradient at grid point `(i, j, k)` (offset `o`).
+    fn gradient(&self, i: usize, j: usize, k: usize, o: usize) -> DVec3 {
+        let sx = 1;
+        let sy = self.nx;
+        let sz = self.nx * self.ny;
+        let axis = |c: usize, n: usize, stride: usize| -> f64 {
+            if c == 0 {
+                self.value(o + stride) - self.value(o)
+            } else if c + 1 == n {
+                self.value(o) - self.value(o - stride)
+            } else {
+                0.5 * (self.value(o + stride) - self.value(o - stride))
+            }
+        };
+        DVec3::new(
+            axis(i, self.nx, sx),
+            axis(j, self.ny, sy),
+            axis(k, self.nz, sz),
+        )
+    }
+
+    /// Position and normal of the crossing on the edge from grid point `p` (offset `o`)
+    /// along `axis` (0, 1, 2).
+    fn vertex(&self, p: [usize; 3], o: usize, axis: usize) -> (DVec3, DVec3) {
+        let stride = [1, self.nx, self.nx * self.ny][axis];
+        let (va, vb) = (self.value(o), self.value(o + stride));
+        let t = (self.level - va) / (vb - va);
+        let t = if t.is_nan() {
+            0.5
+        } else {
+            t.clamp(EDGE_MARGIN, 1.0 - EDGE_MARGIN)
+        };
+        let mut q = p;
+        q[axis] += 1;
+        let base = DVec3::new(p[0] as f64, p[1] as f64, p[2] as f64);
+        let mut step = DVec3::ZERO;
+        step[axis] = t;
+        let position = self.origin + self.m * (base + step);
+        let ga = self.gradient(p[0], p[1], p[2], o);
+        let gb = self.gradient(q[0], q[1], q[2], o + stride);
+        let g = self.m_inv_t * ga.lerp(gb, t) * self.outward;
+        let normal = g.try_normalize().unwrap_or(DVec3::ZERO);
+        (position, normal)
+    }
+
+    /// Classify plane `k` into `flags` (1 inside, 0 outside) and summarise each row of `nx`
+    /// samples in `rows` ([`ALL_OUT`], [`ALL_IN`] or [`MIXED`]).
+    fn classify(&self, k: usize, flags: &mut [u8], rows: &mut [u8]) {
+        let plane = self.nx * self.ny;
+        let src = &self.data[k * plane..(k + 1) * plane];
+        let level = self.level;
+        // Two plain loops (the comparison hoisted out) so that they vectorise.
+        if self.below {
+            for (f, v) in flags.iter_mut().zip(src) {
+                *f = u8::from(v.to_f64() <= level);
+            }
+        } else {
+            for (f, v) in flags.iter_mut().zip(src) {
+                *f = u8::from(v.to_f64() >= level);
+            }
+        }
+        let nx = self.nx;
+        for (r, row) in rows.iter_mut().zip(flags.chunks_exact(nx)) {
+            let inside: u32 = row.iter().map(|&f| u32::from(f)).sum();
+            *r = if inside == 0 {
+                ALL_OUT
+            } else if inside as usize == nx {
+                ALL_IN
+            } else {
+                MIXED
+            };
+        }
+    }
+
+    /// Number of vertices owned by plane `k` (flags `lo`, rows `lo_rows`): crossed x and y
+    /// edges in the plane, and crossed z edges to plane `k + 1` (flags `hi`, if any).
+    fn plane_count(&self, lo: &[u8], lo_rows: &[u8], hi: Option<(&[u8], &[u8])>) -> usize {
+        let nx = self.nx;
+        let differ = |a: &[u8], b: &[u8]| -> usize {
+            a.iter()
+                .zip(b)
+                .map(|(&x, &y)| u32::from(x ^ y))
+                .sum::<u32>() as usize
+        };
+        let mut n = 0;
+        for (j, row) in lo.chunks_exact(nx).enumerate() {
+            if lo_rows[j] == MIXED {
+                n += differ(&row[..nx - 1], &row[1..]);
+            }
+            if j + 1 < self.ny && !uniform_alike(lo_rows[j], lo_rows[j + 1]) {
+                n += differ(row, &lo[(j + 1) * nx..(j + 2) * nx]);
+            }
+            if let Some((hi, hi_rows)) = hi
+                && !uniform_alike(lo_rows[j], hi_rows[j])
+            {
+                n += differ(row, &hi[j * nx..(j + 1) * nx]);
+            }
+        }
+        n
+    }
+
+    /// Fill the x and y edge tables of plane `k` (classified in `flags`, `rows`), numbering
+    /// crossings from `first` in scan order (x edges row by row, then y edges). Writes the
+    /// vertices when `sink` is given (the plane is owned). Entries of uncrossed edges are left
+    /// as they were: the case table never refers to them. Returns the number of crossings.
+    #[allow(clippy::too_many_arguments)]
+    fn fill_xy(
+        &self,
+        k: usize,
+        first: usize,
+        ex: &mut [u32],
+        ey: &mut [u32],
+        flags: &[u8],
+        rows: &[u8],
+        mut sink: Option<&mut Sink<'_>>,
+    ) -> usize {
+        let (nx, ny) = (self.nx, self.ny);
+        let base = k * nx * ny;
+        let mut next = first;
+        for j in (0..ny).filter(|&j| rows[j] == MIXED) {
+            for i in 0..nx - 1 {
+                let l = j * nx + i;
+                if flags[l] != flags[l + 1] {
+                    if let Some(s) = sink.as_deref_mut() {
+                        s.put(next, self.vertex([i, j, k], base + l, 0));
+                    }
+                    ex[l] = next as u32;
+                    next += 1;
+                }
+            }
+        }
+        for j in (0..ny - 1).filter(|&j| !uniform_alike(rows[j], rows[j + 1])) {
+            for i in 0..nx {
+                let l = j * nx + i;
+                if flags[l] != flags[l + nx] {
+                    if let Some(s) = sink.as_deref_mut() {
+                        s.put(next, self.vertex([i, j, k], base + l, 1));
+                    }
+                    ey[l] = next as u32;
+                    next += 1;
+                }
+            }
+        }
+        next - first
+    }
+
+    /// Fill the z edge table between planes `k` and `k + 1`, numbering from `first` and
+    /// writing the vertices.
+    fn fill_z(&self, k: usize, first: usize, ez: &mut [u32], p: &Planes, sink: &mut Sink<'_>) {
+        let nx = self.nx;
+        let base = k * nx * self.ny;
+        let mut next = first;
+        for j in (0..self.ny).filter(|&j| !uniform_alike(p.brows[j], p.trows[j])) {
+            for i in 0..nx {
+                let l = j * nx + i;
+                if p.bin[l] != p.tin[l] {
+                    sink.put(next, self.vertex([i, j, k], base + l, 2));
+                    ez[l] = next as u32;
+                    next += 1;
+                }
+            }
+        }
+    }
+
+    /// Process the cell layers `layers` (cells between planes `k` and `k + 1`), writing the
+    /// vertices of the planes this slab owns and returning the triangles.
+    fn slab(
+        &self,
+        layers: std::ops::Range<usize>,
+        owns_top: bool,
+        offsets: &[usize],
+        sink: &mut Sink<'_>,
+        lookup: &EdgeLookup,
+    ) -> Vec<[u32; 3]> {
+        let plane = self.nx * self.ny;
+        let mut p = Planes {
+            bx: vec![NONE; plane],
+            by: vec![NONE; plane],
+            tx: vec![NONE; plane],
+            ty: vec![NONE; plane],
+            z: vec![NONE; plane],
+            bin: vec![0; plane],
+            tin: vec![0; plane],
+            brows: vec![0; self.ny],
+            trows: vec![0; self.ny],
+        };
+        let mut triangles = Vec::new();
+        let k0 = layers.start;
+        self.classify(k0, &mut p.bin, &mut p.brows);
+        let mut xy_count = self.fill_xy(
+            k0,
+            offsets[k0],
+            &mut p.bx,
+            &mut p.by,
+            &p.bin,
+            &p.brows,
+            Some(&mut *sink),
+        );
+        for k in layers.clone() {
+            let top = k + 1;
+            let owned = top < layers.end || owns_top;
+            self.classify(top, &mut p.tin, &mut p.trows);
+            let top_count = self.fill_xy(
+                top,
+                offsets[top],
+                &mut p.tx,
+                &mut p.ty,
+                &p.tin,
+                &p.trows,
+                if owned { Some(&mut *sink) } else { None },
+            );
+            let mut z = std::mem::take(&mut p.z);
+            self.fill_z(k, offsets[k] + xy_count, &mut z, &p, sink);
+            p.z = z;
+            self.cells(&p, lookup, &mut triangles);
+            std::mem::swap(&mut p.bx, &mut p.tx);
+            std::mem::swap(&mut p.by, &mut p.ty);
+            std::mem::swap(&mut p.bin, &mut p.tin);
+            std::mem::swap(&mut p.brows, &mut p.trows);
+            xy_count = top_count;
+        }
+        triangles
+    }
+
+    /// Triangles of one cell layer whose edge tables are in `p`.
+    fn cells(&self, p: &Planes, lookup: &EdgeLookup, out: &mut Vec<[u32; 3]>) {
+        let nx = self.nx;
+        let tables: [&[u32]; 5] = [&p.bx, &p.by, &p.tx, &p.ty, &p.z];
+        for j in 0..self.ny - 1 {
+            let r = [p.brows[j], p.brows[j + 1], p.trows[j], p.trows[j + 1]];
+            if r[0] != MIXED && r.iter().all(|&x| x == r[0]) {
+                continue; // the whole row of cells is inside or outside
+            }
+            let row = j * nx;
+            let b0 = &p.bin[row..row + nx];
+            let b1 = &p.bin[row + nx..row + 2 * nx];
+            let t0 = &p.tin[row..row + nx];
+            let t1 = &p.tin[row + nx..row + 2 * nx];
+            // Corner bits: x = 0 side in bits 0, 2, 4, 6; the x = 1 side is the next column's
+            // pattern shifted by one.
+            let column = |i: usize| b0[i] | (b1[i] << 2) | (t0[i] << 4) | (t1[i] << 6);
+            let mut left = column(0);
+            for i in 0..nx - 1 {
+                let right = column(i + 1);
+                let case = left | (right << 1);
+                left = right;
+                if case == 0 || case == 255 {
+                    continue;
+                }
+                let o = row + i;
+                for tri in CASES[usize::from(case)].triangles() {
+                    let v = tri.map(|e| {
+                        let e = usize::from(e);
+                        tables[lookup.slots[e]][o + lookup.deltas[e]]
+                    });
+                    out.push(if lookup.flip { [v[0], v[2], v[1]] } else { v });
+                }
+            }
+        }
+    }
+}
+
+/// Scratch tables of one slab: edge → vertex index for the x and y edges of the bottom and
+/// top planes of the current cell layer and for the z edges between them, plus the inside
+/// flags and row summaries of both planes.
+struct Planes {
+    bx: Vec<u32>,
+    by: Vec<u32>,
+    tx: Vec<u32>,
+    ty: Vec<u32>,
+    z: Vec<u32>,
+    bin: Vec<u8>,
+    tin: Vec<u8>,
+    brows: Vec<u8>,
+    trows: Vec<u8>,
+}
+
+/// Where vertices of one slab go: the slab's part of the global arrays, starting at global
+/// vertex index `base`.
+struct Sink<'a> {
+    base: usize,
+    positions: &'a mut [DVec3],
+    normals: &'a mut [DVec3],
+}
+
+impl Sink<'_> {
+    #[inline]
+    fn put(&mut self, index: usize, v: (DVec3, DVec3)) {
+        let local = index - self.base;
+        self.positions[local] = v.0;
+        self.normals[local] = v.1;
+    }
+}
+
+/// Row summaries of a classified plane.
+const ALL_OUT: u8 = 0;
+const ALL_IN: u8 = 1;
+const MIXED: u8 = 2;
+
+/// Whether two rows are both uniform and on the same side (so no edge between them crosses).
+#[inline]
+fn uniform_alike(a: u8, b: u8) -> bool {
+    a == b && a != MIXED
+}
+
+/// How a cell finds the vertex index of each of its 12 edges, and whether triangles are
+/// reversed (mirrored geometry).
+struct EdgeLookup {
+    /// Table of each edge: 0 bottom x, 1 bottom y, 2 top x, 3 top y, 4 z.
+    slots: [usize; 12],
+    /// Offset of each edge's entry from the cell's lowest corner within its table.
+    deltas: [usize; 12],
+    flip: bool,
+}
+
+/// The edge lookup for rows of `nx` samples.
+fn edge_lookup(nx: usize, flip: bool) -> EdgeLookup {
+    let mut deltas = [0; 12];
+    let mut slots = [0; 12];
+    for e in 0..12 {
+        let [from, _] = edge_corners(e);
+        let [dx, dy, dz] = corner_offset(from);
+        deltas[e] = dx + dy * nx;
+        slots[e] = match e / 4 {
+            0 => 2 * dz,
+            1 => 1 + 2 * dz,
+            _ => 4,
+        };
+    }
+    EdgeLookup {
+        slots,
+        deltas,
+        flip,
+    }
+}
+
+fn extract<T: Voxel>(field: &Field<'_, T>, flip: bool) -> Result<IsoSurface, ContourError> {
+    let nz = field.nz;
+    // Vertices owned by each plane, then their global numbering.
+    let (plane, ny) = (field.nx * field.ny, field.ny);
+    let counts: Vec<usize> = (0..nz)
+        .into_par_iter()
+        .map_init(
+            || {
+                (
+                    vec![0u8; plane],
+                    vec![0u8; ny],
+                    vec![0u8; plane],
+                    vec![0u8; ny],
+                )
+            },
+            |(lo, lo_rows, hi, hi_rows), k| {
+                field.classify(k, lo, lo_rows);
+                if k + 1 < nz {
+                    field.classify(k + 1, hi, hi_rows);
+                    field.plane_count(lo, lo_rows, Some((hi, hi_rows)))
+                } else {
+                    field.plane_count(lo, lo_rows, None)
+                }
+            },
+        )
+        .collect();
+    let mut offsets = Vec::with_capacity(nz + 1);
+    let mut total = 0usize;
+    for c in &counts {
+        offsets.push(total);
+        total += c;
+    }
+    offsets.push(total);
+    let limit = volmorph_mesh::MAX_ELEMENTS
+        .min(usize::try_from(volmorph_io::MAX_ALLOC_BYTES).unwrap_or(usize::MAX) / VERTEX_BYTES);
+    if total > limit {
+        return Err(ContourError::TooManyVertices {
+            count: total,
+            limit,
+        });
+    }
+    let mut positions = vec![DVec3::ZERO; total];
+    let mut normals = vec![DVec3::ZERO; total];
+
+    // Slabs of cell layers; slab [k0, k1) owns the vertices of planes k0..k1 (x, y and z
+    // edges), the last slab also those of the top plane.
+    let layers = nz - 1;
+    let slab_count = (rayon::current_num_threads() * 4).clamp(1, layers);
+    let bounds: Vec<usize> = (0..=slab_count).map(|s| s * layers / slab_count).collect();
+    let mut sinks = Vec::with_capacity(slab_count);
+    let (mut rest_p, mut rest_n) = (positions.as_mut_slice(), normals.as_mut_slice());
+    for s in 0..slab_count {
+        let (k0, k1) = (bounds[s], bounds[s + 1]);
+        let end = if s + 1 == slab_count { nz } else { k1 };
+        let len = offsets[end] - offsets[k0];
+        let (p, rp) = std::mem::take(&mut rest_p).split_at_mut(len);
+        let (n, rn) = std::mem::take(&mut rest_n).split_at_mut(len);
+        rest_p = rp;
+        rest_n = rn;
+        sinks.push((
+            k0..k1,
+            s + 1 == slab_count,
+            Sink {
+                base: offsets[k0],
+                positions: p,
+                normals: n,
+            },
+        ));
+    }
+    let lookup = edge_lookup(field.nx, flip);
+    let per_slab: Vec<Vec<[u32; 3]>> = sinks
+        .into_par_iter()
+        .filter(|(r, _, _)| !r.is_empty())
+        .map(|(range, last, mut sink)| field.slab(range, last, &offsets, &mut sink, &lookup))
+        .collect();
+    let triangles: Vec<[u32; 3]> = per_slab.concat();
+    fill_missing_normals(&positions, &triangles, &mut normals);
+    let mesh = Mesh::from_triangles(positions, &triangles)?;
+    Ok(IsoSurface { mesh, normals })
+}
+
+/// Replace zero normals (vanishing or non-finite gradient) by the normalised sum of the
+/// (area-weighted) normals of the triangles around the vertex.
+fn fill_missing_normals(positions: &[DVec3], triangles: &[[u32; 3]], normals: &mut [DVec3]) {
+    if !normals.contains(&DVec3::ZERO) {
+        return;
+    }
+    let missing: Vec<bool> = normals.iter().map(|n| *n == DVec3::ZERO).collect();
+    let mut sums = vec![DVec3::ZERO; normals.len()];
+    for t in triangles {
+        let [a, b, c] = t.map(|i| i as usize);
+        if !(missing[a] || missing[b] || missing[c]) {
+            continue;
+        }
+        let n = (positions[b] - positions[a]).cross(positions[c] - positions[a]);
+        for v in [a, b, c] {
+            if missing[v] {
+                sums[v] += n;
+            }
+        }
+    }
+    for ((n, s), miss) in normals.iter_mut().zip(sums).zip(missing) {
+        if miss {
+            *n = s.try_normalize().unwrap_or(DVec3::ZERO);
+        }
+    }
+}
