@@ -43,6 +43,11 @@ enum Command {
         after_help = "Examples:\n  volmorph phantom teapot -o teapot.nii.gz --size 128\n  volmorph phantom torus -o torus_sdf.mha --kind sdf --dims 96,96,48"
     )]
     Phantom(cmd::phantom::Args),
+    /// Extract a level set of a volume as a triangle mesh (marching cubes).
+    #[command(
+        after_help = "Examples:\n  volmorph isosurface teapot.nii.gz --level 127 -o teapot.ply\n  volmorph isosurface torus_sdf.nii.gz --level 0 --inside-below -o torus.stl"
+    )]
+    Isosurface(cmd::isosurface::Args),
     /// Polygon mesh tasks.
     #[command(subcommand)]
     Mesh(cmd::mesh::Command),
@@ -56,6 +61,7 @@ fn main() -> ExitCode {
         Command::Convert(a) => cmd::convert::run(&a),
         Command::Slice(a) => cmd::slice::run(&a),
         Command::Phantom(a) => cmd::phantom::run(&a),
+        Command::Isosurface(a) => cmd::isosurface::run(&a),
         Command::Mesh(c) => cmd::mesh::run(&c),
     };
     match result {

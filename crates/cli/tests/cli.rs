@@ -275,3 +275,36 @@ fn demo_writes_every_model() {
     }
     assert!(out.join("index.txt").exists());
 }
+
+#[test]
+fn isosurface_of_a_phantom_is_a_closed_mesh() {
+    let dir = tempfile::tempdir().unwrap();
+    let src = dir.path().join("torus.nii.gz");
+    let sdf = dir.path().join("torus_sdf.mha");
+    ok(&[&"phantom", &"torus", &"-o", &src, &"--size", &"40"]);
+    ok(&[
+        &"phantom", &"torus", &"-o", &sdf, &"--size", &"40", &"--kind", &"sdf",
+    ]);
+    for (input, extra) in [(&src, None), (&sdf, Some("--inside-below"))] {
+        let out = dir.path().join("torus.ply");
+        let level = if extra.is_some() { "0" } else { "127" };
+        let text = match extra {
+            Some(x) => ok(&[&"isosurface", input, &"--level", &level, &"-o", &out, &x]),
+            None => ok(&[&"isosurface", input, &"--level", &level, &"-o", &out]),
+        };
+        assert!(
+            text.contains("closed manifold, Euler characteristic 0"),
+            "{text}"
+        );
+        let info = ok(&[&"mesh", &"info", &out]);
+        assert!(info.contains("closed oriented manifold"), "{info}");
+    }
+    fails(&[
+        &"isosurface",
+        &src,
+        &"--level",
+        &"nan",
+        &"-o",
+        &dir.path().join("x.ply"),
+    ]);
+}
