@@ -172,12 +172,11 @@ impl BSplineLattice {
         let [cx, cy, _] = plan.counts;
         let [wx, wy, wz] = plan.orders;
         // Control columns along u that any in-domain voxel touches.
-        let (c_lo, c_hi) = match (plan.axes[0].at(plan.axes[0].lo), plan.axes[0].hi) {
-            (Some((f, _)), hi) => {
-                let last = plan.axes[0].at(hi - 1).map_or(f, |(f, _)| f);
-                (f, (last + wx).min(cx))
-            }
-            (None, _) => (0, 0),
+        // (First indices decrease along i when the grid axis runs against the lattice axis.)
+        let ax = &plan.axes[0];
+        let (c_lo, c_hi) = match (ax.at(ax.lo), ax.hi.checked_sub(1).and_then(|l| ax.at(l))) {
+            (Some((f0, _)), Some((f1, _))) => (f0.min(f1), (f0.max(f1) + wx).min(cx)),
+            _ => (0, 0),
         };
         let pts = &plan.points;
         out.par_chunks_mut(nx * ny).enumerate().for_each_init(
@@ -251,7 +250,7 @@ impl BSplineLattice {
                      spans differ in length"
                 ))
             })?;
-            (classes[a], reps[a]) = residue_classes(&plan.axes[a], g);
+            (classes[a], reps[a]) = residue_classes(&plan.axes[a], g, step[a] < 0.0);
         }
         let [wx, wy, wz] = plan.orders;
         let block = wx * wy * wz;
@@ -343,10 +342,11 @@ fn granularity(kv: &KnotVector, step: f64) -> Option<usize> {
 }
 
 /// Group the in-domain indices of an axis into classes with identical basis values: index `i`
-/// joins the class of `i − G` when it is one span further with the same values (to
+/// joins the class of `i − G` when it is one span further (one span back when the grid axis
+/// runs against the lattice axis, `descending`) with the same values (to
 /// [`TABLE_WEIGHT_TOL`]). Returns the class of every in-domain index (relative to `lo`) and
 /// one representative grid index per class.
-fn residue_classes(axis: &AxisPlan, g: usize) -> (Vec<u32>, Vec<usize>) {
+fn residue_classes(axis: &AxisPlan, g: usize, descending: bool) -> (Vec<u32>, Vec<usize>) {
     let mut class = Vec::with_capacity(axis.hi - axis.lo);
     let mut reps: Vec<usize> = Vec::new();
     for i in axis.lo..axis.hi {
@@ -355,7 +355,12 @@ fn residue_classes(axis: &AxisPlan, g: usize) -> (Vec<u32>, Vec<usize>) {
             .then(|| (axis.at(i), axis.at(i - g)))
             .and_then(|(now, before)| {
                 let ((f1, v1), (f0, v0)) = (now?, before?);
-                (f1 == f0 + 1
+                let next = if descending {
+                    f1 + 1 == f0
+                } else {
+                    f1 == f0 + 1
+                };
+                (next
                     && v1
                         .iter()
                         .zip(v0)
@@ -371,4 +376,46 @@ fn residue_classes(axis: &AxisPlan, g: usize) -> (Vec<u32>, Vec<usize>) {
         }
     }
     (class, reps)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// True's setting: with `G` voxels per cell the fractional positions repeat with period
+    /// `G`, in either grid direction, so each axis has `G` table classes, plus one when a
+    /// voxel sits exactly on the domain end (evaluated in the last span at `t = 1`).
+    #[test]
+    fn residue_classes_repeat_with_period_g() {
+        let kv = KnotVector::uniform(3, 9, [0.0, 6.0]).unwrap();
+        for (g, start, step, end_hit) in [
+            (4usize, 0.0, 0.25, true),
+            (5, 6.0, -0.2, true),
+            (3, 0.5, 1.0 / 3.0, false),
+            (2, 5.75, -0.5, false),
+        ] {
+            let axis = AxisPlan::new(&kv, 40, start, step).unwrap();
+            let (class, reps) = residue_classes(&axis, g, step < 0.0);
+            assert_eq!(reps.len(), g + usize::from(end_hit), "G = {g}");
+            if !end_hit {
+                for (r, &c) in class.iter().enumerate() {
+                    assert_eq!(c as usize, r % g);
+                }
+            }
+            // Every member of a class has its representative's basis values.
+            for (r, &c) in class.iter().enumerate() {
+                let (_, v) = axis.at(axis.lo + r).unwrap();
+                let (_, w) = axis.at(reps[c as usize]).unwrap();
+                assert!(
+                    v.iter()
+                        .zip(w)
+                        .all(|(a, b)| (a - b).abs() <= TABLE_WEIGHT_TOL)
+                );
+            }
+            assert_eq!(granularity(&kv, step), Some(g));
+        }
+        assert_eq!(granularity(&kv, 0.3), None);
+        let clamped = KnotVector::clamped(3, &[0.2], [0.0, 1.0]).unwrap();
+        assert_eq!(granularity(&clamped, 0.1), None);
+    }
 }

@@ -361,6 +361,26 @@ fn dense_paths_agree_with_pointwise_apply() {
     lat2.apply_grid_separable(&grid2, &mut out2).unwrap();
     assert_grid_matches(&lat2, &grid2, &out2);
 
+    // Grid axes running against the lattice axes (x and z flipped), same voxel centres.
+    let flipped = Geometry::new([16, 15, 14])
+        .with_origin(DVec3::new(13.0, -1.0, 11.0))
+        .with_direction(DMat3::from_diagonal(DVec3::new(-1.0, 1.0, -1.0)));
+    let mut outf = vec![DVec3::ZERO; flipped.len()];
+    lat.apply_grid_table(&flipped, &mut outf).unwrap();
+    assert_grid_matches(&lat, &flipped, &outf);
+    outf.fill(DVec3::ZERO);
+    lat.apply_grid_separable(&flipped, &mut outf).unwrap();
+    assert_grid_matches(&lat, &flipped, &outf);
+    for k in 0..14 {
+        for j in 0..15 {
+            for i in 0..16 {
+                let a = out[grid.offset(i, j, k)];
+                let b = outf[flipped.offset(15 - i, j, 13 - k)];
+                assert!((a - b).length() <= 1e-12 * a.length().max(1.0));
+            }
+        }
+    }
+
     // Non-integer G: only the separable path applies.
     let grid3 = Geometry::new([17, 13, 11])
         .with_spacing(DVec3::new(0.77, 0.93, 1.1))
