@@ -1,8 +1,10 @@
 //! Dense evaluation of a 9×9×9 cubic lattice on a 256³ grid (True 1992 §5.2): the coefficient
-//! table path (integer granularity G = 43 voxels per cell) and the separable path.
+//! table path (integer granularity G = 43 voxels per cell) and the separable path, each with
+//! its plan built per call and reused.
 
 use criterion::{Criterion, criterion_group, criterion_main};
 use glam::DVec3;
+use volmorph_deform::grid::{GridPath, LatticeGridPlan};
 use volmorph_deform::{BSplineLattice, SpaceMap};
 use volmorph_volume::Geometry;
 
@@ -36,6 +38,15 @@ fn bench(c: &mut Criterion) {
             lat.apply_grid_separable(&grid, &mut out)
                 .expect("separable path")
         });
+    });
+    // Plans built once, as in an interactive loop where only control points change.
+    let table = LatticeGridPlan::new(&lat, &grid, GridPath::Table).expect("table plan");
+    let separable = LatticeGridPlan::new(&lat, &grid, GridPath::Separable).expect("plan");
+    g.bench_function("table_plan_reused", |b| {
+        b.iter(|| table.apply(&lat, &mut out).expect("table plan"));
+    });
+    g.bench_function("separable_plan_reused", |b| {
+        b.iter(|| separable.apply(&lat, &mut out).expect("separable plan"));
     });
     g.bench_function("apply_grid", |b| {
         b.iter(|| lat.apply_grid(&grid, &mut out).expect("apply_grid"));

@@ -25,7 +25,7 @@ use volmorph_spline::{BasisTable, KnotVector};
 use volmorph_volume::Geometry;
 
 use crate::map::check_grid;
-use crate::{BSplineLattice, DeformError};
+use crate::{BSplineLattice, DeformError, LatticeFrame};
 
 /// Largest off-diagonal drift allowed for a grid to count as aligned with a lattice: over the
 /// whole grid, ignoring the cross terms may move a parameter by at most this many lattice
@@ -75,6 +75,7 @@ pub(crate) fn aligned_steps(
 
 /// One grid axis against one lattice axis: the contiguous range of indices inside the knot
 /// domain and their basis table.
+#[derive(Debug, Clone)]
 struct AxisPlan {
     lo: usize,
     hi: usize,
@@ -111,80 +112,161 @@ impl AxisPlan {
     }
 }
 
-/// Everything both fast paths share.
-struct Plan {
-    axes: [AxisPlan; 3],
-    points: Vec<DVec3>,
-    counts: [usize; 3],
-    orders: [usize; 3],
+/// Which dense evaluation scheme a [`LatticeGridPlan`] uses (see the [module docs](self)).
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum GridPath {
+    /// Per-axis basis tables and row partial sums; any spacing ratio.
+    Separable,
+    /// True's precomputed coefficient table of weight products (§5.2, Eq. 4); integer
+    /// voxels-per-cell ratios only.
+    Table,
 }
 
-impl Plan {
-    fn new(lat: &BSplineLattice, grid: &Geometry, out: &[DVec3]) -> Result<Self, DeformError> {
-        check_grid(grid, out)?;
-        let (start, step) = aligned_steps(lat, grid)?.ok_or_else(|| {
+/// True's coefficient table: one block of `(p_u+1)(p_v+1)(p_w+1)` weight products per
+/// combination of per-axis classes, the u index fastest inside a block.
+#[derive(Debug, Clone)]
+struct CoefTable {
+    classes: [Vec<u32>; 3],
+    sizes: [usize; 3],
+    weights: Vec<f64>,
+}
+
+/// Precomputed evaluation of lattices with given knots and frame on one voxel grid.
+///
+/// Everything that depends only on the parameters of the voxel centres — per-axis basis
+/// tables and, for [`GridPath::Table`], True's coefficient table — is computed once; as True
+/// observes (§5.2), these do not change when control points move, so one plan serves every
+/// edit of a lattice: build it once, then call [`LatticeGridPlan::apply`] after each change.
+///
+/// ```
+/// use glam::DVec3;
+/// use volmorph_deform::{BSplineLattice, SpaceMap, grid::{GridPath, LatticeGridPlan}};
+/// use volmorph_volume::Geometry;
+/// // True's setting: 9 control points, 6 regions of G = 10 voxels per axis.
+/// let mut lat = BSplineLattice::uniform_cubic_around(
+///     DVec3::splat(-0.5), DVec3::splat(59.5), [9, 9, 9]).unwrap();
+/// let grid = Geometry::new([60, 60, 60]);
+/// let plan = LatticeGridPlan::new(&lat, &grid, GridPath::Table).unwrap();
+/// let mut out = vec![DVec3::ZERO; grid.len()];
+/// plan.apply(&lat, &mut out).unwrap(); // identity lattice: voxel centres stay put
+/// assert!((out[grid.offset(7, 30, 59)] - DVec3::new(7.0, 30.0, 59.0)).length() < 1e-12);
+/// lat.move_control_point([4, 4, 4], DVec3::new(3.0, 0.0, 0.0)).unwrap();
+/// plan.apply(&lat, &mut out).unwrap(); // same plan after the edit
+/// let p = DVec3::new(29.0, 29.0, 29.0);
+/// assert!((out[grid.offset(29, 29, 29)] - lat.apply(p)).length() < 1e-12);
+/// ```
+#[derive(Debug, Clone)]
+pub struct LatticeGridPlan {
+    grid: Geometry,
+    frame: LatticeFrame,
+    knots: [KnotVector; 3],
+    path: GridPath,
+    axes: [AxisPlan; 3],
+    orders: [usize; 3],
+    table: Option<CoefTable>,
+}
+
+impl LatticeGridPlan {
+    /// Precompute the evaluation of lattices with `lattice`'s knots and frame on `grid` by
+    /// `path`.
+    ///
+    /// # Errors
+    /// [`DeformError::Grid`] for an invalid geometry, [`DeformError::GridNotAligned`] if the
+    /// grid's index axes are not parallel to the lattice's parameter axes (either sign),
+    /// and for [`GridPath::Table`] [`DeformError::TableUnavailable`] if a lattice cell is not
+    /// an integer number of voxels, knot spans differ in length, or the table would exceed
+    /// [`MAX_TABLE_BYTES`].
+    pub fn new(
+        lattice: &BSplineLattice,
+        grid: &Geometry,
+        path: GridPath,
+    ) -> Result<Self, DeformError> {
+        grid.validate()?;
+        let (start, step) = aligned_steps(lattice, grid)?.ok_or_else(|| {
             DeformError::GridNotAligned(
                 "grid index axes are not parallel to the lattice's parameter axes".into(),
             )
         })?;
-        let k = lat.knots();
+        let k = lattice.knots();
         let axes = [
             AxisPlan::new(&k[0], grid.dims[0], start[0], step[0])?,
             AxisPlan::new(&k[1], grid.dims[1], start[1], step[1])?,
             AxisPlan::new(&k[2], grid.dims[2], start[2], step[2])?,
         ];
-        let deg = lat.degree();
+        let deg = lattice.degree();
+        let orders = [deg[0] + 1, deg[1] + 1, deg[2] + 1];
+        let table = match path {
+            GridPath::Separable => None,
+            GridPath::Table => Some(coefficient_table(k, &axes, step, orders)?),
+        };
         Ok(Self {
+            grid: *grid,
+            frame: *lattice.frame(),
+            knots: k.clone(),
+            path,
             axes,
-            points: lat.control_points(),
-            counts: lat.counts(),
-            orders: [deg[0] + 1, deg[1] + 1, deg[2] + 1],
+            orders,
+            table,
         })
     }
-}
 
-/// Voxel centre `(i, j, k)`, computed exactly as the pointwise path does.
-#[inline]
-fn centre(grid: &Geometry, i: usize, j: usize, k: usize) -> DVec3 {
-    grid.index_to_physical(DVec3::new(i as f64, j as f64, k as f64))
-}
+    /// The grid the plan evaluates on.
+    #[must_use]
+    pub fn grid(&self) -> &Geometry {
+        &self.grid
+    }
 
-impl BSplineLattice {
-    /// Evaluate the map at every voxel centre of `grid` (x fastest) with separable per-axis
-    /// basis tables (see the [module docs](self)); works for any spacing ratio. Agrees with
-    /// pointwise [`SpaceMap::apply`](crate::SpaceMap::apply) to rounding.
+    /// The evaluation scheme.
+    #[must_use]
+    pub fn path(&self) -> GridPath {
+        self.path
+    }
+
+    /// Evaluate `lattice` at every voxel centre of the plan's grid into `out` (x fastest);
+    /// voxels outside the lattice box are mapped to themselves. Parallel over z-slabs, no
+    /// allocation per voxel; agrees with pointwise [`SpaceMap::apply`](crate::SpaceMap::apply)
+    /// to rounding.
     ///
     /// # Errors
-    /// [`DeformError::Grid`] for an invalid geometry, [`DeformError::BufferLength`] for a
-    /// wrong `out` length, [`DeformError::GridNotAligned`] if the grid axes are not parallel to
-    /// the lattice axes (use [`SpaceMap::apply_grid`], which falls back to pointwise
-    /// evaluation).
-    pub fn apply_grid_separable(
-        &self,
-        grid: &Geometry,
-        out: &mut [DVec3],
-    ) -> Result<(), DeformError> {
-        let plan = Plan::new(self, grid, out)?;
-        let [nx, ny, _] = grid.dims;
+    /// [`DeformError::GridNotAligned`] if `lattice` has other knots or another frame than the
+    /// lattice the plan was built for (its control points may differ freely),
+    /// [`DeformError::BufferLength`] if `out.len()` is not the grid's voxel count.
+    pub fn apply(&self, lattice: &BSplineLattice, out: &mut [DVec3]) -> Result<(), DeformError> {
+        if lattice.knots() != &self.knots || lattice.frame() != &self.frame {
+            return Err(DeformError::GridNotAligned(
+                "the lattice's knots or frame differ from those the plan was built for".into(),
+            ));
+        }
+        check_grid(&self.grid, out)?;
         if out.is_empty() {
             return Ok(());
         }
-        let [cx, cy, _] = plan.counts;
-        let [wx, wy, wz] = plan.orders;
-        // Control columns along u that any in-domain voxel touches.
-        // (First indices decrease along i when the grid axis runs against the lattice axis.)
-        let ax = &plan.axes[0];
+        let points = lattice.control_points();
+        match &self.table {
+            None => self.apply_separable(&points, lattice.counts(), out),
+            Some(t) => self.apply_table(t, &points, lattice.counts(), out),
+        }
+        Ok(())
+    }
+
+    fn apply_separable(&self, pts: &[DVec3], counts: [usize; 3], out: &mut [DVec3]) {
+        let grid = &self.grid;
+        let [nx, ny, _] = grid.dims;
+        let [cx, cy, _] = counts;
+        let [wx, wy, wz] = self.orders;
+        // Control columns along u that any in-domain voxel touches. (First indices decrease
+        // along i when the grid axis runs against the lattice axis.)
+        let ax = &self.axes[0];
         let (c_lo, c_hi) = match (ax.at(ax.lo), ax.hi.checked_sub(1).and_then(|l| ax.at(l))) {
             (Some((f0, _)), Some((f1, _))) => (f0.min(f1), (f0.max(f1) + wx).min(cx)),
             _ => (0, 0),
         };
-        let pts = &plan.points;
         out.par_chunks_mut(nx * ny).enumerate().for_each_init(
             || vec![DVec3::ZERO; c_hi - c_lo],
             |row_sum, (k, slab)| {
-                let zk = plan.axes[2].at(k);
+                let zk = self.axes[2].at(k);
                 for (j, row) in slab.chunks_exact_mut(nx).enumerate() {
-                    let (Some((fz, bz)), Some((fy, by))) = (zk, plan.axes[1].at(j)) else {
+                    let (Some((fz, bz)), Some((fy, by))) = (zk, self.axes[1].at(j)) else {
                         for (i, o) in row.iter_mut().enumerate() {
                             *o = centre(grid, i, j, k);
                         }
@@ -203,7 +285,7 @@ impl BSplineLattice {
                         }
                     }
                     for (i, o) in row.iter_mut().enumerate() {
-                        *o = match plan.axes[0].at(i) {
+                        *o = match ax.at(i) {
                             Some((fx, bx)) => {
                                 let s = &row_sum[fx - c_lo..fx - c_lo + wx];
                                 let mut acc = DVec3::ZERO;
@@ -218,98 +300,38 @@ impl BSplineLattice {
                 }
             },
         );
-        Ok(())
     }
 
-    /// Evaluate the map at every voxel centre of `grid` (x fastest) with True's precomputed
-    /// coefficient table (§5.2, Eqs. 4–5): requires the lattice cell to span an integer number
-    /// `G_a` of voxels along each axis (knot spans of equal length), so that the basis values
-    /// repeat with period `G_a`; each voxel is then a sum of `(p_u+1)(p_v+1)(p_w+1)` (64 for
-    /// cubic lattices) contiguous table weights times control points. Agrees with pointwise
-    /// [`SpaceMap::apply`](crate::SpaceMap::apply) to rounding.
-    ///
-    /// # Errors
-    /// As [`BSplineLattice::apply_grid_separable`], plus [`DeformError::TableUnavailable`] if a
-    /// ratio is not an integer, the knot spans differ in length, or the table would exceed
-    /// [`MAX_TABLE_BYTES`].
-    pub fn apply_grid_table(&self, grid: &Geometry, out: &mut [DVec3]) -> Result<(), DeformError> {
-        let plan = Plan::new(self, grid, out)?;
+    fn apply_table(&self, t: &CoefTable, pts: &[DVec3], counts: [usize; 3], out: &mut [DVec3]) {
+        let grid = &self.grid;
         let [nx, ny, _] = grid.dims;
-        if out.is_empty() {
-            return Ok(());
-        }
-        let (_, step) = aligned_steps(self, grid)?.ok_or_else(|| {
-            DeformError::GridNotAligned("grid axes not parallel to lattice axes".into())
-        })?;
-        let mut classes: [Vec<u32>; 3] = Default::default();
-        let mut reps: [Vec<usize>; 3] = Default::default();
-        for a in 0..3 {
-            let g = granularity(&self.knots()[a], step[a]).ok_or_else(|| {
-                DeformError::TableUnavailable(format!(
-                    "axis {a}: a lattice cell is not an integer number of voxels, or knot \
-                     spans differ in length"
-                ))
-            })?;
-            (classes[a], reps[a]) = residue_classes(&plan.axes[a], g, step[a] < 0.0);
-        }
-        let [wx, wy, wz] = plan.orders;
+        let [cx, cy, _] = counts;
+        let [wx, wy, wz] = self.orders;
         let block = wx * wy * wz;
-        let [gx, gy, gz] = [reps[0].len(), reps[1].len(), reps[2].len()];
-        let len = [gx, gy, gz, block, 8]
-            .iter()
-            .try_fold(1usize, |acc, &v| acc.checked_mul(v))
-            .filter(|&b| b <= MAX_TABLE_BYTES)
-            .ok_or_else(|| {
-                DeformError::TableUnavailable(format!(
-                    "a {gx}×{gy}×{gz}×{block} coefficient table exceeds {MAX_TABLE_BYTES} bytes"
-                ))
-            })?
-            / 8;
-        // c[ḡ][f̄][ē][k][j][i]: True's Eq. 4 with the u index fastest.
-        let mut table = vec![0.0; len];
-        table
-            .par_chunks_mut(block)
-            .enumerate()
-            .for_each(|(e, blk)| {
-                let (ex, ey, ez) = (e % gx, (e / gx) % gy, e / (gx * gy));
-                let bx = plan.axes[0].at(reps[0][ex]).map(|t| t.1);
-                let by = plan.axes[1].at(reps[1][ey]).map(|t| t.1);
-                let bz = plan.axes[2].at(reps[2][ez]).map(|t| t.1);
-                if let (Some(bx), Some(by), Some(bz)) = (bx, by, bz) {
-                    for (c, &nz) in bz.iter().enumerate() {
-                        for (b, &ny_) in by.iter().enumerate() {
-                            for (a, &nx_) in bx.iter().enumerate() {
-                                blk[(c * wy + b) * wx + a] = nx_ * ny_ * nz;
-                            }
-                        }
-                    }
-                }
-            });
-        let [cx, cy, _] = plan.counts;
-        let pts = &plan.points;
-        let classes = &classes;
+        let [gx, gy, _] = t.sizes;
         out.par_chunks_mut(nx * ny)
             .enumerate()
             .for_each(|(k, slab)| {
-                let zk = plan.axes[2].at(k).map(|t| t.0);
+                let zk = self.axes[2].at(k).map(|v| v.0);
                 for (j, row) in slab.chunks_exact_mut(nx).enumerate() {
-                    let (Some(fz), Some((fy, _))) = (zk, plan.axes[1].at(j)) else {
+                    let (Some(fz), Some((fy, _))) = (zk, self.axes[1].at(j)) else {
                         for (i, o) in row.iter_mut().enumerate() {
                             *o = centre(grid, i, j, k);
                         }
                         continue;
                     };
-                    let ez = classes[2][k - plan.axes[2].lo] as usize;
-                    let ey = classes[1][j - plan.axes[1].lo] as usize;
+                    let ez = t.classes[2][k - self.axes[2].lo] as usize;
+                    let ey = t.classes[1][j - self.axes[1].lo] as usize;
                     let row_block = (ez * gy + ey) * gx;
                     for (i, o) in row.iter_mut().enumerate() {
-                        let Some((fx, _)) = plan.axes[0].at(i) else {
+                        let Some((fx, _)) = self.axes[0].at(i) else {
                             *o = centre(grid, i, j, k);
                             continue;
                         };
-                        let ex = classes[0][i - plan.axes[0].lo] as usize;
+                        let ex = t.classes[0][i - self.axes[0].lo] as usize;
                         let start = (row_block + ex) * block;
-                        let w = &table[start..start + block];
+                        let w = &t.weights[start..start + block];
+                        // True's Eq. 5: a sum of `block` (64) terms.
                         let mut acc = DVec3::ZERO;
                         for c in 0..wz {
                             for b in 0..wy {
@@ -324,7 +346,111 @@ impl BSplineLattice {
                     }
                 }
             });
-        Ok(())
+    }
+}
+
+/// Build True's coefficient table (Eq. 4) for the per-axis plans.
+fn coefficient_table(
+    knots: &[KnotVector; 3],
+    axes: &[AxisPlan; 3],
+    step: [f64; 3],
+    orders: [usize; 3],
+) -> Result<CoefTable, DeformError> {
+    let mut classes: [Vec<u32>; 3] = Default::default();
+    let mut reps: [Vec<usize>; 3] = Default::default();
+    for a in 0..3 {
+        let g = granularity(&knots[a], step[a]).ok_or_else(|| {
+            DeformError::TableUnavailable(format!(
+                "axis {a}: a lattice cell is not an integer number of voxels, or knot spans \
+                 differ in length"
+            ))
+        })?;
+        (classes[a], reps[a]) = residue_classes(&axes[a], g, step[a] < 0.0);
+    }
+    let [wx, wy, wz] = orders;
+    let block = wx * wy * wz;
+    let sizes = [reps[0].len(), reps[1].len(), reps[2].len()];
+    let [gx, gy, gz] = sizes;
+    let len = [gx, gy, gz, block, 8]
+        .iter()
+        .try_fold(1usize, |acc, &v| acc.checked_mul(v))
+        .filter(|&b| b <= MAX_TABLE_BYTES)
+        .ok_or_else(|| {
+            DeformError::TableUnavailable(format!(
+                "a {gx}×{gy}×{gz}×{block} coefficient table exceeds {MAX_TABLE_BYTES} bytes"
+            ))
+        })?
+        / 8;
+    // c[ḡ][f̄][ē][k][j][i]: True's Eq. 4 with the u index fastest.
+    let mut weights = vec![0.0; len];
+    if block > 0 {
+        weights
+            .par_chunks_mut(block)
+            .enumerate()
+            .for_each(|(e, blk)| {
+                let (ex, ey, ez) = (e % gx, (e / gx) % gy, e / (gx * gy));
+                let bx = axes[0].at(reps[0][ex]).map(|t| t.1);
+                let by = axes[1].at(reps[1][ey]).map(|t| t.1);
+                let bz = axes[2].at(reps[2][ez]).map(|t| t.1);
+                if let (Some(bx), Some(by), Some(bz)) = (bx, by, bz) {
+                    for (c, &nz) in bz.iter().enumerate() {
+                        for (b, &ny_) in by.iter().enumerate() {
+                            for (a, &nx_) in bx.iter().enumerate() {
+                                blk[(c * wy + b) * wx + a] = nx_ * ny_ * nz;
+                            }
+                        }
+                    }
+                }
+            });
+    }
+    Ok(CoefTable {
+        classes,
+        sizes,
+        weights,
+    })
+}
+
+/// Voxel centre `(i, j, k)`, computed exactly as the pointwise path does.
+#[inline]
+fn centre(grid: &Geometry, i: usize, j: usize, k: usize) -> DVec3 {
+    grid.index_to_physical(DVec3::new(i as f64, j as f64, k as f64))
+}
+
+impl BSplineLattice {
+    /// Evaluate the map at every voxel centre of `grid` (x fastest) with separable per-axis
+    /// basis tables (see the [module docs](self)); works for any spacing ratio. Agrees with
+    /// pointwise [`SpaceMap::apply`](crate::SpaceMap::apply) to rounding. Builds a
+    /// [`LatticeGridPlan`] each call; keep one to evaluate repeatedly.
+    ///
+    /// # Errors
+    /// [`DeformError::Grid`] for an invalid geometry, [`DeformError::BufferLength`] for a
+    /// wrong `out` length, [`DeformError::GridNotAligned`] if the grid axes are not parallel to
+    /// the lattice axes (use [`SpaceMap::apply_grid`](crate::SpaceMap::apply_grid), which
+    /// falls back to pointwise evaluation).
+    pub fn apply_grid_separable(
+        &self,
+        grid: &Geometry,
+        out: &mut [DVec3],
+    ) -> Result<(), DeformError> {
+        check_grid(grid, out)?;
+        LatticeGridPlan::new(self, grid, GridPath::Separable)?.apply(self, out)
+    }
+
+    /// Evaluate the map at every voxel centre of `grid` (x fastest) with True's precomputed
+    /// coefficient table (§5.2, Eqs. 4–5): requires the lattice cell to span an integer number
+    /// `G_a` of voxels along each axis (knot spans of equal length), so that the basis values
+    /// repeat with period `G_a`; each voxel is then a sum of `(p_u+1)(p_v+1)(p_w+1)` (64 for
+    /// cubic lattices) contiguous table weights times control points. Agrees with pointwise
+    /// [`SpaceMap::apply`](crate::SpaceMap::apply) to rounding. Builds a [`LatticeGridPlan`]
+    /// each call; keep one to evaluate repeatedly.
+    ///
+    /// # Errors
+    /// As [`BSplineLattice::apply_grid_separable`], plus [`DeformError::TableUnavailable`] if a
+    /// ratio is not an integer, the knot spans differ in length, or the table would exceed
+    /// [`MAX_TABLE_BYTES`].
+    pub fn apply_grid_table(&self, grid: &Geometry, out: &mut [DVec3]) -> Result<(), DeformError> {
+        check_grid(grid, out)?;
+        LatticeGridPlan::new(self, grid, GridPath::Table)?.apply(self, out)
     }
 }
 

@@ -582,3 +582,53 @@ fn construction_and_editing_errors() {
     assert!(lat.map_control_points(|p| p * f64::INFINITY).is_err());
     assert_eq!(lat, before);
 }
+
+#[test]
+fn grid_plans_are_reusable_across_control_point_edits() {
+    use volmorph_deform::grid::{GridPath, LatticeGridPlan};
+    let mut lat =
+        BSplineLattice::uniform_cubic_around(DVec3::splat(-0.5), DVec3::splat(11.5), [9, 9, 9])
+            .unwrap();
+    let grid = Geometry::new([14, 13, 12]).with_origin(DVec3::splat(-1.0));
+    let plans = [
+        LatticeGridPlan::new(&lat, &grid, GridPath::Table).unwrap(),
+        LatticeGridPlan::new(&lat, &grid, GridPath::Separable).unwrap(),
+    ];
+    assert_eq!(plans[0].path(), GridPath::Table);
+    assert_eq!(plans[1].grid(), &grid);
+    let mut out = vec![DVec3::ZERO; grid.len()];
+    for seed in 0..3 {
+        lat = displaced(lat, 0.4, seed);
+        for plan in &plans {
+            out.fill(DVec3::ZERO);
+            plan.apply(&lat, &mut out).unwrap();
+            assert_grid_matches(&lat, &grid, &out);
+        }
+    }
+    let other =
+        BSplineLattice::uniform_cubic_around(DVec3::splat(-0.5), DVec3::splat(11.5), [9, 9, 8])
+            .unwrap();
+    assert!(matches!(
+        plans[0].apply(&other, &mut out),
+        Err(DeformError::GridNotAligned(_))
+    ));
+    assert!(matches!(
+        plans[1].apply(&lat, &mut out[..5]),
+        Err(DeformError::BufferLength { .. })
+    ));
+    let empty = Geometry::new([0, 4, 4]);
+    let mut none: Vec<DVec3> = Vec::new();
+    // Geometries with a zero dimension are invalid volmorph grids.
+    assert!(matches!(
+        lat.apply_grid_separable(&empty, &mut none),
+        Err(DeformError::Grid(_))
+    ));
+    assert!(matches!(
+        lat.apply_grid_table(&empty, &mut none),
+        Err(DeformError::Grid(_))
+    ));
+    assert!(matches!(
+        lat.apply_grid(&empty, &mut none),
+        Err(DeformError::Grid(_))
+    ));
+}
