@@ -44,7 +44,7 @@
 //! the outermost layer to stay in place.
 
 use glam::{DMat3, DVec3};
-use volmorph_spline::{BSplineVolume, KnotVector, TensorBSpline};
+use volmorph_spline::{BSplineVolume, KnotVector, SplineError, TensorBSpline};
 use volmorph_volume::Geometry;
 
 use crate::DeformError;
@@ -327,8 +327,9 @@ impl BSplineLattice {
     /// fastest, one per basis function of `knots`.
     ///
     /// # Errors
-    /// [`DeformError::Spline`] for a wrong number of points (`CoefficientCount`) or degree-0
-    /// knots, [`DeformError::NonFinite`] for a NaN or infinite coordinate.
+    /// [`DeformError::Spline`] for a wrong number of points (`CoefficientCount`) or a knot
+    /// vector of degree 0 (`DegreeTooLow`: a piecewise-constant map cannot be continuous),
+    /// [`DeformError::NonFinite`] for a NaN or infinite coordinate.
     pub fn from_parts(
         frame: LatticeFrame,
         knots: [KnotVector; 3],
@@ -336,11 +337,11 @@ impl BSplineLattice {
     ) -> Result<Self, DeformError> {
         for (a, k) in knots.iter().enumerate() {
             if k.degree() == 0 {
-                return Err(DeformError::TooFewControlPoints {
+                return Err(DeformError::Spline(SplineError::DegreeTooLow {
                     axis: a,
-                    count: k.num_basis(),
-                    min: 2,
-                });
+                    degree: 0,
+                    min: 1,
+                }));
             }
         }
         let mut coefs = Vec::with_capacity(control_points.len().saturating_mul(3));

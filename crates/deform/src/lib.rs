@@ -8,8 +8,9 @@
 //! * [`BSplineLattice`] with its [`LatticeFrame`] — trivariate B-spline and Bézier lattice
 //!   maps with physical control points (True 1992 §4, §5.5; Sederberg–Parry FFD), identity
 //!   placements, analytic Jacobians, behaviour outside the box ([`lattice`] states the
-//!   conventions), fast dense evaluation on voxel grids ([`grid`], True §5.2) and a JSON
-//!   form ([`json`]).
+//!   conventions), fast dense evaluation on voxel grids ([`grid`], True §5.2: separable
+//!   per-axis tables and True's coefficient table, reusable across control-point edits as
+//!   [`grid::LatticeGridPlan`]s) and a JSON form ([`json`]).
 //!
 //! Physical coordinates follow the ITK convention of [`volmorph_volume::Geometry`]:
 //! `physical = origin + direction·(spacing ⊙ index)`, voxels x fastest.

@@ -518,6 +518,11 @@ fn malformed_json_is_rejected_with_clear_errors() {
         edit(&|w| w["knots"][0][2] = 100.into()),
         DeformError::Spline(_)
     ));
+    let degree0 = edit(&|w| {
+        w["degrees"][2] = 0.into();
+        w["knots"][2] = serde_json::json!([0.0, 0.25, 0.5, 0.75, 1.0]);
+    });
+    assert!(degree0.to_string().contains("degree"), "{degree0}");
     assert!(matches!(
         edit(&|w| w["extra"] = 1.into()),
         DeformError::Json(_)
