@@ -637,3 +637,44 @@ fn grid_plans_are_reusable_across_control_point_edits() {
         Err(DeformError::Grid(_))
     ));
 }
+
+#[test]
+fn continuous_across_the_box_surface_iff_outer_layers_stay() {
+    let (lo, hi) = (DVec3::ZERO, DVec3::new(6.0, 4.0, 5.0));
+    let mut lat = BSplineLattice::uniform_cubic_around(lo, hi, [9, 8, 9]).unwrap();
+    let mut r = Lcg(77);
+    // Move only the control points off the three outermost layers on every side.
+    let [nx, ny, nz] = lat.counts();
+    for k in 3..nz - 3 {
+        for j in 3..ny - 3 {
+            for i in 3..nx - 3 {
+                lat.move_control_point([i, j, k], (r.vec() - 0.5) * 2.0)
+                    .unwrap();
+            }
+        }
+    }
+    let eps = 1e-9;
+    let jump = |lat: &BSplineLattice, p: DVec3, n: DVec3| {
+        (lat.apply(p - eps * n) - lat.apply(p + eps * n)).length()
+    };
+    let mut max_jump = 0.0_f64;
+    for _ in 0..200 {
+        let t = r.vec() * (hi - lo);
+        for (p, n) in [
+            (DVec3::new(0.0, t.y, t.z), DVec3::NEG_X),
+            (DVec3::new(6.0, t.y, t.z), DVec3::X),
+            (DVec3::new(t.x, 0.0, t.z), DVec3::NEG_Y),
+            (DVec3::new(t.x, 4.0, t.z), DVec3::Y),
+            (DVec3::new(t.x, t.y, 0.0), DVec3::NEG_Z),
+            (DVec3::new(t.x, t.y, 5.0), DVec3::Z),
+        ] {
+            max_jump = max_jump.max(jump(&lat, p, n));
+        }
+    }
+    // Only the 2ε step itself plus rounding (the map is C² there, Jacobian I on the surface).
+    assert!(max_jump <= 2.0 * eps + 1e-13, "jump {max_jump:e}");
+    // Moving a point of the second layer opens a gap on the face x = 0.
+    lat.move_control_point([1, 4, 4], DVec3::new(0.0, 0.5, 0.0))
+        .unwrap();
+    assert!(jump(&lat, DVec3::new(0.0, 2.0, 2.5), DVec3::NEG_X) > 1e-3);
+}
