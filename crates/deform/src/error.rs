@@ -1,0 +1,75 @@
+//! Errors of the deformation crate.
+
+use volmorph_spline::SplineError;
+use volmorph_volume::VolumeError;
+
+/// Everything that can go wrong building, editing, evaluating or (de)serialising a space map.
+#[derive(Debug, thiserror::Error)]
+pub enum DeformError {
+    /// An output buffer does not have one entry per input point / grid voxel.
+    #[error("output buffer has {got} points, expected {expected}")]
+    BufferLength {
+        /// Required number of points.
+        expected: usize,
+        /// Number of points supplied.
+        got: usize,
+    },
+    /// A lattice axis has fewer control points than its degree requires.
+    #[error("lattice axis {axis} has {count} control points, needs at least {min}")]
+    TooFewControlPoints {
+        /// Axis 0 (u), 1 (v) or 2 (w).
+        axis: usize,
+        /// Control points supplied.
+        count: usize,
+        /// Minimum for that axis (degree + 1).
+        min: usize,
+    },
+    /// The box a lattice is built around is empty, inverted or not finite along an axis.
+    #[error("lattice box is degenerate along axis {axis}: min {min}, max {max}")]
+    DegenerateBox {
+        /// Axis 0 (x), 1 (y) or 2 (z) of the box.
+        axis: usize,
+        /// Lower bound given.
+        min: f64,
+        /// Upper bound given.
+        max: f64,
+    },
+    /// The parameter frame of a lattice is unusable (non-finite values, non-positive spacing,
+    /// axes that are not orthonormal and right- or left-handed unit vectors).
+    #[error("invalid lattice frame: {0}")]
+    InvalidFrame(String),
+    /// A control point or other coordinate is NaN or infinite.
+    #[error("{what} is not finite: {value}")]
+    NonFinite {
+        /// Which value (e.g. "control point 12, component 1").
+        what: String,
+        /// The offending value.
+        value: f64,
+    },
+    /// A control-point index lies outside the lattice.
+    #[error("control point index {index:?} outside lattice of {counts:?} points")]
+    IndexOutOfRange {
+        /// Index asked for.
+        index: [usize; 3],
+        /// Control points per axis.
+        counts: [usize; 3],
+    },
+    /// A lattice description (JSON) is inconsistent with itself.
+    #[error("invalid lattice description: {0}")]
+    InvalidDescription(String),
+    /// A grid fast path needs the grid's index axes parallel to the lattice's parameter axes.
+    #[error("grid not aligned with lattice: {0}")]
+    GridNotAligned(String),
+    /// True's coefficient-table path does not apply to this grid and lattice.
+    #[error("coefficient table unavailable: {0}")]
+    TableUnavailable(String),
+    /// JSON text that does not parse or does not have the documented shape.
+    #[error("lattice JSON: {0}")]
+    Json(#[from] serde_json::Error),
+    /// An invalid voxel grid was passed to a grid evaluation.
+    #[error(transparent)]
+    Grid(#[from] VolumeError),
+    /// An error from the spline layer (knot vectors, evaluation).
+    #[error(transparent)]
+    Spline(#[from] SplineError),
+}

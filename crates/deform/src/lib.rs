@@ -1,0 +1,42 @@
+//! volmorph-deform: mappings of physical space and the lattices that define them.
+//!
+//! * [`SpaceMap`] — the one trait every deformation implements: `apply`, `jacobian`,
+//!   `apply_batch` and the grid entry point `apply_grid`. The trait has no direction; see
+//!   [`map`] for push-forward versus pull-back.
+//! * [`Identity`], [`Affine`], [`Compose`] — elementary maps and composition (`Compose(a, b)`
+//!   applies `b` first).
+//! * [`BSplineLattice`] with its [`LatticeFrame`] — trivariate B-spline and Bézier lattice
+//!   maps with physical control points (True 1992 §4, §5.5; Sederberg–Parry FFD), identity
+//!   placements, analytic Jacobians, behaviour outside the box ([`lattice`] states the
+//!   conventions), fast dense evaluation on voxel grids ([`grid`], True §5.2: separable
+//!   per-axis tables and True's coefficient table, reusable across control-point edits as
+//!   [`grid::LatticeGridPlan`]s) and a JSON form ([`json`]).
+//!
+//! Physical coordinates follow the ITK convention of [`volmorph_volume::Geometry`]:
+//! `physical = origin + direction·(spacing ⊙ index)`, voxels x fastest.
+//!
+//! ```
+//! use glam::DVec3;
+//! use volmorph_deform::{BSplineLattice, SpaceMap};
+//! use volmorph_volume::Geometry;
+//! // An identity lattice leaves every voxel centre where it is.
+//! let lat = BSplineLattice::uniform_cubic_around(DVec3::ZERO, DVec3::splat(8.0), [5, 7, 4])
+//!     .unwrap();
+//! let grid = Geometry::new([9, 9, 9]);
+//! let mut out = vec![DVec3::ZERO; grid.len()];
+//! lat.apply_grid(&grid, &mut out).unwrap();
+//! for (n, p) in out.iter().enumerate() {
+//!     let x = DVec3::new((n % 9) as f64, (n / 9 % 9) as f64, (n / 81) as f64);
+//!     assert!((*p - x).length() <= 1e-12 * x.length().max(1.0));
+//! }
+//! ```
+
+mod error;
+pub mod grid;
+pub mod json;
+pub mod lattice;
+pub mod map;
+
+pub use error::DeformError;
+pub use lattice::{BSplineLattice, LatticeFrame};
+pub use map::{Affine, Compose, Identity, SpaceMap};
