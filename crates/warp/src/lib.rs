@@ -1,0 +1,13 @@
+//! Applying space maps to volumes.
+//!
+//! Every operation names its direction (see DESIGN.md, "Direction of a map"):
+//!
+//! * [`pullback`] — *pull-back resampling*: output voxel `x` takes the input's value at
+//!   `map(x)` (ITK's resampling convention).
+//! * [`pushforward`] — *push-forward*: every input voxel is sent to `map(x)` in the output
+//!   (free-form deformation of the model, True 1992 §5.3–§5.4).
+//! * [`jacobian`] — determinant maps of a map on a grid, and folding statistics.
+
+pub mod jacobian;
+pub mod pullback;
+pub mod pushforward;
