@@ -48,6 +48,9 @@ enum Command {
         after_help = "Examples:\n  volmorph isosurface teapot.nii.gz --level 127 -o teapot.ply\n  volmorph isosurface torus_sdf.nii.gz --level 0 --inside-below -o torus.stl"
     )]
     Isosurface(cmd::isosurface::Args),
+    /// B-spline lattice (space map) tasks.
+    #[command(subcommand)]
+    Lattice(cmd::lattice::Command),
     /// Polygon mesh tasks.
     #[command(subcommand)]
     Mesh(cmd::mesh::Command),
@@ -62,6 +65,7 @@ fn main() -> ExitCode {
         Command::Slice(a) => cmd::slice::run(&a),
         Command::Phantom(a) => cmd::phantom::run(&a),
         Command::Isosurface(a) => cmd::isosurface::run(&a),
+        Command::Lattice(c) => cmd::lattice::run(&c),
         Command::Mesh(c) => cmd::mesh::run(&c),
     };
     match result {

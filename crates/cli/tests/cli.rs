@@ -308,3 +308,42 @@ fn isosurface_of_a_phantom_is_a_closed_mesh() {
         &dir.path().join("x.ply"),
     ]);
 }
+
+#[test]
+fn lattice_init_writes_an_identity_lattice() {
+    let dir = tempfile::tempdir().unwrap();
+    let src = dir.path().join("box.mha");
+    let out = dir.path().join("l.json");
+    ok(&[
+        &"phantom",
+        &"rounded-box",
+        &"-o",
+        &src,
+        &"--dims",
+        &"20,16,12",
+    ]);
+    let text = ok(&[
+        &"lattice",
+        &"init",
+        &src,
+        &"--counts",
+        &"6,5,4",
+        &"-o",
+        &out,
+    ]);
+    assert!(text.contains("6x5x4"), "{text}");
+    let j: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(&out).unwrap()).unwrap();
+    assert_eq!(j["kind"], "bspline-lattice");
+    assert_eq!(j["counts"], serde_json::json!([6, 5, 4]));
+    fails(&[
+        &"lattice",
+        &"init",
+        &src,
+        &"--counts",
+        &"3,5,4",
+        &"-o",
+        &out,
+    ]);
+    fails(&[&"lattice", &"init", &src, &"-o", &dir.path().join("l.xml")]);
+}

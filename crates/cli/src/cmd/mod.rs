@@ -4,6 +4,7 @@ pub mod convert;
 pub mod demo;
 pub mod info;
 pub mod isosurface;
+pub mod lattice;
 pub mod mesh;
 pub mod phantom;
 pub mod slice;

@@ -1,0 +1,104 @@
+//! `volmorph lattice …`: B-spline lattices (space maps) as files.
+
+use std::path::PathBuf;
+
+use anyhow::{Context, bail};
+use volmorph_deform::BSplineLattice;
+use volmorph_volume::format;
+
+use crate::args;
+
+/// Lattice subcommands.
+#[derive(Debug, clap::Subcommand)]
+pub enum Command {
+    /// Write the identity uniform cubic B-spline lattice around a volume (True 1992 Fig. 8).
+    #[command(
+        after_help = "Example:\n  volmorph lattice init teapot.nii.gz --counts 9,9,9 -o lattice.json"
+    )]
+    Init(InitArgs),
+}
+
+/// Arguments of `volmorph lattice init`.
+#[derive(Debug, clap::Args)]
+pub struct InitArgs {
+    /// Volume whose voxel-centre box (in its own index frame) the lattice covers.
+    pub input: PathBuf,
+    /// Control points per axis "NX,NY,NZ" (each at least 4).
+    #[arg(long, default_value = "9,9,9")]
+    pub counts: String,
+    /// Output lattice file (.json).
+    #[arg(short, long)]
+    pub output: PathBuf,
+}
+
+/// Run a lattice subcommand.
+pub fn run(cmd: &Command) -> anyhow::Result<()> {
+    match cmd {
+        Command::Init(a) => init(a),
+    }
+}
+
+fn init(a: &InitArgs) -> anyhow::Result<()> {
+    let vol = format::read(&a.input).context("cannot read volume")?;
+    let counts = args::triple::<usize>(&a.counts)?;
+    let lattice = lattice_around(vol.geometry(), counts)?;
+    write_lattice(&a.output, &lattice)?;
+    println!(
+        "identity lattice of {}x{}x{} control points around {}",
+        counts[0],
+        counts[1],
+        counts[2],
+        a.input.display()
+    );
+    Ok(())
+}
+
+/// The identity uniform cubic lattice on the voxel-centre box of `g`, in the volume's own
+/// (orthonormal) direction frame.
+///
+/// # Errors
+/// When the volume's direction is not orthonormal or the counts are below 4.
+pub fn lattice_around(
+    g: &volmorph_volume::Geometry,
+    counts: [usize; 3],
+) -> anyhow::Result<BSplineLattice> {
+    let extent = g.spacing
+        * volmorph_volume::DVec3::new(
+            g.dims[0].saturating_sub(1) as f64,
+            g.dims[1].saturating_sub(1) as f64,
+            g.dims[2].saturating_sub(1) as f64,
+        );
+    if extent.min_element() <= 0.0 {
+        bail!("a lattice needs a volume at least 2 voxels thick on every axis");
+    }
+    Ok(BSplineLattice::uniform_cubic_in_box(
+        g.origin,
+        g.direction,
+        extent,
+        counts,
+    )?)
+}
+
+/// Write a lattice file; the format follows the extension (`.json`).
+///
+/// # Errors
+/// Unknown extension or I/O failure.
+pub fn write_lattice(path: &std::path::Path, lattice: &BSplineLattice) -> anyhow::Result<()> {
+    let ext = path
+        .extension()
+        .map(|e| e.to_string_lossy().to_ascii_lowercase())
+        .unwrap_or_default();
+    if ext != "json" {
+        bail!(
+            "{}: unknown lattice format (expected .json)",
+            path.display()
+        );
+    }
+    let text = lattice.to_json()?;
+    volmorph_io::write_atomic::<anyhow::Error, _>(path, |w| {
+        use std::io::Write;
+        w.write_all(text.as_bytes())?;
+        Ok(())
+    })
+    .context("cannot write")
+}
