@@ -32,6 +32,7 @@
 //! ```
 
 mod error;
+pub mod formats;
 pub mod grid;
 pub mod json;
 pub mod lattice;
