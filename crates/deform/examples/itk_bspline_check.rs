@@ -5,8 +5,9 @@
 //! `x y z  X Y Z` per point (`X = apply(x)`), points drawn from the lattice box grown by 10 %
 //! of its size on each side, so that some fall outside (and are not moved).
 //!
-//! `itk_bspline_check --read IN.tfm POINTS.txt` reads a transform file (e.g. one written by
-//! ITK) and prints `X Y Z = apply(x)` for each line `x y z …` of `POINTS.txt`.
+//! `itk_bspline_check --read IN POINTS.txt` reads a transform file (an ITK `.tfm` / `.txt`, or
+//! a plastimatch `.bxf`) and prints `X Y Z = apply(x)` for each line `x y z …` of
+//! `POINTS.txt`.
 
 use std::fmt::Write as _;
 use std::path::PathBuf;
@@ -119,7 +120,15 @@ fn main() -> Result<()> {
 }
 
 fn read_and_apply(tfm: &str, points: &str) -> Result<()> {
-    let lat = volmorph_deform::formats::itk_tfm::read_itk_tfm(std::path::Path::new(tfm))?;
+    let path = std::path::Path::new(tfm);
+    let lat = if path
+        .extension()
+        .is_some_and(|e| e.eq_ignore_ascii_case("bxf"))
+    {
+        volmorph_deform::formats::bxf::read_bxf(path)?
+    } else {
+        volmorph_deform::formats::itk_tfm::read_itk_tfm(path)?
+    };
     let text = std::fs::read_to_string(points).with_context(|| points.to_owned())?;
     let mut out = String::new();
     for line in text.lines().filter(|l| !l.trim().is_empty()) {

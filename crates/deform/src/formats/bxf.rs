@@ -21,8 +21,8 @@
 //!   `step[3r + c] = dc[3r + c]·spacing[c]`, the same convention as ITK). Coordinates are
 //!   physical (LPS, as in ITK); the format stores no handedness of its own.
 //!   `direction_cosines` is absent in files from before 2012; it then defaults to `I`.
-//! * The B-spline region of interest starts at voxel `roi_offset` and spans `roi_dim` voxels;
-//!   it is cut into regions of `vox_per_rgn` voxels. There are `r = 1 + (roi_dim − 1) /
+//! * The B-spline region of interest starts at voxel `roi_offset` (read only when `0 0 0`, see
+//!   below) and spans `roi_dim` voxels; it is cut into regions of `vox_per_rgn` voxels. There are `r = 1 + (roi_dim − 1) /
 //!   vox_per_rgn` regions (integer division, i.e. `⌈roi_dim / vox_per_rgn⌉`) and `r + 3`
 //!   control points per axis.
 //! * A voxel at ROI offset `t` (voxels) lies in region `p = ⌊t / vox_per_rgn⌋` at fraction
@@ -34,21 +34,31 @@
 //!   fastest over the control grid), then all y components, then all z components.
 //!
 //! So, in the common model of the [parent module](super), region parameter `u = t /
-//! vox_per_rgn` is True's parameter, the lattice frame is
+//! vox_per_rgn` is True's parameter and the lattice frame is
 //!
 //! ```text
-//! F(u) = img_origin + D·(img_spacing ⊙ (roi_offset + vox_per_rgn ⊙ u)),
+//! F(u) = img_origin + D·(img_spacing ⊙ vox_per_rgn ⊙ u),
 //! ```
 //!
-//! i.e. frame origin `img_origin + D·(img_spacing ⊙ roi_offset)`, axes `D`, spacing
+//! i.e. frame origin `img_origin` (the first voxel), axes `D`, spacing
 //! `img_spacing ⊙ vox_per_rgn`, and `c_ijk = P_ijk − F(i − 1, j − 1, k − 1)`. A negative
 //! `img_spacing` component is read as the positive spacing along the negated axis (the same
 //! voxel positions).
 //!
-//! These conventions are **derived from plastimatch's source** (`bspline_xform.cxx`:
-//! `bspline_xform_save`, `bspline_xform_load`, `bspline_xform_initialize` and
-//! `bspline_transform_point`; `direction_matrices.cxx`), not checked against a running
-//! plastimatch, which is not installable as a Python package.
+//! These conventions were derived from plastimatch's source (`bspline_xform.cxx`:
+//! `bspline_xform_save`, `bspline_xform_load`, `bspline_xform_initialize`,
+//! `bspline_transform_point`; `direction_matrices.cxx`) and checked against plastimatch 1.10
+//! (the `plastimatch` Python wheel): the displacement field of `plastimatch xf-convert
+//! --output-type vf` agrees with the lattice's displacement to single precision (1e-7) at
+//! every voxel inside the regions, for single-coefficient and random files with unequal
+//! `vox_per_rgn`, spacings and origins (reference values are in the crate's tests). Two
+//! differences remain, both at the edge of the domain: plastimatch's region test is
+//! half-open, so voxels exactly on the far end of the last region are not moved there but
+//! are here (the lattice's domain is closed); and only `roi_offset = 0 0 0` is read — older
+//! sources shift the grid by `roi_offset` while plastimatch 1.10 anchors it at voxel 0
+//! whatever `roi_offset` says, so a non-zero offset has no reliable meaning and is refused
+//! ([`DeformError::Unsupported`]). plastimatch itself writes `roi_offset = 0 0 0` when it
+//! registers whole images.
 //!
 //! # Writing
 //!
@@ -112,7 +122,8 @@ fn ints(v: &[f64], key: &str, line: usize) -> Result<[i64; 3], DeformError> {
 /// [`DeformError::Parse`] (with the line) for a missing `MGH_GPUIT_BSP` header, missing,
 /// repeated or unknown header fields, wrong value counts, non-numeric or non-finite numbers,
 /// non-integral sizes, `roi_dim` or `vox_per_rgn` below 1, a zero spacing, a direction
-/// matrix that is not orthonormal, or a coefficient count other than `3·(r₀+3)(r₁+3)(r₂+3)`.
+/// matrix that is not orthonormal, or a coefficient count other than `3·(r₀+3)(r₁+3)(r₂+3)`;
+/// [`DeformError::Unsupported`] for a non-zero `roi_offset` (see the module docs).
 pub fn parse_bxf(text: &str) -> Result<BSplineLattice, DeformError> {
     let mut lines = text.lines().enumerate().map(|(i, l)| (i + 1, l.trim()));
     match lines.next() {
@@ -168,6 +179,13 @@ pub fn parse_bxf(text: &str) -> Result<BSplineLattice, DeformError> {
     let spacing = get(1)?;
     ints(get(2)?, KEYS[2], lines_of[2])?;
     let roi_offset = ints(get(3)?, KEYS[3], lines_of[3])?;
+    if roi_offset != [0; 3] {
+        return Err(DeformError::Unsupported(format!(
+            "bxf line {}: roi_offset {roi_offset:?}; only 0 0 0 is read (plastimatch versions \
+             disagree on where a non-zero offset puts the control grid)",
+            lines_of[3]
+        )));
+    }
     let roi_dim = ints(get(4)?, KEYS[4], lines_of[4])?;
     let vpr = ints(get(5)?, KEYS[5], lines_of[5])?;
     let mut rows = [1.0, 0.0, 0.0, 0.0, 1.0, 0.0, 0.0, 0.0, 1.0];
@@ -224,14 +242,9 @@ pub fn parse_bxf(text: &str) -> Result<BSplineLattice, DeformError> {
         }
     }
     let img_origin = DVec3::from_slice(origin);
-    let offset = DVec3::new(
-        roi_offset[0] as f64,
-        roi_offset[1] as f64,
-        roi_offset[2] as f64,
-    );
     let grid_spacing = img_spacing * DVec3::new(vpr[0] as f64, vpr[1] as f64, vpr[2] as f64);
-    // Control point 0 sits one region before the ROI's first voxel.
-    let grid_origin = img_origin + axes * (img_spacing * offset) - axes * grid_spacing;
+    // Control point 0 sits one region before the ROI's first voxel (voxel 0).
+    let grid_origin = img_origin - axes * grid_spacing;
     UniformGrid {
         size,
         origin: grid_origin,
