@@ -1,7 +1,10 @@
 //! Writes a random cubic B-spline lattice as an ITK transform file and the lattice's images of
 //! random points, for comparison with ITK's `TransformPoint` (`scripts/itk_bspline_check.py`).
 //!
-//! Usage: `itk_bspline_check OUT.tfm POINTS.txt [SEED] [NPOINTS]`. `POINTS.txt` gets one line
+//! Usage: `itk_bspline_check OUT.tfm POINTS.txt [SEED] [NPOINTS]`. A plastimatch file is also
+//! written next to `OUT.tfm` (extension `.bxf`): the same control grid and displacements in an
+//! axis-aligned frame (plastimatch 1.10's `xf-convert` evaluates rotated grids inconsistently,
+//! see `volmorph_deform::formats::bxf`). `POINTS.txt` gets one line
 //! `x y z  X Y Z` per point (`X = apply(x)`), points drawn from the lattice box grown by 10 %
 //! of its size on each side, so that some fall outside (and are not moved).
 //!
@@ -91,6 +94,16 @@ fn main() -> Result<()> {
         }
     }
     write_itk_tfm(&tfm, &lat)?;
+    let mut aligned =
+        BSplineLattice::uniform_cubic_in_box(corner, DMat3::IDENTITY, extent, counts)?;
+    for k in 0..counts[2] {
+        for j in 0..counts[1] {
+            for i in 0..counts[0] {
+                aligned.move_control_point([i, j, k], lat.displacement([i, j, k])?)?;
+            }
+        }
+    }
+    volmorph_deform::formats::bxf::write_bxf(&tfm.with_extension("bxf"), &aligned)?;
 
     let mut out = String::new();
     for _ in 0..npoints {

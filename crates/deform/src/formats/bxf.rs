@@ -48,17 +48,25 @@
 //! These conventions were derived from plastimatch's source (`bspline_xform.cxx`:
 //! `bspline_xform_save`, `bspline_xform_load`, `bspline_xform_initialize`,
 //! `bspline_transform_point`; `direction_matrices.cxx`) and checked against plastimatch 1.10
-//! (the `plastimatch` Python wheel): the displacement field of `plastimatch xf-convert
-//! --output-type vf` agrees with the lattice's displacement to single precision (1e-7) at
-//! every voxel inside the regions, for single-coefficient and random files with unequal
-//! `vox_per_rgn`, spacings and origins (reference values are in the crate's tests). Two
-//! differences remain, both at the edge of the domain: plastimatch's region test is
-//! half-open, so voxels exactly on the far end of the last region are not moved there but
-//! are here (the lattice's domain is closed); and only `roi_offset = 0 0 0` is read — older
-//! sources shift the grid by `roi_offset` while plastimatch 1.10 anchors it at voxel 0
-//! whatever `roi_offset` says, so a non-zero offset has no reliable meaning and is refused
-//! ([`DeformError::Unsupported`]). plastimatch itself writes `roi_offset = 0 0 0` when it
-//! registers whole images.
+//! (the `plastimatch` Python wheel) for **identity direction cosines**: the displacement field
+//! of `plastimatch xf-convert --output-type vf` agrees with the lattice's displacement to
+//! single precision (1e-7) at every voxel inside the regions, for single-coefficient and random
+//! files with unequal `vox_per_rgn`, spacings and origins (reference values are in the
+//! crate's tests; `scripts/itk_bspline_check.py` repeats the comparison). Known differences
+//! and limits:
+//!
+//! * plastimatch's region test is half-open, so voxels exactly on the far end of the last
+//!   region are not moved there but are here (the lattice's domain is closed); and it computes
+//!   in single precision, so voxels exactly on the start of the domain can round to just
+//!   outside it and be left unmoved by plastimatch.
+//! * Only `roi_offset = 0 0 0` is read: older sources shift the grid by `roi_offset`, while
+//!   plastimatch 1.10 anchors it at voxel 0 whatever `roi_offset` says, so a non-zero offset
+//!   has no reliable meaning and is refused ([`DeformError::Unsupported`]). plastimatch writes
+//!   `0 0 0` when it registers whole images.
+//! * Non-identity direction cosines follow the source's step-matrix convention above (the
+//!   ITK one). This could not be confirmed empirically: plastimatch 1.10's `xf-convert` does
+//!   not evaluate rotated files consistently with their own voxel grid (for a 90° rotation
+//!   its displacement field is zero everywhere), so it offers no reference.
 //!
 //! # Writing
 //!

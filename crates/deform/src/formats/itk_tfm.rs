@@ -28,9 +28,11 @@
 //! `c_ijk = P_ijk − F(i − 1, j − 1, k − 1)`; a read lattice has frame origin `o + D·s` (ITK's
 //! `TransformDomainOrigin`).
 //!
-//! These conventions were checked against ITK's `itkBSplineTransform.hxx` /
-//! `itkBSplineBaseTransform.hxx` (fixed-parameter order, row-major direction, domain origin
-//! `= o + D·s`, mesh size `= n − 3`) and empirically with SimpleITK 2.5 (ITK 5.4):
+//! These conventions were checked against ITK's `itkBSplineTransform.hxx` (fixed-parameter
+//! order; direction read as `D[r][c] = fixed[9 + 3r + c]`, row-major — the comment at the top
+//! of that file lists the entries column by column, the code does not; grid origin = domain
+//! origin − `D·(s·(order − 1)/2)`; grid size = mesh size + order) and empirically with
+//! SimpleITK 2.5 (ITK 5.4), whose `BSplineTransformInitializer` writes exactly this layout:
 //! `TransformPoint` agrees with the lattice's [`apply`](crate::SpaceMap::apply) to rounding
 //! (the reference values are in the crate's tests; `scripts/itk_bspline_check.py` repeats the
 //! comparison on random lattices).
