@@ -411,3 +411,52 @@ fn directions_printed_with_six_decimals_are_snapped_to_orthonormal() {
     assert!((a.transpose() * a).abs_diff_eq(DMat3::IDENTITY, 1e-14));
     assert!((a.x_axis - DVec3::new(c, s, 0.0)).length() < 1e-6);
 }
+
+#[test]
+fn written_parameters_are_planar_with_i_fastest() {
+    let mut lat =
+        BSplineLattice::uniform_cubic_around(DVec3::ZERO, DVec3::new(3.0, 4.0, 5.0), [6, 5, 4])
+            .unwrap();
+    lat.move_control_point([4, 1, 2], DVec3::new(0.0, 0.0, -2.5))
+        .unwrap();
+    let text = itk_tfm_to_string(&lat).unwrap();
+    let params: Vec<&str> = text
+        .lines()
+        .find_map(|l| l.strip_prefix("Parameters: "))
+        .unwrap()
+        .split(' ')
+        .collect();
+    let n = 6 * 5 * 4;
+    let at = 2 * n + 4 + 6 * (1 + 5 * 2);
+    for (m, p) in params.iter().enumerate() {
+        assert_eq!(*p, if m == at { "-2.5" } else { "0" }, "parameter {m}");
+    }
+}
+
+proptest::proptest! {
+    #![proptest_config(proptest::prelude::ProptestConfig::with_cases(24))]
+    #[test]
+    fn random_lattices_round_trip(
+        counts in proptest::array::uniform3(4usize..8),
+        angle in -3.0f64..3.0,
+        flip in proptest::bool::ANY,
+        seed in 0u64..1000,
+    ) {
+        let mut axes = DMat3::from_axis_angle(DVec3::new(1.0, 2.0, -0.5).normalize(), angle);
+        if flip {
+            axes.x_axis = -axes.x_axis;
+        }
+        let mut lat = BSplineLattice::uniform_cubic_in_box(
+            DVec3::new(-7.0, 100.0, 3.5), axes, DVec3::new(9.0, 31.0, 4.5), counts).unwrap();
+        let mut r = Lcg(seed);
+        for k in 0..counts[2] {
+            for j in 0..counts[1] {
+                for i in 0..counts[0] {
+                    lat.move_control_point([i, j, k], r.signed()).unwrap();
+                }
+            }
+        }
+        let back = parse_itk_tfm(&itk_tfm_to_string(&lat).unwrap()).unwrap();
+        assert_same_lattice(&lat, &back, 1e-12 * 200.0);
+    }
+}

@@ -43,6 +43,23 @@
 //! deviates from orthonormal by at most [`DIRECTION_TOL`] (the rounding of files written with
 //! 6 decimals) is snapped to the nearest orthonormal matrix, a larger deviation is an error.
 //!
+//! ```
+//! use glam::DVec3;
+//! use volmorph_deform::formats::{bxf, itk_tfm};
+//! use volmorph_deform::{BSplineLattice, SpaceMap};
+//! let mut lat =
+//!     BSplineLattice::uniform_cubic_around(DVec3::ZERO, DVec3::new(40.0, 30.0, 20.0), [7, 6, 5])
+//!         .unwrap();
+//! lat.move_control_point([3, 2, 2], DVec3::new(1.5, 0.0, -0.5)).unwrap();
+//! // The ITK file stores the displacement of each control point, x components first.
+//! let text = itk_tfm::itk_tfm_to_string(&lat).unwrap();
+//! let from_itk = itk_tfm::parse_itk_tfm(&text).unwrap();
+//! let from_bxf = bxf::parse_bxf(&bxf::bxf_to_string(&lat).unwrap()).unwrap();
+//! let p = DVec3::new(20.0, 13.0, 9.0);
+//! assert!((from_itk.apply(p) - lat.apply(p)).length() < 1e-12);
+//! assert!((from_bxf.apply(p) - lat.apply(p)).length() < 1e-12);
+//! ```
+//!
 //! [`BSplineLattice`]: crate::BSplineLattice
 //! [`BSplineLattice::uniform_cubic_around`]: crate::BSplineLattice::uniform_cubic_around
 
