@@ -63,6 +63,24 @@ pub enum DeformError {
     /// True's coefficient-table path does not apply to this grid and lattice.
     #[error("coefficient table unavailable: {0}")]
     TableUnavailable(String),
+    /// A transform file (ITK `.tfm`, plastimatch `.bxf`) that does not have its documented
+    /// layout.
+    #[error("{format} file, line {line}: {message}")]
+    Parse {
+        /// Format name, e.g. "ITK transform".
+        format: &'static str,
+        /// 1-based line number of the offending text (0 when the problem is the whole file).
+        line: usize,
+        /// What is wrong.
+        message: String,
+    },
+    /// A well-formed file or a lattice that the other format cannot represent (another
+    /// transform type, a composite transform, a non-cubic or non-uniform lattice, …).
+    #[error("unsupported: {0}")]
+    Unsupported(String),
+    /// Reading or writing a file failed.
+    #[error(transparent)]
+    Io(#[from] volmorph_io::IoError),
     /// JSON text that does not parse or does not have the documented shape.
     #[error("lattice JSON: {0}")]
     Json(#[from] serde_json::Error),

@@ -11,6 +11,8 @@
 //!   conventions), fast dense evaluation on voxel grids ([`grid`], True §5.2: separable
 //!   per-axis tables and True's coefficient table, reusable across control-point edits as
 //!   [`grid::LatticeGridPlan`]s) and a JSON form ([`json`]).
+//! * [`formats`] — cubic lattices as ITK `BSplineTransform` files (`.tfm`) and plastimatch
+//!   `.bxf` files, with the displacement-coefficient conventions of each.
 //!
 //! Physical coordinates follow the ITK convention of [`volmorph_volume::Geometry`]:
 //! `physical = origin + direction·(spacing ⊙ index)`, voxels x fastest.
@@ -32,6 +34,7 @@
 //! ```
 
 mod error;
+pub mod formats;
 pub mod grid;
 pub mod json;
 pub mod lattice;
