@@ -4,6 +4,7 @@ use std::path::PathBuf;
 
 use anyhow::{Context, bail};
 use volmorph_deform::BSplineLattice;
+use volmorph_deform::formats::write_lattice;
 use volmorph_volume::format;
 
 use crate::args;
@@ -26,7 +27,8 @@ pub struct InitArgs {
     /// Control points per axis "NX,NY,NZ" (each at least 4).
     #[arg(long, default_value = "9,9,9")]
     pub counts: String,
-    /// Output lattice file (.json).
+    /// Output lattice file: .json (volmorph), .tfm (ITK BSplineTransform) or .bxf
+    /// (plastimatch).
     #[arg(short, long)]
     pub output: PathBuf,
 }
@@ -42,7 +44,7 @@ fn init(a: &InitArgs) -> anyhow::Result<()> {
     let vol = format::read(&a.input).context("cannot read volume")?;
     let counts = args::triple::<usize>(&a.counts)?;
     let lattice = lattice_around(vol.geometry(), counts)?;
-    write_lattice(&a.output, &lattice)?;
+    write_lattice(&a.output, &lattice).context("cannot write")?;
     println!(
         "identity lattice of {}x{}x{} control points around {}",
         counts[0],
@@ -77,28 +79,4 @@ pub fn lattice_around(
         extent,
         counts,
     )?)
-}
-
-/// Write a lattice file; the format follows the extension (`.json`).
-///
-/// # Errors
-/// Unknown extension or I/O failure.
-pub fn write_lattice(path: &std::path::Path, lattice: &BSplineLattice) -> anyhow::Result<()> {
-    let ext = path
-        .extension()
-        .map(|e| e.to_string_lossy().to_ascii_lowercase())
-        .unwrap_or_default();
-    if ext != "json" {
-        bail!(
-            "{}: unknown lattice format (expected .json)",
-            path.display()
-        );
-    }
-    let text = lattice.to_json()?;
-    volmorph_io::write_atomic::<anyhow::Error, _>(path, |w| {
-        use std::io::Write;
-        w.write_all(text.as_bytes())?;
-        Ok(())
-    })
-    .context("cannot write")
 }

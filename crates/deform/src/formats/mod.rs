@@ -278,6 +278,47 @@ pub(crate) fn parse_f64(tok: &str, format: &'static str, line: usize) -> Result<
 }
 
 /// Read a whole text file.
+/// Read a lattice file; the format follows the extension: `.json` (volmorph's own, see
+/// [`crate::json`]), `.tfm`/`.txt` (ITK, [`itk_tfm`]) or `.bxf` (plastimatch, [`bxf`]).
+///
+/// # Errors
+/// [`DeformError::Unsupported`] for another extension; the format reader's errors otherwise.
+pub fn read_lattice(path: &Path) -> Result<BSplineLattice, DeformError> {
+    match lattice_extension(path)?.as_str() {
+        "json" => BSplineLattice::from_json(&read_text(path, "lattice JSON")?),
+        "bxf" => bxf::read_bxf(path),
+        _ => itk_tfm::read_itk_tfm(path),
+    }
+}
+
+/// Write a lattice file atomically; the format follows the extension as in [`read_lattice`].
+///
+/// # Errors
+/// [`DeformError::Unsupported`] for another extension or a lattice the format cannot hold;
+/// I/O errors naming the path.
+pub fn write_lattice(path: &Path, lattice: &BSplineLattice) -> Result<(), DeformError> {
+    match lattice_extension(path)?.as_str() {
+        "json" => write_text(path, &lattice.to_json()?),
+        "bxf" => bxf::write_bxf(path, lattice),
+        _ => itk_tfm::write_itk_tfm(path, lattice),
+    }
+}
+
+fn lattice_extension(path: &Path) -> Result<String, DeformError> {
+    let ext = path
+        .extension()
+        .map(|e| e.to_string_lossy().to_ascii_lowercase())
+        .unwrap_or_default();
+    if matches!(ext.as_str(), "json" | "tfm" | "txt" | "bxf") {
+        Ok(ext)
+    } else {
+        Err(DeformError::Unsupported(format!(
+            "{}: unknown lattice format (expected .json, .tfm, .txt or .bxf)",
+            path.display()
+        )))
+    }
+}
+
 pub(crate) fn read_text(path: &Path, format: &'static str) -> Result<String, DeformError> {
     let bytes = std::fs::read(path).map_err(|e| volmorph_io::IoError::os(path, e))?;
     String::from_utf8(bytes).map_err(|e| DeformError::Parse {
