@@ -8,6 +8,9 @@
 //!   (free-form deformation of the model, True 1992 §5.3–§5.4).
 //! * [`jacobian`] — determinant maps of a map on a grid, and folding statistics.
 
+mod error;
 pub mod jacobian;
 pub mod pullback;
 pub mod pushforward;
+
+pub use error::WarpError;

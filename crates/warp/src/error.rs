@@ -1,0 +1,36 @@
+//! Errors of the warping crate.
+
+use volmorph_deform::DeformError;
+use volmorph_volume::VolumeError;
+
+/// Everything that can go wrong applying a space map to a volume.
+#[derive(Debug, thiserror::Error)]
+pub enum WarpError {
+    /// A grid passed by the caller is unusable (zero dims, bad spacing, singular direction,
+    /// too many voxels for the output voxel type). `what` names the grid.
+    #[error("{what}: {source}")]
+    Geometry {
+        /// Which grid is invalid (e.g. "output grid").
+        what: &'static str,
+        /// The geometry or size problem.
+        #[source]
+        source: VolumeError,
+    },
+    /// An output buffer does not have one value per voxel of the output grid.
+    #[error("output buffer has {got} values, the output grid {dims:?} needs {expected}")]
+    BufferLength {
+        /// Output grid dims.
+        dims: [usize; 3],
+        /// Voxel count of the output grid.
+        expected: usize,
+        /// Values supplied.
+        got: usize,
+    },
+    /// Evaluating the space map failed.
+    #[error("evaluating the space map: {0}")]
+    Map(#[from] DeformError),
+    /// Preparing the input volume for sampling failed (e.g. the cubic B-spline coefficient
+    /// array would exceed the allocation limit).
+    #[error(transparent)]
+    Volume(#[from] VolumeError),
+}
