@@ -48,6 +48,16 @@ enum Command {
         after_help = "Examples:\n  volmorph isosurface teapot.nii.gz --level 127 -o teapot.ply\n  volmorph isosurface torus_sdf.nii.gz --level 0 --inside-below -o torus.stl"
     )]
     Isosurface(cmd::isosurface::Args),
+    /// Warp a volume through a B-spline lattice.
+    #[command(
+        after_help = "Example:\n  volmorph warp ct.nii.gz --lattice moved.json -o warped.nii.gz --method pullback-cubic"
+    )]
+    Warp(cmd::warp::Args),
+    /// Jacobian determinant map of a lattice on a volume's grid, with a folding summary.
+    #[command(
+        after_help = "Example:\n  volmorph jacobian --lattice moved.tfm --grid ct.nii.gz -o jacobian.nii.gz"
+    )]
+    Jacobian(cmd::warp::JacobianArgs),
     /// B-spline lattice (space map) tasks.
     #[command(subcommand)]
     Lattice(cmd::lattice::Command),
@@ -66,6 +76,8 @@ fn main() -> ExitCode {
         Command::Phantom(a) => cmd::phantom::run(&a),
         Command::Isosurface(a) => cmd::isosurface::run(&a),
         Command::Lattice(c) => cmd::lattice::run(&c),
+        Command::Warp(a) => cmd::warp::run(&a),
+        Command::Jacobian(a) => cmd::warp::run_jacobian(&a),
         Command::Mesh(c) => cmd::mesh::run(&c),
     };
     match result {

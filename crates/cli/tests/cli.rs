@@ -347,3 +347,77 @@ fn lattice_init_writes_an_identity_lattice() {
     ]);
     fails(&[&"lattice", &"init", &src, &"-o", &dir.path().join("l.xml")]);
 }
+
+#[test]
+fn warp_and_jacobian_through_a_lattice() {
+    let dir = tempfile::tempdir().unwrap();
+    let d = dir.path();
+    let src = d.join("teapot.mha");
+    let lat = d.join("l.json");
+    ok(&[&"phantom", &"teapot", &"-o", &src, &"--size", &"24"]);
+    ok(&[
+        &"lattice",
+        &"init",
+        &src,
+        &"--counts",
+        &"5,5,5",
+        &"-o",
+        &lat,
+    ]);
+    // The identity lattice leaves the volume unchanged.
+    for method in ["pullback-nearest", "pullback-linear"] {
+        let out = d.join(format!("{method}.mha"));
+        ok(&[
+            &"warp",
+            &src,
+            &"--lattice",
+            &lat,
+            &"-o",
+            &out,
+            &"--method",
+            &method,
+        ]);
+        assert_eq!(raw_bytes(d, &out), raw_bytes(d, &src), "{method}");
+    }
+    let jac = d.join("j.nii");
+    let text = ok(&[
+        &"jacobian",
+        &"--lattice",
+        &lat,
+        &"--grid",
+        &src,
+        &"-o",
+        &jac,
+    ]);
+    assert!(text.contains("0 of 13824 voxels fold"), "no folding expected: {text}");
+    let j = info_json(&jac);
+    assert!(
+        (j["stats"]["min"].as_f64().unwrap() - 1.0).abs() < 1e-5,
+        "{j}"
+    );
+    assert!(
+        (j["stats"]["max"].as_f64().unwrap() - 1.0).abs() < 1e-5,
+        "{j}"
+    );
+    // A moved control point changes the warp.
+    let mut doc: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(&lat).unwrap()).unwrap();
+    let pts = doc["control_points"]
+        .as_array_mut()
+        .expect("control_points array");
+    let centre = &mut pts[2 + 5 * (2 + 5 * 2)];
+    let x = centre[0].as_f64().unwrap();
+    centre[0] = serde_json::json!(x + 0.3);
+    std::fs::write(&lat, doc.to_string()).unwrap();
+    let out = d.join("moved.mha");
+    ok(&[&"warp", &src, &"--lattice", &lat, &"-o", &out]);
+    assert_ne!(raw_bytes(d, &out), raw_bytes(d, &src));
+    fails(&[
+        &"warp",
+        &src,
+        &"--lattice",
+        &d.join("missing.json"),
+        &"-o",
+        &out,
+    ]);
+}

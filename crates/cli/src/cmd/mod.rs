@@ -8,3 +8,4 @@ pub mod lattice;
 pub mod mesh;
 pub mod phantom;
 pub mod slice;
+pub mod warp;
