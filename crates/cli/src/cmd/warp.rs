@@ -13,6 +13,7 @@ use crate::progress;
 
 /// How a warp applies the lattice; the name says the direction.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, clap::ValueEnum)]
+#[allow(clippy::enum_variant_names)] // the direction is part of every method's name, on purpose
 pub enum Method {
     /// Pull-back (ITK's resampling convention): output voxel x takes the input at
     /// lattice(x), nearest neighbour.
