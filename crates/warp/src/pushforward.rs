@@ -23,11 +23,13 @@
 //!   space (`Geometry::physical_to_index`), so "fraction of the target voxel's volume"
 //!   (True §5.4) is the overlap volume measured in output index units.
 //! * The six face centres of input voxel `(i, j, k)` are the input points of continuous index
-//!   `(i ± ½, j, k)`, `(i, j ± ½, k)` and `(i, j, k ± ½)`. They form three grids offset by half
-//!   a voxel along one axis; the map is evaluated once per face centre through its grid entry
-//!   point [`SpaceMap::apply_grid`] (lattices use their table-driven fast path), never six
-//!   times per voxel. (True averages the images of neighbouring voxel centres instead, §5.4
-//!   footnote 4; mapping the face centres themselves is the exact version of the same proxy.)
+//!   `(i ± ½, j, k)`, `(i, j ± ½, k)` and `(i, j, k ± ½)`. Their images come either, as in
+//!   True (§5.4, footnote 4), from averaging the images of the two voxel centres each face
+//!   separates ([`FaceCentres::AveragedCentres`], the default, one map evaluation per voxel),
+//!   or from mapping the three face-centre grids, each offset by half a voxel along one axis
+//!   ([`FaceCentres::Mapped`], three evaluations per voxel). Either way the map is evaluated
+//!   through its grid entry point [`SpaceMap::apply_grid`] (lattices use their table-driven
+//!   fast path), never pointwise six times per voxel.
 //! * **Normalisation (True §5.4, verbatim rule).** Per output voxel the weights `W = Σ w` and
 //!   weighted values `V = Σ w·d` are tallied; then `d = V / W` where `W ≥ 1` (overlapping
 //!   bounding boxes), and `d = V` where `W < 1` — "the portion left uncovered [counts] as
@@ -35,7 +37,8 @@
 //!   `W < 1` the result is `V + (1 − W)·background`, which is the paper's rule for the
 //!   default background 0.
 //! * **Non-finite images.** An input voxel whose centre (nearest) or any of whose six face
-//!   centres (antialiased) maps to a NaN or infinite point is skipped and counted in
+//!   centres (antialiased; with averaging, a face image is non-finite when either centre
+//!   image is) maps to a NaN or infinite point is skipped and counted in
 //!   [`PushForwardStats::non_finite`]; it contributes nothing.
 //! * Work is split into input z-slabs whose size depends only on the input dimensions, and
 //!   the slabs' contributions are combined in slab order, so results are bit-identical for
@@ -115,6 +118,8 @@ pub struct PushForward<T> {
 /// Options of the antialiased push-forward.
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct AntialiasOptions {
+    /// How the images of the six face centres of an input voxel are obtained.
+    pub face_centres: FaceCentres,
     /// Value of the uncovered part of an output voxel (in the input's value units). Where the
     /// accumulated weight `W` is below 1 the result is `V + (1 − W)·background`; output voxels
     /// no input reaches are exactly `background`. Default 0, True's rule.
@@ -123,8 +128,28 @@ pub struct AntialiasOptions {
 
 impl Default for AntialiasOptions {
     fn default() -> Self {
-        Self { background: 0.0 }
+        Self {
+            face_centres: FaceCentres::default(),
+            background: 0.0,
+        }
     }
+}
+
+/// How [`push_forward_antialiased`] finds the images of an input voxel's six face centres
+/// (the corners of its proxy box, True §5.4).
+#[derive(Debug, Clone, Copy, Default, PartialEq, Eq)]
+pub enum FaceCentres {
+    /// True's method (§5.4 and its footnote 4): the image of the face centre between two
+    /// neighbouring voxel centres is the **mean of the images of those two centres**. The map
+    /// is evaluated once per voxel centre, on the input grid widened by one voxel on every
+    /// side (so the outer faces have a neighbour), about one evaluation per voxel. Exact for
+    /// affine maps; for a smooth map the error is `O(h²)` in the voxel size `h`.
+    #[default]
+    AveragedCentres,
+    /// The face centres themselves are mapped: three grids offset by half a voxel along x, y
+    /// and z, each evaluated once through [`SpaceMap::apply_grid`] — about three evaluations
+    /// per voxel, exact images of the face centres.
+    Mapped,
 }
 
 /// Affine map from physical points to continuous output indices,
@@ -279,8 +304,9 @@ pub fn push_forward_nearest<T: Voxel, M: SpaceMap + ?Sized>(
 
 /// True §5.4 box-filter antialiased push-forward, result in the input's voxel type.
 ///
-/// Each input voxel `(i, j, k)` is the box of constant value `d` around its centre. The map
-/// is evaluated at its six face centres (see the [module docs](self)); the axis-aligned
+/// Each input voxel `(i, j, k)` is the box of constant value `d` around its centre. Its six
+/// face centres are pushed forward as chosen by [`AntialiasOptions::face_centres`] (see the
+/// [module docs](self)); the axis-aligned
 /// bounding box `[lo, hi]` of their images, in output continuous-index space, stands in for
 /// the image of the voxel. For every output voxel `q` the box overlaps, the weight
 /// `w = Π_a max(0, min(hi_a, q_a + ½) − max(lo_a, q_a − ½))` (the overlap as a fraction of
@@ -378,7 +404,7 @@ fn accumulate<T: Voxel, M: SpaceMap + ?Sized>(
     for batch in slab_list.chunks(window) {
         let tallies: Vec<Result<SlabTally, PushForwardError>> = batch
             .par_iter()
-            .map(|&(k0, k1)| tally_slab(input, map, output, &to_index, k0, k1))
+            .map(|&slab| tally_slab(input, map, output, &to_index, options.face_centres, slab))
             .collect();
         for tally in tallies {
             let tally = tally?;
@@ -440,37 +466,97 @@ fn face_images<M: SpaceMap + ?Sized>(
     Ok(pts)
 }
 
+/// Span `(min z, max z)` of the finite points (`(+∞, −∞)` if there are none).
+fn z_span<'a>(pts: impl Iterator<Item = &'a DVec3>) -> (f64, f64) {
+    pts.filter(|p| p.is_finite())
+        .fold((f64::INFINITY, f64::NEG_INFINITY), |(lo, hi), p| {
+            (lo.min(p.z), hi.max(p.z))
+        })
+}
+
 /// Tally the input slab `k0..k1` into a buffer over the output z-planes it reaches.
 fn tally_slab<T: Voxel, M: SpaceMap + ?Sized>(
     input: &Volume<T>,
     map: &M,
     output: &Geometry,
     to_index: &ToIndex,
-    k0: usize,
-    k1: usize,
+    faces: FaceCentres,
+    (k0, k1): (usize, usize),
 ) -> Result<SlabTally, PushForwardError> {
     let g = input.geometry();
     let [nx, ny, _] = g.dims;
     let nk = k1 - k0;
     let kf = k0 as f64;
-    let gx = offset_grid(g, DVec3::new(-0.5, 0.0, kf), [nx + 1, ny, nk]);
-    let gy = offset_grid(g, DVec3::new(0.0, -0.5, kf), [nx, ny + 1, nk]);
-    let gz = offset_grid(g, DVec3::new(0.0, 0.0, kf - 0.5), [nx, ny, nk + 1]);
-    let fx = face_images(map, &gx, to_index, "x-face")?;
-    let fy = face_images(map, &gy, to_index, "y-face")?;
-    let fz = face_images(map, &gz, to_index, "z-face")?;
+    let values = &input.data()[k0 * nx * ny..k1 * nx * ny];
+    match faces {
+        FaceCentres::Mapped => {
+            let gx = offset_grid(g, DVec3::new(-0.5, 0.0, kf), [nx + 1, ny, nk]);
+            let gy = offset_grid(g, DVec3::new(0.0, -0.5, kf), [nx, ny + 1, nk]);
+            let gz = offset_grid(g, DVec3::new(0.0, 0.0, kf - 0.5), [nx, ny, nk + 1]);
+            let fx = face_images(map, &gx, to_index, "x-face")?;
+            let fy = face_images(map, &gy, to_index, "y-face")?;
+            let fz = face_images(map, &gz, to_index, "z-face")?;
+            let span = z_span(fx.iter().chain(&fy).chain(&fz));
+            tally_boxes(values, [nx, ny, nk], output, span, |i, j, kk| {
+                let bx = (nx + 1) * (j + ny * kk) + i;
+                let by = nx * (j + (ny + 1) * kk) + i;
+                let bz = nx * (j + ny * kk) + i;
+                [
+                    fx[bx],
+                    fx[bx + 1],
+                    fy[by],
+                    fy[by + nx],
+                    fz[bz],
+                    fz[bz + nx * ny],
+                ]
+            })
+        }
+        FaceCentres::AveragedCentres => {
+            // Voxel centres with a one-voxel margin: index (i, j, k) of the slab is entry
+            // (i + 1, j + 1, k + 1) of this grid.
+            let gc = offset_grid(
+                g,
+                DVec3::new(-1.0, -1.0, kf - 1.0),
+                [nx + 2, ny + 2, nk + 2],
+            );
+            let c = face_images(map, &gc, to_index, "voxel-centre")?;
+            let sy = nx + 2;
+            let sz = sy * (ny + 2);
+            // The face averages lie within the span of the centres.
+            tally_boxes(
+                values,
+                [nx, ny, nk],
+                output,
+                z_span(c.iter()),
+                |i, j, kk| {
+                    let n = (i + 1) + sy * (j + 1) + sz * (kk + 1);
+                    let p = c[n];
+                    [
+                        0.5 * (c[n - 1] + p),
+                        0.5 * (p + c[n + 1]),
+                        0.5 * (c[n - sy] + p),
+                        0.5 * (p + c[n + sy]),
+                        0.5 * (c[n - sz] + p),
+                        0.5 * (p + c[n + sz]),
+                    ]
+                },
+            )
+        }
+    }
+}
 
+/// Tally the boxes of a slab of `dims` input voxels holding `values` (x fastest). `faces`
+/// gives the six face-centre images, in output index space, of slab voxel `(i, j, k)`;
+/// `(zlo, zhi)` bounds the z of every finite image.
+fn tally_boxes<T: Voxel, F: Fn(usize, usize, usize) -> [DVec3; 6]>(
+    values: &[T],
+    [nx, ny, nk]: [usize; 3],
+    output: &Geometry,
+    (zlo, zhi): (f64, f64),
+    faces: F,
+) -> Result<SlabTally, PushForwardError> {
     let [nxo, nyo, nzo] = output.dims;
     let plane_out = nxo * nyo;
-    // Output z-planes this slab can reach: the span of every finite face image's z.
-    let (zlo, zhi) = fx
-        .iter()
-        .chain(&fy)
-        .chain(&fz)
-        .filter(|p| p.is_finite())
-        .fold((f64::INFINITY, f64::NEG_INFINITY), |(lo, hi), p| {
-            (lo.min(p.z), hi.max(p.z))
-        });
     let (z0, data_len) = match cell_range(zlo, zhi, nzo) {
         Some((a, b)) => (a, (b - a + 1) * plane_out),
         None => (0, 0),
@@ -479,24 +565,13 @@ fn tally_slab<T: Voxel, M: SpaceMap + ?Sized>(
     let z_end = z0 + data_len / plane_out.max(1);
 
     let mut stats = PushForwardStats::default();
-    let values = &input.data()[k0 * nx * ny..k1 * nx * ny];
     let mut n = 0usize;
     for kk in 0..nk {
         for j in 0..ny {
-            let bx = (nx + 1) * (j + ny * kk);
-            let by = nx * (j + (ny + 1) * kk);
-            let bz = nx * (j + ny * kk);
             for i in 0..nx {
                 let d = values[n].to_f64();
                 n += 1;
-                let pts = [
-                    fx[bx + i],
-                    fx[bx + i + 1],
-                    fy[by + i],
-                    fy[by + i + nx],
-                    fz[bz + i],
-                    fz[bz + i + nx * ny],
-                ];
+                let pts = faces(i, j, kk);
                 if !pts.iter().all(|p| p.is_finite()) {
                     stats.non_finite += 1;
                     continue;
@@ -504,7 +579,7 @@ fn tally_slab<T: Voxel, M: SpaceMap + ?Sized>(
                 let (lo, hi) = pts[1..]
                     .iter()
                     .fold((pts[0], pts[0]), |(lo, hi), p| (lo.min(*p), hi.max(*p)));
-                // The slab buffer spans every finite face image's z, so clamping to it only
+                // The slab buffer spans every finite image's z, so clamping to it only
                 // guards the invariant.
                 let ranges = (
                     cell_range(lo.x, hi.x, nxo),
