@@ -1,12 +1,13 @@
 //! Push-forward of a 256³ u8 volume through True's 9×9×9 cubic lattice with 27 interior
-//! control points moved: map-and-round (§5.3) and box-filter antialiasing (§5.4).
+//! control points moved: map-and-round (§5.3) and box-filter antialiasing (§5.4) with averaged
+//! (True's) and mapped face centres.
 
 use criterion::{Criterion, criterion_group, criterion_main};
 use glam::DVec3;
 use volmorph_deform::BSplineLattice;
 use volmorph_volume::{Geometry, Volume};
 use volmorph_warp::pushforward::{
-    AntialiasOptions, push_forward_antialiased, push_forward_nearest,
+    AntialiasOptions, FaceCentres, push_forward_antialiased, push_forward_nearest,
 };
 
 fn lattice() -> BSplineLattice {
@@ -37,6 +38,13 @@ fn bench(c: &mut Criterion) {
     });
     g.bench_function("antialiased", |b| {
         b.iter(|| push_forward_antialiased(&input, &lat, &grid, &opts).expect("antialiased"));
+    });
+    let mapped = AntialiasOptions {
+        face_centres: FaceCentres::Mapped,
+        ..opts
+    };
+    g.bench_function("antialiased_mapped_faces", |b| {
+        b.iter(|| push_forward_antialiased(&input, &lat, &grid, &mapped).expect("antialiased"));
     });
     g.finish();
 }

@@ -434,8 +434,9 @@ fn overlap(lo: f64, hi: f64, q: usize) -> f64 {
     (hi.min(c + 0.5) - lo.max(c - 0.5)).max(0.0)
 }
 
-/// Range of output indices `0..n` whose cells may overlap `[lo, hi]` with positive length,
-/// or `None` if there are none.
+/// Range `a..=b` of output indices in `0..n` whose cells `[q − ½, q + ½]` overlap `[lo, hi]`
+/// with positive length (`a = ⌊lo + ½⌋`, `b = ⌈hi − ½⌉`, clamped), or `None` if there are
+/// none. Written without `floor`/`ceil` calls: this sits in the per-voxel loop.
 #[inline]
 fn cell_range(lo: f64, hi: f64, n: usize) -> Option<(usize, usize)> {
     let nf = n as f64;
@@ -443,8 +444,18 @@ fn cell_range(lo: f64, hi: f64, n: usize) -> Option<(usize, usize)> {
     if hi <= lo || hi <= -0.5 || lo >= nf - 0.5 {
         return None;
     }
-    let a = (lo + 0.5).floor().max(0.0) as usize;
-    let b = ((hi + 0.5).floor().min(nf - 1.0)) as usize;
+    // Truncation is the floor for positive values; here lo + ½ < n.
+    let s = lo + 0.5;
+    let a = if s > 0.0 { s as usize } else { 0 };
+    let t = hi - 0.5;
+    let b = if t <= 0.0 {
+        0
+    } else if t >= nf - 1.0 {
+        n - 1
+    } else {
+        let c = t as usize;
+        if (c as f64) < t { c + 1 } else { c }
+    };
     Some((a, b))
 }
 
