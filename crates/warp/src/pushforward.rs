@@ -459,30 +459,42 @@ fn cell_range(lo: f64, hi: f64, n: usize) -> Option<(usize, usize)> {
     Some((a, b))
 }
 
-/// Evaluate one face-centre grid of input slab `k0..k1` and convert it to output indices.
+/// Evaluate `map` on the points of `grid`, convert the images to output indices and return
+/// them with the span `(min z, max z)` of the finite ones (`(+∞, −∞)` if none).
 fn face_images<M: SpaceMap + ?Sized>(
     map: &M,
     grid: &Geometry,
     to_index: &ToIndex,
     name: &'static str,
-) -> Result<Vec<DVec3>, PushForwardError> {
-    let mut pts = try_filled(grid.len(), DVec3::ZERO, "face-centre")?;
+) -> Result<(Vec<DVec3>, (f64, f64)), PushForwardError> {
+    let mut pts = try_filled(grid.len(), DVec3::ZERO, "mapped points")?;
     map.apply_grid(grid, &mut pts)
         .map_err(|source| PushForwardError::Map { grid: name, source })?;
-    pts.par_chunks_mut(4096).for_each(|c| {
-        for p in c {
-            *p = to_index.apply(*p);
-        }
-    });
-    Ok(pts)
+    // Convert to output indices and take the z span of the finite images in the same pass
+    // (min/max are order-independent, so the span does not depend on the thread count).
+    let span = pts
+        .par_chunks_mut(4096)
+        .map(|c| {
+            let (mut lo, mut hi) = (f64::INFINITY, f64::NEG_INFINITY);
+            for p in c {
+                *p = to_index.apply(*p);
+                if p.is_finite() {
+                    lo = lo.min(p.z);
+                    hi = hi.max(p.z);
+                }
+            }
+            (lo, hi)
+        })
+        .reduce(
+            || (f64::INFINITY, f64::NEG_INFINITY),
+            |a, b| (a.0.min(b.0), a.1.max(b.1)),
+        );
+    Ok((pts, span))
 }
 
-/// Span `(min z, max z)` of the finite points (`(+∞, −∞)` if there are none).
-fn z_span<'a>(pts: impl Iterator<Item = &'a DVec3>) -> (f64, f64) {
-    pts.filter(|p| p.is_finite())
-        .fold((f64::INFINITY, f64::NEG_INFINITY), |(lo, hi), p| {
-            (lo.min(p.z), hi.max(p.z))
-        })
+/// The union of two z spans.
+fn union(a: (f64, f64), b: (f64, f64)) -> (f64, f64) {
+    (a.0.min(b.0), a.1.max(b.1))
 }
 
 /// Tally the input slab `k0..k1` into a buffer over the output z-planes it reaches.
@@ -504,10 +516,10 @@ fn tally_slab<T: Voxel, M: SpaceMap + ?Sized>(
             let gx = offset_grid(g, DVec3::new(-0.5, 0.0, kf), [nx + 1, ny, nk]);
             let gy = offset_grid(g, DVec3::new(0.0, -0.5, kf), [nx, ny + 1, nk]);
             let gz = offset_grid(g, DVec3::new(0.0, 0.0, kf - 0.5), [nx, ny, nk + 1]);
-            let fx = face_images(map, &gx, to_index, "x-face")?;
-            let fy = face_images(map, &gy, to_index, "y-face")?;
-            let fz = face_images(map, &gz, to_index, "z-face")?;
-            let span = z_span(fx.iter().chain(&fy).chain(&fz));
+            let (fx, sx) = face_images(map, &gx, to_index, "x-face")?;
+            let (fy, sy) = face_images(map, &gy, to_index, "y-face")?;
+            let (fz, sz) = face_images(map, &gz, to_index, "z-face")?;
+            let span = union(union(sx, sy), sz);
             tally_boxes(values, [nx, ny, nk], output, span, |i, j, kk| {
                 let bx = (nx + 1) * (j + ny * kk) + i;
                 let by = nx * (j + (ny + 1) * kk) + i;
@@ -530,28 +542,22 @@ fn tally_slab<T: Voxel, M: SpaceMap + ?Sized>(
                 DVec3::new(-1.0, -1.0, kf - 1.0),
                 [nx + 2, ny + 2, nk + 2],
             );
-            let c = face_images(map, &gc, to_index, "voxel-centre")?;
+            let (c, span) = face_images(map, &gc, to_index, "voxel-centre")?;
             let sy = nx + 2;
             let sz = sy * (ny + 2);
             // The face averages lie within the span of the centres.
-            tally_boxes(
-                values,
-                [nx, ny, nk],
-                output,
-                z_span(c.iter()),
-                |i, j, kk| {
-                    let n = (i + 1) + sy * (j + 1) + sz * (kk + 1);
-                    let p = c[n];
-                    [
-                        0.5 * (c[n - 1] + p),
-                        0.5 * (p + c[n + 1]),
-                        0.5 * (c[n - sy] + p),
-                        0.5 * (p + c[n + sy]),
-                        0.5 * (c[n - sz] + p),
-                        0.5 * (p + c[n + sz]),
-                    ]
-                },
-            )
+            tally_boxes(values, [nx, ny, nk], output, span, |i, j, kk| {
+                let n = (i + 1) + sy * (j + 1) + sz * (kk + 1);
+                let p = c[n];
+                [
+                    0.5 * (c[n - 1] + p),
+                    0.5 * (p + c[n + 1]),
+                    0.5 * (c[n - sy] + p),
+                    0.5 * (p + c[n + sy]),
+                    0.5 * (c[n - sz] + p),
+                    0.5 * (p + c[n + sz]),
+                ]
+            })
         }
     }
 }
