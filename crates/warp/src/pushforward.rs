@@ -32,7 +32,7 @@
 //!   fast path), never pointwise six times per voxel.
 //! * **Normalisation (True §5.4, verbatim rule).** Per output voxel the weights `W = Σ w` and
 //!   weighted values `V = Σ w·d` are tallied; then `d = V / W` where `W ≥ 1` (overlapping
-//!   bounding boxes), and `d = V` where `W < 1` — "the portion left uncovered [counts] as
+//!   bounding boxes), and `d = V` where `W < 1` — "the portion left uncovered \[counts\] as
 //!   contributing zero". [`AntialiasOptions::background`] generalises the zero: where
 //!   `W < 1` the result is `V + (1 − W)·background`, which is the paper's rule for the
 //!   default background 0.
@@ -51,7 +51,8 @@ use volmorph_volume::{Geometry, Volume, VolumeError, Voxel};
 
 /// Input voxels per slab (rounded to whole z-slices, at least one slice). Fixed, so the slab
 /// partition — and with it the order of floating-point sums — never depends on the thread
-/// count. 2¹⁹ voxels keep the three face-centre buffers of a slab near 40 MB.
+/// count. 2¹⁹ voxels keep a slab's mapped points near 13 MB (one centre grid) or 38 MB
+/// (three face-centre grids); one slab per rayon thread is in flight at a time.
 const SLAB_VOXELS: usize = 1 << 19;
 
 /// Everything that can go wrong in a push-forward.
