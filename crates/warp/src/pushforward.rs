@@ -43,6 +43,22 @@
 //! * Work is split into input z-slabs whose size depends only on the input dimensions, and
 //!   the slabs' contributions are combined in slab order, so results are bit-identical for
 //!   any number of rayon threads.
+//!
+//! ```
+//! use glam::DVec3;
+//! use volmorph_deform::Affine;
+//! use volmorph_volume::{Geometry, Volume};
+//! use volmorph_warp::pushforward::{AntialiasOptions, push_forward_antialiased_f32};
+//!
+//! // A single bright voxel pushed half a voxel along +x is shared by two output voxels.
+//! let g = Geometry::new([4, 3, 3]);
+//! let v = Volume::from_fn(g, |i, j, k| if (i, j, k) == (1, 1, 1) { 8.0f32 } else { 0.0 })?;
+//! let shift = Affine::translation(DVec3::new(0.5, 0.0, 0.0));
+//! let r = push_forward_antialiased_f32(&v, &shift, &g, &AntialiasOptions::default())?;
+//! assert_eq!((r.volume[[1, 1, 1]], r.volume[[2, 1, 1]]), (4.0, 4.0));
+//! assert_eq!(r.volume.data().iter().sum::<f32>(), 8.0); // mass is conserved
+//! # Ok::<(), Box<dyn std::error::Error>>(())
+//! ```
 
 use glam::{DMat3, DVec3};
 use rayon::prelude::*;
