@@ -365,7 +365,12 @@ fn warp_and_jacobian_through_a_lattice() {
         &lat,
     ]);
     // The identity lattice leaves the volume unchanged.
-    for method in ["pullback-nearest", "pullback-linear"] {
+    for method in [
+        "pullback-nearest",
+        "pullback-linear",
+        "pushforward-nearest",
+        "pushforward-antialiased",
+    ] {
         let out = d.join(format!("{method}.mha"));
         ok(&[
             &"warp",
@@ -389,7 +394,10 @@ fn warp_and_jacobian_through_a_lattice() {
         &"-o",
         &jac,
     ]);
-    assert!(text.contains("0 of 13824 voxels fold"), "no folding expected: {text}");
+    assert!(
+        text.contains("0 of 13824 voxels fold"),
+        "no folding expected: {text}"
+    );
     let j = info_json(&jac);
     assert!(
         (j["stats"]["min"].as_f64().unwrap() - 1.0).abs() < 1e-5,

@@ -2,18 +2,21 @@
 
 use std::path::PathBuf;
 
-use anyhow::Context;
+use anyhow::{Context, bail};
+use volmorph_deform::BSplineLattice;
 use volmorph_deform::formats::read_lattice;
-use volmorph_volume::format;
 use volmorph_volume::sample::Interpolation;
+use volmorph_volume::{AnyVolume, format, with_volume};
 use volmorph_warp::jacobian::{FoldingReport, jacobian_determinant};
 use volmorph_warp::pullback::{ResampleOptions, resample_any};
+use volmorph_warp::pushforward::{
+    AntialiasOptions, push_forward_antialiased, push_forward_nearest,
+};
 
 use crate::progress;
 
 /// How a warp applies the lattice; the name says the direction.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, clap::ValueEnum)]
-#[allow(clippy::enum_variant_names)] // the direction is part of every method's name, on purpose
 pub enum Method {
     /// Pull-back (ITK's resampling convention): output voxel x takes the input at
     /// lattice(x), nearest neighbour.
@@ -22,6 +25,13 @@ pub enum Method {
     PullbackLinear,
     /// Pull-back with prefiltered cubic B-spline interpolation.
     PullbackCubic,
+    /// Push-forward (free-form deformation of the model): every input voxel is sent to
+    /// lattice(x) and written into the nearest output voxel (True 1992 §5.3, a fast preview;
+    /// holes stay at the background, collisions keep the largest value).
+    PushforwardNearest,
+    /// Push-forward with True's box-filter antialiasing (§5.4): each voxel's mapped box is
+    /// spread over the output voxels it overlaps.
+    PushforwardAntialiased,
 }
 
 /// Arguments of `volmorph warp`.
@@ -49,18 +59,46 @@ pub fn run(args: &Args) -> anyhow::Result<()> {
     let vol = format::read(&args.input).context("cannot read volume")?;
     let lattice = read_lattice(&args.lattice).context("cannot read lattice")?;
     pb.set_message("warping");
-    let interpolation = match args.method {
-        Method::PullbackNearest => Interpolation::Nearest,
-        Method::PullbackLinear => Interpolation::Linear,
-        Method::PullbackCubic => Interpolation::CubicBSpline,
-    };
-    let options = ResampleOptions::new(interpolation, args.default);
-    let out = resample_any(&vol, &lattice, vol.geometry(), &options)
+    let out = warp(&vol, &lattice, args.method, args.default)
         .with_context(|| format!("cannot warp {}", args.input.display()))?;
     pb.set_message(format!("writing {}", args.output.display()));
     format::write(&args.output, &out).context("cannot write")?;
     pb.finish_and_clear();
     Ok(())
+}
+
+/// Warp `vol` on its own grid by `method`; `default` fills output voxels nothing reaches.
+fn warp(
+    vol: &AnyVolume,
+    lattice: &BSplineLattice,
+    method: Method,
+    default: f64,
+) -> anyhow::Result<AnyVolume> {
+    let grid = vol.geometry();
+    let interpolation = match method {
+        Method::PullbackNearest => Interpolation::Nearest,
+        Method::PullbackLinear => Interpolation::Linear,
+        Method::PullbackCubic => Interpolation::CubicBSpline,
+        Method::PushforwardNearest => {
+            if default != 0.0 {
+                bail!("--default is not used by pushforward-nearest (holes stay 0)");
+            }
+            return Ok(with_volume!(vol, v => {
+                AnyVolume::from(push_forward_nearest(v, lattice, grid)?.volume)
+            }));
+        }
+        Method::PushforwardAntialiased => {
+            let options = AntialiasOptions {
+                background: default,
+                ..AntialiasOptions::default()
+            };
+            return Ok(with_volume!(vol, v => {
+                AnyVolume::from(push_forward_antialiased(v, lattice, grid, &options)?.volume)
+            }));
+        }
+    };
+    let options = ResampleOptions::new(interpolation, default);
+    Ok(resample_any(vol, lattice, grid, &options)?)
 }
 
 /// Arguments of `volmorph jacobian`.
