@@ -8,7 +8,8 @@ use volmorph_contour::{
     McOptions, Qef, dual_contouring, dual_contouring_any, marching_cubes,
 };
 use volmorph_mesh::{Mesh, ValidationReport};
-use volmorph_volume::{AnyVolume, Geometry, Volume};
+use volmorph_volume::phantom::{self, Phantom};
+use volmorph_volume::{AnyVolume, Geometry, Volume, Voxel};
 
 const SDF: DcOptions = DcOptions {
     inside_below: true,
@@ -209,9 +210,9 @@ impl Lcg {
 
 /// Whether some cell face has all four edges crossed (two inside corners diagonally
 /// opposite), the configuration where one vertex per cell cannot be edge-manifold.
-fn has_ambiguous_face(v: &Volume<f64>, level: f64) -> bool {
+fn has_ambiguous_face<T: Voxel>(v: &Volume<T>, level: f64) -> bool {
     let [nx, ny, nz] = v.geometry().dims;
-    let inside = |i: usize, j: usize, k: usize| v.data()[i + nx * (j + ny * k)] <= level;
+    let inside = |i: usize, j: usize, k: usize| v.data()[i + nx * (j + ny * k)].to_f64() <= level;
     let d = [[1, 0, 0], [0, 1, 0], [0, 0, 1]];
     for k in 0..nz {
         for j in 0..ny {
@@ -505,5 +506,50 @@ fn any_volume_matches_the_typed_entry() {
     assert_eq!(any.mesh.face_count(), typed.mesh.face_count());
     for (p, q) in any.mesh.positions().iter().zip(typed.mesh.positions()) {
         assert!(close(*p, *q, 1e-5));
+    }
+}
+
+#[test]
+fn result_does_not_depend_on_the_thread_count() {
+    let sdf = phantom::signed_distance(Phantom::Teapot, [40, 36, 33]).unwrap();
+    let run = |threads| {
+        rayon::ThreadPoolBuilder::new()
+            .num_threads(threads)
+            .build()
+            .unwrap()
+            .install(|| dual_contouring(&sdf, 0.0, &SDF).unwrap())
+    };
+    let one = run(1);
+    assert!(one.mesh.face_count() > 1000);
+    assert_eq!(one, run(3));
+    assert_eq!(one, run(8));
+}
+
+#[test]
+fn phantoms_give_closed_meshes_of_the_right_topology() {
+    for (phantom, euler) in [
+        (Phantom::Sphere, 2),
+        (Phantom::Torus, 0),
+        (Phantom::RoundedBox, 2),
+    ] {
+        let sdf = phantom::signed_distance(phantom, [32, 32, 32]).unwrap();
+        let s = dual_contouring(&sdf, 0.0, &SDF).unwrap();
+        let report = s.mesh.validate();
+        assert!(report.boundary_edges.is_empty(), "{phantom:?}: {report}");
+        assert!(report.misoriented_edges.is_empty(), "{phantom:?}: {report}");
+        assert!(report.degenerate_faces.is_empty(), "{phantom:?}: {report}");
+        assert_eq!(report.euler_characteristic, euler, "{phantom:?}");
+        // Non-manifold edges only where a cell face is ambiguous (the torus's saddles).
+        if has_ambiguous_face(&sdf, 0.0) {
+            assert_eq!(phantom, Phantom::Torus);
+        } else {
+            assert!(report.is_closed_manifold(), "{phantom:?}: {report}");
+        }
+        let mc = marching_cubes(&sdf, 0.0, &McOptions { inside_below: true }).unwrap();
+        let ratio = s.mesh.signed_volume() / mc.mesh.signed_volume();
+        assert!(
+            (ratio - 1.0).abs() < 0.02,
+            "{phantom:?}: volume ratio {ratio}"
+        );
     }
 }
