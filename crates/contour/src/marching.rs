@@ -26,17 +26,20 @@ pub struct McOptions {
     pub inside_below: bool,
 }
 
-/// A triangulated isosurface with per-vertex normals.
+/// A triangulated isosurface with per-vertex normals, as returned by [`marching_cubes`] and
+/// [`dual_contouring`](crate::dual_contouring).
 #[derive(Debug, Clone, PartialEq)]
 pub struct IsoSurface {
     /// Triangles counter-clockwise seen from outside (the right-hand-rule normal points from
     /// the inside to the outside), vertices in physical coordinates.
     pub mesh: Mesh,
     /// Unit outward normal of each vertex (same order as the mesh positions), from the
-    /// gradient of the field: central differences at the grid points (one-sided on the volume
-    /// boundary), taken through the geometry to physical space and interpolated along the
-    /// vertex's edge. Where that gradient vanishes or is not finite, the normalised sum of the
-    /// area-weighted normals of the vertex's triangles is used instead.
+    /// gradient of the field taken through the geometry to physical space. For
+    /// [`marching_cubes`]: central differences at the grid points (one-sided on the volume
+    /// boundary) interpolated along the vertex's edge; for
+    /// [`dual_contouring`](crate::dual_contouring): the normalised sum of the cell's Hermite
+    /// normals. Where that vanishes or is not finite, the normalised sum of the area-weighted
+    /// normals of the vertex's triangles is used instead.
     pub normals: Vec<DVec3>,
 }
 
