@@ -100,7 +100,10 @@ impl DcOptions {
 ///
 /// **Faces.** For every crossed grid edge with four cells around it (edges on the volume's
 /// boundary faces have fewer and are skipped) the quad joining those cells' vertices is split
-/// into two triangles **along its shorter diagonal** (the output is a triangle mesh).
+/// into two triangles (the output is a triangle mesh): along the diagonal joining two
+/// **feature vertices** (QEF solutions of rank ≥ 2, i.e. on a sharp edge or corner) when
+/// exactly one diagonal does, so the mesh follows the feature line, otherwise along the
+/// **shorter diagonal**.
 /// Triangles are counter-clockwise seen from outside (right-hand-rule normals from the inside
 /// to the outside), also for mirrored geometries (negative direction determinant), as for
 /// marching cubes.
@@ -175,6 +178,8 @@ struct Layer {
     cells: Vec<usize>,
     positions: Vec<DVec3>,
     normals: Vec<DVec3>,
+    /// Whether each vertex lies on a sharp edge or corner (QEF of rank ≥ 2).
+    features: Vec<bool>,
 }
 
 /// Classified grid planes: inside flags and row summaries.
@@ -223,18 +228,20 @@ impl<T: Voxel> Dual<'_, T> {
                 if case == 0 || case == 255 {
                     continue;
                 }
-                let (position, normal) = self.cell_vertex([i, j, k], case);
+                let (position, normal, feature) = self.cell_vertex([i, j, k], case);
                 out.cells.push(j * (nx - 1) + i);
                 out.positions.push(position);
                 out.normals.push(normal);
+                out.features.push(feature);
             }
         }
         out
     }
 
     /// Vertex and normal of the cell with lowest corner `c` and corner pattern `case` (bit
-    /// `dx + 2 dy + 4 dz` set when that corner is inside).
-    fn cell_vertex(&self, c: [usize; 3], case: u8) -> (DVec3, DVec3) {
+    /// `dx + 2 dy + 4 dz` set when that corner is inside), and whether the vertex is on a
+    /// sharp edge or corner (a QEF solution of rank ≥ 2).
+    fn cell_vertex(&self, c: [usize; 3], case: u8) -> (DVec3, DVec3, bool) {
         let f = &self.field;
         let corner = DVec3::new(c[0] as f64, c[1] as f64, c[2] as f64);
         let reference = f.origin + f.m * corner;
@@ -266,10 +273,9 @@ impl<T: Voxel> Dual<'_, T> {
         });
         // A crossed cell has at least three crossings, so both are `Some`.
         let mass = qef.mass_point().unwrap_or(reference);
-        let position = if sharp {
-            qef.solve(self.threshold).map_or(mass, |s| s.position)
-        } else {
-            mass
+        let (position, feature) = match qef.solve(self.threshold) {
+            Some(s) if sharp => (s.position, s.rank >= 2),
+            _ => (mass, false),
         };
         let local = self.m_inv * (position - reference);
         let clamped = local.clamp(DVec3::splat(EDGE_MARGIN), DVec3::splat(1.0 - EDGE_MARGIN));
@@ -278,19 +284,24 @@ impl<T: Voxel> Dual<'_, T> {
         } else {
             reference + f.m * clamped
         };
-        (position, sum.try_normalize().unwrap_or(DVec3::ZERO))
+        (
+            position,
+            sum.try_normalize().unwrap_or(DVec3::ZERO),
+            feature,
+        )
     }
 
     /// Triangles of the crossed edges of grid plane `k` (x and y edges in the plane, z edges
     /// to plane `k + 1`), with `lower` and `upper` the global vertex indices of cell layers
-    /// `k − 1` and `k` (dense, [`NONE`] where a cell has no vertex).
+    /// `k − 1` and `k` (dense, [`NONE`] where a cell has no vertex) and `features` marking
+    /// the vertices on sharp features.
     fn faces(
         &self,
         k: usize,
         p: &mut Planes,
-        lower: &[u32],
-        upper: &[u32],
+        (lower, upper): (&[u32], &[u32]),
         positions: &[DVec3],
+        features: &[bool],
         out: &mut Vec<[u32; 3]>,
     ) {
         let f = &self.field;
@@ -308,7 +319,14 @@ impl<T: Voxel> Dual<'_, T> {
                 [quad[3], quad[2], quad[1], quad[0]]
             };
             let at = |i: usize| positions[q[i] as usize];
-            if at(0).distance_squared(at(2)) <= at(1).distance_squared(at(3)) {
+            let on = |i: usize| features[q[i] as usize];
+            let (along02, along13) = (on(0) && on(2), on(1) && on(3));
+            let split02 = if along02 == along13 {
+                at(0).distance_squared(at(2)) <= at(1).distance_squared(at(3))
+            } else {
+                along02
+            };
+            if split02 {
                 out.push([q[0], q[1], q[2]]);
                 out.push([q[0], q[2], q[3]]);
             } else {
@@ -380,9 +398,11 @@ impl<T: Voxel> Dual<'_, T> {
         }
         let mut positions = Vec::with_capacity(total);
         let mut normals = Vec::with_capacity(total);
+        let mut features = Vec::with_capacity(total);
         for l in &layers {
             positions.extend_from_slice(&l.positions);
             normals.extend_from_slice(&l.normals);
+            features.extend_from_slice(&l.features);
         }
         let layer_cells = (f.nx - 1) * (f.ny - 1);
         // Global vertex index of every cell of layer `k` into `map` (and back to NONE after).
@@ -409,7 +429,7 @@ impl<T: Voxel> Dual<'_, T> {
                         fill(upper, k, Some(offsets[k]));
                     }
                     let mut out = Vec::new();
-                    self.faces(k, p, lower, upper, &positions, &mut out);
+                    self.faces(k, p, (lower, upper), &positions, &features, &mut out);
                     if k >= 1 {
                         fill(lower, k - 1, None);
                     }
