@@ -76,16 +76,25 @@ impl DcOptions {
 /// classified as [`DcOptions::inside_below`] says (the level itself inside, NaN outside), the
 /// same rule as [`marching_cubes`](crate::marching_cubes).
 ///
-/// **Hermite data.** On every grid edge whose ends are classified differently the crossing
-/// point is marching cubes' vertex on that edge (linear interpolation of the samples, kept
-/// [`EDGE_MARGIN`] away from the ends). Its normal is the outward unit gradient, in physical
-/// space, at the edge's end **nearer to the crossing**, by differences that do not straddle a
-/// kink of the field: along each axis the central difference, unless the centred second
-/// difference exceeds four times the smaller one-sided one, in which case the one-sided
-/// difference on the smoother side (an ENO stencil choice). Sampled distance fields have
-/// slope discontinuities along sharp features; central differences and interpolation along
-/// the edge would blend the normals of the two faces there and pull the QEF's minimiser off
-/// the feature. On smooth fields this is the central-difference gradient.
+/// **Hermite data.** On every grid edge whose ends are classified differently a crossing
+/// point and its outward unit normal (in physical space) are estimated without interpolating
+/// across a kink of the field — sampled distance fields have slope discontinuities along
+/// sharp features, and plain linear interpolation and central differences there would
+/// move the crossings and blend the two faces' normals, pulling the QEF minimiser off the
+/// feature:
+/// * the **crossing** is the linear interpolation of the two samples, unless the second
+///   differences centred on the edge's ends exceed four times the smaller of the one-sided
+///   second differences beyond either end; then it is the root of the line through an end and
+///   its outer neighbour, on the smoother side (an ENO choice of stencil), when on the edge.
+///   It is kept [`EDGE_MARGIN`] away from the ends;
+/// * the **normal** is the gradient at the end whose line gave the crossing (else the end
+///   nearer to it), by central differences along each axis unless the centred second
+///   difference exceeds four times the smaller one-sided one, then the one-sided difference
+///   on the smoother side.
+///
+/// On smooth fields these are marching cubes' crossing and (up to interpolation along the
+/// edge) its central-difference normal; on piecewise-linear fields such as the distance to a
+/// box they are exact wherever a side of the stencil lies within one face's region.
 ///
 /// **Vertices.** One vertex per cell with a sign change, computed in physical coordinates:
 /// * if all the cell's normals are within [`DcOptions::feature_angle`] of one another (a
@@ -103,7 +112,7 @@ impl DcOptions {
 /// into two triangles (the output is a triangle mesh): along the diagonal joining two
 /// **feature vertices** (QEF solutions of rank ≥ 2, i.e. on a sharp edge or corner) when
 /// exactly one diagonal does, so the mesh follows the feature line, otherwise along the
-/// **shorter diagonal**.
+/// **shorter diagonal**; but never into a flat triangle when the other split avoids one.
 /// Triangles are counter-clockwise seen from outside (right-hand-rule normals from the inside
 /// to the outside), also for mirrored geometries (negative direction determinant), as for
 /// marching cubes.
@@ -160,6 +169,24 @@ pub fn dual_contouring_any(
 
 /// No vertex in this cell.
 const NONE: u32 = u32::MAX;
+
+/// Largest [`flatness`] of a triangle counted as flat when choosing a quad's split: a
+/// thousand times the mesh validator's degeneracy bound.
+const FLAT: f64 = 1e3 * volmorph_mesh::DEGENERATE_RELATIVE_AREA;
+
+/// Twice the area of triangle `abc` over the square of its longest edge (0 when flat or
+/// when all its vertices coincide).
+fn flatness(a: DVec3, b: DVec3, c: DVec3) -> f64 {
+    let longest = a
+        .distance_squared(b)
+        .max(b.distance_squared(c))
+        .max(c.distance_squared(a));
+    if longest > 0.0 {
+        (b - a).cross(c - a).length() / longest
+    } else {
+        0.0
+    }
+}
 
 /// The field and the per-run constants.
 struct Dual<'a, T> {
@@ -321,10 +348,21 @@ impl<T: Voxel> Dual<'_, T> {
             let at = |i: usize| positions[q[i] as usize];
             let on = |i: usize| features[q[i] as usize];
             let (along02, along13) = (on(0) && on(2), on(1) && on(3));
-            let split02 = if along02 == along13 {
+            let preferred02 = if along02 == along13 {
                 at(0).distance_squared(at(2)) <= at(1).distance_squared(at(3))
             } else {
                 along02
+            };
+            // Never a flat triangle when the other split avoids it (three vertices on one
+            // feature line).
+            let (q02, q13) = (
+                flatness(at(0), at(1), at(2)).min(flatness(at(0), at(2), at(3))),
+                flatness(at(0), at(1), at(3)).min(flatness(at(1), at(2), at(3))),
+            );
+            let split02 = match preferred02 {
+                true if q02 <= FLAT && q13 > q02 => false,
+                false if q13 <= FLAT && q02 > q13 => true,
+                p => p,
             };
             if split02 {
                 out.push([q[0], q[1], q[2]]);

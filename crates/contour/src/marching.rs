@@ -236,9 +236,11 @@ impl<'a, T: Voxel> Field<'a, T> {
         self.crossing(p, o, axis, false)
     }
 
-    /// As [`Self::vertex`]; when `eno` the normal is instead the [`Self::gradient_eno`] of the
-    /// edge end nearer to the crossing, not interpolated along the edge, so that a slope
-    /// discontinuity between the ends (a sharp feature) does not blend the two sides' normals.
+    /// As [`Self::vertex`]; when `eno` the crossing is placed by [`Self::eno_root`] and the
+    /// normal is the [`Self::gradient_eno`] of the end whose one-sided line gave the crossing
+    /// (else of the end nearer to it), not interpolated along the edge, so that a slope
+    /// discontinuity near the edge (a sharp feature) neither moves the crossing nor blends
+    /// the two sides' normals.
     pub(crate) fn crossing(
         &self,
         p: [usize; 3],
@@ -248,7 +250,13 @@ impl<'a, T: Voxel> Field<'a, T> {
     ) -> (DVec3, DVec3) {
         let stride = [1, self.nx, self.nx * self.ny][axis];
         let (va, vb) = (self.value(o), self.value(o + stride));
-        let t = (self.level - va) / (vb - va);
+        let linear = (self.level - va) / (vb - va);
+        // Which end's one-sided model placed the crossing: 0 none (linear), 1 `p`, 2 `q`.
+        let (t, side) = if eno {
+            self.eno_root(p, o, axis, linear)
+        } else {
+            (linear, 0)
+        };
         let t = if t.is_nan() {
             0.5
         } else {
@@ -264,7 +272,7 @@ impl<'a, T: Voxel> Field<'a, T> {
             let ga = self.gradient(p[0], p[1], p[2], o);
             let gb = self.gradient(q[0], q[1], q[2], o + stride);
             ga.lerp(gb, t)
-        } else if t <= 0.5 {
+        } else if side == 1 || (side == 0 && t <= 0.5) {
             self.gradient_eno(p[0], p[1], p[2], o)
         } else {
             self.gradient_eno(q[0], q[1], q[2], o + stride)
@@ -272,6 +280,43 @@ impl<'a, T: Voxel> Field<'a, T> {
         let g = self.m_inv_t * gi * self.outward;
         let normal = g.try_normalize().unwrap_or(DVec3::ZERO);
         (position, normal)
+    }
+
+    /// The crossing parameter on the edge from `p` (offset `o`) along `axis` that does not
+    /// interpolate across a kink (an ENO choice of model): the linear interpolation `linear`
+    /// of the two samples, unless the second differences centred on the edge's ends exceed
+    /// four times the smaller of those of the one-sided stencils beyond either end; then the
+    /// root of the line through the end and its outer neighbour on the smoother side, if that
+    /// root lies on the edge (else on the other side, else the linear one). Returns the parameter and which end's model gave it (0: the
+    /// linear interpolation, 1: `p`'s side, 2: the other end's side).
+    fn eno_root(&self, p: [usize; 3], o: usize, axis: usize, linear: f64) -> (f64, u8) {
+        let n = [self.nx, self.ny, self.nz][axis];
+        let stride = [1, self.nx, self.nx * self.ny][axis];
+        let c = p[axis];
+        if c < 2 || c + 3 >= n {
+            return (linear, 0);
+        }
+        let f = |d: isize| self.value(o.wrapping_add_signed(d * stride as isize));
+        let (fm2, fm1, fa, fb, fp1, fp2) = (f(-2), f(-1), f(0), f(1), f(2), f(3));
+        let centred = (fm1 - 2.0 * fa + fb).abs().max((fa - 2.0 * fb + fp1).abs());
+        let sa = (fm2 - 2.0 * fm1 + fa).abs();
+        let sb = (fb - 2.0 * fp1 + fp2).abs();
+        if centred.is_nan() || centred <= 4.0 * sa.min(sb) {
+            return (linear, 0);
+        }
+        let level = self.level;
+        // Line through (−1, fm1) and (0, fa); line through (1, fb) and (2, fp1).
+        let from_p = ((level - fa) / (fa - fm1), 1);
+        let from_q = (1.0 + (level - fb) / (fp1 - fb), 2);
+        let order = if sa <= sb {
+            [from_p, from_q]
+        } else {
+            [from_q, from_p]
+        };
+        order
+            .into_iter()
+            .find(|(t, _)| (0.0..=1.0).contains(t))
+            .unwrap_or((linear, 0))
     }
 
     /// Classify plane `k` into `flags` (1 inside, 0 outside) and summarise each row of `nx`
