@@ -24,6 +24,16 @@ pub enum ContourError {
         /// Largest number allowed.
         limit: usize,
     },
+    /// An option is out of its documented range.
+    #[error("option {name} = {value} is invalid: expected {expected}")]
+    InvalidOption {
+        /// Name of the option field.
+        name: &'static str,
+        /// The value given.
+        value: f64,
+        /// The accepted range.
+        expected: &'static str,
+    },
     /// The volume's geometry is invalid (singular direction, bad spacing, …).
     #[error(transparent)]
     Volume(#[from] VolumeError),

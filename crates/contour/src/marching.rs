@@ -26,17 +26,20 @@ pub struct McOptions {
     pub inside_below: bool,
 }
 
-/// A triangulated isosurface with per-vertex normals.
+/// A triangulated isosurface with per-vertex normals, as returned by [`marching_cubes`] and
+/// [`dual_contouring`](crate::dual_contouring).
 #[derive(Debug, Clone, PartialEq)]
 pub struct IsoSurface {
     /// Triangles counter-clockwise seen from outside (the right-hand-rule normal points from
     /// the inside to the outside), vertices in physical coordinates.
     pub mesh: Mesh,
     /// Unit outward normal of each vertex (same order as the mesh positions), from the
-    /// gradient of the field: central differences at the grid points (one-sided on the volume
-    /// boundary), taken through the geometry to physical space and interpolated along the
-    /// vertex's edge. Where that gradient vanishes or is not finite, the normalised sum of the
-    /// area-weighted normals of the vertex's triangles is used instead.
+    /// gradient of the field taken through the geometry to physical space. For
+    /// [`marching_cubes`]: central differences at the grid points (one-sided on the volume
+    /// boundary) interpolated along the vertex's edge; for
+    /// [`dual_contouring`](crate::dual_contouring): the normalised sum of the cell's Hermite
+    /// normals. Where that vanishes or is not finite, the normalised sum of the area-weighted
+    /// normals of the vertex's triangles is used instead.
     pub normals: Vec<DVec3>,
 }
 
@@ -80,29 +83,7 @@ pub fn marching_cubes<T: Voxel>(
     level: f64,
     options: &McOptions,
 ) -> Result<IsoSurface, ContourError> {
-    if !level.is_finite() {
-        return Err(ContourError::NonFiniteLevel(level));
-    }
-    let geometry = volume.geometry();
-    let dims = geometry.dims;
-    if dims.iter().any(|&d| d < 2) {
-        return Err(ContourError::TooSmall { dims });
-    }
-    geometry.validate()?;
-    let m = geometry.index_to_physical_matrix();
-    let field = Field {
-        data: volume.data(),
-        nx: dims[0],
-        ny: dims[1],
-        nz: dims[2],
-        level,
-        below: options.inside_below,
-        origin: geometry.origin,
-        m,
-        m_inv_t: m.inverse().transpose(),
-        outward: if options.inside_below { 1.0 } else { -1.0 },
-    };
-    let flip = m.determinant() < 0.0;
+    let (field, flip) = Field::new(volume, level, options.inside_below)?;
     extract(&field, flip)
 }
 
@@ -123,28 +104,61 @@ pub fn marching_cubes_any(
 const NONE: u32 = u32::MAX;
 
 /// Bytes held per vertex (position and normal).
-const VERTEX_BYTES: usize = 2 * size_of::<DVec3>();
+pub(crate) const VERTEX_BYTES: usize = 2 * size_of::<DVec3>();
 
 /// The sampled field with its classification rule and geometry.
-struct Field<'a, T> {
-    data: &'a [T],
-    nx: usize,
-    ny: usize,
-    nz: usize,
+pub(crate) struct Field<'a, T> {
+    pub(crate) data: &'a [T],
+    pub(crate) nx: usize,
+    pub(crate) ny: usize,
+    pub(crate) nz: usize,
     level: f64,
-    below: bool,
-    origin: DVec3,
+    pub(crate) below: bool,
+    pub(crate) origin: DVec3,
     /// Index step → physical step.
-    m: DMat3,
+    pub(crate) m: DMat3,
     /// Index-space gradient → physical gradient.
-    m_inv_t: DMat3,
+    pub(crate) m_inv_t: DMat3,
     /// −1 when inside is above the level (outward = down the gradient), +1 otherwise.
-    outward: f64,
+    pub(crate) outward: f64,
 }
 
-impl<T: Voxel> Field<'_, T> {
+impl<'a, T: Voxel> Field<'a, T> {
+    /// Check the level and the volume and set up the field; the flag is `true` when the
+    /// geometry is mirrored (direction determinant < 0), so triangles must be reversed.
+    pub(crate) fn new(
+        volume: &'a Volume<T>,
+        level: f64,
+        inside_below: bool,
+    ) -> Result<(Self, bool), ContourError> {
+        if !level.is_finite() {
+            return Err(ContourError::NonFiniteLevel(level));
+        }
+        let geometry = volume.geometry();
+        let dims = geometry.dims;
+        if dims.iter().any(|&d| d < 2) {
+            return Err(ContourError::TooSmall { dims });
+        }
+        geometry.validate()?;
+        let m = geometry.index_to_physical_matrix();
+        let field = Field {
+            data: volume.data(),
+            nx: dims[0],
+            ny: dims[1],
+            nz: dims[2],
+            level,
+            below: inside_below,
+            origin: geometry.origin,
+            m,
+            m_inv_t: m.inverse().transpose(),
+            outward: if inside_below { 1.0 } else { -1.0 },
+        };
+        let flip = m.determinant() < 0.0;
+        Ok((field, flip))
+    }
+
     #[inline]
-    fn value(&self, o: usize) -> f64 {
+    pub(crate) fn value(&self, o: usize) -> f64 {
         self.data[o].to_f64()
     }
 
@@ -169,12 +183,80 @@ impl<T: Voxel> Field<'_, T> {
         )
     }
 
+    /// Index-space gradient at grid point `(i, j, k)` (offset `o`) that does not difference
+    /// across a kink: along each axis the central difference is used unless the centred
+    /// second difference exceeds four times the smaller one-sided second difference (a slope
+    /// discontinuity next to the point, as at the sharp edges of a distance field); then the
+    /// one-sided difference on the smoother side is used (an ENO choice of stencil). On smooth
+    /// fields all second differences agree and this is the central difference.
+    pub(crate) fn gradient_eno(&self, i: usize, j: usize, k: usize, o: usize) -> DVec3 {
+        let axis = |c: usize, n: usize, stride: usize| -> f64 {
+            if c == 0 || c + 1 == n {
+                return if c == 0 {
+                    self.value(o + stride) - self.value(o)
+                } else {
+                    self.value(o) - self.value(o - stride)
+                };
+            }
+            let (fm, f0, fp) = (
+                self.value(o - stride),
+                self.value(o),
+                self.value(o + stride),
+            );
+            let (back, fwd) = (f0 - fm, fp - f0);
+            let s0 = (fwd - back).abs();
+            let sm = if c >= 2 {
+                (back - (fm - self.value(o - 2 * stride))).abs()
+            } else {
+                f64::INFINITY
+            };
+            let sp = if c + 2 < n {
+                ((self.value(o + 2 * stride) - fp) - fwd).abs()
+            } else {
+                f64::INFINITY
+            };
+            if s0 <= 4.0 * sm.min(sp) || s0.is_nan() {
+                0.5 * (fwd + back)
+            } else if sm <= sp {
+                back
+            } else {
+                fwd
+            }
+        };
+        DVec3::new(
+            axis(i, self.nx, 1),
+            axis(j, self.ny, self.nx),
+            axis(k, self.nz, self.nx * self.ny),
+        )
+    }
+
     /// Position and normal of the crossing on the edge from grid point `p` (offset `o`)
     /// along `axis` (0, 1, 2).
-    fn vertex(&self, p: [usize; 3], o: usize, axis: usize) -> (DVec3, DVec3) {
+    pub(crate) fn vertex(&self, p: [usize; 3], o: usize, axis: usize) -> (DVec3, DVec3) {
+        self.crossing(p, o, axis, false)
+    }
+
+    /// As [`Self::vertex`]; when `eno` the crossing is placed by [`Self::eno_root`] and the
+    /// normal is the [`Self::gradient_eno`] of the end whose one-sided line gave the crossing
+    /// (else of the end nearer to it), not interpolated along the edge, so that a slope
+    /// discontinuity near the edge (a sharp feature) neither moves the crossing nor blends
+    /// the two sides' normals.
+    pub(crate) fn crossing(
+        &self,
+        p: [usize; 3],
+        o: usize,
+        axis: usize,
+        eno: bool,
+    ) -> (DVec3, DVec3) {
         let stride = [1, self.nx, self.nx * self.ny][axis];
         let (va, vb) = (self.value(o), self.value(o + stride));
-        let t = (self.level - va) / (vb - va);
+        let linear = (self.level - va) / (vb - va);
+        // Which end's one-sided model placed the crossing: 0 none (linear), 1 `p`, 2 `q`.
+        let (t, side) = if eno {
+            self.eno_root(p, o, axis, linear)
+        } else {
+            (linear, 0)
+        };
         let t = if t.is_nan() {
             0.5
         } else {
@@ -186,16 +268,60 @@ impl<T: Voxel> Field<'_, T> {
         let mut step = DVec3::ZERO;
         step[axis] = t;
         let position = self.origin + self.m * (base + step);
-        let ga = self.gradient(p[0], p[1], p[2], o);
-        let gb = self.gradient(q[0], q[1], q[2], o + stride);
-        let g = self.m_inv_t * ga.lerp(gb, t) * self.outward;
+        let gi = if !eno {
+            let ga = self.gradient(p[0], p[1], p[2], o);
+            let gb = self.gradient(q[0], q[1], q[2], o + stride);
+            ga.lerp(gb, t)
+        } else if side == 1 || (side == 0 && t <= 0.5) {
+            self.gradient_eno(p[0], p[1], p[2], o)
+        } else {
+            self.gradient_eno(q[0], q[1], q[2], o + stride)
+        };
+        let g = self.m_inv_t * gi * self.outward;
         let normal = g.try_normalize().unwrap_or(DVec3::ZERO);
         (position, normal)
     }
 
+    /// The crossing parameter on the edge from `p` (offset `o`) along `axis` that does not
+    /// interpolate across a kink (an ENO choice of model): the linear interpolation `linear`
+    /// of the two samples, unless the second differences centred on the edge's ends exceed
+    /// four times the smaller of those of the one-sided stencils beyond either end; then the
+    /// root of the line through the end and its outer neighbour on the smoother side, if that
+    /// root lies on the edge (else on the other side, else the linear one). Returns the parameter and which end's model gave it (0: the
+    /// linear interpolation, 1: `p`'s side, 2: the other end's side).
+    fn eno_root(&self, p: [usize; 3], o: usize, axis: usize, linear: f64) -> (f64, u8) {
+        let n = [self.nx, self.ny, self.nz][axis];
+        let stride = [1, self.nx, self.nx * self.ny][axis];
+        let c = p[axis];
+        if c < 2 || c + 3 >= n {
+            return (linear, 0);
+        }
+        let f = |d: isize| self.value(o.wrapping_add_signed(d * stride as isize));
+        let (fm2, fm1, fa, fb, fp1, fp2) = (f(-2), f(-1), f(0), f(1), f(2), f(3));
+        let centred = (fm1 - 2.0 * fa + fb).abs().max((fa - 2.0 * fb + fp1).abs());
+        let sa = (fm2 - 2.0 * fm1 + fa).abs();
+        let sb = (fb - 2.0 * fp1 + fp2).abs();
+        if centred.is_nan() || centred <= 4.0 * sa.min(sb) {
+            return (linear, 0);
+        }
+        let level = self.level;
+        // Line through (−1, fm1) and (0, fa); line through (1, fb) and (2, fp1).
+        let from_p = ((level - fa) / (fa - fm1), 1);
+        let from_q = (1.0 + (level - fb) / (fp1 - fb), 2);
+        let order = if sa <= sb {
+            [from_p, from_q]
+        } else {
+            [from_q, from_p]
+        };
+        order
+            .into_iter()
+            .find(|(t, _)| (0.0..=1.0).contains(t))
+            .unwrap_or((linear, 0))
+    }
+
     /// Classify plane `k` into `flags` (1 inside, 0 outside) and summarise each row of `nx`
     /// samples in `rows` ([`ALL_OUT`], [`ALL_IN`] or [`MIXED`]).
-    fn classify(&self, k: usize, flags: &mut [u8], rows: &mut [u8]) {
+    pub(crate) fn classify(&self, k: usize, flags: &mut [u8], rows: &mut [u8]) {
         let plane = self.nx * self.ny;
         let src = &self.data[k * plane..(k + 1) * plane];
         let level = self.level;
@@ -443,13 +569,13 @@ impl Sink<'_> {
 }
 
 /// Row summaries of a classified plane.
-const ALL_OUT: u8 = 0;
-const ALL_IN: u8 = 1;
-const MIXED: u8 = 2;
+pub(crate) const ALL_OUT: u8 = 0;
+pub(crate) const ALL_IN: u8 = 1;
+pub(crate) const MIXED: u8 = 2;
 
 /// Whether two rows are both uniform and on the same side (so no edge between them crosses).
 #[inline]
-fn uniform_alike(a: u8, b: u8) -> bool {
+pub(crate) fn uniform_alike(a: u8, b: u8) -> bool {
     a == b && a != MIXED
 }
 
@@ -567,7 +693,11 @@ fn extract<T: Voxel>(field: &Field<'_, T>, flip: bool) -> Result<IsoSurface, Con
 
 /// Replace zero normals (vanishing or non-finite gradient) by the normalised sum of the
 /// (area-weighted) normals of the triangles around the vertex.
-fn fill_missing_normals(positions: &[DVec3], triangles: &[[u32; 3]], normals: &mut [DVec3]) {
+pub(crate) fn fill_missing_normals(
+    positions: &[DVec3],
+    triangles: &[[u32; 3]],
+    normals: &mut [DVec3],
+) {
     if !normals.contains(&DVec3::ZERO) {
         return;
     }
