@@ -1,9 +1,10 @@
-//! `volmorph isosurface`: a triangle mesh of a volume's level set, by marching cubes.
+//! `volmorph isosurface`: a triangle mesh of a volume's level set, by marching cubes or dual
+//! contouring.
 
 use std::path::PathBuf;
 
 use anyhow::Context;
-use volmorph_contour::{McOptions, marching_cubes_any};
+use volmorph_contour::{DcOptions, McOptions, dual_contouring_any, marching_cubes_any};
 use volmorph_mesh::{self as mesh, MeshWriteOptions};
 use volmorph_volume::format;
 
@@ -27,18 +28,44 @@ pub struct Args {
     /// Write ASCII STL/PLY instead of binary.
     #[arg(long)]
     pub ascii: bool,
+    /// Surface extraction algorithm.
+    #[arg(long, value_enum, default_value_t = Algorithm::MarchingCubes)]
+    pub method: Algorithm,
+}
+
+/// Isosurface algorithms.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, clap::ValueEnum)]
+pub enum Algorithm {
+    /// Marching cubes: crack-free, closed 2-manifold on closed level sets; rounds sharp edges.
+    MarchingCubes,
+    /// Dual contouring with QEF vertices in feature cells: keeps sharp edges and corners; may
+    /// give non-manifold edges at ambiguous cell faces.
+    DualContouring,
 }
 
 /// Run `volmorph isosurface`.
 pub fn run(args: &Args) -> anyhow::Result<()> {
     let pb = progress::spinner(format!("reading {}", args.input.display()));
     let vol = format::read(&args.input).context("cannot read volume")?;
-    pb.set_message("marching cubes");
-    let options = McOptions {
-        inside_below: args.inside_below,
-    };
-    let surface = marching_cubes_any(&vol, args.level, &options)
-        .with_context(|| format!("cannot extract the surface of {}", args.input.display()))?;
+    pb.set_message("extracting the surface");
+    let surface = match args.method {
+        Algorithm::MarchingCubes => marching_cubes_any(
+            &vol,
+            args.level,
+            &McOptions {
+                inside_below: args.inside_below,
+            },
+        ),
+        Algorithm::DualContouring => dual_contouring_any(
+            &vol,
+            args.level,
+            &DcOptions {
+                inside_below: args.inside_below,
+                ..DcOptions::default()
+            },
+        ),
+    }
+    .with_context(|| format!("cannot extract the surface of {}", args.input.display()))?;
     pb.set_message(format!("writing {}", args.output.display()));
     let opts = MeshWriteOptions {
         binary: !args.ascii,
@@ -57,7 +84,9 @@ pub fn run(args: &Args) -> anyhow::Result<()> {
                 report.euler_characteristic
             )
         } else {
-            String::from(", open surface (it reaches the volume's border)")
+            String::from(
+                ", not a closed manifold (it reaches the volume's border, or has ambiguous cells)",
+            )
         }
     );
     Ok(())
