@@ -3,30 +3,13 @@
 //! `bspline_transform_point` (region index, fraction, the four cubic segments, planar
 //! coefficients), exact round trips, hand-written files, and clear errors.
 
-use std::path::PathBuf;
-
 use glam::{DMat3, DVec3};
 use volmorph_deform::formats::bxf::{bxf_to_string, parse_bxf, read_bxf, write_bxf};
 use volmorph_deform::formats::itk_tfm::{itk_tfm_to_string, parse_itk_tfm};
 use volmorph_deform::{BSplineLattice, DeformError, SpaceMap};
 
-struct Lcg(u64);
-impl Lcg {
-    fn next(&mut self) -> f64 {
-        self.0 = self
-            .0
-            .wrapping_mul(6_364_136_223_846_793_005)
-            .wrapping_add(1_442_695_040_888_963_407);
-        (self.0 >> 11) as f64 / (1u64 << 53) as f64
-    }
-    fn signed(&mut self) -> DVec3 {
-        DVec3::new(self.next(), self.next(), self.next()) * 2.0 - 1.0
-    }
-}
-
-fn tmp(name: &str) -> PathBuf {
-    PathBuf::from(env!("CARGO_TARGET_TMPDIR")).join(name)
-}
+mod common;
+use common::{Lcg, tmp};
 
 /// A parsed bxf header and its planar coefficients, evaluated the way plastimatch does.
 struct Plastimatch {

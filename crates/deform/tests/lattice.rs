@@ -8,19 +8,8 @@ use volmorph_spline::KnotVector;
 use volmorph_volume::Geometry;
 
 /// Deterministic pseudo-random numbers in [0, 1) (64-bit LCG, top 53 bits).
-struct Lcg(u64);
-impl Lcg {
-    fn next(&mut self) -> f64 {
-        self.0 = self
-            .0
-            .wrapping_mul(6_364_136_223_846_793_005)
-            .wrapping_add(1_442_695_040_888_963_407);
-        (self.0 >> 11) as f64 / (1u64 << 53) as f64
-    }
-    fn vec(&mut self) -> DVec3 {
-        DVec3::new(self.next(), self.next(), self.next())
-    }
-}
+mod common;
+use common::Lcg;
 
 /// A rotation by `angle` about the normalised `axis` (orthonormal, right-handed).
 fn rotation(axis: DVec3, angle: f64) -> DMat3 {

@@ -2,8 +2,6 @@
 //! (ITK 5.4), exact round trips, the documented layout read from hand-written files, and
 //! clear errors for unsupported or malformed input.
 
-use std::path::PathBuf;
-
 use glam::{DMat3, DVec3};
 use volmorph_deform::formats::itk_tfm::{
     itk_tfm_to_string, parse_itk_tfm, read_itk_tfm, write_itk_tfm,
@@ -11,23 +9,8 @@ use volmorph_deform::formats::itk_tfm::{
 use volmorph_deform::{BSplineLattice, DeformError, LatticeFrame, SpaceMap};
 use volmorph_spline::KnotVector;
 
-struct Lcg(u64);
-impl Lcg {
-    fn next(&mut self) -> f64 {
-        self.0 = self
-            .0
-            .wrapping_mul(6_364_136_223_846_793_005)
-            .wrapping_add(1_442_695_040_888_963_407);
-        (self.0 >> 11) as f64 / (1u64 << 53) as f64
-    }
-    fn signed(&mut self) -> DVec3 {
-        DVec3::new(self.next(), self.next(), self.next()) * 2.0 - 1.0
-    }
-}
-
-fn tmp(name: &str) -> PathBuf {
-    PathBuf::from(env!("CARGO_TARGET_TMPDIR")).join(name)
-}
+mod common;
+use common::{Lcg, tmp};
 
 /// Row-major direction of the reference file: Rz(0.4)·Ry(−0.7)·Rx(1.1) with the third column
 /// negated (a left-handed frame), as printed by Python's `repr`.
