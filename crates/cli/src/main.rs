@@ -83,16 +83,49 @@ fn main() -> ExitCode {
     match result {
         Ok(()) => ExitCode::SUCCESS,
         Err(e) => {
-            eprintln!("volmorph: error: {e:#}");
+            eprintln!("volmorph: error: {}", error_chain(&e));
             ExitCode::FAILURE
         }
     }
+}
+
+/// The error and its causes joined by `": "`, leaving out a cause whose text its parent's
+/// message already contains (many error types print their cause *and* return it as
+/// `source()`), so every cause is said once.
+fn error_chain(e: &anyhow::Error) -> String {
+    let mut out = e.to_string();
+    let mut parent = out.clone();
+    for cause in e.chain().skip(1) {
+        let msg = cause.to_string();
+        if !parent.contains(&msg) {
+            out.push_str(": ");
+            out.push_str(&msg);
+        }
+        parent = msg;
+    }
+    out
 }
 
 #[cfg(test)]
 mod tests {
     use super::*;
     use clap::CommandFactory;
+
+    #[test]
+    fn error_chain_says_each_cause_once() {
+        #[derive(Debug, thiserror::Error)]
+        #[error("lattice JSON: {0}")]
+        struct Wrapped(#[from] std::io::Error);
+        let inner = std::io::Error::other("EOF at line 2");
+        let e = anyhow::Error::from(Wrapped(inner)).context("cannot read lattice");
+        assert_eq!(
+            error_chain(&e),
+            "cannot read lattice: lattice JSON: EOF at line 2"
+        );
+        // Causes not repeated by their parent are all kept.
+        let e = anyhow::anyhow!("inner").context("middle").context("outer");
+        assert_eq!(error_chain(&e), "outer: middle: inner");
+    }
 
     #[test]
     fn cli_definition_is_consistent() {
