@@ -9,7 +9,7 @@ use volmorph_deform::formats::itk_tfm::{itk_tfm_to_string, parse_itk_tfm};
 use volmorph_deform::{BSplineLattice, DeformError, SpaceMap};
 
 mod common;
-use common::{Lcg, tmp};
+use common::{Lcg, REF_DIRECTION, tmp};
 
 /// A parsed bxf header and its planar coefficients, evaluated the way plastimatch does.
 struct Plastimatch {
@@ -119,24 +119,12 @@ fn make_bxf(
     (text, pm)
 }
 
-const ROT_ROWS: [f64; 9] = [
-    0.7044663052755917,
-    -0.7054488206087492,
-    -0.07790498208126101,
-    0.2978435767000479,
-    0.19421234020899739,
-    0.9346500792965607,
-    0.644217687237691,
-    0.681632986593423,
-    -0.34692944965489897,
-];
-
 #[test]
 fn agrees_with_plastimatch_point_transform() {
     let (text, pm) = make_bxf(
         DVec3::new(-120.0, 35.5, 8.0),
         DVec3::new(0.9, 1.1, 2.5),
-        ROT_ROWS,
+        REF_DIRECTION,
         [0, 0, 0],
         [29, 17, 12], // 29 voxels in regions of 7: 5 regions, the last one partly outside
         [7, 4, 3],
@@ -204,7 +192,7 @@ fn one_coefficient_moves_one_control_point_along_its_axis() {
 
 fn random_lattice(seed: u64) -> BSplineLattice {
     let mut r = Lcg(seed);
-    let axes = DMat3::from_cols_array(&ROT_ROWS).transpose();
+    let axes = DMat3::from_cols_array(&REF_DIRECTION).transpose();
     let mut lat = BSplineLattice::uniform_cubic_in_box(
         DVec3::new(-30.0, 12.0, 5.0),
         axes,

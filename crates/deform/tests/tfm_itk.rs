@@ -10,21 +10,7 @@ use volmorph_deform::{BSplineLattice, DeformError, LatticeFrame, SpaceMap};
 use volmorph_spline::KnotVector;
 
 mod common;
-use common::{Lcg, tmp};
-
-/// Row-major direction of the reference file: Rz(0.4)·Ry(−0.7)·Rx(1.1) with the third column
-/// negated (a left-handed frame), as printed by Python's `repr`.
-const REF_DIRECTION: [f64; 9] = [
-    0.7044663052755917,
-    -0.7054488206087492,
-    -0.07790498208126101,
-    0.2978435767000479,
-    0.19421234020899739,
-    0.9346500792965607,
-    0.644217687237691,
-    0.681632986593423,
-    -0.34692944965489897,
-];
+use common::{Lcg, REF_DIRECTION, tmp};
 
 /// The reference file: grid 6 × 5 × 7, origin (−3.5, 2.25, 10), spacing (2.5, 1.5, 3),
 /// parameter `m` = ((37·m) mod 17 − 8)/8.
