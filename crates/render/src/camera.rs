@@ -204,6 +204,14 @@ impl Camera {
         f64::from(self.width) / f64::from(self.height)
     }
 
+    /// The same view rendered at `width × height` pixels (used for supersampling: the
+    /// picture plane is unchanged, only its pixel grid). Callers keep the aspect ratio.
+    pub(crate) fn resize(&mut self, width: u32, height: u32) {
+        self.width = width;
+        self.height = height;
+        self.set_projection(self.projection);
+    }
+
     /// Half extents of the image plane: at unit distance for perspective (tangents of the
     /// half angles), in world units for orthographic.
     fn half_extents(&self) -> (f64, f64) {

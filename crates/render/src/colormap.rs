@@ -486,7 +486,8 @@ fn mat_vec(m: &[[f64; 3]; 3], v: [f64; 3]) -> [f64; 3] {
     ]
 }
 
-fn srgb_decode(c: f64) -> f64 {
+/// sRGB transfer function, coded value in `[0, 1]` → linear light.
+pub(crate) fn srgb_decode(c: f64) -> f64 {
     if c <= 0.04045 {
         c / 12.92
     } else {
@@ -494,7 +495,8 @@ fn srgb_decode(c: f64) -> f64 {
     }
 }
 
-fn srgb_encode(c: f64) -> f64 {
+/// Inverse sRGB transfer function, linear light → coded value in `[0, 1]` (clamped).
+pub(crate) fn srgb_encode(c: f64) -> f64 {
     let c = c.clamp(0.0, 1.0);
     if c <= 0.003_130_8 {
         12.92 * c

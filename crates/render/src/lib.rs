@@ -12,6 +12,7 @@
 //! * [`Camera`] — pinhole and orthographic projections with pixel-centre rays and their
 //!   inverse [`Camera::project`]; [`Ray`] and [`Aabb`] with slab intersection.
 //! * [`draw`] — lines, markers and rectangles for handle overlays.
+//! * [`render_triangles`] — z-buffered, shaded pictures of triangle meshes ([`ShadeStyle`]).
 //!
 //! Geometry is f64 ([`glam::DVec3`]); image values are f32; colours are 8-bit sRGB-coded.
 //! The crate receives plain 2-D fields and knows nothing of volumes.
@@ -23,6 +24,7 @@ mod error;
 mod geometry;
 mod image;
 mod png_file;
+mod raster;
 mod window;
 
 pub use camera::{Camera, FIT_MARGIN, Projection};
@@ -34,4 +36,5 @@ pub use png_file::{
     decode_png, encode_png_rgba, read_png, write_png_grey8, write_png_grey16, write_png_rgb,
     write_png_rgba,
 };
+pub use raster::{MAX_SUPERSAMPLE, ShadeStyle, render_triangles};
 pub use window::Window;

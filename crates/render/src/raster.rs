@@ -1,0 +1,671 @@
+//! Shaded pictures of triangle meshes by z-buffer rasterisation.
+//!
+//! [`render_triangles`] draws the triangles `positions[t[0]], positions[t[1]], positions[t[2]]`
+//! as seen by a [`Camera`], with a depth buffer, Lambert plus Blinn–Phong shading from a light
+//! fixed to the camera, and optional supersampling. It is the picture of an isosurface or a
+//! deformed mesh that the command-line tool writes next to the mesh files.
+//!
+//! # Conventions
+//!
+//! * A triangle is **front-facing** when its vertices appear counter-clockwise on the picture,
+//!   i.e. its right-handed normal `(b − a) × (c − a)` points towards the camera. Front faces are
+//!   drawn in [`ShadeStyle::front`], back faces in [`ShadeStyle::back`], so an inverted or
+//!   inconsistently oriented mesh shows at a glance (as Blender's face-orientation overlay).
+//! * With per-vertex `normals` the shading normal is interpolated across the triangle
+//!   (perspective-correct) and turned towards the viewer; without, the face normal is used
+//!   (flat shading).
+//! * Coverage: a pixel sample belongs to a triangle when it lies inside or **on** all three
+//!   edges, so triangles sharing an edge leave no crack between them (the depth test decides
+//!   between the two).
+//! * Triangles with a vertex behind the camera (or with a non-finite vertex) are skipped:
+//!   there is no near-plane clipping, so frame the model in front of the camera
+//!   ([`Camera::fit_bounds`]).
+//! * Shading is computed in linear light and encoded to sRGB after the supersamples are
+//!   averaged.
+//!
+//! Rasterisation runs in parallel over horizontal bands of the picture; each band walks only
+//! the triangles binned to it.
+
+use glam::DVec3;
+use rayon::prelude::*;
+
+use crate::colormap::{srgb_decode, srgb_encode};
+use crate::{Camera, Projection, RenderError, RgbaImage};
+
+/// Picture rows (after supersampling) per parallel band.
+const BAND_ROWS: usize = 16;
+
+/// Largest supersampling factor accepted by [`ShadeStyle::supersample`].
+pub const MAX_SUPERSAMPLE: u32 = 4;
+
+/// How [`render_triangles`] colours a mesh.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct ShadeStyle {
+    /// sRGB colour of front faces (counter-clockwise on the picture).
+    pub front: [u8; 3],
+    /// sRGB colour of back faces.
+    pub back: [u8; 3],
+    /// Colour of pixels no triangle covers (straight alpha).
+    pub background: [u8; 4],
+    /// Direction *towards* the light in camera coordinates (x right, y up, z towards the
+    /// viewer); need not be normalised, must be non-zero.
+    pub light: DVec3,
+    /// Fraction of the colour lit regardless of the light, in `[0, 1]`.
+    pub ambient: f64,
+    /// Strength of the Blinn–Phong highlight, in `[0, 1]` (0: matte).
+    pub specular: f64,
+    /// Samples per pixel along each axis, `1..=`[`MAX_SUPERSAMPLE`]; `2` gives 4× antialiasing.
+    pub supersample: u32,
+}
+
+impl Default for ShadeStyle {
+    /// Warm clay front faces, blue back faces, white background, light from the upper left
+    /// behind the viewer, 2 × 2 supersampling.
+    fn default() -> Self {
+        Self {
+            front: [222, 184, 135],
+            back: [70, 110, 200],
+            background: [255, 255, 255, 255],
+            light: DVec3::new(-0.4, 0.6, 1.0),
+            ambient: 0.2,
+            specular: 0.25,
+            supersample: 2,
+        }
+    }
+}
+
+impl ShadeStyle {
+    fn validate(&self) -> Result<(), RenderError> {
+        if !(self.light.is_finite() && self.light.length_squared() > 0.0) {
+            return Err(RenderError::invalid(format!(
+                "light direction {} must be finite and non-zero",
+                self.light
+            )));
+        }
+        if !(0.0..=1.0).contains(&self.ambient) {
+            return Err(RenderError::invalid(format!(
+                "ambient {} must lie in [0, 1]",
+                self.ambient
+            )));
+        }
+        if !(0.0..=1.0).contains(&self.specular) {
+            return Err(RenderError::invalid(format!(
+                "specular {} must lie in [0, 1]",
+                self.specular
+            )));
+        }
+        if !(1..=MAX_SUPERSAMPLE).contains(&self.supersample) {
+            return Err(RenderError::invalid(format!(
+                "supersample {} must lie in 1..={MAX_SUPERSAMPLE}",
+                self.supersample
+            )));
+        }
+        Ok(())
+    }
+}
+
+/// A triangle projected to the (supersampled) picture.
+#[derive(Debug, Clone, Copy)]
+struct Projected {
+    /// Picture coordinates `(x, y)` and `1/w` per vertex (`w` = depth for perspective, 1 for
+    /// orthographic), for perspective-correct interpolation.
+    v: [(f64, f64, f64); 3],
+    /// View depth per vertex (z-buffer key, smaller is nearer).
+    depth: [f64; 3],
+    /// Signed doubled area in picture coordinates (y down): negative = counter-clockwise on
+    /// screen = front-facing.
+    area: f64,
+    /// Triangle index.
+    index: u32,
+}
+
+/// Draw `triangles` (vertex indices into `positions`) as seen by `camera`, shaded as `style`
+/// says (see the [module docs](self) for facing, coverage and shading conventions).
+///
+/// `normals`, if given, holds one shading normal per vertex (same length as `positions`; need
+/// not be unit length).
+///
+/// ```
+/// use glam::DVec3;
+/// use volmorph_render::{Camera, Projection, ShadeStyle, render_triangles};
+/// // A square of two triangles facing a camera on +z fills the middle of the picture.
+/// let cam = Camera::look_at(DVec3::new(0.0, 0.0, 5.0), DVec3::ZERO, DVec3::Y,
+///                           Projection::Orthographic { view_height: 4.0 }, 40, 40).unwrap();
+/// let p = [DVec3::new(-1.0, -1.0, 0.0), DVec3::new(1.0, -1.0, 0.0),
+///          DVec3::new(1.0, 1.0, 0.0), DVec3::new(-1.0, 1.0, 0.0)];
+/// let img = render_triangles(&cam, &p, &[[0, 1, 2], [0, 2, 3]], None,
+///                            &ShadeStyle::default()).unwrap();
+/// let background = ShadeStyle::default().background;
+/// assert_ne!(img.get(20, 20), Some(background)); // centre: covered
+/// assert_eq!(img.get(2, 2), Some(background)); // corner: empty
+/// ```
+///
+/// # Errors
+/// [`RenderError::InvalidArgument`] for a vertex index out of range, a `normals` slice of the
+/// wrong length, or an invalid style; [`RenderError::Size`] if the supersampled picture is
+/// too large.
+pub fn render_triangles(
+    camera: &Camera,
+    positions: &[DVec3],
+    triangles: &[[u32; 3]],
+    normals: Option<&[DVec3]>,
+    style: &ShadeStyle,
+) -> Result<RgbaImage, RenderError> {
+    style.validate()?;
+    if let Some(n) = normals
+        && n.len() != positions.len()
+    {
+        return Err(RenderError::invalid(format!(
+            "{} normals for {} vertices",
+            n.len(),
+            positions.len()
+        )));
+    }
+    if let Some((t, v)) = triangles.iter().enumerate().find_map(|(t, tri)| {
+        tri.iter()
+            .find(|&&v| v as usize >= positions.len())
+            .map(|&v| (t, v))
+    }) {
+        return Err(RenderError::invalid(format!(
+            "triangle {t} refers to vertex {v}, but there are {} vertices",
+            positions.len()
+        )));
+    }
+    let s = style.supersample;
+    let (w, h) = (camera.width(), camera.height());
+    let (sw, sh) = (
+        w.checked_mul(s)
+            .ok_or_else(|| RenderError::invalid("supersampled width overflows"))?,
+        h.checked_mul(s)
+            .ok_or_else(|| RenderError::invalid("supersampled height overflows"))?,
+    );
+    crate::image::pixel_count(sw.into(), sh.into(), 16)?;
+    let mut cam = *camera;
+    cam.resize(sw, sh);
+
+    let projected: Vec<Option<(f64, f64, f64)>> =
+        positions.par_iter().map(|&p| cam.project(p)).collect();
+    let perspective = matches!(cam.projection(), Projection::Perspective { .. });
+    let tris: Vec<Projected> = triangles
+        .iter()
+        .enumerate()
+        .filter_map(|(t, tri)| {
+            let mut v = [(0.0, 0.0, 0.0); 3];
+            let mut depth = [0.0; 3];
+            for c in 0..3 {
+                let (x, y, d) = projected[tri[c] as usize]?;
+                if perspective && d <= 0.0 {
+                    return None;
+                }
+                v[c] = (x, y, if perspective { 1.0 / d } else { 1.0 });
+                depth[c] = d;
+            }
+            let area = edge(v[0], v[1], (v[2].0, v[2].1));
+            (area != 0.0 && area.is_finite()).then_some(Projected {
+                v,
+                depth,
+                area,
+                index: t as u32,
+            })
+        })
+        .collect();
+
+    // Bin triangles to bands by their vertical extent.
+    let (swu, shu) = (sw as usize, sh as usize);
+    let bands = shu.div_ceil(BAND_ROWS);
+    let mut binned: Vec<Vec<u32>> = vec![Vec::new(); bands];
+    for (n, t) in tris.iter().enumerate() {
+        let ymin = t.v.iter().map(|v| v.1).fold(f64::INFINITY, f64::min);
+        let ymax = t.v.iter().map(|v| v.1).fold(f64::NEG_INFINITY, f64::max);
+        let Some((r0, r1)) = pixel_span(ymin, ymax, shu) else {
+            continue;
+        };
+        for b in &mut binned[r0 / BAND_ROWS..=r1 / BAND_ROWS] {
+            b.push(n as u32);
+        }
+    }
+
+    let shader = Shader::new(&cam, style);
+    let background = style.background;
+    let bg_linear = [
+        srgb_decode(f64::from(background[0]) / 255.0),
+        srgb_decode(f64::from(background[1]) / 255.0),
+        srgb_decode(f64::from(background[2]) / 255.0),
+    ];
+    // Per sample: linear colour and coverage (alpha 0 = background).
+    let mut samples = vec![[0.0f32; 4]; swu * shu];
+    samples
+        .par_chunks_mut(BAND_ROWS * swu)
+        .zip(binned.par_iter())
+        .enumerate()
+        .for_each(|(b, (band, list))| {
+            let y0 = b * BAND_ROWS;
+            let rows = band.len() / swu;
+            let mut depth = vec![f64::INFINITY; band.len()];
+            for &n in list {
+                let t = &tris[n as usize];
+                raster_triangle(
+                    t,
+                    (y0, rows, swu),
+                    band,
+                    &mut depth,
+                    positions,
+                    triangles,
+                    normals,
+                    &shader,
+                );
+            }
+        });
+
+    // Average the s × s samples of each pixel over the background, then encode.
+    let ss = s as usize;
+    let inv = 1.0 / (ss * ss) as f64;
+    let mut out = RgbaImage::new(w, h, background)?;
+    out.pixels_mut()
+        .par_chunks_mut(w as usize)
+        .enumerate()
+        .for_each(|(y, row)| {
+            for (x, px) in row.iter_mut().enumerate() {
+                let mut acc = [0.0f64; 3];
+                let mut cover = 0.0f64;
+                for sy in 0..ss {
+                    let line = &samples[(y * ss + sy) * swu + x * ss..][..ss];
+                    for smp in line {
+                        let a = f64::from(smp[3]);
+                        for c in 0..3 {
+                            acc[c] += f64::from(smp[c]) * a + bg_linear[c] * (1.0 - a);
+                        }
+                        cover += a;
+                    }
+                }
+                if cover == 0.0 {
+                    continue;
+                }
+                let alpha = f64::from(background[3]) / 255.0;
+                let a = cover * inv + (1.0 - cover * inv) * alpha;
+                *px = [
+                    encode(acc[0] * inv),
+                    encode(acc[1] * inv),
+                    encode(acc[2] * inv),
+                    (a * 255.0).round() as u8,
+                ];
+            }
+        });
+    Ok(out)
+}
+
+/// Linear light in `[0, 1]` → 8-bit sRGB.
+fn encode(c: f64) -> u8 {
+    (srgb_encode(c) * 255.0).round() as u8
+}
+
+/// Doubled signed area of `(a, b, p)` in picture coordinates (y down).
+#[inline]
+fn edge(a: (f64, f64, f64), b: (f64, f64, f64), p: (f64, f64)) -> f64 {
+    (b.0 - a.0) * (p.1 - a.1) - (b.1 - a.1) * (p.0 - a.0)
+}
+
+/// Rows/columns `r0..=r1` of `0..n` whose sample centres `r + ½` lie in `[lo, hi]`.
+fn pixel_span(lo: f64, hi: f64, n: usize) -> Option<(usize, usize)> {
+    let a = (lo - 0.5).ceil().max(0.0);
+    let b = (hi - 0.5).floor().min(n as f64 - 1.0);
+    (a <= b).then_some((a as usize, b as usize))
+}
+
+/// Lighting in world coordinates.
+struct Shader {
+    light: DVec3,
+    half: DVec3,
+    to_viewer: DVec3,
+    front: [f64; 3],
+    back: [f64; 3],
+    ambient: f64,
+    specular: f64,
+}
+
+impl Shader {
+    fn new(cam: &Camera, style: &ShadeStyle) -> Self {
+        let l = style.light.normalize();
+        let to_viewer = -cam.forward();
+        let light = (cam.right() * l.x + cam.up() * l.y + to_viewer * l.z).normalize();
+        let lin = |c: [u8; 3]| c.map(|v| srgb_decode(f64::from(v) / 255.0));
+        Self {
+            light,
+            half: (light + to_viewer).normalize_or(to_viewer),
+            to_viewer,
+            front: lin(style.front),
+            back: lin(style.back),
+            ambient: style.ambient,
+            specular: style.specular,
+        }
+    }
+
+    /// Linear colour of a surface point with normal `n`, facing the viewer or not.
+    fn shade(&self, n: DVec3, front: bool) -> [f32; 4] {
+        // Turn the shading normal towards the viewer: the visible side is what is lit.
+        let n = if n.dot(self.to_viewer) < 0.0 { -n } else { n };
+        let diffuse = n.dot(self.light).max(0.0);
+        let k = self.ambient + (1.0 - self.ambient) * diffuse;
+        let spec = if diffuse > 0.0 {
+            self.specular * n.dot(self.half).max(0.0).powi(32)
+        } else {
+            0.0
+        };
+        let base = if front { self.front } else { self.back };
+        [
+            (base[0] * k + spec).min(1.0) as f32,
+            (base[1] * k + spec).min(1.0) as f32,
+            (base[2] * k + spec).min(1.0) as f32,
+            1.0,
+        ]
+    }
+}
+
+/// Rasterise one triangle into a band of `rows` sample rows starting at row `y0`.
+#[allow(clippy::too_many_arguments)]
+fn raster_triangle(
+    t: &Projected,
+    (y0, rows, width): (usize, usize, usize),
+    band: &mut [[f32; 4]],
+    depth: &mut [f64],
+    positions: &[DVec3],
+    triangles: &[[u32; 3]],
+    normals: Option<&[DVec3]>,
+    shader: &Shader,
+) {
+    let [a, b, c] = t.v;
+    let xmin = a.0.min(b.0).min(c.0);
+    let xmax = a.0.max(b.0).max(c.0);
+    let ymin = a.1.min(b.1).min(c.1).max(y0 as f64);
+    let ymax = a.1.max(b.1).max(c.1).min((y0 + rows) as f64);
+    let (Some((x0, x1)), Some((r0, r1))) = (
+        pixel_span(xmin, xmax, width),
+        pixel_span(ymin, ymax, y0 + rows),
+    ) else {
+        return;
+    };
+    let front = t.area < 0.0;
+    let inv_area = 1.0 / t.area;
+    let tri = triangles[t.index as usize];
+    let face_normal = {
+        let [p0, p1, p2] = tri.map(|v| positions[v as usize]);
+        (p1 - p0).cross(p2 - p0)
+    };
+    let vn = normals.map(|n| tri.map(|v| n[v as usize]));
+    for y in r0.max(y0)..=r1 {
+        let py = y as f64 + 0.5;
+        let row = (y - y0) * width;
+        for x in x0..=x1 {
+            let p = (x as f64 + 0.5, py);
+            // Barycentric weights (screen space), all ≥ 0 inside or on the edges.
+            let l0 = edge(b, c, p) * inv_area;
+            let l1 = edge(c, a, p) * inv_area;
+            let l2 = edge(a, b, p) * inv_area;
+            if l0 < 0.0 || l1 < 0.0 || l2 < 0.0 {
+                continue;
+            }
+            // Perspective-correct weights from the interpolated 1/w.
+            let (q0, q1, q2) = (l0 * a.2, l1 * b.2, l2 * c.2);
+            let qs = q0 + q1 + q2;
+            let (m0, m1, m2) = (q0 / qs, q1 / qs, q2 / qs);
+            let d = m0 * t.depth[0] + m1 * t.depth[1] + m2 * t.depth[2];
+            let slot = row + x;
+            if d >= depth[slot] {
+                continue;
+            }
+            depth[slot] = d;
+            let n = match vn {
+                Some([n0, n1, n2]) => (m0 * n0 + m1 * n1 + m2 * n2).normalize_or(face_normal),
+                None => face_normal,
+            }
+            .normalize_or(shader.to_viewer);
+            band[slot] = shader.shade(n, front);
+        }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn ortho(w: u32, h: u32, view_height: f64) -> Camera {
+        Camera::look_at(
+            DVec3::new(0.0, 0.0, 10.0),
+            DVec3::ZERO,
+            DVec3::Y,
+            Projection::Orthographic { view_height },
+            w,
+            h,
+        )
+        .unwrap()
+    }
+
+    fn style1() -> ShadeStyle {
+        ShadeStyle {
+            supersample: 1,
+            specular: 0.0,
+            ..ShadeStyle::default()
+        }
+    }
+
+    /// A unit icosphere refined `level` times, outward-oriented (counter-clockwise seen from
+    /// outside).
+    fn icosphere(level: usize) -> (Vec<DVec3>, Vec<[u32; 3]>) {
+        let t = (1.0 + 5f64.sqrt()) / 2.0;
+        let mut p: Vec<DVec3> = [
+            (-1.0, t, 0.0),
+            (1.0, t, 0.0),
+            (-1.0, -t, 0.0),
+            (1.0, -t, 0.0),
+            (0.0, -1.0, t),
+            (0.0, 1.0, t),
+            (0.0, -1.0, -t),
+            (0.0, 1.0, -t),
+            (t, 0.0, -1.0),
+            (t, 0.0, 1.0),
+            (-t, 0.0, -1.0),
+            (-t, 0.0, 1.0),
+        ]
+        .iter()
+        .map(|&(x, y, z)| DVec3::new(x, y, z).normalize())
+        .collect();
+        let mut f: Vec<[u32; 3]> = vec![
+            [0, 11, 5],
+            [0, 5, 1],
+            [0, 1, 7],
+            [0, 7, 10],
+            [0, 10, 11],
+            [1, 5, 9],
+            [5, 11, 4],
+            [11, 10, 2],
+            [10, 7, 6],
+            [7, 1, 8],
+            [3, 9, 4],
+            [3, 4, 2],
+            [3, 2, 6],
+            [3, 6, 8],
+            [3, 8, 9],
+            [4, 9, 5],
+            [2, 4, 11],
+            [6, 2, 10],
+            [8, 6, 7],
+            [9, 8, 1],
+        ];
+        for _ in 0..level {
+            let mut mid = std::collections::HashMap::new();
+            let mut next = Vec::new();
+            for tri in &f {
+                let mut m = [0u32; 3];
+                for e in 0..3 {
+                    let (a, b) = (tri[e], tri[(e + 1) % 3]);
+                    let key = (a.min(b), a.max(b));
+                    m[e] = *mid.entry(key).or_insert_with(|| {
+                        p.push(((p[a as usize] + p[b as usize]) * 0.5).normalize());
+                        (p.len() - 1) as u32
+                    });
+                }
+                next.push([tri[0], m[0], m[2]]);
+                next.push([tri[1], m[1], m[0]]);
+                next.push([tri[2], m[2], m[1]]);
+                next.push(m);
+            }
+            f = next;
+        }
+        (p, f)
+    }
+
+    #[test]
+    fn closed_sphere_has_no_cracks_and_only_front_faces() {
+        let (p, f) = icosphere(3);
+        let (w, h) = (101, 101);
+        let cam = ortho(w, h, 2.5);
+        let style = style1();
+        let img = render_triangles(&cam, &p, &f, Some(&p), &style).unwrap();
+        let bg = style.background;
+        // The silhouette of the inscribed polyhedron has radius ≥ cos(edge half-angle) ≈ 0.99;
+        // every pixel centre well inside must be covered, every one outside the sphere empty.
+        let px = 2.5 / f64::from(h);
+        let mut covered = 0;
+        for y in 0..h {
+            for x in 0..w {
+                let cx = (f64::from(x) + 0.5) * px - 1.25;
+                let cy = 1.25 - (f64::from(y) + 0.5) * px;
+                let r = (cx * cx + cy * cy).sqrt();
+                let c = img.get(x, y).unwrap();
+                if r < 0.97 {
+                    assert_ne!(c, bg, "crack at pixel ({x}, {y})");
+                    // Front colour dominates (reddish clay, not blue back faces).
+                    assert!(c[0] > c[2], "back face visible at ({x}, {y}): {c:?}");
+                    covered += 1;
+                } else if r > 1.0 + px {
+                    assert_eq!(c, bg, "pixel ({x}, {y}) outside the sphere is drawn");
+                }
+            }
+        }
+        assert!(covered > 4500, "{covered} pixels covered");
+    }
+
+    #[test]
+    fn nearer_triangle_wins_whatever_the_order() {
+        let cam = ortho(20, 20, 4.0);
+        let near = [
+            DVec3::new(-1.0, -1.0, 1.0),
+            DVec3::new(1.0, -1.0, 1.0),
+            DVec3::new(0.0, 1.0, 1.0),
+        ];
+        let far = near.map(|p| p - DVec3::new(0.0, 0.0, 2.0));
+        let pts: Vec<DVec3> = near.iter().chain(far.iter()).copied().collect();
+        // Near triangle front-facing (CCW seen from +z), far one back-facing: colours differ.
+        let style = style1();
+        let a = render_triangles(&cam, &pts, &[[0, 1, 2], [3, 5, 4]], None, &style).unwrap();
+        let b = render_triangles(&cam, &pts, &[[3, 5, 4], [0, 1, 2]], None, &style).unwrap();
+        assert_eq!(a, b);
+        let c = a.get(10, 11).unwrap();
+        assert!(c[0] > c[2], "the far back face shows through: {c:?}");
+        // Only the far triangle: the back colour.
+        let back = render_triangles(&cam, &pts, &[[3, 5, 4]], None, &style).unwrap();
+        let c = back.get(10, 11).unwrap();
+        assert!(c[2] > c[0], "back face not drawn in the back colour: {c:?}");
+    }
+
+    #[test]
+    fn perspective_depth_is_interpolated_correctly() {
+        // A large tilted square and a small square just in front of it: with correct
+        // perspective depth the small one is visible where it is nearer.
+        let cam = Camera::look_at(
+            DVec3::new(0.0, 0.0, 5.0),
+            DVec3::ZERO,
+            DVec3::Y,
+            Projection::Perspective { fov_y: 0.8 },
+            64,
+            64,
+        )
+        .unwrap();
+        let big = [
+            DVec3::new(-2.0, -2.0, -2.0),
+            DVec3::new(2.0, -2.0, 2.0),
+            DVec3::new(2.0, 2.0, 2.0),
+            DVec3::new(-2.0, 2.0, -2.0),
+        ];
+        // Small square at x ≈ 1 slightly in front of the big one (big has z = x there).
+        let small = [
+            DVec3::new(0.9, -0.1, 1.05),
+            DVec3::new(1.1, -0.1, 1.05),
+            DVec3::new(1.1, 0.1, 1.05),
+            DVec3::new(0.9, 0.1, 1.05),
+        ];
+        let pts: Vec<DVec3> = big.iter().chain(small.iter()).copied().collect();
+        let style = ShadeStyle {
+            front: [255, 0, 0],
+            ..style1()
+        };
+        // Small square wound clockwise → back colour, so it is distinguishable.
+        let img = render_triangles(
+            &cam,
+            &pts,
+            &[[0, 1, 2], [0, 2, 3], [4, 6, 5], [4, 7, 6]],
+            None,
+            &style,
+        )
+        .unwrap();
+        let (x, y, _) = cam.project(DVec3::new(1.0, 0.0, 1.05)).unwrap();
+        let c = img.get(x as u32, y as u32).unwrap();
+        assert!(c[2] > c[0], "the nearer small square is hidden: {c:?}");
+    }
+
+    #[test]
+    fn bad_input_is_an_error() {
+        let cam = ortho(8, 8, 2.0);
+        let p = [DVec3::ZERO, DVec3::X, DVec3::Y];
+        let style = ShadeStyle::default();
+        assert!(render_triangles(&cam, &p, &[[0, 1, 3]], None, &style).is_err());
+        assert!(render_triangles(&cam, &p, &[[0, 1, 2]], Some(&p[..2]), &style).is_err());
+        for bad in [
+            ShadeStyle {
+                supersample: 0,
+                ..style
+            },
+            ShadeStyle {
+                light: DVec3::ZERO,
+                ..style
+            },
+            ShadeStyle {
+                ambient: f64::NAN,
+                ..style
+            },
+        ] {
+            assert!(render_triangles(&cam, &p, &[[0, 1, 2]], None, &bad).is_err());
+        }
+        // Non-finite vertices are skipped, not a panic.
+        let q = [DVec3::ZERO, DVec3::X, DVec3::splat(f64::NAN)];
+        let img = render_triangles(&cam, &q, &[[0, 1, 2]], None, &style).unwrap();
+        assert!(img.pixels().iter().all(|&c| c == style.background));
+    }
+
+    #[test]
+    fn supersampling_softens_edges_only() {
+        let cam = ortho(16, 16, 2.0);
+        let p = [
+            DVec3::new(-0.9, -0.9, 0.0),
+            DVec3::new(0.93, -0.9, 0.0),
+            DVec3::new(-0.9, 0.77, 0.0),
+        ];
+        let s1 = render_triangles(&cam, &p, &[[0, 1, 2]], None, &style1()).unwrap();
+        let s4 = render_triangles(
+            &cam,
+            &p,
+            &[[0, 1, 2]],
+            None,
+            &ShadeStyle {
+                supersample: 4,
+                ..style1()
+            },
+        )
+        .unwrap();
+        // Interior pixels agree; some edge pixels are blends (neither background nor fill).
+        assert_eq!(s1.get(3, 12), s4.get(3, 12));
+        let fill = s1.get(3, 12).unwrap();
+        let bg = style1().background;
+        assert!(s4.pixels().iter().any(|&c| c != fill && c != bg));
+    }
+}
