@@ -429,3 +429,25 @@ fn warp_and_jacobian_through_a_lattice() {
         &out,
     ]);
 }
+
+#[test]
+fn mesh_render_draws_the_model_in_the_middle() {
+    let dir = tempfile::tempdir().unwrap();
+    let vol = dir.path().join("sphere.nii.gz");
+    let mesh = dir.path().join("sphere.obj");
+    let png = dir.path().join("sphere.png");
+    ok(&[&"phantom", &"sphere", &"-o", &vol, &"--size", &"24"]);
+    ok(&[&"isosurface", &vol, &"--level", &"127", &"-o", &mesh]);
+    ok(&[
+        &"mesh", &"render", &mesh, &"-o", &png, &"--size", &"64x48", &"--view", &"top",
+    ]);
+    let img = volmorph_render::read_png(&png).unwrap();
+    assert_eq!((img.width(), img.height()), (64, 48));
+    let white = [255, 255, 255, 255];
+    assert_ne!(img.get(32, 24), Some(white), "centre not drawn");
+    assert_eq!(img.get(0, 0), Some(white), "corner drawn");
+    // A malformed size is a usage error (clap's exit status 2), not a crash.
+    let bad = volmorph(&[&"mesh", &"render", &mesh, &"-o", &png, &"--size", &"64"]);
+    assert_eq!(bad.status.code(), Some(2));
+    assert!(String::from_utf8_lossy(&bad.stderr).contains("WIDTHxHEIGHT"));
+}

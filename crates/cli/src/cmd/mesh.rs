@@ -5,6 +5,7 @@ use std::path::PathBuf;
 use anyhow::Context;
 use volmorph_mesh::{self as mesh, MeshWriteOptions};
 
+use super::picture::{self, View};
 use crate::progress;
 
 /// Mesh subcommands.
@@ -18,6 +19,27 @@ pub enum Command {
         after_help = "Examples:\n  volmorph mesh convert dragon.ply.gz dragon.stl\n  volmorph mesh convert part.stl part.ply --ascii"
     )]
     Convert(ConvertArgs),
+    /// Write a shaded PNG picture of a mesh.
+    #[command(
+        after_help = "Examples:\n  volmorph mesh render teapot.ply -o teapot.png --view iso\n  volmorph mesh render bunny.obj -o bunny.png --size 1024x768 --view front"
+    )]
+    Render(RenderArgs),
+}
+
+/// Arguments of `volmorph mesh render`.
+#[derive(Debug, clap::Args)]
+pub struct RenderArgs {
+    /// Input mesh.
+    pub input: PathBuf,
+    /// Output picture (.png).
+    #[arg(short, long)]
+    pub output: PathBuf,
+    /// Viewing direction (z is up).
+    #[arg(long, value_enum, default_value_t = View::Iso)]
+    pub view: View,
+    /// Picture size in pixels, WIDTHxHEIGHT.
+    #[arg(long, default_value = "800x600", value_parser = picture::size)]
+    pub size: (u32, u32),
 }
 
 /// Arguments of `volmorph mesh info`.
@@ -44,6 +66,7 @@ pub fn run(cmd: &Command) -> anyhow::Result<()> {
     match cmd {
         Command::Info(a) => info(a),
         Command::Convert(a) => convert(a),
+        Command::Render(a) => render(a),
     }
 }
 
@@ -75,6 +98,17 @@ fn convert(a: &ConvertArgs) -> anyhow::Result<()> {
         ..MeshWriteOptions::default()
     };
     mesh::write_with(&a.output, &m, &opts).context("cannot write")?;
+    pb.finish_and_clear();
+    Ok(())
+}
+
+fn render(a: &RenderArgs) -> anyhow::Result<()> {
+    let pb = progress::spinner(format!("reading {}", a.input.display()));
+    let m = mesh::read(&a.input).context("cannot read mesh")?;
+    pb.set_message("drawing");
+    let what = a.input.display().to_string();
+    let cam = picture::camera(a.view, picture::bounds(&m, &what)?, a.size)?;
+    picture::write_mesh_png(&a.output, &m, None, &cam)?;
     pb.finish_and_clear();
     Ok(())
 }

@@ -7,5 +7,6 @@ pub mod isosurface;
 pub mod lattice;
 pub mod mesh;
 pub mod phantom;
+pub mod picture;
 pub mod slice;
 pub mod warp;
