@@ -52,7 +52,25 @@ pub fn camera(
         width,
         height,
     )?;
-    Ok(cam.fit_bounds(min, max)?)
+    let mut cam = cam.fit_bounds(min, max)?;
+    // `fit_bounds` frames the bounding sphere; pull in until the box corners themselves fill
+    // ~85% of the narrower picture half-extent (a few fixed-point steps on the distance).
+    let corners = volmorph_render::Aabb::new(min, max)?.corners();
+    for _ in 0..4 {
+        let mut extent: f64 = 0.0;
+        for c in corners {
+            let (x, y, _) = cam
+                .project(c)
+                .context("model corner behind the camera while framing")?;
+            extent = extent
+                .max((2.0 * x / f64::from(width) - 1.0).abs())
+                .max((1.0 - 2.0 * y / f64::from(height)).abs());
+        }
+        let dist = (cam.eye() - centre).length();
+        let next = centre - cam.forward() * (dist * extent / 0.85);
+        cam = Camera::look_at(next, centre, up, cam.projection(), width, height)?;
+    }
+    Ok(cam)
 }
 
 /// Render `mesh` (any polygons; fan-triangulated) with `normals` per vertex (computed from
