@@ -822,3 +822,48 @@ impl ManipulationSession {
         self.undo.push_back(edit);
     }
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use volmorph_spline::KnotVector;
+
+    fn lattice(knots: [KnotVector; 3]) -> BSplineLattice {
+        BSplineLattice::identity_around(DVec3::ZERO, DVec3::ONE, knots).unwrap()
+    }
+
+    #[test]
+    fn boundary_layers_are_the_control_points_seen_on_the_box_surface() {
+        // Uniform cubic, 9 points: B(0) = (1/6, 4/6, 1/6, 0) → three layers per side.
+        let lat = BSplineLattice::uniform_cubic_around(DVec3::ZERO, DVec3::ONE, [9, 5, 4]).unwrap();
+        assert_eq!(boundary_layers(&lat).unwrap(), [[3, 6], [3, 2], [3, 1]]);
+        // Clamped (end-interpolating) knots: only the outermost layer touches the surface.
+        let q = KnotVector::clamped(2, &[0.2, 0.5, 0.55], [0.0, 1.0]).unwrap();
+        let n = q.num_basis();
+        let lat = lattice([q.clone(), q.clone(), q]);
+        assert_eq!(boundary_layers(&lat).unwrap(), [[1, n - 1]; 3]);
+        // Uniform (unclamped) quadratic: N(0) = (1/2, 1/2, 0) → two layers per side.
+        let u = KnotVector::uniform(2, 7, [0.0, 5.0]).unwrap();
+        let lat = lattice([u.clone(), u.clone(), u]);
+        assert_eq!(boundary_layers(&lat).unwrap(), [[2, 5]; 3]);
+    }
+
+    #[test]
+    fn support_weights_form_a_partition_of_unity() {
+        let k = KnotVector::clamped(3, &[0.1, 0.3, 0.35, 0.9], [0.0, 1.0]).unwrap();
+        let lat = lattice([k.clone(), k.clone(), k]);
+        let p = DVec3::new(0.32, 0.05, 0.77);
+        let s = supports(&lat, &[Drag::new(p, p)]).unwrap();
+        let mut sum = 0.0;
+        let mut count = 0;
+        s[0].for_each(lat.counts(), |idx, lin, w| {
+            assert_eq!(lat.spline().linear_index(idx), Some(lin));
+            assert!(w > 0.0);
+            sum += w;
+            count += 1;
+        });
+        assert!((sum - 1.0).abs() < 1e-14);
+        assert_eq!(count, 64);
+        assert!((s[0].image - p).length() < 1e-15);
+    }
+}
