@@ -252,7 +252,16 @@ pub enum DragError {
         /// Number of free control points.
         columns: usize,
     },
-    /// A solution does not fit the lattice it is applied to (wrong index, non-finite result).
+    /// A solution is applied to a lattice with a different control net than the one it was
+    /// solved for.
+    #[error("solution for a lattice of {expected:?} control points applied to one of {got:?}")]
+    LatticeMismatch {
+        /// Control points per axis of the lattice the solution was computed for.
+        expected: [usize; 3],
+        /// Control points per axis of the lattice it was applied to.
+        got: [usize; 3],
+    },
+    /// A lattice operation failed (e.g. a moved control point overflowed).
     #[error(transparent)]
     Lattice(#[from] DeformError),
 }
@@ -261,6 +270,7 @@ pub enum DragError {
 /// [module docs](self).
 #[derive(Debug, Clone, PartialEq)]
 pub struct DragSolution {
+    counts: [usize; 3],
     displacements: Vec<ControlPointMove>,
     residuals: Vec<DVec3>,
     singular_values: Vec<f64>,
@@ -324,15 +334,21 @@ impl DragSolution {
     /// every new position is valid.
     ///
     /// # Errors
-    /// [`DragError::Lattice`] wrapping [`DeformError::IndexOutOfRange`] when the solution does
-    /// not fit the lattice's control net, or [`DeformError::NonFinite`] when a new position
-    /// overflows; the lattice is then unchanged.
+    /// [`DragError::LatticeMismatch`] when `lattice` has other control-point counts than the
+    /// lattice solved for, [`DragError::Lattice`] wrapping [`DeformError::NonFinite`] when a
+    /// new position overflows; the lattice is then unchanged.
     pub fn apply(&self, lattice: &mut BSplineLattice) -> Result<Vec<ControlPointMove>, DragError> {
         Ok(self.apply_recording(lattice)?.after)
     }
 
     /// [`DragSolution::apply`], also returning the old positions of the moved control points.
     fn apply_recording(&self, lattice: &mut BSplineLattice) -> Result<ControlPointEdit, DragError> {
+        if lattice.counts() != self.counts {
+            return Err(DragError::LatticeMismatch {
+                expected: self.counts,
+                got: lattice.counts(),
+            });
+        }
         let mut before = Vec::with_capacity(self.displacements.len());
         let mut after = Vec::with_capacity(self.displacements.len());
         for &(index, d) in &self.displacements {
@@ -630,6 +646,7 @@ pub fn solve_drags(
         .map(|(&(_, idx), d)| (idx, d))
         .collect();
     Ok(DragSolution {
+        counts,
         displacements,
         residuals,
         singular_values,
