@@ -38,8 +38,12 @@ pub mod formats;
 pub mod grid;
 pub mod json;
 pub mod lattice;
+pub mod manipulate;
 pub mod map;
 
 pub use error::DeformError;
 pub use lattice::{BSplineLattice, LatticeFrame};
+pub use manipulate::{
+    Drag, DragError, DragOptions, DragSolution, ManipulationSession, solve_drags,
+};
 pub use map::{Affine, Compose, Identity, SpaceMap};
