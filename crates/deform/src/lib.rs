@@ -13,6 +13,9 @@
 //!   [`grid::LatticeGridPlan`]s) and a JSON form ([`json`]).
 //! * [`formats`] — cubic lattices as ITK `BSplineTransform` files (`.tfm`) and plastimatch
 //!   `.bxf` files, with the displacement-coefficient conventions of each.
+//! * [`manipulate`] — direct manipulation (True 1992 §6, after Hsu): drag points of the model
+//!   and move the control points by the least-norm amounts that land them exactly, with a tool
+//!   radius, a frozen-boundary option and an undo/redo [`manipulate::ManipulationSession`].
 //!
 //! Physical coordinates follow the ITK convention of [`volmorph_volume::Geometry`]:
 //! `physical = origin + direction·(spacing ⊙ index)`, voxels x fastest.
