@@ -155,6 +155,9 @@ pub struct PointInverse {
     /// `det Dφ(point)`: `≤ 0` means the point lies where the map folds space (see the
     /// [module docs](self)); NaN if not evaluated.
     pub det_jacobian: f64,
+    /// `Dφ(point)` (columns `∂/∂x, ∂/∂y, ∂/∂z`), e.g. to predict the preimage of a nearby
+    /// target to first order; all NaN if not evaluated.
+    pub jacobian: DMat3,
 }
 
 impl PointInverse {
@@ -171,6 +174,7 @@ impl PointInverse {
             iterations: 0,
             status: InverseStatus::NonFinite,
             det_jacobian: f64::NAN,
+            jacobian: DMat3::NAN,
         }
     }
 }
@@ -227,6 +231,7 @@ pub fn newton<M: SpaceMap + ?Sized>(
                 iterations,
                 status: InverseStatus::NonFinite,
                 det_jacobian: f64::NAN,
+                jacobian: DMat3::NAN,
             };
         }
         if rn <= tolerance {
@@ -267,6 +272,7 @@ pub fn newton<M: SpaceMap + ?Sized>(
         iterations,
         status,
         det_jacobian: jac.determinant(),
+        jacobian: jac,
     }
 }
 
