@@ -34,7 +34,9 @@
 
 use glam::{DMat3, DVec3};
 use rayon::prelude::*;
-use volmorph_spline::{BasisTable, KnotVector, basis_funs_and_derivs_into};
+use volmorph_spline::{
+    BasisTable, KnotVector, basis_funs_and_derivs_into, uniform_cubic, uniform_cubic_derivative,
+};
 use volmorph_volume::Geometry;
 
 use crate::grid::aligned_steps;
@@ -69,9 +71,7 @@ pub(crate) fn lattice_value_and_jacobian(lat: &BSplineLattice, p: DVec3) -> Opti
         if deg > POINT_KERNEL_MAX_DEGREE {
             return None;
         }
-        let span = kv.find_span(u[a]).ok()?;
-        basis_funs_and_derivs_into(kv, span, u[a], &mut vals[a], &mut ders[a]).ok()?;
-        first[a] = span - deg;
+        first[a] = axis_basis(kv, u[a], &mut vals[a], &mut ders[a])?;
         orders[a] = deg + 1;
     }
     let coefs = lat.spline().homogeneous_coefficients();
@@ -101,6 +101,44 @@ pub(crate) fn lattice_value_and_jacobian(lat: &BSplineLattice, p: DVec3) -> Opti
         value,
         DMat3::from_cols(du, dv, dw) * frame.to_parameter_matrix(),
     ))
+}
+
+/// Knots count as equally spaced for the uniform cubic shortcut of [`axis_basis`] when their
+/// differences agree to this relative tolerance (integer knots are exact; knots read from text
+/// differ by a few ulps). The shortcut's values then differ from Cox–de Boor's by rounding.
+const UNIFORM_KNOT_TOL: f64 = 1e-12;
+
+/// Basis values and first derivatives of `kv` at in-domain `u` into `vals`/`ders`; returns the
+/// first control index. Cubic spans whose eight surrounding knots are equally spaced (True's
+/// lattices) use the closed-form uniform cubic basis instead of the triangular recursion.
+#[inline]
+fn axis_basis(
+    kv: &KnotVector,
+    u: f64,
+    vals: &mut [f64; KERNEL_BUF],
+    ders: &mut [f64; KERNEL_BUF],
+) -> Option<usize> {
+    let deg = kv.degree();
+    let span = kv.find_span(u).ok()?;
+    if deg == 3
+        && let Some(w) = kv.knots().get(span - 3..span + 5)
+    {
+        let h = w[4] - w[3];
+        if h > 0.0
+            && w.windows(2)
+                .all(|p| ((p[1] - p[0]) - h).abs() <= UNIFORM_KNOT_TOL * h)
+        {
+            let inv_h = 1.0 / h;
+            let t = (u - w[3]) * inv_h;
+            vals[..4].copy_from_slice(&uniform_cubic(t));
+            for (d, b) in ders.iter_mut().zip(uniform_cubic_derivative(t)) {
+                *d = b * inv_h;
+            }
+            return Some(span - 3);
+        }
+    }
+    basis_funs_and_derivs_into(kv, span, u, vals, ders).ok()?;
+    Some(span - deg)
 }
 
 /// One grid axis against one lattice axis: the contiguous range `lo..hi` of grid indices
