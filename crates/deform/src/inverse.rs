@@ -206,8 +206,9 @@ pub fn invert_point<M: SpaceMap + ?Sized>(
     newton(map, y, x0, options.tolerance_for(y), options.max_iterations)
 }
 
-/// The Newton iteration with an absolute tolerance (shared with grid walkers that precompute
-/// it). `y` must be finite.
+/// The damped Newton iteration of [`invert_point`] from the start `x0` with an absolute
+/// residual `tolerance` (physical units), for callers that choose their own starts and
+/// tolerance (grid walkers). A non-finite `y` or `x0` gives [`InverseStatus::NonFinite`].
 #[must_use]
 pub fn newton<M: SpaceMap + ?Sized>(
     map: &M,
