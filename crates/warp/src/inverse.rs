@@ -37,7 +37,7 @@
 //!
 //! # How it runs
 //!
-//! Parallel (rayon) over z-slices; each task walks its slice's rows as above and samples each
+//! Parallel (rayon) over blocks of whole rows; each task walks its rows as above and samples each
 //! preimage immediately with [`Sampler::sample_index`] after the same index conversion and
 //! voxel-centre snapping as [`crate::pullback`] (so a map that reproduces voxel centres copies
 //! voxel values exactly). Nothing is allocated per voxel.
@@ -80,6 +80,11 @@ pub const DEFAULT_TOLERANCE_VOXELS: f64 = 1e-6;
 /// Default iteration limit per Newton start (see
 /// [`volmorph_deform::inverse::DEFAULT_MAX_ITERATIONS`]).
 pub const DEFAULT_MAX_ITERATIONS: u32 = volmorph_deform::inverse::DEFAULT_MAX_ITERATIONS;
+
+/// Output voxels per parallel task (whole rows, at least one). Each task starts its first
+/// row from the first-order guess, so tasks should hold many rows; 4 Ki voxels keep a few
+/// hundred tasks on a 128³ grid for load balance.
+const TASK_VOXELS: usize = 1 << 12;
 
 /// Mask value of a voxel whose preimage was found where the map does not fold.
 pub const MASK_CONVERGED: u8 = 0;
@@ -309,23 +314,25 @@ pub fn pullback_through_inverse_into<T: Voxel, U: Voxel, M: SpaceMap + ?Sized>(
         max_iterations: options.max_iterations,
         fill: U::from_f64(options.fill),
     };
-    let [nx, ny, _] = output.dims;
-    let plane = nx * ny;
-    if plane == 0 {
+    let [nx, ny, nz] = output.dims;
+    if output.is_empty() {
         return Ok(InverseReport::default());
     }
-    // One mask slice per z-slice, or empty stand-ins when no mask is wanted.
-    let mask_slices: Vec<&mut [u8]> = match mask {
-        Some(m) => m.chunks_mut(plane).collect(),
-        None => (0..output.dims[2])
+    // Whole rows per task, about TASK_VOXELS voxels; tasks may span z-slices.
+    let rows_per_task = (TASK_VOXELS / nx).clamp(1, ny * nz);
+    let chunk = rows_per_task * nx;
+    // One mask chunk per task, or empty stand-ins when no mask is wanted.
+    let mask_chunks: Vec<&mut [u8]> = match mask {
+        Some(m) => m.chunks_mut(chunk).collect(),
+        None => (0..out.len().div_ceil(chunk))
             .map(|_| <&mut [u8]>::default())
             .collect(),
     };
     let report = out
-        .par_chunks_mut(plane)
-        .zip(mask_slices.into_par_iter())
+        .par_chunks_mut(chunk)
+        .zip(mask_chunks.into_par_iter())
         .enumerate()
-        .map(|(k, (slice, mask))| walker.slice(k, slice, mask))
+        .map(|(t, (rows, mask))| walker.rows(t * rows_per_task, rows, mask))
         .reduce(InverseReport::default, InverseReport::merge);
     Ok(report)
 }
@@ -374,16 +381,22 @@ struct Walker<'a, M: ?Sized, U> {
 }
 
 impl<M: SpaceMap + ?Sized, U: Voxel> Walker<'_, M, U> {
-    /// Walk z-slice `k` row by row; `mask` is empty or one entry per voxel of the slice.
-    fn slice(&self, k: usize, slice: &mut [U], mask: &mut [u8]) -> InverseReport {
-        let nx = self.output.dims[0];
+    /// Walk the rows `first_row, first_row + 1, …` (global row index `j + ny·k`) that make up
+    /// `chunk`; `mask` is empty or one entry per voxel of the chunk.
+    fn rows(&self, first_row: usize, chunk: &mut [U], mask: &mut [u8]) -> InverseReport {
+        let [nx, ny, _] = self.output.dims;
         let mut report = InverseReport {
-            voxels: slice.len(),
+            voxels: chunk.len(),
             ..InverseReport::default()
         };
-        // Solution at the first voxel of the previous row, to start the next row from.
+        // Solution at the first voxel of the previous row of the same slice, to start the
+        // next row from.
         let mut row_start: Option<PointInverse> = None;
-        for (j, row) in slice.chunks_exact_mut(nx).enumerate() {
+        for (n, row) in chunk.chunks_exact_mut(nx).enumerate() {
+            let (j, k) = ((first_row + n) % ny, (first_row + n) / ny);
+            if j == 0 {
+                row_start = None;
+            }
             let mut prev = row_start.map(|r| (r, self.steps.y_axis));
             for (i, o) in row.iter_mut().enumerate() {
                 let y = self
@@ -413,7 +426,7 @@ impl<M: SpaceMap + ?Sized, U: Voxel> Walker<'_, M, U> {
                     report.nonconverged += 1;
                     MASK_NOT_CONVERGED
                 };
-                if let Some(m) = mask.get_mut(j * nx + i) {
+                if let Some(m) = mask.get_mut(n * nx + i) {
                     *m = code;
                 }
             }
