@@ -31,6 +31,10 @@
 //! Both agree with the pointwise [`SpaceMap::jacobian`] to rounding (≈1e-13 relative). At a
 //! voxel centre lying exactly on a knot of a lattice that is only C⁰ there (degree 1, or a
 //! repeated knot) the two may pick the derivative of different sides.
+//!
+//! [`SpaceMap::jacobian`]: crate::SpaceMap::jacobian
+//! [`SpaceMap::apply_with_jacobian`]: crate::SpaceMap::apply_with_jacobian
+//! [`SpaceMap::jacobian_grid`]: crate::SpaceMap::jacobian_grid
 
 use glam::{DMat3, DVec3};
 use rayon::prelude::*;
@@ -194,6 +198,9 @@ impl BSplineLattice {
     /// wrong `out` length, [`DeformError::GridNotAligned`] if the grid axes are not parallel to
     /// the lattice axes (use [`SpaceMap::jacobian_grid`], which falls back to pointwise
     /// evaluation), [`DeformError::Spline`] for an absurd table size.
+    ///
+    /// [`SpaceMap::jacobian`]: crate::SpaceMap::jacobian
+    /// [`SpaceMap::jacobian_grid`]: crate::SpaceMap::jacobian_grid
     pub fn jacobian_grid_separable(
         &self,
         grid: &Geometry,

@@ -30,10 +30,12 @@
 //!
 //! Voxels where no start converges (a target outside the image of `φ`, a singular Jacobian,
 //! non-finite values) take [`InverseResampleOptions::fill`] and are counted in
-//! [`InverseReport::nonconverged`]; optionally a `u8` mask marks them. Where `φ` folds space a
-//! target may have several preimages; the walk follows the sheet it started on and the
-//! voxels whose preimage has `det Dφ ≤ 0` are counted in [`InverseReport::folded`] (their
-//! value is still sampled at the preimage found).
+//! [`InverseReport::nonconverged`]. Where `φ` folds space a target may have several
+//! preimages (the push-forward would overlap several layers of the model there); the walk
+//! shows one of them — the one on the sheet the row is following, as long as the predicted
+//! start converges — and the voxels whose preimage has `det Dφ ≤ 0` (an inverted sheet) are
+//! counted in [`InverseReport::folded`], their value still sampled at the preimage found. An
+//! optional `u8` mask marks both kinds of voxels ([`MASK_NOT_CONVERGED`], [`MASK_FOLDED`]).
 //!
 //! # How it runs
 //!

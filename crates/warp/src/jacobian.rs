@@ -41,8 +41,9 @@ const SLAB_POINTS: usize = 1 << 14;
 /// geometry. Parallel over slabs of z-slices, each evaluated through the map's
 /// [`SpaceMap::jacobian_grid`] on the slab's sub-grid (the separable table path for lattices
 /// aligned with the grid, the map's own [`SpaceMap::jacobian`] pointwise otherwise: analytic
-/// for lattices and affine maps, central differences for maps without a closed form). A determinant outside the `f32`
-/// range becomes `±∞`; `J ≤ 0` marks folding (see the [module docs](self)).
+/// for lattices and affine maps, central differences for maps without a closed form). A
+/// determinant outside the `f32` range becomes `±∞`; `J ≤ 0` marks folding (see the
+/// [module docs](self)).
 ///
 /// # Errors
 /// [`WarpError::Geometry`] if `grid` is invalid or too large for an `f32` array within
