@@ -50,7 +50,7 @@ enum Command {
     Isosurface(cmd::isosurface::Args),
     /// Warp a volume through a B-spline lattice.
     #[command(
-        after_help = "Example:\n  volmorph warp ct.nii.gz --lattice moved.json -o warped.nii.gz --method pullback-cubic"
+        after_help = "Examples:\n  volmorph warp ct.nii.gz --lattice moved.json -o warped.nii.gz --method pullback-cubic\n  volmorph warp model.nii.gz --lattice ffd.json -o deformed.nii.gz --method inverse-linear --nonconverged-mask failed.nii.gz"
     )]
     Warp(cmd::warp::Args),
     /// Jacobian determinant map of a lattice on a volume's grid, with a folding summary.

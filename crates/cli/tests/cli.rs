@@ -370,6 +370,8 @@ fn warp_and_jacobian_through_a_lattice() {
         "pullback-linear",
         "pushforward-nearest",
         "pushforward-antialiased",
+        "inverse-nearest",
+        "inverse-linear",
     ] {
         let out = d.join(format!("{method}.mha"));
         ok(&[
@@ -450,4 +452,93 @@ fn mesh_render_draws_the_model_in_the_middle() {
     let bad = volmorph(&[&"mesh", &"render", &mesh, &"-o", &png, &"--size", &"64"]);
     assert_eq!(bad.status.code(), Some(2));
     assert!(String::from_utf8_lossy(&bad.stderr).contains("WIDTHxHEIGHT"));
+
+fn inverse_warp_reports_and_masks_voxels_without_a_preimage() {
+    let dir = tempfile::tempdir().unwrap();
+    let d = dir.path();
+    let src = d.join("teapot.mha");
+    let lat = d.join("l.json");
+    ok(&[&"phantom", &"teapot", &"-o", &src, &"--size", &"20"]);
+    ok(&[
+        &"lattice",
+        &"init",
+        &src,
+        &"--counts",
+        &"5,5,5",
+        &"-o",
+        &lat,
+    ]);
+    // Every control point moved +3 along x: the box is translated, so its first 3 units
+    // along x have no preimage (outside the box the map is the identity).
+    let mut doc: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(&lat).unwrap()).unwrap();
+    for p in doc["control_points"].as_array_mut().unwrap() {
+        let x = p[0].as_f64().unwrap();
+        p[0] = serde_json::json!(x + 3.0);
+    }
+    std::fs::write(&lat, doc.to_string()).unwrap();
+    let out = d.join("ffd.mha");
+    let mask = d.join("mask.nii");
+    let run = volmorph(&[
+        &"warp",
+        &src,
+        &"--lattice",
+        &lat,
+        &"-o",
+        &out,
+        &"--method",
+        &"inverse-cubic",
+        &"--nonconverged-mask",
+        &mask,
+    ]);
+    let err = String::from_utf8_lossy(&run.stderr);
+    assert!(run.status.success(), "{err}");
+    assert!(
+        err.contains("warning: inverse:") && err.contains("did not converge"),
+        "{err}"
+    );
+    assert!(!err.contains("inverse: 0 of"), "some voxels fail: {err}");
+    let m = info_json(&mask);
+    assert_eq!(m["stats"]["max"].as_f64(), Some(1.0), "{m}");
+    assert_eq!(m["stats"]["min"].as_f64(), Some(0.0), "{m}");
+    // The mask belongs to the inverse methods only.
+    let e = fails(&[
+        &"warp",
+        &src,
+        &"--lattice",
+        &lat,
+        &"-o",
+        &out,
+        &"--method",
+        &"pullback-linear",
+        &"--nonconverged-mask",
+        &mask,
+    ]);
+    assert!(e.contains("--nonconverged-mask"), "{e}");
+    // A clean inverse warp prints no warning.
+    ok(&[
+        &"lattice",
+        &"init",
+        &src,
+        &"--counts",
+        &"5,5,5",
+        &"-o",
+        &lat,
+    ]);
+    let run = volmorph(&[
+        &"warp",
+        &src,
+        &"--lattice",
+        &lat,
+        &"-o",
+        &out,
+        &"--method",
+        &"inverse-linear",
+    ]);
+    assert!(run.status.success());
+    assert!(
+        run.stderr.is_empty(),
+        "{}",
+        String::from_utf8_lossy(&run.stderr)
+    );
 }

@@ -548,6 +548,25 @@ impl SpaceMap for BSplineLattice {
             apply_grid_pointwise(self, grid, out)
         }
     }
+
+    /// One pass over the control points for both the image and the Jacobian (see
+    /// [`crate::jacobian`]); the general path for degrees above
+    /// [`crate::jacobian::POINT_KERNEL_MAX_DEGREE`].
+    fn apply_with_jacobian(&self, p: DVec3) -> (DVec3, DMat3) {
+        crate::jacobian::lattice_value_and_jacobian(self, p)
+            .unwrap_or_else(|| (self.apply(p), self.jacobian(p)))
+    }
+
+    /// Separable per-axis tables of basis values and derivatives when the grid axes are
+    /// parallel to the lattice axes (see [`BSplineLattice::jacobian_grid_separable`]),
+    /// pointwise otherwise.
+    fn jacobian_grid(&self, grid: &Geometry, out: &mut [DMat3]) -> Result<(), DeformError> {
+        if crate::grid::aligned_steps(self, grid)?.is_some() {
+            self.jacobian_grid_separable(grid, out)
+        } else {
+            crate::map::jacobian_grid_pointwise(self, grid, out)
+        }
+    }
 }
 
 /// Knot vectors of True's uniform cubic lattice: integers `−3 … n` with domain `[0, n − 3]`.

@@ -1,7 +1,8 @@
 //! volmorph-deform: mappings of physical space and the lattices that define them.
 //!
 //! * [`SpaceMap`] — the one trait every deformation implements: `apply`, `jacobian`,
-//!   `apply_batch` and the grid entry point `apply_grid`. The trait has no direction; see
+//!   `apply_with_jacobian`, `apply_batch` and the grid entry points `apply_grid` and
+//!   `jacobian_grid`. The trait has no direction; see
 //!   [`map`] for push-forward versus pull-back.
 //! * [`Identity`], [`Affine`], [`Compose`] — elementary maps and composition (`Compose(a, b)`
 //!   applies `b` first).
@@ -11,6 +12,10 @@
 //!   conventions), fast dense evaluation on voxel grids ([`grid`], True §5.2: separable
 //!   per-axis tables and True's coefficient table, reusable across control-point edits as
 //!   [`grid::LatticeGridPlan`]s) and a JSON form ([`json`]).
+//! * [`jacobian`] — one-pass image-and-Jacobian of a lattice at a point and the separable
+//!   Jacobian path on voxel grids ([`SpaceMap::jacobian_grid`]).
+//! * [`inverse`] — point inversion `φ(x) = y` by damped Newton iteration ([`invert_point`]),
+//!   which turns a push-forward map into the pull-back a renderer needs.
 //! * [`formats`] — cubic lattices as ITK `BSplineTransform` files (`.tfm`) and plastimatch
 //!   `.bxf` files, with the displacement-coefficient conventions of each.
 //! * [`manipulate`] — direct manipulation (True 1992 §6, after Hsu): drag points of the model
@@ -39,12 +44,15 @@
 mod error;
 pub mod formats;
 pub mod grid;
+pub mod inverse;
+pub mod jacobian;
 pub mod json;
 pub mod lattice;
 pub mod manipulate;
 pub mod map;
 
 pub use error::DeformError;
+pub use inverse::{InverseOptions, InverseStatus, PointInverse, invert_point};
 pub use lattice::{BSplineLattice, LatticeFrame};
 pub use manipulate::{
     Drag, DragError, DragOptions, DragSolution, ManipulationSession, solve_drags,

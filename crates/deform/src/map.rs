@@ -80,6 +80,26 @@ pub trait SpaceMap: Send + Sync {
     fn apply_grid(&self, grid: &Geometry, out: &mut [DVec3]) -> Result<(), DeformError> {
         apply_grid_pointwise(self, grid, out)
     }
+
+    /// The image of `p` and the Jacobian there in one call, `(self.apply(p), self.jacobian(p))`.
+    /// Iterative solvers (point inversion by Newton's method) need both at every step; lattices
+    /// override this with one pass over the control points that shares the basis evaluation.
+    fn apply_with_jacobian(&self, p: DVec3) -> (DVec3, DMat3) {
+        (self.apply(p), self.jacobian(p))
+    }
+
+    /// The Jacobian at every voxel centre of `grid`: `out[i + nx·(j + ny·k)] =
+    /// self.jacobian(grid.index_to_physical((i, j, k)))` (x fastest; columns `∂/∂x, ∂/∂y, ∂/∂z`
+    /// as in [`SpaceMap::jacobian`]). The default runs pointwise in parallel over z-slabs;
+    /// lattices override it with separable per-axis tables of basis values and derivatives
+    /// that agree with `jacobian` to rounding.
+    ///
+    /// # Errors
+    /// [`DeformError::Grid`] for an invalid geometry, [`DeformError::BufferLength`] if
+    /// `out.len()` is not the grid's voxel count.
+    fn jacobian_grid(&self, grid: &Geometry, out: &mut [DMat3]) -> Result<(), DeformError> {
+        jacobian_grid_pointwise(self, grid, out)
+    }
 }
 
 /// Check an output buffer length against the number of inputs.
@@ -125,6 +145,43 @@ pub fn apply_grid_pointwise<M: SpaceMap + ?Sized>(
     Ok(())
 }
 
+/// The pointwise loop behind the default [`SpaceMap::jacobian_grid`]: parallel over z-slabs,
+/// each voxel centre through `map.jacobian`.
+///
+/// # Errors
+/// As [`SpaceMap::jacobian_grid`].
+pub fn jacobian_grid_pointwise<M: SpaceMap + ?Sized>(
+    map: &M,
+    grid: &Geometry,
+    out: &mut [DMat3],
+) -> Result<(), DeformError> {
+    grid.validate()?;
+    check_len(grid.len(), out.len())?;
+    let [nx, ny, _] = grid.dims;
+    if out.is_empty() {
+        return Ok(());
+    }
+    out.par_chunks_mut(nx * ny)
+        .enumerate()
+        .for_each(|(k, slab)| {
+            for (j, row) in slab.chunks_exact_mut(nx).enumerate() {
+                for (i, o) in row.iter_mut().enumerate() {
+                    let x = grid.index_to_physical(DVec3::new(i as f64, j as f64, k as f64));
+                    *o = map.jacobian(x);
+                }
+            }
+        });
+    Ok(())
+}
+
+/// Fill a grid's Jacobian buffer with one constant matrix (maps with a constant Jacobian).
+fn fill_jacobian_grid(grid: &Geometry, out: &mut [DMat3], m: DMat3) -> Result<(), DeformError> {
+    grid.validate()?;
+    check_len(grid.len(), out.len())?;
+    out.par_chunks_mut(POINTS_PER_TASK).for_each(|c| c.fill(m));
+    Ok(())
+}
+
 /// The identity map `p ↦ p` (Jacobian `I`).
 #[derive(Debug, Clone, Copy, Default, PartialEq)]
 pub struct Identity;
@@ -142,6 +199,10 @@ impl SpaceMap for Identity {
         check_len(points.len(), out.len())?;
         out.copy_from_slice(points);
         Ok(())
+    }
+
+    fn jacobian_grid(&self, grid: &Geometry, out: &mut [DMat3]) -> Result<(), DeformError> {
+        fill_jacobian_grid(grid, out, DMat3::IDENTITY)
     }
 }
 
@@ -190,6 +251,10 @@ impl SpaceMap for Affine {
     fn jacobian(&self, _p: DVec3) -> DMat3 {
         self.matrix
     }
+
+    fn jacobian_grid(&self, grid: &Geometry, out: &mut [DMat3]) -> Result<(), DeformError> {
+        fill_jacobian_grid(grid, out, self.matrix)
+    }
 }
 
 /// Composition `Compose(a, b)`: **apply `b` first, then `a`**, i.e. `p ↦ a(b(p))` like the
@@ -213,6 +278,12 @@ impl<A: SpaceMap, B: SpaceMap> SpaceMap for Compose<A, B> {
 
     fn jacobian(&self, p: DVec3) -> DMat3 {
         self.0.jacobian(self.1.apply(p)) * self.1.jacobian(p)
+    }
+
+    fn apply_with_jacobian(&self, p: DVec3) -> (DVec3, DMat3) {
+        let (q, jb) = self.1.apply_with_jacobian(p);
+        let (r, ja) = self.0.apply_with_jacobian(q);
+        (r, ja * jb)
     }
 
     fn apply_grid(&self, grid: &Geometry, out: &mut [DVec3]) -> Result<(), DeformError> {
@@ -240,6 +311,12 @@ impl<M: SpaceMap + ?Sized> SpaceMap for &M {
     fn apply_grid(&self, grid: &Geometry, out: &mut [DVec3]) -> Result<(), DeformError> {
         (**self).apply_grid(grid, out)
     }
+    fn apply_with_jacobian(&self, p: DVec3) -> (DVec3, DMat3) {
+        (**self).apply_with_jacobian(p)
+    }
+    fn jacobian_grid(&self, grid: &Geometry, out: &mut [DMat3]) -> Result<(), DeformError> {
+        (**self).jacobian_grid(grid, out)
+    }
 }
 
 impl<M: SpaceMap + ?Sized> SpaceMap for Box<M> {
@@ -254,6 +331,12 @@ impl<M: SpaceMap + ?Sized> SpaceMap for Box<M> {
     }
     fn apply_grid(&self, grid: &Geometry, out: &mut [DVec3]) -> Result<(), DeformError> {
         (**self).apply_grid(grid, out)
+    }
+    fn apply_with_jacobian(&self, p: DVec3) -> (DVec3, DMat3) {
+        (**self).apply_with_jacobian(p)
+    }
+    fn jacobian_grid(&self, grid: &Geometry, out: &mut [DMat3]) -> Result<(), DeformError> {
+        (**self).jacobian_grid(grid, out)
     }
 }
 

@@ -26,6 +26,9 @@ pub enum WarpError {
         /// Values supplied.
         got: usize,
     },
+    /// An option value is unusable (e.g. a Newton tolerance that is not a positive number).
+    #[error("invalid option: {0}")]
+    InvalidOption(String),
     /// Evaluating the space map failed.
     #[error("evaluating the space map: {0}")]
     Map(#[from] DeformError),

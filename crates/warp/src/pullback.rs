@@ -225,7 +225,7 @@ pub fn resample_any_to<M: SpaceMap + ?Sized>(
 }
 
 /// Voxel count of `output` after checking the geometry and the byte size of a `U` array.
-fn checked_output_len<U: Voxel>(output: &Geometry) -> Result<usize, WarpError> {
+pub(crate) fn checked_output_len<U: Voxel>(output: &Geometry) -> Result<usize, WarpError> {
     let geometry_error = |source: VolumeError| WarpError::Geometry {
         what: "output grid",
         source,
@@ -238,13 +238,13 @@ fn checked_output_len<U: Voxel>(output: &Geometry) -> Result<usize, WarpError> {
 /// Physical point → continuous index of the input, `(direction·diag(spacing))⁻¹·(p − origin)`
 /// with the inverse computed once, followed by snapping to voxel centres.
 #[derive(Debug, Clone, Copy)]
-struct IndexMap {
+pub(crate) struct IndexMap {
     matrix: DMat3,
     origin: DVec3,
 }
 
 impl IndexMap {
-    fn new(geometry: &Geometry) -> Self {
+    pub(crate) fn new(geometry: &Geometry) -> Self {
         Self {
             matrix: geometry.index_to_physical_matrix().inverse(),
             origin: geometry.origin,
@@ -252,7 +252,7 @@ impl IndexMap {
     }
 
     #[inline]
-    fn apply(&self, p: DVec3) -> DVec3 {
+    pub(crate) fn apply(&self, p: DVec3) -> DVec3 {
         let c = self.matrix * (p - self.origin);
         DVec3::new(snap(c.x), snap(c.y), snap(c.z))
     }
