@@ -53,6 +53,12 @@ enum Command {
         after_help = "Examples:\n  volmorph warp ct.nii.gz --lattice moved.json -o warped.nii.gz --method pullback-cubic\n  volmorph warp model.nii.gz --lattice ffd.json -o deformed.nii.gz --method inverse-linear --nonconverged-mask failed.nii.gz"
     )]
     Warp(cmd::warp::Args),
+    /// Drag points of a volume to new places; the lattice follows by least-norm control-point
+    /// moves (direct manipulation), and the volume is warped through it.
+    #[command(
+        after_help = "Examples:\n  volmorph drag teapot.nii.gz --from 0.76,0,0.25 --to 0.86,0,-0.02 --radius 0.75 -o lowered.nii.gz --lattice-out lowered.json\n  volmorph drag ct.nii.gz --lattice current.tfm --from 10,-4,30 --to 12,-4,26 --from 0,0,0 --to 0,0,0 -o ct_dragged.nii.gz --method inverse-linear"
+    )]
+    Drag(cmd::drag::Args),
     /// Jacobian determinant map of a lattice on a volume's grid, with a folding summary.
     #[command(
         after_help = "Example:\n  volmorph jacobian --lattice moved.tfm --grid ct.nii.gz -o jacobian.nii.gz"
@@ -77,6 +83,7 @@ fn main() -> ExitCode {
         Command::Isosurface(a) => cmd::isosurface::run(&a),
         Command::Lattice(c) => cmd::lattice::run(&c),
         Command::Warp(a) => cmd::warp::run(&a),
+        Command::Drag(a) => cmd::drag::run(&a),
         Command::Jacobian(a) => cmd::warp::run_jacobian(&a),
         Command::Mesh(c) => cmd::mesh::run(&c),
     };

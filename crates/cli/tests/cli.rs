@@ -452,7 +452,9 @@ fn mesh_render_draws_the_model_in_the_middle() {
     let bad = volmorph(&[&"mesh", &"render", &mesh, &"-o", &png, &"--size", &"64"]);
     assert_eq!(bad.status.code(), Some(2));
     assert!(String::from_utf8_lossy(&bad.stderr).contains("WIDTHxHEIGHT"));
+}
 
+#[test]
 fn inverse_warp_reports_and_masks_voxels_without_a_preimage() {
     let dir = tempfile::tempdir().unwrap();
     let d = dir.path();
@@ -541,4 +543,85 @@ fn inverse_warp_reports_and_masks_voxels_without_a_preimage() {
         "{}",
         String::from_utf8_lossy(&run.stderr)
     );
+}
+
+#[test]
+fn drag_lands_the_point_and_writes_the_lattice() {
+    use volmorph_deform::SpaceMap;
+    let dir = tempfile::tempdir().unwrap();
+    let src = dir.path().join("sphere.nii.gz");
+    let out = dir.path().join("dragged.nii.gz");
+    let lat = dir.path().join("dragged.json");
+    ok(&[&"phantom", &"sphere", &"-o", &src, &"--size", &"24"]);
+    let text = ok(&[
+        &"drag",
+        &src,
+        &"--from",
+        &"0.2,0.1,0.3",
+        &"--to",
+        &"0.35,0.1,0.1",
+        &"--radius",
+        &"1.0",
+        &"-o",
+        &out,
+        &"--lattice-out",
+        &lat,
+    ]);
+    assert!(text.contains("moved"), "{text}");
+    let lattice = volmorph_deform::formats::read_lattice(&lat).unwrap();
+    let landed = lattice.apply(glam::DVec3::new(0.2, 0.1, 0.3));
+    assert!(
+        (landed - glam::DVec3::new(0.35, 0.1, 0.1)).length() < 1e-9,
+        "{landed}"
+    );
+    let info = info_json(&out);
+    assert_eq!(info["dims"], serde_json::json!([24, 24, 24]));
+
+    // A second drag from the dragged place, through the written lattice, back to the start.
+    let back = dir.path().join("back.json");
+    ok(&[
+        &"drag",
+        &src,
+        &"--lattice",
+        &lat,
+        &"--from",
+        &"0.35,0.1,0.1",
+        &"--to",
+        &"0.2,0.1,0.3",
+        &"-o",
+        &out,
+        &"--lattice-out",
+        &back,
+        &"--method",
+        &"inverse-linear",
+    ]);
+    let lattice = volmorph_deform::formats::read_lattice(&back).unwrap();
+    let landed = lattice.apply(glam::DVec3::new(0.2, 0.1, 0.3));
+    assert!(
+        (landed - glam::DVec3::new(0.2, 0.1, 0.3)).length() < 1e-9,
+        "{landed}"
+    );
+
+    // Targets outside the lattice box, unmatched pairs and plain pull-backs are refused.
+    let err = fails(&[
+        &"drag", &src, &"--from", &"0,0,0", &"--to", &"5,0,0", &"-o", &out,
+    ]);
+    assert!(err.contains("outside the lattice box"), "{err}");
+    let err = fails(&[
+        &"drag", &src, &"--from", &"0,0,0", &"--from", &"0.1,0,0", &"--to", &"0.2,0,0", &"-o", &out,
+    ]);
+    assert!(err.contains("one target per dragged point"), "{err}");
+    let err = fails(&[
+        &"drag",
+        &src,
+        &"--from",
+        &"0,0,0",
+        &"--to",
+        &"0.1,0,0",
+        &"-o",
+        &out,
+        &"--method",
+        &"pullback-linear",
+    ]);
+    assert!(err.contains("push-forward or an inverse method"), "{err}");
 }

@@ -184,8 +184,8 @@ pub enum DragError {
     },
     /// A material point lies outside the closed lattice box, where the map cannot move it.
     #[error(
-        "drag {drag}: material point {point} lies outside the lattice box (lattice parameters \
-         {parameter}, domain {domain:?}); the lattice moves only points of its box"
+        "drag {drag}: material point {point:.6} lies outside the lattice box (lattice \
+         parameters {parameter:.4}, domain {domain:?}); the lattice moves only points of its box"
     )]
     MaterialOutsideBox {
         /// Index of the drag in the list.
@@ -199,8 +199,8 @@ pub enum DragError {
     },
     /// A target lies outside the closed lattice box.
     #[error(
-        "drag {drag}: target {target} lies outside the lattice box (lattice parameters \
-         {parameter}, domain {domain:?}); targets must stay inside the deformed region"
+        "drag {drag}: target {target:.6} lies outside the lattice box (lattice parameters \
+         {parameter:.4}, domain {domain:?}); targets must stay inside the deformed region"
     )]
     TargetOutsideBox {
         /// Index of the drag in the list.
@@ -221,8 +221,10 @@ pub enum DragError {
     /// No control point that may move (within the tool radius, not frozen) has a basis weight
     /// of at least [`MIN_INFLUENCE`] at a dragged point.
     #[error(
-        "drag {drag}: no movable control point influences the material point {point} (tool \
-         radius {radius:?}, boundary frozen: {freeze_boundary})"
+        "drag {drag}: no movable control point influences the material point {point:.6} \
+         (tool radius {}, boundary {}); enlarge the radius or free the boundary",
+        .radius.map_or_else(|| "unlimited".to_string(), |r| r.to_string()),
+        if *.freeze_boundary { "frozen" } else { "free" }
     )]
     NoInfluence {
         /// Index of the drag in the list.

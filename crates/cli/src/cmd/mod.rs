@@ -2,6 +2,7 @@
 
 pub mod convert;
 pub mod demo;
+pub mod drag;
 pub mod info;
 pub mod isosurface;
 pub mod lattice;

@@ -63,6 +63,15 @@ impl Method {
             Method::InverseNearest | Method::InverseLinear | Method::InverseCubic
         )
     }
+
+    /// A plain pull-back through the lattice (not through its inverse): the lattice is read
+    /// as the output-to-input map, not as a deformation of the model.
+    pub(crate) fn is_pullback(self) -> bool {
+        matches!(
+            self,
+            Method::PullbackNearest | Method::PullbackLinear | Method::PullbackCubic
+        )
+    }
 }
 
 /// Arguments of `volmorph warp`.
@@ -99,7 +108,8 @@ pub fn run(args: &Args) -> anyhow::Result<()> {
     let vol = format::read(&args.input).context("cannot read volume")?;
     let lattice = read_lattice(&args.lattice).context("cannot read lattice")?;
     pb.set_message("warping");
-    let (out, mask) = warp(&vol, &lattice, args, &pb)
+    let want_mask = args.nonconverged_mask.is_some();
+    let (out, mask) = warp(&vol, &lattice, args.method, args.default, want_mask, &pb)
         .with_context(|| format!("cannot warp {}", args.input.display()))?;
     pb.set_message(format!("writing {}", args.output.display()));
     format::write(&args.output, &out).context("cannot write")?;
@@ -111,19 +121,20 @@ pub fn run(args: &Args) -> anyhow::Result<()> {
     Ok(())
 }
 
-/// Warp `vol` on its own grid by `args.method`; `args.default` fills output voxels nothing
-/// reaches. The inverse methods warn on standard error about voxels that did not converge
-/// or landed on a fold, and return the mask when `--nonconverged-mask` asks for it.
-fn warp(
+/// Warp `vol` on its own grid by `method`; `default` fills output voxels nothing reaches.
+/// The inverse methods warn on standard error about voxels that did not converge or landed
+/// on a fold, and return the mask of them when `want_mask` is set.
+pub(crate) fn warp(
     vol: &AnyVolume,
     lattice: &BSplineLattice,
-    args: &Args,
+    method: Method,
+    default: f64,
+    want_mask: bool,
     pb: &indicatif::ProgressBar,
 ) -> anyhow::Result<(AnyVolume, Option<Volume<u8>>)> {
     let grid = vol.geometry();
-    let default = args.default;
-    let Some(interpolation) = args.method.interpolation() else {
-        let out = if args.method == Method::PushforwardNearest {
+    let Some(interpolation) = method.interpolation() else {
+        let out = if method == Method::PushforwardNearest {
             if default != 0.0 {
                 bail!("--default is not used by pushforward-nearest (holes stay 0)");
             }
@@ -141,9 +152,8 @@ fn warp(
         };
         return Ok((out, None));
     };
-    if args.method.is_inverse() {
-        let options = InverseResampleOptions::new(interpolation, default)
-            .with_mask(args.nonconverged_mask.is_some());
+    if method.is_inverse() {
+        let options = InverseResampleOptions::new(interpolation, default).with_mask(want_mask);
         let r = pullback_through_inverse_any(vol, lattice, grid, &options)?;
         if !r.report.is_clean() {
             pb.suspend(|| eprintln!("volmorph: warning: {}", r.report));
