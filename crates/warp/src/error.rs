@@ -29,6 +29,26 @@ pub enum WarpError {
     /// Evaluating the space map failed.
     #[error("evaluating the space map: {0}")]
     Map(#[from] DeformError),
+    /// Evaluating the space map on one of a push-forward's evaluation grids failed.
+    #[error("evaluating the map on the {grid} grid: {source}")]
+    MapOnGrid {
+        /// Which grid: `"voxel-centre"`, `"x-face"`, `"y-face"` or `"z-face"`.
+        grid: &'static str,
+        /// The map's error.
+        #[source]
+        source: DeformError,
+    },
+    /// A background (fill) value is NaN or infinite.
+    #[error("background value {0} is not finite")]
+    Background(f64),
+    /// A working buffer could not be allocated.
+    #[error("cannot allocate {bytes} bytes for the {what} buffer")]
+    Allocation {
+        /// Which buffer.
+        what: &'static str,
+        /// Bytes requested (saturating).
+        bytes: usize,
+    },
     /// Preparing the input volume for sampling failed (e.g. the cubic B-spline coefficient
     /// array would exceed the allocation limit).
     #[error(transparent)]

@@ -62,42 +62,16 @@
 
 use glam::{DMat3, DVec3};
 use rayon::prelude::*;
-use volmorph_deform::{DeformError, SpaceMap};
+use volmorph_deform::SpaceMap;
 use volmorph_volume::{Geometry, Volume, VolumeError, Voxel};
+
+use crate::WarpError;
 
 /// Input voxels per slab (rounded to whole z-slices, at least one slice). Fixed, so the slab
 /// partition — and with it the order of floating-point sums — never depends on the thread
 /// count. 2¹⁹ voxels keep a slab's mapped points near 13 MB (one centre grid) or 38 MB
 /// (three face-centre grids); one slab per rayon thread is in flight at a time.
 const SLAB_VOXELS: usize = 1 << 19;
-
-/// Everything that can go wrong in a push-forward.
-#[derive(Debug, thiserror::Error)]
-pub enum PushForwardError {
-    /// The output geometry is unusable (zero dims, bad spacing, singular direction, too large).
-    #[error("invalid output geometry: {0}")]
-    OutputGeometry(#[source] VolumeError),
-    /// The map failed on one of the evaluation grids (centres or face centres).
-    #[error("evaluating the map on the {grid} grid: {source}")]
-    Map {
-        /// Which grid: `"voxel-centre"`, `"x-face"`, `"y-face"` or `"z-face"`.
-        grid: &'static str,
-        /// The map's error.
-        #[source]
-        source: DeformError,
-    },
-    /// [`AntialiasOptions::background`] is NaN or infinite.
-    #[error("background value {0} is not finite")]
-    Background(f64),
-    /// A working buffer could not be allocated.
-    #[error("cannot allocate {bytes} bytes for the {what} buffer")]
-    Allocation {
-        /// Which buffer.
-        what: &'static str,
-        /// Bytes requested (saturating).
-        bytes: usize,
-    },
-}
 
 /// What happened to the input voxels. `mapped + non_finite + outside` is the input's voxel
 /// count.
@@ -201,15 +175,19 @@ fn offset_grid(g: &Geometry, offset: DVec3, dims: [usize; 3]) -> Geometry {
     }
 }
 
+/// The error for an unusable output geometry.
+pub(crate) fn output_geometry(source: VolumeError) -> WarpError {
+    WarpError::Geometry {
+        what: "output grid",
+        source,
+    }
+}
+
 /// A vector of `len` copies of `value`, or an allocation error instead of an abort.
-fn try_filled<V: Clone>(
-    len: usize,
-    value: V,
-    what: &'static str,
-) -> Result<Vec<V>, PushForwardError> {
+fn try_filled<V: Clone>(len: usize, value: V, what: &'static str) -> Result<Vec<V>, WarpError> {
     let mut v = Vec::new();
     v.try_reserve_exact(len)
-        .map_err(|_| PushForwardError::Allocation {
+        .map_err(|_| WarpError::Allocation {
             what,
             bytes: len.saturating_mul(std::mem::size_of::<V>()),
         })?;
@@ -257,17 +235,15 @@ fn round_index(x: f64, n: usize) -> Option<usize> {
 ///   [`PushForwardStats::non_finite`].
 ///
 /// # Errors
-/// [`PushForwardError::OutputGeometry`] for an invalid `output`,
-/// [`PushForwardError::Map`] if the map's grid evaluation fails,
-/// [`PushForwardError::Allocation`] if a working buffer cannot be allocated.
+/// [`WarpError::Geometry`] for an invalid `output`,
+/// [`WarpError::MapOnGrid`] if the map's grid evaluation fails,
+/// [`WarpError::Allocation`] if a working buffer cannot be allocated.
 pub fn push_forward_nearest<T: Voxel, M: SpaceMap + ?Sized>(
     input: &Volume<T>,
     map: &M,
     output: &Geometry,
-) -> Result<PushForward<T>, PushForwardError> {
-    output
-        .validate()
-        .map_err(PushForwardError::OutputGeometry)?;
+) -> Result<PushForward<T>, WarpError> {
+    output.validate().map_err(output_geometry)?;
     let to_index = ToIndex::new(output);
     let [nxo, nyo, nzo] = output.dims;
     let mut out = try_filled(output.len(), T::default(), "output")?;
@@ -284,7 +260,7 @@ pub fn push_forward_nearest<T: Voxel, M: SpaceMap + ?Sized>(
         let grid = offset_grid(g, DVec3::new(0.0, 0.0, k0 as f64), [nx, ny, k1 - k0]);
         let images = &mut images[..grid.len()];
         map.apply_grid(&grid, images)
-            .map_err(|source| PushForwardError::Map {
+            .map_err(|source| WarpError::MapOnGrid {
                 grid: "voxel-centre",
                 source,
             })?;
@@ -315,7 +291,7 @@ pub fn push_forward_nearest<T: Voxel, M: SpaceMap + ?Sized>(
             }
         }
     }
-    let volume = Volume::new(*output, out).map_err(PushForwardError::OutputGeometry)?;
+    let volume = Volume::new(*output, out).map_err(output_geometry)?;
     Ok(PushForward { volume, stats })
 }
 
@@ -337,16 +313,16 @@ pub fn push_forward_nearest<T: Voxel, M: SpaceMap + ?Sized>(
 /// each box covers: a map that blows a voxel up over a large region costs accordingly.
 ///
 /// # Errors
-/// [`PushForwardError::OutputGeometry`] for an invalid `output`,
-/// [`PushForwardError::Background`] for a non-finite background,
-/// [`PushForwardError::Map`] if the map's grid evaluation fails,
-/// [`PushForwardError::Allocation`] if a working buffer cannot be allocated.
+/// [`WarpError::Geometry`] for an invalid `output`,
+/// [`WarpError::Background`] for a non-finite background,
+/// [`WarpError::MapOnGrid`] if the map's grid evaluation fails,
+/// [`WarpError::Allocation`] if a working buffer cannot be allocated.
 pub fn push_forward_antialiased<T: Voxel, M: SpaceMap + ?Sized>(
     input: &Volume<T>,
     map: &M,
     output: &Geometry,
     options: &AntialiasOptions,
-) -> Result<PushForward<T>, PushForwardError> {
+) -> Result<PushForward<T>, WarpError> {
     let (acc, stats) = accumulate(input, map, output, options)?;
     finish(acc, stats, output, options)
 }
@@ -361,7 +337,7 @@ pub fn push_forward_antialiased_f32<T: Voxel, M: SpaceMap + ?Sized>(
     map: &M,
     output: &Geometry,
     options: &AntialiasOptions,
-) -> Result<PushForward<f32>, PushForwardError> {
+) -> Result<PushForward<f32>, WarpError> {
     let (acc, stats) = accumulate(input, map, output, options)?;
     finish(acc, stats, output, options)
 }
@@ -372,7 +348,7 @@ fn finish<U: Voxel>(
     stats: PushForwardStats,
     output: &Geometry,
     options: &AntialiasOptions,
-) -> Result<PushForward<U>, PushForwardError> {
+) -> Result<PushForward<U>, WarpError> {
     let background = options.background;
     let data: Vec<U> = acc
         .par_iter()
@@ -386,7 +362,7 @@ fn finish<U: Voxel>(
             })
         })
         .collect();
-    let volume = Volume::new(*output, data).map_err(PushForwardError::OutputGeometry)?;
+    let volume = Volume::new(*output, data).map_err(output_geometry)?;
     Ok(PushForward { volume, stats })
 }
 
@@ -403,12 +379,10 @@ fn accumulate<T: Voxel, M: SpaceMap + ?Sized>(
     map: &M,
     output: &Geometry,
     options: &AntialiasOptions,
-) -> Result<(Vec<[f32; 2]>, PushForwardStats), PushForwardError> {
-    output
-        .validate()
-        .map_err(PushForwardError::OutputGeometry)?;
+) -> Result<(Vec<[f32; 2]>, PushForwardStats), WarpError> {
+    output.validate().map_err(output_geometry)?;
     if !options.background.is_finite() {
-        return Err(PushForwardError::Background(options.background));
+        return Err(WarpError::Background(options.background));
     }
     let to_index = ToIndex::new(output);
     let plane_out = output.dims[0] * output.dims[1];
@@ -419,7 +393,7 @@ fn accumulate<T: Voxel, M: SpaceMap + ?Sized>(
     // added in slab order, so the sums never depend on the thread count.
     let window = rayon::current_num_threads().max(1);
     for batch in slab_list.chunks(window) {
-        let tallies: Vec<Result<SlabTally, PushForwardError>> = batch
+        let tallies: Vec<Result<SlabTally, WarpError>> = batch
             .par_iter()
             .map(|&slab| tally_slab(input, map, output, &to_index, options.face_centres, slab))
             .collect();
@@ -483,10 +457,10 @@ fn face_images<M: SpaceMap + ?Sized>(
     grid: &Geometry,
     to_index: &ToIndex,
     name: &'static str,
-) -> Result<(Vec<DVec3>, (f64, f64)), PushForwardError> {
+) -> Result<(Vec<DVec3>, (f64, f64)), WarpError> {
     let mut pts = try_filled(grid.len(), DVec3::ZERO, "mapped points")?;
     map.apply_grid(grid, &mut pts)
-        .map_err(|source| PushForwardError::Map { grid: name, source })?;
+        .map_err(|source| WarpError::MapOnGrid { grid: name, source })?;
     // Convert to output indices and take the z span of the finite images in the same pass
     // (min/max are order-independent, so the span does not depend on the thread count).
     let span = pts
@@ -522,7 +496,7 @@ fn tally_slab<T: Voxel, M: SpaceMap + ?Sized>(
     to_index: &ToIndex,
     faces: FaceCentres,
     (k0, k1): (usize, usize),
-) -> Result<SlabTally, PushForwardError> {
+) -> Result<SlabTally, WarpError> {
     let g = input.geometry();
     let [nx, ny, _] = g.dims;
     let nk = k1 - k0;
@@ -588,7 +562,7 @@ fn tally_boxes<T: Voxel, F: Fn(usize, usize, usize) -> [DVec3; 6]>(
     output: &Geometry,
     (zlo, zhi): (f64, f64),
     faces: F,
-) -> Result<SlabTally, PushForwardError> {
+) -> Result<SlabTally, WarpError> {
     let [nxo, nyo, nzo] = output.dims;
     let plane_out = nxo * nyo;
     let (z0, data_len) = match cell_range(zlo, zhi, nzo) {
