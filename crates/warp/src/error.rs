@@ -41,6 +41,20 @@ pub enum WarpError {
     /// A background (fill) value is NaN or infinite.
     #[error("background value {0} is not finite")]
     Background(f64),
+    /// Moving or setting control points of a lattice failed (index out of range, NaN or
+    /// infinite position).
+    #[error("cannot move the control points: {0}")]
+    ControlPoint(#[source] DeformError),
+    /// A lattice handed to an incremental engine has other knots or another frame than the
+    /// engine's lattice (only control points may change between updates).
+    #[error(
+        "the new lattice has other knots or another frame than the current one; only control \
+         points may change"
+    )]
+    LatticeMismatch,
+    /// An option combination the operation does not support.
+    #[error("unsupported: {0}")]
+    Unsupported(&'static str),
     /// A working buffer could not be allocated.
     #[error("cannot allocate {bytes} bytes for the {what} buffer")]
     Allocation {

@@ -66,6 +66,7 @@ use volmorph_deform::SpaceMap;
 use volmorph_volume::{Geometry, Volume, VolumeError, Voxel};
 
 use crate::WarpError;
+use crate::tally::{Region, Voxels, cell_range, splat, tally_averaged};
 
 /// Input voxels per slab (rounded to whole z-slices, at least one slice). Fixed, so the slab
 /// partition — and with it the order of floating-point sums — never depends on the thread
@@ -89,7 +90,7 @@ pub struct PushForwardStats {
 }
 
 impl PushForwardStats {
-    fn add(&mut self, o: &Self) {
+    pub(crate) fn add(&mut self, o: &Self) {
         self.mapped += o.mapped;
         self.non_finite += o.non_finite;
         self.outside += o.outside;
@@ -146,13 +147,13 @@ pub enum FaceCentres {
 /// Affine map from physical points to continuous output indices,
 /// `index = m·(p − origin)` with `m = (direction·diag(spacing))⁻¹`.
 #[derive(Debug, Clone, Copy)]
-struct ToIndex {
+pub(crate) struct ToIndex {
     m: DMat3,
     origin: DVec3,
 }
 
 impl ToIndex {
-    fn new(g: &Geometry) -> Self {
+    pub(crate) fn new(g: &Geometry) -> Self {
         Self {
             m: g.index_to_physical_matrix().inverse(),
             origin: g.origin,
@@ -160,14 +161,14 @@ impl ToIndex {
     }
 
     #[inline]
-    fn apply(&self, p: DVec3) -> DVec3 {
+    pub(crate) fn apply(&self, p: DVec3) -> DVec3 {
         self.m * (p - self.origin)
     }
 }
 
 /// The geometry of the grid of continuous input indices `offset + (i, j, k)`,
 /// `(i, j, k) < dims`: same spacing and direction, origin moved to `offset`.
-fn offset_grid(g: &Geometry, offset: DVec3, dims: [usize; 3]) -> Geometry {
+pub(crate) fn offset_grid(g: &Geometry, offset: DVec3, dims: [usize; 3]) -> Geometry {
     Geometry {
         dims,
         origin: g.index_to_physical(offset),
@@ -184,7 +185,11 @@ pub(crate) fn output_geometry(source: VolumeError) -> WarpError {
 }
 
 /// A vector of `len` copies of `value`, or an allocation error instead of an abort.
-fn try_filled<V: Clone>(len: usize, value: V, what: &'static str) -> Result<Vec<V>, WarpError> {
+pub(crate) fn try_filled<V: Clone>(
+    len: usize,
+    value: V,
+    what: &'static str,
+) -> Result<Vec<V>, WarpError> {
     let mut v = Vec::new();
     v.try_reserve_exact(len)
         .map_err(|_| WarpError::Allocation {
@@ -342,6 +347,17 @@ pub fn push_forward_antialiased_f32<T: Voxel, M: SpaceMap + ?Sized>(
     finish(acc, stats, output, options)
 }
 
+/// True's normalisation of one output voxel's tallies (see the module docs): `V / W` where
+/// `W ≥ 1`, else `V + (1 − W)·background`.
+#[inline]
+pub(crate) fn normalise(v: f64, w: f64, background: f64) -> f64 {
+    if w >= 1.0 {
+        v / w
+    } else {
+        v + (1.0 - w) * background
+    }
+}
+
 /// Normalise the tallies `[V, W]` into the output volume (True's rule plus background).
 fn finish<U: Voxel>(
     acc: Vec<[f32; 2]>,
@@ -353,14 +369,7 @@ fn finish<U: Voxel>(
     let data: Vec<U> = acc
         .par_iter()
         .with_min_len(4096)
-        .map(|&[v, w]| {
-            let (v, w) = (f64::from(v), f64::from(w));
-            U::from_f64(if w >= 1.0 {
-                v / w
-            } else {
-                v + (1.0 - w) * background
-            })
-        })
+        .map(|&[v, w]| U::from_f64(normalise(f64::from(v), f64::from(w), background)))
         .collect();
     let volume = Volume::new(*output, data).map_err(output_geometry)?;
     Ok(PushForward { volume, stats })
@@ -416,38 +425,6 @@ fn accumulate<T: Voxel, M: SpaceMap + ?Sized>(
         }
     }
     Ok((acc, stats))
-}
-
-/// Positive overlap of `[lo, hi]` with the output voxel `[q − ½, q + ½]` (index units).
-#[inline]
-fn overlap(lo: f64, hi: f64, q: usize) -> f64 {
-    let c = q as f64;
-    (hi.min(c + 0.5) - lo.max(c - 0.5)).max(0.0)
-}
-
-/// Range `a..=b` of output indices in `0..n` whose cells `[q − ½, q + ½]` overlap `[lo, hi]`
-/// with positive length (`a = ⌊lo + ½⌋`, `b = ⌈hi − ½⌉`, clamped), or `None` if there are
-/// none. Written without `floor`/`ceil` calls: this sits in the per-voxel loop.
-#[inline]
-fn cell_range(lo: f64, hi: f64, n: usize) -> Option<(usize, usize)> {
-    let nf = n as f64;
-    // Callers pass non-NaN bounds (finite images, or the empty fold ±∞).
-    if hi <= lo || hi <= -0.5 || lo >= nf - 0.5 {
-        return None;
-    }
-    // Truncation is the floor for positive values; here lo + ½ < n.
-    let s = lo + 0.5;
-    let a = if s > 0.0 { s as usize } else { 0 };
-    let t = hi - 0.5;
-    let b = if t <= 0.0 {
-        0
-    } else if t >= nf - 1.0 {
-        n - 1
-    } else {
-        let c = t as usize;
-        if (c as f64) < t { c + 1 } else { c }
-    };
-    Some((a, b))
 }
 
 /// Evaluate `map` on the points of `grid`, convert the images to output indices and return
@@ -511,18 +488,45 @@ fn tally_slab<T: Voxel, M: SpaceMap + ?Sized>(
             let (fy, sy) = face_images(map, &gy, to_index, "y-face")?;
             let (fz, sz) = face_images(map, &gz, to_index, "z-face")?;
             let span = union(union(sx, sy), sz);
-            tally_boxes(values, [nx, ny, nk], output, span, |i, j, kk| {
-                let bx = (nx + 1) * (j + ny * kk) + i;
-                let by = nx * (j + (ny + 1) * kk) + i;
-                let bz = nx * (j + ny * kk) + i;
-                [
-                    fx[bx],
-                    fx[bx + 1],
-                    fy[by],
-                    fy[by + nx],
-                    fz[bz],
-                    fz[bz + nx * ny],
-                ]
+            let (region, mut data) = slab_buffer(output, span)?;
+            let out = output.dims;
+            let mut stats = PushForwardStats::default();
+            let mut n = 0usize;
+            for kk in 0..nk {
+                for j in 0..ny {
+                    for i in 0..nx {
+                        let d = values[n].to_f64();
+                        n += 1;
+                        let bx = (nx + 1) * (j + ny * kk) + i;
+                        let by = nx * (j + (ny + 1) * kk) + i;
+                        let bz = nx * (j + ny * kk) + i;
+                        let pts = [
+                            fx[bx],
+                            fx[bx + 1],
+                            fy[by],
+                            fy[by + nx],
+                            fz[bz],
+                            fz[bz + nx * ny],
+                        ];
+                        if !pts.iter().all(|p| p.is_finite()) {
+                            stats.non_finite += 1;
+                            continue;
+                        }
+                        let (lo, hi) = pts[1..]
+                            .iter()
+                            .fold((pts[0], pts[0]), |(lo, hi), p| (lo.min(*p), hi.max(*p)));
+                        if splat(lo, hi, d, 1.0, out, &region, &mut data) {
+                            stats.mapped += 1;
+                        } else {
+                            stats.outside += 1;
+                        }
+                    }
+                }
+            }
+            Ok(SlabTally {
+                z0: region.lo[2],
+                data,
+                stats,
             })
         }
         FaceCentres::AveragedCentres => {
@@ -534,102 +538,42 @@ fn tally_slab<T: Voxel, M: SpaceMap + ?Sized>(
                 [nx + 2, ny + 2, nk + 2],
             );
             let (c, span) = face_images(map, &gc, to_index, "voxel-centre")?;
-            let sy = nx + 2;
-            let sz = sy * (ny + 2);
             // The face averages lie within the span of the centres.
-            tally_boxes(values, [nx, ny, nk], output, span, |i, j, kk| {
-                let n = (i + 1) + sy * (j + 1) + sz * (kk + 1);
-                let p = c[n];
-                [
-                    0.5 * (c[n - 1] + p),
-                    0.5 * (p + c[n + 1]),
-                    0.5 * (c[n - sy] + p),
-                    0.5 * (p + c[n + sy]),
-                    0.5 * (c[n - sz] + p),
-                    0.5 * (p + c[n + sz]),
-                ]
+            let (region, mut data) = slab_buffer(output, span)?;
+            let src = Voxels {
+                values,
+                vdims: [nx, ny, nk],
+                centres: &c,
+                cdims: [nx + 2, ny + 2],
+            };
+            let all = Region {
+                lo: [0; 3],
+                dims: [nx, ny, nk],
+            };
+            let stats = tally_averaged(&src, &all, [1, 1, 1], output.dims, &region, &mut data, 1.0);
+            Ok(SlabTally {
+                z0: region.lo[2],
+                data,
+                stats,
             })
         }
     }
 }
 
-/// Tally the boxes of a slab of `dims` input voxels holding `values` (x fastest). `faces`
-/// gives the six face-centre images, in output index space, of slab voxel `(i, j, k)`;
-/// `(zlo, zhi)` bounds the z of every finite image.
-fn tally_boxes<T: Voxel, F: Fn(usize, usize, usize) -> [DVec3; 6]>(
-    values: &[T],
-    [nx, ny, nk]: [usize; 3],
+/// The zeroed tally buffer of a slab whose finite images have z in `(zlo, zhi)`: whole output
+/// planes over the z cells that span reaches (empty if none).
+fn slab_buffer(
     output: &Geometry,
     (zlo, zhi): (f64, f64),
-    faces: F,
-) -> Result<SlabTally, WarpError> {
+) -> Result<(Region, Vec<[f32; 2]>), WarpError> {
     let [nxo, nyo, nzo] = output.dims;
-    let plane_out = nxo * nyo;
-    let (z0, data_len) = match cell_range(zlo, zhi, nzo) {
-        Some((a, b)) => (a, (b - a + 1) * plane_out),
-        None => (0, 0),
+    let region = match cell_range(zlo, zhi, nzo) {
+        Some((a, b)) => Region {
+            lo: [0, 0, a],
+            dims: [nxo, nyo, b - a + 1],
+        },
+        None => Region::default(),
     };
-    let mut data = try_filled(data_len, [0.0f32; 2], "slab accumulator")?;
-    let z_end = z0 + data_len / plane_out.max(1);
-
-    let mut stats = PushForwardStats::default();
-    let mut n = 0usize;
-    for kk in 0..nk {
-        for j in 0..ny {
-            for i in 0..nx {
-                let d = values[n].to_f64();
-                n += 1;
-                let pts = faces(i, j, kk);
-                if !pts.iter().all(|p| p.is_finite()) {
-                    stats.non_finite += 1;
-                    continue;
-                }
-                let (lo, hi) = pts[1..]
-                    .iter()
-                    .fold((pts[0], pts[0]), |(lo, hi), p| (lo.min(*p), hi.max(*p)));
-                // The slab buffer spans every finite image's z, so clamping to it only
-                // guards the invariant.
-                let ranges = (
-                    cell_range(lo.x, hi.x, nxo),
-                    cell_range(lo.y, hi.y, nyo),
-                    cell_range(lo.z, hi.z, nzo)
-                        .map(|(a, b)| (a.max(z0), b.min(z_end.saturating_sub(1))))
-                        .filter(|(a, b)| a <= b && *b < z_end),
-                );
-                let (Some((xa, xb)), Some((ya, yb)), Some((za, zb))) = ranges else {
-                    stats.outside += 1;
-                    continue;
-                };
-                let mut total = 0.0;
-                for qz in za..=zb {
-                    let wz = overlap(lo.z, hi.z, qz);
-                    if wz <= 0.0 {
-                        continue;
-                    }
-                    for qy in ya..=yb {
-                        let wyz = wz * overlap(lo.y, hi.y, qy);
-                        if wyz <= 0.0 {
-                            continue;
-                        }
-                        let row = ((qz - z0) * nyo + qy) * nxo;
-                        let cells = &mut data[row + xa..=row + xb];
-                        for (qx, cell) in (xa..=xb).zip(cells) {
-                            let w = wyz * overlap(lo.x, hi.x, qx);
-                            if w > 0.0 {
-                                cell[0] += (w * d) as f32;
-                                cell[1] += w as f32;
-                                total += w;
-                            }
-                        }
-                    }
-                }
-                if total > 0.0 {
-                    stats.mapped += 1;
-                } else {
-                    stats.outside += 1;
-                }
-            }
-        }
-    }
-    Ok(SlabTally { z0, data, stats })
+    let data = try_filled(region.len(), [0.0f32; 2], "slab accumulator")?;
+    Ok((region, data))
 }
