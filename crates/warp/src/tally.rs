@@ -143,6 +143,62 @@ fn axis_range(lo: f64, hi: f64, n: usize, r0: usize, rn: usize) -> Option<(usize
     (a <= b).then_some((a, b))
 }
 
+/// For a box `[lo, hi]` at most two cells long: the first cell `a = ⌊lo + ½⌋`, the
+/// overlaps with cells `a`, `a + 1`, `a + 2` (zero-padded) and whether the third cell is
+/// needed (length above 1), provided every cell used lies in the region `[r0, r0 + rn)`.
+/// Equal to [`overlap`], since `a − ½ ≤ lo < a + ½` and `hi ≤ lo + 2`.
+#[inline(always)]
+fn short(lo: f64, hi: f64, r0: usize, rn: usize) -> Option<(usize, [f64; 3], bool)> {
+    let s = lo + 0.5;
+    let len = hi - lo;
+    if s >= 0.0 && len > 0.0 && len <= 2.0 {
+        // Truncation is the floor for s ≥ 0 (and saturates for huge s, failing below).
+        let a = s as usize;
+        let e = a as f64 + 0.5;
+        if len <= 1.0 {
+            if a >= r0 && a + 2 <= r0 + rn {
+                return Some((a, [hi.min(e) - lo, (hi - e).max(0.0), 0.0], false));
+            }
+        } else if a >= r0 && a + 3 <= r0 + rn {
+            let e1 = e + 1.0;
+            return Some((a, [e - lo, hi.min(e1) - e, (hi - e1).max(0.0)], true));
+        }
+    }
+    None
+}
+
+/// One box of the fast path: buffer index of its first cell, row and plane strides of the
+/// buffer, per-axis weights (x, y, z), value and sign.
+struct Kernel {
+    base: usize,
+    sy: usize,
+    sz: usize,
+    w: [[f64; 3]; 3],
+    d: f64,
+    sign: f64,
+}
+
+impl Kernel {
+    /// Add the `NX × NY × NZ` cells (`w = ((sign·w_z)·w_y)·w_x`, as the general path).
+    #[inline(always)]
+    fn run<C: Cell, const NX: usize, const NY: usize, const NZ: usize>(&self, buf: &mut [C]) {
+        let [wx, wy, wz] = &self.w;
+        for (z, &wz) in wz.iter().enumerate().take(NZ) {
+            let wz = self.sign * wz;
+            for (y, &wy) in wy.iter().enumerate().take(NY) {
+                let wyz = wz * wy;
+                let i = self.base + z * self.sz + y * self.sy;
+                if let Some(cells) = buf.get_mut(i..i + NX) {
+                    for (cell, &wx) in cells.iter_mut().zip(wx) {
+                        let w = wyz * wx;
+                        cell.add(w * self.d, w);
+                    }
+                }
+            }
+        }
+    }
+}
+
 /// Per-axis overlaps of `[lo, hi]` with cells `a..=b` (at most [`SMALL`]) and their sum.
 #[inline(always)]
 fn small_weights(lo: f64, hi: f64, a: usize, b: usize) -> ([f64; SMALL], f64) {
@@ -171,6 +227,38 @@ pub(crate) fn splat<C: Cell>(
 ) -> bool {
     let [rx, ry, rz] = region.lo;
     let [dx, dy, dz] = region.dims;
+    // Fast path: a box at most two cells long along every axis, inside the region, covers
+    // two or three cells per axis from `a = ⌊lo + ½⌋` (the last possibly with weight 0,
+    // which adds nothing to a finite value); fully unrolled per shape. Same weights and
+    // products as the general path.
+    if d.is_finite()
+        && let (Some((xa, wx, tx)), Some((ya, wy, ty)), Some((za, wz, tz))) = (
+            short(lo.x, hi.x, rx, dx),
+            short(lo.y, hi.y, ry, dy),
+            short(lo.z, hi.z, rz, dz),
+        )
+    {
+        let base = ((za - rz) * dy + (ya - ry)) * dx + (xa - rx);
+        let k = Kernel {
+            base,
+            sy: dx,
+            sz: dx * dy,
+            w: [wx, wy, wz],
+            d,
+            sign,
+        };
+        match (tx, ty, tz) {
+            (false, false, false) => k.run::<C, 2, 2, 2>(buf),
+            (true, false, false) => k.run::<C, 3, 2, 2>(buf),
+            (false, true, false) => k.run::<C, 2, 3, 2>(buf),
+            (true, true, false) => k.run::<C, 3, 3, 2>(buf),
+            (false, false, true) => k.run::<C, 2, 2, 3>(buf),
+            (true, false, true) => k.run::<C, 3, 2, 3>(buf),
+            (false, true, true) => k.run::<C, 2, 3, 3>(buf),
+            (true, true, true) => k.run::<C, 3, 3, 3>(buf),
+        }
+        return true;
+    }
     let (Some((xa, xb)), Some((ya, yb)), Some((za, zb))) = (
         axis_range(lo.x, hi.x, out[0], rx, dx),
         axis_range(lo.y, hi.y, out[1], ry, dy),
