@@ -91,7 +91,7 @@ use crate::pushforward::{
     AntialiasOptions, FaceCentres, PushForwardStats, ToIndex, normalise, offset_grid,
     output_geometry, try_filled,
 };
-use crate::tally::{Region, Voxels, tally_averaged};
+use crate::tally::{Region, Voxels, tally_averaged, vmax, vmin};
 
 /// Widening, in source voxels, of the box of voxel centres whose parameters lie in the
 /// influenced parameter box. The map evaluation and this test compute a centre's parameter
@@ -175,19 +175,19 @@ pub struct UpdateReport {
     pub after: PushForwardStats,
 }
 
-/// Scratch of one slab: its delta tallies and its copy of the new centre images.
-#[derive(Debug, Default)]
-struct SlabScratch {
-    delta: Vec<[f64; 2]>,
-    centres: Vec<DVec3>,
+/// New centre images of an update: the points (x fastest) over a margin-coordinate box and
+/// the bounds of the finite points of each of its z-planes.
+struct Fresh<'a> {
+    points: &'a [DVec3],
+    region: &'a Region,
+    plane_bounds: &'a [(DVec3, DVec3)],
 }
 
-/// A slab of an update: its source voxels, the margin-grid neighbourhood they read and the
-/// output region their old and new boxes can reach.
+/// A slab of an update: its source voxels and the output region their old and new boxes
+/// can reach.
 #[derive(Debug, Clone, Copy)]
 struct SlabPlan {
     voxels: Region,
-    neighbourhood: Region,
     output: Region,
 }
 
@@ -215,7 +215,8 @@ pub struct IncrementalPushForward {
     volume: Volume<f32>,
     stats: PushForwardStats,
     fresh: Vec<DVec3>,
-    scratch: Vec<SlabScratch>,
+    /// Delta tallies of the slabs of an update (kept between updates).
+    scratch: Vec<Vec<[f64; 2]>>,
 }
 
 impl IncrementalPushForward {
@@ -443,18 +444,31 @@ impl IncrementalPushForward {
                 grid: "voxel-centre",
                 source,
             })?;
+        // Convert to output indices, with the bounds of each plane's finite images.
         let to_index = self.to_index;
-        self.fresh[..len]
-            .par_iter_mut()
-            .with_min_len(4096)
-            .for_each(|p| *p = to_index.apply(*p));
-        let fresh = std::mem::take(&mut self.fresh);
-        let result = self.retally(&redo, Some((&fresh[..len], &influenced)));
-        let outcome = result.map(|(before, after, out)| {
-            self.store_centres(&fresh[..len], &influenced);
-            (before, after, out)
-        });
-        self.fresh = fresh;
+        let plane = influenced.dims[0] * influenced.dims[1];
+        let plane_bounds: Vec<(DVec3, DVec3)> = self.fresh[..len]
+            .par_chunks_mut(plane)
+            .map(|pts| {
+                let (mut lo, mut hi) = (DVec3::INFINITY, DVec3::NEG_INFINITY);
+                for p in pts {
+                    *p = to_index.apply(*p);
+                    if p.is_finite() {
+                        lo = vmin(lo, *p);
+                        hi = vmax(hi, *p);
+                    }
+                }
+                (lo, hi)
+            })
+            .collect();
+        let points = std::mem::take(&mut self.fresh);
+        let fresh = Fresh {
+            points: &points[..len],
+            region: &influenced,
+            plane_bounds: &plane_bounds,
+        };
+        let outcome = self.retally(&redo, Some(&fresh));
+        self.fresh = points;
         let (before, after, out) = outcome?;
         self.renormalise(&out);
         self.lattice = lattice;
@@ -522,15 +536,20 @@ impl IncrementalPushForward {
         r
     }
 
-    /// Subtract (if `fresh` is given) the old boxes of the source voxels in `redo` and add
-    /// their new boxes, the new centre images being the stored ones overridden by `fresh`
-    /// over its margin-coordinate box. Returns the stats of the redone voxels before and
-    /// after and the output region the deltas covered. Nothing is modified if an error is
-    /// returned.
+    /// Subtract (if `fresh` is given) the old boxes of the source voxels in `redo`, store the
+    /// new centre images `fresh`, and add the voxels' new boxes. Returns the stats of the
+    /// redone voxels before and after and the output region the deltas covered. Nothing is
+    /// modified if an error is returned.
+    ///
+    /// Every slab tallies into its own delta buffer. Without `fresh` (the initial push) the
+    /// slabs run in windows of one per thread, each window merged before the next; with
+    /// `fresh`, all slabs subtract first, then the centre images are replaced, then all slabs
+    /// add (so the deltas of every slab are alive at once: about 16 bytes per output voxel the
+    /// update reaches, plus the slabs' overlap).
     fn retally(
         &mut self,
         redo: &Region,
-        fresh: Option<(&[DVec3], &Region)>,
+        fresh: Option<&Fresh<'_>>,
     ) -> Result<(PushForwardStats, PushForwardStats, Region), WarpError> {
         let mut before = PushForwardStats::default();
         let mut after = PushForwardStats::default();
@@ -538,82 +557,62 @@ impl IncrementalPushForward {
             return Ok((before, after, Region::default()));
         }
         let plans = self.plan_slabs(redo, fresh);
-        let window = rayon::current_num_threads().max(1).min(plans.len());
-        // Reserve every buffer first, so that nothing fails once tallies change.
-        let delta_len = plans.iter().map(|p| p.output.len()).max().unwrap_or(0);
-        let copy_len = if fresh.is_some() {
-            plans
-                .iter()
-                .map(|p| p.neighbourhood.len())
-                .max()
-                .unwrap_or(0)
+        let window = if fresh.is_some() {
+            plans.len()
         } else {
-            0
+            rayon::current_num_threads().max(1).min(plans.len())
         };
-        self.scratch.resize_with(window, SlabScratch::default);
-        for s in &mut self.scratch {
-            reserve(&mut s.delta, delta_len, "slab delta")?;
-            reserve(&mut s.centres, copy_len, "slab centre copy")?;
+        // Reserve every buffer first, so that nothing fails once the state changes.
+        let delta_len = plans.iter().map(|p| p.output.len()).max().unwrap_or(0);
+        if self.scratch.len() < window {
+            self.scratch.resize_with(window, Vec::new);
         }
-        let src = Voxels {
-            values: &self.values,
-            vdims: self.source.dims,
-            centres: &self.centres,
-            cdims: [self.source.dims[0] + 2, self.source.dims[1] + 2],
-        };
+        for s in &mut self.scratch[..window] {
+            reserve(s, delta_len, "slab delta")?;
+        }
         let out_dims = self.output.dims;
+        let cdims = [self.source.dims[0] + 2, self.source.dims[1] + 2];
         let mut touched = Region::default();
         for batch in plans.chunks(window) {
-            let counts: Vec<(PushForwardStats, PushForwardStats)> = batch
+            let deltas = &mut self.scratch[..batch.len()];
+            let src = Voxels {
+                values: &self.values,
+                vdims: self.source.dims,
+                centres: &self.centres,
+                cdims,
+            };
+            // Erase: with the stored (old) centre images.
+            let old: Vec<PushForwardStats> = batch
                 .par_iter()
-                .zip(self.scratch.par_iter_mut())
-                .map(|(plan, scratch)| {
-                    let delta = &mut scratch.delta;
+                .zip(deltas.par_iter_mut())
+                .map(|(plan, delta)| {
                     delta.clear();
                     delta.resize(plan.output.len(), [0.0; 2]);
-                    let c0 = [0, 1, 2].map(|a| plan.voxels.lo[a] + 1);
-                    let Some((fresh, fresh_box)) = fresh else {
-                        let add = tally_averaged(
-                            &src,
-                            &plan.voxels,
-                            c0,
-                            out_dims,
-                            &plan.output,
-                            delta,
-                            1.0,
-                        );
-                        return (PushForwardStats::default(), add);
-                    };
-                    let old =
-                        tally_averaged(&src, &plan.voxels, c0, out_dims, &plan.output, delta, -1.0);
-                    copy_new_centres(
-                        &mut scratch.centres,
-                        &src,
-                        &plan.neighbourhood,
-                        fresh,
-                        fresh_box,
-                    );
-                    let local = Voxels {
-                        centres: &scratch.centres,
-                        cdims: [plan.neighbourhood.dims[0], plan.neighbourhood.dims[1]],
-                        ..src
-                    };
-                    let new = tally_averaged(
-                        &local,
-                        &plan.voxels,
-                        [1, 1, 1],
-                        out_dims,
-                        &plan.output,
-                        delta,
-                        1.0,
-                    );
-                    (old, new)
+                    if fresh.is_none() {
+                        return PushForwardStats::default();
+                    }
+                    tally_plan(&src, plan, out_dims, delta, -1.0)
                 })
                 .collect();
-            for ((plan, scratch), (old, new)) in batch.iter().zip(&self.scratch).zip(counts) {
+            if let Some(f) = fresh {
+                store_centres(&mut self.centres, cdims, f.points, f.region);
+            }
+            // Add: with the new centre images.
+            let src = Voxels {
+                values: &self.values,
+                vdims: self.source.dims,
+                centres: &self.centres,
+                cdims,
+            };
+            let new: Vec<PushForwardStats> = batch
+                .par_iter()
+                .zip(deltas.par_iter_mut())
+                .map(|(plan, delta)| tally_plan(&src, plan, out_dims, delta, 1.0))
+                .collect();
+            for (((plan, delta), old), new) in batch.iter().zip(deltas.iter()).zip(old).zip(new) {
                 before.add(&old);
                 after.add(&new);
-                merge(&mut self.tallies, out_dims, &plan.output, &scratch.delta);
+                merge(&mut self.tallies, out_dims, &plan.output, delta);
                 touched = touched.union(&plan.output);
             }
         }
@@ -623,7 +622,7 @@ impl IncrementalPushForward {
     /// Split `redo` into z-slabs and find, for each, the output region its old and new boxes
     /// can reach: the cells overlapped by the bounding box of the finite centre images its
     /// voxels read (face centres lie between centres).
-    fn plan_slabs(&self, redo: &Region, fresh: Option<(&[DVec3], &Region)>) -> Vec<SlabPlan> {
+    fn plan_slabs(&self, redo: &Region, fresh: Option<&Fresh<'_>>) -> Vec<SlabPlan> {
         let plane = redo.dims[0] * redo.dims[1];
         let step = SLAB_VOXELS.div_ceil(plane.max(1)).max(MIN_SLAB_SLICES);
         let slabs: Vec<(usize, usize)> = (0..redo.dims[2])
@@ -644,45 +643,31 @@ impl IncrementalPushForward {
                     dims: [0, 1, 2].map(|a| voxels.dims[a] + 2),
                 };
                 let (mut lo, mut hi) = bounds(&self.centres, cdims, &neighbourhood);
-                if let Some((fresh, fresh_box)) = fresh {
-                    let common = intersect(&neighbourhood, fresh_box);
-                    if !common.is_empty() {
-                        let rel = Region {
-                            lo: [0, 1, 2].map(|a| common.lo[a] - fresh_box.lo[a]),
-                            dims: common.dims,
-                        };
-                        let (l, h) = bounds(fresh, [fresh_box.dims[0], fresh_box.dims[1]], &rel);
+                if let Some(f) = fresh {
+                    // The neighbourhood spans the fresh box in x and y (it is the redone box
+                    // widened by one, the redone box the fresh box widened by one), so the
+                    // fresh planes it meets bound its fresh points.
+                    let z_lo = neighbourhood.lo[2].max(f.region.lo[2]);
+                    let z_hi = (neighbourhood.lo[2] + neighbourhood.dims[2])
+                        .min(f.region.lo[2] + f.region.dims[2]);
+                    for &(l, h) in f
+                        .plane_bounds
+                        .get(
+                            z_lo.saturating_sub(f.region.lo[2])
+                                ..z_hi.saturating_sub(f.region.lo[2]),
+                        )
+                        .unwrap_or(&[])
+                    {
                         lo = lo.min(l);
                         hi = hi.max(h);
                     }
                 }
                 SlabPlan {
                     voxels,
-                    neighbourhood,
                     output: Region::of_bounds(lo, hi, self.output.dims),
                 }
             })
             .collect()
-    }
-
-    /// Write `fresh` (centre images over the margin-coordinate box `fresh_box`) into the
-    /// stored centre images.
-    fn store_centres(&mut self, fresh: &[DVec3], fresh_box: &Region) {
-        let [cx, cy] = [self.source.dims[0] + 2, self.source.dims[1] + 2];
-        let [fx, fy, _] = fresh_box.dims;
-        if fx == 0 || fy == 0 {
-            return;
-        }
-        self.centres
-            .par_chunks_mut(cx * cy)
-            .skip(fresh_box.lo[2])
-            .zip(fresh.par_chunks(fx * fy))
-            .for_each(|(plane, src)| {
-                for (j, row) in src.chunks_exact(fx).enumerate() {
-                    let s = (fresh_box.lo[1] + j) * cx + fresh_box.lo[0];
-                    plane[s..s + fx].copy_from_slice(row);
-                }
-            });
     }
 
     /// Recompute the output voxels of `region` from their tallies (True's rule).
@@ -730,8 +715,8 @@ fn bounds(pts: &[DVec3], dims: [usize; 2], r: &Region) -> (DVec3, DVec3) {
             let s = r.lo[0] + dims[0] * (j + dims[1] * k);
             for p in pts.get(s..s + r.dims[0]).unwrap_or(&[]) {
                 if p.is_finite() {
-                    lo = lo.min(*p);
-                    hi = hi.max(*p);
+                    lo = vmin(lo, *p);
+                    hi = vmax(hi, *p);
                 }
             }
         }
@@ -754,34 +739,37 @@ fn intersect(a: &Region, b: &Region) -> Region {
     r
 }
 
-/// Fill `out` with the new centre images over the margin-coordinate box `nb`: the stored
-/// images of `src`, overridden by `fresh` over `fresh_box`.
-fn copy_new_centres(
-    out: &mut Vec<DVec3>,
-    src: &Voxels<'_, f32>,
-    nb: &Region,
-    fresh: &[DVec3],
-    fresh_box: &Region,
-) {
-    out.clear();
-    let [cx, cy] = src.cdims;
-    for k in nb.lo[2]..nb.lo[2] + nb.dims[2] {
-        for j in nb.lo[1]..nb.lo[1] + nb.dims[1] {
-            let s = nb.lo[0] + cx * (j + cy * k);
-            out.extend_from_slice(&src.centres[s..s + nb.dims[0]]);
-        }
-    }
-    let common = intersect(nb, fresh_box);
+/// Write `fresh` (centre images over the margin-coordinate box `fresh_box`) into `centres`
+/// (rows of `cdims[0]`, planes of `cdims[0]·cdims[1]`).
+fn store_centres(centres: &mut [DVec3], cdims: [usize; 2], fresh: &[DVec3], fresh_box: &Region) {
+    let [cx, cy] = cdims;
     let [fx, fy, _] = fresh_box.dims;
-    for k in common.lo[2]..common.lo[2] + common.dims[2] {
-        for j in common.lo[1]..common.lo[1] + common.dims[1] {
-            let d = (common.lo[0] - nb.lo[0])
-                + nb.dims[0] * ((j - nb.lo[1]) + nb.dims[1] * (k - nb.lo[2]));
-            let s = (common.lo[0] - fresh_box.lo[0])
-                + fx * ((j - fresh_box.lo[1]) + fy * (k - fresh_box.lo[2]));
-            out[d..d + common.dims[0]].copy_from_slice(&fresh[s..s + common.dims[0]]);
-        }
+    if fresh_box.is_empty() {
+        return;
     }
+    centres
+        .par_chunks_mut(cx * cy)
+        .skip(fresh_box.lo[2])
+        .zip(fresh.par_chunks(fx * fy))
+        .for_each(|(plane, src)| {
+            for (j, row) in src.chunks_exact(fx).enumerate() {
+                let s = (fresh_box.lo[1] + j) * cx + fresh_box.lo[0];
+                plane[s..s + fx].copy_from_slice(row);
+            }
+        });
+}
+
+/// Tally the voxels of `plan` (with `sign`) from the centre images of `src`, which cover
+/// the whole margin grid.
+fn tally_plan(
+    src: &Voxels<'_, f32>,
+    plan: &SlabPlan,
+    out_dims: [usize; 3],
+    delta: &mut [[f64; 2]],
+    sign: f64,
+) -> PushForwardStats {
+    let c0 = [0, 1, 2].map(|a| plan.voxels.lo[a] + 1);
+    tally_averaged(src, &plan.voxels, c0, out_dims, &plan.output, delta, sign)
 }
 
 /// Add the delta tallies `delta` over `region` to `tallies` (an output grid of `dims`).

@@ -102,11 +102,35 @@ impl Region {
     }
 }
 
+/// Minimum of two non-NaN numbers (one `minsd`; `f64::min` also handles NaN, at a cost).
+#[inline(always)]
+fn fmin(a: f64, b: f64) -> f64 {
+    if a < b { a } else { b }
+}
+
+/// Maximum of two non-NaN numbers (one `maxsd`).
+#[inline(always)]
+fn fmax(a: f64, b: f64) -> f64 {
+    if a > b { a } else { b }
+}
+
+/// Component-wise [`fmin`].
+#[inline(always)]
+pub(crate) fn vmin(a: DVec3, b: DVec3) -> DVec3 {
+    DVec3::new(fmin(a.x, b.x), fmin(a.y, b.y), fmin(a.z, b.z))
+}
+
+/// Component-wise [`fmax`].
+#[inline(always)]
+pub(crate) fn vmax(a: DVec3, b: DVec3) -> DVec3 {
+    DVec3::new(fmax(a.x, b.x), fmax(a.y, b.y), fmax(a.z, b.z))
+}
+
 /// Positive overlap of `[lo, hi]` with the output voxel `[q − ½, q + ½]` (index units).
 #[inline(always)]
 pub(crate) fn overlap(lo: f64, hi: f64, q: usize) -> f64 {
     let c = q as f64;
-    (hi.min(c + 0.5) - lo.max(c - 0.5)).max(0.0)
+    fmax(fmin(hi, c + 0.5) - fmax(lo, c - 0.5), 0.0)
 }
 
 /// Range `a..=b` of output indices in `0..n` whose cells `[q − ½, q + ½]` overlap `[lo, hi]`
@@ -153,15 +177,17 @@ fn short(lo: f64, hi: f64, r0: usize, rn: usize) -> Option<(usize, [f64; 3], boo
     let len = hi - lo;
     if s >= 0.0 && len > 0.0 && len <= 2.0 {
         // Truncation is the floor for s ≥ 0 (and saturates for huge s, failing below).
-        let a = s as usize;
-        let e = a as f64 + 0.5;
+        // Signed conversions: one instruction each, where unsigned ones take several.
+        let ai = s as i64;
+        let a = ai as usize;
+        let e = ai as f64 + 0.5;
         if len <= 1.0 {
             if a >= r0 && a + 2 <= r0 + rn {
-                return Some((a, [hi.min(e) - lo, (hi - e).max(0.0), 0.0], false));
+                return Some((a, [fmin(hi, e) - lo, fmax(hi - e, 0.0), 0.0], false));
             }
         } else if a >= r0 && a + 3 <= r0 + rn {
             let e1 = e + 1.0;
-            return Some((a, [e - lo, hi.min(e1) - e, (hi - e1).max(0.0)], true));
+            return Some((a, [e - lo, fmin(hi, e1) - e, fmax(hi - e1, 0.0)], true));
         }
     }
     None
@@ -327,8 +353,15 @@ pub(crate) fn averaged_bounds(p: DVec3, nb: [DVec3; 6]) -> Option<(DVec3, DVec3)
     if !all_finite {
         return None;
     }
-    let mn = nb[0].min(nb[1]).min(nb[2].min(nb[3])).min(nb[4].min(nb[5]));
-    let mx = nb[0].max(nb[1]).max(nb[2].max(nb[3])).max(nb[4].max(nb[5]));
+    // No NaN past this point, so the cheap min/max select exactly.
+    let mn = vmin(
+        vmin(vmin(nb[0], nb[1]), vmin(nb[2], nb[3])),
+        vmin(nb[4], nb[5]),
+    );
+    let mx = vmax(
+        vmax(vmax(nb[0], nb[1]), vmax(nb[2], nb[3])),
+        vmax(nb[4], nb[5]),
+    );
     let lo = 0.5 * (p + mn);
     let hi = 0.5 * (p + mx);
     (lo.is_finite() && hi.is_finite()).then_some((lo, hi))
