@@ -724,21 +724,6 @@ fn bounds(pts: &[DVec3], dims: [usize; 2], r: &Region) -> (DVec3, DVec3) {
     (lo, hi)
 }
 
-/// The common part of two regions (empty if disjoint).
-fn intersect(a: &Region, b: &Region) -> Region {
-    let mut r = Region::default();
-    for ax in 0..3 {
-        let lo = a.lo[ax].max(b.lo[ax]);
-        let hi = (a.lo[ax] + a.dims[ax]).min(b.lo[ax] + b.dims[ax]);
-        if hi <= lo {
-            return Region::default();
-        }
-        r.lo[ax] = lo;
-        r.dims[ax] = hi - lo;
-    }
-    r
-}
-
 /// Write `fresh` (centre images over the margin-coordinate box `fresh_box`) into `centres`
 /// (rows of `cdims[0]`, planes of `cdims[0]·cdims[1]`).
 fn store_centres(centres: &mut [DVec3], cdims: [usize; 2], fresh: &[DVec3], fresh_box: &Region) {
