@@ -367,6 +367,27 @@ pub(crate) fn averaged_bounds(p: DVec3, nb: [DVec3; 6]) -> Option<(DVec3, DVec3)
     (lo.is_finite() && hi.is_finite()).then_some((lo, hi))
 }
 
+/// [`averaged_bounds`] without branches: the bounds and `true`, or `false` when a point is
+/// NaN or infinite or a sum overflows (then [`averaged_bounds`] decides).
+#[inline(always)]
+fn raw_bounds(p: DVec3, nb: [DVec3; 6]) -> (DVec3, DVec3, bool) {
+    let s = p + nb[0] + nb[1] + nb[2] + nb[3] + nb[4] + nb[5];
+    let mn = vmin(
+        vmin(vmin(nb[0], nb[1]), vmin(nb[2], nb[3])),
+        vmin(nb[4], nb[5]),
+    );
+    let mx = vmax(
+        vmax(vmax(nb[0], nb[1]), vmax(nb[2], nb[3])),
+        vmax(nb[4], nb[5]),
+    );
+    let lo = 0.5 * (p + mn);
+    let hi = 0.5 * (p + mx);
+    // A finite sum means every point is finite (NaN and infinities propagate), and then the
+    // cheap min/max select exactly.
+    let ok = (s.x + s.y + s.z + lo.x + lo.y + lo.z + hi.x + hi.y + hi.z).is_finite();
+    (lo, hi, ok)
+}
+
 /// Where a box of input voxels finds its values and centre images.
 pub(crate) struct Voxels<'a, T> {
     /// Input values, x fastest, rows of `vdims[0]`, planes of `vdims[0]·vdims[1]`.
@@ -429,9 +450,16 @@ pub(crate) fn tally_averaged<T: Voxel, C: Cell>(
                 .zip(ym.iter().zip(yp))
                 .zip(zm.iter().zip(zp));
             for (((w, v), (ym, yp)), (zm, zp)) in it {
-                let Some((lo, hi)) = averaged_bounds(w[1], [w[0], w[2], *ym, *yp, *zm, *zp]) else {
-                    stats.non_finite += 1;
-                    continue;
+                let nb = [w[0], w[2], *ym, *yp, *zm, *zp];
+                let (lo, hi) = match raw_bounds(w[1], nb) {
+                    (lo, hi, true) => (lo, hi),
+                    _ => match averaged_bounds(w[1], nb) {
+                        Some(b) => b,
+                        None => {
+                            stats.non_finite += 1;
+                            continue;
+                        }
+                    },
                 };
                 if splat(lo, hi, v.to_f64(), sign, out, region, buf) {
                     stats.mapped += 1;
