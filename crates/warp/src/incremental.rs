@@ -25,9 +25,15 @@
 //!    tallies (exactly the values once added, with the sign flipped), the influenced centre
 //!    images are re-evaluated with the new lattice through [`SpaceMap::apply_grid`] on the
 //!    sub-grid they form (the evaluation a full push-forward uses), and the new boxes are
-//!    added. Work runs in parallel over z-slabs of the redone box, each slab tallying into
-//!    its own delta buffer; the deltas are merged in slab order, so results do not depend
-//!    on the number of threads.
+//!    added: all slabs erase, then the centre images are replaced, then all slabs add. Work
+//!    runs in parallel over z-slabs of the redone box (a partition fixed by the box), each
+//!    slab tallying into its own delta buffer over the output box its boxes can reach; the
+//!    deltas are merged in slab order, so results do not depend on the number of threads.
+//!
+//! The moved control points are handled together: the redone region is the bounding box
+//! of their influence, which suits the clusters that dragging a point moves (the control
+//! points blending one region). Callers moving far-apart points at once may update per
+//! cluster instead (each update is exact).
 //! 4. **Renormalise** the output voxels in the union of the slabs' output boxes with True's
 //!    rule (see [`crate::pushforward`]).
 //!
@@ -43,8 +49,9 @@
 //! the source values (`4n` bytes, `f32`), the centre images (`24·(nx+2)(ny+2)(nz+2)` bytes,
 //! `f64` points in output index space), the tallies (`16m` bytes) and the current volume
 //! (`4m` bytes) — about 105 MB for 128³ → 128³, 815 MB for 256³ → 256³. An update adds
-//! scratch of `24` bytes per re-evaluated centre plus, per rayon thread, one slab's delta
-//! buffer and centre copy (kept between updates).
+//! scratch (kept between updates) of `24` bytes per re-evaluated centre and the slabs'
+//! delta buffers, `16` bytes per output voxel its boxes reach plus the slabs' overlap
+//! (a few planes each); construction tallies in windows of one slab per thread.
 //!
 //! # Why the nearest ("map and round") preview is not incremental
 //!
@@ -554,6 +561,10 @@ impl IncrementalPushForward {
         let mut before = PushForwardStats::default();
         let mut after = PushForwardStats::default();
         if redo.is_empty() {
+            if let Some(f) = fresh {
+                let cdims = [self.source.dims[0] + 2, self.source.dims[1] + 2];
+                store_centres(&mut self.centres, cdims, f.points, f.region);
+            }
             return Ok((before, after, Region::default()));
         }
         let plans = self.plan_slabs(redo, fresh);
