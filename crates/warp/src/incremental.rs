@@ -26,9 +26,10 @@
 //!    images are re-evaluated with the new lattice through [`SpaceMap::apply_grid`] on the
 //!    sub-grid they form (the evaluation a full push-forward uses), and the new boxes are
 //!    added: all slabs erase, then the centre images are replaced, then all slabs add. Work
-//!    runs in parallel over z-slabs of the redone box (a partition fixed by the box), each
-//!    slab tallying into its own delta buffer over the output box its boxes can reach; the
-//!    deltas are merged in slab order, so results do not depend on the number of threads.
+//!    runs over z-slabs of the redone box (a partition fixed by the box), tallying straight
+//!    into the tallies: slabs whose output z-ranges are disjoint run in parallel, groups of
+//!    them one after the other, so every output voxel receives its contributions in an
+//!    order fixed by the partition and results do not depend on the number of threads.
 //!
 //! The moved control points are handled together: the redone region is the bounding box
 //! of their influence, which suits the clusters that dragging a point moves (the control
@@ -49,9 +50,7 @@
 //! the source values (`4n` bytes, `f32`), the centre images (`24·(nx+2)(ny+2)(nz+2)` bytes,
 //! `f64` points in output index space), the tallies (`16m` bytes) and the current volume
 //! (`4m` bytes) — about 105 MB for 128³ → 128³, 815 MB for 256³ → 256³. An update adds
-//! scratch (kept between updates) of `24` bytes per re-evaluated centre and the slabs'
-//! delta buffers, `16` bytes per output voxel its boxes reach plus the slabs' overlap
-//! (a few planes each); construction tallies in windows of one slab per thread.
+//! only the re-evaluated centre images (`24` bytes each, kept between updates).
 //!
 //! # Why the nearest ("map and round") preview is not incremental
 //!
@@ -112,8 +111,9 @@ pub const PARAMETER_MARGIN: f64 = 1e-6;
 /// count.
 const SLAB_VOXELS: usize = 1 << 16;
 
-/// Thinnest slab, in source z-slices: a slab's output region also holds the boxes' spill
-/// into the next planes, which thin slabs would tally and merge repeatedly.
+/// Thinnest slab, in source z-slices: boxes spill about a plane into the output planes of
+/// the neighbouring slabs, so thinner slabs would overlap several neighbours and need more
+/// groups run one after the other.
 const MIN_SLAB_SLICES: usize = 4;
 
 /// A box of voxel indices `start[a] .. end[a]` per axis (half-open; empty if any
@@ -222,8 +222,6 @@ pub struct IncrementalPushForward {
     volume: Volume<f32>,
     stats: PushForwardStats,
     fresh: Vec<DVec3>,
-    /// Delta tallies of the slabs of an update (kept between updates).
-    scratch: Vec<Vec<[f64; 2]>>,
 }
 
 impl IncrementalPushForward {
@@ -298,13 +296,12 @@ impl IncrementalPushForward {
             volume,
             stats: PushForwardStats::default(),
             fresh: Vec::new(),
-            scratch: Vec::new(),
         };
         let all = Region {
             lo: [0; 3],
             dims: g.dims,
         };
-        let (_, after, _) = engine.retally(&all, None)?;
+        let (_, after, _) = engine.retally(&all, None);
         engine.stats = after;
         let everything = Region {
             lo: [0; 3],
@@ -365,8 +362,8 @@ impl IncrementalPushForward {
     /// # Errors
     /// [`WarpError::ControlPoint`] if an index is out of range or a new position is NaN or
     /// infinite; [`WarpError::MapOnGrid`] if the new lattice fails on the voxel-centre grid;
-    /// [`WarpError::Allocation`] if scratch cannot be allocated. On error the engine is
-    /// unchanged.
+    /// [`WarpError::Allocation`] if the re-evaluated centre images cannot be stored. On error
+    /// the engine is unchanged.
     pub fn move_control_points(
         &mut self,
         moves: &[([usize; 3], DVec3)],
@@ -474,9 +471,8 @@ impl IncrementalPushForward {
             region: &influenced,
             plane_bounds: &plane_bounds,
         };
-        let outcome = self.retally(&redo, Some(&fresh));
+        let (before, after, out) = self.retally(&redo, Some(&fresh));
         self.fresh = points;
-        let (before, after, out) = outcome?;
         self.renormalise(&out);
         self.lattice = lattice;
         self.stats = PushForwardStats {
@@ -545,89 +541,99 @@ impl IncrementalPushForward {
 
     /// Subtract (if `fresh` is given) the old boxes of the source voxels in `redo`, store the
     /// new centre images `fresh`, and add the voxels' new boxes. Returns the stats of the
-    /// redone voxels before and after and the output region the deltas covered. Nothing is
-    /// modified if an error is returned.
+    /// redone voxels before and after and the output region the boxes can reach.
     ///
-    /// Every slab tallies into its own delta buffer. Without `fresh` (the initial push) the
-    /// slabs run in windows of one per thread, each window merged before the next; with
-    /// `fresh`, all slabs subtract first, then the centre images are replaced, then all slabs
-    /// add (so the deltas of every slab are alive at once: about 16 bytes per output voxel the
-    /// update reaches, plus the slabs' overlap).
+    /// Slabs tally straight into the tallies. They run in colour groups (see [`colours`]):
+    /// within a group the slabs' output z-ranges are disjoint, so they run in parallel on
+    /// disjoint planes; groups run one after the other. Every output voxel therefore receives
+    /// its contributions in an order fixed by the slab partition alone, whatever the number
+    /// of threads.
     fn retally(
         &mut self,
         redo: &Region,
         fresh: Option<&Fresh<'_>>,
-    ) -> Result<(PushForwardStats, PushForwardStats, Region), WarpError> {
-        let mut before = PushForwardStats::default();
-        let mut after = PushForwardStats::default();
+    ) -> (PushForwardStats, PushForwardStats, Region) {
+        let cdims = [self.source.dims[0] + 2, self.source.dims[1] + 2];
         if redo.is_empty() {
             if let Some(f) = fresh {
-                let cdims = [self.source.dims[0] + 2, self.source.dims[1] + 2];
                 store_centres(&mut self.centres, cdims, f.points, f.region);
             }
-            return Ok((before, after, Region::default()));
+            return (
+                PushForwardStats::default(),
+                PushForwardStats::default(),
+                Region::default(),
+            );
         }
         let plans = self.plan_slabs(redo, fresh);
-        let window = if fresh.is_some() {
-            plans.len()
-        } else {
-            rayon::current_num_threads().max(1).min(plans.len())
+        let groups = colours(&plans);
+        let touched = plans
+            .iter()
+            .fold(Region::default(), |acc, p| acc.union(&p.output));
+        let before = match fresh {
+            Some(f) => {
+                let old = self.tally_groups(&plans, &groups, -1.0);
+                store_centres(&mut self.centres, cdims, f.points, f.region);
+                old
+            }
+            None => PushForwardStats::default(),
         };
-        // Reserve every buffer first, so that nothing fails once the state changes.
-        let delta_len = plans.iter().map(|p| p.output.len()).max().unwrap_or(0);
-        if self.scratch.len() < window {
-            self.scratch.resize_with(window, Vec::new);
-        }
-        for s in &mut self.scratch[..window] {
-            reserve(s, delta_len, "slab delta")?;
-        }
-        let out_dims = self.output.dims;
-        let cdims = [self.source.dims[0] + 2, self.source.dims[1] + 2];
-        let mut touched = Region::default();
-        for batch in plans.chunks(window) {
-            let deltas = &mut self.scratch[..batch.len()];
-            let src = Voxels {
-                values: &self.values,
-                vdims: self.source.dims,
-                centres: &self.centres,
-                cdims,
-            };
-            // Erase: with the stored (old) centre images.
-            let old: Vec<PushForwardStats> = batch
-                .par_iter()
-                .zip(deltas.par_iter_mut())
-                .map(|(plan, delta)| {
-                    delta.clear();
-                    delta.resize(plan.output.len(), [0.0; 2]);
-                    if fresh.is_none() {
-                        return PushForwardStats::default();
-                    }
-                    tally_plan(&src, plan, out_dims, delta, -1.0)
+        let after = self.tally_groups(&plans, &groups, 1.0);
+        (before, after, touched)
+    }
+
+    /// Tally (with `sign`) the voxels of every slab plan from the stored centre images
+    /// straight into the tallies, group by group.
+    fn tally_groups(
+        &mut self,
+        plans: &[SlabPlan],
+        groups: &[Vec<usize>],
+        sign: f64,
+    ) -> PushForwardStats {
+        let src = Voxels {
+            values: &self.values,
+            vdims: self.source.dims,
+            centres: &self.centres,
+            cdims: [self.source.dims[0] + 2, self.source.dims[1] + 2],
+        };
+        let out = self.output.dims;
+        let plane = out[0] * out[1];
+        let mut stats = PushForwardStats::default();
+        for group in groups {
+            // Members are sorted by output z and their z-ranges are disjoint: hand each its
+            // own planes of the tallies.
+            let mut work: Vec<(&SlabPlan, Region, &mut [[f64; 2]])> =
+                Vec::with_capacity(group.len());
+            let mut rest: &mut [[f64; 2]] = &mut self.tallies;
+            let mut taken = 0usize;
+            for &g in group {
+                let plan = &plans[g];
+                let (z0, dz) = if plan.output.is_empty() {
+                    (taken, 0)
+                } else {
+                    (plan.output.lo[2], plan.output.dims[2])
+                };
+                let (_, tail) = std::mem::take(&mut rest).split_at_mut((z0 - taken) * plane);
+                let (mine, tail) = tail.split_at_mut(dz * plane);
+                rest = tail;
+                taken = z0 + dz;
+                let region = Region {
+                    lo: [0, 0, z0],
+                    dims: [out[0], out[1], dz],
+                };
+                work.push((plan, region, mine));
+            }
+            let counts: Vec<PushForwardStats> = work
+                .into_par_iter()
+                .map(|(plan, region, planes)| {
+                    let c0 = [0, 1, 2].map(|a| plan.voxels.lo[a] + 1);
+                    tally_averaged(&src, &plan.voxels, c0, out, &region, planes, sign)
                 })
                 .collect();
-            if let Some(f) = fresh {
-                store_centres(&mut self.centres, cdims, f.points, f.region);
-            }
-            // Add: with the new centre images.
-            let src = Voxels {
-                values: &self.values,
-                vdims: self.source.dims,
-                centres: &self.centres,
-                cdims,
-            };
-            let new: Vec<PushForwardStats> = batch
-                .par_iter()
-                .zip(deltas.par_iter_mut())
-                .map(|(plan, delta)| tally_plan(&src, plan, out_dims, delta, 1.0))
-                .collect();
-            for (((plan, delta), old), new) in batch.iter().zip(deltas.iter()).zip(old).zip(new) {
-                before.add(&old);
-                after.add(&new);
-                merge(&mut self.tallies, out_dims, &plan.output, delta);
-                touched = touched.union(&plan.output);
+            for c in &counts {
+                stats.add(c);
             }
         }
-        Ok((before, after, touched))
+        stats
     }
 
     /// Split `redo` into z-slabs and find, for each, the output region its old and new boxes
@@ -755,39 +761,36 @@ fn store_centres(centres: &mut [DVec3], cdims: [usize; 2], fresh: &[DVec3], fres
         });
 }
 
-/// Tally the voxels of `plan` (with `sign`) from the centre images of `src`, which cover
-/// the whole margin grid.
-fn tally_plan(
-    src: &Voxels<'_, f32>,
-    plan: &SlabPlan,
-    out_dims: [usize; 3],
-    delta: &mut [[f64; 2]],
-    sign: f64,
-) -> PushForwardStats {
-    let c0 = [0, 1, 2].map(|a| plan.voxels.lo[a] + 1);
-    tally_averaged(src, &plan.voxels, c0, out_dims, &plan.output, delta, sign)
-}
-
-/// Add the delta tallies `delta` over `region` to `tallies` (an output grid of `dims`).
-fn merge(tallies: &mut [[f64; 2]], dims: [usize; 3], region: &Region, delta: &[[f64; 2]]) {
-    if region.is_empty() {
-        return;
+/// Group slab plans (indices) so that within a group the output z-ranges are pairwise
+/// disjoint, each group sorted by output z; greedy in slab order, so the grouping depends on
+/// the plans alone. Plans reaching no output voxel join the first group.
+fn colours(plans: &[SlabPlan]) -> Vec<Vec<usize>> {
+    let z_range = |p: &SlabPlan| (p.output.lo[2], p.output.lo[2] + p.output.dims[2]);
+    let mut groups: Vec<Vec<usize>> = Vec::new();
+    for (n, plan) in plans.iter().enumerate() {
+        let (a, b) = z_range(plan);
+        let fits = |g: &Vec<usize>| {
+            plan.output.is_empty()
+                || g.iter().all(|&m| {
+                    let o = &plans[m];
+                    let (c, d) = z_range(o);
+                    o.output.is_empty() || b <= c || d <= a
+                })
+        };
+        match groups.iter_mut().find(|g| fits(g)) {
+            Some(g) => g.push(n),
+            None => groups.push(vec![n]),
+        }
     }
-    let [nx, ny, _] = dims;
-    let [x0, y0, z0] = region.lo;
-    let [dx, dy, dz] = region.dims;
-    tallies
-        .par_chunks_mut(nx * ny)
-        .skip(z0)
-        .take(dz)
-        .zip(delta.par_chunks(dx * dy))
-        .for_each(|(plane, d)| {
-            for (j, row) in d.chunks_exact(dx).enumerate() {
-                let s = (y0 + j) * nx + x0;
-                for (t, v) in plane[s..s + dx].iter_mut().zip(row) {
-                    t[0] += v[0];
-                    t[1] += v[1];
-                }
+    for g in &mut groups {
+        g.sort_by_key(|&m| {
+            let o = &plans[m];
+            if o.output.is_empty() {
+                0
+            } else {
+                o.output.lo[2]
             }
         });
+    }
+    groups
 }
