@@ -106,10 +106,15 @@ use crate::tally::{Region, Voxels, tally_averaged, vmax, vmin};
 pub const PARAMETER_MARGIN: f64 = 1e-6;
 
 /// Target number of redone source voxels per slab of an update (slabs are whole z-slices of
-/// the redone box, at least [`MIN_SLAB_SLICES`] thick). Depends only on the box, so the slab
-/// partition — and with it the order of floating-point sums — never depends on the thread
-/// count.
+/// the redone box, at least [`MIN_SLAB_SLICES`] thick, their count a multiple of
+/// [`SLAB_GROUPING`]). Depends only on the box, so the slab partition — and with it the
+/// order of floating-point sums — never depends on the thread count.
 const SLAB_VOXELS: usize = 1 << 16;
+
+/// The slab count is rounded up to a multiple of this: neighbouring slabs usually fall
+/// into two alternating groups, and each group of a multiple of two slabs shares evenly
+/// over two threads.
+const SLAB_GROUPING: usize = 4;
 
 /// Thinnest slab, in source z-slices: boxes spill about a plane into the output planes of
 /// the neighbouring slabs, so thinner slabs would overlap several neighbours and need more
@@ -640,11 +645,19 @@ impl IncrementalPushForward {
     /// can reach: the cells overlapped by the bounding box of the finite centre images its
     /// voxels read (face centres lie between centres).
     fn plan_slabs(&self, redo: &Region, fresh: Option<&Fresh<'_>>) -> Vec<SlabPlan> {
-        let plane = redo.dims[0] * redo.dims[1];
-        let step = SLAB_VOXELS.div_ceil(plane.max(1)).max(MIN_SLAB_SLICES);
-        let slabs: Vec<(usize, usize)> = (0..redo.dims[2])
-            .step_by(step)
-            .map(|z| (redo.lo[2] + z, (z + step).min(redo.dims[2]) - z))
+        // A multiple of SLAB_GROUPING slabs (each colour group then splits evenly over a few
+        // threads), at least MIN_SLAB_SLICES thick, planes shared out evenly.
+        let nz = redo.dims[2];
+        let wanted = redo
+            .len()
+            .div_ceil(SLAB_VOXELS)
+            .next_multiple_of(SLAB_GROUPING);
+        let count = wanted.min(nz / MIN_SLAB_SLICES).max(1);
+        let slabs: Vec<(usize, usize)> = (0..count)
+            .map(|s| {
+                let (a, b) = (s * nz / count, (s + 1) * nz / count);
+                (redo.lo[2] + a, b - a)
+            })
             .collect();
         let cdims = [self.source.dims[0] + 2, self.source.dims[1] + 2];
         slabs
