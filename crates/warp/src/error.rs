@@ -32,6 +32,40 @@ pub enum WarpError {
     /// Evaluating the space map failed.
     #[error("evaluating the space map: {0}")]
     Map(#[from] DeformError),
+    /// Evaluating the space map on one of a push-forward's evaluation grids failed.
+    #[error("evaluating the map on the {grid} grid: {source}")]
+    MapOnGrid {
+        /// Which grid: `"voxel-centre"`, `"x-face"`, `"y-face"` or `"z-face"`.
+        grid: &'static str,
+        /// The map's error.
+        #[source]
+        source: DeformError,
+    },
+    /// A background (fill) value is NaN or infinite.
+    #[error("background value {0} is not finite")]
+    Background(f64),
+    /// Moving or setting control points of a lattice failed (index out of range, NaN or
+    /// infinite position).
+    #[error("cannot move the control points: {0}")]
+    ControlPoint(#[source] DeformError),
+    /// A lattice handed to an incremental engine has other knots or another frame than the
+    /// engine's lattice (only control points may change between updates).
+    #[error(
+        "the new lattice has other knots or another frame than the current one; only control \
+         points may change"
+    )]
+    LatticeMismatch,
+    /// An option combination the operation does not support.
+    #[error("unsupported: {0}")]
+    Unsupported(&'static str),
+    /// A working buffer could not be allocated.
+    #[error("cannot allocate {bytes} bytes for the {what} buffer")]
+    Allocation {
+        /// Which buffer.
+        what: &'static str,
+        /// Bytes requested (saturating).
+        bytes: usize,
+    },
     /// Preparing the input volume for sampling failed (e.g. the cubic B-spline coefficient
     /// array would exceed the allocation limit).
     #[error(transparent)]

@@ -6,15 +6,19 @@
 //!   `map(x)` (ITK's resampling convention).
 //! * [`pushforward`] — *push-forward*: every input voxel is sent to `map(x)` in the output
 //!   (free-form deformation of the model, True 1992 §5.3–§5.4).
+//! * [`incremental`] — the antialiased push-forward kept up to date under control-point
+//!   moves by redoing only the influenced region (True 1992 §5.3, the main loop).
 //! * [`inverse`] — *pull-back through the inverse of a push-forward map*: output voxel `y`
 //!   takes the input's value at `map⁻¹(y)` (Newton inversion per voxel), rendering the model
 //!   deformed by a free-form deformation without push-forward's holes and aliasing.
 //! * [`jacobian`] — determinant maps of a map on a grid, and folding statistics.
 
 mod error;
+pub mod incremental;
 pub mod inverse;
 pub mod jacobian;
 pub mod pullback;
 pub mod pushforward;
+mod tally;
 
 pub use error::WarpError;

@@ -62,42 +62,17 @@
 
 use glam::{DMat3, DVec3};
 use rayon::prelude::*;
-use volmorph_deform::{DeformError, SpaceMap};
+use volmorph_deform::SpaceMap;
 use volmorph_volume::{Geometry, Volume, VolumeError, Voxel};
+
+use crate::WarpError;
+use crate::tally::{Region, Voxels, cell_range, splat, tally_averaged};
 
 /// Input voxels per slab (rounded to whole z-slices, at least one slice). Fixed, so the slab
 /// partition — and with it the order of floating-point sums — never depends on the thread
 /// count. 2¹⁹ voxels keep a slab's mapped points near 13 MB (one centre grid) or 38 MB
 /// (three face-centre grids); one slab per rayon thread is in flight at a time.
 const SLAB_VOXELS: usize = 1 << 19;
-
-/// Everything that can go wrong in a push-forward.
-#[derive(Debug, thiserror::Error)]
-pub enum PushForwardError {
-    /// The output geometry is unusable (zero dims, bad spacing, singular direction, too large).
-    #[error("invalid output geometry: {0}")]
-    OutputGeometry(#[source] VolumeError),
-    /// The map failed on one of the evaluation grids (centres or face centres).
-    #[error("evaluating the map on the {grid} grid: {source}")]
-    Map {
-        /// Which grid: `"voxel-centre"`, `"x-face"`, `"y-face"` or `"z-face"`.
-        grid: &'static str,
-        /// The map's error.
-        #[source]
-        source: DeformError,
-    },
-    /// [`AntialiasOptions::background`] is NaN or infinite.
-    #[error("background value {0} is not finite")]
-    Background(f64),
-    /// A working buffer could not be allocated.
-    #[error("cannot allocate {bytes} bytes for the {what} buffer")]
-    Allocation {
-        /// Which buffer.
-        what: &'static str,
-        /// Bytes requested (saturating).
-        bytes: usize,
-    },
-}
 
 /// What happened to the input voxels. `mapped + non_finite + outside` is the input's voxel
 /// count.
@@ -115,7 +90,7 @@ pub struct PushForwardStats {
 }
 
 impl PushForwardStats {
-    fn add(&mut self, o: &Self) {
+    pub(crate) fn add(&mut self, o: &Self) {
         self.mapped += o.mapped;
         self.non_finite += o.non_finite;
         self.outside += o.outside;
@@ -172,13 +147,13 @@ pub enum FaceCentres {
 /// Affine map from physical points to continuous output indices,
 /// `index = m·(p − origin)` with `m = (direction·diag(spacing))⁻¹`.
 #[derive(Debug, Clone, Copy)]
-struct ToIndex {
+pub(crate) struct ToIndex {
     m: DMat3,
     origin: DVec3,
 }
 
 impl ToIndex {
-    fn new(g: &Geometry) -> Self {
+    pub(crate) fn new(g: &Geometry) -> Self {
         Self {
             m: g.index_to_physical_matrix().inverse(),
             origin: g.origin,
@@ -186,14 +161,14 @@ impl ToIndex {
     }
 
     #[inline]
-    fn apply(&self, p: DVec3) -> DVec3 {
+    pub(crate) fn apply(&self, p: DVec3) -> DVec3 {
         self.m * (p - self.origin)
     }
 }
 
 /// The geometry of the grid of continuous input indices `offset + (i, j, k)`,
 /// `(i, j, k) < dims`: same spacing and direction, origin moved to `offset`.
-fn offset_grid(g: &Geometry, offset: DVec3, dims: [usize; 3]) -> Geometry {
+pub(crate) fn offset_grid(g: &Geometry, offset: DVec3, dims: [usize; 3]) -> Geometry {
     Geometry {
         dims,
         origin: g.index_to_physical(offset),
@@ -201,15 +176,23 @@ fn offset_grid(g: &Geometry, offset: DVec3, dims: [usize; 3]) -> Geometry {
     }
 }
 
+/// The error for an unusable output geometry.
+pub(crate) fn output_geometry(source: VolumeError) -> WarpError {
+    WarpError::Geometry {
+        what: "output grid",
+        source,
+    }
+}
+
 /// A vector of `len` copies of `value`, or an allocation error instead of an abort.
-fn try_filled<V: Clone>(
+pub(crate) fn try_filled<V: Clone>(
     len: usize,
     value: V,
     what: &'static str,
-) -> Result<Vec<V>, PushForwardError> {
+) -> Result<Vec<V>, WarpError> {
     let mut v = Vec::new();
     v.try_reserve_exact(len)
-        .map_err(|_| PushForwardError::Allocation {
+        .map_err(|_| WarpError::Allocation {
             what,
             bytes: len.saturating_mul(std::mem::size_of::<V>()),
         })?;
@@ -257,17 +240,15 @@ fn round_index(x: f64, n: usize) -> Option<usize> {
 ///   [`PushForwardStats::non_finite`].
 ///
 /// # Errors
-/// [`PushForwardError::OutputGeometry`] for an invalid `output`,
-/// [`PushForwardError::Map`] if the map's grid evaluation fails,
-/// [`PushForwardError::Allocation`] if a working buffer cannot be allocated.
+/// [`WarpError::Geometry`] for an invalid `output`,
+/// [`WarpError::MapOnGrid`] if the map's grid evaluation fails,
+/// [`WarpError::Allocation`] if a working buffer cannot be allocated.
 pub fn push_forward_nearest<T: Voxel, M: SpaceMap + ?Sized>(
     input: &Volume<T>,
     map: &M,
     output: &Geometry,
-) -> Result<PushForward<T>, PushForwardError> {
-    output
-        .validate()
-        .map_err(PushForwardError::OutputGeometry)?;
+) -> Result<PushForward<T>, WarpError> {
+    output.validate().map_err(output_geometry)?;
     let to_index = ToIndex::new(output);
     let [nxo, nyo, nzo] = output.dims;
     let mut out = try_filled(output.len(), T::default(), "output")?;
@@ -284,7 +265,7 @@ pub fn push_forward_nearest<T: Voxel, M: SpaceMap + ?Sized>(
         let grid = offset_grid(g, DVec3::new(0.0, 0.0, k0 as f64), [nx, ny, k1 - k0]);
         let images = &mut images[..grid.len()];
         map.apply_grid(&grid, images)
-            .map_err(|source| PushForwardError::Map {
+            .map_err(|source| WarpError::MapOnGrid {
                 grid: "voxel-centre",
                 source,
             })?;
@@ -315,7 +296,7 @@ pub fn push_forward_nearest<T: Voxel, M: SpaceMap + ?Sized>(
             }
         }
     }
-    let volume = Volume::new(*output, out).map_err(PushForwardError::OutputGeometry)?;
+    let volume = Volume::new(*output, out).map_err(output_geometry)?;
     Ok(PushForward { volume, stats })
 }
 
@@ -337,16 +318,16 @@ pub fn push_forward_nearest<T: Voxel, M: SpaceMap + ?Sized>(
 /// each box covers: a map that blows a voxel up over a large region costs accordingly.
 ///
 /// # Errors
-/// [`PushForwardError::OutputGeometry`] for an invalid `output`,
-/// [`PushForwardError::Background`] for a non-finite background,
-/// [`PushForwardError::Map`] if the map's grid evaluation fails,
-/// [`PushForwardError::Allocation`] if a working buffer cannot be allocated.
+/// [`WarpError::Geometry`] for an invalid `output`,
+/// [`WarpError::Background`] for a non-finite background,
+/// [`WarpError::MapOnGrid`] if the map's grid evaluation fails,
+/// [`WarpError::Allocation`] if a working buffer cannot be allocated.
 pub fn push_forward_antialiased<T: Voxel, M: SpaceMap + ?Sized>(
     input: &Volume<T>,
     map: &M,
     output: &Geometry,
     options: &AntialiasOptions,
-) -> Result<PushForward<T>, PushForwardError> {
+) -> Result<PushForward<T>, WarpError> {
     let (acc, stats) = accumulate(input, map, output, options)?;
     finish(acc, stats, output, options)
 }
@@ -361,9 +342,20 @@ pub fn push_forward_antialiased_f32<T: Voxel, M: SpaceMap + ?Sized>(
     map: &M,
     output: &Geometry,
     options: &AntialiasOptions,
-) -> Result<PushForward<f32>, PushForwardError> {
+) -> Result<PushForward<f32>, WarpError> {
     let (acc, stats) = accumulate(input, map, output, options)?;
     finish(acc, stats, output, options)
+}
+
+/// True's normalisation of one output voxel's tallies (see the module docs): `V / W` where
+/// `W ≥ 1`, else `V + (1 − W)·background`.
+#[inline]
+pub(crate) fn normalise(v: f64, w: f64, background: f64) -> f64 {
+    if w >= 1.0 {
+        v / w
+    } else {
+        v + (1.0 - w) * background
+    }
 }
 
 /// Normalise the tallies `[V, W]` into the output volume (True's rule plus background).
@@ -372,21 +364,14 @@ fn finish<U: Voxel>(
     stats: PushForwardStats,
     output: &Geometry,
     options: &AntialiasOptions,
-) -> Result<PushForward<U>, PushForwardError> {
+) -> Result<PushForward<U>, WarpError> {
     let background = options.background;
     let data: Vec<U> = acc
         .par_iter()
         .with_min_len(4096)
-        .map(|&[v, w]| {
-            let (v, w) = (f64::from(v), f64::from(w));
-            U::from_f64(if w >= 1.0 {
-                v / w
-            } else {
-                v + (1.0 - w) * background
-            })
-        })
+        .map(|&[v, w]| U::from_f64(normalise(f64::from(v), f64::from(w), background)))
         .collect();
-    let volume = Volume::new(*output, data).map_err(PushForwardError::OutputGeometry)?;
+    let volume = Volume::new(*output, data).map_err(output_geometry)?;
     Ok(PushForward { volume, stats })
 }
 
@@ -403,12 +388,10 @@ fn accumulate<T: Voxel, M: SpaceMap + ?Sized>(
     map: &M,
     output: &Geometry,
     options: &AntialiasOptions,
-) -> Result<(Vec<[f32; 2]>, PushForwardStats), PushForwardError> {
-    output
-        .validate()
-        .map_err(PushForwardError::OutputGeometry)?;
+) -> Result<(Vec<[f32; 2]>, PushForwardStats), WarpError> {
+    output.validate().map_err(output_geometry)?;
     if !options.background.is_finite() {
-        return Err(PushForwardError::Background(options.background));
+        return Err(WarpError::Background(options.background));
     }
     let to_index = ToIndex::new(output);
     let plane_out = output.dims[0] * output.dims[1];
@@ -419,7 +402,7 @@ fn accumulate<T: Voxel, M: SpaceMap + ?Sized>(
     // added in slab order, so the sums never depend on the thread count.
     let window = rayon::current_num_threads().max(1);
     for batch in slab_list.chunks(window) {
-        let tallies: Vec<Result<SlabTally, PushForwardError>> = batch
+        let tallies: Vec<Result<SlabTally, WarpError>> = batch
             .par_iter()
             .map(|&slab| tally_slab(input, map, output, &to_index, options.face_centres, slab))
             .collect();
@@ -444,38 +427,6 @@ fn accumulate<T: Voxel, M: SpaceMap + ?Sized>(
     Ok((acc, stats))
 }
 
-/// Positive overlap of `[lo, hi]` with the output voxel `[q − ½, q + ½]` (index units).
-#[inline]
-fn overlap(lo: f64, hi: f64, q: usize) -> f64 {
-    let c = q as f64;
-    (hi.min(c + 0.5) - lo.max(c - 0.5)).max(0.0)
-}
-
-/// Range `a..=b` of output indices in `0..n` whose cells `[q − ½, q + ½]` overlap `[lo, hi]`
-/// with positive length (`a = ⌊lo + ½⌋`, `b = ⌈hi − ½⌉`, clamped), or `None` if there are
-/// none. Written without `floor`/`ceil` calls: this sits in the per-voxel loop.
-#[inline]
-fn cell_range(lo: f64, hi: f64, n: usize) -> Option<(usize, usize)> {
-    let nf = n as f64;
-    // Callers pass non-NaN bounds (finite images, or the empty fold ±∞).
-    if hi <= lo || hi <= -0.5 || lo >= nf - 0.5 {
-        return None;
-    }
-    // Truncation is the floor for positive values; here lo + ½ < n.
-    let s = lo + 0.5;
-    let a = if s > 0.0 { s as usize } else { 0 };
-    let t = hi - 0.5;
-    let b = if t <= 0.0 {
-        0
-    } else if t >= nf - 1.0 {
-        n - 1
-    } else {
-        let c = t as usize;
-        if (c as f64) < t { c + 1 } else { c }
-    };
-    Some((a, b))
-}
-
 /// Evaluate `map` on the points of `grid`, convert the images to output indices and return
 /// them with the span `(min z, max z)` of the finite ones (`(+∞, −∞)` if none).
 fn face_images<M: SpaceMap + ?Sized>(
@@ -483,10 +434,10 @@ fn face_images<M: SpaceMap + ?Sized>(
     grid: &Geometry,
     to_index: &ToIndex,
     name: &'static str,
-) -> Result<(Vec<DVec3>, (f64, f64)), PushForwardError> {
+) -> Result<(Vec<DVec3>, (f64, f64)), WarpError> {
     let mut pts = try_filled(grid.len(), DVec3::ZERO, "mapped points")?;
     map.apply_grid(grid, &mut pts)
-        .map_err(|source| PushForwardError::Map { grid: name, source })?;
+        .map_err(|source| WarpError::MapOnGrid { grid: name, source })?;
     // Convert to output indices and take the z span of the finite images in the same pass
     // (min/max are order-independent, so the span does not depend on the thread count).
     let span = pts
@@ -522,7 +473,7 @@ fn tally_slab<T: Voxel, M: SpaceMap + ?Sized>(
     to_index: &ToIndex,
     faces: FaceCentres,
     (k0, k1): (usize, usize),
-) -> Result<SlabTally, PushForwardError> {
+) -> Result<SlabTally, WarpError> {
     let g = input.geometry();
     let [nx, ny, _] = g.dims;
     let nk = k1 - k0;
@@ -537,18 +488,45 @@ fn tally_slab<T: Voxel, M: SpaceMap + ?Sized>(
             let (fy, sy) = face_images(map, &gy, to_index, "y-face")?;
             let (fz, sz) = face_images(map, &gz, to_index, "z-face")?;
             let span = union(union(sx, sy), sz);
-            tally_boxes(values, [nx, ny, nk], output, span, |i, j, kk| {
-                let bx = (nx + 1) * (j + ny * kk) + i;
-                let by = nx * (j + (ny + 1) * kk) + i;
-                let bz = nx * (j + ny * kk) + i;
-                [
-                    fx[bx],
-                    fx[bx + 1],
-                    fy[by],
-                    fy[by + nx],
-                    fz[bz],
-                    fz[bz + nx * ny],
-                ]
+            let (region, mut data) = slab_buffer(output, span)?;
+            let out = output.dims;
+            let mut stats = PushForwardStats::default();
+            let mut n = 0usize;
+            for kk in 0..nk {
+                for j in 0..ny {
+                    for i in 0..nx {
+                        let d = values[n].to_f64();
+                        n += 1;
+                        let bx = (nx + 1) * (j + ny * kk) + i;
+                        let by = nx * (j + (ny + 1) * kk) + i;
+                        let bz = nx * (j + ny * kk) + i;
+                        let pts = [
+                            fx[bx],
+                            fx[bx + 1],
+                            fy[by],
+                            fy[by + nx],
+                            fz[bz],
+                            fz[bz + nx * ny],
+                        ];
+                        if !pts.iter().all(|p| p.is_finite()) {
+                            stats.non_finite += 1;
+                            continue;
+                        }
+                        let (lo, hi) = pts[1..]
+                            .iter()
+                            .fold((pts[0], pts[0]), |(lo, hi), p| (lo.min(*p), hi.max(*p)));
+                        if splat(lo, hi, d, 1.0, out, &region, &mut data) {
+                            stats.mapped += 1;
+                        } else {
+                            stats.outside += 1;
+                        }
+                    }
+                }
+            }
+            Ok(SlabTally {
+                z0: region.lo[2],
+                data,
+                stats,
             })
         }
         FaceCentres::AveragedCentres => {
@@ -560,102 +538,42 @@ fn tally_slab<T: Voxel, M: SpaceMap + ?Sized>(
                 [nx + 2, ny + 2, nk + 2],
             );
             let (c, span) = face_images(map, &gc, to_index, "voxel-centre")?;
-            let sy = nx + 2;
-            let sz = sy * (ny + 2);
             // The face averages lie within the span of the centres.
-            tally_boxes(values, [nx, ny, nk], output, span, |i, j, kk| {
-                let n = (i + 1) + sy * (j + 1) + sz * (kk + 1);
-                let p = c[n];
-                [
-                    0.5 * (c[n - 1] + p),
-                    0.5 * (p + c[n + 1]),
-                    0.5 * (c[n - sy] + p),
-                    0.5 * (p + c[n + sy]),
-                    0.5 * (c[n - sz] + p),
-                    0.5 * (p + c[n + sz]),
-                ]
+            let (region, mut data) = slab_buffer(output, span)?;
+            let src = Voxels {
+                values,
+                vdims: [nx, ny, nk],
+                centres: &c,
+                cdims: [nx + 2, ny + 2],
+            };
+            let all = Region {
+                lo: [0; 3],
+                dims: [nx, ny, nk],
+            };
+            let stats = tally_averaged(&src, &all, [1, 1, 1], output.dims, &region, &mut data, 1.0);
+            Ok(SlabTally {
+                z0: region.lo[2],
+                data,
+                stats,
             })
         }
     }
 }
 
-/// Tally the boxes of a slab of `dims` input voxels holding `values` (x fastest). `faces`
-/// gives the six face-centre images, in output index space, of slab voxel `(i, j, k)`;
-/// `(zlo, zhi)` bounds the z of every finite image.
-fn tally_boxes<T: Voxel, F: Fn(usize, usize, usize) -> [DVec3; 6]>(
-    values: &[T],
-    [nx, ny, nk]: [usize; 3],
+/// The zeroed tally buffer of a slab whose finite images have z in `(zlo, zhi)`: whole output
+/// planes over the z cells that span reaches (empty if none).
+fn slab_buffer(
     output: &Geometry,
     (zlo, zhi): (f64, f64),
-    faces: F,
-) -> Result<SlabTally, PushForwardError> {
+) -> Result<(Region, Vec<[f32; 2]>), WarpError> {
     let [nxo, nyo, nzo] = output.dims;
-    let plane_out = nxo * nyo;
-    let (z0, data_len) = match cell_range(zlo, zhi, nzo) {
-        Some((a, b)) => (a, (b - a + 1) * plane_out),
-        None => (0, 0),
+    let region = match cell_range(zlo, zhi, nzo) {
+        Some((a, b)) => Region {
+            lo: [0, 0, a],
+            dims: [nxo, nyo, b - a + 1],
+        },
+        None => Region::default(),
     };
-    let mut data = try_filled(data_len, [0.0f32; 2], "slab accumulator")?;
-    let z_end = z0 + data_len / plane_out.max(1);
-
-    let mut stats = PushForwardStats::default();
-    let mut n = 0usize;
-    for kk in 0..nk {
-        for j in 0..ny {
-            for i in 0..nx {
-                let d = values[n].to_f64();
-                n += 1;
-                let pts = faces(i, j, kk);
-                if !pts.iter().all(|p| p.is_finite()) {
-                    stats.non_finite += 1;
-                    continue;
-                }
-                let (lo, hi) = pts[1..]
-                    .iter()
-                    .fold((pts[0], pts[0]), |(lo, hi), p| (lo.min(*p), hi.max(*p)));
-                // The slab buffer spans every finite image's z, so clamping to it only
-                // guards the invariant.
-                let ranges = (
-                    cell_range(lo.x, hi.x, nxo),
-                    cell_range(lo.y, hi.y, nyo),
-                    cell_range(lo.z, hi.z, nzo)
-                        .map(|(a, b)| (a.max(z0), b.min(z_end.saturating_sub(1))))
-                        .filter(|(a, b)| a <= b && *b < z_end),
-                );
-                let (Some((xa, xb)), Some((ya, yb)), Some((za, zb))) = ranges else {
-                    stats.outside += 1;
-                    continue;
-                };
-                let mut total = 0.0;
-                for qz in za..=zb {
-                    let wz = overlap(lo.z, hi.z, qz);
-                    if wz <= 0.0 {
-                        continue;
-                    }
-                    for qy in ya..=yb {
-                        let wyz = wz * overlap(lo.y, hi.y, qy);
-                        if wyz <= 0.0 {
-                            continue;
-                        }
-                        let row = ((qz - z0) * nyo + qy) * nxo;
-                        let cells = &mut data[row + xa..=row + xb];
-                        for (qx, cell) in (xa..=xb).zip(cells) {
-                            let w = wyz * overlap(lo.x, hi.x, qx);
-                            if w > 0.0 {
-                                cell[0] += (w * d) as f32;
-                                cell[1] += w as f32;
-                                total += w;
-                            }
-                        }
-                    }
-                }
-                if total > 0.0 {
-                    stats.mapped += 1;
-                } else {
-                    stats.outside += 1;
-                }
-            }
-        }
-    }
-    Ok(SlabTally { z0, data, stats })
+    let data = try_filled(region.len(), [0.0f32; 2], "slab accumulator")?;
+    Ok((region, data))
 }

@@ -4,9 +4,10 @@
 use glam::{DMat3, DVec3};
 use volmorph_deform::{Affine, BSplineLattice, DeformError, Identity, SpaceMap};
 use volmorph_volume::{Geometry, Volume};
+use volmorph_warp::WarpError;
 use volmorph_warp::pushforward::{
-    AntialiasOptions, FaceCentres, PushForwardError, push_forward_antialiased,
-    push_forward_antialiased_f32, push_forward_nearest,
+    AntialiasOptions, FaceCentres, push_forward_antialiased, push_forward_antialiased_f32,
+    push_forward_nearest,
 };
 
 /// A deterministic, structured u8 volume (no two neighbours alike, values 0..=250).
@@ -392,16 +393,25 @@ fn invalid_input_is_a_clear_error() {
     let bad = Geometry::new([4, 0, 4]);
     assert!(matches!(
         push_forward_nearest(&v, &Identity, &bad),
-        Err(PushForwardError::OutputGeometry(_))
+        Err(WarpError::Geometry {
+            what: "output grid",
+            ..
+        })
     ));
     assert!(matches!(
         push_forward_antialiased(&v, &Identity, &bad, &opts),
-        Err(PushForwardError::OutputGeometry(_))
+        Err(WarpError::Geometry {
+            what: "output grid",
+            ..
+        })
     ));
     let singular = g.with_direction(DMat3::ZERO);
     assert!(matches!(
         push_forward_antialiased(&v, &Identity, &singular, &opts),
-        Err(PushForwardError::OutputGeometry(_))
+        Err(WarpError::Geometry {
+            what: "output grid",
+            ..
+        })
     ));
     let nan_bg = AntialiasOptions {
         background: f64::NAN,
@@ -413,7 +423,7 @@ fn invalid_input_is_a_clear_error() {
     assert!(
         matches!(
             e,
-            PushForwardError::Map {
+            WarpError::MapOnGrid {
                 grid: "voxel-centre",
                 ..
             }
@@ -423,7 +433,7 @@ fn invalid_input_is_a_clear_error() {
     let e =
         push_forward_antialiased(&v, &Failing, &g, &self::opts(FaceCentres::Mapped)).unwrap_err();
     assert!(
-        matches!(e, PushForwardError::Map { grid: "x-face", .. }),
+        matches!(e, WarpError::MapOnGrid { grid: "x-face", .. }),
         "{e}"
     );
     let e = push_forward_nearest(&v, &Failing, &g).unwrap_err();

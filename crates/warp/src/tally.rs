@@ -1,0 +1,473 @@
+//! The box-filter tally shared by the full and the incremental push-forward (True 1992 §5.4).
+//!
+//! An input voxel of value `d` whose proxy box is `[lo, hi]` (output continuous-index space)
+//! adds, to every output voxel `q` it overlaps, the weight
+//! `w = w_z(q_z)·w_y(q_y)·w_x(q_x)` — the overlap of `[lo, hi]` with `[q − ½, q + ½]` per axis,
+//! multiplied in that order — to `W_q` and `w·d` to `V_q`. Tallies live in a buffer covering
+//! a [`Region`] of the output grid; the caller sizes the region so that it holds every box
+//! (boxes are clamped to it only to guard that invariant).
+//!
+//! The per-axis overlaps are computed once per box (not once per cell), and the whole
+//! product is scaled by a sign, so erasing a box (`sign = −1`) subtracts exactly the
+//! values that adding it (`sign = +1`) added.
+
+use glam::DVec3;
+use volmorph_volume::Voxel;
+
+use crate::pushforward::PushForwardStats;
+
+/// Boxes spanning at most this many output cells along every axis take the fast path with
+/// per-axis weights in stack arrays; larger ones compute the overlaps cell by cell.
+const SMALL: usize = 4;
+
+/// One output voxel's tallies `[V, W]` (weighted value, weight).
+pub(crate) trait Cell: Copy + Send + Sync {
+    /// Add `wd` to `V` and `w` to `W`.
+    fn add(&mut self, wd: f64, w: f64);
+}
+
+impl Cell for [f32; 2] {
+    #[inline(always)]
+    fn add(&mut self, wd: f64, w: f64) {
+        self[0] += wd as f32;
+        self[1] += w as f32;
+    }
+}
+
+impl Cell for [f64; 2] {
+    #[inline(always)]
+    fn add(&mut self, wd: f64, w: f64) {
+        self[0] += wd;
+        self[1] += w;
+    }
+}
+
+/// A box of grid indices `lo .. lo + dims` (half-open per axis), x fastest in any buffer laid
+/// over it.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
+pub(crate) struct Region {
+    /// First index per axis.
+    pub lo: [usize; 3],
+    /// Extent per axis.
+    pub dims: [usize; 3],
+}
+
+impl Region {
+    /// Number of indices in the box.
+    pub fn len(&self) -> usize {
+        self.dims[0] * self.dims[1] * self.dims[2]
+    }
+
+    /// `true` if the box holds no index.
+    pub fn is_empty(&self) -> bool {
+        self.dims.contains(&0)
+    }
+
+    /// The region of output cells overlapped with positive length by the axis-aligned box
+    /// `[lo, hi]` (output index space) in a grid of `dims`; empty if none (or if the bounds
+    /// are empty or NaN).
+    pub fn of_bounds(lo: DVec3, hi: DVec3, dims: [usize; 3]) -> Self {
+        let mut r = Self::default();
+        for a in 0..3 {
+            if lo[a].partial_cmp(&hi[a]).is_none_or(|o| o.is_gt()) {
+                return Self::default();
+            }
+            match cell_range(lo[a], hi[a], dims[a]) {
+                Some((s, e)) => {
+                    r.lo[a] = s;
+                    r.dims[a] = e - s + 1;
+                }
+                None => return Self::default(),
+            }
+        }
+        r
+    }
+
+    /// Smallest region holding both (an empty region is the neutral element).
+    pub fn union(&self, o: &Self) -> Self {
+        if self.is_empty() {
+            return *o;
+        }
+        if o.is_empty() {
+            return *self;
+        }
+        let mut r = Self::default();
+        for a in 0..3 {
+            let s = self.lo[a].min(o.lo[a]);
+            let e = (self.lo[a] + self.dims[a]).max(o.lo[a] + o.dims[a]);
+            r.lo[a] = s;
+            r.dims[a] = e - s;
+        }
+        r
+    }
+}
+
+/// Minimum of two non-NaN numbers (one `minsd`; `f64::min` also handles NaN, at a cost).
+#[inline(always)]
+fn fmin(a: f64, b: f64) -> f64 {
+    if a < b { a } else { b }
+}
+
+/// Maximum of two non-NaN numbers (one `maxsd`).
+#[inline(always)]
+fn fmax(a: f64, b: f64) -> f64 {
+    if a > b { a } else { b }
+}
+
+/// Component-wise [`fmin`].
+#[inline(always)]
+pub(crate) fn vmin(a: DVec3, b: DVec3) -> DVec3 {
+    DVec3::new(fmin(a.x, b.x), fmin(a.y, b.y), fmin(a.z, b.z))
+}
+
+/// Component-wise [`fmax`].
+#[inline(always)]
+pub(crate) fn vmax(a: DVec3, b: DVec3) -> DVec3 {
+    DVec3::new(fmax(a.x, b.x), fmax(a.y, b.y), fmax(a.z, b.z))
+}
+
+/// Positive overlap of `[lo, hi]` with the output voxel `[q − ½, q + ½]` (index units).
+#[inline(always)]
+pub(crate) fn overlap(lo: f64, hi: f64, q: usize) -> f64 {
+    let c = q as f64;
+    fmax(fmin(hi, c + 0.5) - fmax(lo, c - 0.5), 0.0)
+}
+
+/// Range `a..=b` of output indices in `0..n` whose cells `[q − ½, q + ½]` overlap `[lo, hi]`
+/// with positive length (`a = ⌊lo + ½⌋`, `b = ⌈hi − ½⌉`, clamped), or `None` if there are
+/// none. Written without `floor`/`ceil` calls: this sits in the per-voxel loop.
+#[inline(always)]
+pub(crate) fn cell_range(lo: f64, hi: f64, n: usize) -> Option<(usize, usize)> {
+    let nf = n as f64;
+    // Callers pass non-NaN bounds (finite images, or the empty fold ±∞).
+    if hi <= lo || hi <= -0.5 || lo >= nf - 0.5 {
+        return None;
+    }
+    // Truncation is the floor for positive values; here lo + ½ < n.
+    let s = lo + 0.5;
+    let a = if s > 0.0 { s as usize } else { 0 };
+    let t = hi - 0.5;
+    let b = if t <= 0.0 {
+        0
+    } else if t >= nf - 1.0 {
+        n - 1
+    } else {
+        let c = t as usize;
+        if (c as f64) < t { c + 1 } else { c }
+    };
+    Some((a, b))
+}
+
+/// Cell range of `[lo, hi]` along one axis of an output grid of `n` cells, clamped to the
+/// region `[r0, r0 + rn)`; `None` if empty.
+#[inline(always)]
+fn axis_range(lo: f64, hi: f64, n: usize, r0: usize, rn: usize) -> Option<(usize, usize)> {
+    let (a, b) = cell_range(lo, hi, n)?;
+    let (a, b) = (a.max(r0), b.min((r0 + rn).checked_sub(1)?));
+    (a <= b).then_some((a, b))
+}
+
+/// For a box `[lo, hi]` at most two cells long: the first cell `a = ⌊lo + ½⌋`, the
+/// overlaps with cells `a`, `a + 1`, `a + 2` (zero-padded) and whether the third cell is
+/// needed (length above 1), provided every cell used lies in the region `[r0, r0 + rn)`.
+/// Equal to [`overlap`], since `a − ½ ≤ lo < a + ½` and `hi ≤ lo + 2`.
+#[inline(always)]
+fn short(lo: f64, hi: f64, r0: usize, rn: usize) -> Option<(usize, [f64; 3], bool)> {
+    let s = lo + 0.5;
+    let len = hi - lo;
+    if s >= 0.0 && len > 0.0 && len <= 2.0 {
+        // Truncation is the floor for s ≥ 0 (and saturates for huge s, failing below).
+        // Signed conversions: one instruction each, where unsigned ones take several.
+        let ai = s as i64;
+        let a = ai as usize;
+        let e = ai as f64 + 0.5;
+        if len <= 1.0 {
+            if a >= r0 && a + 2 <= r0 + rn {
+                return Some((a, [fmin(hi, e) - lo, fmax(hi - e, 0.0), 0.0], false));
+            }
+        } else if a >= r0 && a + 3 <= r0 + rn {
+            let e1 = e + 1.0;
+            return Some((a, [e - lo, fmin(hi, e1) - e, fmax(hi - e1, 0.0)], true));
+        }
+    }
+    None
+}
+
+/// One box of the fast path: buffer index of its first cell, row and plane strides of the
+/// buffer, per-axis weights (x, y, z), value and sign.
+struct Kernel {
+    base: usize,
+    sy: usize,
+    sz: usize,
+    w: [[f64; 3]; 3],
+    d: f64,
+    sign: f64,
+}
+
+impl Kernel {
+    /// Add the `NX × NY × NZ` cells (`w = ((sign·w_z)·w_y)·w_x`, as the general path).
+    #[inline(always)]
+    fn run<C: Cell, const NX: usize, const NY: usize, const NZ: usize>(&self, buf: &mut [C]) {
+        let [wx, wy, wz] = &self.w;
+        for (z, &wz) in wz.iter().enumerate().take(NZ) {
+            let wz = self.sign * wz;
+            for (y, &wy) in wy.iter().enumerate().take(NY) {
+                let wyz = wz * wy;
+                let i = self.base + z * self.sz + y * self.sy;
+                if let Some(cells) = buf.get_mut(i..i + NX) {
+                    for (cell, &wx) in cells.iter_mut().zip(wx) {
+                        let w = wyz * wx;
+                        cell.add(w * self.d, w);
+                    }
+                }
+            }
+        }
+    }
+}
+
+/// Per-axis overlaps of `[lo, hi]` with cells `a..=b` (at most [`SMALL`]) and their sum.
+#[inline(always)]
+fn small_weights(lo: f64, hi: f64, a: usize, b: usize) -> ([f64; SMALL], f64) {
+    let mut w = [0.0; SMALL];
+    let mut s = 0.0;
+    for (q, slot) in (a..=b).zip(w.iter_mut()) {
+        *slot = overlap(lo, hi, q);
+        s += *slot;
+    }
+    (w, s)
+}
+
+/// Spread value `d` of the box `[lo, hi]` (output index space; finite) over the cells of
+/// `buf`, which covers `region` of an output grid of `out` dims: `V += sign·w·d`,
+/// `W += sign·w` per overlapped cell. Returns `true` if the box overlaps some output voxel
+/// with positive volume.
+#[inline(always)]
+pub(crate) fn splat<C: Cell>(
+    lo: DVec3,
+    hi: DVec3,
+    d: f64,
+    sign: f64,
+    out: [usize; 3],
+    region: &Region,
+    buf: &mut [C],
+) -> bool {
+    let [rx, ry, rz] = region.lo;
+    let [dx, dy, dz] = region.dims;
+    // Fast path: a box at most two cells long along every axis, inside the region, covers
+    // two or three cells per axis from `a = ⌊lo + ½⌋` (the last possibly with weight 0,
+    // which adds nothing to a finite value); fully unrolled per shape. Same weights and
+    // products as the general path.
+    if d.is_finite()
+        && let (Some((xa, wx, tx)), Some((ya, wy, ty)), Some((za, wz, tz))) = (
+            short(lo.x, hi.x, rx, dx),
+            short(lo.y, hi.y, ry, dy),
+            short(lo.z, hi.z, rz, dz),
+        )
+    {
+        let base = ((za - rz) * dy + (ya - ry)) * dx + (xa - rx);
+        let k = Kernel {
+            base,
+            sy: dx,
+            sz: dx * dy,
+            w: [wx, wy, wz],
+            d,
+            sign,
+        };
+        match (tx, ty, tz) {
+            (false, false, false) => k.run::<C, 2, 2, 2>(buf),
+            (true, false, false) => k.run::<C, 3, 2, 2>(buf),
+            (false, true, false) => k.run::<C, 2, 3, 2>(buf),
+            (true, true, false) => k.run::<C, 3, 3, 2>(buf),
+            (false, false, true) => k.run::<C, 2, 2, 3>(buf),
+            (true, false, true) => k.run::<C, 3, 2, 3>(buf),
+            (false, true, true) => k.run::<C, 2, 3, 3>(buf),
+            (true, true, true) => k.run::<C, 3, 3, 3>(buf),
+        }
+        return true;
+    }
+    let (Some((xa, xb)), Some((ya, yb)), Some((za, zb))) = (
+        axis_range(lo.x, hi.x, out[0], rx, dx),
+        axis_range(lo.y, hi.y, out[1], ry, dy),
+        axis_range(lo.z, hi.z, out[2], rz, dz),
+    ) else {
+        return false;
+    };
+    if xb - xa < SMALL && yb - ya < SMALL && zb - za < SMALL {
+        let (wx, sx) = small_weights(lo.x, hi.x, xa, xb);
+        let (wy, sy) = small_weights(lo.y, hi.y, ya, yb);
+        let (wz, sz) = small_weights(lo.z, hi.z, za, zb);
+        let nx = xb - xa + 1;
+        for (qz, &wz) in (za..=zb).zip(&wz) {
+            let wz = sign * wz;
+            for (qy, &wy) in (ya..=yb).zip(&wy) {
+                let wyz = wz * wy;
+                let row = ((qz - rz) * dy + (qy - ry)) * dx + (xa - rx);
+                if let Some(cells) = buf.get_mut(row..row + nx) {
+                    for (cell, &wx) in cells.iter_mut().zip(&wx) {
+                        let w = wyz * wx;
+                        cell.add(w * d, w);
+                    }
+                }
+            }
+        }
+        return sx * sy * sz > 0.0;
+    }
+    let mut total = 0.0;
+    for qz in za..=zb {
+        let wz = overlap(lo.z, hi.z, qz);
+        if wz <= 0.0 {
+            continue;
+        }
+        let wz = sign * wz;
+        for qy in ya..=yb {
+            let wyz = wz * overlap(lo.y, hi.y, qy);
+            if wyz == 0.0 {
+                continue;
+            }
+            let row = ((qz - rz) * dy + (qy - ry)) * dx;
+            let Some(cells) = buf.get_mut(row + (xa - rx)..=row + (xb - rx)) else {
+                continue;
+            };
+            for (qx, cell) in (xa..=xb).zip(cells) {
+                let w = wyz * overlap(lo.x, hi.x, qx);
+                cell.add(w * d, w);
+                total += w.abs();
+            }
+        }
+    }
+    total > 0.0
+}
+
+/// Bounds `(lo, hi)` of the six face-centre images of a voxel with centre image `p` and
+/// neighbouring centre images `nb` (−x, +x, −y, +y, −z, +z), each face image being the mean
+/// of `p` and one neighbour (True §5.4). `None` if any face image is NaN or infinite.
+///
+/// `min_k ½(p + c_k) = ½(p + min_k c_k)` holds exactly in floating point (rounding is
+/// monotone and halving exact), so the box is bit-identical to the bounds of the six means.
+#[inline(always)]
+pub(crate) fn averaged_bounds(p: DVec3, nb: [DVec3; 6]) -> Option<(DVec3, DVec3)> {
+    let s = p + nb[0] + nb[1] + nb[2] + nb[3] + nb[4] + nb[5];
+    // A finite sum means every point is finite; otherwise check them one by one (the sum
+    // of finite points may overflow).
+    let all_finite = s.is_finite() || (p.is_finite() && nb.iter().all(|q| q.is_finite()));
+    if !all_finite {
+        return None;
+    }
+    // No NaN past this point, so the cheap min/max select exactly.
+    let mn = vmin(
+        vmin(vmin(nb[0], nb[1]), vmin(nb[2], nb[3])),
+        vmin(nb[4], nb[5]),
+    );
+    let mx = vmax(
+        vmax(vmax(nb[0], nb[1]), vmax(nb[2], nb[3])),
+        vmax(nb[4], nb[5]),
+    );
+    let lo = 0.5 * (p + mn);
+    let hi = 0.5 * (p + mx);
+    (lo.is_finite() && hi.is_finite()).then_some((lo, hi))
+}
+
+/// [`averaged_bounds`] without branches: the bounds and `true`, or `false` when a point is
+/// NaN or infinite or a sum overflows (then [`averaged_bounds`] decides).
+#[inline(always)]
+fn raw_bounds(p: DVec3, nb: [DVec3; 6]) -> (DVec3, DVec3, bool) {
+    let s = p + nb[0] + nb[1] + nb[2] + nb[3] + nb[4] + nb[5];
+    let mn = vmin(
+        vmin(vmin(nb[0], nb[1]), vmin(nb[2], nb[3])),
+        vmin(nb[4], nb[5]),
+    );
+    let mx = vmax(
+        vmax(vmax(nb[0], nb[1]), vmax(nb[2], nb[3])),
+        vmax(nb[4], nb[5]),
+    );
+    let lo = 0.5 * (p + mn);
+    let hi = 0.5 * (p + mx);
+    // A finite sum means every point is finite (NaN and infinities propagate), and then the
+    // cheap min/max select exactly.
+    let ok = (s.x + s.y + s.z + lo.x + lo.y + lo.z + hi.x + hi.y + hi.z).is_finite();
+    (lo, hi, ok)
+}
+
+/// Where a box of input voxels finds its values and centre images.
+pub(crate) struct Voxels<'a, T> {
+    /// Input values, x fastest, rows of `vdims[0]`, planes of `vdims[0]·vdims[1]`.
+    pub values: &'a [T],
+    /// Dims of the value array.
+    pub vdims: [usize; 3],
+    /// Centre images (output index space), x fastest, rows of `cdims[0]`, planes of
+    /// `cdims[0]·cdims[1]`; every voxel's six neighbours must be present.
+    pub centres: &'a [DVec3],
+    /// Row and plane extents of the centre array (x and y dims).
+    pub cdims: [usize; 2],
+}
+
+/// Tally (with `sign`) the boxes of the input voxels in `vbox` (value-array indices), whose
+/// centre images sit at centre-array index `c0 + (voxel − vbox.lo)`, with True's averaged
+/// face centres, into `buf` over `region` of an output grid of `out` dims.
+pub(crate) fn tally_averaged<T: Voxel, C: Cell>(
+    src: &Voxels<'_, T>,
+    vbox: &Region,
+    c0: [usize; 3],
+    out: [usize; 3],
+    region: &Region,
+    buf: &mut [C],
+    sign: f64,
+) -> PushForwardStats {
+    let mut stats = PushForwardStats::default();
+    let [vx, vy, _] = src.vdims;
+    let [sy, _] = src.cdims;
+    let sz = src.cdims[0] * src.cdims[1];
+    let nx = vbox.dims[0];
+    if nx == 0 {
+        return stats;
+    }
+    let c = src.centres;
+    for dk in 0..vbox.dims[2] {
+        for dj in 0..vbox.dims[1] {
+            let v0 = vbox.lo[0] + vx * (vbox.lo[1] + dj + vy * (vbox.lo[2] + dk));
+            // Centre index of the row's first voxel; its −x neighbour is one before.
+            let n0 = c0[0] + sy * (c0[1] + dj) + sz * (c0[2] + dk);
+            let rows = (|| {
+                let (ym, zm) = (n0.checked_sub(sy)?, n0.checked_sub(sz)?);
+                Some((
+                    src.values.get(v0..v0 + nx)?,
+                    c.get(n0.checked_sub(1)?..n0 + nx + 1)?,
+                    c.get(ym..ym + nx)?,
+                    c.get(n0 + sy..n0 + sy + nx)?,
+                    c.get(zm..zm + nx)?,
+                    c.get(n0 + sz..n0 + sz + nx)?,
+                ))
+            })();
+            let Some((vals, row, ym, yp, zm, zp)) = rows else {
+                // Unreachable for the callers' layouts; count the row as non-finite rather
+                // than panic.
+                stats.non_finite += nx;
+                continue;
+            };
+            let it = row
+                .windows(3)
+                .zip(vals)
+                .zip(ym.iter().zip(yp))
+                .zip(zm.iter().zip(zp));
+            for (((w, v), (ym, yp)), (zm, zp)) in it {
+                let nb = [w[0], w[2], *ym, *yp, *zm, *zp];
+                let (lo, hi) = match raw_bounds(w[1], nb) {
+                    (lo, hi, true) => (lo, hi),
+                    _ => match averaged_bounds(w[1], nb) {
+                        Some(b) => b,
+                        None => {
+                            stats.non_finite += 1;
+                            continue;
+                        }
+                    },
+                };
+                if splat(lo, hi, v.to_f64(), sign, out, region, buf) {
+                    stats.mapped += 1;
+                } else {
+                    stats.outside += 1;
+                }
+            }
+        }
+    }
+    stats
+}
