@@ -4,6 +4,22 @@
 //! status 1), shows a progress bar for long work when standard error is a terminal, and writes
 //! outputs to a temporary file that is renamed into place only when complete.
 
+/// `println!` for the command's report on standard output, except that a closed pipe (as in
+/// `volmorph info x.nii | head -1`) ends the process quietly with status 141 — what a
+/// program killed by `SIGPIPE` reports — instead of panicking.
+macro_rules! say {
+    ($($arg:tt)*) => {
+        $crate::write_stdout(format_args!("{}\n", format_args!($($arg)*)))
+    };
+}
+
+/// `print!` with the closed-pipe handling of `say!`.
+macro_rules! say_raw {
+    ($($arg:tt)*) => {
+        $crate::write_stdout(format_args!($($arg)*))
+    };
+}
+
 mod args;
 mod cmd;
 mod progress;
@@ -93,6 +109,20 @@ fn main() -> ExitCode {
             eprintln!("volmorph: error: {}", error_chain(&e));
             ExitCode::FAILURE
         }
+    }
+}
+
+/// Write to standard output; on a closed pipe exit with status 141 (see `say!`), on any
+/// other write error report it and exit with status 1.
+fn write_stdout(args: std::fmt::Arguments<'_>) {
+    use std::io::Write;
+    let mut out = std::io::stdout().lock();
+    if let Err(e) = out.write_fmt(args) {
+        if e.kind() == std::io::ErrorKind::BrokenPipe {
+            std::process::exit(141);
+        }
+        eprintln!("volmorph: error: cannot write to standard output: {e}");
+        std::process::exit(1);
     }
 }
 

@@ -259,10 +259,51 @@ fn mesh_info_and_convert() {
 }
 
 #[test]
-fn demo_writes_every_model() {
+fn demo_warps_the_teapot_and_writes_every_model() {
     let dir = tempfile::tempdir().unwrap();
     let out = dir.path().join("demo");
-    ok(&[&"demo", &"--out", &out, &"--size", &"16"]);
+    let text = ok(&[
+        &"demo",
+        &"--out",
+        &out,
+        &"--size",
+        &"32",
+        &"--gallery-size",
+        &"16",
+        &"--picture",
+        &"80x60",
+    ]);
+    // The spout lands on its target, the incremental warp equals the full one, undo
+    // restores the original, and the timings are printed.
+    assert!(text.contains("lands"), "{text}");
+    let diff = |key: &str| -> f64 {
+        let line = text.lines().find(|l| l.contains(key)).expect(key);
+        line.split("max |difference| ")
+            .nth(1)
+            .and_then(|r| r.split_whitespace().next())
+            .and_then(|v| v.parse().ok())
+            .expect(line)
+    };
+    assert!(diff("incremental result vs full") <= 255.0 * 1e-5, "{text}");
+    assert!(diff("undo restores") <= 255.0 * 1e-5, "{text}");
+    assert!(text.contains("timings"), "{text}");
+    for f in [
+        "teapot.nii.gz",
+        "teapot_warped.nii.gz",
+        "teapot_jacobian.nii.gz",
+        "lattice_after.json",
+        "lattice_after.tfm",
+        "teapot_before.ply",
+        "teapot_after.ply",
+        "teapot_before_side.png",
+        "teapot_after_side.png",
+        "teapot_after_iso.png",
+        "index.txt",
+    ] {
+        assert!(out.join(f).exists(), "missing {f}");
+    }
+    let info = ok(&[&"mesh", &"info", &out.join("teapot_after.ply")]);
+    assert!(info.contains("closed oriented manifold"), "{info}");
     for name in ["sphere", "torus", "rounded-box", "clay-block", "teapot"] {
         for f in [
             format!("{name}.nii.gz"),
@@ -270,10 +311,9 @@ fn demo_writes_every_model() {
             format!("{name}_z.png"),
             format!("{name}_sdf_x.png"),
         ] {
-            assert!(out.join(&f).exists(), "missing {f}");
+            assert!(out.join("models").join(&f).exists(), "missing models/{f}");
         }
     }
-    assert!(out.join("index.txt").exists());
 }
 
 #[test]

@@ -115,7 +115,7 @@ pub fn run(a: &Args) -> anyhow::Result<()> {
 
     for (d, (from, to)) in drags.iter().zip(a.from.iter().zip(&a.to)) {
         let landed = lattice.apply(d.material);
-        println!(
+        say!(
             "dragged {} -> {}: now at {} (off by {:.3e})",
             fmt(*from),
             fmt(*to),
@@ -123,7 +123,7 @@ pub fn run(a: &Args) -> anyhow::Result<()> {
             (landed - *to).length()
         );
     }
-    println!(
+    say!(
         "moved {} control points (rank {} of {} drags), solve {:.2} ms, warp {:.1} ms",
         solution.displacements().len(),
         solution.rank(),

@@ -32,9 +32,9 @@ pub fn run(args: &Args) -> anyhow::Result<()> {
     let stats = (!args.no_stats).then(|| Statistics::of_any(&file.volume));
     pb.finish_and_clear();
     if args.json {
-        println!("{}", json(&file, stats.as_ref()));
+        say!("{}", json(&file, stats.as_ref()));
     } else {
-        print!(
+        say_raw!(
             "{}",
             report(&args.input, &file, stats.as_ref(), args.header)
         );

@@ -74,7 +74,7 @@ pub fn run(args: &Args) -> anyhow::Result<()> {
     mesh::write_with(&args.output, &surface.mesh, &opts).context("cannot write")?;
     pb.finish_and_clear();
     let report = surface.mesh.validate();
-    println!(
+    say!(
         "{} vertices, {} triangles{}",
         surface.mesh.vertex_count(),
         surface.mesh.face_count(),

@@ -45,7 +45,7 @@ fn init(a: &InitArgs) -> anyhow::Result<()> {
     let counts = args::triple::<usize>(&a.counts)?;
     let lattice = lattice_around(vol.geometry(), counts)?;
     write_lattice(&a.output, &lattice).context("cannot write")?;
-    println!(
+    say!(
         "identity lattice of {}x{}x{} control points around {}",
         counts[0],
         counts[1],

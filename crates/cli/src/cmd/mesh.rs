@@ -75,17 +75,22 @@ fn info(a: &InfoArgs) -> anyhow::Result<()> {
     let m = mesh::read(&a.input).context("cannot read mesh")?;
     let report = m.validate();
     pb.finish_and_clear();
-    println!("file:     {}", a.input.display());
-    println!("vertices: {}", m.vertex_count());
-    println!("faces:    {}", m.face_count());
+    say!("file:     {}", a.input.display());
+    say!("vertices: {}", m.vertex_count());
+    say!("faces:    {}", m.face_count());
     match m.bounding_box() {
-        Some((lo, hi)) => println!(
+        Some((lo, hi)) => say!(
             "bounds:   ({}, {}, {}) .. ({}, {}, {})",
-            lo.x, lo.y, lo.z, hi.x, hi.y, hi.z
+            lo.x,
+            lo.y,
+            lo.z,
+            hi.x,
+            hi.y,
+            hi.z
         ),
-        None => println!("bounds:   (empty)"),
+        None => say!("bounds:   (empty)"),
     }
-    println!("{report}");
+    say!("{report}");
     Ok(())
 }
 

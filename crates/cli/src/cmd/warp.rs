@@ -191,6 +191,6 @@ pub fn run_jacobian(args: &JacobianArgs) -> anyhow::Result<()> {
     pb.set_message(format!("writing {}", args.output.display()));
     format::write(&args.output, &det.into()).context("cannot write")?;
     pb.finish_and_clear();
-    println!("{report}");
+    say!("{report}");
     Ok(())
 }
