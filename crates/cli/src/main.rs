@@ -64,6 +64,9 @@ enum Command {
     /// Polygon mesh tasks.
     #[command(subcommand)]
     Mesh(cmd::mesh::Command),
+    /// Time the warps and isosurface extractors on built-in inputs, against their targets.
+    #[command(subcommand)]
+    Bench(cmd::bench::Command),
 }
 
 fn main() -> ExitCode {
@@ -79,6 +82,7 @@ fn main() -> ExitCode {
         Command::Warp(a) => cmd::warp::run(&a),
         Command::Jacobian(a) => cmd::warp::run_jacobian(&a),
         Command::Mesh(c) => cmd::mesh::run(&c),
+        Command::Bench(c) => cmd::bench::run(&c),
     };
     match result {
         Ok(()) => ExitCode::SUCCESS,

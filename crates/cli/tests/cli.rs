@@ -429,3 +429,65 @@ fn warp_and_jacobian_through_a_lattice() {
         &out,
     ]);
 }
+
+#[test]
+fn bench_times_every_item_on_a_tiny_input() {
+    let j: serde_json::Value = serde_json::from_str(&ok(&[
+        &"bench",
+        &"warp",
+        &"--size",
+        &"12",
+        &"--lattice",
+        &"5",
+        &"--repeat",
+        &"2",
+        &"--json",
+    ]))
+    .expect("bench --json prints JSON");
+    assert_eq!(j["suite"], "warp");
+    assert_eq!(j["size"], 12);
+    assert_eq!(j["lattice"], 5);
+    let items = j["items"].as_array().expect("items");
+    let names: Vec<&str> = items.iter().filter_map(|i| i["name"].as_str()).collect();
+    assert_eq!(names.len(), 5, "{names:?}");
+    for want in [
+        "pull-back trilinear",
+        "pull-back cubic",
+        "push-forward nearest",
+    ] {
+        assert!(names.iter().any(|n| n.starts_with(want)), "{names:?}");
+    }
+    for it in items {
+        let (min, med, max) = (
+            it["min_s"].as_f64().unwrap(),
+            it["median_s"].as_f64().unwrap(),
+            it["max_s"].as_f64().unwrap(),
+        );
+        assert!(0.0 < min && min <= med && med <= max, "{it}");
+        // Targets are stated for 256³ only.
+        assert!(it["target_s"].is_null(), "{it}");
+    }
+
+    let text = ok(&[&"bench", &"isosurface", &"--size", &"16", &"--repeat", &"1"]);
+    assert!(text.contains("marching cubes"), "{text}");
+    assert!(text.contains("dual contouring"), "{text}");
+    assert!(text.contains("triangles"), "{text}");
+    let j: serde_json::Value = serde_json::from_str(&ok(&[
+        &"bench",
+        &"isosurface",
+        &"--size",
+        &"16",
+        &"--repeat",
+        &"1",
+        &"--json",
+    ]))
+    .unwrap();
+    for it in j["items"].as_array().unwrap() {
+        assert!(it["triangles"].as_u64().unwrap() > 100, "{it}");
+    }
+
+    let err = fails(&[&"bench", &"warp", &"--size", &"12", &"--lattice", &"3"]);
+    assert!(err.contains("--lattice 3"), "{err}");
+    let err = fails(&[&"bench", &"isosurface", &"--repeat", &"0"]);
+    assert!(err.contains("--repeat 0"), "{err}");
+}
