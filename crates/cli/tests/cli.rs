@@ -346,6 +346,41 @@ fn lattice_init_writes_an_identity_lattice() {
         &out,
     ]);
     fails(&[&"lattice", &"init", &src, &"-o", &dir.path().join("l.xml")]);
+
+    // An edited JSON lattice through ITK's .tfm and back keeps its control points.
+    let mut j = j;
+    j["control_points"][37] = serde_json::json!([0.25, -0.5, 0.125]);
+    let edited = dir.path().join("edited.json");
+    std::fs::write(&edited, j.to_string()).unwrap();
+    let tfm = dir.path().join("edited.tfm");
+    let text = ok(&[&"lattice", &"convert", &edited, &"-o", &tfm]);
+    assert!(text.contains("6x5x4"), "{text}");
+    let back = dir.path().join("back.json");
+    ok(&[&"lattice", &"convert", &tfm, &"-o", &back]);
+    let b: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(&back).unwrap()).unwrap();
+    let flat = |v: &serde_json::Value| -> Vec<f64> {
+        v["control_points"]
+            .as_array()
+            .unwrap()
+            .iter()
+            .flat_map(|p| p.as_array().unwrap().iter().map(|x| x.as_f64().unwrap()))
+            .collect()
+    };
+    let (a, b) = (flat(&j), flat(&b));
+    assert_eq!(a.len(), 6 * 5 * 4 * 3);
+    assert!(
+        a.iter().zip(&b).all(|(x, y)| (x - y).abs() < 1e-9),
+        "{a:?} vs {b:?}"
+    );
+    let err = fails(&[
+        &"lattice",
+        &"convert",
+        &dir.path().join("missing.json"),
+        &"-o",
+        &tfm,
+    ]);
+    assert!(err.contains("missing.json"), "{err}");
 }
 
 #[test]
