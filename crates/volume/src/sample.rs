@@ -557,7 +557,7 @@ impl InteriorKernel for NearestKernel {
         interior_box(dims, 0.0, 0.0)
     }
 
-    #[inline]
+    #[inline(always)]
     fn eval<V: Voxel>(d: &[V], dims: [usize; 3], q: DVec3) -> f64 {
         let [nx, ny, _] = dims;
         // The result is below n since q < n − 1.
@@ -577,7 +577,7 @@ impl InteriorKernel for LinearKernel {
         interior_box(dims, 0.0, 0.0)
     }
 
-    #[inline]
+    #[inline(always)]
     fn eval<V: Voxel>(d: &[V], dims: [usize; 3], q: DVec3) -> f64 {
         let sy = dims[0];
         let sz = dims[0] * dims[1];
@@ -604,7 +604,7 @@ impl InteriorKernel for CubicKernel {
         interior_box(dims, 1.0, 1.0)
     }
 
-    #[inline]
+    #[inline(always)]
     fn eval<V: Voxel>(d: &[V], dims: [usize; 3], q: DVec3) -> f64 {
         let sy = dims[0];
         let sz = dims[0] * dims[1];
