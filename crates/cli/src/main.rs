@@ -86,6 +86,9 @@ enum Command {
     /// Polygon mesh tasks.
     #[command(subcommand)]
     Mesh(cmd::mesh::Command),
+    /// Time the warps and isosurface extractors on built-in inputs, against their targets.
+    #[command(subcommand)]
+    Bench(cmd::bench::Command),
 }
 
 fn main() -> ExitCode {
@@ -102,6 +105,7 @@ fn main() -> ExitCode {
         Command::Drag(a) => cmd::drag::run(&a),
         Command::Jacobian(a) => cmd::warp::run_jacobian(&a),
         Command::Mesh(c) => cmd::mesh::run(&c),
+        Command::Bench(c) => cmd::bench::run(&c),
     };
     match result {
         Ok(()) => ExitCode::SUCCESS,

@@ -386,6 +386,41 @@ fn lattice_init_writes_an_identity_lattice() {
         &out,
     ]);
     fails(&[&"lattice", &"init", &src, &"-o", &dir.path().join("l.xml")]);
+
+    // An edited JSON lattice through ITK's .tfm and back keeps its control points.
+    let mut j = j;
+    j["control_points"][37] = serde_json::json!([0.25, -0.5, 0.125]);
+    let edited = dir.path().join("edited.json");
+    std::fs::write(&edited, j.to_string()).unwrap();
+    let tfm = dir.path().join("edited.tfm");
+    let text = ok(&[&"lattice", &"convert", &edited, &"-o", &tfm]);
+    assert!(text.contains("6x5x4"), "{text}");
+    let back = dir.path().join("back.json");
+    ok(&[&"lattice", &"convert", &tfm, &"-o", &back]);
+    let b: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(&back).unwrap()).unwrap();
+    let flat = |v: &serde_json::Value| -> Vec<f64> {
+        v["control_points"]
+            .as_array()
+            .unwrap()
+            .iter()
+            .flat_map(|p| p.as_array().unwrap().iter().map(|x| x.as_f64().unwrap()))
+            .collect()
+    };
+    let (a, b) = (flat(&j), flat(&b));
+    assert_eq!(a.len(), 6 * 5 * 4 * 3);
+    assert!(
+        a.iter().zip(&b).all(|(x, y)| (x - y).abs() < 1e-9),
+        "{a:?} vs {b:?}"
+    );
+    let err = fails(&[
+        &"lattice",
+        &"convert",
+        &dir.path().join("missing.json"),
+        &"-o",
+        &tfm,
+    ]);
+    assert!(err.contains("missing.json"), "{err}");
 }
 
 #[test]
@@ -664,4 +699,66 @@ fn drag_lands_the_point_and_writes_the_lattice() {
         &"pullback-linear",
     ]);
     assert!(err.contains("push-forward or an inverse method"), "{err}");
+}
+
+#[test]
+fn bench_times_every_item_on_a_tiny_input() {
+    let j: serde_json::Value = serde_json::from_str(&ok(&[
+        &"bench",
+        &"warp",
+        &"--size",
+        &"12",
+        &"--lattice",
+        &"5",
+        &"--repeat",
+        &"2",
+        &"--json",
+    ]))
+    .expect("bench --json prints JSON");
+    assert_eq!(j["suite"], "warp");
+    assert_eq!(j["size"], 12);
+    assert_eq!(j["lattice"], 5);
+    let items = j["items"].as_array().expect("items");
+    let names: Vec<&str> = items.iter().filter_map(|i| i["name"].as_str()).collect();
+    assert_eq!(names.len(), 5, "{names:?}");
+    for want in [
+        "pull-back trilinear",
+        "pull-back cubic",
+        "push-forward nearest",
+    ] {
+        assert!(names.iter().any(|n| n.starts_with(want)), "{names:?}");
+    }
+    for it in items {
+        let (min, med, max) = (
+            it["min_s"].as_f64().unwrap(),
+            it["median_s"].as_f64().unwrap(),
+            it["max_s"].as_f64().unwrap(),
+        );
+        assert!(0.0 < min && min <= med && med <= max, "{it}");
+        // Targets are stated for 256³ only.
+        assert!(it["target_s"].is_null(), "{it}");
+    }
+
+    let text = ok(&[&"bench", &"isosurface", &"--size", &"16", &"--repeat", &"1"]);
+    assert!(text.contains("marching cubes"), "{text}");
+    assert!(text.contains("dual contouring"), "{text}");
+    assert!(text.contains("triangles"), "{text}");
+    let j: serde_json::Value = serde_json::from_str(&ok(&[
+        &"bench",
+        &"isosurface",
+        &"--size",
+        &"16",
+        &"--repeat",
+        &"1",
+        &"--json",
+    ]))
+    .unwrap();
+    for it in j["items"].as_array().unwrap() {
+        assert!(it["triangles"].as_u64().unwrap() > 100, "{it}");
+    }
+
+    let err = fails(&[&"bench", &"warp", &"--size", &"12", &"--lattice", &"3"]);
+    assert!(err.contains("--lattice 3"), "{err}");
+    let err = fails(&[&"bench", &"isosurface", &"--repeat", &"0"]);
+    assert!(err.contains("--repeat 0"), "{err}");
 }

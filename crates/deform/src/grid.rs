@@ -288,11 +288,22 @@ impl LatticeGridPlan {
                         *o = match ax.at(i) {
                             Some((fx, bx)) => {
                                 let s = &row_sum[fx - c_lo..fx - c_lo + wx];
-                                let mut acc = DVec3::ZERO;
-                                for (&n, &p) in bx.iter().zip(s) {
-                                    acc += n * p;
+                                if let (Ok(b), Ok(p)) =
+                                    (<&[f64; 4]>::try_from(bx), <&[DVec3; 4]>::try_from(s))
+                                {
+                                    // Cubic: the loop below unrolled (same sums, same order).
+                                    DVec3::ZERO
+                                        + b[0] * p[0]
+                                        + b[1] * p[1]
+                                        + b[2] * p[2]
+                                        + b[3] * p[3]
+                                } else {
+                                    let mut acc = DVec3::ZERO;
+                                    for (&n, &p) in bx.iter().zip(s) {
+                                        acc += n * p;
+                                    }
+                                    acc
                                 }
-                                acc
                             }
                             None => centre(grid, i, j, k),
                         };

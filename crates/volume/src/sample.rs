@@ -4,7 +4,14 @@
 //! queries without allocating: [`Sampler::sample_index`] at a continuous index `(i, j, k)`,
 //! [`Sampler::sample_physical`] at a physical point (through the volume's [`Geometry`]), and
 //! the parallel batch forms [`Sampler::sample_index_batch`] / [`Sampler::sample_physical_batch`]
-//! that fill an output slice of any voxel type.
+//! that fill an output slice of any voxel type, and [`Sampler::sample_index_serial`] for
+//! callers that parallelise themselves.
+//!
+//! The single queries are the reference: they run the general boundary code below for every
+//! point. The batch forms dispatch on the voxel type once per call and run one monomorphised
+//! loop per kernel in which a point whose whole stencil lies inside the volume (one bounds
+//! test) is interpolated directly from the typed voxels; only points near or beyond the edge
+//! take the general code. Both give the same bits.
 //!
 //! # Kernels ([`Interpolation`])
 //!
@@ -328,6 +335,28 @@ impl<'a> Sampler<'a> {
         Ok(())
     }
 
+    /// Sample at every continuous index of `indices`, writing `out[n]` for `indices[n]`, on
+    /// the calling thread: the form for callers that already run in parallel (one call per
+    /// row or slab of their own work). Values agree bit for bit with
+    /// [`Sampler::sample_index`] and are converted with [`Voxel::from_f64`].
+    ///
+    /// The voxel type is dispatched once per call and each kernel runs a monomorphised loop
+    /// with an interior fast path: a point whose whole stencil lies inside the volume (one
+    /// bounds test per point) is interpolated directly from the typed voxels; only points
+    /// near or beyond the edge take the general boundary code.
+    ///
+    /// # Errors
+    /// [`VolumeError::InvalidArgument`] if `out` does not have one slot per index.
+    pub fn sample_index_serial<O: Voxel>(
+        &self,
+        indices: &[DVec3],
+        out: &mut [O],
+    ) -> Result<(), VolumeError> {
+        check_batch(indices.len(), out.len())?;
+        dispatch!(&self.values, d => self.run(d, indices, out, |x| x));
+        Ok(())
+    }
+
     /// Sample at every physical point of `points`, writing `out[n]` for `points[n]`, in
     /// parallel. Values are converted with [`Voxel::from_f64`].
     ///
@@ -353,11 +382,57 @@ impl<'a> Sampler<'a> {
     ) {
         out.par_chunks_mut(BATCH_CHUNK)
             .zip(points.par_chunks(BATCH_CHUNK))
-            .for_each(|(o, p)| {
-                for (o, &p) in o.iter_mut().zip(p) {
-                    *o = O::from_f64(self.eval(d, to_index(p)));
-                }
-            });
+            .for_each(|(o, p)| self.run(d, p, o, &to_index));
+    }
+
+    /// Sample `points` (turned into continuous indices by `to_index`) into `out` on the
+    /// calling thread, with the kernel chosen once for the whole slice.
+    fn run<V: Voxel, O: Voxel>(
+        &self,
+        d: &[V],
+        points: &[DVec3],
+        out: &mut [O],
+        to_index: impl Fn(DVec3) -> DVec3,
+    ) {
+        match self.interpolation {
+            Interpolation::Nearest => {
+                self.run_kernel::<NearestKernel, _, _>(d, points, out, to_index)
+            }
+            Interpolation::Linear => {
+                self.run_kernel::<LinearKernel, _, _>(d, points, out, to_index)
+            }
+            Interpolation::CubicBSpline => {
+                self.run_kernel::<CubicKernel, _, _>(d, points, out, to_index);
+            }
+        }
+    }
+
+    /// The loop of one kernel: points whose stencil lies inside the volume (the kernel's
+    /// interior box, one test per point; NaN fails it) are evaluated by the kernel's direct
+    /// formula, all others by the general boundary code of [`Sampler::eval`]. Both give the
+    /// same bits for interior points (same index arithmetic, same floating-point operations
+    /// in the same order).
+    #[inline]
+    fn run_kernel<K: InteriorKernel, V: Voxel, O: Voxel>(
+        &self,
+        d: &[V],
+        points: &[DVec3],
+        out: &mut [O],
+        to_index: impl Fn(DVec3) -> DVec3,
+    ) {
+        let dims = self.geometry.dims;
+        let (lo, hi) = K::interior(dims);
+        for (o, &p) in out.iter_mut().zip(points) {
+            let q = to_index(p);
+            let v =
+                if q.x >= lo && q.x < hi[0] && q.y >= lo && q.y < hi[1] && q.z >= lo && q.z < hi[2]
+                {
+                    K::eval(d, dims, q)
+                } else {
+                    self.eval_border(d, q)
+                };
+            *o = O::from_f64(v);
+        }
     }
 
     /// Value returned for points outside the sampled domain.
@@ -367,6 +442,14 @@ impl<'a> Sampler<'a> {
             Boundary::Constant(c) => c,
             Boundary::Clamp | Boundary::Mirror => f64::NAN,
         }
+    }
+
+    /// [`Sampler::eval`] kept out of line: the rare border and outside points of the batch
+    /// loops, which then stay small enough to inline their kernel and index map.
+    #[inline(never)]
+    #[cold]
+    fn eval_border<V: Voxel>(&self, d: &[V], index: DVec3) -> f64 {
+        self.eval(d, index)
     }
 
     #[inline]
@@ -431,6 +514,122 @@ impl<'a> Sampler<'a> {
                 acc
             }
         }
+    }
+}
+
+/// A kernel's direct formula for points whose whole stencil lies inside the volume.
+///
+/// Implementations must return exactly what [`Sampler::eval`] returns for such points under
+/// every boundary policy (inside the interior box every policy leaves the coordinates
+/// unchanged, so this means the same index arithmetic and the same floating-point operations
+/// in the same order).
+trait InteriorKernel {
+    /// The interior box `lo ≤ x < hi[a]` along each axis `a` of a volume of `dims` voxels
+    /// (empty along an axis too short for the stencil).
+    fn interior(dims: [usize; 3]) -> (f64, [f64; 3]);
+
+    /// The value at continuous index `q` inside the interior box.
+    fn eval<V: Voxel>(d: &[V], dims: [usize; 3], q: DVec3) -> f64;
+}
+
+/// Interior box `[lo, n − 1 − margin)` per axis as `f64` bounds.
+#[inline]
+fn interior_box(dims: [usize; 3], lo: f64, margin: f64) -> (f64, [f64; 3]) {
+    let hi = |n: usize| n as f64 - 1.0 - margin;
+    (lo, [hi(dims[0]), hi(dims[1]), hi(dims[2])])
+}
+
+/// `(⌊x⌋, x − ⌊x⌋)` for `0 ≤ x < 2⁶³` (the interior of a volume): truncation through `i64`
+/// is floor there and both conversions are single instructions on baseline x86-64 (those
+/// through `usize` are not). Same values as the general path's `x as usize`.
+#[inline]
+fn floor_fract(x: f64) -> (usize, f64) {
+    let i = x as i64;
+    (i as usize, x - i as f64)
+}
+
+/// [`Interpolation::Nearest`] on `[0, n − 1)`: `⌊x + ½⌋` never exceeds `n − 1` there.
+struct NearestKernel;
+
+impl InteriorKernel for NearestKernel {
+    #[inline]
+    fn interior(dims: [usize; 3]) -> (f64, [f64; 3]) {
+        interior_box(dims, 0.0, 0.0)
+    }
+
+    #[inline(always)]
+    fn eval<V: Voxel>(d: &[V], dims: [usize; 3], q: DVec3) -> f64 {
+        let [nx, ny, _] = dims;
+        // The result is below n since q < n − 1.
+        let (i, _) = floor_fract(q.x + 0.5);
+        let (j, _) = floor_fract(q.y + 0.5);
+        let (k, _) = floor_fract(q.z + 0.5);
+        d[i + nx * j + nx * ny * k].to_f64()
+    }
+}
+
+/// [`Interpolation::Linear`] on `[0, n − 1)`: the upper neighbour `⌊x⌋ + 1` is in range.
+struct LinearKernel;
+
+impl InteriorKernel for LinearKernel {
+    #[inline]
+    fn interior(dims: [usize; 3]) -> (f64, [f64; 3]) {
+        interior_box(dims, 0.0, 0.0)
+    }
+
+    #[inline(always)]
+    fn eval<V: Voxel>(d: &[V], dims: [usize; 3], q: DVec3) -> f64 {
+        let sy = dims[0];
+        let sz = dims[0] * dims[1];
+        let (x0, tx) = floor_fract(q.x);
+        let (y0, ty) = floor_fract(q.y);
+        let (z0, tz) = floor_fract(q.z);
+        let o = x0 + sy * y0 + sz * z0;
+        // The eight corners, one range check for the whole cell.
+        let cell = &d[o..o + sz + sy + 2];
+        let row = |r: usize| lerp(cell[r].to_f64(), cell[r + 1].to_f64(), tx);
+        let c0 = lerp(row(0), row(sy), ty);
+        let c1 = lerp(row(sz), row(sz + sy), ty);
+        lerp(c0, c1, tz)
+    }
+}
+
+/// [`Interpolation::CubicBSpline`] on `[1, n − 2)`: the four neighbours `⌊x⌋ − 1 … ⌊x⌋ + 2`
+/// are in range, so no coefficient index needs mirroring.
+struct CubicKernel;
+
+impl InteriorKernel for CubicKernel {
+    #[inline]
+    fn interior(dims: [usize; 3]) -> (f64, [f64; 3]) {
+        interior_box(dims, 1.0, 1.0)
+    }
+
+    #[inline(always)]
+    fn eval<V: Voxel>(d: &[V], dims: [usize; 3], q: DVec3) -> f64 {
+        let sy = dims[0];
+        let sz = dims[0] * dims[1];
+        let (i, tx) = floor_fract(q.x);
+        let (j, ty) = floor_fract(q.y);
+        let (k, tz) = floor_fract(q.z);
+        let (wx, wy, wz) = (cubic_weights(tx), cubic_weights(ty), cubic_weights(tz));
+        let o = (i - 1) + sy * (j - 1) + sz * (k - 1);
+        // The 4×4×4 stencil, one range check for the whole block.
+        let block = &d[o..o + 3 * sz + 3 * sy + 4];
+        let mut acc = 0.0;
+        for (c, &wk) in wz.iter().enumerate() {
+            let mut plane = 0.0;
+            for (b, &wj) in wy.iter().enumerate() {
+                let r = c * sz + b * sy;
+                let row = &block[r..r + 4];
+                let v = wx[0] * row[0].to_f64()
+                    + wx[1] * row[1].to_f64()
+                    + wx[2] * row[2].to_f64()
+                    + wx[3] * row[3].to_f64();
+                plane += wj * v;
+            }
+            acc += wk * plane;
+        }
+        acc
     }
 }
 
@@ -525,16 +724,22 @@ fn cubic_axis(x: f64, n: usize) -> ([usize; 4], [f64; 4]) {
             mirror_index(i + 2, n),
         ]
     };
+    (idx, cubic_weights(t))
+}
+
+/// Cubic B-spline weights of the four neighbours `⌊x⌋ − 1 … ⌊x⌋ + 2` for fractional part
+/// `t = x − ⌊x⌋ ∈ [0, 1]`.
+#[inline]
+fn cubic_weights(t: f64) -> [f64; 4] {
     let t2 = t * t;
     let t3 = t2 * t;
     let s = 1.0 - t;
-    let w = [
+    [
         s * s * s / 6.0,
         (3.0 * t3 - 6.0 * t2 + 4.0) / 6.0,
         (-3.0 * t3 + 3.0 * t2 + 3.0 * t + 1.0) / 6.0,
         t3 / 6.0,
-    ];
-    (idx, w)
+    ]
 }
 
 /// Number of terms of the causal initial sum for a line of `n` samples.

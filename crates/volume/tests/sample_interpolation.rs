@@ -468,3 +468,128 @@ fn cubic_prefilter_with_many_column_tiles_interpolates() {
         }
     }
 }
+
+/// Coordinates along an axis of `n` voxels that stress the interior fast paths: exact voxel
+/// centres and half-way points near both ends, the edges of every kernel's interior box
+/// (and one ulp either side), the border half-voxel, far outside, and non-finite values.
+fn edge_coordinates(n: usize) -> Vec<f64> {
+    let last = (n - 1) as f64;
+    let mut c = vec![
+        -3.0,
+        -0.5,
+        -0.25,
+        -1e-300,
+        0.0,
+        0.5,
+        1.0,
+        1.5,
+        last - 2.0,
+        last - 1.5,
+        last - 1.0,
+        last - 0.5,
+        last,
+        last + 0.25,
+        last + 0.5,
+        last + 3.0,
+        1e300,
+        f64::NAN,
+        f64::INFINITY,
+        f64::NEG_INFINITY,
+    ];
+    for x in [0.0, 1.0, last - 2.0, last - 1.0, last] {
+        c.push(f64::from_bits(x.to_bits() + 1));
+        if x > 0.0 {
+            c.push(f64::from_bits(x.to_bits() - 1));
+        }
+    }
+    c
+}
+
+/// The batch entry points (interior fast paths, one kernel loop per call) return exactly
+/// the bits of single queries through the general boundary code, for every voxel type,
+/// kernel and boundary policy, on random points inside, on the border and outside, on
+/// exact grid and edge coordinates, and on axes too short for any interior.
+#[test]
+fn fast_paths_equal_the_general_path_bit_for_bit() {
+    let mut rng = Lcg(77);
+    for dims in [[9, 8, 7], [5, 4, 3], [1, 6, 2]] {
+        let base = random_volume(dims, 5);
+        let volumes = [
+            AnyVolume::from(base.cast::<u8>()),
+            AnyVolume::from(base.cast::<i8>()),
+            AnyVolume::from(base.cast::<u16>()),
+            AnyVolume::from(base.cast::<i16>()),
+            AnyVolume::from(base.cast::<u32>()),
+            AnyVolume::from(base.cast::<i32>()),
+            AnyVolume::from(base.clone()),
+            AnyVolume::from(base.cast::<f64>()),
+        ];
+        let mut indices: Vec<DVec3> = (0..3000)
+            .map(|_| {
+                DVec3::new(
+                    rng.next() * (dims[0] + 4) as f64 - 2.0,
+                    rng.next() * (dims[1] + 4) as f64 - 2.0,
+                    rng.next() * (dims[2] + 4) as f64 - 2.0,
+                )
+            })
+            .collect();
+        let (ex, ey, ez) = (
+            edge_coordinates(dims[0]),
+            edge_coordinates(dims[1]),
+            edge_coordinates(dims[2]),
+        );
+        for (a, &x) in ex.iter().enumerate() {
+            for (b, &y) in ey.iter().enumerate() {
+                // Every x and y edge value against a z cycling through the z edge values.
+                indices.push(DVec3::new(x, y, ez[(a + b) % ez.len()]));
+                indices.push(DVec3::new(x, rng.next() * dims[1] as f64, y.min(1.0)));
+            }
+        }
+        for vol in &volumes {
+            let g = *vol.geometry();
+            let points: Vec<DVec3> = indices.iter().map(|&q| g.index_to_physical(q)).collect();
+            for kernel in KERNELS {
+                for boundary in BOUNDARIES {
+                    let s = Sampler::from_any(vol, kernel, boundary).unwrap();
+                    let what = format!("{:?} {kernel:?} {boundary:?} {dims:?}", vol.voxel_type());
+                    let mut serial = vec![0f64; indices.len()];
+                    s.sample_index_serial(&indices, &mut serial).unwrap();
+                    let mut batch = vec![0f64; indices.len()];
+                    s.sample_index_batch(&indices, &mut batch).unwrap();
+                    let mut physical = vec![0f64; points.len()];
+                    s.sample_physical_batch(&points, &mut physical).unwrap();
+                    for (n, &q) in indices.iter().enumerate() {
+                        let want = s.sample_index(q);
+                        assert_eq!(serial[n].to_bits(), want.to_bits(), "{what} at {q:?}");
+                        assert_eq!(batch[n].to_bits(), want.to_bits(), "{what} at {q:?}");
+                        let p = points[n];
+                        assert_eq!(
+                            physical[n].to_bits(),
+                            s.sample_physical(p).to_bits(),
+                            "{what} at {p:?}"
+                        );
+                    }
+                    // Conversion to the output type is the single-query value's conversion.
+                    let mut small = vec![0i16; indices.len()];
+                    s.sample_index_serial(&indices, &mut small).unwrap();
+                    for (q, v) in indices.iter().zip(&small) {
+                        let want = s.sample_index(*q);
+                        assert_eq!(*v, want.round() as i16, "{what} at {q:?}");
+                    }
+                }
+            }
+        }
+    }
+}
+
+#[test]
+fn serial_sampling_checks_the_output_length() {
+    let v = random_volume([4, 4, 4], 3);
+    let s = Sampler::new(&v, Interpolation::Linear, Boundary::Clamp).unwrap();
+    let indices = vec![DVec3::ONE; 5];
+    let mut short = vec![0f32; 4];
+    assert!(matches!(
+        s.sample_index_serial(&indices, &mut short),
+        Err(VolumeError::InvalidArgument(m)) if m.contains("got 4")
+    ));
+}

@@ -37,13 +37,17 @@
 //!
 //! # How it runs
 //!
-//! The output is processed in parallel (rayon) over slabs of whole z-slices. For each slab the
-//! map is evaluated on the slab's voxel centres through [`SpaceMap::apply_grid`] on a
-//! sub-geometry of the output grid (same spacing and direction, origin at the slab's first
-//! voxel, `nz` = slab thickness), so lattices use their separable fast path. The mapped points
-//! go to a per-task buffer that is reused from slab to slab; each is turned in place into an
-//! input index with one precomputed affine map (no matrix inverse per voxel), and the slab is
-//! sampled with [`Sampler::sample_index_batch`]. Nothing is allocated per voxel.
+//! The output is cut into tiles of at most [`TILE`] voxels (x, y, z); bands of tiles (one
+//! tile high and deep, the whole width) are processed in parallel (rayon). For each tile the
+//! map is evaluated on the tile's voxel centres through [`SpaceMap::apply_grid`] on a
+//! sub-geometry of the output grid (same spacing and direction, origin at the tile's first
+//! voxel), so lattices use their separable fast path. The mapped points go to a per-task
+//! buffer reused from tile to tile; each is turned in place into an input index with one
+//! precomputed affine map (no matrix inverse per voxel), and the tile is sampled on the same
+//! thread with [`Sampler::sample_index_serial`] (one kernel loop per tile, interior points
+//! straight from the typed voxels) before its rows are copied into the output. A compact tile
+//! reads a compact region of the input, so the sampling stays in cache. Nothing is allocated
+//! per voxel.
 //!
 //! ```
 //! use glam::DVec3;
@@ -76,10 +80,11 @@ use crate::WarpError;
 /// `f32` data (relative precision 6e-8).
 pub const INDEX_SNAP_TOL: f64 = 1e-9;
 
-/// Target number of output voxels per parallel slab (whole z-slices; at least one slice).
-/// 32 Ki mapped points are 768 KiB of `DVec3`, which stays within a core's L2 cache while the
-/// slab is sampled.
-const SLAB_POINTS: usize = 1 << 15;
+/// Output tile (voxels along x, y, z) on which the map is evaluated and then sampled. A compact
+/// tile reads a compact region of the input, so the sampling stays in cache; 8 Ki mapped
+/// points are 192 KiB of `DVec3`, which stays in a core's L2 cache between the two passes,
+/// and are enough that a lattice's per-call setup (its basis tables) is a small cost.
+pub const TILE: [usize; 3] = [64, 16, 8];
 
 /// How [`resample`] interpolates the input and what it returns beyond the input's edge.
 #[derive(Debug, Clone, Copy, PartialEq, Default)]
@@ -168,29 +173,89 @@ pub fn resample_into<T: Voxel, U: Voxel, M: SpaceMap + ?Sized>(
     let sampler = Sampler::new(input, options.interpolation, options.boundary)?;
     let to_index = IndexMap::new(input.geometry());
 
+    // One parallel task per band of `TILE[1]` rows × `TILE[2]` slices: the band's piece of
+    // each slice is contiguous in `out`, and the band is processed tile by tile along x.
     let [nx, ny, nz] = output.dims;
-    let plane = nx * ny;
-    let slab_nz = (SLAB_POINTS / plane).clamp(1, nz);
-    out.par_chunks_mut(plane * slab_nz)
-        .enumerate()
-        .try_for_each_init(
-            Vec::new,
-            |buf: &mut Vec<DVec3>, (s, chunk)| -> Result<(), WarpError> {
-                let slab = Geometry {
-                    dims: [nx, ny, chunk.len() / plane],
-                    origin: output.index_to_physical(DVec3::new(0.0, 0.0, (s * slab_nz) as f64)),
-                    ..*output
-                };
-                // Grows once per task to the slab size; later slabs reuse it.
-                buf.resize(chunk.len(), DVec3::ZERO);
-                map.apply_grid(&slab, buf)?;
-                for p in buf.iter_mut() {
-                    *p = to_index.apply(*p);
-                }
-                sampler.sample_index_batch(buf, chunk)?;
-                Ok(())
-            },
-        )
+    let [tx, ty, tz] = [TILE[0].min(nx), TILE[1].min(ny), TILE[2].min(nz)];
+    let mut bands: Vec<Band<'_, U>> = Vec::with_capacity(ny.div_ceil(ty) * nz.div_ceil(tz));
+    for (s, slab) in out.chunks_mut(nx * ny * tz).enumerate() {
+        let first = bands.len();
+        for (b, _) in (0..ny).step_by(ty).enumerate() {
+            bands.push(Band {
+                start: [b * ty, s * tz],
+                rows: ty.min(ny - b * ty),
+                slices: Vec::with_capacity(tz),
+            });
+        }
+        for slice in slab.chunks_mut(nx * ny) {
+            for (band, piece) in bands[first..].iter_mut().zip(slice.chunks_mut(ty * nx)) {
+                band.slices.push(piece);
+            }
+        }
+    }
+    bands.into_par_iter().try_for_each_init(
+        || {
+            (
+                Vec::with_capacity(tx * ty * tz),
+                Vec::with_capacity(tx * ty * tz),
+            )
+        },
+        |(points, values), band| {
+            pull_band(&sampler, &to_index, map, output, tx, band, points, values)
+        },
+    )
+}
+
+/// Rows `start[0] .. start[0] + rows` of slices `start[1] ..` of the output: one piece of
+/// `rows · nx` voxels per slice (x fastest).
+struct Band<'a, U> {
+    start: [usize; 2],
+    rows: usize,
+    slices: Vec<&'a mut [U]>,
+}
+
+/// Resample one band of the output, tile by tile along x (tiles `tx` voxels wide): the map
+/// is evaluated on the tile's sub-grid into `points`, the tile is sampled into `values`
+/// (both reused from tile to tile and band to band), and its rows are copied into the band.
+#[allow(clippy::too_many_arguments)]
+fn pull_band<M: SpaceMap + ?Sized, U: Voxel>(
+    sampler: &Sampler<'_>,
+    to_index: &IndexMap,
+    map: &M,
+    output: &Geometry,
+    tx: usize,
+    mut band: Band<'_, U>,
+    points: &mut Vec<DVec3>,
+    values: &mut Vec<U>,
+) -> Result<(), WarpError> {
+    let nx = output.dims[0];
+    let (rows, depth) = (band.rows, band.slices.len());
+    for x0 in (0..nx).step_by(tx) {
+        let w = tx.min(nx - x0);
+        let tile = Geometry {
+            dims: [w, rows, depth],
+            origin: output.index_to_physical(DVec3::new(
+                x0 as f64,
+                band.start[0] as f64,
+                band.start[1] as f64,
+            )),
+            ..*output
+        };
+        let len = w * rows * depth;
+        points.resize(len, DVec3::ZERO);
+        values.resize(len, U::default());
+        map.apply_grid(&tile, points)?;
+        for p in points.iter_mut() {
+            *p = to_index.apply(*p);
+        }
+        sampler.sample_index_serial(points, values)?;
+        for (piece, tile_rows) in band.slices.iter_mut().zip(values.chunks_exact(w * rows)) {
+            for (row, src) in piece.chunks_exact_mut(nx).zip(tile_rows.chunks_exact(w)) {
+                row[x0..x0 + w].copy_from_slice(src);
+            }
+        }
+    }
+    Ok(())
 }
 
 /// Pull-back resampling of a volume whose voxel type is known at run time; the output keeps
@@ -251,7 +316,7 @@ impl IndexMap {
         }
     }
 
-    #[inline]
+    #[inline(always)]
     pub(crate) fn apply(&self, p: DVec3) -> DVec3 {
         let c = self.matrix * (p - self.origin);
         DVec3::new(snap(c.x), snap(c.y), snap(c.z))
@@ -269,7 +334,7 @@ const ROUND_MAGIC_LIMIT: f64 = 2_251_799_813_685_248.0;
 
 /// `x` rounded to the nearest integer if within [`INDEX_SNAP_TOL`] of it (NaN, ±∞ and
 /// magnitudes of `2⁵¹` and more pass through unchanged).
-#[inline]
+#[inline(always)]
 fn snap(x: f64) -> f64 {
     if x.abs() >= ROUND_MAGIC_LIMIT || x.is_nan() {
         return x;

@@ -4,7 +4,7 @@ use std::path::PathBuf;
 
 use anyhow::{Context, bail};
 use volmorph_deform::BSplineLattice;
-use volmorph_deform::formats::write_lattice;
+use volmorph_deform::formats::{read_lattice, write_lattice};
 use volmorph_volume::format;
 
 use crate::args;
@@ -17,6 +17,20 @@ pub enum Command {
         after_help = "Example:\n  volmorph lattice init teapot.nii.gz --counts 9,9,9 -o lattice.json"
     )]
     Init(InitArgs),
+    /// Convert a lattice file between formats (.json, .tfm, .bxf), e.g. to hand a lattice
+    /// edited as JSON to ITK or plastimatch.
+    #[command(after_help = "Example:\n  volmorph lattice convert moved.json -o moved.tfm")]
+    Convert(ConvertArgs),
+}
+
+/// Arguments of `volmorph lattice convert`.
+#[derive(Debug, clap::Args)]
+pub struct ConvertArgs {
+    /// Input lattice file (.json, .tfm, .bxf).
+    pub input: PathBuf,
+    /// Output lattice file; the format follows the extension (.json, .tfm, .bxf).
+    #[arg(short, long)]
+    pub output: PathBuf,
 }
 
 /// Arguments of `volmorph lattice init`.
@@ -37,7 +51,20 @@ pub struct InitArgs {
 pub fn run(cmd: &Command) -> anyhow::Result<()> {
     match cmd {
         Command::Init(a) => init(a),
+        Command::Convert(a) => convert(a),
     }
+}
+
+fn convert(a: &ConvertArgs) -> anyhow::Result<()> {
+    let lattice = read_lattice(&a.input)
+        .with_context(|| format!("cannot read lattice {}", a.input.display()))?;
+    write_lattice(&a.output, &lattice).context("cannot write")?;
+    let [cx, cy, cz] = lattice.counts();
+    println!(
+        "lattice of {cx}x{cy}x{cz} control points written to {}",
+        a.output.display()
+    );
+    Ok(())
 }
 
 fn init(a: &InitArgs) -> anyhow::Result<()> {

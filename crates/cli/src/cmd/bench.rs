@@ -1,0 +1,374 @@
+//! `volmorph bench …`: time the warps and the isosurface extractors on built-in inputs and
+//! print each item's min / median / max wall-clock time next to its target.
+//!
+//! Every input is built before the clock starts; each item runs `--repeat` times and its
+//! result is dropped after the clock stops, so a time covers exactly one call of the library
+//! function (including the allocation of its output). Targets are stated for the 256³ inputs
+//! on the reference two-core machine and shown only at that size.
+
+use std::time::{Duration, Instant};
+
+use anyhow::bail;
+use volmorph_contour::{DcOptions, McOptions, dual_contouring, marching_cubes};
+use volmorph_deform::BSplineLattice;
+use volmorph_volume::DVec3;
+use volmorph_volume::phantom::{self, Phantom};
+use volmorph_volume::sample::Interpolation;
+use volmorph_volume::{Geometry, Volume};
+use volmorph_warp::jacobian::jacobian_determinant;
+use volmorph_warp::pullback::{ResampleOptions, resample};
+use volmorph_warp::pushforward::{
+    AntialiasOptions, push_forward_antialiased, push_forward_nearest,
+};
+
+use crate::cmd::lattice::lattice_around;
+use crate::progress;
+
+/// Size at which the targets are stated.
+const TARGET_SIZE: usize = 256;
+
+/// Largest `--size` accepted (a 1024³ `f32` volume is 4 GiB).
+const MAX_SIZE: usize = 1024;
+
+/// Largest `--repeat` accepted.
+const MAX_REPEAT: usize = 1000;
+
+/// Seed of the random control-point displacements, so every run times the same lattice.
+const LATTICE_SEED: u64 = 0x5eed;
+
+/// Benchmark subcommands.
+#[derive(Debug, clap::Subcommand)]
+pub enum Command {
+    /// Time pull-back (trilinear, cubic), push-forward (nearest, antialiased) and the
+    /// Jacobian determinant map of a randomly moved lattice on the teapot phantom.
+    #[command(after_help = "Example:\n  volmorph bench warp --size 256 --lattice 9 --repeat 5")]
+    Warp(WarpArgs),
+    /// Time marching cubes and dual contouring on a sphere's signed distance field.
+    #[command(after_help = "Example:\n  volmorph bench isosurface --size 256 --repeat 5 --json")]
+    Isosurface(IsosurfaceArgs),
+}
+
+/// Arguments of `volmorph bench warp`.
+#[derive(Debug, clap::Args)]
+pub struct WarpArgs {
+    /// Voxels per axis of the teapot phantom (a cube).
+    #[arg(long, default_value_t = TARGET_SIZE)]
+    pub size: usize,
+    /// Control points per axis of the uniform cubic lattice (at least 4).
+    #[arg(long, default_value_t = 9)]
+    pub lattice: usize,
+    /// Timed runs per item.
+    #[arg(long, default_value_t = 5)]
+    pub repeat: usize,
+    /// Print the results as JSON instead of a table.
+    #[arg(long)]
+    pub json: bool,
+}
+
+/// Arguments of `volmorph bench isosurface`.
+#[derive(Debug, clap::Args)]
+pub struct IsosurfaceArgs {
+    /// Voxels per axis of the sphere's distance field (a cube).
+    #[arg(long, default_value_t = TARGET_SIZE)]
+    pub size: usize,
+    /// Timed runs per item.
+    #[arg(long, default_value_t = 5)]
+    pub repeat: usize,
+    /// Print the results as JSON instead of a table.
+    #[arg(long)]
+    pub json: bool,
+}
+
+/// Run a bench subcommand.
+pub fn run(cmd: &Command) -> anyhow::Result<()> {
+    match cmd {
+        Command::Warp(a) => warp(a),
+        Command::Isosurface(a) => isosurface(a),
+    }
+}
+
+/// Timings of one benchmarked operation.
+#[derive(Debug)]
+struct Item {
+    name: &'static str,
+    /// Wall-clock time of each run, sorted.
+    times: Vec<Duration>,
+    /// Target time at [`TARGET_SIZE`], if the operation has one.
+    target: Option<f64>,
+    /// Triangles of the extracted surface (isosurface items).
+    triangles: Option<usize>,
+}
+
+impl Item {
+    fn min(&self) -> f64 {
+        self.times.first().map_or(f64::NAN, Duration::as_secs_f64)
+    }
+
+    fn max(&self) -> f64 {
+        self.times.last().map_or(f64::NAN, Duration::as_secs_f64)
+    }
+
+    /// Median of the runs (mean of the middle two for an even count).
+    fn median(&self) -> f64 {
+        let n = self.times.len();
+        match n {
+            0 => f64::NAN,
+            _ if n % 2 == 1 => self.times[n / 2].as_secs_f64(),
+            _ => 0.5 * (self.times[n / 2 - 1] + self.times[n / 2]).as_secs_f64(),
+        }
+    }
+}
+
+/// Time `f` `repeat` times; its result is dropped after each clock stops. Returns the sorted
+/// times and the last result.
+fn time<R>(
+    repeat: usize,
+    mut f: impl FnMut() -> anyhow::Result<R>,
+) -> anyhow::Result<(Vec<Duration>, R)> {
+    let mut times = Vec::with_capacity(repeat);
+    let mut last = None;
+    for _ in 0..repeat {
+        let start = Instant::now();
+        let r = f()?;
+        times.push(start.elapsed());
+        last = Some(r);
+    }
+    times.sort();
+    let last = last.ok_or_else(|| anyhow::anyhow!("no timed run"))?;
+    Ok((times, last))
+}
+
+fn check_common(size: usize, repeat: usize) -> anyhow::Result<()> {
+    if !(4..=MAX_SIZE).contains(&size) {
+        bail!("--size {size} must be between 4 and {MAX_SIZE}");
+    }
+    if !(1..=MAX_REPEAT).contains(&repeat) {
+        bail!("--repeat {repeat} must be between 1 and {MAX_REPEAT}");
+    }
+    Ok(())
+}
+
+/// Deterministic pseudo-random numbers in `[0, 1)` (64-bit LCG, top 53 bits).
+struct Lcg(u64);
+
+impl Lcg {
+    fn next(&mut self) -> f64 {
+        self.0 = self
+            .0
+            .wrapping_mul(6_364_136_223_846_793_005)
+            .wrapping_add(1_442_695_040_888_963_407);
+        (self.0 >> 11) as f64 / (1u64 << 53) as f64
+    }
+}
+
+/// True's uniform cubic lattice of `counts³` control points on the voxel-centre box of `g`,
+/// every control point off the outer layer moved by a random vector (fixed seed) whose
+/// components are uniform in `[−½, ½]` region along each axis (length at most ≈0.87 region).
+fn moved_lattice(g: &Geometry, counts: usize) -> anyhow::Result<BSplineLattice> {
+    let mut lat = lattice_around(g, [counts; 3])?;
+    let extent = g.spacing
+        * DVec3::new(
+            g.dims[0].saturating_sub(1) as f64,
+            g.dims[1].saturating_sub(1) as f64,
+            g.dims[2].saturating_sub(1) as f64,
+        );
+    let region = g.direction * (extent / (counts - 3) as f64);
+    let mut rng = Lcg(LATTICE_SEED);
+    for k in 1..counts - 1 {
+        for j in 1..counts - 1 {
+            for i in 1..counts - 1 {
+                let d = DVec3::new(rng.next() - 0.5, rng.next() - 0.5, rng.next() - 0.5);
+                lat.move_control_point([i, j, k], region * d)?;
+            }
+        }
+    }
+    Ok(lat)
+}
+
+fn warp(a: &WarpArgs) -> anyhow::Result<()> {
+    check_common(a.size, a.repeat)?;
+    if !(4..=64).contains(&a.lattice) {
+        bail!("--lattice {} must be between 4 and 64", a.lattice);
+    }
+    let dims = [a.size; 3];
+    let pb = progress::spinner(format!("building the teapot phantom {dims:?}"));
+    let density = phantom::density(Phantom::Teapot, dims)?;
+    let grid = *density.geometry();
+    let input: Volume<f32> = density.cast();
+    let lat = moved_lattice(&grid, a.lattice)?;
+    let at_target = a.size == TARGET_SIZE;
+    let target = |t: f64| at_target.then_some(t);
+
+    let mut items = Vec::new();
+    let (input, lat, grid) = (&input, &lat, &grid);
+    let pull = |interpolation: Interpolation| {
+        let options = ResampleOptions::new(interpolation, 0.0);
+        move || -> anyhow::Result<Volume<f32>> { Ok(resample(input, lat, grid, &options)?) }
+    };
+    pb.set_message("pull-back trilinear");
+    let (times, _) = time(a.repeat, pull(Interpolation::Linear))?;
+    items.push(Item {
+        name: "pull-back trilinear (f32)",
+        times,
+        target: target(0.25),
+        triangles: None,
+    });
+    pb.set_message("pull-back cubic");
+    let (times, _) = time(a.repeat, pull(Interpolation::CubicBSpline))?;
+    items.push(Item {
+        name: "pull-back cubic B-spline (f32)",
+        times,
+        target: None,
+        triangles: None,
+    });
+    pb.set_message("push-forward nearest");
+    let (times, _) = time(a.repeat, || Ok(push_forward_nearest(&density, lat, grid)?))?;
+    items.push(Item {
+        name: "push-forward nearest (u8)",
+        times,
+        target: None,
+        triangles: None,
+    });
+    pb.set_message("push-forward antialiased");
+    let options = AntialiasOptions::default();
+    let (times, _) = time(a.repeat, || {
+        Ok(push_forward_antialiased(&density, lat, grid, &options)?)
+    })?;
+    items.push(Item {
+        name: "push-forward antialiased (u8)",
+        times,
+        target: target(1.0),
+        triangles: None,
+    });
+    pb.set_message("Jacobian determinant map");
+    let (times, _) = time(a.repeat, || Ok(jacobian_determinant(lat, grid)?))?;
+    items.push(Item {
+        name: "Jacobian determinant map",
+        times,
+        target: None,
+        triangles: None,
+    });
+    pb.finish_and_clear();
+
+    let l = a.lattice;
+    let title = format!(
+        "teapot {n}x{n}x{n}, lattice {l}x{l}x{l} moved at random (seed {LATTICE_SEED:#x}), \
+         {r} runs each, {t} threads",
+        n = a.size,
+        r = a.repeat,
+        t = rayon::current_num_threads(),
+    );
+    report(a.json, "warp", &title, a.size, a.repeat, Some(l), &items);
+    Ok(())
+}
+
+fn isosurface(a: &IsosurfaceArgs) -> anyhow::Result<()> {
+    check_common(a.size, a.repeat)?;
+    let dims = [a.size; 3];
+    let pb = progress::spinner(format!("building the sphere distance field {dims:?}"));
+    let sdf = phantom::signed_distance(Phantom::Sphere, dims)?;
+    let at_target = a.size == TARGET_SIZE;
+
+    pb.set_message("marching cubes");
+    let mc = McOptions { inside_below: true };
+    let (times, s) = time(a.repeat, || Ok(marching_cubes(&sdf, 0.0, &mc)?))?;
+    let mut items = vec![Item {
+        name: "marching cubes",
+        times,
+        target: at_target.then_some(0.1),
+        triangles: Some(s.mesh.face_count()),
+    }];
+    pb.set_message("dual contouring");
+    let dc = DcOptions {
+        inside_below: true,
+        ..DcOptions::default()
+    };
+    let (times, s) = time(a.repeat, || Ok(dual_contouring(&sdf, 0.0, &dc)?))?;
+    items.push(Item {
+        name: "dual contouring",
+        times,
+        target: None,
+        triangles: Some(s.mesh.face_count()),
+    });
+    pb.finish_and_clear();
+
+    let title = format!(
+        "sphere signed distance {n}x{n}x{n} (f32), level 0, {r} runs each, {t} threads",
+        n = a.size,
+        r = a.repeat,
+        t = rayon::current_num_threads(),
+    );
+    report(a.json, "isosurface", &title, a.size, a.repeat, None, &items);
+    Ok(())
+}
+
+/// Print the items as a table (or JSON with `json`).
+fn report(
+    json: bool,
+    suite: &str,
+    title: &str,
+    size: usize,
+    repeat: usize,
+    lattice: Option<usize>,
+    items: &[Item],
+) {
+    if json {
+        let items: Vec<serde_json::Value> = items
+            .iter()
+            .map(|it| {
+                serde_json::json!({
+                    "name": it.name,
+                    "min_s": it.min(),
+                    "median_s": it.median(),
+                    "max_s": it.max(),
+                    "target_s": it.target,
+                    "target_met": it.target.map(|t| it.median() <= t),
+                    "triangles": it.triangles,
+                })
+            })
+            .collect();
+        let doc = serde_json::json!({
+            "suite": suite,
+            "description": title,
+            "size": size,
+            "lattice": lattice,
+            "repeat": repeat,
+            "threads": rayon::current_num_threads(),
+            "items": items,
+        });
+        println!("{doc:#}");
+        return;
+    }
+    let with_triangles = items.iter().any(|it| it.triangles.is_some());
+    println!("{title}");
+    let mut header = format!(
+        "{:<32} {:>9} {:>9} {:>9}  {:<16}",
+        "item", "min", "median", "max", "target (median)"
+    );
+    if with_triangles {
+        header.push_str(&format!(" {:>10}", "triangles"));
+    }
+    println!("{}", header.trim_end());
+    for it in items {
+        let target = match it.target {
+            Some(t) if it.median() <= t => format!("<= {t:.2} s  met"),
+            Some(t) => format!("<= {t:.2} s  MISSED"),
+            None => String::from("-"),
+        };
+        let mut line = format!(
+            "{:<32} {:>7.3} s {:>7.3} s {:>7.3} s  {:<16}",
+            it.name,
+            it.min(),
+            it.median(),
+            it.max(),
+            target
+        );
+        if let Some(t) = it.triangles {
+            line.push_str(&format!(" {t:>10}"));
+        }
+        println!("{}", line.trim_end());
+    }
+    if size != TARGET_SIZE {
+        println!("(targets are stated for --size {TARGET_SIZE})");
+    }
+}
