@@ -11,10 +11,12 @@ use std::time::{Duration, Instant};
 use anyhow::bail;
 use volmorph_contour::{DcOptions, McOptions, dual_contouring, marching_cubes};
 use volmorph_deform::BSplineLattice;
+use volmorph_deform::manipulate::{Drag, DragOptions, ManipulationSession};
 use volmorph_volume::DVec3;
 use volmorph_volume::phantom::{self, Phantom};
 use volmorph_volume::sample::Interpolation;
 use volmorph_volume::{Geometry, Volume};
+use volmorph_warp::incremental::IncrementalPushForward;
 use volmorph_warp::jacobian::jacobian_determinant;
 use volmorph_warp::pullback::{ResampleOptions, resample};
 use volmorph_warp::pushforward::{
@@ -26,6 +28,10 @@ use crate::progress;
 
 /// Size at which the targets are stated.
 const TARGET_SIZE: usize = 256;
+
+/// Size of the volume of the interactive-editing items (incremental update, drag), at which
+/// their targets are stated.
+const EDIT_TARGET_SIZE: usize = 128;
 
 /// Largest `--size` accepted (a 1024³ `f32` volume is 4 GiB).
 const MAX_SIZE: usize = 1024;
@@ -40,7 +46,9 @@ const LATTICE_SEED: u64 = 0x5eed;
 #[derive(Debug, clap::Subcommand)]
 pub enum Command {
     /// Time pull-back (trilinear, cubic), push-forward (nearest, antialiased) and the
-    /// Jacobian determinant map of a randomly moved lattice on the teapot phantom.
+    /// Jacobian determinant map of a randomly moved lattice on the teapot phantom, and the
+    /// interactive edits: an incremental update after one control point moves, and a drag
+    /// (solve plus incremental update).
     #[command(after_help = "Example:\n  volmorph bench warp --size 256 --lattice 9 --repeat 5")]
     Warp(WarpArgs),
     /// Time marching cubes and dual contouring on a sphere's signed distance field.
@@ -60,6 +68,10 @@ pub struct WarpArgs {
     /// Timed runs per item.
     #[arg(long, default_value_t = 5)]
     pub repeat: usize,
+    /// Voxels per axis of the teapot for the interactive-editing items (incremental update
+    /// after moving one control point, drag).
+    #[arg(long, default_value_t = EDIT_TARGET_SIZE)]
+    pub edit_size: usize,
     /// Print the results as JSON instead of a table.
     #[arg(long)]
     pub json: bool,
@@ -248,6 +260,8 @@ fn warp(a: &WarpArgs) -> anyhow::Result<()> {
         target: None,
         triangles: None,
     });
+    pb.set_message("incremental update and drag");
+    edit_items(a, &mut items)?;
     pb.finish_and_clear();
 
     let l = a.lattice;
@@ -259,6 +273,63 @@ fn warp(a: &WarpArgs) -> anyhow::Result<()> {
         t = rayon::current_num_threads(),
     );
     report(a.json, "warp", &title, a.size, a.repeat, Some(l), &items);
+    Ok(())
+}
+
+/// The interactive-editing items on a teapot of `--edit-size`³ under the identity lattice of
+/// `--lattice`³ control points: the antialiased push-forward kept by
+/// [`IncrementalPushForward`] is updated (a) after the centre control point moves by about a
+/// third of a region, alternately there and back, and (b) after a drag of the point at that
+/// control point's place with a tool radius of half a region (so the least-norm solve moves
+/// that one control point) — solve plus update, from the undeformed lattice each time.
+fn edit_items(a: &WarpArgs, items: &mut Vec<Item>) -> anyhow::Result<()> {
+    if !(8..=MAX_SIZE).contains(&a.edit_size) {
+        bail!(
+            "--edit-size {} must be between 8 and {MAX_SIZE}",
+            a.edit_size
+        );
+    }
+    let target = |t: f64| (a.edit_size == EDIT_TARGET_SIZE).then_some(t);
+    let density = phantom::density(Phantom::Teapot, [a.edit_size; 3])?;
+    let grid = *density.geometry();
+    let base = lattice_around(&grid, [a.lattice; 3])?;
+    let c = a.lattice / 2;
+    let centre = base.control_point([c, c, c])?;
+    let region = (base.control_point([c + 1, c, c])? - centre).length();
+    let options = AntialiasOptions::default();
+    let mut engine = IncrementalPushForward::new(&density, base.clone(), &grid, &options)?;
+    let step = DVec3::new(0.3, -0.2, 0.25) * region;
+    let mut sign = -1.0;
+    let (times, _) = time(a.repeat, || {
+        sign = -sign;
+        Ok(engine.move_control_points(&[([c, c, c], step * sign)])?)
+    })?;
+    items.push(Item {
+        name: "incremental update, 1 control pt",
+        times,
+        target: target(0.030),
+        triangles: None,
+    });
+    // Each run starts from the undeformed lattice (restored, untimed, by undo) and times the
+    // drag: the least-norm solve and the incremental update.
+    engine.set_lattice(base.clone())?;
+    let mut session = ManipulationSession::new(base, DragOptions::with_radius(0.5 * region))?;
+    let mut times = Vec::with_capacity(a.repeat);
+    for _ in 0..a.repeat {
+        let start = Instant::now();
+        session.drag(&[Drag::new(centre, centre + step)])?;
+        engine.set_lattice(session.lattice().clone())?;
+        times.push(start.elapsed());
+        session.undo();
+        engine.set_lattice(session.lattice().clone())?;
+    }
+    times.sort();
+    items.push(Item {
+        name: "drag: solve + incremental update",
+        times,
+        target: target(0.040),
+        triangles: None,
+    });
     Ok(())
 }
 
@@ -336,11 +407,11 @@ fn report(
             "threads": rayon::current_num_threads(),
             "items": items,
         });
-        println!("{doc:#}");
+        say!("{doc:#}");
         return;
     }
     let with_triangles = items.iter().any(|it| it.triangles.is_some());
-    println!("{title}");
+    say!("{title}");
     let mut header = format!(
         "{:<32} {:>9} {:>9} {:>9}  {:<16}",
         "item", "min", "median", "max", "target (median)"
@@ -348,7 +419,7 @@ fn report(
     if with_triangles {
         header.push_str(&format!(" {:>10}", "triangles"));
     }
-    println!("{}", header.trim_end());
+    say!("{}", header.trim_end());
     for it in items {
         let target = match it.target {
             Some(t) if it.median() <= t => format!("<= {t:.2} s  met"),
@@ -366,9 +437,12 @@ fn report(
         if let Some(t) = it.triangles {
             line.push_str(&format!(" {t:>10}"));
         }
-        println!("{}", line.trim_end());
+        say!("{}", line.trim_end());
     }
     if size != TARGET_SIZE {
-        println!("(targets are stated for --size {TARGET_SIZE})");
+        say!(
+            "(targets are stated for --size {TARGET_SIZE}; the editing items' for --edit-size \
+             {EDIT_TARGET_SIZE})"
+        );
     }
 }
