@@ -712,6 +712,8 @@ fn bench_times_every_item_on_a_tiny_input() {
         &"5",
         &"--repeat",
         &"2",
+        &"--edit-size",
+        &"12",
         &"--json",
     ]))
     .expect("bench --json prints JSON");
@@ -720,11 +722,13 @@ fn bench_times_every_item_on_a_tiny_input() {
     assert_eq!(j["lattice"], 5);
     let items = j["items"].as_array().expect("items");
     let names: Vec<&str> = items.iter().filter_map(|i| i["name"].as_str()).collect();
-    assert_eq!(names.len(), 5, "{names:?}");
+    assert_eq!(names.len(), 7, "{names:?}");
     for want in [
         "pull-back trilinear",
         "pull-back cubic",
         "push-forward nearest",
+        "incremental update",
+        "drag",
     ] {
         assert!(names.iter().any(|n| n.starts_with(want)), "{names:?}");
     }
