@@ -120,7 +120,18 @@ struct Projected {
 }
 
 /// Draw `triangles` (vertex indices into `positions`) as seen by `camera`, shaded as `style`
-/// says (see the [module docs](self) for facing, coverage and shading conventions).
+/// says.
+///
+/// * A triangle is **front-facing** when its vertices appear counter-clockwise on the
+///   picture (its right-handed normal points towards the camera); front faces take
+///   [`ShadeStyle::front`], back faces [`ShadeStyle::back`].
+/// * A pixel sample inside or on all three edges is covered, so triangles sharing an edge
+///   leave no crack; a depth buffer keeps the nearest surface.
+/// * Shading is Lambert plus Blinn–Phong from a light fixed to the camera, computed in linear
+///   light, with the shading normal (interpolated from `normals`, else the face normal)
+///   turned towards the viewer.
+/// * Triangles with a vertex behind the camera or not finite are skipped (no near-plane
+///   clipping: frame the model with [`Camera::fit_bounds`]).
 ///
 /// `normals`, if given, holds one shading normal per vertex (same length as `positions`; need
 /// not be unit length).
