@@ -128,20 +128,8 @@ pub fn apply_grid_pointwise<M: SpaceMap + ?Sized>(
     grid: &Geometry,
     out: &mut [DVec3],
 ) -> Result<(), DeformError> {
-    let [nx, ny, _] = check_grid(grid, out)?;
-    if out.is_empty() {
-        return Ok(());
-    }
-    out.par_chunks_mut(nx * ny)
-        .enumerate()
-        .for_each(|(k, slab)| {
-            for (j, row) in slab.chunks_exact_mut(nx).enumerate() {
-                for (i, o) in row.iter_mut().enumerate() {
-                    let x = grid.index_to_physical(DVec3::new(i as f64, j as f64, k as f64));
-                    *o = map.apply(x);
-                }
-            }
-        });
+    check_grid(grid, out)?;
+    for_each_voxel(grid, out, |x| map.apply(x));
     Ok(())
 }
 
@@ -157,21 +145,26 @@ pub fn jacobian_grid_pointwise<M: SpaceMap + ?Sized>(
 ) -> Result<(), DeformError> {
     grid.validate()?;
     check_len(grid.len(), out.len())?;
+    for_each_voxel(grid, out, |x| map.jacobian(x));
+    Ok(())
+}
+
+/// `out[i + nx·(j + ny·k)] = f(grid.index_to_physical((i, j, k)))`, parallel over z-slabs.
+/// `grid` must be valid and `out` one value per voxel (callers check).
+fn for_each_voxel<T: Send>(grid: &Geometry, out: &mut [T], f: impl Fn(DVec3) -> T + Sync) {
     let [nx, ny, _] = grid.dims;
     if out.is_empty() {
-        return Ok(());
+        return;
     }
     out.par_chunks_mut(nx * ny)
         .enumerate()
         .for_each(|(k, slab)| {
             for (j, row) in slab.chunks_exact_mut(nx).enumerate() {
                 for (i, o) in row.iter_mut().enumerate() {
-                    let x = grid.index_to_physical(DVec3::new(i as f64, j as f64, k as f64));
-                    *o = map.jacobian(x);
+                    *o = f(grid.index_to_physical(DVec3::new(i as f64, j as f64, k as f64)));
                 }
             }
         });
-    Ok(())
 }
 
 /// Fill a grid's Jacobian buffer with one constant matrix (maps with a constant Jacobian).

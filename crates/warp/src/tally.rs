@@ -346,25 +346,15 @@ pub(crate) fn splat<C: Cell>(
 /// monotone and halving exact), so the box is bit-identical to the bounds of the six means.
 #[inline(always)]
 pub(crate) fn averaged_bounds(p: DVec3, nb: [DVec3; 6]) -> Option<(DVec3, DVec3)> {
-    let s = p + nb[0] + nb[1] + nb[2] + nb[3] + nb[4] + nb[5];
-    // A finite sum means every point is finite; otherwise check them one by one (the sum
-    // of finite points may overflow).
-    let all_finite = s.is_finite() || (p.is_finite() && nb.iter().all(|q| q.is_finite()));
-    if !all_finite {
-        return None;
+    match raw_bounds(p, nb) {
+        (lo, hi, true) => Some((lo, hi)),
+        // A point is NaN or infinite (no box), or finite points overflowed a sum: then the
+        // cheap min/max selected exactly and only the bounds themselves need checking.
+        (lo, hi, false) => {
+            let finite = p.is_finite() && nb.iter().all(|q| q.is_finite());
+            (finite && lo.is_finite() && hi.is_finite()).then_some((lo, hi))
+        }
     }
-    // No NaN past this point, so the cheap min/max select exactly.
-    let mn = vmin(
-        vmin(vmin(nb[0], nb[1]), vmin(nb[2], nb[3])),
-        vmin(nb[4], nb[5]),
-    );
-    let mx = vmax(
-        vmax(vmax(nb[0], nb[1]), vmax(nb[2], nb[3])),
-        vmax(nb[4], nb[5]),
-    );
-    let lo = 0.5 * (p + mn);
-    let hi = 0.5 * (p + mx);
-    (lo.is_finite() && hi.is_finite()).then_some((lo, hi))
 }
 
 /// [`averaged_bounds`] without branches: the bounds and `true`, or `false` when a point is
@@ -451,15 +441,9 @@ pub(crate) fn tally_averaged<T: Voxel, C: Cell>(
                 .zip(zm.iter().zip(zp));
             for (((w, v), (ym, yp)), (zm, zp)) in it {
                 let nb = [w[0], w[2], *ym, *yp, *zm, *zp];
-                let (lo, hi) = match raw_bounds(w[1], nb) {
-                    (lo, hi, true) => (lo, hi),
-                    _ => match averaged_bounds(w[1], nb) {
-                        Some(b) => b,
-                        None => {
-                            stats.non_finite += 1;
-                            continue;
-                        }
-                    },
+                let Some((lo, hi)) = averaged_bounds(w[1], nb) else {
+                    stats.non_finite += 1;
+                    continue;
                 };
                 if splat(lo, hi, v.to_f64(), sign, out, region, buf) {
                     stats.mapped += 1;
