@@ -677,6 +677,31 @@ fn drag_lands_the_point_and_writes_the_lattice() {
         "{landed}"
     );
 
+    // A drag that folds space succeeds with a warning; conflicting drags are met in the
+    // least-squares sense with a warning.
+    let folded = volmorph(&[
+        &"drag",
+        &src,
+        &"--from",
+        &"0,0,0",
+        &"--to",
+        &"0.9,0,0",
+        &"--radius",
+        &"0.2",
+        &"-o",
+        &out,
+    ]);
+    assert!(folded.status.success());
+    let err = String::from_utf8_lossy(&folded.stderr);
+    assert!(err.contains("folds space"), "{err}");
+    let conflict = volmorph(&[
+        &"drag", &src, &"--from", &"0,0,0", &"--to", &"0,0,0", &"--from", &"0,0,0", &"--to",
+        &"0.1,0,0", &"-o", &out,
+    ]);
+    assert!(conflict.status.success());
+    let err = String::from_utf8_lossy(&conflict.stderr);
+    assert!(err.contains("drags conflict"), "{err}");
+
     // Targets outside the lattice box, unmatched pairs and plain pull-backs are refused.
     let err = fails(&[
         &"drag", &src, &"--from", &"0,0,0", &"--to", &"5,0,0", &"-o", &out,
