@@ -291,47 +291,39 @@ impl<A: SpaceMap, B: SpaceMap> SpaceMap for Compose<A, B> {
     }
 }
 
-impl<M: SpaceMap + ?Sized> SpaceMap for &M {
-    fn apply(&self, p: DVec3) -> DVec3 {
-        (**self).apply(p)
-    }
-    fn jacobian(&self, p: DVec3) -> DMat3 {
-        (**self).jacobian(p)
-    }
-    fn apply_batch(&self, points: &[DVec3], out: &mut [DVec3]) -> Result<(), DeformError> {
-        (**self).apply_batch(points, out)
-    }
-    fn apply_grid(&self, grid: &Geometry, out: &mut [DVec3]) -> Result<(), DeformError> {
-        (**self).apply_grid(grid, out)
-    }
-    fn apply_with_jacobian(&self, p: DVec3) -> (DVec3, DMat3) {
-        (**self).apply_with_jacobian(p)
-    }
-    fn jacobian_grid(&self, grid: &Geometry, out: &mut [DMat3]) -> Result<(), DeformError> {
-        (**self).jacobian_grid(grid, out)
-    }
+/// `SpaceMap` for a pointer type to a map: every method forwards to the pointee, so its fast
+/// paths (grid evaluation, analytic Jacobians) are kept. One list of methods for all pointer
+/// types, so a method added to the trait cannot be forgotten in one of them.
+macro_rules! forward_space_map {
+    ($($ptr:ty),*) => {$(
+        impl<M: SpaceMap + ?Sized> SpaceMap for $ptr {
+            fn apply(&self, p: DVec3) -> DVec3 {
+                (**self).apply(p)
+            }
+            fn jacobian(&self, p: DVec3) -> DMat3 {
+                (**self).jacobian(p)
+            }
+            fn apply_batch(&self, points: &[DVec3], out: &mut [DVec3]) -> Result<(), DeformError> {
+                (**self).apply_batch(points, out)
+            }
+            fn apply_grid(&self, grid: &Geometry, out: &mut [DVec3]) -> Result<(), DeformError> {
+                (**self).apply_grid(grid, out)
+            }
+            fn apply_with_jacobian(&self, p: DVec3) -> (DVec3, DMat3) {
+                (**self).apply_with_jacobian(p)
+            }
+            fn jacobian_grid(
+                &self,
+                grid: &Geometry,
+                out: &mut [DMat3],
+            ) -> Result<(), DeformError> {
+                (**self).jacobian_grid(grid, out)
+            }
+        }
+    )*};
 }
 
-impl<M: SpaceMap + ?Sized> SpaceMap for Box<M> {
-    fn apply(&self, p: DVec3) -> DVec3 {
-        (**self).apply(p)
-    }
-    fn jacobian(&self, p: DVec3) -> DMat3 {
-        (**self).jacobian(p)
-    }
-    fn apply_batch(&self, points: &[DVec3], out: &mut [DVec3]) -> Result<(), DeformError> {
-        (**self).apply_batch(points, out)
-    }
-    fn apply_grid(&self, grid: &Geometry, out: &mut [DVec3]) -> Result<(), DeformError> {
-        (**self).apply_grid(grid, out)
-    }
-    fn apply_with_jacobian(&self, p: DVec3) -> (DVec3, DMat3) {
-        (**self).apply_with_jacobian(p)
-    }
-    fn jacobian_grid(&self, grid: &Geometry, out: &mut [DMat3]) -> Result<(), DeformError> {
-        (**self).jacobian_grid(grid, out)
-    }
-}
+forward_space_map!(&M, Box<M>);
 
 #[cfg(test)]
 mod tests {
