@@ -1,11 +1,17 @@
 //! Incremental push-forward (True 1992 §5.3 main loop): a 128³ volume under True's 9×9×9
 //! uniform cubic lattice around the volume's bounds; one interior control point is moved
 //! (alternately there and back, so the state stays bounded) and the push-forward updated.
+//! A direct-manipulation drag of the point at an interior control point's place, with a tool
+//! radius of half a region (so the least-norm solve moves that one control point): solve plus
+//! incremental update, each run starting from the same lattice (restored untimed by undo).
 //! For scale, the full antialiased push-forward of the same volume and the engine's set-up.
 
 use criterion::{Criterion, criterion_group, criterion_main};
 use glam::DVec3;
+use std::time::{Duration, Instant};
+
 use volmorph_deform::BSplineLattice;
+use volmorph_deform::manipulate::{Drag, DragOptions, ManipulationSession};
 use volmorph_volume::{Geometry, Volume};
 use volmorph_warp::incremental::IncrementalPushForward;
 use volmorph_warp::pushforward::{AntialiasOptions, push_forward_antialiased_f32};
@@ -31,6 +37,31 @@ fn bench(c: &mut Criterion) {
             engine
                 .move_control_points(&[([4, 4, 4], DVec3::new(3.0, -2.0, 1.5) * sign)])
                 .expect("update")
+        });
+    });
+    engine.set_lattice(lattice.clone()).expect("reset");
+    let centre = lattice.control_point([4, 4, 4]).expect("control point");
+    let region = (lattice.control_point([5, 4, 4]).expect("control point") - centre).length();
+    let mut session =
+        ManipulationSession::new(lattice.clone(), DragOptions::with_radius(0.5 * region))
+            .expect("session");
+    let step = DVec3::new(0.3, -0.2, 0.25) * region;
+    g.bench_function("drag_solve_and_update", |b| {
+        b.iter_custom(|iters| {
+            let mut total = Duration::ZERO;
+            for _ in 0..iters {
+                let start = Instant::now();
+                session
+                    .drag(&[Drag::new(centre, centre + step)])
+                    .expect("drag");
+                engine
+                    .set_lattice(session.lattice().clone())
+                    .expect("update");
+                total += start.elapsed();
+                session.undo();
+                engine.set_lattice(session.lattice().clone()).expect("undo");
+            }
+            total
         });
     });
     g.sample_size(10);
