@@ -423,13 +423,8 @@ fn lattice_init_writes_an_identity_lattice() {
     assert!(err.contains("missing.json"), "{err}");
 }
 
-#[test]
-fn warp_and_jacobian_through_a_lattice() {
-    let dir = tempfile::tempdir().unwrap();
-    let d = dir.path();
-    let src = d.join("teapot.mha");
-    let lat = d.join("l.json");
-    ok(&[&"phantom", &"teapot", &"-o", &src, &"--size", &"24"]);
+/// Write the identity lattice of 5×5×5 control points around volume `src` to `lat`.
+fn write_identity_lattice(src: &Path, lat: &Path) {
     ok(&[
         &"lattice",
         &"init",
@@ -439,6 +434,21 @@ fn warp_and_jacobian_through_a_lattice() {
         &"-o",
         &lat,
     ]);
+}
+
+/// The teapot phantom at `size`³ as `dir/teapot.mha` and its identity lattice `dir/l.json`.
+fn teapot_and_identity_lattice(dir: &Path, size: &str) -> (PathBuf, PathBuf) {
+    let (src, lat) = (dir.join("teapot.mha"), dir.join("l.json"));
+    ok(&[&"phantom", &"teapot", &"-o", &src, &"--size", &size]);
+    write_identity_lattice(&src, &lat);
+    (src, lat)
+}
+
+#[test]
+fn warp_and_jacobian_through_a_lattice() {
+    let dir = tempfile::tempdir().unwrap();
+    let d = dir.path();
+    let (src, lat) = teapot_and_identity_lattice(d, "24");
     // The identity lattice leaves the volume unchanged.
     for method in [
         "pullback-nearest",
@@ -533,18 +543,7 @@ fn mesh_render_draws_the_model_in_the_middle() {
 fn inverse_warp_reports_and_masks_voxels_without_a_preimage() {
     let dir = tempfile::tempdir().unwrap();
     let d = dir.path();
-    let src = d.join("teapot.mha");
-    let lat = d.join("l.json");
-    ok(&[&"phantom", &"teapot", &"-o", &src, &"--size", &"20"]);
-    ok(&[
-        &"lattice",
-        &"init",
-        &src,
-        &"--counts",
-        &"5,5,5",
-        &"-o",
-        &lat,
-    ]);
+    let (src, lat) = teapot_and_identity_lattice(d, "20");
     // Every control point moved +3 along x: the box is translated, so its first 3 units
     // along x have no preimage (outside the box the map is the identity).
     let mut doc: serde_json::Value =
@@ -593,15 +592,7 @@ fn inverse_warp_reports_and_masks_voxels_without_a_preimage() {
     ]);
     assert!(e.contains("--nonconverged-mask"), "{e}");
     // A clean inverse warp prints no warning.
-    ok(&[
-        &"lattice",
-        &"init",
-        &src,
-        &"--counts",
-        &"5,5,5",
-        &"-o",
-        &lat,
-    ]);
+    write_identity_lattice(&src, &lat);
     let run = volmorph(&[
         &"warp",
         &src,
