@@ -18,6 +18,7 @@ use std::path::{Path, PathBuf};
 use std::time::Instant;
 
 use anyhow::Context;
+use clap::ValueEnum as _;
 use glam::DVec3;
 use volmorph_contour::{IsoSurface, McOptions, marching_cubes};
 use volmorph_deform::SpaceMap;
@@ -167,14 +168,25 @@ fn warp_demo(args: &Args, index: &mut String, timings: &mut Timings) -> anyhow::
     })?;
 
     pb.set_message("pictures");
-    let bounds = union(
-        picture::bounds(&before.mesh, "the teapot")?,
-        picture::bounds(&after.mesh, "the warped teapot")?,
-    );
+    // One frame for both pictures, so before and after line up.
+    let both = volmorph_render::Aabb::from_points(
+        before
+            .mesh
+            .positions()
+            .iter()
+            .chain(after.mesh.positions())
+            .copied(),
+    )
+    .context("the teapot's isosurface is empty")?;
+    let bounds = (both.min(), both.max());
     timings.time("shaded pictures (4)", || -> anyhow::Result<()> {
         for view in [View::Side, View::Iso] {
             let cam = picture::camera(view, bounds, args.picture)?;
-            let name = view_name(view);
+            let name = view
+                .to_possible_value()
+                .context("every view has a name")?
+                .get_name()
+                .to_string();
             write_surface_png(out, &format!("teapot_before_{name}"), &before, &cam)?;
             write_surface_png(out, &format!("teapot_after_{name}"), &after, &cam)?;
         }
@@ -300,19 +312,6 @@ fn write_surface_png(
         Some(&surface.normals),
         cam,
     )
-}
-
-fn view_name(view: View) -> &'static str {
-    match view {
-        View::Side => "side",
-        View::Front => "front",
-        View::Top => "top",
-        View::Iso => "iso",
-    }
-}
-
-fn union(a: (DVec3, DVec3), b: (DVec3, DVec3)) -> (DVec3, DVec3) {
-    (a.0.min(b.0), a.1.max(b.1))
 }
 
 fn max_abs_diff(a: &[f32], b: &[f32]) -> f64 {
