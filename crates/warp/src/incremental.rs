@@ -5,10 +5,10 @@
 //! where the lattice sends it, and its box-filtered value is spread over the *output* voxels
 //! its proxy box overlaps.
 //!
-//! [`IncrementalPushForward`] keeps everything the push-forward of True §5.4 computes —
-//! the images of the voxel centres (True's "deformation mapping array", with the one-voxel
-//! margin that averaged face centres need) and the per-output-voxel tallies `[V, W]` — so
-//! that moving control points only redoes what they influence, as in True's main loop:
+//! [`IncrementalPushForward`] keeps the images of the voxel centres (True's "deformation
+//! mapping array", with the one-voxel margin that averaged face centres need) and the
+//! current output, so that moving control points only redoes what they influence, as in
+//! True's main loop:
 //!
 //! 1. **Influenced region.** Control point `i` of an axis of degree `p` blends the knot spans
 //!    `i ..= i + p` (span index `s` = `[u_s, u_{s+1})`, blended by control points
@@ -19,38 +19,44 @@
 //!    turned into the box of voxel centres (margin included) whose parameters lie in it,
 //!    widened by [`PARAMETER_MARGIN`] voxels against rounding.
 //! 2. **Redone voxels.** A source voxel's proxy box depends on its own centre image and its
-//!    six neighbours' (face centres are averages), so the voxels to redo are the influenced
-//!    centres dilated by one voxel, clipped to the source.
-//! 3. **Erase, remap, add.** For the redone voxels the old boxes are subtracted from the
-//!    tallies (exactly the values once added, with the sign flipped), the influenced centre
-//!    images are re-evaluated with the new lattice through [`SpaceMap::apply_grid`] on the
-//!    sub-grid they form (the evaluation a full push-forward uses), and the new boxes are
-//!    added: all slabs erase, then the centre images are replaced, then all slabs add. Work
-//!    runs over z-slabs of the redone box (a partition fixed by the box), tallying straight
-//!    into the tallies: slabs whose output z-ranges are disjoint run in parallel, groups of
-//!    them one after the other, so every output voxel receives its contributions in an
-//!    order fixed by the partition and results do not depend on the number of threads.
+//!    six neighbours' (face centres are averages), so the voxels whose boxes change are the
+//!    influenced centres dilated by one voxel, clipped to the source.
+//! 3. **Remap.** The influenced centre images are re-evaluated with the new lattice through
+//!    [`SpaceMap::apply_grid`] on the sub-grid they form (the evaluation a full push-forward
+//!    uses) and stored, in one pass that also bounds the redone voxels' old and new boxes.
+//!    Every output voxel those boxes overlap may change; no other can.
+//! 4. **Recompute the changed output region.** True erases the old boxes of the redone
+//!    voxels and adds their new ones. Here the tallies `[V, W]` of the output voxels in the
+//!    bounding box of the old and new boxes are instead summed afresh from every source
+//!    voxel whose box reaches them, and renormalised with True's rule (see
+//!    [`crate::pushforward`]). The result is the same, but each redone voxel is tallied
+//!    once instead of twice, and nothing cancels, so nothing drifts over many edits.
+//!    The voxels whose boxes reach the region are found through the bounds of the boxes of
+//!    short runs of voxels along x (blocks; see `BLOCK`), kept up to date in step 3.
 //!
 //! The moved control points are handled together: the redone region is the bounding box
 //! of their influence, which suits the clusters that dragging a point moves (the control
 //! points blending one region). Callers moving far-apart points at once may update per
 //! cluster instead (each update is exact).
-//! 4. **Renormalise** the output voxels in the union of the slabs' output boxes with True's
-//!    rule (see [`crate::pushforward`]).
 //!
-//! Tallies are kept in `f64`: erase-then-add cancels to rounding (about 1e-16 relative per
-//! update), so no drift builds up over many edits. After any sequence of updates the volume
-//! equals [`push_forward_antialiased_f32`](crate::pushforward::push_forward_antialiased_f32)
-//! with the current lattice and the same options, up to the `f32` accumulation of the
-//! latter (about 1e-6 relative).
+//! Every output voxel sums its contributions in one fixed order (source voxels in index
+//! order), whatever region is recomputed and however the work is split over threads, so
+//! results are bit for bit the same for any number of threads, and after any sequence of
+//! edits the volume is the one a new engine built with the current lattice holds, up to
+//! the rounding of centre images evaluated on a sub-grid instead of the whole grid (about
+//! 1e-14 relative). It equals
+//! [`push_forward_antialiased_f32`](crate::pushforward::push_forward_antialiased_f32) with
+//! the current lattice and the same options up to the `f32` accumulation of the latter
+//! (about 1e-6 relative; the engine sums in `f64`).
 //!
 //! # Memory
 //!
 //! The engine holds, for a source of `n = nx·ny·nz` voxels and an output of `m` voxels:
 //! the source values (`4n` bytes, `f32`), the centre images (`24·(nx+2)(ny+2)(nz+2)` bytes,
-//! `f64` points in output index space), the tallies (`16m` bytes) and the current volume
-//! (`4m` bytes) — about 105 MB for 128³ → 128³, 815 MB for 256³ → 256³. An update adds
-//! only the re-evaluated centre images (`24` bytes each, kept between updates).
+//! `f64` points in output index space), a status byte and `3` bytes of block bounds per
+//! source voxel, scratch tallies (`16m` bytes, all zero between updates) and the current
+//! volume (`4m` bytes) — about 110 MB for 128³ → 128³, 880 MB for 256³ → 256³. An update
+//! adds only the re-evaluated centre images (`24` bytes each, kept between updates).
 //!
 //! # Why the nearest ("map and round") preview is not incremental
 //!
@@ -87,6 +93,9 @@
 //! # Ok::<(), Box<dyn std::error::Error>>(())
 //! ```
 
+use std::sync::atomic::AtomicU8;
+use std::sync::atomic::Ordering::Relaxed;
+
 use glam::DVec3;
 use rayon::prelude::*;
 use volmorph_deform::{BSplineLattice, SpaceMap};
@@ -97,29 +106,13 @@ use crate::pushforward::{
     AntialiasOptions, FaceCentres, PushForwardStats, ToIndex, normalise, offset_grid,
     output_geometry, try_filled,
 };
-use crate::tally::{Region, Voxels, tally_averaged, vmax, vmin};
+use crate::tally::{Region, Voxels, reaches_grid, row, splat, vmax, vmin};
 
 /// Widening, in source voxels, of the box of voxel centres whose parameters lie in the
 /// influenced parameter box. The map evaluation and this test compute a centre's parameter
 /// along different roundings (≈1e-13 relative); a voxel redone needlessly costs a little
 /// time, a voxel missed would be wrong, so the margin is generous.
 pub const PARAMETER_MARGIN: f64 = 1e-6;
-
-/// Target number of redone source voxels per slab of an update (slabs are whole z-slices of
-/// the redone box, at least [`MIN_SLAB_SLICES`] thick, their count a multiple of
-/// [`SLAB_GROUPING`]). Depends only on the box, so the slab partition — and with it the
-/// order of floating-point sums — never depends on the thread count.
-const SLAB_VOXELS: usize = 1 << 16;
-
-/// The slab count is rounded up to a multiple of this: neighbouring slabs usually fall
-/// into two alternating groups, and each group of a multiple of two slabs shares evenly
-/// over two threads.
-const SLAB_GROUPING: usize = 4;
-
-/// Thinnest slab, in source z-slices: boxes spill about a plane into the output planes of
-/// the neighbouring slabs, so thinner slabs would overlap several neighbours and need more
-/// groups run one after the other.
-const MIN_SLAB_SLICES: usize = 4;
 
 /// A box of voxel indices `start[a] .. end[a]` per axis (half-open; empty if any
 /// `start[a] >= end[a]`).
@@ -187,31 +180,36 @@ pub struct UpdateReport {
     pub after: PushForwardStats,
 }
 
-/// New centre images of an update: the points (x fastest) over a margin-coordinate box and
-/// the bounds of the finite points of each of its z-planes.
-struct Fresh<'a> {
-    points: &'a [DVec3],
-    region: &'a Region,
-    plane_bounds: &'a [(DVec3, DVec3)],
-}
+/// Edge lengths (x, y, z), in source voxels, of the blocks of the source grid whose
+/// proxy-box bounds the engine keeps (see [`IncrementalPushForward`]): a recomputed output
+/// region visits the voxels of every block whose bounds reach it, so smaller blocks visit
+/// fewer needless voxels around the region and larger ones cost less bookkeeping. Longer
+/// in x, the contiguous axis, to keep rows long.
+const BLOCK: [usize; 3] = [16, 1, 1];
 
-/// A slab of an update: its source voxels and the output region their old and new boxes
-/// can reach.
-#[derive(Debug, Clone, Copy)]
-struct SlabPlan {
-    voxels: Region,
-    output: Region,
-}
+/// Fewest output planes in one slab of a recomputed output region: a block whose boxes
+/// straddle a slab boundary is visited by both slabs, so slabs much thinner than a block's
+/// reach would visit most blocks twice.
+const MIN_SLAB_PLANES: usize = 8;
+
+/// What a source voxel's proxy box does under the current lattice (one byte per voxel).
+const MAPPED: u8 = 0;
+/// See [`MAPPED`]: the box overlaps no output voxel.
+const OUTSIDE: u8 = 1;
+/// See [`MAPPED`]: a face-centre image is NaN or infinite.
+const NON_FINITE: u8 = 2;
 
 /// The antialiased push-forward of a source volume through a [`BSplineLattice`], kept up to
-/// date under control-point moves by redoing only the influenced region (see the
-/// [module docs](self) for the algorithm, its exactness and its memory use).
+/// date under control-point moves by recomputing only the output region they can change
+/// (see the [module docs](self) for the algorithm, its exactness and its memory use).
 ///
 /// The result always equals
 /// [`push_forward_antialiased_f32`](crate::pushforward::push_forward_antialiased_f32) of the
 /// source with [`lattice`](Self::lattice) on the output geometry with the engine's options
 /// (to the `f32` rounding of the latter), and [`stats`](Self::stats) equals its
-/// [`PushForwardStats`].
+/// [`PushForwardStats`]. It is moreover, up to the rounding of re-evaluated centre images,
+/// the volume a new engine built with the current lattice holds, whatever the edits that
+/// led to it, and bit for bit the same for any number of threads.
 #[derive(Debug)]
 pub struct IncrementalPushForward {
     source: Geometry,
@@ -223,10 +221,146 @@ pub struct IncrementalPushForward {
     /// Images of the voxel centres of the source grid widened by one voxel on every side
     /// (source index `v` is entry `v + 1`), in output continuous-index space.
     centres: Vec<DVec3>,
-    tallies: Vec<[f64; 2]>,
+    /// Per source voxel (x fastest): [`MAPPED`], [`OUTSIDE`] or [`NON_FINITE`].
+    status: Vec<AtomicU8>,
+    blocks: Blocks,
     volume: Volume<f32>,
     stats: PushForwardStats,
+    /// Centre images re-evaluated by an update (kept to reuse the allocation).
     fresh: Vec<DVec3>,
+    /// Tallies `[V, W]` of a recomputed output region (kept to reuse the allocation).
+    scratch: Vec<[f64; 2]>,
+}
+
+/// The source grid cut into [`BLOCK`]-sized blocks (the last ones per axis shorter), with
+/// the bounds, in output index space, of the proxy boxes of each block's voxels.
+#[derive(Debug)]
+struct Blocks {
+    /// Blocks per axis.
+    counts: [usize; 3],
+    /// Per block (x fastest): the bounds of its voxels' finite proxy boxes, `(+∞, −∞)` if
+    /// it has none.
+    bounds: Vec<(DVec3, DVec3)>,
+    /// Per z-layer of blocks: the union of its blocks' bounds.
+    layers: Vec<(DVec3, DVec3)>,
+}
+
+impl Blocks {
+    /// The blocks of a source grid of `dims`, with empty bounds.
+    fn new(dims: [usize; 3]) -> Result<Self, WarpError> {
+        let counts = [0, 1, 2].map(|a| dims[a].div_ceil(BLOCK[a]));
+        let len = counts[0] * counts[1] * counts[2];
+        let empty = (DVec3::INFINITY, DVec3::NEG_INFINITY);
+        Ok(Self {
+            counts,
+            bounds: try_filled(len, empty, "block bounds")?,
+            layers: try_filled(counts[2], empty, "block bounds")?,
+        })
+    }
+
+    /// The source voxels of block `[i, j, k]` in a source grid of `dims`.
+    fn voxels(index: [usize; 3], dims: [usize; 3]) -> Region {
+        let mut r = Region::default();
+        for a in 0..3 {
+            r.lo[a] = index[a] * BLOCK[a];
+            r.dims[a] = BLOCK[a].min(dims[a] - r.lo[a]);
+        }
+        r
+    }
+
+    /// Range of block indices per axis (half-open) of the blocks meeting `voxels`.
+    fn meeting(voxels: &Region) -> [(usize, usize); 3] {
+        [0, 1, 2].map(|a| {
+            let lo = voxels.lo[a];
+            (lo / BLOCK[a], (lo + voxels.dims[a]).div_ceil(BLOCK[a]))
+        })
+    }
+}
+
+/// Bounds of the finite centre images along stretches of margin rows: for each margin row
+/// (y, z) of `rows` and each block column `i` of `columns`, the row's images under the
+/// column's voxels and their ±x neighbours (margin x from `16·i` for [`BLOCK`]`[0] = 16`,
+/// `BLOCK[0] + 2` of them). A block's bounds are the union of the segments of the rows
+/// its voxels and their neighbours sit on.
+struct Segments {
+    /// The margin rows covered (x extent unused).
+    rows: Region,
+    /// Block columns `i0 .. i1` (half-open).
+    columns: (usize, usize),
+    /// Planes of rows of columns, x fastest.
+    bounds: Vec<(DVec3, DVec3)>,
+}
+
+impl Segments {
+    /// Empty segments of `rows` × `columns`.
+    fn new(rows: Region, columns: (usize, usize)) -> Self {
+        let n = rows.dims[1] * rows.dims[2] * (columns.1 - columns.0);
+        Self {
+            rows,
+            columns,
+            bounds: vec![(DVec3::INFINITY, DVec3::NEG_INFINITY); n],
+        }
+    }
+
+    /// Empty segments of the margin rows and block columns the blocks meeting `redo` read,
+    /// in a source grid of `dims`.
+    fn covering(redo: &Region, dims: [usize; 3]) -> Self {
+        let [(i0, i1), (j0, j1), (k0, k1)] = Blocks::meeting(redo);
+        let [_, by, bz] = BLOCK;
+        let rows = Region {
+            lo: [0, j0 * by, k0 * bz],
+            dims: [
+                dims[0] + 2,
+                (j1 * by).min(dims[1]) + 2 - j0 * by,
+                (k1 * bz).min(dims[2]) + 2 - k0 * bz,
+            ],
+        };
+        Self::new(rows, (i0, i1))
+    }
+
+    /// Number of block columns.
+    fn columns(&self) -> usize {
+        self.columns.1 - self.columns.0
+    }
+
+    /// The segment of margin row `(y, z)` under block column `i`, if covered.
+    fn get(&self, y: usize, z: usize, i: usize) -> Option<(DVec3, DVec3)> {
+        let dy = y
+            .checked_sub(self.rows.lo[1])
+            .filter(|&d| d < self.rows.dims[1])?;
+        let dz = z
+            .checked_sub(self.rows.lo[2])
+            .filter(|&d| d < self.rows.dims[2])?;
+        let di = i
+            .checked_sub(self.columns.0)
+            .filter(|&d| d < self.columns())?;
+        self.bounds
+            .get((dz * self.rows.dims[1] + dy) * self.columns() + di)
+            .copied()
+    }
+
+    /// Fill `out` (one entry per column of `columns`) with the segments of the full margin
+    /// row `row` of a source grid of `dims`.
+    #[inline]
+    fn of_row(
+        row: &[DVec3],
+        columns: (usize, usize),
+        dims: [usize; 3],
+        out: &mut [(DVec3, DVec3)],
+    ) {
+        for (i, seg) in (columns.0..columns.1).zip(out) {
+            let vbox = Blocks::voxels([i, 0, 0], dims);
+            let (mut lo, mut hi) = (DVec3::INFINITY, DVec3::NEG_INFINITY);
+            let (a, b) = (vbox.lo[0], vbox.lo[0] + vbox.dims[0] + 2);
+            for p in row.get(a..b).unwrap_or(&[]) {
+                if p.is_finite() {
+                    lo = vmin(lo, *p);
+                    hi = vmax(hi, *p);
+                }
+            }
+            *seg = (lo, hi);
+        }
+    }
 }
 
 impl IncrementalPushForward {
@@ -286,7 +420,14 @@ impl IncrementalPushForward {
             .par_iter_mut()
             .with_min_len(4096)
             .for_each(|p| *p = to_index.apply(*p));
-        let tallies = try_filled(output.len(), [0.0f64; 2], "tallies")?;
+        let mut status = Vec::new();
+        status
+            .try_reserve_exact(source.len())
+            .map_err(|_| WarpError::Allocation {
+                what: "voxel statuses",
+                bytes: source.len(),
+            })?;
+        status.extend((0..source.len()).map(|_| AtomicU8::new(OUTSIDE)));
         let data = try_filled(output.len(), 0.0f32, "output")?;
         let volume = Volume::new(*output, data).map_err(output_geometry)?;
         let mut engine = Self {
@@ -297,22 +438,26 @@ impl IncrementalPushForward {
             to_index,
             background: options.background,
             centres,
-            tallies,
+            status,
+            blocks: Blocks::new(g.dims)?,
             volume,
             stats: PushForwardStats::default(),
             fresh: Vec::new(),
+            scratch: try_filled(output.len(), [0.0; 2], "tallies")?,
         };
         let all = Region {
             lo: [0; 3],
             dims: g.dims,
         };
-        let (_, after, _) = engine.retally(&all, None);
-        engine.stats = after;
         let everything = Region {
             lo: [0; 3],
             dims: output.dims,
         };
-        engine.renormalise(&everything);
+        let sane = engine.centres.par_iter().all(|p| sane(*p));
+        engine.refresh_blocks(&all, None);
+        engine.reset_statuses(&all, sane);
+        engine.recompute(&everything, &all);
+        engine.stats = engine.count(&all);
         Ok(engine)
     }
 
@@ -434,7 +579,8 @@ impl IncrementalPushForward {
             redo.lo[a] = lo;
             redo.dims[a] = hi.saturating_sub(lo);
         }
-        // New centre images of the influenced box (margin coordinates m = source index + 1).
+        // New centre images of the influenced box (margin coordinates m = source index + 1),
+        // in physical space.
         let sub = offset_grid(
             &self.source,
             DVec3::new(
@@ -453,32 +599,34 @@ impl IncrementalPushForward {
                 grid: "voxel-centre",
                 source,
             })?;
-        // Convert to output indices, with the bounds of each plane's finite images.
-        let to_index = self.to_index;
-        let plane = influenced.dims[0] * influenced.dims[1];
-        let plane_bounds: Vec<(DVec3, DVec3)> = self.fresh[..len]
-            .par_chunks_mut(plane)
-            .map(|pts| {
-                let (mut lo, mut hi) = (DVec3::INFINITY, DVec3::NEG_INFINITY);
-                for p in pts {
-                    *p = to_index.apply(*p);
-                    if p.is_finite() {
-                        lo = vmin(lo, *p);
-                        hi = vmax(hi, *p);
-                    }
-                }
-                (lo, hi)
-            })
-            .collect();
-        let points = std::mem::take(&mut self.fresh);
-        let fresh = Fresh {
-            points: &points[..len],
-            region: &influenced,
-            plane_bounds: &plane_bounds,
+        // Everything that can fail is done: commit.
+        let before = self.count(&redo);
+        // The redone voxels' boxes, old and new, lie between the centre images they read:
+        // the old ones of their neighbourhood and the fresh ones (the neighbourhood's
+        // unchanged images are among the old ones).
+        let neighbourhood = Region {
+            lo: redo.lo,
+            dims: [0, 1, 2].map(|a| redo.dims[a] + 2),
         };
-        let (before, after, out) = self.retally(&redo, Some(&fresh));
-        self.fresh = points;
-        self.renormalise(&out);
+        let mut segments = Segments::covering(&redo, self.source.dims);
+        let hulls = swap_in(
+            &mut self.centres,
+            self.source.dims,
+            &neighbourhood,
+            &self.fresh[..len],
+            &influenced,
+            &self.to_index,
+            &mut segments,
+        );
+        let touched = Region::of_bounds(
+            vmin(hulls.old.lo, hulls.new.lo),
+            vmax(hulls.old.hi, hulls.new.hi),
+            self.output.dims,
+        );
+        self.refresh_blocks(&redo, Some(&segments));
+        self.reset_statuses(&redo, hulls.old.sane && hulls.new.sane);
+        self.recompute(&touched, &redo);
+        let after = self.count(&redo);
         self.lattice = lattice;
         self.stats = PushForwardStats {
             mapped: self.stats.mapped.saturating_sub(before.mapped) + after.mapped,
@@ -488,7 +636,7 @@ impl IncrementalPushForward {
         report.remapped = len;
         report.redone = redo.len();
         report.source_box = IndexBox::of(&redo);
-        report.output_box = IndexBox::of(&out);
+        report.output_box = IndexBox::of(&touched);
         report.before = before;
         report.after = after;
         Ok(report)
@@ -544,185 +692,286 @@ impl IncrementalPushForward {
         r
     }
 
-    /// Subtract (if `fresh` is given) the old boxes of the source voxels in `redo`, store the
-    /// new centre images `fresh`, and add the voxels' new boxes. Returns the stats of the
-    /// redone voxels before and after and the output region the boxes can reach.
+    /// Recompute the bounds of every block meeting `redo` from the stored centre images: the
+    /// bounds of the finite images of the block's voxel centres and their neighbours, which
+    /// hold every proxy box of the block (a box's corners are means of such images).
     ///
-    /// Slabs tally straight into the tallies. They run in colour groups (see [`colours`]):
-    /// within a group the slabs' output z-ranges are disjoint, so they run in parallel on
-    /// disjoint planes; groups run one after the other. Every output voxel therefore receives
-    /// its contributions in an order fixed by the slab partition alone, whatever the number
-    /// of threads.
-    fn retally(
-        &mut self,
-        redo: &Region,
-        fresh: Option<&Fresh<'_>>,
-    ) -> (PushForwardStats, PushForwardStats, Region) {
-        let cdims = [self.source.dims[0] + 2, self.source.dims[1] + 2];
+    /// In two passes, so each image is read about once: the [`Segments`] of the margin rows
+    /// the blocks read (given, or computed here, parallel over planes), then per block the
+    /// union of its rows' segments (parallel over z-layers of blocks).
+    fn refresh_blocks(&mut self, redo: &Region, given: Option<&Segments>) {
         if redo.is_empty() {
-            if let Some(f) = fresh {
-                store_centres(&mut self.centres, cdims, f.points, f.region);
-            }
-            return (
-                PushForwardStats::default(),
-                PushForwardStats::default(),
-                Region::default(),
-            );
-        }
-        let plans = self.plan_slabs(redo, fresh);
-        let groups = colours(&plans);
-        let touched = plans
-            .iter()
-            .fold(Region::default(), |acc, p| acc.union(&p.output));
-        let before = match fresh {
-            Some(f) => {
-                let old = self.tally_groups(&plans, &groups, -1.0);
-                store_centres(&mut self.centres, cdims, f.points, f.region);
-                old
-            }
-            None => PushForwardStats::default(),
-        };
-        let after = self.tally_groups(&plans, &groups, 1.0);
-        (before, after, touched)
-    }
-
-    /// Tally (with `sign`) the voxels of every slab plan from the stored centre images
-    /// straight into the tallies, group by group.
-    fn tally_groups(
-        &mut self,
-        plans: &[SlabPlan],
-        groups: &[Vec<usize>],
-        sign: f64,
-    ) -> PushForwardStats {
-        let src = Voxels {
-            values: &self.values,
-            vdims: self.source.dims,
-            centres: &self.centres,
-            cdims: [self.source.dims[0] + 2, self.source.dims[1] + 2],
-        };
-        let out = self.output.dims;
-        let plane = out[0] * out[1];
-        let mut stats = PushForwardStats::default();
-        for group in groups {
-            // Members are sorted by output z and their z-ranges are disjoint: hand each its
-            // own planes of the tallies.
-            let mut work: Vec<(&SlabPlan, Region, &mut [[f64; 2]])> =
-                Vec::with_capacity(group.len());
-            let mut rest: &mut [[f64; 2]] = &mut self.tallies;
-            let mut taken = 0usize;
-            for &g in group {
-                let plan = &plans[g];
-                let (z0, dz) = if plan.output.is_empty() {
-                    (taken, 0)
-                } else {
-                    (plan.output.lo[2], plan.output.dims[2])
-                };
-                let (_, tail) = std::mem::take(&mut rest).split_at_mut((z0 - taken) * plane);
-                let (mine, tail) = tail.split_at_mut(dz * plane);
-                rest = tail;
-                taken = z0 + dz;
-                let region = Region {
-                    lo: [0, 0, z0],
-                    dims: [out[0], out[1], dz],
-                };
-                work.push((plan, region, mine));
-            }
-            let counts: Vec<PushForwardStats> = work
-                .into_par_iter()
-                .map(|(plan, region, planes)| {
-                    let c0 = [0, 1, 2].map(|a| plan.voxels.lo[a] + 1);
-                    tally_averaged(&src, &plan.voxels, c0, out, &region, planes, sign)
-                })
-                .collect();
-            for c in &counts {
-                stats.add(c);
-            }
-        }
-        stats
-    }
-
-    /// Split `redo` into z-slabs and find, for each, the output region its old and new boxes
-    /// can reach: the cells overlapped by the bounding box of the finite centre images its
-    /// voxels read (face centres lie between centres).
-    fn plan_slabs(&self, redo: &Region, fresh: Option<&Fresh<'_>>) -> Vec<SlabPlan> {
-        // A multiple of SLAB_GROUPING slabs (each colour group then splits evenly over a few
-        // threads), at least MIN_SLAB_SLICES thick, planes shared out evenly.
-        let nz = redo.dims[2];
-        let wanted = redo
-            .len()
-            .div_ceil(SLAB_VOXELS)
-            .next_multiple_of(SLAB_GROUPING);
-        let count = wanted.min(nz / MIN_SLAB_SLICES).max(1);
-        let slabs: Vec<(usize, usize)> = (0..count)
-            .map(|s| {
-                let (a, b) = (s * nz / count, (s + 1) * nz / count);
-                (redo.lo[2] + a, b - a)
-            })
-            .collect();
-        let cdims = [self.source.dims[0] + 2, self.source.dims[1] + 2];
-        slabs
-            .par_iter()
-            .map(|&(z0, nz)| {
-                let voxels = Region {
-                    lo: [redo.lo[0], redo.lo[1], z0],
-                    dims: [redo.dims[0], redo.dims[1], nz],
-                };
-                // Margin coordinates of the voxels' centres and their neighbours.
-                let neighbourhood = Region {
-                    lo: voxels.lo,
-                    dims: [0, 1, 2].map(|a| voxels.dims[a] + 2),
-                };
-                let (mut lo, mut hi) = bounds(&self.centres, cdims, &neighbourhood);
-                if let Some(f) = fresh {
-                    // The neighbourhood spans the fresh box in x and y (it is the redone box
-                    // widened by one, the redone box the fresh box widened by one), so the
-                    // fresh planes it meets bound its fresh points.
-                    let z_lo = neighbourhood.lo[2].max(f.region.lo[2]);
-                    let z_hi = (neighbourhood.lo[2] + neighbourhood.dims[2])
-                        .min(f.region.lo[2] + f.region.dims[2]);
-                    for &(l, h) in f
-                        .plane_bounds
-                        .get(
-                            z_lo.saturating_sub(f.region.lo[2])
-                                ..z_hi.saturating_sub(f.region.lo[2]),
-                        )
-                        .unwrap_or(&[])
-                    {
-                        lo = lo.min(l);
-                        hi = hi.max(h);
-                    }
-                }
-                SlabPlan {
-                    voxels,
-                    output: Region::of_bounds(lo, hi, self.output.dims),
-                }
-            })
-            .collect()
-    }
-
-    /// Recompute the output voxels of `region` from their tallies (True's rule).
-    fn renormalise(&mut self, region: &Region) {
-        if region.is_empty() {
             return;
         }
-        let [nx, ny, _] = self.output.dims;
-        let bg = self.background;
-        let [x0, y0, z0] = region.lo;
-        let [dx, dy, dz] = region.dims;
-        self.volume
-            .data_mut()
-            .par_chunks_mut(nx * ny)
-            .zip(self.tallies.par_chunks(nx * ny))
-            .skip(z0)
-            .take(dz)
-            .for_each(|(vp, tp)| {
-                for j in y0..y0 + dy {
-                    let s = j * nx + x0;
-                    for (v, t) in vp[s..s + dx].iter_mut().zip(&tp[s..s + dx]) {
-                        *v = f32::from_f64(normalise(t[0], t[1], bg));
+        let dims = self.source.dims;
+        let [cx, cy, _] = self.blocks.counts;
+        let [(i0, i1), (j0, j1), (k0, k1)] = Blocks::meeting(redo);
+        let mut computed = None;
+        let segments = match given {
+            Some(s) => s,
+            None => {
+                let mut s = Segments::covering(redo, dims);
+                let rows = s.rows;
+                let ncol = s.columns();
+                let plane = rows.dims[1] * ncol;
+                let cdims = [dims[0] + 2, dims[1] + 2];
+                let centres = &self.centres;
+                s.bounds
+                    .par_chunks_mut(plane)
+                    .enumerate()
+                    .for_each(|(dz, out)| {
+                        for (dy, out) in out.chunks_exact_mut(ncol).enumerate() {
+                            let start = cdims[0] * (rows.lo[1] + dy + cdims[1] * (rows.lo[2] + dz));
+                            if let Some(row) = centres.get(start..start + cdims[0]) {
+                                Segments::of_row(row, (i0, i1), dims, out);
+                            }
+                        }
+                    });
+                computed.insert(s)
+            }
+        };
+        let empty = (DVec3::INFINITY, DVec3::NEG_INFINITY);
+        let Blocks { bounds, layers, .. } = &mut self.blocks;
+        bounds
+            .par_chunks_mut(cx * cy)
+            .zip(layers.par_iter_mut())
+            .enumerate()
+            .skip(k0)
+            .take(k1 - k0)
+            .for_each(|(k, (layer, union))| {
+                for j in j0..j1 {
+                    for i in i0..i1 {
+                        let vbox = Blocks::voxels([i, j, k], dims);
+                        let (mut lo, mut hi) = empty;
+                        for z in vbox.lo[2]..vbox.lo[2] + vbox.dims[2] + 2 {
+                            for y in vbox.lo[1]..vbox.lo[1] + vbox.dims[1] + 2 {
+                                if let Some((l, h)) = segments.get(y, z, i) {
+                                    lo = vmin(lo, l);
+                                    hi = vmax(hi, h);
+                                }
+                            }
+                        }
+                        layer[j * cx + i] = (lo, hi);
+                    }
+                }
+                *union = layer
+                    .iter()
+                    .fold(empty, |(lo, hi), &(l, h)| (vmin(lo, l), vmax(hi, h)));
+            });
+    }
+
+    /// Set the status of every source voxel of `r` to [`OUTSIDE`] when `sane` (every centre
+    /// image the voxels read is finite and moderate, so every proxy box exists;
+    /// [`recompute`](Self::recompute) then marks the mapped ones), or else classify each
+    /// voxel from its proxy box. Runs over z-planes in parallel.
+    fn reset_statuses(&self, r: &Region, sane: bool) {
+        let dims = self.source.dims;
+        let [nx, ny, _] = dims;
+        let src = Voxels {
+            values: &self.values,
+            vdims: dims,
+            centres: &self.centres,
+            cdims: [nx + 2, ny + 2],
+        };
+        let out = self.output.dims;
+        let plane = Region {
+            lo: [r.lo[0], r.lo[1], 0],
+            dims: [r.dims[0], r.dims[1], 1],
+        };
+        (r.lo[2]..r.lo[2] + r.dims[2])
+            .into_par_iter()
+            .for_each(|k| {
+                for dj in 0..r.dims[1] {
+                    let s = r.lo[0] + nx * (r.lo[1] + dj + ny * k);
+                    let Some(slots) = self.status.get(s..s + r.dims[0]) else {
+                        continue;
+                    };
+                    if sane {
+                        for slot in slots {
+                            slot.store(OUTSIDE, Relaxed);
+                        }
+                        continue;
+                    }
+                    let vbox = Region {
+                        lo: [plane.lo[0], plane.lo[1], k],
+                        ..plane
+                    };
+                    let c0 = [vbox.lo[0] + 1, vbox.lo[1] + 1, k + 1];
+                    let Some(row) = row(&src, &vbox, c0, dj, 0) else {
+                        continue;
+                    };
+                    for (slot, (_, proxy)) in slots.iter().zip(row.boxes()) {
+                        let status = match proxy {
+                            Some((lo, hi)) if reaches_grid(lo, hi, out) => MAPPED,
+                            Some(_) => OUTSIDE,
+                            None => NON_FINITE,
+                        };
+                        slot.store(status, Relaxed);
                     }
                 }
             });
+    }
+
+    /// Counts of the statuses of the source voxels in `r`.
+    fn count(&self, r: &Region) -> PushForwardStats {
+        let [nx, ny, _] = self.source.dims;
+        (r.lo[2]..r.lo[2] + r.dims[2])
+            .into_par_iter()
+            .map(|k| {
+                let mut c = [0usize; 3];
+                for j in r.lo[1]..r.lo[1] + r.dims[1] {
+                    let s = r.lo[0] + nx * (j + ny * k);
+                    for st in self.status.get(s..s + r.dims[0]).unwrap_or(&[]) {
+                        c[usize::from(st.load(Relaxed).min(NON_FINITE))] += 1;
+                    }
+                }
+                PushForwardStats {
+                    mapped: c[usize::from(MAPPED)],
+                    outside: c[usize::from(OUTSIDE)],
+                    non_finite: c[usize::from(NON_FINITE)],
+                }
+            })
+            .reduce(PushForwardStats::default, |mut a, b| {
+                a.add(&b);
+                a
+            })
+    }
+
+    /// Recompute the output voxels of `region` from scratch: their tallies are summed anew
+    /// from the boxes of every source voxel (of every block whose bounds reach the region)
+    /// and renormalised with True's rule. Source voxels of `redo` whose boxes reach the
+    /// output grid are marked [`MAPPED`]; `region` must hold every output voxel their boxes
+    /// overlap.
+    ///
+    /// The region is cut into slabs of whole output planes, recomputed in parallel. Within
+    /// a slab, blocks are visited in index order and voxels in index order, so every output
+    /// voxel sums its contributions in one fixed order — the same for any region holding
+    /// it and any number of threads.
+    ///
+    /// The scratch tallies hold a cell per output voxel, so any region fits.
+    fn recompute(&mut self, region: &Region, redo: &Region) {
+        let len = region.len();
+        if region.is_empty() || self.scratch.len() < len {
+            return;
+        }
+        let dims = self.source.dims;
+        let out = self.output.dims;
+        let [ox, oy, _] = out;
+        let plane = ox * oy;
+        let (rx, ry) = (region.dims[0], region.dims[1]);
+        let rplane = rx * ry;
+        let nz = region.dims[2];
+        let count = (2 * rayon::current_num_threads())
+            .min(nz / MIN_SLAB_PLANES)
+            .max(1);
+        // Each slab: its region, its tallies and its planes of the volume.
+        let mut work = Vec::with_capacity(count);
+        let data = self.volume.data_mut();
+        let mut planes = data
+            .get_mut(region.lo[2] * plane..(region.lo[2] + nz) * plane)
+            .unwrap_or(&mut []);
+        let mut tallies = &mut self.scratch[..len];
+        for s in 0..count {
+            let (a, b) = (s * nz / count, (s + 1) * nz / count);
+            let (mine, rest) = std::mem::take(&mut planes).split_at_mut((b - a) * plane);
+            planes = rest;
+            let (buf, rest) = std::mem::take(&mut tallies).split_at_mut((b - a) * rplane);
+            tallies = rest;
+            let slab = Region {
+                lo: [region.lo[0], region.lo[1], region.lo[2] + a],
+                dims: [rx, ry, b - a],
+            };
+            work.push((slab, buf, mine));
+        }
+        let src = Voxels {
+            values: &self.values,
+            vdims: dims,
+            centres: &self.centres,
+            cdims: [dims[0] + 2, dims[1] + 2],
+        };
+        let [cx, cy, _] = self.blocks.counts;
+        let blocks = &self.blocks;
+        let status = &self.status;
+        let bg = self.background;
+        let redo_end = [0, 1, 2].map(|a| redo.lo[a] + redo.dims[a]);
+        let in_redo = |a: usize, i: usize| i >= redo.lo[a] && i < redo_end[a];
+        let z0 = region.lo[2];
+        work.into_par_iter().for_each(|(slab, buf, vol)| {
+            // The scratch is all zeros between recomputations (cleared as it is read).
+            let corner = |d: [usize; 3]| {
+                DVec3::new(
+                    (slab.lo[0] + d[0]) as f64,
+                    (slab.lo[1] + d[1]) as f64,
+                    (slab.lo[2] + d[2]) as f64,
+                ) - 0.5
+            };
+            let (rlo, rhi) = (corner([0; 3]), corner(slab.dims));
+            // Boxes overlapping the slab's cells with positive length (empty bounds fail
+            // every test).
+            let reaches = |&(lo, hi): &(DVec3, DVec3)| hi.cmpgt(rlo).all() && lo.cmplt(rhi).all();
+            let layers = blocks.layers.iter().enumerate().filter(|(_, b)| reaches(b));
+            // Runs of consecutive reaching blocks along x, visited as one box of voxels
+            // (the same voxels in the same order, with longer rows).
+            let runs = layers.flat_map(|(k, _)| {
+                let first = k * cx * cy;
+                let layer = blocks.bounds.get(first..first + cx * cy).unwrap_or(&[]);
+                layer.chunks(cx).enumerate().flat_map(move |(j, row)| {
+                    let mut i = 0;
+                    std::iter::from_fn(move || {
+                        while i < row.len() && !reaches(&row[i]) {
+                            i += 1;
+                        }
+                        let start = i;
+                        while i < row.len() && reaches(&row[i]) {
+                            i += 1;
+                        }
+                        (start < i).then_some(([start, j, k], i - start))
+                    })
+                })
+            });
+            for (index, count) in runs {
+                let mut vbox = Blocks::voxels(index, dims);
+                vbox.dims[0] = (vbox.lo[0] + count * BLOCK[0]).min(dims[0]) - vbox.lo[0];
+                let c0 = [0, 1, 2].map(|a| vbox.lo[a] + 1);
+                for dk in 0..vbox.dims[2] {
+                    for dj in 0..vbox.dims[1] {
+                        let Some(row) = row(&src, &vbox, c0, dj, dk) else {
+                            continue;
+                        };
+                        let marks = in_redo(1, vbox.lo[1] + dj) && in_redo(2, vbox.lo[2] + dk);
+                        for (n, (v, proxy)) in row.boxes().enumerate() {
+                            let Some((lo, hi)) = proxy else {
+                                continue;
+                            };
+                            let hit = splat(lo, hi, v.to_f64(), 1.0, out, &slab, buf);
+                            // The slab holding the box's first output plane (the first
+                            // slab for boxes reaching below the grid) marks a redone voxel.
+                            let index = row.first + n;
+                            if hit
+                                && marks
+                                && in_redo(0, vbox.lo[0] + n)
+                                && (slab.lo[2] == z0 || lo.z + 0.5 >= slab.lo[2] as f64)
+                                && let Some(slot) = status.get(index)
+                            {
+                                slot.store(MAPPED, Relaxed);
+                            }
+                        }
+                    }
+                }
+            }
+            for (tp, vp) in buf
+                .chunks_exact_mut(rplane)
+                .zip(vol.chunks_exact_mut(plane))
+            {
+                for (j, trow) in tp.chunks_exact_mut(rx).enumerate() {
+                    let s = (slab.lo[1] + j) * ox + slab.lo[0];
+                    for (v, t) in vp[s..s + rx].iter_mut().zip(trow) {
+                        *v = f32::from_f64(normalise(t[0], t[1], bg));
+                        *t = [0.0; 2];
+                    }
+                }
+            }
+        });
     }
 }
 
@@ -735,75 +984,125 @@ fn reserve<V>(v: &mut Vec<V>, len: usize, what: &'static str) -> Result<(), Warp
     })
 }
 
-/// Bounds of the finite points of `pts` (x fastest, rows of `dims[0]`, planes of
-/// `dims[0]·dims[1]`) inside `r`; `(+∞, −∞)` if none.
-fn bounds(pts: &[DVec3], dims: [usize; 2], r: &Region) -> (DVec3, DVec3) {
-    let mut lo = DVec3::INFINITY;
-    let mut hi = DVec3::NEG_INFINITY;
-    for k in r.lo[2]..r.lo[2] + r.dims[2] {
-        for j in r.lo[1]..r.lo[1] + r.dims[1] {
-            let s = r.lo[0] + dims[0] * (j + dims[1] * k);
-            for p in pts.get(s..s + r.dims[0]).unwrap_or(&[]) {
-                if p.is_finite() {
-                    lo = vmin(lo, *p);
-                    hi = vmax(hi, *p);
-                }
-            }
-        }
-    }
-    (lo, hi)
+/// Magnitude below which centre images are "sane": finite, and small enough that the sums
+/// of seven of them forming a proxy box cannot overflow, so every box exists.
+const SANE: f64 = 1e300;
+
+/// `true` if every coordinate of `p` is finite with magnitude below [`SANE`].
+#[inline(always)]
+fn sane(p: DVec3) -> bool {
+    p.abs().max_element() < SANE
 }
 
-/// Write `fresh` (centre images over the margin-coordinate box `fresh_box`) into `centres`
-/// (rows of `cdims[0]`, planes of `cdims[0]·cdims[1]`).
-fn store_centres(centres: &mut [DVec3], cdims: [usize; 2], fresh: &[DVec3], fresh_box: &Region) {
-    let [cx, cy] = cdims;
-    let [fx, fy, _] = fresh_box.dims;
-    if fresh_box.is_empty() {
-        return;
+/// Bounds of a set of points: of the finite ones (`(+∞, −∞)` if none), and whether all are
+/// [`sane`].
+#[derive(Debug, Clone, Copy)]
+struct Hull {
+    lo: DVec3,
+    hi: DVec3,
+    sane: bool,
+}
+
+impl Hull {
+    const EMPTY: Self = Self {
+        lo: DVec3::INFINITY,
+        hi: DVec3::NEG_INFINITY,
+        sane: true,
+    };
+
+    #[inline(always)]
+    fn add(&mut self, p: DVec3) {
+        if p.is_finite() {
+            self.lo = vmin(self.lo, p);
+            self.hi = vmax(self.hi, p);
+        }
+        self.sane &= sane(p);
     }
+
+    fn union(self, o: Self) -> Self {
+        Self {
+            lo: vmin(self.lo, o.lo),
+            hi: vmax(self.hi, o.hi),
+            sane: self.sane && o.sane,
+        }
+    }
+}
+
+/// The hulls of the centre images of a neighbourhood before and after an update.
+struct Hulls {
+    old: Hull,
+    new: Hull,
+}
+
+/// Over the margin-coordinate box `hood` of `centres` (rows of `cdims[0]`, planes of
+/// `cdims[0]·cdims[1]`), which holds `fresh_box`: take the hull of the stored images, then
+/// store `fresh` (physical images over `fresh_box`) converted to output indices by
+/// `to_index`, taking their hull; and fill `segments` (whose rows hold the hood's) from the
+/// new images — one pass, parallel over planes.
+fn swap_in(
+    centres: &mut [DVec3],
+    dims: [usize; 3],
+    hood: &Region,
+    fresh: &[DVec3],
+    fresh_box: &Region,
+    to_index: &ToIndex,
+    segments: &mut Segments,
+) -> Hulls {
+    let [cx, cy] = [dims[0] + 2, dims[1] + 2];
+    let [fx, fy, _] = fresh_box.dims;
+    let empty = || Hulls {
+        old: Hull::EMPTY,
+        new: Hull::EMPTY,
+    };
+    let rows = segments.rows;
+    let columns = segments.columns;
+    let per_plane = rows.dims[1] * segments.columns();
     centres
         .par_chunks_mut(cx * cy)
-        .skip(fresh_box.lo[2])
-        .zip(fresh.par_chunks(fx * fy))
-        .for_each(|(plane, src)| {
-            for (j, row) in src.chunks_exact(fx).enumerate() {
-                let s = (fresh_box.lo[1] + j) * cx + fresh_box.lo[0];
-                plane[s..s + fx].copy_from_slice(row);
+        .skip(rows.lo[2])
+        .zip(segments.bounds.par_chunks_mut(per_plane))
+        .enumerate()
+        .map(|(dz, (plane, out))| {
+            let k = rows.lo[2] + dz;
+            let mut h = empty();
+            let in_hood = k >= hood.lo[2] && k < hood.lo[2] + hood.dims[2];
+            let new = k
+                .checked_sub(fresh_box.lo[2])
+                .filter(|&dz| dz < fresh_box.dims[2])
+                .and_then(|dz| fresh.get(dz * fx * fy..(dz + 1) * fx * fy));
+            for (dy, out) in out.chunks_exact_mut(columns.1 - columns.0).enumerate() {
+                let j = rows.lo[1] + dy;
+                let Some(full) = plane.get_mut(j * cx..(j + 1) * cx) else {
+                    continue;
+                };
+                if in_hood
+                    && j >= hood.lo[1]
+                    && j < hood.lo[1] + hood.dims[1]
+                    && let Some(row) = full.get_mut(hood.lo[0]..hood.lo[0] + hood.dims[0])
+                {
+                    for p in row.iter() {
+                        h.old.add(*p);
+                    }
+                    let dy = j.wrapping_sub(fresh_box.lo[1]);
+                    let src = new
+                        .filter(|_| dy < fy)
+                        .and_then(|n| n.get(dy * fx..(dy + 1) * fx));
+                    let dst = fresh_box.lo[0]
+                        .checked_sub(hood.lo[0])
+                        .and_then(|x| row.get_mut(x..x + fx));
+                    if let (Some(src), Some(dst)) = (src, dst) {
+                        for (d, p) in dst.iter_mut().zip(src) {
+                            *d = to_index.apply(*p);
+                            h.new.add(*d);
+                        }
+                    }
+                }
+                Segments::of_row(full, columns, dims, out);
             }
-        });
-}
-
-/// Group slab plans (indices) so that within a group the output z-ranges are pairwise
-/// disjoint, each group sorted by output z; greedy in slab order, so the grouping depends on
-/// the plans alone. Plans reaching no output voxel join the first group.
-fn colours(plans: &[SlabPlan]) -> Vec<Vec<usize>> {
-    let z_range = |p: &SlabPlan| (p.output.lo[2], p.output.lo[2] + p.output.dims[2]);
-    let mut groups: Vec<Vec<usize>> = Vec::new();
-    for (n, plan) in plans.iter().enumerate() {
-        let (a, b) = z_range(plan);
-        let fits = |g: &Vec<usize>| {
-            plan.output.is_empty()
-                || g.iter().all(|&m| {
-                    let o = &plans[m];
-                    let (c, d) = z_range(o);
-                    o.output.is_empty() || b <= c || d <= a
-                })
-        };
-        match groups.iter_mut().find(|g| fits(g)) {
-            Some(g) => g.push(n),
-            None => groups.push(vec![n]),
-        }
-    }
-    for g in &mut groups {
-        g.sort_by_key(|&m| {
-            let o = &plans[m];
-            if o.output.is_empty() {
-                0
-            } else {
-                o.output.lo[2]
-            }
-        });
-    }
-    groups
+            h
+        })
+        .reduce(empty, |a, b| Hulls {
+            old: a.old.union(b.old),
+            new: a.new.union(b.new),
+        })
 }

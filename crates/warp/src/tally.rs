@@ -82,24 +82,6 @@ impl Region {
         }
         r
     }
-
-    /// Smallest region holding both (an empty region is the neutral element).
-    pub fn union(&self, o: &Self) -> Self {
-        if self.is_empty() {
-            return *o;
-        }
-        if o.is_empty() {
-            return *self;
-        }
-        let mut r = Self::default();
-        for a in 0..3 {
-            let s = self.lo[a].min(o.lo[a]);
-            let e = (self.lo[a] + self.dims[a]).max(o.lo[a] + o.dims[a]);
-            r.lo[a] = s;
-            r.dims[a] = e - s;
-        }
-        r
-    }
 }
 
 /// Minimum of two non-NaN numbers (one `minsd`; `f64::min` also handles NaN, at a cost).
@@ -168,29 +150,35 @@ fn axis_range(lo: f64, hi: f64, n: usize, r0: usize, rn: usize) -> Option<(usize
 }
 
 /// For a box `[lo, hi]` at most two cells long: the first cell `a = ⌊lo + ½⌋`, the
-/// overlaps with cells `a`, `a + 1`, `a + 2` (zero-padded) and whether the third cell is
-/// needed (length above 1), provided every cell used lies in the region `[r0, r0 + rn)`.
-/// Equal to [`overlap`], since `a − ½ ≤ lo < a + ½` and `hi ≤ lo + 2`.
+/// overlaps with cells `a`, `a + 1`, `a + 2` (zero-padded) and the number of cells needed
+/// (2, or 3 for lengths above 1). Equal to [`overlap`], since `a − ½ ≤ lo < a + ½` and
+/// `hi ≤ lo + 2`.
 #[inline(always)]
-fn short(lo: f64, hi: f64, r0: usize, rn: usize) -> Option<(usize, [f64; 3], bool)> {
+fn short(lo: f64, hi: f64) -> Option<(usize, [f64; 3], usize)> {
     let s = lo + 0.5;
     let len = hi - lo;
-    if s >= 0.0 && len > 0.0 && len <= 2.0 {
-        // Truncation is the floor for s ≥ 0 (and saturates for huge s, failing below).
-        // Signed conversions: one instruction each, where unsigned ones take several.
+    if s >= 0.0 && len > 0.0 && len <= 2.0 && s < 1e15 {
+        // Truncation is the floor for 0 ≤ s < 2⁵³. Signed conversions: one instruction
+        // each, where unsigned ones take several.
         let ai = s as i64;
         let a = ai as usize;
         let e = ai as f64 + 0.5;
         if len <= 1.0 {
-            if a >= r0 && a + 2 <= r0 + rn {
-                return Some((a, [fmin(hi, e) - lo, fmax(hi - e, 0.0), 0.0], false));
-            }
-        } else if a >= r0 && a + 3 <= r0 + rn {
-            let e1 = e + 1.0;
-            return Some((a, [e - lo, fmin(hi, e1) - e, fmax(hi - e1, 0.0)], true));
+            return Some((a, [fmin(hi, e) - lo, fmax(hi - e, 0.0), 0.0], 2));
         }
+        let e1 = e + 1.0;
+        return Some((a, [e - lo, fmin(hi, e1) - e, fmax(hi - e1, 0.0)], 3));
     }
     None
+}
+
+/// The cells `a .. a + n` of a [`short`] box clipped to the region's `[r0, r0 + rn)`, and
+/// whether they carry positive weight.
+#[inline(always)]
+fn clip((a, w, n): (usize, [f64; 3], usize), r0: usize, rn: usize) -> (usize, usize, bool) {
+    let (s, e) = (a.max(r0), (a + n).min(r0 + rn));
+    let positive = (s..e).any(|q| w[q - a] > 0.0);
+    (s, e, positive)
 }
 
 /// One box of the fast path: buffer index of its first cell, row and plane strides of the
@@ -258,32 +246,53 @@ pub(crate) fn splat<C: Cell>(
     // which adds nothing to a finite value); fully unrolled per shape. Same weights and
     // products as the general path.
     if d.is_finite()
-        && let (Some((xa, wx, tx)), Some((ya, wy, ty)), Some((za, wz, tz))) = (
-            short(lo.x, hi.x, rx, dx),
-            short(lo.y, hi.y, ry, dy),
-            short(lo.z, hi.z, rz, dz),
-        )
+        && let (Some(x), Some(y), Some(z)) =
+            (short(lo.x, hi.x), short(lo.y, hi.y), short(lo.z, hi.z))
     {
-        let base = ((za - rz) * dy + (ya - ry)) * dx + (xa - rx);
-        let k = Kernel {
-            base,
-            sy: dx,
-            sz: dx * dy,
-            w: [wx, wy, wz],
-            d,
-            sign,
-        };
-        match (tx, ty, tz) {
-            (false, false, false) => k.run::<C, 2, 2, 2>(buf),
-            (true, false, false) => k.run::<C, 3, 2, 2>(buf),
-            (false, true, false) => k.run::<C, 2, 3, 2>(buf),
-            (true, true, false) => k.run::<C, 3, 3, 2>(buf),
-            (false, false, true) => k.run::<C, 2, 2, 3>(buf),
-            (true, false, true) => k.run::<C, 3, 2, 3>(buf),
-            (false, true, true) => k.run::<C, 2, 3, 3>(buf),
-            (true, true, true) => k.run::<C, 3, 3, 3>(buf),
+        let inside =
+            |(a, _, n): (usize, [f64; 3], usize), r0: usize, rn: usize| a >= r0 && a + n <= r0 + rn;
+        let ((xa, wx, nx), (ya, wy, ny), (za, wz, nz)) = (x, y, z);
+        if inside(x, rx, dx) && inside(y, ry, dy) && inside(z, rz, dz) {
+            let base = ((za - rz) * dy + (ya - ry)) * dx + (xa - rx);
+            let k = Kernel {
+                base,
+                sy: dx,
+                sz: dx * dy,
+                w: [wx, wy, wz],
+                d,
+                sign,
+            };
+            match (nx, ny, nz) {
+                (2, 2, 2) => k.run::<C, 2, 2, 2>(buf),
+                (3, 2, 2) => k.run::<C, 3, 2, 2>(buf),
+                (2, 3, 2) => k.run::<C, 2, 3, 2>(buf),
+                (3, 3, 2) => k.run::<C, 3, 3, 2>(buf),
+                (2, 2, 3) => k.run::<C, 2, 2, 3>(buf),
+                (3, 2, 3) => k.run::<C, 3, 2, 3>(buf),
+                (2, 3, 3) => k.run::<C, 2, 3, 3>(buf),
+                _ => k.run::<C, 3, 3, 3>(buf),
+            }
+            return true;
         }
-        return true;
+        // Partly outside the region: the same weights and products on the cells inside.
+        let (xs, xe, px) = clip(x, rx, dx);
+        let (ys, ye, py) = clip(y, ry, dy);
+        let (zs, ze, pz) = clip(z, rz, dz);
+        for qz in zs..ze {
+            let wz = sign * wz[qz - za];
+            for qy in ys..ye {
+                let wyz = wz * wy[qy - ya];
+                let row = ((qz - rz) * dy + (qy - ry)) * dx;
+                let Some(cells) = buf.get_mut(row + xs - rx..row + xe - rx) else {
+                    continue;
+                };
+                for (qx, cell) in (xs..xe).zip(cells) {
+                    let w = wyz * wx[qx - xa];
+                    cell.add(w * d, w);
+                }
+            }
+        }
+        return px && py && pz;
     }
     let (Some((xa, xb)), Some((ya, yb)), Some((za, zb))) = (
         axis_range(lo.x, hi.x, out[0], rx, dx),
@@ -391,6 +400,82 @@ pub(crate) struct Voxels<'a, T> {
     pub cdims: [usize; 2],
 }
 
+/// `true` if the box `[lo, hi]` (output index space, finite) overlaps some voxel of an output
+/// grid of `out` dims with positive volume — exactly when [`splat`] over the whole grid
+/// returns `true`.
+#[inline(always)]
+pub(crate) fn reaches_grid(lo: DVec3, hi: DVec3, out: [usize; 3]) -> bool {
+    (0..3).all(|a| cell_range(lo[a], hi[a], out[a]).is_some())
+}
+
+/// The slices one row of input voxels reads: values, centre images with one extra on each
+/// side in x (`centres[n + 1]` is voxel `n`'s), and the −y, +y, −z, +z neighbours' rows.
+pub(crate) struct Row<'a, T> {
+    /// Value-array index of the row's first voxel.
+    pub first: usize,
+    /// The row's values.
+    pub values: &'a [T],
+    /// Centre images of the row widened by one in x.
+    pub centres: &'a [DVec3],
+    /// Centre images of the rows at −y, +y, −z, +z.
+    pub ym: &'a [DVec3],
+    /// See [`Row::ym`].
+    pub yp: &'a [DVec3],
+    /// See [`Row::ym`].
+    pub zm: &'a [DVec3],
+    /// See [`Row::ym`].
+    pub zp: &'a [DVec3],
+}
+
+impl<T> Row<'_, T> {
+    /// Per voxel of the row: its value and proxy box ([`averaged_bounds`]).
+    #[inline(always)]
+    pub fn boxes(&self) -> impl Iterator<Item = (&T, Option<(DVec3, DVec3)>)> {
+        self.centres
+            .windows(3)
+            .zip(self.values)
+            .zip(self.ym.iter().zip(self.yp))
+            .zip(self.zm.iter().zip(self.zp))
+            .map(
+                #[inline(always)]
+                |(((w, v), (ym, yp)), (zm, zp))| {
+                    (v, averaged_bounds(w[1], [w[0], w[2], *ym, *yp, *zm, *zp]))
+                },
+            )
+    }
+}
+
+/// Row `(dj, dk)` of the input voxels of `vbox` (value-array indices), whose centre images
+/// sit at centre-array index `c0 + (voxel − vbox.lo)`; `None` (unreachable for the
+/// callers' layouts) if a slice falls outside the arrays.
+#[inline(always)]
+pub(crate) fn row<'a, T>(
+    src: &Voxels<'a, T>,
+    vbox: &Region,
+    c0: [usize; 3],
+    dj: usize,
+    dk: usize,
+) -> Option<Row<'a, T>> {
+    let [vx, vy, _] = src.vdims;
+    let [sy, _] = src.cdims;
+    let sz = src.cdims[0] * src.cdims[1];
+    let nx = vbox.dims[0];
+    let c = src.centres;
+    let v0 = vbox.lo[0] + vx * (vbox.lo[1] + dj + vy * (vbox.lo[2] + dk));
+    // Centre index of the row's first voxel; its −x neighbour is one before.
+    let n0 = c0[0] + sy * (c0[1] + dj) + sz * (c0[2] + dk);
+    let (ym, zm) = (n0.checked_sub(sy)?, n0.checked_sub(sz)?);
+    Some(Row {
+        first: v0,
+        values: src.values.get(v0..v0 + nx)?,
+        centres: c.get(n0.checked_sub(1)?..n0 + nx + 1)?,
+        ym: c.get(ym..ym + nx)?,
+        yp: c.get(n0 + sy..n0 + sy + nx)?,
+        zm: c.get(zm..zm + nx)?,
+        zp: c.get(n0 + sz..n0 + sz + nx)?,
+    })
+}
+
 /// Tally (with `sign`) the boxes of the input voxels in `vbox` (value-array indices), whose
 /// centre images sit at centre-array index `c0 + (voxel − vbox.lo)`, with True's averaged
 /// face centres, into `buf` over `region` of an output grid of `out` dims.
@@ -404,44 +489,15 @@ pub(crate) fn tally_averaged<T: Voxel, C: Cell>(
     sign: f64,
 ) -> PushForwardStats {
     let mut stats = PushForwardStats::default();
-    let [vx, vy, _] = src.vdims;
-    let [sy, _] = src.cdims;
-    let sz = src.cdims[0] * src.cdims[1];
-    let nx = vbox.dims[0];
-    if nx == 0 {
-        return stats;
-    }
-    let c = src.centres;
     for dk in 0..vbox.dims[2] {
         for dj in 0..vbox.dims[1] {
-            let v0 = vbox.lo[0] + vx * (vbox.lo[1] + dj + vy * (vbox.lo[2] + dk));
-            // Centre index of the row's first voxel; its −x neighbour is one before.
-            let n0 = c0[0] + sy * (c0[1] + dj) + sz * (c0[2] + dk);
-            let rows = (|| {
-                let (ym, zm) = (n0.checked_sub(sy)?, n0.checked_sub(sz)?);
-                Some((
-                    src.values.get(v0..v0 + nx)?,
-                    c.get(n0.checked_sub(1)?..n0 + nx + 1)?,
-                    c.get(ym..ym + nx)?,
-                    c.get(n0 + sy..n0 + sy + nx)?,
-                    c.get(zm..zm + nx)?,
-                    c.get(n0 + sz..n0 + sz + nx)?,
-                ))
-            })();
-            let Some((vals, row, ym, yp, zm, zp)) = rows else {
-                // Unreachable for the callers' layouts; count the row as non-finite rather
-                // than panic.
-                stats.non_finite += nx;
+            let Some(row) = row(src, vbox, c0, dj, dk) else {
+                // Count the row as non-finite rather than panic.
+                stats.non_finite += vbox.dims[0];
                 continue;
             };
-            let it = row
-                .windows(3)
-                .zip(vals)
-                .zip(ym.iter().zip(yp))
-                .zip(zm.iter().zip(zp));
-            for (((w, v), (ym, yp)), (zm, zp)) in it {
-                let nb = [w[0], w[2], *ym, *yp, *zm, *zp];
-                let Some((lo, hi)) = averaged_bounds(w[1], nb) else {
+            for (v, proxy) in row.boxes() {
+                let Some((lo, hi)) = proxy else {
                     stats.non_finite += 1;
                     continue;
                 };

@@ -72,6 +72,27 @@ fn assert_matches_full(e: &IncrementalPushForward, src: &Volume<f32>, opts: &Ant
     assert_eq!(e.stats(), full.stats);
 }
 
+/// The engine holds bit for bit what a new engine built with its current lattice holds.
+fn assert_equals_fresh_engine(
+    e: &IncrementalPushForward,
+    src: &Volume<f32>,
+    opts: &AntialiasOptions,
+) {
+    let fresh =
+        IncrementalPushForward::new(src, e.lattice().clone(), e.output_geometry(), opts).unwrap();
+    let worst = e
+        .volume()
+        .data()
+        .iter()
+        .zip(fresh.volume().data())
+        .fold(0.0f32, |w, (a, b)| w.max((a - b).abs()));
+    assert!(
+        worst <= 1e-9,
+        "incremental result differs from a fresh engine by {worst}"
+    );
+    assert_eq!(e.stats(), fresh.stats());
+}
+
 /// Random moves of `count` distinct-or-not control points drawn from `indices`.
 fn random_moves(
     rng: &mut Rng,
@@ -121,6 +142,7 @@ fn run_sequence(
         let before = e.volume().clone();
         let report = e.move_control_points(&moves).unwrap();
         assert_matches_full(&e, src, &opts);
+        assert_equals_fresh_engine(&e, src, &opts);
         assert_eq!(report.redone, report.source_box.len());
         let [nx, ny, nz] = output.dims;
         for k in 0..nz {
@@ -496,4 +518,38 @@ fn identity_lattice_reproduces_source() {
         assert!((a - b).abs() <= 1e-4, "{a} vs {b}");
     }
     assert_eq!(e.stats().mapped, src.len());
+}
+
+/// Regression: control points moved so far that face-centre sums overflow leave voxels
+/// without a proxy box. Their statuses must then be classified one by one (the fast path
+/// assumes every box exists), and moving the points back must restore everything.
+#[test]
+fn overflowing_moves_are_counted_as_non_finite_and_undone() {
+    // Fine spacing: output indices are physical coordinates times 100.
+    let g = Geometry::new([14, 12, 10]).with_spacing(DVec3::splat(0.01));
+    let src = source(g);
+    let (lo, hi) = bounds_of(&g);
+    let lat = BSplineLattice::uniform_cubic_around(lo, hi, [7, 7, 7]).unwrap();
+    let opts = AntialiasOptions::default();
+    let mut e = IncrementalPushForward::new(&src, lat.clone(), &g, &opts).unwrap();
+    let start = e.volume().clone();
+    // Near the largest finite value: the images are finite, their output indices are not.
+    let huge = DVec3::new(1.5e308, 0.0, 0.0);
+    let r = e
+        .move_control_points(&[([3, 3, 3], huge), ([4, 3, 3], huge)])
+        .unwrap();
+    assert!(r.after.non_finite > 0, "{r:?}");
+    assert_matches_full(&e, &src, &opts);
+    assert_equals_fresh_engine(&e, &src, &opts);
+    // Subtracting `huge` again would not restore the positions' low bits: set them.
+    e.set_lattice(lat).unwrap();
+    assert_matches_full(&e, &src, &opts);
+    assert_equals_fresh_engine(&e, &src, &opts);
+    let back = e
+        .volume()
+        .data()
+        .iter()
+        .zip(start.data())
+        .all(|(a, b)| (a - b).abs() <= 1e-9);
+    assert!(back, "restoring the lattice did not restore the volume");
 }
