@@ -223,6 +223,9 @@ pub struct IncrementalPushForward {
     centres: Vec<DVec3>,
     /// Per source voxel (x fastest): [`MAPPED`], [`OUTSIDE`] or [`NON_FINITE`].
     status: Vec<AtomicU8>,
+    /// Number of centre images that are not [`sane`]; while there are none, every voxel
+    /// has a proxy box and boxes are computed without checks.
+    insane: usize,
     blocks: Blocks,
     volume: Volume<f32>,
     stats: PushForwardStats,
@@ -439,6 +442,7 @@ impl IncrementalPushForward {
             background: options.background,
             centres,
             status,
+            insane: 0,
             blocks: Blocks::new(g.dims)?,
             volume,
             stats: PushForwardStats::default(),
@@ -453,9 +457,9 @@ impl IncrementalPushForward {
             lo: [0; 3],
             dims: output.dims,
         };
-        let sane = engine.centres.par_iter().all(|p| sane(*p));
+        engine.insane = engine.centres.par_iter().filter(|p| !sane(**p)).count();
         engine.refresh_blocks(&all, None);
-        engine.reset_statuses(&all, sane);
+        engine.reset_statuses(&all, engine.insane == 0);
         engine.recompute(&everything, &all);
         engine.stats = engine.count(&all);
         Ok(engine)
@@ -624,7 +628,8 @@ impl IncrementalPushForward {
             self.output.dims,
         );
         self.refresh_blocks(&redo, Some(&segments));
-        self.reset_statuses(&redo, hulls.old.sane && hulls.new.sane);
+        self.insane = self.insane.saturating_sub(hulls.replaced_insane) + hulls.new_insane;
+        self.reset_statuses(&redo, self.insane == 0);
         self.recompute(&touched, &redo);
         let after = self.count(&redo);
         self.lattice = lattice;
@@ -896,6 +901,7 @@ impl IncrementalPushForward {
         let redo_end = [0, 1, 2].map(|a| redo.lo[a] + redo.dims[a]);
         let in_redo = |a: usize, i: usize| i >= redo.lo[a] && i < redo_end[a];
         let z0 = region.lo[2];
+        let all_sane = self.insane == 0;
         work.into_par_iter().for_each(|(slab, buf, vol)| {
             // The scratch is all zeros between recomputations (cleared as it is read).
             let corner = |d: [usize; 3]| {
@@ -939,22 +945,32 @@ impl IncrementalPushForward {
                             continue;
                         };
                         let marks = in_redo(1, vbox.lo[1] + dj) && in_redo(2, vbox.lo[2] + dk);
-                        for (n, (v, proxy)) in row.boxes().enumerate() {
-                            let Some((lo, hi)) = proxy else {
-                                continue;
+                        // One loop body for both ways of getting the boxes.
+                        macro_rules! tally_row {
+                            ($boxes:expr) => {
+                                for (n, (v, proxy)) in $boxes.enumerate() {
+                                    let Some((lo, hi)) = proxy else {
+                                        continue;
+                                    };
+                                    let hit = splat(lo, hi, v.to_f64(), 1.0, out, &slab, buf);
+                                    // The slab holding the box's first output plane (the
+                                    // first slab for boxes reaching below the grid) marks a
+                                    // redone voxel.
+                                    if hit
+                                        && marks
+                                        && in_redo(0, vbox.lo[0] + n)
+                                        && (slab.lo[2] == z0 || lo.z + 0.5 >= slab.lo[2] as f64)
+                                        && let Some(slot) = status.get(row.first + n)
+                                    {
+                                        slot.store(MAPPED, Relaxed);
+                                    }
+                                }
                             };
-                            let hit = splat(lo, hi, v.to_f64(), 1.0, out, &slab, buf);
-                            // The slab holding the box's first output plane (the first
-                            // slab for boxes reaching below the grid) marks a redone voxel.
-                            let index = row.first + n;
-                            if hit
-                                && marks
-                                && in_redo(0, vbox.lo[0] + n)
-                                && (slab.lo[2] == z0 || lo.z + 0.5 >= slab.lo[2] as f64)
-                                && let Some(slot) = status.get(index)
-                            {
-                                slot.store(MAPPED, Relaxed);
-                            }
+                        }
+                        if all_sane {
+                            tally_row!(row.boxes_unchecked().map(|(v, b)| (v, Some(b))));
+                        } else {
+                            tally_row!(row.boxes());
                         }
                     }
                 }
@@ -994,20 +1010,17 @@ fn sane(p: DVec3) -> bool {
     p.abs().max_element() < SANE
 }
 
-/// Bounds of a set of points: of the finite ones (`(+∞, −∞)` if none), and whether all are
-/// [`sane`].
+/// Bounds of the finite points of a set (`(+∞, −∞)` if none).
 #[derive(Debug, Clone, Copy)]
 struct Hull {
     lo: DVec3,
     hi: DVec3,
-    sane: bool,
 }
 
 impl Hull {
     const EMPTY: Self = Self {
         lo: DVec3::INFINITY,
         hi: DVec3::NEG_INFINITY,
-        sane: true,
     };
 
     #[inline(always)]
@@ -1016,22 +1029,23 @@ impl Hull {
             self.lo = vmin(self.lo, p);
             self.hi = vmax(self.hi, p);
         }
-        self.sane &= sane(p);
     }
 
     fn union(self, o: Self) -> Self {
         Self {
             lo: vmin(self.lo, o.lo),
             hi: vmax(self.hi, o.hi),
-            sane: self.sane && o.sane,
         }
     }
 }
 
-/// The hulls of the centre images of a neighbourhood before and after an update.
+/// The hulls of the centre images of a neighbourhood before and after an update, and the
+/// number of images that are not [`sane`] among the replaced and the new ones.
 struct Hulls {
     old: Hull,
     new: Hull,
+    replaced_insane: usize,
+    new_insane: usize,
 }
 
 /// Over the margin-coordinate box `hood` of `centres` (rows of `cdims[0]`, planes of
@@ -1053,6 +1067,8 @@ fn swap_in(
     let empty = || Hulls {
         old: Hull::EMPTY,
         new: Hull::EMPTY,
+        replaced_insane: 0,
+        new_insane: 0,
     };
     let rows = segments.rows;
     let columns = segments.columns;
@@ -1092,8 +1108,10 @@ fn swap_in(
                         .and_then(|x| row.get_mut(x..x + fx));
                     if let (Some(src), Some(dst)) = (src, dst) {
                         for (d, p) in dst.iter_mut().zip(src) {
+                            h.replaced_insane += usize::from(!sane(*d));
                             *d = to_index.apply(*p);
                             h.new.add(*d);
+                            h.new_insane += usize::from(!sane(*d));
                         }
                     }
                 }
@@ -1104,5 +1122,7 @@ fn swap_in(
         .reduce(empty, |a, b| Hulls {
             old: a.old.union(b.old),
             new: a.new.union(b.new),
+            replaced_insane: a.replaced_insane + b.replaced_insane,
+            new_insane: a.new_insane + b.new_insane,
         })
 }

@@ -366,6 +366,22 @@ pub(crate) fn averaged_bounds(p: DVec3, nb: [DVec3; 6]) -> Option<(DVec3, DVec3)
     }
 }
 
+/// [`averaged_bounds`] for points known to be finite and small enough that no sum
+/// overflows (magnitudes below about 1e307): the same bounds, without the checks. For
+/// other points the result is unspecified (but no panic).
+#[inline(always)]
+pub(crate) fn unchecked_bounds(p: DVec3, nb: [DVec3; 6]) -> (DVec3, DVec3) {
+    let mn = vmin(
+        vmin(vmin(nb[0], nb[1]), vmin(nb[2], nb[3])),
+        vmin(nb[4], nb[5]),
+    );
+    let mx = vmax(
+        vmax(vmax(nb[0], nb[1]), vmax(nb[2], nb[3])),
+        vmax(nb[4], nb[5]),
+    );
+    (0.5 * (p + mn), 0.5 * (p + mx))
+}
+
 /// [`averaged_bounds`] without branches: the bounds and `true`, or `false` when a point is
 /// NaN or infinite or a sum overflows (then [`averaged_bounds`] decides).
 #[inline(always)]
@@ -440,6 +456,24 @@ impl<T> Row<'_, T> {
                 #[inline(always)]
                 |(((w, v), (ym, yp)), (zm, zp))| {
                     (v, averaged_bounds(w[1], [w[0], w[2], *ym, *yp, *zm, *zp]))
+                },
+            )
+    }
+}
+
+impl<T> Row<'_, T> {
+    /// [`Row::boxes`] for centre images known to satisfy [`unchecked_bounds`]' condition.
+    #[inline(always)]
+    pub fn boxes_unchecked(&self) -> impl Iterator<Item = (&T, (DVec3, DVec3))> {
+        self.centres
+            .windows(3)
+            .zip(self.values)
+            .zip(self.ym.iter().zip(self.yp))
+            .zip(self.zm.iter().zip(self.zp))
+            .map(
+                #[inline(always)]
+                |(((w, v), (ym, yp)), (zm, zp))| {
+                    (v, unchecked_bounds(w[1], [w[0], w[2], *ym, *yp, *zm, *zp]))
                 },
             )
     }
