@@ -164,11 +164,11 @@ pub struct UpdateReport {
     /// Voxel centres whose images were re-evaluated (including the one-voxel margin around
     /// the source that averaged face centres use).
     pub remapped: usize,
-    /// Source voxels whose boxes were erased and tallied again (`source_box.len()`).
+    /// Source voxels whose boxes may have changed (`source_box.len()`).
     pub redone: usize,
     /// The redone source voxels (source indices; empty if the edit reaches no voxel).
     pub source_box: IndexBox,
-    /// The output voxels whose tallies may have changed and were renormalised (output
+    /// The output voxels recomputed: every one whose value may have changed (output
     /// indices; empty if none).
     pub output_box: IndexBox,
     /// The redone voxels under the old lattice.

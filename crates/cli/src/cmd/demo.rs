@@ -4,8 +4,8 @@
 //!    teapot as a u8 density volume, a 9 × 9 × 9 uniform cubic B-spline lattice placed around
 //!    it as the identity (Fig. 8), and a drag that lowers the spout, moving only the control
 //!    points within a tool radius of it (Hsu's least-norm control-point solve). The warp is
-//!    updated incrementally (True's main loop: erase the influenced regions, push them
-//!    forward again) and checked against a full antialiased push-forward; the drag is then
+//!    updated incrementally (True's main loop: only the influenced regions are pushed
+//!    forward again and the output they reach recomputed) and checked against a full antialiased push-forward; the drag is then
 //!    undone and redone. Before/after volumes, lattices, marching-cubes meshes and shaded
 //!    pictures go to the output folder, and the time of every step is printed.
 //! 2. **The model gallery** (`models/`): every built-in model as a u8 density volume (object
