@@ -323,6 +323,95 @@ impl BSplineLattice {
         Self::bezier_in_box(min, DMat3::IDENTITY, max - min, degrees)
     }
 
+    /// Feng et al.'s uniform initial volume (2002 §3.1.2) on the axis-aligned box `[min, max]`
+    /// with `degrees[a] ≥ 1` and `counts[a] ≥ degrees[a] + 1` control points per axis.
+    ///
+    /// The parameters are the physical coordinates themselves (frame origin 0, spacing 1, axes
+    /// `I`), so a point's local coordinates are its coordinates. Along each axis the knots are
+    /// uniform and unclamped, `u_i = min + (i − k)(max − min)/(n − k)` for `i = 0 … n + k`, which
+    /// makes the domain exactly `[min, max]`. The control points are first spread evenly,
+    /// `x'_i = min + i (max − min)/(n − 1)`; the resulting volume is linear but covers a smaller
+    /// box `[x'(min), x'(max)]`, so the **scaling step** maps the control coordinates by
+    /// `x''_i = min + s (x'_i − x'(min))` with `s = (max − min)/(x'(max) − x'(min))`. The
+    /// volume then reproduces every point of the box and its Jacobian is the identity.
+    ///
+    /// # Errors
+    /// [`DeformError::DegenerateBox`] for a non-finite or empty box,
+    /// [`DeformError::TooFewControlPoints`] for a degree of 0 or `counts[a] < degrees[a] + 1`,
+    /// [`DeformError::Spline`] for a degree above [`volmorph_spline::MAX_DEGREE`].
+    pub fn feng_uniform_around(
+        min: DVec3,
+        max: DVec3,
+        degrees: [usize; 3],
+        counts: [usize; 3],
+    ) -> Result<Self, DeformError> {
+        check_extent(min, max - min)?;
+        let mut knots = Vec::with_capacity(3);
+        let mut coords: Vec<Vec<f64>> = Vec::with_capacity(3);
+        for a in 0..3 {
+            let (k, n) = (degrees[a], counts[a]);
+            if k == 0 || n < k + 1 {
+                return Err(DeformError::TooFewControlPoints {
+                    axis: a,
+                    count: n,
+                    min: k.max(1) + 1,
+                });
+            }
+            let kv = KnotVector::uniform(k, n, [min[a], max[a]])?;
+            let len = max[a] - min[a];
+            let even: Vec<f64> = (0..n)
+                .map(|i| min[a] + i as f64 * len / (n - 1) as f64)
+                .collect();
+            // Corners of the volume spanned by the evenly spread points.
+            let curve = volmorph_spline::BSplineCurve::new([kv.clone()], 1, even.clone())?;
+            let lo = curve.eval([min[a]])?[0];
+            let hi = curve.eval([max[a]])?[0];
+            let scale = len / (hi - lo);
+            coords.push(even.iter().map(|&x| min[a] + scale * (x - lo)).collect());
+            knots.push(kv);
+        }
+        let [ku, kv, kw]: [KnotVector; 3] = knots
+            .try_into()
+            .map_err(|_| DeformError::InvalidFrame("three knot vectors expected".into()))?;
+        let frame = LatticeFrame::axis_aligned(DVec3::ZERO, DVec3::ONE)?;
+        let mut pts = Vec::with_capacity(counts[0] * counts[1] * counts[2]);
+        for z in &coords[2] {
+            for y in &coords[1] {
+                for x in &coords[0] {
+                    pts.push(DVec3::new(*x, *y, *z));
+                }
+            }
+        }
+        Self::from_parts(frame, [ku, kv, kw], &pts)
+    }
+
+    /// Feng et al.'s end-interpolating initial volume (2002 §3.1.3): the uniform volume of
+    /// [`BSplineLattice::feng_uniform_around`] converted by knot insertion at the domain ends
+    /// ([`volmorph_spline::TensorBSpline::clamp_ends`]). The knots become clamped with the same
+    /// interior knots, the map is still the identity with Jacobian `I` on `[min, max]`, and the
+    /// control points follow Eq. (2): along each axis the gaps between successive control
+    /// points grow `h/k, 2h/k, …, h` from each end (`h` the knot spacing), the outermost
+    /// points lying on the box faces.
+    ///
+    /// # Errors
+    /// As [`BSplineLattice::feng_uniform_around`].
+    pub fn feng_end_interpolating_around(
+        min: DVec3,
+        max: DVec3,
+        degrees: [usize; 3],
+        counts: [usize; 3],
+    ) -> Result<Self, DeformError> {
+        let uniform = Self::feng_uniform_around(min, max, degrees, counts)?;
+        let mut spline = uniform.spline;
+        for a in 0..3 {
+            spline = spline.clamp_ends(a)?;
+        }
+        Ok(Self {
+            frame: uniform.frame,
+            spline,
+        })
+    }
+
     /// Assemble a lattice from its parts: `control_points` in physical coordinates, index `i`
     /// fastest, one per basis function of `knots`.
     ///

@@ -1,0 +1,9 @@
+//! volmorph-ffd: free-form deformation of polygon meshes.
+mod error;
+pub mod interp;
+pub mod polygon;
+
+pub use error::FfdError;
+pub mod accurate;
+pub mod frame;
+pub mod subdivide;
