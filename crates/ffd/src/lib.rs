@@ -7,3 +7,4 @@ pub use error::FfdError;
 pub mod accurate;
 pub mod frame;
 pub mod subdivide;
+pub mod step;

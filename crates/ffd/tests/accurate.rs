@@ -225,3 +225,48 @@ fn lattice_mismatch_and_mesh_outside_the_box() {
     .unwrap();
     assert!(model.plan.deform(&other).is_err());
 }
+
+/// The STEP text of the Fig. 7 cube: 24 faces on their own surfaces, every edge written once
+/// and referenced once forward and once reversed, a closed shell.
+#[test]
+fn step_of_the_cube_shares_every_edge() {
+    let mesh = cube();
+    let (lo, hi) = mesh.bounding_box().unwrap();
+    let mut lat =
+        BSplineLattice::feng_end_interpolating_around(lo, hi, [2, 2, 2], [4, 4, 4]).unwrap();
+    jiggle(&mut lat, 0.1, 3);
+    let model = accurate_ffd(&mesh, &lat).unwrap();
+    let (text, sum) = volmorph_ffd::step::step_string(&model, "cube").unwrap();
+    assert!(text.starts_with("ISO-10303-21;") && text.trim_end().ends_with("END-ISO-10303-21;"));
+    let count = |kw: &str| text.lines().filter(|l| l.contains(&format!("={kw}("))).count();
+    assert_eq!(count("ADVANCED_FACE"), 24);
+    assert_eq!(count("B_SPLINE_SURFACE_WITH_KNOTS"), 24);
+    assert_eq!(count("EDGE_CURVE"), sum.edges);
+    assert_eq!(count("CLOSED_SHELL"), 1);
+    assert_eq!(count("PCURVE"), 2 * sum.edges);
+    assert!(sum.closed);
+    // Euler: V − E + F = 2 for the closed shell of quadrant faces.
+    assert_eq!(sum.vertices as i64 - sum.edges as i64 + sum.faces as i64, 2);
+    // Every EDGE_CURVE is referenced by exactly one .T. and one .F. ORIENTED_EDGE.
+    let mut uses: std::collections::HashMap<String, (u32, u32)> = Default::default();
+    for l in text.lines().filter(|l| l.contains("=ORIENTED_EDGE(")) {
+        let inner = &l[l.find("*,*,").unwrap() + 4..];
+        let (id, sense) = inner.split_once(',').unwrap();
+        let e = uses.entry(id.to_string()).or_default();
+        if sense.starts_with(".T.") {
+            e.0 += 1;
+        } else {
+            e.1 += 1;
+        }
+    }
+    assert_eq!(uses.len(), sum.edges);
+    assert!(uses.values().all(|&u| u == (1, 1)));
+    // Written atomically to a file.
+    let dir = tempfile::tempdir().unwrap();
+    let path = dir.path().join("cube.step");
+    volmorph_ffd::step::write_step(&path, &model).unwrap();
+    assert_eq!(std::fs::read_to_string(&path).unwrap(), {
+        let (t, _) = volmorph_ffd::step::step_string(&model, "cube").unwrap();
+        t
+    });
+}
