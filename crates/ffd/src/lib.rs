@@ -5,6 +5,8 @@ pub mod polygon;
 
 pub use error::FfdError;
 pub mod accurate;
+pub mod baseline;
 pub mod frame;
-pub mod subdivide;
 pub mod step;
+pub mod subdivide;
+pub mod tessellate;

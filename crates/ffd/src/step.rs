@@ -84,7 +84,11 @@ impl Out {
     }
 
     fn point2(&mut self, p: [f64; 2]) -> usize {
-        self.add(&format!("CARTESIAN_POINT('',({},{}))", real(p[0]), real(p[1])))
+        self.add(&format!(
+            "CARTESIAN_POINT('',({},{}))",
+            real(p[0]),
+            real(p[1])
+        ))
     }
 }
 
@@ -216,11 +220,10 @@ pub fn step_string(model: &TrimmedModel, name: &str) -> Result<(String, StepSumm
             let line = o.add(&format!(
                 "B_SPLINE_CURVE_WITH_KNOTS('',1,(#{a},#{b}),.UNSPECIFIED.,.F.,.F.,(2,2),(0.,1.),.UNSPECIFIED.)"
             ));
-            let dr = o.add(&format!("DEFINITIONAL_REPRESENTATION('',(#{line}),#{ctx2})"));
-            pcurves.push(o.add(&format!(
-                "PCURVE('',#{},#{dr})",
-                face_surface[f as usize]
-            )));
+            let dr = o.add(&format!(
+                "DEFINITIONAL_REPRESENTATION('',(#{line}),#{ctx2})"
+            ));
+            pcurves.push(o.add(&format!("PCURVE('',#{},#{dr})", face_surface[f as usize])));
         }
         let sc = o.add(&format!(
             "SURFACE_CURVE('',#{c3},({}),.CURVE_3D.)",
@@ -251,7 +254,11 @@ pub fn step_string(model: &TrimmedModel, name: &str) -> Result<(String, StepSumm
                 oes.push(o.add(&format!("ORIENTED_EDGE('',*,*,#{},{sense})", edge_id[e])));
             }
             let lid = o.add(&format!("EDGE_LOOP('',({}))", refs(&oes)));
-            let kind = if li == 0 { "FACE_OUTER_BOUND" } else { "FACE_BOUND" };
+            let kind = if li == 0 {
+                "FACE_OUTER_BOUND"
+            } else {
+                "FACE_BOUND"
+            };
             bounds.push(o.add(&format!("{kind}('',#{lid},.T.)")));
         }
         face_ids.push(o.add(&format!(
@@ -270,12 +277,16 @@ pub fn step_string(model: &TrimmedModel, name: &str) -> Result<(String, StepSumm
 
     let mut text = String::with_capacity(o.text.len() + 512);
     text.push_str("ISO-10303-21;\nHEADER;\n");
-    text.push_str("FILE_DESCRIPTION(('volmorph accurate B-spline FFD: trimmed Bezier surfaces'),'2;1');\n");
+    text.push_str(
+        "FILE_DESCRIPTION(('volmorph accurate B-spline FFD: trimmed Bezier surfaces'),'2;1');\n",
+    );
     let _ = writeln!(
         text,
         "FILE_NAME('{name}','2000-01-01T00:00:00',(''),(''),'volmorph','volmorph','');"
     );
-    text.push_str("FILE_SCHEMA(('AUTOMOTIVE_DESIGN { 1 0 10303 214 1 1 1 1 }'));\nENDSEC;\nDATA;\n");
+    text.push_str(
+        "FILE_SCHEMA(('AUTOMOTIVE_DESIGN { 1 0 10303 214 1 1 1 1 }'));\nENDSEC;\nDATA;\n",
+    );
     text.push_str(&o.text);
     text.push_str("ENDSEC;\nEND-ISO-10303-21;\n");
     let summary = StepSummary {

@@ -238,7 +238,11 @@ fn step_of_the_cube_shares_every_edge() {
     let model = accurate_ffd(&mesh, &lat).unwrap();
     let (text, sum) = volmorph_ffd::step::step_string(&model, "cube").unwrap();
     assert!(text.starts_with("ISO-10303-21;") && text.trim_end().ends_with("END-ISO-10303-21;"));
-    let count = |kw: &str| text.lines().filter(|l| l.contains(&format!("={kw}("))).count();
+    let count = |kw: &str| {
+        text.lines()
+            .filter(|l| l.contains(&format!("={kw}(")))
+            .count()
+    };
     assert_eq!(count("ADVANCED_FACE"), 24);
     assert_eq!(count("B_SPLINE_SURFACE_WITH_KNOTS"), 24);
     assert_eq!(count("EDGE_CURVE"), sum.edges);
@@ -269,4 +273,36 @@ fn step_of_the_cube_shares_every_edge() {
         let (t, _) = volmorph_ffd::step::step_string(&model, "cube").unwrap();
         t
     });
+}
+
+/// Tessellation is watertight (closed 2-manifold for a closed input), follows the surfaces to
+/// the chordal tolerance, and its area converges to the trimmed surfaces' area.
+#[test]
+fn tessellation_is_watertight_and_within_tolerance() {
+    let mesh = sphere(6, 1.0, DVec3::ZERO);
+    let (lo, hi) = mesh.bounding_box().unwrap();
+    let mut lat =
+        BSplineLattice::feng_end_interpolating_around(lo, hi, [2, 2, 2], [4, 5, 4]).unwrap();
+    jiggle(&mut lat, 0.3, 21);
+    let model = accurate_ffd(&mesh, &lat).unwrap();
+    let coarse = volmorph_ffd::tessellate::tessellate(&model, 1e-2).unwrap();
+    let fine = volmorph_ffd::tessellate::tessellate(&model, 1e-4).unwrap();
+    for t in [&coarse, &fine] {
+        let rep = t.validate();
+        assert!(rep.is_closed_manifold(), "{rep}");
+        assert_eq!(rep.euler_characteristic, 2);
+    }
+    assert!(fine.face_count() > coarse.face_count());
+    let area = model.surface_area();
+    let err = |m: &Mesh| (m.surface_area() - area).abs() / area;
+    assert!(
+        err(&fine) < err(&coarse) && err(&fine) < 1e-3,
+        "{} {}",
+        err(&coarse),
+        err(&fine)
+    );
+    // Closed shell: the tessellation's signed volume is close to the point-wise FFD's of the
+    // finely subdivided sphere.
+    assert!(fine.signed_volume() > 0.0);
+    assert!(volmorph_ffd::tessellate::tessellate(&model, 0.0).is_err());
 }
