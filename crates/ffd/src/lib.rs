@@ -7,6 +7,7 @@ pub use error::FfdError;
 pub mod accurate;
 pub mod baseline;
 pub mod frame;
+pub mod shapes;
 pub mod step;
 pub mod subdivide;
 pub mod tessellate;
