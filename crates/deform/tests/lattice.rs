@@ -731,3 +731,44 @@ fn feng_initial_volumes_are_the_identity_with_eq2_spacing() {
             .is_err()
     );
 }
+
+/// The batch kernel agrees with `apply` inside, on and outside the box, for several degrees
+/// and frames.
+#[test]
+fn apply_batch_agrees_with_apply() {
+    let (min, max) = (DVec3::new(-1.0, 0.5, 2.0), DVec3::new(3.0, 2.0, 5.0));
+    let mut r = Lcg(8);
+    for (degrees, counts) in [
+        ([2, 2, 2], [6, 8, 6]),
+        ([1, 3, 2], [4, 5, 3]),
+        ([3, 3, 3], [4, 4, 4]),
+    ] {
+        let mut lat =
+            BSplineLattice::feng_end_interpolating_around(min, max, degrees, counts).unwrap();
+        for k in 0..counts[2] {
+            for j in 0..counts[1] {
+                for i in 0..counts[0] {
+                    lat.move_control_point([i, j, k], (r.vec() - 0.5) * 0.4)
+                        .unwrap();
+                }
+            }
+        }
+        let mut pts: Vec<DVec3> = (0..5000)
+            .map(|_| min - 0.5 + (max - min + 1.0) * r.vec())
+            .collect();
+        pts.extend([min, max, DVec3::new(max.x, min.y, max.z)]);
+        let mut out = vec![DVec3::ZERO; pts.len()];
+        lat.apply_batch(&pts, &mut out).unwrap();
+        for (p, o) in pts.iter().zip(&out) {
+            assert!((lat.apply(*p) - *o).length() < 1e-12, "{p}");
+        }
+        assert!(lat.apply_batch(&pts, &mut out[1..]).is_err());
+    }
+    let cubic = BSplineLattice::uniform_cubic_around(min, max, [7, 5, 6]).unwrap();
+    let pts: Vec<DVec3> = (0..500).map(|_| min + (max - min) * r.vec()).collect();
+    let mut out = vec![DVec3::ZERO; pts.len()];
+    cubic.apply_batch(&pts, &mut out).unwrap();
+    for (p, o) in pts.iter().zip(&out) {
+        assert!((*p - *o).length() < 1e-12);
+    }
+}
