@@ -55,6 +55,29 @@ use crate::map::{SpaceMap, apply_grid_pointwise};
 /// Points per parallel work item of [`BSplineLattice`]'s batch evaluation.
 const BATCH_CHUNK: usize = 4096;
 
+/// Largest order (degree + 1) of the small-degree batch kernel.
+const SMALL_ORDER: usize = 4;
+
+/// Cox–de Boor (The NURBS Book A2.2) for degree `p < SMALL_ORDER` on a valid `span` of a
+/// validated knot vector (so every index is in range).
+#[inline]
+fn small_basis(knots: &[f64], p: usize, span: usize, u: f64, out: &mut [f64; SMALL_ORDER]) {
+    let mut left = [0.0; SMALL_ORDER];
+    let mut right = [0.0; SMALL_ORDER];
+    out[0] = 1.0;
+    for j in 1..=p {
+        left[j] = u - knots[span + 1 - j];
+        right[j] = knots[span + j] - u;
+        let mut saved = 0.0;
+        for r in 0..j {
+            let temp = out[r] / (right[r + 1] + left[j - r]);
+            out[r] = saved + right[r + 1] * temp;
+            saved = left[j - r] * temp;
+        }
+        out[j] = saved;
+    }
+}
+
 /// Largest allowed deviation of `axesᵀ·axes` from the identity in a [`LatticeFrame`]; frames
 /// read from text with ~15 significant digits pass, frames with visibly skewed axes do not.
 pub const FRAME_ORTHONORMAL_TOL: f64 = 1e-9;
@@ -596,28 +619,48 @@ impl BSplineLattice {
             return p;
         }
         let knots = self.spline.knots();
-        let mut b = [[0.0; volmorph_spline::MAX_DEGREE + 1]; 3];
-        let mut first = [0usize; 3];
-        let mut deg = [0usize; 3];
+        let deg = [knots[0].degree(), knots[1].degree(), knots[2].degree()];
+        let mut spans = [0usize; 3];
         for a in 0..3 {
-            deg[a] = knots[a].degree();
             let Ok(span) = knots[a].find_span(u[a]) else {
                 return p;
             };
-            if volmorph_spline::basis_funs_into(&knots[a], span, u[a], &mut b[a]).is_err() {
+            spans[a] = span;
+        }
+        if deg.iter().all(|&d| d < SMALL_ORDER) {
+            // Stack buffers of the order only (degrees ≤ 3, the common case).
+            let mut b = [[0.0; SMALL_ORDER]; 3];
+            for a in 0..3 {
+                small_basis(knots[a].knots(), deg[a], spans[a], u[a], &mut b[a]);
+            }
+            return self.contract(ctrl, spans, deg, &b).unwrap_or(p);
+        }
+        let mut b = [[0.0; volmorph_spline::MAX_DEGREE + 1]; 3];
+        for a in 0..3 {
+            if volmorph_spline::basis_funs_into(&knots[a], spans[a], u[a], &mut b[a]).is_err() {
                 return p;
             }
-            first[a] = span - deg[a];
         }
+        self.contract(ctrl, spans, deg, &b).unwrap_or(p)
+    }
+
+    /// `Σ b_u[i] b_v[j] b_w[k] P` over the control points of the cell `spans`.
+    #[inline]
+    fn contract<const L: usize>(
+        &self,
+        ctrl: &[DVec3],
+        spans: [usize; 3],
+        deg: [usize; 3],
+        b: &[[f64; L]; 3],
+    ) -> Option<DVec3> {
         let [nu, nv, _] = self.spline.counts();
+        let first = [spans[0] - deg[0], spans[1] - deg[1], spans[2] - deg[2]];
         let mut acc = DVec3::ZERO;
         for k in 0..=deg[2] {
             let mut pv = DVec3::ZERO;
             for j in 0..=deg[1] {
                 let base = first[0] + nu * (first[1] + j + nv * (first[2] + k));
-                let Some(row) = ctrl.get(base..=base + deg[0]) else {
-                    return p;
-                };
+                let row = ctrl.get(base..=base + deg[0])?;
                 let mut pu = DVec3::ZERO;
                 for (c, w) in row.iter().zip(&b[0]) {
                     pu += *w * *c;
@@ -626,7 +669,7 @@ impl BSplineLattice {
             }
             acc += b[2][k] * pv;
         }
-        acc
+        Some(acc)
     }
 
     /// Image of in-domain parameters `u` (no domain check beyond the spline's own).

@@ -742,6 +742,7 @@ fn apply_batch_agrees_with_apply() {
         ([2, 2, 2], [6, 8, 6]),
         ([1, 3, 2], [4, 5, 3]),
         ([3, 3, 3], [4, 4, 4]),
+        ([4, 2, 1], [6, 4, 3]),
     ] {
         let mut lat =
             BSplineLattice::feng_end_interpolating_around(min, max, degrees, counts).unwrap();
