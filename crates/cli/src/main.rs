@@ -80,6 +80,12 @@ enum Command {
         after_help = "Example:\n  volmorph jacobian --lattice moved.tfm --grid ct.nii.gz -o jacobian.nii.gz"
     )]
     Jacobian(cmd::warp::JacobianArgs),
+    /// Free-form deformation of a polygon mesh: vertices only, after uniform or adaptive
+    /// subdivision, or exactly as trimmed Bézier surfaces (STEP or tessellated).
+    #[command(
+        after_help = "Examples:\n  volmorph lattice init --mesh cube.obj --degree 2,2,2 --size 4,4,4 -o cube_lattice.json\n  volmorph ffd cube.obj --lattice moved.json --mode accurate -o cube.step\n  volmorph ffd bunny.obj --lattice moved.json --mode adaptive:0.01 -o bunny_adaptive.ply"
+    )]
+    Ffd(cmd::ffd::Args),
     /// B-spline lattice (space map) tasks.
     #[command(subcommand)]
     Lattice(cmd::lattice::Command),
@@ -100,6 +106,7 @@ fn main() -> ExitCode {
         Command::Slice(a) => cmd::slice::run(&a),
         Command::Phantom(a) => cmd::phantom::run(&a),
         Command::Isosurface(a) => cmd::isosurface::run(&a),
+        Command::Ffd(a) => cmd::ffd::run(&a),
         Command::Lattice(c) => cmd::lattice::run(&c),
         Command::Warp(a) => cmd::warp::run(&a),
         Command::Drag(a) => cmd::drag::run(&a),

@@ -782,3 +782,201 @@ fn bench_times_every_item_on_a_tiny_input() {
     let err = fails(&[&"bench", &"isosurface", &"--repeat", &"0"]);
     assert!(err.contains("--repeat 0"), "{err}");
 }
+
+// ---------------------------------------------------------------------------------------
+// `volmorph ffd` and `volmorph lattice init --mesh` (mesh free-form deformation)
+// ---------------------------------------------------------------------------------------
+
+/// The unit cube as 12 triangles (OBJ text).
+const FFD_CUBE_OBJ: &str = "v 0 0 0\nv 1 0 0\nv 0 1 0\nv 1 1 0\nv 0 0 1\nv 1 0 1\nv 0 1 1\nv 1 1 1\n\
+f 1 3 4\nf 1 4 2\nf 5 6 8\nf 5 8 7\nf 1 2 6\nf 1 6 5\nf 3 7 8\nf 3 8 4\nf 1 5 7\nf 1 7 3\n\
+f 2 4 8\nf 2 8 6\n";
+
+/// Writes the cube and its Fig. 7 lattice (degree 2, 4×4×4) with one control point moved.
+fn ffd_cube_and_lattice(dir: &Path) -> (PathBuf, PathBuf) {
+    let cube = dir.join("cube.obj");
+    std::fs::write(&cube, FFD_CUBE_OBJ).unwrap();
+    let lat = dir.join("lat.json");
+    let text = ok(&[
+        &"lattice",
+        &"init",
+        &"--mesh",
+        &cube,
+        &"--degree",
+        &"2,2,2",
+        &"--size",
+        &"4,4,4",
+        &"-o",
+        &lat,
+    ]);
+    assert!(text.contains("degree 2x2x2"), "{text}");
+    let mut j: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(&lat).unwrap()).unwrap();
+    assert_eq!(j["degrees"], serde_json::json!([2, 2, 2]));
+    // Pull the control point at the (1,1,3) index up: bulges the top face.
+    let idx = 1 + 4 * (1 + 4 * 3);
+    let z = j["control_points"][idx][2].as_f64().unwrap();
+    j["control_points"][idx][2] = serde_json::json!(z + 0.3);
+    let moved = dir.join("moved.json");
+    std::fs::write(&moved, serde_json::to_string(&j).unwrap()).unwrap();
+    (cube, moved)
+}
+
+#[test]
+fn ffd_accurate_cube_reports_table_2_counts_and_writes_step_and_meshes() {
+    let dir = tempfile::tempdir().unwrap();
+    let (cube, lat) = ffd_cube_and_lattice(dir.path());
+    let step = dir.path().join("cube.step");
+    let report = dir.path().join("cube.json");
+    let text = ok(&[
+        &"ffd",
+        &cube,
+        &"--lattice",
+        &lat,
+        &"--mode",
+        &"accurate",
+        &"-o",
+        &step,
+        &"--report",
+        &report,
+    ]);
+    assert!(text.contains("sub-polygons:   36"), "{text}");
+    assert!(text.contains("Bézier patches: 24"), "{text}");
+    let r: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(&report).unwrap()).unwrap();
+    assert_eq!(r["sub_polygons"], 36);
+    assert_eq!(r["patches"], 24);
+    assert_eq!(r["closed_shell"], true);
+    assert!(r["surface_area"].as_f64().unwrap() > 6.0);
+    let s = std::fs::read_to_string(&step).unwrap();
+    assert!(s.contains("CLOSED_SHELL") && s.contains("ADVANCED_FACE"));
+    // Tessellated output in every mesh format, watertight.
+    for ext in ["obj", "ply", "stl"] {
+        let out = dir.path().join(format!("cube_acc.{ext}"));
+        ok(&[
+            &"ffd",
+            &cube,
+            &"--lattice",
+            &lat,
+            &"-o",
+            &out,
+            &"--chordal",
+            &"1e-3",
+        ]);
+        let info = ok(&[&"mesh", &"info", &out]);
+        if ext != "stl" {
+            assert!(info.contains("closed"), "{info}");
+        }
+    }
+    // Baselines.
+    for (mode, more) in [
+        ("vertex", false),
+        ("uniform:2", true),
+        ("adaptive:0.001", true),
+    ] {
+        let out = dir.path().join("base.ply");
+        let text = ok(&[
+            &"ffd",
+            &cube,
+            &"--lattice",
+            &lat,
+            &"--mode",
+            &mode,
+            &"-o",
+            &out,
+        ]);
+        let faces: usize = text
+            .lines()
+            .find_map(|l| l.strip_prefix("output faces:"))
+            .and_then(|l| l.split_whitespace().next())
+            .and_then(|n| n.parse().ok())
+            .unwrap();
+        assert_eq!(faces > 12, more, "{mode}: {text}");
+    }
+}
+
+#[test]
+fn ffd_bad_inputs_fail_cleanly() {
+    let dir = tempfile::tempdir().unwrap();
+    let (cube, lat) = ffd_cube_and_lattice(dir.path());
+    let out = dir.path().join("out.step");
+    let err = fails(&[
+        &"ffd",
+        &cube,
+        &"--lattice",
+        &lat,
+        &"--mode",
+        &"vertex",
+        &"-o",
+        &out,
+    ]);
+    assert!(err.contains("--mode accurate"), "{err}");
+    let err = fails(&[
+        &"ffd",
+        &cube,
+        &"--lattice",
+        &lat,
+        &"--mode",
+        &"wobbly",
+        &"-o",
+        &out,
+    ]);
+    assert!(err.contains("wobbly"), "{err}");
+    let err = fails(&[
+        &"ffd",
+        &cube,
+        &"--lattice",
+        &lat,
+        &"--mode",
+        &"adaptive:-1",
+        &"-o",
+        &out,
+    ]);
+    assert!(err.contains("adaptive"), "{err}");
+    let empty = dir.path().join("empty.obj");
+    std::fs::write(&empty, "").unwrap();
+    let err = fails(&[&"ffd", &empty, &"--lattice", &lat, &"-o", &out]);
+    assert!(err.contains("empty.obj"), "{err}");
+    let nan = dir.path().join("nan.obj");
+    std::fs::write(&nan, "v 0 0 0\nv 1 0 0\nv nan 1 0\nf 1 2 3\n").unwrap();
+    let err = fails(&[&"ffd", &nan, &"--lattice", &lat, &"-o", &out]);
+    assert!(err.contains("nan.obj"), "{err}");
+    assert!(!out.exists());
+    // A non-convex quad is triangulated with a warning.
+    let nc = dir.path().join("nonconvex.obj");
+    std::fs::write(
+        &nc,
+        "v 0 0 0.5\nv 1 0 0.5\nv 1 1 0.5\nv 0.5 0.2 0.5\nv 0 1 0.5\nf 1 2 3 4 5\n",
+    )
+    .unwrap();
+    let o = volmorph(&[&"ffd", &nc, &"--lattice", &lat, &"-o", &out]);
+    assert!(o.status.success());
+    assert!(String::from_utf8_lossy(&o.stderr).contains("non-convex"));
+    let err = fails(&[
+        &"lattice", &"init", &"--mesh", &cube, &"--size", &"2,4,4", &"-o", &out,
+    ]);
+    assert!(err.contains("control points"), "{err}");
+}
+
+#[test]
+fn bench_ffd_runs_small() {
+    let j: serde_json::Value = serde_json::from_str(&ok(&[
+        &"bench",
+        &"ffd",
+        &"--rings",
+        &"8",
+        &"--vertex-rings",
+        &"10",
+        &"--repeat",
+        &"1",
+        &"--json",
+    ]))
+    .unwrap();
+    let items = j["items"].as_array().unwrap();
+    assert_eq!(items.len(), 2);
+    for it in items {
+        assert!(it["median_s"].as_f64().unwrap() > 0.0, "{it}");
+        assert!(it["target_s"].is_null(), "{it}");
+    }
+    assert!(items[0]["triangles"].as_u64().unwrap() >= 4 * 8 * 7);
+}

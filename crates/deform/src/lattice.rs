@@ -47,8 +47,36 @@ use glam::{DMat3, DVec3};
 use volmorph_spline::{BSplineVolume, KnotVector, SplineError, TensorBSpline};
 use volmorph_volume::Geometry;
 
+use rayon::prelude::*;
+
 use crate::DeformError;
 use crate::map::{SpaceMap, apply_grid_pointwise};
+
+/// Points per parallel work item of [`BSplineLattice`]'s batch evaluation.
+const BATCH_CHUNK: usize = 4096;
+
+/// Largest order (degree + 1) of the small-degree batch kernel.
+const SMALL_ORDER: usize = 4;
+
+/// Cox–de Boor (The NURBS Book A2.2) for degree `p < SMALL_ORDER` on a valid `span` of a
+/// validated knot vector (so every index is in range).
+#[inline]
+fn small_basis(knots: &[f64], p: usize, span: usize, u: f64, out: &mut [f64; SMALL_ORDER]) {
+    let mut left = [0.0; SMALL_ORDER];
+    let mut right = [0.0; SMALL_ORDER];
+    out[0] = 1.0;
+    for j in 1..=p {
+        left[j] = u - knots[span + 1 - j];
+        right[j] = knots[span + j] - u;
+        let mut saved = 0.0;
+        for r in 0..j {
+            let temp = out[r] / (right[r + 1] + left[j - r]);
+            out[r] = saved + right[r + 1] * temp;
+            saved = left[j - r] * temp;
+        }
+        out[j] = saved;
+    }
+}
 
 /// Largest allowed deviation of `axesᵀ·axes` from the identity in a [`LatticeFrame`]; frames
 /// read from text with ~15 significant digits pass, frames with visibly skewed axes do not.
@@ -323,6 +351,95 @@ impl BSplineLattice {
         Self::bezier_in_box(min, DMat3::IDENTITY, max - min, degrees)
     }
 
+    /// Feng et al.'s uniform initial volume (2002 §3.1.2) on the axis-aligned box `[min, max]`
+    /// with `degrees[a] ≥ 1` and `counts[a] ≥ degrees[a] + 1` control points per axis.
+    ///
+    /// The parameters are the physical coordinates themselves (frame origin 0, spacing 1, axes
+    /// `I`), so a point's local coordinates are its coordinates. Along each axis the knots are
+    /// uniform and unclamped, `u_i = min + (i − k)(max − min)/(n − k)` for `i = 0 … n + k`, which
+    /// makes the domain exactly `[min, max]`. The control points are first spread evenly,
+    /// `x'_i = min + i (max − min)/(n − 1)`; the resulting volume is linear but covers a smaller
+    /// box `[x'(min), x'(max)]`, so the **scaling step** maps the control coordinates by
+    /// `x''_i = min + s (x'_i − x'(min))` with `s = (max − min)/(x'(max) − x'(min))`. The
+    /// volume then reproduces every point of the box and its Jacobian is the identity.
+    ///
+    /// # Errors
+    /// [`DeformError::DegenerateBox`] for a non-finite or empty box,
+    /// [`DeformError::TooFewControlPoints`] for a degree of 0 or `counts[a] < degrees[a] + 1`,
+    /// [`DeformError::Spline`] for a degree above [`volmorph_spline::MAX_DEGREE`].
+    pub fn feng_uniform_around(
+        min: DVec3,
+        max: DVec3,
+        degrees: [usize; 3],
+        counts: [usize; 3],
+    ) -> Result<Self, DeformError> {
+        check_extent(min, max - min)?;
+        let mut knots = Vec::with_capacity(3);
+        let mut coords: Vec<Vec<f64>> = Vec::with_capacity(3);
+        for a in 0..3 {
+            let (k, n) = (degrees[a], counts[a]);
+            if k == 0 || n < k + 1 {
+                return Err(DeformError::TooFewControlPoints {
+                    axis: a,
+                    count: n,
+                    min: k.max(1) + 1,
+                });
+            }
+            let kv = KnotVector::uniform(k, n, [min[a], max[a]])?;
+            let len = max[a] - min[a];
+            let even: Vec<f64> = (0..n)
+                .map(|i| min[a] + i as f64 * len / (n - 1) as f64)
+                .collect();
+            // Corners of the volume spanned by the evenly spread points.
+            let curve = volmorph_spline::BSplineCurve::new([kv.clone()], 1, even.clone())?;
+            let lo = curve.eval([min[a]])?[0];
+            let hi = curve.eval([max[a]])?[0];
+            let scale = len / (hi - lo);
+            coords.push(even.iter().map(|&x| min[a] + scale * (x - lo)).collect());
+            knots.push(kv);
+        }
+        let [ku, kv, kw]: [KnotVector; 3] = knots
+            .try_into()
+            .map_err(|_| DeformError::InvalidFrame("three knot vectors expected".into()))?;
+        let frame = LatticeFrame::axis_aligned(DVec3::ZERO, DVec3::ONE)?;
+        let mut pts = Vec::with_capacity(counts[0] * counts[1] * counts[2]);
+        for z in &coords[2] {
+            for y in &coords[1] {
+                for x in &coords[0] {
+                    pts.push(DVec3::new(*x, *y, *z));
+                }
+            }
+        }
+        Self::from_parts(frame, [ku, kv, kw], &pts)
+    }
+
+    /// Feng et al.'s end-interpolating initial volume (2002 §3.1.3): the uniform volume of
+    /// [`BSplineLattice::feng_uniform_around`] converted by knot insertion at the domain ends
+    /// ([`volmorph_spline::TensorBSpline::clamp_ends`]). The knots become clamped with the same
+    /// interior knots, the map is still the identity with Jacobian `I` on `[min, max]`, and the
+    /// control points follow Eq. (2): along each axis the gaps between successive control
+    /// points grow `h/k, 2h/k, …, h` from each end (`h` the knot spacing), the outermost
+    /// points lying on the box faces.
+    ///
+    /// # Errors
+    /// As [`BSplineLattice::feng_uniform_around`].
+    pub fn feng_end_interpolating_around(
+        min: DVec3,
+        max: DVec3,
+        degrees: [usize; 3],
+        counts: [usize; 3],
+    ) -> Result<Self, DeformError> {
+        let uniform = Self::feng_uniform_around(min, max, degrees, counts)?;
+        let mut spline = uniform.spline;
+        for a in 0..3 {
+            spline = spline.clamp_ends(a)?;
+        }
+        Ok(Self {
+            frame: uniform.frame,
+            spline,
+        })
+    }
+
     /// Assemble a lattice from its parts: `control_points` in physical coordinates, index `i`
     /// fastest, one per basis function of `knots`.
     ///
@@ -493,6 +610,68 @@ impl BSplineLattice {
         Ok(())
     }
 
+    /// [`SpaceMap::apply`] of a polynomial lattice given its control points `ctrl` (index `i`
+    /// fastest).
+    #[inline]
+    fn apply_with_net(&self, ctrl: &[DVec3], p: DVec3) -> DVec3 {
+        let u = self.frame.to_parameter(p);
+        if !self.contains_parameter(u) {
+            return p;
+        }
+        let knots = self.spline.knots();
+        let deg = [knots[0].degree(), knots[1].degree(), knots[2].degree()];
+        let mut spans = [0usize; 3];
+        for a in 0..3 {
+            let Ok(span) = knots[a].find_span(u[a]) else {
+                return p;
+            };
+            spans[a] = span;
+        }
+        if deg.iter().all(|&d| d < SMALL_ORDER) {
+            // Stack buffers of the order only (degrees ≤ 3, the common case).
+            let mut b = [[0.0; SMALL_ORDER]; 3];
+            for a in 0..3 {
+                small_basis(knots[a].knots(), deg[a], spans[a], u[a], &mut b[a]);
+            }
+            return self.contract(ctrl, spans, deg, &b).unwrap_or(p);
+        }
+        let mut b = [[0.0; volmorph_spline::MAX_DEGREE + 1]; 3];
+        for a in 0..3 {
+            if volmorph_spline::basis_funs_into(&knots[a], spans[a], u[a], &mut b[a]).is_err() {
+                return p;
+            }
+        }
+        self.contract(ctrl, spans, deg, &b).unwrap_or(p)
+    }
+
+    /// `Σ b_u[i] b_v[j] b_w[k] P` over the control points of the cell `spans`.
+    #[inline]
+    fn contract<const L: usize>(
+        &self,
+        ctrl: &[DVec3],
+        spans: [usize; 3],
+        deg: [usize; 3],
+        b: &[[f64; L]; 3],
+    ) -> Option<DVec3> {
+        let [nu, nv, _] = self.spline.counts();
+        let first = [spans[0] - deg[0], spans[1] - deg[1], spans[2] - deg[2]];
+        let mut acc = DVec3::ZERO;
+        for k in 0..=deg[2] {
+            let mut pv = DVec3::ZERO;
+            for j in 0..=deg[1] {
+                let base = first[0] + nu * (first[1] + j + nv * (first[2] + k));
+                let row = ctrl.get(base..=base + deg[0])?;
+                let mut pu = DVec3::ZERO;
+                for (c, w) in row.iter().zip(&b[0]) {
+                    pu += *w * *c;
+                }
+                pv += b[1][j] * pu;
+            }
+            acc += b[2][k] * pv;
+        }
+        Some(acc)
+    }
+
     /// Image of in-domain parameters `u` (no domain check beyond the spline's own).
     fn eval_param(&self, u: DVec3) -> Option<DVec3> {
         let mut v = [0.0; 3];
@@ -518,6 +697,33 @@ impl SpaceMap for BSplineLattice {
             return p;
         }
         self.eval_param(u).unwrap_or(p)
+    }
+
+    /// Parallel over chunks of points with the control net copied once into a contiguous
+    /// array of points and a per-point kernel (span search, Cox–de Boor basis per axis, one
+    /// contraction over the `(p+1)³` control points); agrees with [`SpaceMap::apply`] to
+    /// rounding.
+    fn apply_batch(&self, points: &[DVec3], out: &mut [DVec3]) -> Result<(), DeformError> {
+        crate::map::check_len(points.len(), out.len())?;
+        if self.spline.is_rational() {
+            out.par_chunks_mut(BATCH_CHUNK)
+                .zip(points.par_chunks(BATCH_CHUNK))
+                .for_each(|(o, p)| {
+                    for (o, &p) in o.iter_mut().zip(p) {
+                        *o = self.apply(p);
+                    }
+                });
+            return Ok(());
+        }
+        let ctrl = self.control_points();
+        out.par_chunks_mut(BATCH_CHUNK)
+            .zip(points.par_chunks(BATCH_CHUNK))
+            .for_each(|(o, p)| {
+                for (o, &p) in o.iter_mut().zip(p) {
+                    *o = self.apply_with_net(&ctrl, p);
+                }
+            });
+        Ok(())
     }
 
     /// Analytic: `∂S/∂u · diag(1/spacing) · axesᵀ` inside the box (chain rule through the

@@ -667,3 +667,109 @@ fn continuous_across_the_box_surface_iff_outer_layers_stay() {
         .unwrap();
     assert!(jump(&lat, DVec3::new(0.0, 2.0, 2.5), DVec3::NEG_X) > 1e-3);
 }
+
+/// Feng 2002 §3.1.2–3.1.3: the uniform and end-interpolating initial volumes fix every point of
+/// the box with Jacobian `I`, parameters equal coordinates, and the end-interpolating control
+/// points follow Eq. (2).
+#[test]
+fn feng_initial_volumes_are_the_identity_with_eq2_spacing() {
+    let (min, max) = (DVec3::new(-2.0, 1.0, 3.5), DVec3::new(4.0, 2.5, 9.0));
+    let extent = max - min;
+    let pts = box_points(min, DMat3::IDENTITY, extent, 200, 17);
+    for degrees in [[2, 2, 2], [1, 2, 3], [3, 3, 1], [4, 2, 2]] {
+        for counts in [[6, 8, 6], [5, 4, 7], [9, 9, 9]] {
+            if (0..3).any(|a| counts[a] < degrees[a] + 1) {
+                continue;
+            }
+            let uni = BSplineLattice::feng_uniform_around(min, max, degrees, counts).unwrap();
+            let end =
+                BSplineLattice::feng_end_interpolating_around(min, max, degrees, counts).unwrap();
+            for lat in [&uni, &end] {
+                assert_eq!(lat.counts(), counts);
+                assert_eq!(lat.degree(), degrees);
+                assert_eq!(
+                    lat.frame().to_parameter(DVec3::new(1.5, -7.0, 2.0)),
+                    DVec3::new(1.5, -7.0, 2.0)
+                );
+                for &p in &pts {
+                    let q = lat.apply(p);
+                    assert!((q - p).length() <= 1e-12 * p.length().max(1.0), "{p} ↦ {q}");
+                    let j = lat.jacobian(p) - DMat3::IDENTITY;
+                    assert!(
+                        j.abs_diff_eq(DMat3::ZERO, 1e-12),
+                        "{degrees:?} {counts:?} {j}"
+                    );
+                }
+            }
+            assert!(end.knots().iter().all(KnotVector::is_clamped));
+            // Eq. (2) along x on the row j = k = 0: gaps u, 2u, …, ku from each end.
+            let (k, n) = (degrees[0], counts[0]);
+            let h = extent.x / (n - k) as f64;
+            let xs: Vec<f64> = (0..n)
+                .map(|i| end.control_point([i, 0, 0]).unwrap().x)
+                .collect();
+            assert!((xs[0] - min.x).abs() < 1e-12 && (xs[n - 1] - max.x).abs() < 1e-12);
+            // Eq. (2) as stated holds when the two end ramps do not overlap (n ≥ 2k).
+            for s in (0..n - 1).filter(|_| n >= 2 * k || n == k + 1) {
+                let from_end = s.min(n - 2 - s);
+                let want = if n == k + 1 {
+                    extent.x / k as f64
+                } else {
+                    h * ((from_end + 1).min(k)) as f64 / k as f64
+                };
+                assert!(
+                    (xs[s + 1] - xs[s] - want).abs() < 1e-12,
+                    "{degrees:?} {counts:?} gap {s}"
+                );
+            }
+        }
+    }
+    assert!(BSplineLattice::feng_uniform_around(min, max, [2, 0, 2], [4, 4, 4]).is_err());
+    assert!(BSplineLattice::feng_uniform_around(min, max, [3, 3, 3], [3, 4, 4]).is_err());
+    assert!(
+        BSplineLattice::feng_uniform_around(min, DVec3::new(4.0, 1.0, 9.0), [2; 3], [4; 3])
+            .is_err()
+    );
+}
+
+/// The batch kernel agrees with `apply` inside, on and outside the box, for several degrees
+/// and frames.
+#[test]
+fn apply_batch_agrees_with_apply() {
+    let (min, max) = (DVec3::new(-1.0, 0.5, 2.0), DVec3::new(3.0, 2.0, 5.0));
+    let mut r = Lcg(8);
+    for (degrees, counts) in [
+        ([2, 2, 2], [6, 8, 6]),
+        ([1, 3, 2], [4, 5, 3]),
+        ([3, 3, 3], [4, 4, 4]),
+        ([4, 2, 1], [6, 4, 3]),
+    ] {
+        let mut lat =
+            BSplineLattice::feng_end_interpolating_around(min, max, degrees, counts).unwrap();
+        for k in 0..counts[2] {
+            for j in 0..counts[1] {
+                for i in 0..counts[0] {
+                    lat.move_control_point([i, j, k], (r.vec() - 0.5) * 0.4)
+                        .unwrap();
+                }
+            }
+        }
+        let mut pts: Vec<DVec3> = (0..5000)
+            .map(|_| min - 0.5 + (max - min + 1.0) * r.vec())
+            .collect();
+        pts.extend([min, max, DVec3::new(max.x, min.y, max.z)]);
+        let mut out = vec![DVec3::ZERO; pts.len()];
+        lat.apply_batch(&pts, &mut out).unwrap();
+        for (p, o) in pts.iter().zip(&out) {
+            assert!((lat.apply(*p) - *o).length() < 1e-12, "{p}");
+        }
+        assert!(lat.apply_batch(&pts, &mut out[1..]).is_err());
+    }
+    let cubic = BSplineLattice::uniform_cubic_around(min, max, [7, 5, 6]).unwrap();
+    let pts: Vec<DVec3> = (0..500).map(|_| min + (max - min) * r.vec()).collect();
+    let mut out = vec![DVec3::ZERO; pts.len()];
+    cubic.apply_batch(&pts, &mut out).unwrap();
+    for (p, o) in pts.iter().zip(&out) {
+        assert!((*p - *o).length() < 1e-12);
+    }
+}

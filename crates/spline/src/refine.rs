@@ -144,6 +144,61 @@ impl<const N: usize> TensorBSpline<N> {
     }
 }
 
+impl<const N: usize> TensorBSpline<N> {
+    /// The end-interpolating (clamped) form along `axis`: the domain ends `a` and `b` are
+    /// inserted until each has multiplicity `p + 1`, and the control points whose basis
+    /// functions then vanish on the domain are dropped (Feng et al. 2002 §3.1.3). The result
+    /// has knots `a^(p+1) … b^(p+1)`, the same interior knots, and represents exactly the same
+    /// function on the domain; its first and last control rows along `axis` are the values on
+    /// the faces `u = a` and `u = b`. A spline that is already clamped is returned unchanged.
+    ///
+    /// # Errors
+    /// [`SplineError::InvalidAxis`] or [`SplineError::TooLarge`].
+    ///
+    /// ```
+    /// use volmorph_spline::{BSplineCurve, KnotVector};
+    /// let kv = KnotVector::uniform(2, 5, [0.0, 3.0]).unwrap();
+    /// let c = BSplineCurve::new([kv], 1, vec![1.0, -1.0, 2.0, 0.5, 3.0]).unwrap();
+    /// let e = c.clamp_ends(0).unwrap();
+    /// assert!(e.knots()[0].is_clamped());
+    /// assert_eq!(e.counts(), [5]);
+    /// assert!((e.eval([1.3]).unwrap()[0] - c.eval([1.3]).unwrap()[0]).abs() < 1e-12);
+    /// assert!((e.homogeneous_coefficients()[0] - c.eval([0.0]).unwrap()[0]).abs() < 1e-12);
+    /// ```
+    pub fn clamp_ends(&self, axis: usize) -> Result<Self, SplineError> {
+        Self::check_axis(axis)?;
+        let kv = &self.knots()[axis];
+        let p = kv.degree();
+        let [a, b] = kv.domain();
+        let mut inserts = Vec::with_capacity(2 * (p + 1));
+        inserts.extend(std::iter::repeat_n(
+            a,
+            p + 1 - kv.multiplicity(a).min(p + 1),
+        ));
+        inserts.extend(std::iter::repeat_n(
+            b,
+            p + 1 - kv.multiplicity(b).min(p + 1),
+        ));
+        let r = self.refine(axis, &inserts)?;
+        let rk = r.knots()[axis].knots();
+        let first = rk.partition_point(|&k| k < a);
+        let last = rk.partition_point(|&k| k <= b); // one past the last copy of b
+        if first == 0 && last == rk.len() {
+            return Ok(r);
+        }
+        let new_kv = KnotVector::new(p, rk[first..last].to_vec())?;
+        let (outer, len, inner) = r.axis_blocks(axis);
+        let keep = new_kv.num_basis();
+        let src = r.homogeneous_coefficients();
+        let mut coefs = Vec::with_capacity(outer * keep * inner);
+        for o in 0..outer {
+            let blk = &src[o * len * inner..(o + 1) * len * inner];
+            coefs.extend_from_slice(&blk[first * inner..(first + keep) * inner]);
+        }
+        Ok(r.with_axis(axis, new_kv, coefs))
+    }
+}
+
 /// A5.4 on one block: `src` holds `n` rows of `inner` values, `dst` receives `n + r` rows.
 /// `x` is sorted and inside the domain; `ubar` is the merged knot vector.
 fn refine_block(
@@ -225,6 +280,35 @@ mod tests {
         assert!(c.insert_knot(0, 4.5, 1).is_err());
         assert!(c.insert_knot(0, 1.0, 5).is_err());
         assert!(c.insert_knot(1, 1.0, 1).is_err());
+    }
+
+    #[test]
+    fn clamp_ends_keeps_the_function_and_interpolates_the_ends() {
+        for (p, n) in [(1, 3), (2, 4), (2, 7), (3, 6), (4, 9)] {
+            let kv = KnotVector::uniform(p, n, [-1.0, 2.5]).unwrap();
+            let coefs: Vec<f64> = (0..2 * n)
+                .map(|i| ((i * 7 + 3) % 11) as f64 - 4.0)
+                .collect();
+            let c = BSplineCurve::new([kv], 2, coefs).unwrap();
+            let e = c.clamp_ends(0).unwrap();
+            assert!(e.knots()[0].is_clamped(), "p={p} n={n}");
+            assert_eq!(e.counts(), [n]);
+            assert_eq!(e.domain(), c.domain());
+            assert!(max_diff(&c, &e) < 1e-12, "p={p} n={n}");
+            let h = e.homogeneous_coefficients();
+            let (lo, hi) = (c.eval([-1.0]).unwrap(), c.eval([2.5]).unwrap());
+            assert!((h[0] - lo[0]).abs() < 1e-12 && (h[1] - lo[1]).abs() < 1e-12);
+            assert!((h[2 * n - 2] - hi[0]).abs() < 1e-12 && (h[2 * n - 1] - hi[1]).abs() < 1e-12);
+            // Already clamped: unchanged.
+            assert_eq!(e.clamp_ends(0).unwrap(), e);
+        }
+        let c = BSplineCurve::new(
+            [KnotVector::uniform(2, 4, [0.0, 1.0]).unwrap()],
+            1,
+            vec![0.0; 4],
+        )
+        .unwrap();
+        assert!(c.clamp_ends(1).is_err());
     }
 
     #[test]

@@ -54,6 +54,32 @@ pub enum Command {
     /// Time marching cubes and dual contouring on a sphere's signed distance field.
     #[command(after_help = "Example:\n  volmorph bench isosurface --size 256 --repeat 5 --json")]
     Isosurface(IsosurfaceArgs),
+    /// Time the accurate FFD of a 70k-triangle sphere through a moved 6×8×6 degree-2 lattice
+    /// (target 2 s) and vertex FFD of a 1M-vertex sphere (target 50 ms).
+    #[command(after_help = "Example:\n  volmorph bench ffd --repeat 3")]
+    Ffd(FfdArgs),
+}
+
+/// Default rings of the accurate-FFD sphere: 4·133·132 = 70 224 triangles.
+const FFD_RINGS: u32 = 133;
+/// Default rings of the vertex-FFD sphere: 2·708·707 + 2 = 1 001 114 vertices.
+const FFD_VERTEX_RINGS: u32 = 708;
+
+/// Arguments of `volmorph bench ffd`.
+#[derive(Debug, clap::Args)]
+pub struct FfdArgs {
+    /// Latitude rings of the sphere for the accurate FFD (4·r·(r−1) triangles).
+    #[arg(long, default_value_t = FFD_RINGS)]
+    pub rings: u32,
+    /// Latitude rings of the sphere for vertex FFD (2·r·(r−1)+2 vertices).
+    #[arg(long, default_value_t = FFD_VERTEX_RINGS)]
+    pub vertex_rings: u32,
+    /// Timed runs per item.
+    #[arg(long, default_value_t = 3)]
+    pub repeat: usize,
+    /// Print the results as JSON instead of a table.
+    #[arg(long)]
+    pub json: bool,
 }
 
 /// Arguments of `volmorph bench warp`.
@@ -96,7 +122,82 @@ pub fn run(cmd: &Command) -> anyhow::Result<()> {
     match cmd {
         Command::Warp(a) => warp(a),
         Command::Isosurface(a) => isosurface(a),
+        Command::Ffd(a) => ffd(a),
     }
+}
+
+/// A Feng end-interpolating degree-2 lattice around `m` with every control point moved by up
+/// to 5 % of the box (seeded, so every run times the same lattice).
+fn ffd_lattice(m: &volmorph_mesh::Mesh, counts: [usize; 3]) -> anyhow::Result<BSplineLattice> {
+    let (lo, hi) = m
+        .bounding_box()
+        .ok_or_else(|| anyhow::anyhow!("empty mesh"))?;
+    let mut lat = BSplineLattice::feng_end_interpolating_around(lo, hi, [2, 2, 2], counts)?;
+    let mut r = Lcg(LATTICE_SEED);
+    let size = (hi - lo).max_element();
+    for k in 0..counts[2] {
+        for j in 0..counts[1] {
+            for i in 0..counts[0] {
+                let d = DVec3::new(r.next() - 0.5, r.next() - 0.5, r.next() - 0.5) * 0.1 * size;
+                lat.move_control_point([i, j, k], d)?;
+            }
+        }
+    }
+    Ok(lat)
+}
+
+fn ffd(a: &FfdArgs) -> anyhow::Result<()> {
+    if !(1..=MAX_REPEAT).contains(&a.repeat) {
+        bail!("--repeat {} must be between 1 and {MAX_REPEAT}", a.repeat);
+    }
+    if !(2..=2048).contains(&a.rings) || !(2..=2048).contains(&a.vertex_rings) {
+        bail!("--rings and --vertex-rings must be between 2 and 2048");
+    }
+    let pb = progress::spinner("building the spheres");
+    let sphere = volmorph_ffd::shapes::uv_sphere(a.rings, 1.0, DVec3::ZERO)?;
+    let lat = ffd_lattice(&sphere, [6, 8, 6])?;
+    pb.set_message("accurate FFD");
+    let (times, model) = time(a.repeat, || {
+        let plan = std::sync::Arc::new(volmorph_ffd::accurate::AccuratePlan::new(&sphere, &lat)?);
+        Ok(plan.deform(&lat)?)
+    })?;
+    let mut items = vec![Item {
+        name: "accurate FFD (plan + surfaces)",
+        times,
+        target: (a.rings == FFD_RINGS).then_some(2.0),
+        triangles: Some(model.stats.patches),
+    }];
+    let big = volmorph_ffd::shapes::uv_sphere(a.vertex_rings, 1.0, DVec3::ZERO)?;
+    let lat = ffd_lattice(&big, [6, 8, 6])?;
+    pb.set_message("vertex FFD");
+    let (times, _) = time(a.repeat, || {
+        Ok(volmorph_ffd::baseline::vertex_ffd(&big, &lat)?)
+    })?;
+    items.push(Item {
+        name: "vertex FFD",
+        times,
+        target: (a.vertex_rings == FFD_VERTEX_RINGS).then_some(0.05),
+        triangles: None,
+    });
+    pb.finish_and_clear();
+    let title = format!(
+        "sphere of {} triangles (accurate; 'triangles' column = Bézier patches) and of {} \
+         vertices (vertex FFD), 6x8x6 degree-2 lattice, {} runs each, {} threads",
+        sphere.face_count(),
+        big.vertex_count(),
+        a.repeat,
+        rayon::current_num_threads()
+    );
+    report(
+        a.json,
+        "ffd",
+        &title,
+        a.rings as usize,
+        a.repeat,
+        Some(6),
+        &items,
+    );
+    Ok(())
 }
 
 /// Timings of one benchmarked operation.
@@ -439,7 +540,7 @@ fn report(
         }
         say!("{}", line.trim_end());
     }
-    if size != TARGET_SIZE {
+    if suite != "ffd" && size != TARGET_SIZE {
         say!(
             "(targets are stated for --size {TARGET_SIZE}; the editing items' for --edit-size \
              {EDIT_TARGET_SIZE})"

@@ -1,0 +1,117 @@
+#!/usr/bin/env python3
+"""Validate a STEP file written by `volmorph ffd --mode accurate` with OpenCASCADE.
+
+Checks: the file loads; BRepCheck_Analyzer finds the shape valid; the largest edge tolerance
+is at most 1e-6; every edge shared by two or more faces is shared by exactly two (edges used
+by one face are boundary edges of an open model); and, with --area A (or --report R.json from
+`volmorph ffd --report`), the total surface area matches volmorph's own to 1e-6 relative.
+
+Needs `cadquery-ocp` (pip install cadquery-ocp). Without it the script prints a note and
+exits 0, so it can run on machines without OpenCASCADE.
+
+Usage:
+  python3 scripts/step_occ_check.py OUT.step [--report OUT.json | --area A] [--tol 1e-6]
+"""
+
+import argparse
+import json
+import sys
+
+
+def main() -> int:
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("step")
+    ap.add_argument("--report", help="JSON report of `volmorph ffd --report`")
+    ap.add_argument("--area", type=float, help="surface area computed by volmorph")
+    ap.add_argument("--tol", type=float, default=1e-6, help="largest edge tolerance allowed")
+    ap.add_argument("--area-rel", type=float, default=1e-6, help="relative area tolerance")
+    a = ap.parse_args()
+
+    try:
+        from OCP.STEPControl import STEPControl_Reader
+        from OCP.IFSelect import IFSelect_RetDone
+        from OCP.BRepCheck import BRepCheck_Analyzer
+        from OCP.TopExp import TopExp_Explorer
+        from OCP.TopAbs import TopAbs_EDGE, TopAbs_FACE
+        from OCP.BRep import BRep_Tool
+        from OCP.GProp import GProp_GProps
+        from OCP.BRepGProp import BRepGProp
+        from OCP.TopoDS import TopoDS
+    except ImportError:
+        print("SKIP: OpenCASCADE (cadquery-ocp) is not installed")
+        return 0
+
+    area_ref = a.area
+    if a.report:
+        with open(a.report) as f:
+            area_ref = json.load(f)["surface_area"]
+
+    reader = STEPControl_Reader()
+    if reader.ReadFile(a.step) != IFSelect_RetDone:
+        print(f"FAIL: {a.step} does not load")
+        return 1
+    reader.TransferRoots()
+    shape = reader.OneShape()
+    ok = True
+
+    nfaces = 0
+    exp = TopExp_Explorer(shape, TopAbs_FACE)
+    while exp.More():
+        nfaces += 1
+        exp.Next()
+    print(f"loaded: {nfaces} faces")
+
+    valid = BRepCheck_Analyzer(shape).IsValid()
+    print(f"BRepCheck_Analyzer valid: {valid}")
+    ok &= valid
+
+    to_edge = getattr(TopoDS, "Edge_s", None) or TopoDS.Edge
+    # Edge → number of faces using it (edges compared with IsSame, bucketed by hash).
+    buckets = {}
+    fexp = TopExp_Explorer(shape, TopAbs_FACE)
+    while fexp.More():
+        face = fexp.Current()
+        seen = []
+        eexp = TopExp_Explorer(face, TopAbs_EDGE)
+        while eexp.More():
+            e = eexp.Current()
+            if not any(e.IsSame(s) for s in seen):
+                seen.append(e)
+                bucket = buckets.setdefault(hash(e), [])
+                for entry in bucket:
+                    if entry[0].IsSame(e):
+                        entry[1] += 1
+                        break
+                else:
+                    bucket.append([e, 1])
+            eexp.Next()
+        fexp.Next()
+    max_tol = 0.0
+    hist = {}
+    nedges = 0
+    for bucket in buckets.values():
+        for e, n in bucket:
+            nedges += 1
+            max_tol = max(max_tol, BRep_Tool.Tolerance_s(to_edge(e)))
+            hist[n] = hist.get(n, 0) + 1
+    print(f"edges: {nedges}, faces per edge: {dict(sorted(hist.items()))}")
+    print(f"largest edge tolerance: {max_tol:.3e} (limit {a.tol:.1e})")
+    ok &= max_tol <= a.tol
+    shared_ok = all(n in (1, 2) for n in hist)
+    print(f"every interior edge shared by exactly two faces: {shared_ok}")
+    ok &= shared_ok
+
+    props = GProp_GProps()
+    BRepGProp.SurfaceProperties_s(shape, props, 1e-10)
+    area = props.Mass()
+    print(f"OpenCASCADE area: {area:.15e}")
+    if area_ref is not None:
+        rel = abs(area - area_ref) / abs(area_ref)
+        print(f"volmorph area:    {area_ref:.15e} (relative difference {rel:.2e})")
+        ok &= rel <= a.area_rel
+    print("PASS" if ok else "FAIL")
+    return 0 if ok else 1
+
+
+if __name__ == "__main__":
+    sys.exit(main())
