@@ -47,7 +47,7 @@ pub mod tape;
 
 pub use compile::{CompileOptions, compile, compile_source};
 pub use error::{FrepError, Pos};
-// pub use field::Field;
+pub use field::Field;
 pub use ops::{Dual, Interval};
 pub use shape::{Builder, Shape};
 pub use tape::Tape;

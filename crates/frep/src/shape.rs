@@ -495,7 +495,9 @@ pub struct Shape {
 }
 
 impl Shape {
-    fn compact(nodes: &[Node], root: Id) -> Shape {
+    /// The nodes reachable from `root`, renumbered in order (arguments must precede their
+    /// users).
+    pub(crate) fn compact(nodes: &[Node], root: Id) -> Shape {
         let n = (root as usize + 1).min(nodes.len());
         let mut live = vec![false; n];
         if n > 0 {

@@ -387,37 +387,7 @@ fn simplify_shape(shape: &Shape, choices: &[Choice]) -> Shape {
         }
     }
     let root = rep[shape.root() as usize];
-    let mut b = crate::shape::Builder::new();
-    // Rebuild through a builder so the result is compact and deduplicated.
-    let mut map: Vec<Id> = vec![0; out.len()];
-    let live = liveness(&out, root);
-    for (i, n) in out.iter().enumerate() {
-        if !live[i] {
-            continue;
-        }
-        let m = |a: Id| map[a as usize];
-        map[i] = match *n {
-            Node::Input(a) => b.input(a),
-            Node::Const(v) => b.constant(f64::from_bits(v)),
-            Node::Unary(op, a) => b.unary(op, m(a)),
-            Node::Binary(op, a, c) => b.binary(op, m(a), m(c)),
-            Node::Select(c, a, d) => b.select(m(c), m(a), m(d)),
-        };
-    }
-    b.finish(map[root as usize])
-}
-
-fn liveness(nodes: &[Node], root: Id) -> Vec<bool> {
-    let mut live = vec![false; nodes.len()];
-    live[root as usize] = true;
-    for i in (0..=root as usize).rev() {
-        if live[i] {
-            for a in args(&nodes[i]) {
-                live[a as usize] = true;
-            }
-        }
-    }
-    live
+    Shape::compact(&out, root)
 }
 
 /// Scratch registers of batch evaluation (reuse one per thread).
