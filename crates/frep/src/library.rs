@@ -11,7 +11,7 @@
 //! | `hfSphere(x, c, R)` | `R² − |x − c|²` |
 //! | `hfEllipsoid(x, c, a, b, cc)` | `1 − ((x−c₀)/a)² − ((y−c₁)/b)² − ((z−c₂)/cc)²` |
 //! | `hfCylinderX(x, c, R)` (`Y`, `Z`) | `R² − (y−c₁)² − (z−c₂)²` (the two other axes) |
-//! | `hfEllCylX(x, c, a, b)` (`Y`, `Z`) | `1 − ((y−c₁)/a)² − ((z−c₂)/b)²` |
+//! | `hfEllCylX(x, c, a, b)` (`Y`, `Z`) | `1 − ((y−c₁)/a)² − ((z−c₂)/b)²` (`Y`: `a` along x, `b` along z; `Z`: x, y) |
 //! | `hfConeX(x, c, R)` (`Y`, `Z`) | `(x−c₀)² − ((y−c₁)/R)² − ((z−c₂)/R)²` |
 //! | `hfEllConeX(x, c, a, b)` (`Y`, `Z`) | `(x−c₀)² − ((y−c₁)/a)² − ((z−c₂)/b)²` |
 //! | `hfTorusX(x, c, R, r0)` (`Y`, `Z`) | `r0² − (x−c₀)² − (y−c₁)² − (z−c₂)² − R² + 2R√((y−c₁)² + (z−c₂)²)` |
@@ -248,6 +248,16 @@ fn axes(name: &str) -> [usize; 3] {
     }
 }
 
+/// The axis of a primitive and the two others in increasing order (the order of the `a`, `b`
+/// half-axes of elliptic cylinders and cones: `Y` → `(x, z)`).
+fn sorted_axes(name: &str) -> [usize; 3] {
+    match name.chars().last() {
+        Some('Y') => [1, 0, 2],
+        Some('Z') => [2, 0, 1],
+        _ => [0, 1, 2],
+    }
+}
+
 /// Expand a library call.
 pub(crate) fn call(b: &mut Builder, name: &str, args: &[Value]) -> Result<CallResult, String> {
     check(name, args)?;
@@ -292,7 +302,7 @@ pub(crate) fn call(b: &mut Builder, name: &str, args: &[Value]) -> Result<CallRe
             plain(acc)
         }
         "hfEllCylX" | "hfEllCylY" | "hfEllCylZ" => {
-            let [_, u, v] = axes(name);
+            let [_, u, v] = sorted_axes(name);
             let c = arr(&args[1]);
             let mut acc = one;
             for (k, r) in [(u, s(&args[2])), (v, s(&args[3]))] {
@@ -304,7 +314,7 @@ pub(crate) fn call(b: &mut Builder, name: &str, args: &[Value]) -> Result<CallRe
             plain(acc)
         }
         "hfConeX" | "hfConeY" | "hfConeZ" | "hfEllConeX" | "hfEllConeY" | "hfEllConeZ" => {
-            let [w, u, v] = axes(name);
+            let [w, u, v] = sorted_axes(name);
             let c = arr(&args[1]);
             let (ra, rb) = if name.starts_with("hfEll") {
                 (s(&args[2]), s(&args[3]))

@@ -494,15 +494,28 @@ fn powi_interval(x: Interval, n: i32) -> Interval {
     }
 }
 
+const INF: f64 = f64::INFINITY;
+
 /// Interval of a binary operation.
 #[must_use]
 pub fn binary_interval(op: BinaryOp, a: Interval, b: Interval) -> Interval {
     let nan = a.nan || b.nan;
     match op {
-        BinaryOp::Add => Interval::from_candidates(&[a.lo + b.lo, a.hi + b.hi], nan),
-        BinaryOp::Sub => Interval::from_candidates(&[a.lo - b.hi, a.hi - b.lo], nan),
+        BinaryOp::Add => {
+            // ∞ + (−∞) is NaN.
+            let inf_nan = (a.hi == INF && b.lo == -INF) || (a.lo == -INF && b.hi == INF);
+            Interval::from_candidates(&[a.lo + b.lo, a.hi + b.hi], nan).with_nan(inf_nan)
+        }
+        BinaryOp::Sub => {
+            let inf_nan = (a.hi == INF && b.hi == INF) || (a.lo == -INF && b.lo == -INF);
+            Interval::from_candidates(&[a.lo - b.hi, a.hi - b.lo], nan).with_nan(inf_nan)
+        }
         BinaryOp::Mul => {
+            // 0 · ∞ is NaN.
+            let inf = |i: Interval| i.lo == -INF || i.hi == INF;
+            let inf_nan = (a.contains_zero() && inf(b)) || (b.contains_zero() && inf(a));
             Interval::from_candidates(&[a.lo * b.lo, a.lo * b.hi, a.hi * b.lo, a.hi * b.hi], nan)
+                .with_nan(inf_nan)
         }
         BinaryOp::Div => {
             if b.contains_zero() {
