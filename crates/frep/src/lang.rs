@@ -31,7 +31,9 @@
 //! object's value is the value last assigned to its own name.
 //!
 //! Limits that keep hostile input harmless: sources over [`MAX_SOURCE_BYTES`] and nesting
-//! deeper than [`MAX_DEPTH`] are refused with an error (no stack overflow).
+//! deeper than [`MAX_DEPTH`] are refused with an error (no stack overflow). The depth counts
+//! parentheses, blocks and chains of binary operators alike (an expression tree's height), so
+//! a sum of more than about [`MAX_DEPTH`] terms must be split into several assignments.
 
 use crate::error::{FrepError, Pos};
 
@@ -596,12 +598,15 @@ impl Parser {
 
     fn or_expr(&mut self) -> Result<Expr, FrepError> {
         let mut l = self.and_expr()?;
+        let mark = self.depth;
         loop {
             let pos = self.pos();
             if self.eat_punct("|") || self.eat_punct("||") || self.eat_kw("or") {
+                self.enter()?;
                 let r = self.and_expr()?;
                 l = Expr::Binary(BinOp::Union, Box::new(l), Box::new(r), pos);
             } else {
+                self.depth = mark;
                 return Ok(l);
             }
         }
@@ -618,6 +623,7 @@ impl Parser {
 
     fn and_expr(&mut self) -> Result<Expr, FrepError> {
         let mut l = self.rel_expr()?;
+        let mark = self.depth;
         loop {
             let pos = self.pos();
             let op = if self.eat_punct("&") || self.eat_punct("&&") || self.eat_kw("and") {
@@ -627,8 +633,10 @@ impl Parser {
             } else if self.eat_punct("@") {
                 BinOp::Product
             } else {
+                self.depth = mark;
                 return Ok(l);
             };
+            self.enter()?;
             let r = self.rel_expr()?;
             l = Expr::Binary(op, Box::new(l), Box::new(r), pos);
         }
@@ -653,6 +661,7 @@ impl Parser {
 
     fn sum(&mut self) -> Result<Expr, FrepError> {
         let mut l = self.prod()?;
+        let mark = self.depth;
         loop {
             let pos = self.pos();
             let op = if self.eat_punct("+") {
@@ -660,8 +669,10 @@ impl Parser {
             } else if self.eat_punct("-") {
                 BinOp::Sub
             } else {
+                self.depth = mark;
                 return Ok(l);
             };
+            self.enter()?;
             let r = self.prod()?;
             l = Expr::Binary(op, Box::new(l), Box::new(r), pos);
         }
@@ -669,6 +680,7 @@ impl Parser {
 
     fn prod(&mut self) -> Result<Expr, FrepError> {
         let mut l = self.unary()?;
+        let mark = self.depth;
         loop {
             let pos = self.pos();
             let op = if self.eat_punct("*") {
@@ -676,8 +688,10 @@ impl Parser {
             } else if self.eat_punct("/") {
                 BinOp::Div
             } else {
+                self.depth = mark;
                 return Ok(l);
             };
+            self.enter()?;
             let r = self.unary()?;
             l = Expr::Binary(op, Box::new(l), Box::new(r), pos);
         }
@@ -815,6 +829,12 @@ mod tests {
         );
         assert!(parse(&deep).unwrap_err().to_string().contains("nesting"));
         let deep = format!("m(x[3]) {{ m = {}1; }}", "~ ".repeat(5000));
+        assert!(parse(&deep).is_err());
+        // Long operator chains count as depth too (the compiler recurses on them).
+        let long = format!("m(x[3]) {{ m = 1{}; }}", " + x[1]".repeat(5000));
+        assert!(parse(&long).unwrap_err().to_string().contains("nesting"));
+        let ok = format!("m(x[3]) {{ m = 1{}; }}", " * x[2] + x[1]".repeat(60));
+        assert!(parse(&ok).is_ok());
         assert!(parse(&deep).is_err());
     }
 }

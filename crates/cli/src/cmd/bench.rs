@@ -54,6 +54,13 @@ pub enum Command {
     /// Time marching cubes and dual contouring on a sphere's signed distance field.
     #[command(after_help = "Example:\n  volmorph bench isosurface --size 256 --repeat 5 --json")]
     Isosurface(IsosurfaceArgs),
+    /// Time grid evaluation of F-rep models (HyperFun files): the culled, specialised
+    /// sampler against the published libfive figures (193³ over [−1.6, 1.6]³), checked
+    /// against point-by-point evaluation.
+    #[command(
+        after_help = "Example:\n  volmorph bench frep s1_sphere.hf c1_gear.hf --grid 193 --repeat 7 --json"
+    )]
+    Frep(crate::cmd::frep::BenchArgs),
 }
 
 /// Arguments of `volmorph bench warp`.
@@ -96,6 +103,7 @@ pub fn run(cmd: &Command) -> anyhow::Result<()> {
     match cmd {
         Command::Warp(a) => warp(a),
         Command::Isosurface(a) => isosurface(a),
+        Command::Frep(a) => crate::cmd::frep::bench(a),
     }
 }
 
