@@ -25,7 +25,7 @@ use crate::field::Field;
 use crate::tape::{BatchScratch, IntervalScratch, Tape};
 
 /// Largest region evaluated with the batch evaluator without further subdivision.
-pub const LEAF_POINTS: usize = 512;
+pub const LEAF_POINTS: usize = 1024;
 
 /// z-layers per parallel task.
 const SLAB: usize = 4;

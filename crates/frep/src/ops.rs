@@ -97,6 +97,101 @@ pub enum BinaryOp {
     Or,
 }
 
+/// Largest `|x|` for which [`sin`] and [`cos`] use their own reduction and polynomials;
+/// beyond it (and for non-finite `x`) they call the platform's `sin`/`cos`. Below it the
+/// three-part Cody–Waite reduction by `π/2` is exact in its first product (`k·DP1` with
+/// `|k| < 2²⁰` and a 33-bit `DP1`).
+pub const TRIG_FAST_LIMIT: f64 = 1.0e6;
+
+/// `π/2` split into three parts for Cody–Waite argument reduction.
+const PIO2_1: f64 = 1.570796251296997;
+const PIO2_2: f64 = 7.549789415861596e-08;
+const PIO2_3: f64 = 5.390302858158119e-15;
+
+/// `1.5 · 2⁵²`: adding and subtracting it rounds to the nearest integer, and the low
+/// mantissa bits of the sum hold that integer modulo 4.
+const ROUNDER: f64 = 6755399441055744.0;
+
+/// Minimax coefficients of `(sin r − r)/r³` and `(cos r − 1 + r²/2)/r⁴` in `r²` on
+/// `[−π/4, π/4]` (the classical Cephes sets).
+const SIN_C: [f64; 6] = [
+    1.5896230157654656e-10,
+    -2.5050747762857807e-08,
+    2.7557313621385727e-06,
+    -0.0001984126982958954,
+    0.008333333333322118,
+    -0.1666666666666663,
+];
+const COS_C: [f64; 6] = [
+    -1.1358536521387682e-11,
+    2.087570084197473e-09,
+    -2.755731417929674e-07,
+    2.4801587288851704e-05,
+    -0.0013888888888873056,
+    0.041666666666666595,
+];
+
+#[inline(always)]
+fn poly(z: f64, c: &[f64; 6]) -> f64 {
+    ((((c[0] * z + c[1]) * z + c[2]) * z + c[3]) * z + c[4]) * z + c[5]
+}
+
+/// `(sin r, cos r, quadrant)` with `x = r + quadrant·π/2`, `|r| ≤ π/4` (branch-free, so batch
+/// loops vectorise; valid for `|x| ≤` [`TRIG_FAST_LIMIT`]).
+#[inline(always)]
+fn reduce(x: f64) -> (f64, f64, u64) {
+    let t = x * std::f64::consts::FRAC_2_PI + ROUNDER;
+    let q = t.to_bits() & 3;
+    let k = t - ROUNDER;
+    let r = ((x - k * PIO2_1) - k * PIO2_2) - k * PIO2_3;
+    let z = r * r;
+    let s = r + r * z * poly(z, &SIN_C);
+    let c = 1.0 - 0.5 * z + z * z * poly(z, &COS_C);
+    (s, c, q)
+}
+
+/// Sine (radians): own reduction and polynomial for `|x| ≤` [`TRIG_FAST_LIMIT`] (within a
+/// few units in the last place of the correctly rounded value, and within `[−1, 1]`), the
+/// platform's `sin` beyond. Every evaluator uses this one function.
+#[inline(always)]
+#[must_use]
+pub fn sin(x: f64) -> f64 {
+    if x.abs() <= TRIG_FAST_LIMIT {
+        sin_reduced(x)
+    } else {
+        x.sin()
+    }
+}
+
+/// [`sin`] without the range check (for `|x| ≤` [`TRIG_FAST_LIMIT`] only).
+#[inline(always)]
+pub(crate) fn sin_reduced(x: f64) -> f64 {
+    let (s, c, q) = reduce(x);
+    let v = if q & 1 == 0 { s } else { c };
+    let v = if q & 2 == 0 { v } else { -v };
+    v.clamp(-1.0, 1.0)
+}
+
+/// [`cos`] without the range check (for `|x| ≤` [`TRIG_FAST_LIMIT`] only).
+#[inline(always)]
+pub(crate) fn cos_reduced(x: f64) -> f64 {
+    let (s, c, q) = reduce(x);
+    let v = if q & 1 == 0 { c } else { s };
+    let v = if (q + 1) & 2 == 0 { v } else { -v };
+    v.clamp(-1.0, 1.0)
+}
+
+/// Cosine (radians), as [`sin`].
+#[inline(always)]
+#[must_use]
+pub fn cos(x: f64) -> f64 {
+    if x.abs() <= TRIG_FAST_LIMIT {
+        cos_reduced(x)
+    } else {
+        x.cos()
+    }
+}
+
 fn b2f(b: bool) -> f64 {
     if b { 1.0 } else { 0.0 }
 }
@@ -113,8 +208,8 @@ pub fn unary(op: UnaryOp, x: f64) -> f64 {
         UnaryOp::Exp => x.exp(),
         UnaryOp::Ln => x.ln(),
         UnaryOp::Log10 => x.log10(),
-        UnaryOp::Sin => x.sin(),
-        UnaryOp::Cos => x.cos(),
+        UnaryOp::Sin => sin(x),
+        UnaryOp::Cos => cos(x),
         UnaryOp::Tan => x.tan(),
         UnaryOp::Asin => x.asin(),
         UnaryOp::Acos => x.acos(),
@@ -350,7 +445,7 @@ fn hits(lo: f64, hi: f64, phase: f64, period: f64) -> bool {
     phase + k * period <= hi + 1e-9 * hi.abs().max(1.0)
 }
 
-fn trig(x: Interval, f: fn(f64) -> f64, max_at: f64, min_at: f64) -> Interval {
+fn trig(x: Interval, f: impl Fn(f64) -> f64, max_at: f64, min_at: f64) -> Interval {
     use std::f64::consts::TAU;
     if !(x.lo.is_finite() && x.hi.is_finite()) {
         return Interval {
@@ -422,8 +517,8 @@ pub fn unary_interval(op: UnaryOp, x: Interval) -> Interval {
             };
             monotone(c, f, 1).with_nan(c.nan)
         }
-        UnaryOp::Sin => trig(x, f64::sin, FRAC_PI_2, -FRAC_PI_2),
-        UnaryOp::Cos => trig(x, f64::cos, 0.0, PI),
+        UnaryOp::Sin => trig(x, sin, FRAC_PI_2, -FRAC_PI_2),
+        UnaryOp::Cos => trig(x, cos, 0.0, PI),
         UnaryOp::Tan => {
             if !(x.lo.is_finite() && x.hi.is_finite()) {
                 return Interval::ENTIRE;
@@ -680,8 +775,8 @@ pub fn unary_dual(op: UnaryOp, x: Dual) -> Dual {
         UnaryOp::Exp => v,
         UnaryOp::Ln => 1.0 / x.v,
         UnaryOp::Log10 => 1.0 / (x.v * std::f64::consts::LN_10),
-        UnaryOp::Sin => x.v.cos(),
-        UnaryOp::Cos => -x.v.sin(),
+        UnaryOp::Sin => cos(x.v),
+        UnaryOp::Cos => -sin(x.v),
         UnaryOp::Tan => 1.0 + v * v,
         UnaryOp::Asin => 1.0 / (1.0 - x.v * x.v).sqrt(),
         UnaryOp::Acos => -1.0 / (1.0 - x.v * x.v).sqrt(),
@@ -749,5 +844,34 @@ pub fn select_dual(c: Dual, a: Dual, b: Dual) -> Dual {
         a
     } else {
         b
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn sin_and_cos_match_the_platform() {
+        let mut worst: f64 = 0.0;
+        for i in -200_000..=200_000 {
+            let x = f64::from(i) * 0.000_731 + 1e-3 * f64::from(i % 7);
+            for (a, b) in [(sin(x), x.sin()), (cos(x), x.cos())] {
+                worst = worst.max((a - b).abs());
+            }
+        }
+        assert!(worst < 4e-16, "{worst}");
+        for x in [1e5, -7.5e5, 1e6, 3.0e6, f64::INFINITY, f64::NAN, 0.0, -0.0] {
+            assert!(
+                (sin(x) - x.sin()).abs() < 1e-9 || (sin(x).is_nan() && x.sin().is_nan()),
+                "{x}"
+            );
+            assert!(
+                (cos(x) - x.cos()).abs() < 1e-9 || (cos(x).is_nan() && x.cos().is_nan()),
+                "{x}"
+            );
+        }
+        assert_eq!(sin(0.0), 0.0);
+        assert_eq!(cos(0.0), 1.0);
     }
 }

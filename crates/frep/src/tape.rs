@@ -500,6 +500,18 @@ macro_rules! binary_arms {
 }
 
 fn unary_block(op: UnaryOp, o: &mut [f64], a: Src<'_>) {
+    // Sine and cosine: the branch-free kernel when the whole block is in its range (the
+    // same values `ops::sin`/`ops::cos` give there), so the loop vectorises.
+    if let (UnaryOp::Sin | UnaryOp::Cos, Src::S(s)) = (op, a)
+        && s.iter().all(|v| v.abs() <= ops::TRIG_FAST_LIMIT)
+    {
+        if op == UnaryOp::Sin {
+            map1(o, a, ops::sin_reduced);
+        } else {
+            map1(o, a, ops::cos_reduced);
+        }
+        return;
+    }
     unary_arms!(
         op,
         o,
