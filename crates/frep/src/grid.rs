@@ -176,10 +176,15 @@ impl Worker<'_> {
         if count == 0 {
             return;
         }
-        // Specialise the tape to the region's physical bounding box.
-        let (plo, phi) = self.bounds(lo, hi);
-        let _ = tape.interval_with(plo, phi, &mut self.iv);
-        let specialised = tape.simplify(&self.iv);
+        // Specialise the tape to the region's physical bounding box (when it has anything
+        // to prune).
+        let specialised = if tape.choice_count() > 0 {
+            let (plo, phi) = self.bounds(lo, hi);
+            let _ = tape.interval_with(plo, phi, &mut self.iv);
+            tape.simplify(&self.iv)
+        } else {
+            None
+        };
         let tape = specialised.as_ref().unwrap_or(tape);
         if count <= LEAF_POINTS {
             self.leaf(tape, lo, hi);

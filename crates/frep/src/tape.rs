@@ -48,6 +48,8 @@ pub struct Tape {
     instrs: Vec<Instr>,
     regs: usize,
     output: Arg,
+    /// Number of `min`, `max` and `select` instructions (what specialisation can prune).
+    choices: usize,
 }
 
 impl Tape {
@@ -103,11 +105,21 @@ impl Tape {
             }
             arg_of.push(Arg::Reg(out));
         }
+        let choices = instrs
+            .iter()
+            .filter(|i| {
+                matches!(
+                    i,
+                    Instr::Binary(BinaryOp::Min | BinaryOp::Max, ..) | Instr::Select(..)
+                )
+            })
+            .count();
         Tape {
             shape: shape.clone(),
             output: arg_of[root],
             instrs,
             regs: regs as usize,
+            choices,
         }
     }
 
@@ -127,6 +139,13 @@ impl Tape {
     #[must_use]
     pub fn is_empty(&self) -> bool {
         self.instrs.is_empty()
+    }
+
+    /// Number of `min`, `max` and `select` instructions: `0` means [`Tape::simplify`] can
+    /// never shorten this tape.
+    #[must_use]
+    pub fn choice_count(&self) -> usize {
+        self.choices
     }
 
     /// Number of registers a batch or point evaluation needs.
