@@ -392,6 +392,15 @@ impl Ctx<'_> {
     ) -> Result<(), FrepError> {
         let mut active = first;
         for _ in 0..MAX_DEPENDENT_ITERATIONS {
+            // Unrolled passes share the compile-time iteration budget, so nested
+            // data-dependent loops cannot multiply into a hang.
+            self.iterations += 1;
+            if self.iterations > MAX_ITERATIONS {
+                return Err(FrepError::compile(
+                    pos,
+                    format!("loops unroll into more than {MAX_ITERATIONS} passes at compile time"),
+                ));
+            }
             let mut next = env.clone();
             self.block(body, &mut next)?;
             *env = self.merge(active, &next, env, pos)?;

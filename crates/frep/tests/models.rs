@@ -357,6 +357,15 @@ fn bad_models_give_located_errors() {
         assert!(e.to_string().contains(msg), "{src}\n→ {e}");
         assert_eq!(e.pos().map(|p: Pos| p.line), Some(line), "{src}\n→ {e}");
     }
+    // Nested data-dependent loops with empty bodies must not hang.
+    let nested = format!(
+        "m(x[3], a[1]) {{ {} m = 1; }}",
+        "while x[1] > 0 loop ".repeat(6) + &"endloop; ".repeat(6)
+    );
+    let t0 = std::time::Instant::now();
+    let e = err(&nested);
+    assert!(e.to_string().contains("passes"), "{e}");
+    assert!(t0.elapsed().as_secs() < 20);
     // Parameters outside the declared array.
     let e = compile_source(
         "m(x[3], a[1]) { m = a[1]; }",
