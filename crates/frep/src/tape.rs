@@ -22,7 +22,7 @@ use crate::ops::{self, BinaryOp, Choice, Dual, Interval, UnaryOp};
 use crate::shape::{Id, Node, Shape};
 
 /// Points per batch block: each instruction runs over this many points at a time.
-pub const LANES: usize = 64;
+pub const LANES: usize = 256;
 
 /// An operand of an instruction.
 #[derive(Debug, Clone, Copy, PartialEq)]
@@ -389,6 +389,34 @@ fn simplify_shape(shape: &Shape, choices: &[Choice]) -> Shape {
             (Node::Select(c, a, b), _) => (Some(Node::Select(r(c), r(a), r(b))), None),
             (leaf, _) => (Some(leaf), None),
         };
+        // Fold operations whose arguments became constants (a pruned `max(…, 0)` makes
+        // everything computed from it constant); the values are those evaluation would give.
+        let konst = |a: Id| out[a as usize].as_const();
+        let (node, alias) = match node {
+            Some(Node::Unary(op, a)) if konst(a).is_some() => (
+                Some(Node::Const(const_bits(ops::unary(
+                    op,
+                    konst(a).unwrap_or(0.0),
+                )))),
+                alias,
+            ),
+            Some(Node::Binary(op, a, b)) if konst(a).is_some() && konst(b).is_some() => (
+                Some(Node::Const(const_bits(ops::binary(
+                    op,
+                    konst(a).unwrap_or(0.0),
+                    konst(b).unwrap_or(0.0),
+                )))),
+                alias,
+            ),
+            Some(Node::Select(c, a, b)) if konst(c).is_some_and(|v| !v.is_nan()) => {
+                if konst(c).is_some_and(|v| v != 0.0) {
+                    (None, Some(a))
+                } else {
+                    (None, Some(b))
+                }
+            }
+            other => (other, alias),
+        };
         match (node, alias) {
             (_, Some(a)) => {
                 // Keep indices aligned with a dead placeholder.
@@ -407,6 +435,11 @@ fn simplify_shape(shape: &Shape, choices: &[Choice]) -> Shape {
     }
     let root = rep[shape.root() as usize];
     Shape::compact(&out, root)
+}
+
+/// Bit pattern of a folded constant (NaNs canonicalised, as the builder does).
+fn const_bits(v: f64) -> u64 {
+    if v.is_nan() { f64::NAN } else { v }.to_bits()
 }
 
 /// Scratch registers of batch evaluation (reuse one per thread).
