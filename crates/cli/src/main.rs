@@ -92,6 +92,9 @@ enum Command {
     /// Polygon mesh tasks.
     #[command(subcommand)]
     Mesh(cmd::mesh::Command),
+    /// F-rep models (HyperFun language): sample, mesh, render, morph.
+    #[command(subcommand)]
+    Frep(cmd::frep::Command),
     /// Time the warps and isosurface extractors on built-in inputs, against their targets.
     #[command(subcommand)]
     Bench(cmd::bench::Command),
@@ -112,6 +115,7 @@ fn main() -> ExitCode {
         Command::Drag(a) => cmd::drag::run(&a),
         Command::Jacobian(a) => cmd::warp::run_jacobian(&a),
         Command::Mesh(c) => cmd::mesh::run(&c),
+        Command::Frep(c) => cmd::frep::run(&c),
         Command::Bench(c) => cmd::bench::run(&c),
     };
     match result {

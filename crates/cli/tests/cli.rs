@@ -980,3 +980,188 @@ fn bench_ffd_runs_small() {
     }
     assert!(items[0]["triangles"].as_u64().unwrap() >= 4 * 8 * 7);
 }
+
+// ---------------------------------------------------------------------------------------
+// volmorph frep: F-rep models in the HyperFun language.
+// ---------------------------------------------------------------------------------------
+
+/// A small HyperFun model written for these tests: a block with a spherical hole, its size
+/// set by the parameter a[1].
+const FREP_CSG: &str = "-- block minus ball
+model(x[3], a[1])
+{
+  array center[3];
+  array corner[3];
+  center = [0, 0, 0];
+  corner = [-1, -1, -1];
+  ball = hfSphere(x, center, a[1]);
+  box = hfBlock(x, corner, 2, 2, 2);
+  model = box \\ ball;
+}
+";
+
+/// A second model for morphing: a sphere in the machine-exported assignment form.
+const FREP_BALL: &str = "model(x[3], a[1])
+{
+  t0 = sqrt(x[1]*x[1] + x[2]*x[2] + x[3]*x[3]);
+  model = 1.1 - t0;
+}
+";
+
+#[test]
+fn frep_eval_mesh_render_and_morph() {
+    let dir = tempfile::tempdir().unwrap();
+    let csg = dir.path().join("csg.hf");
+    let ball = dir.path().join("ball.hf");
+    std::fs::write(&csg, FREP_CSG).unwrap();
+    std::fs::write(&ball, FREP_BALL).unwrap();
+
+    let vol = dir.path().join("csg.nii");
+    let out = ok(&[
+        &"frep",
+        &"eval",
+        &csg,
+        &"--grid",
+        &"24",
+        &"--bounds=-1.5,1.5",
+        &"-o",
+        &vol,
+        &"--param",
+        &"a1=1.2",
+    ]);
+    assert!(out.contains("inside"), "{out}");
+    let j = info_json(&vol);
+    assert_eq!(j["dims"], serde_json::json!([24, 24, 24]));
+    assert_eq!(j["voxel_type"], "f32");
+    // The centre is in the hole (negative), a box corner is solid (positive).
+    assert!(j["stats"]["min"].as_f64().unwrap() < 0.0);
+    assert!(j["stats"]["max"].as_f64().unwrap() > 0.0);
+
+    let mesh = dir.path().join("csg.ply");
+    let out = ok(&[
+        &"frep",
+        &"mesh",
+        &csg,
+        &"--grid",
+        &"32",
+        &"--bounds=-1.5,1.5",
+        &"-o",
+        &mesh,
+        &"--param",
+        &"a1=1.2",
+    ]);
+    assert!(out.contains("closed manifold"), "{out}");
+    let info = ok(&[&"mesh", &"info", &mesh]);
+    assert!(info.contains("closed"), "{info}");
+
+    let png = dir.path().join("csg.png");
+    let out = ok(&[
+        &"frep",
+        &"render",
+        &csg,
+        &"-o",
+        &png,
+        &"--size",
+        &"48x32",
+        &"--bounds=-1.5,1.5",
+        &"--param",
+        &"a1=1.2",
+    ]);
+    assert!(out.contains("48x32"), "{out}");
+    assert!(std::fs::metadata(&png).unwrap().len() > 100);
+
+    let frames = dir.path().join("frames");
+    let out = ok(&[
+        &"frep",
+        &"morph",
+        &csg,
+        &ball,
+        &"--frames",
+        &"3",
+        &"--schedule",
+        &"smoothstep",
+        &"--size",
+        &"24",
+        &"-o",
+        &frames,
+        &"--param",
+        &"a1=1.2",
+    ]);
+    assert!(out.contains("3 frames"), "{out}");
+    for i in 0..3 {
+        assert!(frames.join(format!("frame{i:04}.png")).exists());
+    }
+
+    let out = ok(&[
+        &"bench",
+        &"frep",
+        &csg,
+        &ball,
+        &"--grid",
+        &"16",
+        &"--repeat",
+        &"1",
+        &"--json",
+    ]);
+    let j: serde_json::Value = serde_json::from_str(&out).unwrap();
+    for it in j["items"].as_array().unwrap() {
+        assert_eq!(it["same_as_pointwise"], true, "{it}");
+    }
+}
+
+#[test]
+fn frep_bad_models_fail_cleanly() {
+    let dir = tempfile::tempdir().unwrap();
+    let vol = dir.path().join("v.nii");
+    let cases = [
+        ("syntax.hf", "m(x[3], a[1]) {\n  m = 1 +;\n}", "line 2"),
+        (
+            "unknown.hf",
+            "m(x[3], a[1]) {\n  m = hfGizmo(x);\n}",
+            "unknown function `hfGizmo`",
+        ),
+        (
+            "arity.hf",
+            "m(x[3], a[1]) {\n  array c[3];\n  m = hfSphere(x, c);\n}",
+            "takes 3 arguments",
+        ),
+        (
+            "loop.hf",
+            "m(x[3], a[1]) {\n  i = 0;\n  while 1 > 0 loop i = i + 1; endloop;\n  m = i;\n}",
+            "loop does not end",
+        ),
+        (
+            "recursion.hf",
+            "m(x[3], a[1]) {\n  m = m(x, a);\n}",
+            "recursive call",
+        ),
+    ];
+    for (name, src, msg) in cases {
+        let p = dir.path().join(name);
+        std::fs::write(&p, src).unwrap();
+        let err = fails(&[&"frep", &"eval", &p, &"--grid", &"8", &"-o", &vol]);
+        assert!(err.contains(name) && err.contains(msg), "{err}");
+        assert!(!vol.exists());
+    }
+    let good = dir.path().join("good.hf");
+    std::fs::write(&good, FREP_BALL).unwrap();
+    let err = fails(&[&"frep", &"eval", &good, &"--grid", &"1", &"-o", &vol]);
+    assert!(err.contains("--grid 1"), "{err}");
+    let err = fails(&[&"frep", &"eval", &good, &"--bounds=1,0", &"-o", &vol]);
+    assert!(err.contains("--bounds"), "{err}");
+    let err = fails(&[&"frep", &"eval", &good, &"--param", &"b1=2", &"-o", &vol]);
+    assert!(err.contains("a1, a2"), "{err}");
+    let err = fails(&[&"frep", &"eval", &good, &"--param", &"a5=2", &"-o", &vol]);
+    assert!(err.contains("a5"), "{err}");
+    let err = fails(&[
+        &"frep",
+        &"morph",
+        &good,
+        &good,
+        &"--schedule",
+        &"wobbly",
+        &"-o",
+        &dir.path(),
+    ]);
+    assert!(err.contains("schedule"), "{err}");
+}

@@ -58,6 +58,13 @@ pub enum Command {
     /// (target 2 s) and vertex FFD of a 1M-vertex sphere (target 50 ms).
     #[command(after_help = "Example:\n  volmorph bench ffd --repeat 3")]
     Ffd(FfdArgs),
+    /// Time grid evaluation of F-rep models (HyperFun files): the culled, specialised
+    /// sampler against the published libfive figures (193³ over [−1.6, 1.6]³), checked
+    /// against point-by-point evaluation.
+    #[command(
+        after_help = "Example:\n  volmorph bench frep s1_sphere.hf c1_gear.hf --grid 193 --repeat 7 --json"
+    )]
+    Frep(crate::cmd::frep::BenchArgs),
 }
 
 /// Default rings of the accurate-FFD sphere: 4·133·132 = 70 224 triangles.
@@ -123,6 +130,7 @@ pub fn run(cmd: &Command) -> anyhow::Result<()> {
         Command::Warp(a) => warp(a),
         Command::Isosurface(a) => isosurface(a),
         Command::Ffd(a) => ffd(a),
+        Command::Frep(a) => crate::cmd::frep::bench(a),
     }
 }
 

@@ -5,6 +5,7 @@ pub mod convert;
 pub mod demo;
 pub mod drag;
 pub mod ffd;
+pub mod frep;
 pub mod info;
 pub mod isosurface;
 pub mod lattice;

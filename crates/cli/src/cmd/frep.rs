@@ -1,0 +1,571 @@
+//! `volmorph frep …`: F-rep models written in the HyperFun language — sample them to
+//! volumes, mesh them, ray-cast pictures of them, and animate the metamorphosis of one into
+//! another.
+
+use std::collections::HashMap;
+use std::path::{Path, PathBuf};
+
+use anyhow::{Context, bail};
+use glam::DVec3;
+use volmorph_frep::grid::{box_geometry, sample};
+use volmorph_frep::mapping::{Schedule, morph};
+use volmorph_frep::output::{
+    MeshMethod, MeshOptions, RenderOptions, mesh, render, render_animation,
+};
+use volmorph_frep::{CompileOptions, Field, Shape, Tape, compile_source};
+use volmorph_mesh::{self as meshio, MeshWriteOptions};
+use volmorph_render::{Camera, Projection, write_png_rgba};
+use volmorph_volume::{AnyVolume, format};
+
+use crate::progress;
+
+/// Largest grid size per axis accepted (a 2048³ f32 volume is 32 GiB).
+const MAX_GRID: usize = 2048;
+
+/// Largest picture side accepted.
+const MAX_PIXELS_SIDE: u32 = 8192;
+
+/// Largest animation length.
+const MAX_FRAMES: usize = 10_000;
+
+/// F-rep subcommands.
+#[derive(Debug, clap::Subcommand)]
+pub enum Command {
+    /// Sample a model's defining function on a grid and write it as a volume (f32, the solid
+    /// is where values are ≥ 0).
+    #[command(
+        after_help = "Example:\n  volmorph frep eval gear.hf --grid 193 --bounds -1.6,1.6 -o gear.nii.gz --param a1=0.5"
+    )]
+    Eval(EvalArgs),
+    /// Extract a model's surface f = 0 as a triangle mesh.
+    #[command(
+        after_help = "Example:\n  volmorph frep mesh csg.hf --grid 128 --bounds -8,8 -o csg.ply --method dual-contouring"
+    )]
+    Mesh(MeshArgs),
+    /// Ray-cast a shaded picture of a model (PNG).
+    #[command(
+        after_help = "Example:\n  volmorph frep render gear.hf -o gear.png --size 640x480 --view 30,35"
+    )]
+    Render(RenderArgs),
+    /// Animate the metamorphosis of one model into another (numbered PNG frames).
+    #[command(
+        after_help = "Example:\n  volmorph frep morph s1_sphere.hf s5_twist.hf --schedule smoothstep --frames 24 -o frames/"
+    )]
+    Morph(MorphArgs),
+}
+
+/// Options shared by every frep command: model parameters and the box.
+#[derive(Debug, Clone, clap::Args)]
+pub struct Common {
+    /// Box of interest: `lo,hi` (a cube) or `x0,y0,z0,x1,y1,z1`.
+    #[arg(long, default_value = "-1.6,1.6", allow_hyphen_values = true)]
+    pub bounds: String,
+    /// Set a model parameter: `a1=0.5` sets the first element of the model's parameter
+    /// array (repeatable).
+    #[arg(long = "param", value_name = "aN=VALUE")]
+    pub params: Vec<String>,
+}
+
+/// Arguments of `volmorph frep eval`.
+#[derive(Debug, clap::Args)]
+pub struct EvalArgs {
+    /// Model file (HyperFun language).
+    pub model: PathBuf,
+    /// Grid points per axis (voxel centres on the box's faces).
+    #[arg(long, default_value_t = 128)]
+    pub grid: usize,
+    /// Output volume (.nii, .nii.gz, .mha, .nrrd, .vtk).
+    #[arg(short, long)]
+    pub output: PathBuf,
+    #[command(flatten)]
+    pub common: Common,
+}
+
+/// Arguments of `volmorph frep mesh`.
+#[derive(Debug, clap::Args)]
+pub struct MeshArgs {
+    /// Model file (HyperFun language).
+    pub model: PathBuf,
+    /// Grid points per axis.
+    #[arg(long, default_value_t = 128)]
+    pub grid: usize,
+    /// Output mesh (.obj, .ply, .stl, .off).
+    #[arg(short, long)]
+    pub output: PathBuf,
+    /// Surface extraction algorithm.
+    #[arg(long, value_enum, default_value_t = Method::MarchingCubes)]
+    pub method: Method,
+    /// Cap the shape where the box cuts it, so the mesh is closed.
+    #[arg(long)]
+    pub close: bool,
+    /// Write ASCII STL/PLY instead of binary.
+    #[arg(long)]
+    pub ascii: bool,
+    #[command(flatten)]
+    pub common: Common,
+}
+
+/// Isosurface extractors.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, clap::ValueEnum)]
+pub enum Method {
+    /// Marching cubes.
+    MarchingCubes,
+    /// Dual contouring (sharp edges kept).
+    DualContouring,
+}
+
+/// Picture options shared by `render` and `morph`.
+#[derive(Debug, Clone, clap::Args)]
+pub struct View {
+    /// Picture size `WxH` (or one number for a square).
+    #[arg(long, default_value = "512x512")]
+    pub size: String,
+    /// Viewing direction `azimuth,elevation` in degrees (z up; the camera looks at the
+    /// box's centre).
+    #[arg(long, default_value = "35,25", allow_hyphen_values = true)]
+    pub view: String,
+}
+
+/// Arguments of `volmorph frep render`.
+#[derive(Debug, clap::Args)]
+pub struct RenderArgs {
+    /// Model file (HyperFun language).
+    pub model: PathBuf,
+    /// Output PNG.
+    #[arg(short, long)]
+    pub output: PathBuf,
+    #[command(flatten)]
+    pub view: View,
+    #[command(flatten)]
+    pub common: Common,
+}
+
+/// Arguments of `volmorph frep morph`.
+#[derive(Debug, clap::Args)]
+pub struct MorphArgs {
+    /// Initial model (t = 0).
+    pub from: PathBuf,
+    /// Final model (t = 1).
+    pub to: PathBuf,
+    /// Schedule h(t) of the metamorphosis (1 − h) f + h g: linear, sqrt, smoothstep or
+    /// delayed:T0.
+    #[arg(long, default_value = "linear")]
+    pub schedule: String,
+    /// Number of frames (t = 0 … 1).
+    #[arg(long, default_value_t = 10)]
+    pub frames: usize,
+    /// Output folder for `frame0000.png` …
+    #[arg(short, long)]
+    pub output: PathBuf,
+    #[command(flatten)]
+    pub view: View,
+    #[command(flatten)]
+    pub common: Common,
+}
+
+/// Run a frep subcommand.
+pub fn run(cmd: &Command) -> anyhow::Result<()> {
+    match cmd {
+        Command::Eval(a) => eval(a),
+        Command::Mesh(a) => mesh_cmd(a),
+        Command::Render(a) => render_cmd(a),
+        Command::Morph(a) => morph_cmd(a),
+    }
+}
+
+/// Parse `--param aN=V` options.
+pub fn params(list: &[String]) -> anyhow::Result<HashMap<usize, f64>> {
+    let mut out = HashMap::new();
+    for p in list {
+        let Some((k, v)) = p.split_once('=') else {
+            bail!("--param {p}: expected aN=VALUE, e.g. a1=0.5");
+        };
+        let idx: usize = k
+            .trim()
+            .strip_prefix('a')
+            .and_then(|n| n.parse().ok())
+            .filter(|&n: &usize| n >= 1)
+            .with_context(|| format!("--param {p}: the name must be a1, a2, …"))?;
+        let val: f64 = v
+            .trim()
+            .parse()
+            .with_context(|| format!("--param {p}: {v:?} is not a number"))?;
+        if !val.is_finite() {
+            bail!("--param {p}: the value must be finite");
+        }
+        out.insert(idx, val);
+    }
+    Ok(out)
+}
+
+/// Read and compile a model file.
+pub fn load(path: &Path, params: &HashMap<usize, f64>) -> anyhow::Result<Shape> {
+    let src = std::fs::read_to_string(path)
+        .with_context(|| format!("cannot read model {}", path.display()))?;
+    compile_source(
+        &src,
+        &CompileOptions {
+            params: params.clone(),
+            object: None,
+        },
+    )
+    .with_context(|| format!("{}", path.display()))
+}
+
+/// Parse `--bounds`.
+pub fn bounds(s: &str) -> anyhow::Result<(DVec3, DVec3)> {
+    let v: Vec<f64> = s
+        .split(',')
+        .map(|p| p.trim().parse::<f64>())
+        .collect::<Result<_, _>>()
+        .with_context(|| format!("--bounds {s}: expected numbers"))?;
+    let (lo, hi) = match v.as_slice() {
+        [a, b] => (DVec3::splat(*a), DVec3::splat(*b)),
+        [a, b, c, d, e, f] => (DVec3::new(*a, *b, *c), DVec3::new(*d, *e, *f)),
+        _ => bail!("--bounds {s}: expected lo,hi or x0,y0,z0,x1,y1,z1"),
+    };
+    if !(lo.is_finite() && hi.is_finite()) || (hi - lo).min_element() <= 0.0 {
+        bail!("--bounds {s}: every max must be greater than its min");
+    }
+    Ok((lo, hi))
+}
+
+fn grid_geometry(n: usize, bounds: (DVec3, DVec3)) -> anyhow::Result<volmorph_volume::Geometry> {
+    if !(2..=MAX_GRID).contains(&n) {
+        bail!("--grid {n}: must be between 2 and {MAX_GRID}");
+    }
+    Ok(box_geometry(bounds.0, bounds.1, [n; 3])?)
+}
+
+fn eval(a: &EvalArgs) -> anyhow::Result<()> {
+    let b = bounds(&a.common.bounds)?;
+    let g = grid_geometry(a.grid, b)?;
+    let shape = load(&a.model, &params(&a.common.params)?)?;
+    let pb = progress::spinner(format!("sampling {} on {}³", a.model.display(), a.grid));
+    let tape = Tape::new(&shape);
+    let t0 = std::time::Instant::now();
+    let vol = sample(&tape, &g).context("cannot sample the model")?;
+    let dt = t0.elapsed();
+    pb.set_message(format!("writing {}", a.output.display()));
+    format::write(&a.output, &AnyVolume::from(vol.clone()))
+        .with_context(|| format!("cannot write {}", a.output.display()))?;
+    pb.finish_and_clear();
+    let inside = vol.data().iter().filter(|v| **v >= 0.0).count();
+    say!(
+        "{} operations, {}³ samples in {:.1} ms, {} inside ({:.1} %)",
+        tape.len(),
+        a.grid,
+        dt.as_secs_f64() * 1e3,
+        inside,
+        100.0 * inside as f64 / vol.len().max(1) as f64
+    );
+    Ok(())
+}
+
+fn mesh_cmd(a: &MeshArgs) -> anyhow::Result<()> {
+    let b = bounds(&a.common.bounds)?;
+    let g = grid_geometry(a.grid, b)?;
+    let shape = load(&a.model, &params(&a.common.params)?)?;
+    let pb = progress::spinner(format!("meshing {}", a.model.display()));
+    let tape = Tape::new(&shape);
+    let options = MeshOptions {
+        method: match a.method {
+            Method::MarchingCubes => MeshMethod::MarchingCubes,
+            Method::DualContouring => MeshMethod::DualContouring,
+        },
+        close: a.close,
+    };
+    let surface = mesh(&tape, &g, &options).context("cannot extract the surface")?;
+    pb.set_message(format!("writing {}", a.output.display()));
+    let opts = MeshWriteOptions {
+        binary: !a.ascii,
+        ..MeshWriteOptions::default()
+    };
+    meshio::write_with(&a.output, &surface.mesh, &opts)
+        .with_context(|| format!("cannot write {}", a.output.display()))?;
+    pb.finish_and_clear();
+    let report = surface.mesh.validate();
+    say!(
+        "{} vertices, {} triangles, {}",
+        surface.mesh.vertex_count(),
+        surface.mesh.face_count(),
+        if report.is_closed_manifold() {
+            format!(
+                "closed manifold, Euler characteristic {}",
+                report.euler_characteristic
+            )
+        } else {
+            "not a closed manifold (the box cuts the shape: enlarge --bounds or use --close)"
+                .to_string()
+        }
+    );
+    Ok(())
+}
+
+fn camera(view: &View, b: (DVec3, DVec3)) -> anyhow::Result<Camera> {
+    let (w, h) = match view.size.split_once('x') {
+        Some((w, h)) => (w.trim().parse::<u32>(), h.trim().parse::<u32>()),
+        None => (
+            view.size.trim().parse::<u32>(),
+            view.size.trim().parse::<u32>(),
+        ),
+    };
+    let (Ok(w), Ok(h)) = (w, h) else {
+        bail!("--size {}: expected WxH, e.g. 640x480", view.size);
+    };
+    if !(1..=MAX_PIXELS_SIDE).contains(&w) || !(1..=MAX_PIXELS_SIDE).contains(&h) {
+        bail!("--size {}: sides must be 1 to {MAX_PIXELS_SIDE}", view.size);
+    }
+    let [az, el] = crate::args::pair(&view.view).context("--view")?;
+    if !(az.is_finite() && el.is_finite() && el.abs() < 89.9) {
+        bail!(
+            "--view {}: elevation must be within (−90, 90) degrees",
+            view.view
+        );
+    }
+    let (az, el) = (az.to_radians(), el.to_radians());
+    let dir = DVec3::new(el.cos() * az.cos(), el.cos() * az.sin(), el.sin());
+    let center = 0.5 * (b.0 + b.1);
+    let cam = Camera::look_at(
+        center + dir,
+        center,
+        DVec3::Z,
+        Projection::Perspective { fov_y: 0.6 },
+        w,
+        h,
+    )?;
+    Ok(cam.fit_bounds(b.0, b.1)?)
+}
+
+fn render_cmd(a: &RenderArgs) -> anyhow::Result<()> {
+    let b = bounds(&a.common.bounds)?;
+    let cam = camera(&a.view, b)?;
+    let shape = load(&a.model, &params(&a.common.params)?)?;
+    let pb = progress::spinner(format!("ray casting {}", a.model.display()));
+    let tape = Tape::new(&shape);
+    let options = RenderOptions {
+        bounds_min: b.0,
+        bounds_max: b.1,
+        ..RenderOptions::default()
+    };
+    let t0 = std::time::Instant::now();
+    let img = render(&tape, &cam, &options).context("cannot render")?;
+    let dt = t0.elapsed();
+    write_png_rgba(&a.output, &img)
+        .with_context(|| format!("cannot write {}", a.output.display()))?;
+    pb.finish_and_clear();
+    let covered = img
+        .pixels()
+        .iter()
+        .filter(|p| **p != options.background)
+        .count();
+    say!(
+        "{}x{} picture in {:.2} s, the model covers {:.1} % of it",
+        img.width(),
+        img.height(),
+        dt.as_secs_f64(),
+        100.0 * covered as f64 / img.pixels().len().max(1) as f64
+    );
+    Ok(())
+}
+
+fn morph_cmd(a: &MorphArgs) -> anyhow::Result<()> {
+    if !(1..=MAX_FRAMES).contains(&a.frames) {
+        bail!("--frames {}: must be 1 to {MAX_FRAMES}", a.frames);
+    }
+    let schedule = Schedule::parse(&a.schedule).context("--schedule")?;
+    let b = bounds(&a.common.bounds)?;
+    let cam = camera(&a.view, b)?;
+    let p = params(&a.common.params)?;
+    let f = load(&a.from, &p)?;
+    let g = load(&a.to, &p)?;
+    std::fs::create_dir_all(&a.output)
+        .with_context(|| format!("cannot create {}", a.output.display()))?;
+    let options = RenderOptions {
+        bounds_min: b.0,
+        bounds_max: b.1,
+        ..RenderOptions::default()
+    };
+    let pb = progress::spinner(format!("rendering {} frames", a.frames));
+    let field_at = |t: f64| -> Result<Box<dyn Field>, volmorph_frep::FrepError> {
+        Ok(Box::new(Tape::new(&morph(&f, &g, t, schedule))))
+    };
+    let paths = render_animation(a.frames, &field_at, &cam, &options, &a.output, "frame")
+        .context("cannot render the animation")?;
+    pb.finish_and_clear();
+    say!(
+        "{} frames written to {} ({} … {})",
+        paths.len(),
+        a.output.display(),
+        paths
+            .first()
+            .map(|p| p.display().to_string())
+            .unwrap_or_default(),
+        paths
+            .last()
+            .map(|p| p.display().to_string())
+            .unwrap_or_default()
+    );
+    Ok(())
+}
+
+/// Grid size at which the targets are stated.
+const BENCH_GRID: usize = 193;
+
+/// Arguments of `volmorph bench frep`.
+#[derive(Debug, clap::Args)]
+pub struct BenchArgs {
+    /// Model files (HyperFun language).
+    #[arg(required = true)]
+    pub models: Vec<PathBuf>,
+    /// Grid points per axis.
+    #[arg(long, default_value_t = BENCH_GRID)]
+    pub grid: usize,
+    /// Timed runs per model.
+    #[arg(long, default_value_t = 5)]
+    pub repeat: usize,
+    /// Skip the comparison with point-by-point evaluation.
+    #[arg(long)]
+    pub no_check: bool,
+    /// Print the results as JSON instead of a table.
+    #[arg(long)]
+    pub json: bool,
+    #[command(flatten)]
+    pub common: Common,
+}
+
+/// Target median for a model at 193³ over the default box: the published libfive figures
+/// rounded down (40 ms for the small scenes `s1`–`s5`, 150 ms for the gear and colonnade).
+fn target_for(path: &Path) -> Option<f64> {
+    let stem = path.file_stem()?.to_string_lossy().to_lowercase();
+    if stem.starts_with('s') && stem[1..].starts_with(|c: char| c.is_ascii_digit()) {
+        Some(0.040)
+    } else if stem.contains("gear") || stem.contains("colonnade") {
+        Some(0.150)
+    } else {
+        None
+    }
+}
+
+/// Run `volmorph bench frep`.
+pub fn bench(a: &BenchArgs) -> anyhow::Result<()> {
+    if !(1..=1000).contains(&a.repeat) {
+        bail!("--repeat {} must be between 1 and 1000", a.repeat);
+    }
+    let b = bounds(&a.common.bounds)?;
+    let g = grid_geometry(a.grid, b)?;
+    let p = params(&a.common.params)?;
+    let at_target = a.grid == BENCH_GRID && b == (DVec3::splat(-1.6), DVec3::splat(1.6));
+    let mut rows = Vec::new();
+    for path in &a.models {
+        let shape = load(path, &p)?;
+        let tape = Tape::new(&shape);
+        let mut times = Vec::with_capacity(a.repeat);
+        let mut last = None;
+        for _ in 0..a.repeat {
+            let t0 = std::time::Instant::now();
+            let v = sample(&tape, &g)?;
+            times.push(t0.elapsed().as_secs_f64());
+            last = Some(v);
+        }
+        times.sort_by(f64::total_cmp);
+        let n = times.len();
+        let median = if n % 2 == 1 {
+            times[n / 2]
+        } else {
+            0.5 * (times[n / 2 - 1] + times[n / 2])
+        };
+        let same = if a.no_check {
+            None
+        } else {
+            let naive = volmorph_frep::grid::sample_naive(&tape, &g)?;
+            let fast = last.context("no timed run")?;
+            Some(
+                fast.data()
+                    .iter()
+                    .zip(naive.data())
+                    .all(|(x, y)| x.to_bits() == y.to_bits()),
+            )
+        };
+        let target = if at_target { target_for(path) } else { None };
+        rows.push((
+            path.display().to_string(),
+            tape.len(),
+            times,
+            median,
+            target,
+            same,
+        ));
+    }
+    if a.json {
+        let items: Vec<serde_json::Value> = rows
+            .iter()
+            .map(|(name, ops, t, med, target, same)| {
+                serde_json::json!({
+                    "name": name,
+                    "operations": ops,
+                    "min_s": t.first(),
+                    "median_s": med,
+                    "max_s": t.last(),
+                    "target_s": target,
+                    "target_met": target.map(|x| *med <= x),
+                    "same_as_pointwise": same,
+                })
+            })
+            .collect();
+        say!(
+            "{:#}",
+            serde_json::json!({
+                "suite": "frep",
+                "grid": a.grid,
+                "repeat": a.repeat,
+                "threads": rayon::current_num_threads(),
+                "items": items,
+            })
+        );
+        return Ok(());
+    }
+    say!(
+        "F-rep grid evaluation, {g}³ over {lo}..{hi}, {r} runs, {t} threads",
+        g = a.grid,
+        lo = b.0,
+        hi = b.1,
+        r = a.repeat,
+        t = rayon::current_num_threads()
+    );
+    say!(
+        "{:<40} {:>5} {:>10} {:>10} {:>10}  {:<18} {}",
+        "model",
+        "ops",
+        "min",
+        "median",
+        "max",
+        "target (median)",
+        "= pointwise"
+    );
+    for (name, ops, t, med, target, same) in &rows {
+        let target = match target {
+            Some(x) if med <= x => format!("<= {:.0} ms  met", x * 1e3),
+            Some(x) => format!("<= {:.0} ms  MISSED", x * 1e3),
+            None => "-".into(),
+        };
+        say!(
+            "{:<40} {:>5} {:>7.1} ms {:>7.1} ms {:>7.1} ms  {:<18} {}",
+            name,
+            ops,
+            t.first().copied().unwrap_or(f64::NAN) * 1e3,
+            med * 1e3,
+            t.last().copied().unwrap_or(f64::NAN) * 1e3,
+            target,
+            match same {
+                Some(true) => "yes",
+                Some(false) => "NO",
+                None => "-",
+            }
+        );
+    }
+    if !at_target {
+        say!("(targets are stated for --grid {BENCH_GRID} over the default --bounds -1.6,1.6)");
+    }
+    Ok(())
+}

@@ -1,0 +1,80 @@
+use std::fmt;
+
+/// A position in model source text: 1-based line and column (columns count characters).
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
+pub struct Pos {
+    /// Line, from 1.
+    pub line: u32,
+    /// Column, from 1.
+    pub col: u32,
+}
+
+impl fmt::Display for Pos {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        write!(f, "line {}, column {}", self.line, self.col)
+    }
+}
+
+/// Errors of the F-rep layer.
+#[derive(Debug, thiserror::Error)]
+pub enum FrepError {
+    /// The model text is not valid syntax.
+    #[error("syntax error at {pos}: {message}")]
+    Syntax {
+        /// Where.
+        pos: Pos,
+        /// What is wrong.
+        message: String,
+    },
+    /// The model is syntactically valid but cannot be compiled (unknown function, wrong
+    /// number or kind of arguments, undefined variable, array index out of range, recursion,
+    /// a loop that does not end within the iteration limit, a model too large).
+    #[error("error at {pos}: {message}")]
+    Compile {
+        /// Where.
+        pos: Pos,
+        /// What is wrong.
+        message: String,
+    },
+    /// An argument of a library call is outside what it accepts (a non-positive grid size,
+    /// an empty box, a radius of influence that is not positive, …).
+    #[error("invalid argument: {0}")]
+    InvalidArgument(String),
+    /// Writing or building a volume failed.
+    #[error(transparent)]
+    Volume(#[from] volmorph_volume::VolumeError),
+    /// Isosurface extraction failed.
+    #[error(transparent)]
+    Contour(#[from] volmorph_contour::ContourError),
+    /// Image or camera error.
+    #[error(transparent)]
+    Render(#[from] volmorph_render::RenderError),
+    /// A space map failed.
+    #[error(transparent)]
+    Deform(#[from] volmorph_deform::DeformError),
+}
+
+impl FrepError {
+    pub(crate) fn syntax(pos: Pos, message: impl Into<String>) -> Self {
+        Self::Syntax {
+            pos,
+            message: message.into(),
+        }
+    }
+
+    pub(crate) fn compile(pos: Pos, message: impl Into<String>) -> Self {
+        Self::Compile {
+            pos,
+            message: message.into(),
+        }
+    }
+
+    /// The source position of a syntax or compile error.
+    #[must_use]
+    pub fn pos(&self) -> Option<Pos> {
+        match self {
+            Self::Syntax { pos, .. } | Self::Compile { pos, .. } => Some(*pos),
+            _ => None,
+        }
+    }
+}

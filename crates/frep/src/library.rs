@@ -1,0 +1,677 @@
+//! The HyperFun library: primitives, blends and coordinate transformations, expanded into
+//! graph nodes at compile time (so they are deduplicated, bounded by intervals and
+//! differentiated like any other expression).
+//!
+//! Every primitive follows the F-rep convention `f ≥ 0` inside and the definitions of the
+//! HyperFun library documentation (`c` is the `center` array, `x` the point array; all arrays
+//! are 1-based in the language, written 0-based here):
+//!
+//! | call | defining function |
+//! | --- | --- |
+//! | `hfSphere(x, c, R)` | `R² − |x − c|²` |
+//! | `hfEllipsoid(x, c, a, b, cc)` | `1 − ((x−c₀)/a)² − ((y−c₁)/b)² − ((z−c₂)/cc)²` |
+//! | `hfCylinderX(x, c, R)` (`Y`, `Z`) | `R² − (y−c₁)² − (z−c₂)²` (the two other axes) |
+//! | `hfEllCylX(x, c, a, b)` (`Y`, `Z`) | `1 − ((y−c₁)/a)² − ((z−c₂)/b)²` (`Y`: `a` along x, `b` along z; `Z`: x, y) |
+//! | `hfConeX(x, c, R)` (`Y`, `Z`) | `(x−c₀)² − ((y−c₁)/R)² − ((z−c₂)/R)²` |
+//! | `hfEllConeX(x, c, a, b)` (`Y`, `Z`) | `(x−c₀)² − ((y−c₁)/a)² − ((z−c₂)/b)²` |
+//! | `hfTorusX(x, c, R, r0)` (`Y`, `Z`) | `r0² − (x−c₀)² − (y−c₁)² − (z−c₂)² − R² + 2R√((y−c₁)² + (z−c₂)²)` |
+//! | `hfBlock(x, v, dx, dy, dz)` | R-intersection of `(x−v₀)(v₀+dx−x)`, same in y and z |
+//! | `hfSuperell(x, c, a, b, cc, s1, s2)` | `1 − (|X|^{2/s2} + |Y|^{2/s2})^{s2/s1} − |Z|^{2/s1}`, `X = (x−c₀)/a` … |
+//! | `hfBlobby(x, x0, y0, z0, a, b, T)` | `Σ bᵢ exp(−aᵢ rᵢ²) − T` |
+//! | `hfMetaball(x, x0, y0, z0, b, d, T)` | `Σ fᵢ − T`, `fᵢ = bᵢ(1 − 3rᵢ²/dᵢ²)` for `r ≤ d/3`, `1.5bᵢ(1 − rᵢ/dᵢ)²` for `r < d`, else 0 |
+//! | `hfSoft(x, x0, y0, z0, d, T)` | `Σ (1 − 22r²/9d² + 17r⁴/9d⁴ − 4r⁶/9d⁶)[r ≤ d] − T` |
+//! | `hfConvPoint(x, p, S, T)` | `Σ 1/(1 + Sᵢ² rᵢ²)² − T` (Cauchy kernel; `p` holds 3 values per point) |
+//! | `hfConvLine(x, b, e, S, T)` | closed-form Cauchy convolution of each segment `bᵢ → eᵢ`, minus `T` |
+//! | `hfBlendUni(f1, f2, a0, a1, a2)` | `f1 + f2 + √(f1² + f2²) + a0/(1 + (f1/a1)² + (f2/a2)²)` |
+//! | `hfBlendInt(f1, f2, a0, a1, a2)` | `f1 + f2 − √(f1² + f2²) + a0/(1 + (f1/a1)² + (f2/a2)²)` |
+//!
+//! Transformations change their first argument (a point array) in place — they are inverse
+//! mappings, applied to the point before a primitive is evaluated — and return 1:
+//!
+//! | call | new coordinates |
+//! | --- | --- |
+//! | `hfShift3D(x, dx, dy, dz)` | `x − d` |
+//! | `hfScale3D(x, sx, sy, sz)` | `x / s` |
+//! | `hfRotate3DX(x, θ)` | `y' = y cos θ + z sin θ`, `z' = −y sin θ + z cos θ` (`Y`: on `(z, x)`, `Z`: on `(x, y)`) |
+//! | `hfStretch3D(x, x0, sx, sy, sz)` | `x0 + (x − x0)/s` |
+//! | `hfTwistX(x, x1, x2, θ1, θ2)` | rotation of `(y, z)` by `θ = (1−t)θ1 + tθ2`, `t = (x−x1)/(x2−x1)` |
+//! | `hfTaperX(x, x1, x2, s1, s2)` | `(y, z) / s`, `s` from `s1` (`x < x1`) through the linear ramp to `s2` (`x > x2`); `|s| < 10⁻¹²` counts as 1 |
+
+use crate::ops::{BinaryOp, UnaryOp};
+use crate::shape::{Builder, Id};
+
+/// A compile-time value: a scalar node or an array of nodes.
+#[derive(Debug, Clone, PartialEq)]
+pub enum Value {
+    /// One number.
+    Scalar(Id),
+    /// An array (0-based here, 1-based in the language).
+    Array(Vec<Id>),
+}
+
+/// What a library call produced: its value and, for transformations, the new value of its
+/// first (point array) argument.
+pub(crate) struct CallResult {
+    pub value: Id,
+    pub new_point: Option<Vec<Id>>,
+}
+
+/// Kinds of arguments in a signature.
+#[derive(Clone, Copy)]
+enum Kind {
+    /// A scalar.
+    S,
+    /// An array with at least 3 elements.
+    P,
+    /// An array of any length.
+    A,
+}
+
+use Kind::{A, P, S};
+
+/// Signature (argument kinds and names) of a library function, `None` if unknown.
+fn signature(name: &str) -> Option<&'static [(Kind, &'static str)]> {
+    Some(match name {
+        "hfSphere" => &[(P, "x"), (P, "center"), (S, "R")],
+        "hfEllipsoid" => &[(P, "x"), (P, "center"), (S, "a"), (S, "b"), (S, "c")],
+        "hfCylinderX" | "hfCylinderY" | "hfCylinderZ" | "hfConeX" | "hfConeY" | "hfConeZ" => {
+            &[(P, "x"), (P, "center"), (S, "R")]
+        }
+        "hfEllCylX" | "hfEllCylY" | "hfEllCylZ" | "hfEllConeX" | "hfEllConeY" | "hfEllConeZ" => {
+            &[(P, "x"), (P, "center"), (S, "a"), (S, "b")]
+        }
+        "hfTorusX" | "hfTorusY" | "hfTorusZ" => &[(P, "x"), (P, "center"), (S, "R"), (S, "r0")],
+        "hfBlock" => &[(P, "x"), (P, "vertex"), (S, "dx"), (S, "dy"), (S, "dz")],
+        "hfSuperell" => &[
+            (P, "x"),
+            (P, "center"),
+            (S, "a"),
+            (S, "b"),
+            (S, "c"),
+            (S, "s1"),
+            (S, "s2"),
+        ],
+        "hfBlobby" => &[
+            (P, "x"),
+            (A, "x0"),
+            (A, "y0"),
+            (A, "z0"),
+            (A, "a"),
+            (A, "b"),
+            (S, "T"),
+        ],
+        "hfMetaball" => &[
+            (P, "x"),
+            (A, "x0"),
+            (A, "y0"),
+            (A, "z0"),
+            (A, "b"),
+            (A, "d"),
+            (S, "T"),
+        ],
+        "hfSoft" => &[
+            (P, "x"),
+            (A, "x0"),
+            (A, "y0"),
+            (A, "z0"),
+            (A, "d"),
+            (S, "T"),
+        ],
+        "hfConvPoint" => &[(P, "x"), (A, "vect"), (A, "S"), (S, "T")],
+        "hfConvLine" => &[(P, "x"), (A, "begin"), (A, "end"), (A, "S"), (S, "T")],
+        "hfBlendUni" | "hfBlendInt" => &[(S, "f1"), (S, "f2"), (S, "a0"), (S, "a1"), (S, "a2")],
+        "hfShift3D" => &[(P, "x"), (S, "dx"), (S, "dy"), (S, "dz")],
+        "hfScale3D" => &[(P, "x"), (S, "sx"), (S, "sy"), (S, "sz")],
+        "hfRotate3DX" | "hfRotate3DY" | "hfRotate3DZ" => &[(P, "x"), (S, "theta")],
+        "hfStretch3D" => &[(P, "x"), (P, "x0"), (S, "sx"), (S, "sy"), (S, "sz")],
+        "hfTwistX" | "hfTwistY" | "hfTwistZ" => {
+            &[(P, "x"), (S, "x1"), (S, "x2"), (S, "theta1"), (S, "theta2")]
+        }
+        "hfTaperX" | "hfTaperY" | "hfTaperZ" => {
+            &[(P, "x"), (S, "x1"), (S, "x2"), (S, "s1"), (S, "s2")]
+        }
+        _ => return None,
+    })
+}
+
+/// Whether `name` is a library function.
+pub(crate) fn is_library(name: &str) -> bool {
+    signature(name).is_some()
+}
+
+/// Names of every library function (for documentation and error hints).
+#[must_use]
+pub fn library_names() -> Vec<&'static str> {
+    let all = [
+        "hfSphere",
+        "hfEllipsoid",
+        "hfCylinderX",
+        "hfCylinderY",
+        "hfCylinderZ",
+        "hfEllCylX",
+        "hfEllCylY",
+        "hfEllCylZ",
+        "hfConeX",
+        "hfConeY",
+        "hfConeZ",
+        "hfEllConeX",
+        "hfEllConeY",
+        "hfEllConeZ",
+        "hfTorusX",
+        "hfTorusY",
+        "hfTorusZ",
+        "hfBlock",
+        "hfSuperell",
+        "hfBlobby",
+        "hfMetaball",
+        "hfSoft",
+        "hfConvPoint",
+        "hfConvLine",
+        "hfBlendUni",
+        "hfBlendInt",
+        "hfShift3D",
+        "hfScale3D",
+        "hfRotate3DX",
+        "hfRotate3DY",
+        "hfRotate3DZ",
+        "hfStretch3D",
+        "hfTwistX",
+        "hfTwistY",
+        "hfTwistZ",
+        "hfTaperX",
+        "hfTaperY",
+        "hfTaperZ",
+    ];
+    all.to_vec()
+}
+
+/// Check the arguments against the signature; returns a message naming the problem.
+fn check(name: &str, args: &[Value]) -> Result<(), String> {
+    let Some(sig) = signature(name) else {
+        return Err(format!("unknown function `{name}`"));
+    };
+    let names: Vec<&str> = sig.iter().map(|(_, n)| *n).collect();
+    if args.len() != sig.len() {
+        return Err(format!(
+            "`{name}` takes {} arguments ({}), got {}",
+            sig.len(),
+            names.join(", "),
+            args.len()
+        ));
+    }
+    for (k, ((kind, an), v)) in sig.iter().zip(args).enumerate() {
+        let ok = match (kind, v) {
+            (S, Value::Scalar(_)) | (A, Value::Array(_)) => true,
+            (P, Value::Array(a)) => a.len() >= 3,
+            _ => false,
+        };
+        if !ok {
+            let want = match kind {
+                S => "a number".to_string(),
+                P => "an array of 3 numbers".to_string(),
+                A => "an array".to_string(),
+            };
+            let got = match v {
+                Value::Scalar(_) => "a number".to_string(),
+                Value::Array(a) => format!("an array of {}", a.len()),
+            };
+            return Err(format!(
+                "argument {} (`{an}`) of `{name}` must be {want}, got {got}",
+                k + 1
+            ));
+        }
+    }
+    Ok(())
+}
+
+fn s(v: &Value) -> Id {
+    match v {
+        Value::Scalar(id) => *id,
+        Value::Array(a) => a.first().copied().unwrap_or(0),
+    }
+}
+
+fn arr(v: &Value) -> &[Id] {
+    match v {
+        Value::Array(a) => a,
+        Value::Scalar(id) => std::slice::from_ref(id),
+    }
+}
+
+/// Axes of a primitive aligned with `axis` (0 = X…): the axis and the two others in the
+/// cyclic order used by the rotations.
+fn axes(name: &str) -> [usize; 3] {
+    match name.chars().last() {
+        Some('Y') => [1, 2, 0],
+        Some('Z') => [2, 0, 1],
+        _ => [0, 1, 2],
+    }
+}
+
+/// The axis of a primitive and the two others in increasing order (the order of the `a`, `b`
+/// half-axes of elliptic cylinders and cones: `Y` → `(x, z)`).
+fn sorted_axes(name: &str) -> [usize; 3] {
+    match name.chars().last() {
+        Some('Y') => [1, 0, 2],
+        Some('Z') => [2, 0, 1],
+        _ => [0, 1, 2],
+    }
+}
+
+/// Expand a library call.
+pub(crate) fn call(b: &mut Builder, name: &str, args: &[Value]) -> Result<CallResult, String> {
+    check(name, args)?;
+    let one = b.constant(1.0);
+    let plain = |value| CallResult {
+        value,
+        new_point: None,
+    };
+    let x = arr(&args[0]).to_vec();
+    let diff = |b: &mut Builder, k: usize, c: &[Id]| b.sub(x[k], c[k]);
+    Ok(match name {
+        "hfSphere" => {
+            let c = arr(&args[1]);
+            let mut acc = b.square(s(&args[2]));
+            for k in 0..3 {
+                let d = diff(b, k, c);
+                let d2 = b.square(d);
+                acc = b.sub(acc, d2);
+            }
+            plain(acc)
+        }
+        "hfEllipsoid" => {
+            let c = arr(&args[1]);
+            let mut acc = one;
+            for k in 0..3 {
+                let d = diff(b, k, c);
+                let q = b.div(d, s(&args[2 + k]));
+                let q2 = b.square(q);
+                acc = b.sub(acc, q2);
+            }
+            plain(acc)
+        }
+        "hfCylinderX" | "hfCylinderY" | "hfCylinderZ" => {
+            let [_, u, v] = axes(name);
+            let c = arr(&args[1]);
+            let mut acc = b.square(s(&args[2]));
+            for k in [u, v] {
+                let d = diff(b, k, c);
+                let d2 = b.square(d);
+                acc = b.sub(acc, d2);
+            }
+            plain(acc)
+        }
+        "hfEllCylX" | "hfEllCylY" | "hfEllCylZ" => {
+            let [_, u, v] = sorted_axes(name);
+            let c = arr(&args[1]);
+            let mut acc = one;
+            for (k, r) in [(u, s(&args[2])), (v, s(&args[3]))] {
+                let d = diff(b, k, c);
+                let q = b.div(d, r);
+                let q2 = b.square(q);
+                acc = b.sub(acc, q2);
+            }
+            plain(acc)
+        }
+        "hfConeX" | "hfConeY" | "hfConeZ" | "hfEllConeX" | "hfEllConeY" | "hfEllConeZ" => {
+            let [w, u, v] = sorted_axes(name);
+            let c = arr(&args[1]);
+            let (ra, rb) = if name.starts_with("hfEll") {
+                (s(&args[2]), s(&args[3]))
+            } else {
+                (s(&args[2]), s(&args[2]))
+            };
+            let d = diff(b, w, c);
+            let mut acc = b.square(d);
+            for (k, r) in [(u, ra), (v, rb)] {
+                let d = diff(b, k, c);
+                let q = b.div(d, r);
+                let q2 = b.square(q);
+                acc = b.sub(acc, q2);
+            }
+            plain(acc)
+        }
+        "hfTorusX" | "hfTorusY" | "hfTorusZ" => {
+            let [w, u, v] = axes(name);
+            let c = arr(&args[1]);
+            let (big_r, r0) = (s(&args[2]), s(&args[3]));
+            let dw = diff(b, w, c);
+            let du = diff(b, u, c);
+            let dv = diff(b, v, c);
+            let (w2, u2, v2) = (b.square(dw), b.square(du), b.square(dv));
+            let uv = b.add(u2, v2);
+            let ring = b.sqrt(uv);
+            let mut acc = b.square(r0);
+            acc = b.sub(acc, w2);
+            acc = b.sub(acc, uv);
+            let r2 = b.square(big_r);
+            acc = b.sub(acc, r2);
+            let two_r = b.mul_c(big_r, 2.0);
+            let t = b.mul(two_r, ring);
+            plain(b.add(acc, t))
+        }
+        "hfBlock" => {
+            let v = arr(&args[1]);
+            let mut slabs = [0; 3];
+            for (k, slab) in slabs.iter_mut().enumerate() {
+                let lo = b.sub(x[k], v[k]);
+                let top = b.add(v[k], s(&args[2 + k]));
+                let hi = b.sub(top, x[k]);
+                *slab = b.mul(lo, hi);
+            }
+            let f = b.intersection(slabs[0], slabs[1]);
+            plain(b.intersection(f, slabs[2]))
+        }
+        "hfSuperell" => {
+            let c = arr(&args[1]);
+            let (s1, s2) = (s(&args[5]), s(&args[6]));
+            let two = b.constant(2.0);
+            let p2 = b.div(two, s2);
+            let p1 = b.div(two, s1);
+            let mut t = [0; 3];
+            for (k, tk) in t.iter_mut().enumerate() {
+                let d = diff(b, k, c);
+                let q = b.div(d, s(&args[2 + k]));
+                *tk = b.unary(UnaryOp::Abs, q);
+            }
+            let xp = b.binary(BinaryOp::Pow, t[0], p2);
+            let yp = b.binary(BinaryOp::Pow, t[1], p2);
+            let zp = b.binary(BinaryOp::Pow, t[2], p1);
+            let xy = b.add(xp, yp);
+            let e = b.div(s2, s1);
+            let xyp = b.binary(BinaryOp::Pow, xy, e);
+            let f = b.sub(one, xyp);
+            plain(b.sub(f, zp))
+        }
+        "hfBlobby" | "hfMetaball" | "hfSoft" => {
+            let (x0, y0, z0) = (arr(&args[1]), arr(&args[2]), arr(&args[3]));
+            let n = x0.len();
+            let (ca, cb) = if name == "hfSoft" {
+                (arr(&args[4]), arr(&args[4]))
+            } else {
+                (arr(&args[4]), arr(&args[5]))
+            };
+            for (label, a) in [
+                ("y0", y0),
+                ("z0", z0),
+                ("coefficients", ca),
+                ("coefficients", cb),
+            ] {
+                if a.len() != n {
+                    return Err(format!(
+                        "`{name}`: array {label} has {} elements but x0 has {n}",
+                        a.len()
+                    ));
+                }
+            }
+            let t = s(&args[args.len() - 1]);
+            let mut sum = b.constant(0.0);
+            for i in 0..n {
+                let dx = b.sub(x[0], x0[i]);
+                let dy = b.sub(x[1], y0[i]);
+                let dz = b.sub(x[2], z0[i]);
+                let (dx2, dy2, dz2) = (b.square(dx), b.square(dy), b.square(dz));
+                let r2 = b.add(dx2, dy2);
+                let r2 = b.add(r2, dz2);
+                let term = match name {
+                    "hfBlobby" => {
+                        let e = b.mul(ca[i], r2);
+                        let e = b.neg(e);
+                        let e = b.unary(UnaryOp::Exp, e);
+                        b.mul(cb[i], e)
+                    }
+                    "hfMetaball" => metaball(b, r2, ca[i], cb[i]),
+                    _ => soft(b, r2, ca[i]),
+                };
+                sum = b.add(sum, term);
+            }
+            plain(b.sub(sum, t))
+        }
+        "hfConvPoint" => {
+            let (p, sv) = (arr(&args[1]), arr(&args[2]));
+            if p.len() < 3 * sv.len() {
+                return Err(format!(
+                    "`hfConvPoint`: `vect` needs 3 values per point ({} for {} kernels), has {}",
+                    3 * sv.len(),
+                    sv.len(),
+                    p.len()
+                ));
+            }
+            let mut sum = b.constant(0.0);
+            for (i, &si) in sv.iter().enumerate() {
+                let mut r2 = b.constant(0.0);
+                for k in 0..3 {
+                    let d = b.sub(p[3 * i + k], x[k]);
+                    let d2 = b.square(d);
+                    r2 = b.add(r2, d2);
+                }
+                let s2 = b.square(si);
+                let q = b.mul(s2, r2);
+                let q = b.add(one, q);
+                let q = b.square(q);
+                let term = b.div(one, q);
+                sum = b.add(sum, term);
+            }
+            plain(b.sub(sum, s(&args[3])))
+        }
+        "hfConvLine" => {
+            let (bg, en, sv) = (arr(&args[1]), arr(&args[2]), arr(&args[3]));
+            if bg.len() < 3 * sv.len() || en.len() < 3 * sv.len() {
+                return Err(format!(
+                    "`hfConvLine`: `begin` and `end` need 3 values per segment ({} for {} kernels)",
+                    3 * sv.len(),
+                    sv.len()
+                ));
+            }
+            let mut sum = b.constant(0.0);
+            for (i, &si) in sv.iter().enumerate() {
+                let term = conv_line(b, &x, &bg[3 * i..3 * i + 3], &en[3 * i..3 * i + 3], si);
+                sum = b.add(sum, term);
+            }
+            plain(b.sub(sum, s(&args[4])))
+        }
+        "hfBlendUni" | "hfBlendInt" => {
+            let (f1, f2) = (s(&args[0]), s(&args[1]));
+            let base = if name == "hfBlendUni" {
+                b.union(f1, f2)
+            } else {
+                b.intersection(f1, f2)
+            };
+            let d = b.blend_displacement(f1, f2, s(&args[2]), s(&args[3]), s(&args[4]));
+            plain(b.add(base, d))
+        }
+        _ => transform(b, name, args, x)?,
+    })
+}
+
+fn metaball(b: &mut Builder, r2: Id, coef: Id, d: Id) -> Id {
+    let r = b.sqrt(r2);
+    let rd = b.div(r, d);
+    let rd2 = b.square(rd);
+    let inner = b.mul_c(rd2, 3.0);
+    let one = b.constant(1.0);
+    let inner = b.sub(one, inner);
+    let inner = b.mul(coef, inner);
+    let om = b.sub(one, rd);
+    let om2 = b.square(om);
+    let outer = b.mul(coef, om2);
+    let outer = b.mul_c(outer, 1.5);
+    let third = b.mul_c(d, 1.0 / 3.0);
+    let near = b.binary(BinaryOp::Le, r, third);
+    let within = b.binary(BinaryOp::Lt, r, d);
+    let zero = b.constant(0.0);
+    let far = b.select(within, outer, zero);
+    let v = b.select(near, inner, far);
+    let positive = b.binary(BinaryOp::Lt, zero, d);
+    b.select(positive, v, zero)
+}
+
+fn soft(b: &mut Builder, r2: Id, d: Id) -> Id {
+    let d2 = b.square(d);
+    let q = b.div(r2, d2);
+    let q2 = b.square(q);
+    let q3 = b.mul(q2, q);
+    let one = b.constant(1.0);
+    let t1 = b.mul_c(q, 22.0 / 9.0);
+    let t2 = b.mul_c(q2, 17.0 / 9.0);
+    let t3 = b.mul_c(q3, 4.0 / 9.0);
+    let v = b.sub(one, t1);
+    let v = b.add(v, t2);
+    let v = b.sub(v, t3);
+    let r = b.sqrt(r2);
+    let inside = b.binary(BinaryOp::Le, r, d);
+    let zero = b.constant(0.0);
+    b.select(inside, v, zero)
+}
+
+/// Closed-form convolution of the Cauchy kernel `1/(1 + S²r²)²` along the segment `p → q`.
+fn conv_line(b: &mut Builder, x: &[Id], p: &[Id], q: &[Id], s_: Id) -> Id {
+    let mut l2 = b.constant(0.0);
+    let mut axis = [0; 3];
+    let mut d = [0; 3];
+    for k in 0..3 {
+        axis[k] = b.sub(q[k], p[k]);
+        let a2 = b.square(axis[k]);
+        l2 = b.add(l2, a2);
+        d[k] = b.sub(x[k], p[k]);
+    }
+    let l = b.sqrt(l2);
+    let mut proj = b.constant(0.0);
+    let mut d2 = b.constant(0.0);
+    for k in 0..3 {
+        let a = b.div(axis[k], l);
+        let t = b.mul(d[k], a);
+        proj = b.add(proj, t);
+        let dd = b.square(d[k]);
+        d2 = b.add(d2, dd);
+    }
+    let one = b.constant(1.0);
+    let s2 = b.square(s_);
+    let xx2 = b.square(proj);
+    // p² = 1 + S²(|d|² − xx²), q² = 1 + S²(|d|² + l² − 2 l xx)
+    let perp = b.sub(d2, xx2);
+    let pp = b.mul(s2, perp);
+    let pp = b.add(one, pp);
+    let lx = b.mul(l, proj);
+    let lx2 = b.mul_c(lx, 2.0);
+    let qq = b.add(d2, l2);
+    let qq = b.sub(qq, lx2);
+    let qq = b.mul(s2, qq);
+    let qq = b.add(one, qq);
+    let pr = b.sqrt(pp);
+    // term 1: xx / (2 p² (p² + S² xx²))
+    let sxx = b.mul(s2, xx2);
+    let den1 = b.add(pp, sxx);
+    let den1 = b.mul(pp, den1);
+    let den1 = b.mul_c(den1, 2.0);
+    let t1 = b.div(proj, den1);
+    // term 2: (l − xx) / (2 p² q²)
+    let lmx = b.sub(l, proj);
+    let den2 = b.mul(pp, qq);
+    let den2 = b.mul_c(den2, 2.0);
+    let t2 = b.div(lmx, den2);
+    // term 3: (atan(S xx / p) + atan(S (l − xx) / p)) / (2 S p³)
+    let a1 = b.mul(s_, proj);
+    let a1 = b.div(a1, pr);
+    let a1 = b.unary(UnaryOp::Atan, a1);
+    let a2 = b.mul(s_, lmx);
+    let a2 = b.div(a2, pr);
+    let a2 = b.unary(UnaryOp::Atan, a2);
+    let num = b.add(a1, a2);
+    let p3 = b.mul(pp, pr);
+    let den3 = b.mul(s_, p3);
+    let den3 = b.mul_c(den3, 2.0);
+    let t3 = b.div(num, den3);
+    let v = b.add(t1, t2);
+    b.add(v, t3)
+}
+
+fn transform(
+    b: &mut Builder,
+    name: &str,
+    args: &[Value],
+    mut x: Vec<Id>,
+) -> Result<CallResult, String> {
+    let one = b.constant(1.0);
+    match name {
+        "hfShift3D" => {
+            for k in 0..3 {
+                x[k] = b.sub(x[k], s(&args[1 + k]));
+            }
+        }
+        "hfScale3D" => {
+            for k in 0..3 {
+                x[k] = b.div(x[k], s(&args[1 + k]));
+            }
+        }
+        "hfStretch3D" => {
+            let c = arr(&args[1]).to_vec();
+            for k in 0..3 {
+                let d = b.sub(x[k], c[k]);
+                let q = b.div(d, s(&args[2 + k]));
+                x[k] = b.add(c[k], q);
+            }
+        }
+        "hfRotate3DX" | "hfRotate3DY" | "hfRotate3DZ" => {
+            let [_, u, v] = axes(name);
+            let th = s(&args[1]);
+            rotate(b, &mut x, u, v, th);
+        }
+        "hfTwistX" | "hfTwistY" | "hfTwistZ" => {
+            let [w, u, v] = axes(name);
+            let (x1, x2, t1, t2) = (s(&args[1]), s(&args[2]), s(&args[3]), s(&args[4]));
+            let num = b.sub(x[w], x1);
+            let den = b.sub(x2, x1);
+            let t = b.div(num, den);
+            let omt = b.sub(one, t);
+            let a = b.mul(omt, t1);
+            let c = b.mul(t, t2);
+            let th = b.add(a, c);
+            rotate(b, &mut x, u, v, th);
+        }
+        "hfTaperX" | "hfTaperY" | "hfTaperZ" => {
+            let [w, u, v] = axes(name);
+            let (x1, x2, s1, s2) = (s(&args[1]), s(&args[2]), s(&args[3]), s(&args[4]));
+            let num = b.sub(x[w], x1);
+            let den = b.sub(x2, x1);
+            let t = b.div(num, den);
+            let omt = b.sub(one, t);
+            let a = b.mul(omt, s1);
+            let c = b.mul(t, s2);
+            let ramp = b.add(a, c);
+            let below = b.binary(BinaryOp::Lt, x[w], x1);
+            let above = b.binary(BinaryOp::Lt, x2, x[w]);
+            let upper = b.select(above, s2, ramp);
+            let scale = b.select(below, s1, upper);
+            let mag = b.unary(UnaryOp::Abs, scale);
+            let eps = b.constant(TAPER_EPS);
+            let tiny = b.binary(BinaryOp::Lt, mag, eps);
+            let scale = b.select(tiny, one, scale);
+            x[u] = b.div(x[u], scale);
+            x[v] = b.div(x[v], scale);
+        }
+        _ => return Err(format!("unknown function `{name}`")),
+    }
+    Ok(CallResult {
+        value: one,
+        new_point: Some(x),
+    })
+}
+
+/// Scale magnitudes below this count as 1 in `hfTaper*` (HyperFun's guard against a
+/// division by zero).
+pub const TAPER_EPS: f64 = 1e-12;
+
+/// `(x_u, x_v) ← (x_u cos θ + x_v sin θ, −x_u sin θ + x_v cos θ)`.
+fn rotate(b: &mut Builder, x: &mut [Id], u: usize, v: usize, th: Id) {
+    let c = b.unary(UnaryOp::Cos, th);
+    let sn = b.unary(UnaryOp::Sin, th);
+    let uc = b.mul(x[u], c);
+    let vs = b.mul(x[v], sn);
+    let us = b.mul(x[u], sn);
+    let vc = b.mul(x[v], c);
+    let nu = b.add(uc, vs);
+    let nv = b.sub(vc, us);
+    x[u] = nu;
+    x[v] = nv;
+}

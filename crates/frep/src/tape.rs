@@ -1,0 +1,634 @@
+//! The compiled evaluator: a [`Shape`] flattened into a register-allocated instruction list
+//! (a *tape*), evaluated at points, on batches of points, over boxes (intervals) and with
+//! gradients — four evaluators over one instruction list, whose agreement the shared
+//! conformance suite checks.
+//!
+//! Design (after the tape/interval/simplification architecture of fidget):
+//! * the graph is already deduplicated and topologically sorted, so the tape is the graph's
+//!   non-leaf nodes in order; constants and coordinates become immediate operands;
+//! * registers are reused once a value's last use has passed (linear scan), so even long
+//!   models need few registers and a batch's working set stays in cache;
+//! * batch evaluation runs each instruction over a whole block of [`LANES`] points before
+//!   the next instruction, in plain loops over slices that the compiler vectorises;
+//! * interval evaluation over a box records which side every `min`, `max` and `select`
+//!   takes there ([`Choice`]); [`Tape::simplify`] drops the sides that cannot matter, giving
+//!   a shorter tape that is **exactly** equal to the full one everywhere in the box (a pruned
+//!   side never decides the value and is never NaN there). Grid sampling and ray casting
+//!   evaluate such specialised tapes.
+
+use glam::DVec3;
+
+use crate::ops::{self, BinaryOp, Choice, Dual, Interval, UnaryOp};
+use crate::shape::{Id, Node, Shape};
+
+/// Points per batch block: each instruction runs over this many points at a time.
+pub const LANES: usize = 256;
+
+/// An operand of an instruction.
+#[derive(Debug, Clone, Copy, PartialEq)]
+enum Arg {
+    Reg(u32),
+    Imm(f64),
+    Input(u8),
+}
+
+#[derive(Debug, Clone, Copy, PartialEq)]
+enum Instr {
+    Unary(UnaryOp, u32, Arg),
+    Binary(BinaryOp, u32, Arg, Arg),
+    Select(u32, Arg, Arg, Arg),
+}
+
+/// A compiled defining function. Cheap to clone (the graph is shared); evaluation methods
+/// take `&self` and keep their scratch space in the caller's evaluator or on the stack, so
+/// one tape serves many threads.
+#[derive(Debug, Clone)]
+pub struct Tape {
+    shape: Shape,
+    instrs: Vec<Instr>,
+    regs: usize,
+    output: Arg,
+    /// Number of `min`, `max` and `select` instructions (what specialisation can prune).
+    choices: usize,
+}
+
+impl Tape {
+    /// Compile `shape`: register allocation by linear scan over the graph.
+    #[must_use]
+    pub fn new(shape: &Shape) -> Tape {
+        let nodes = shape.nodes();
+        let n = nodes.len();
+        let mut last_use = vec![0usize; n];
+        for (i, node) in nodes.iter().enumerate() {
+            for a in args(node) {
+                last_use[a as usize] = i;
+            }
+        }
+        let root = shape.root() as usize;
+        last_use[root] = usize::MAX;
+        let mut arg_of: Vec<Arg> = Vec::with_capacity(n);
+        let mut free: Vec<u32> = Vec::new();
+        let mut regs = 0u32;
+        let mut instrs = Vec::new();
+        for (i, node) in nodes.iter().enumerate() {
+            let leaf = match *node {
+                Node::Input(a) => Some(Arg::Input(a.min(2))),
+                Node::Const(b) => Some(Arg::Imm(f64::from_bits(b))),
+                _ => None,
+            };
+            if let Some(a) = leaf {
+                arg_of.push(a);
+                continue;
+            }
+            let out = free.pop().unwrap_or_else(|| {
+                regs += 1;
+                regs - 1
+            });
+            let g = |a: Id| arg_of[a as usize];
+            instrs.push(match *node {
+                Node::Unary(op, a) => Instr::Unary(op, out, g(a)),
+                Node::Binary(op, a, b) => Instr::Binary(op, out, g(a), g(b)),
+                Node::Select(c, a, b) => Instr::Select(out, g(c), g(a), g(b)),
+                Node::Input(_) | Node::Const(_) => unreachable_leaf(),
+            });
+            // Free the arguments whose last use is this instruction (after the output was
+            // allocated, so an output never aliases an argument).
+            let mut done: [Option<u32>; 3] = [None; 3];
+            for (k, a) in args(node).enumerate() {
+                if last_use[a as usize] == i
+                    && let Arg::Reg(r) = arg_of[a as usize]
+                    && !done.contains(&Some(r))
+                {
+                    free.push(r);
+                    done[k] = Some(r);
+                }
+            }
+            arg_of.push(Arg::Reg(out));
+        }
+        let choices = instrs
+            .iter()
+            .filter(|i| {
+                matches!(
+                    i,
+                    Instr::Binary(BinaryOp::Min | BinaryOp::Max, ..) | Instr::Select(..)
+                )
+            })
+            .count();
+        Tape {
+            shape: shape.clone(),
+            output: arg_of[root],
+            instrs,
+            regs: regs as usize,
+            choices,
+        }
+    }
+
+    /// The graph this tape was compiled from.
+    #[must_use]
+    pub fn shape(&self) -> &Shape {
+        &self.shape
+    }
+
+    /// Number of instructions (non-leaf graph nodes).
+    #[must_use]
+    pub fn len(&self) -> usize {
+        self.instrs.len()
+    }
+
+    /// Whether the function is a constant or a bare coordinate (no instruction).
+    #[must_use]
+    pub fn is_empty(&self) -> bool {
+        self.instrs.is_empty()
+    }
+
+    /// Number of `min`, `max` and `select` instructions: `0` means [`Tape::simplify`] can
+    /// never shorten this tape.
+    #[must_use]
+    pub fn choice_count(&self) -> usize {
+        self.choices
+    }
+
+    /// Number of registers a batch or point evaluation needs.
+    #[must_use]
+    pub fn register_count(&self) -> usize {
+        self.regs
+    }
+
+    /// The value `f(p)`.
+    #[must_use]
+    pub fn eval(&self, p: DVec3) -> f64 {
+        let mut regs = vec![0.0; self.regs];
+        self.eval_with(p, &mut regs)
+    }
+
+    /// The value `f(p)` using `regs` as scratch (resized as needed), for loops that evaluate
+    /// many points without allocating.
+    pub fn eval_with(&self, p: DVec3, regs: &mut Vec<f64>) -> f64 {
+        if regs.len() < self.regs {
+            regs.resize(self.regs, 0.0);
+        }
+        let pa = p.to_array();
+        let get = |a: Arg, regs: &[f64]| match a {
+            Arg::Reg(r) => regs[r as usize],
+            Arg::Imm(v) => v,
+            Arg::Input(k) => pa[usize::from(k)],
+        };
+        for ins in &self.instrs {
+            match *ins {
+                Instr::Unary(op, o, a) => regs[o as usize] = ops::unary(op, get(a, regs)),
+                Instr::Binary(op, o, a, b) => {
+                    regs[o as usize] = ops::binary(op, get(a, regs), get(b, regs));
+                }
+                Instr::Select(o, c, a, b) => {
+                    regs[o as usize] = ops::select(get(c, regs), get(a, regs), get(b, regs));
+                }
+            }
+        }
+        get(self.output, regs)
+    }
+
+    /// The value and gradient `(f(p), ∇f(p))` by forward-mode differentiation. The value is
+    /// bit-for-bit [`Tape::eval`]'s.
+    #[must_use]
+    pub fn gradient(&self, p: DVec3) -> (f64, DVec3) {
+        let mut regs = vec![Dual::constant(0.0); self.regs];
+        self.gradient_with(p, &mut regs)
+    }
+
+    /// [`Tape::gradient`] with caller-provided scratch.
+    pub fn gradient_with(&self, p: DVec3, regs: &mut Vec<Dual>) -> (f64, DVec3) {
+        if regs.len() < self.regs {
+            regs.resize(self.regs, Dual::constant(0.0));
+        }
+        let inputs = [
+            Dual {
+                v: p.x,
+                d: DVec3::X,
+            },
+            Dual {
+                v: p.y,
+                d: DVec3::Y,
+            },
+            Dual {
+                v: p.z,
+                d: DVec3::Z,
+            },
+        ];
+        let get = |a: Arg, regs: &[Dual]| match a {
+            Arg::Reg(r) => regs[r as usize],
+            Arg::Imm(v) => Dual::constant(v),
+            Arg::Input(k) => inputs[usize::from(k)],
+        };
+        for ins in &self.instrs {
+            match *ins {
+                Instr::Unary(op, o, a) => regs[o as usize] = ops::unary_dual(op, get(a, regs)),
+                Instr::Binary(op, o, a, b) => {
+                    regs[o as usize] = ops::binary_dual(op, get(a, regs), get(b, regs));
+                }
+                Instr::Select(o, c, a, b) => {
+                    regs[o as usize] = ops::select_dual(get(c, regs), get(a, regs), get(b, regs));
+                }
+            }
+        }
+        let r = get(self.output, regs);
+        (r.v, r.d)
+    }
+
+    /// Evaluate at the points `(x[i], y[i], z[i])` into `out[i]`, block by block.
+    ///
+    /// # Panics
+    /// Never; the slices are truncated to the shortest length.
+    pub fn eval_batch(&self, x: &[f64], y: &[f64], z: &[f64], out: &mut [f64]) {
+        let mut scratch = BatchScratch::default();
+        self.eval_batch_with(x, y, z, out, &mut scratch);
+    }
+
+    /// [`Tape::eval_batch`] with caller-provided scratch registers.
+    pub fn eval_batch_with(
+        &self,
+        x: &[f64],
+        y: &[f64],
+        z: &[f64],
+        out: &mut [f64],
+        scratch: &mut BatchScratch,
+    ) {
+        let n = x.len().min(y.len()).min(z.len()).min(out.len());
+        if scratch.regs.len() < self.regs {
+            scratch.regs.resize(self.regs, [0.0; LANES]);
+        }
+        let mut start = 0;
+        while start < n {
+            let end = (start + LANES).min(n);
+            let xs = [&x[start..end], &y[start..end], &z[start..end]];
+            self.eval_block(xs, &mut scratch.regs, &mut out[start..end]);
+            start = end;
+        }
+    }
+
+    fn eval_block(&self, xs: [&[f64]; 3], regs: &mut [[f64; LANES]], out: &mut [f64]) {
+        let n = out.len();
+        for ins in &self.instrs {
+            match *ins {
+                Instr::Unary(op, o, a) => {
+                    let (dst, lo, hi) = split(regs, o as usize);
+                    let a = src(a, lo, hi, o, xs, n);
+                    unary_block(op, &mut dst[..n], a);
+                }
+                Instr::Binary(op, o, a, b) => {
+                    let (dst, lo, hi) = split(regs, o as usize);
+                    let a = src(a, lo, hi, o, xs, n);
+                    let b = src(b, lo, hi, o, xs, n);
+                    binary_block(op, &mut dst[..n], a, b);
+                }
+                Instr::Select(o, c, a, b) => {
+                    let (dst, lo, hi) = split(regs, o as usize);
+                    let c = src(c, lo, hi, o, xs, n);
+                    let a = src(a, lo, hi, o, xs, n);
+                    let b = src(b, lo, hi, o, xs, n);
+                    for (i, d) in dst[..n].iter_mut().enumerate() {
+                        *d = ops::select(c.at(i), a.at(i), b.at(i));
+                    }
+                }
+            }
+        }
+        match self.output {
+            Arg::Reg(r) => out.copy_from_slice(&regs[r as usize][..n]),
+            Arg::Imm(v) => out.fill(v),
+            Arg::Input(k) => out.copy_from_slice(xs[usize::from(k)]),
+        }
+    }
+
+    /// An enclosure of `f` over the box `[lo, hi]` (every point value lies in it, NaN only
+    /// if the `nan` flag is set).
+    #[must_use]
+    pub fn interval(&self, lo: DVec3, hi: DVec3) -> Interval {
+        let mut s = IntervalScratch::default();
+        self.interval_with(lo, hi, &mut s)
+    }
+
+    /// [`Tape::interval`] with scratch; afterwards `scratch` holds the [`Choice`] of every
+    /// graph node over the box, for [`Tape::simplify`].
+    pub fn interval_with(&self, lo: DVec3, hi: DVec3, s: &mut IntervalScratch) -> Interval {
+        let nodes = self.shape.nodes();
+        s.values.clear();
+        s.choices.clear();
+        s.pruned = 0;
+        let box_ = [
+            Interval::new(lo.x, hi.x),
+            Interval::new(lo.y, hi.y),
+            Interval::new(lo.z, hi.z),
+        ];
+        for node in nodes {
+            let v = &s.values;
+            let (iv, ch) = match *node {
+                Node::Input(a) => (box_[usize::from(a.min(2))], Choice::Both),
+                Node::Const(b) => (Interval::point(f64::from_bits(b)), Choice::Both),
+                Node::Unary(op, a) => (ops::unary_interval(op, v[a as usize]), Choice::Both),
+                Node::Binary(op, a, b) => {
+                    let (ia, ib) = (v[a as usize], v[b as usize]);
+                    let ch = ops::min_max_choice(op, ia, ib);
+                    (ops::binary_interval(op, ia, ib), ch)
+                }
+                Node::Select(c, a, b) => {
+                    ops::select_interval(v[c as usize], v[a as usize], v[b as usize])
+                }
+            };
+            if ch != Choice::Both {
+                s.pruned += 1;
+            }
+            s.values.push(iv);
+            s.choices.push(ch);
+        }
+        s.values[self.shape.root() as usize]
+    }
+
+    /// The tape specialised to the box of the last [`Tape::interval_with`] call on `s`:
+    /// `min`/`max`/`select` sides that cannot decide the value there are removed, and what
+    /// only they used is dropped. Equal to `self` at every point of that box (bit for bit).
+    /// Returns `None` when nothing can be pruned (use `self`).
+    #[must_use]
+    pub fn simplify(&self, s: &IntervalScratch) -> Option<Tape> {
+        if s.pruned == 0 || s.choices.len() != self.shape.len() {
+            return None;
+        }
+        let shape = simplify_shape(&self.shape, &s.choices);
+        Some(Tape::new(&shape))
+    }
+}
+
+fn unreachable_leaf() -> Instr {
+    // Leaves were handled before; a harmless placeholder keeps this total.
+    Instr::Unary(UnaryOp::Neg, 0, Arg::Imm(f64::NAN))
+}
+
+/// Arguments of a node.
+fn args(n: &Node) -> impl Iterator<Item = Id> {
+    let (a, k): ([Id; 3], usize) = match *n {
+        Node::Unary(_, a) => ([a, 0, 0], 1),
+        Node::Binary(_, a, b) => ([a, b, 0], 2),
+        Node::Select(c, a, b) => ([c, a, b], 3),
+        _ => ([0; 3], 0),
+    };
+    a.into_iter().take(k)
+}
+
+/// The shape with the recorded choices applied (pruned sides replaced by the kept one).
+fn simplify_shape(shape: &Shape, choices: &[Choice]) -> Shape {
+    let nodes = shape.nodes();
+    let mut rep: Vec<Id> = Vec::with_capacity(nodes.len());
+    let mut out: Vec<Node> = Vec::with_capacity(nodes.len());
+    for (i, n) in nodes.iter().enumerate() {
+        let r = |a: Id| rep[a as usize];
+        let (node, alias) = match (*n, choices[i]) {
+            (Node::Binary(BinaryOp::Min | BinaryOp::Max, a, _), Choice::First)
+            | (Node::Select(_, a, _), Choice::First) => (None, Some(r(a))),
+            (Node::Binary(BinaryOp::Min | BinaryOp::Max, _, b), Choice::Second)
+            | (Node::Select(_, _, b), Choice::Second) => (None, Some(r(b))),
+            (Node::Unary(op, a), _) => (Some(Node::Unary(op, r(a))), None),
+            (Node::Binary(op, a, b), _) => (Some(Node::Binary(op, r(a), r(b))), None),
+            (Node::Select(c, a, b), _) => (Some(Node::Select(r(c), r(a), r(b))), None),
+            (leaf, _) => (Some(leaf), None),
+        };
+        // Fold operations whose arguments became constants (a pruned `max(…, 0)` makes
+        // everything computed from it constant); the values are those evaluation would give.
+        let konst = |a: Id| out[a as usize].as_const();
+        let (node, alias) = match node {
+            Some(Node::Unary(op, a)) if konst(a).is_some() => (
+                Some(Node::Const(const_bits(ops::unary(
+                    op,
+                    konst(a).unwrap_or(0.0),
+                )))),
+                alias,
+            ),
+            Some(Node::Binary(op, a, b)) if konst(a).is_some() && konst(b).is_some() => (
+                Some(Node::Const(const_bits(ops::binary(
+                    op,
+                    konst(a).unwrap_or(0.0),
+                    konst(b).unwrap_or(0.0),
+                )))),
+                alias,
+            ),
+            Some(Node::Select(c, a, b)) if konst(c).is_some_and(|v| !v.is_nan()) => {
+                if konst(c).is_some_and(|v| v != 0.0) {
+                    (None, Some(a))
+                } else {
+                    (None, Some(b))
+                }
+            }
+            other => (other, alias),
+        };
+        match (node, alias) {
+            (_, Some(a)) => {
+                // Keep indices aligned with a dead placeholder.
+                out.push(Node::Const(0));
+                rep.push(a);
+            }
+            (Some(nd), None) => {
+                out.push(nd);
+                rep.push(i as Id);
+            }
+            (None, None) => {
+                out.push(Node::Const(0));
+                rep.push(i as Id);
+            }
+        }
+    }
+    let root = rep[shape.root() as usize];
+    Shape::compact(&out, root)
+}
+
+/// Bit pattern of a folded constant (NaNs canonicalised, as the builder does).
+fn const_bits(v: f64) -> u64 {
+    if v.is_nan() { f64::NAN } else { v }.to_bits()
+}
+
+/// Scratch registers of batch evaluation (reuse one per thread).
+#[derive(Debug, Clone, Default)]
+pub struct BatchScratch {
+    regs: Vec<[f64; LANES]>,
+}
+
+/// Scratch space of interval evaluation: one interval and one [`Choice`] per graph node.
+#[derive(Debug, Clone, Default)]
+pub struct IntervalScratch {
+    values: Vec<Interval>,
+    choices: Vec<Choice>,
+    pruned: usize,
+}
+
+impl IntervalScratch {
+    /// Number of `min`/`max`/`select` nodes decided over the last box.
+    #[must_use]
+    pub fn pruned(&self) -> usize {
+        self.pruned
+    }
+}
+
+/// A block operand: a slice of `n` values or a constant.
+#[derive(Clone, Copy)]
+enum Src<'a> {
+    S(&'a [f64]),
+    C(f64),
+}
+
+impl Src<'_> {
+    #[inline(always)]
+    fn at(&self, i: usize) -> f64 {
+        match *self {
+            Src::S(s) => s[i],
+            Src::C(c) => c,
+        }
+    }
+}
+
+type Regs = [[f64; LANES]];
+
+/// The output register mutably, and the registers before and after it shared.
+fn split(regs: &mut Regs, o: usize) -> (&mut [f64; LANES], &Regs, &Regs) {
+    let (lo, rest) = regs.split_at_mut(o);
+    let (dst, hi) = rest.split_at_mut(1);
+    (&mut dst[0], lo, hi)
+}
+
+#[inline(always)]
+fn src<'a>(a: Arg, lo: &'a Regs, hi: &'a Regs, o: u32, xs: [&'a [f64]; 3], n: usize) -> Src<'a> {
+    match a {
+        Arg::Reg(r) if r < o => Src::S(&lo[r as usize][..n]),
+        Arg::Reg(r) => Src::S(&hi[(r - o - 1) as usize][..n]),
+        Arg::Imm(v) => Src::C(v),
+        Arg::Input(k) => Src::S(xs[usize::from(k)]),
+    }
+}
+
+#[inline(always)]
+fn map1(o: &mut [f64], a: Src<'_>, f: impl Fn(f64) -> f64) {
+    match a {
+        Src::S(a) => {
+            for (o, &a) in o.iter_mut().zip(a) {
+                *o = f(a);
+            }
+        }
+        Src::C(c) => o.fill(f(c)),
+    }
+}
+
+#[inline(always)]
+fn map2(o: &mut [f64], a: Src<'_>, b: Src<'_>, f: impl Fn(f64, f64) -> f64) {
+    match (a, b) {
+        (Src::S(a), Src::S(b)) => {
+            for ((o, &a), &b) in o.iter_mut().zip(a).zip(b) {
+                *o = f(a, b);
+            }
+        }
+        (Src::S(a), Src::C(b)) => {
+            for (o, &a) in o.iter_mut().zip(a) {
+                *o = f(a, b);
+            }
+        }
+        (Src::C(a), Src::S(b)) => {
+            for (o, &b) in o.iter_mut().zip(b) {
+                *o = f(a, b);
+            }
+        }
+        (Src::C(a), Src::C(b)) => o.fill(f(a, b)),
+    }
+}
+
+macro_rules! unary_arms {
+    ($op:expr, $o:expr, $a:expr, [$($k:ident),*]) => {
+        match $op {
+            $(UnaryOp::$k => map1($o, $a, |v| ops::unary(UnaryOp::$k, v)),)*
+            UnaryOp::PowI(n) => map1($o, $a, |v| ops::unary(UnaryOp::PowI(n), v)),
+        }
+    };
+}
+
+macro_rules! binary_arms {
+    ($op:expr, $o:expr, $a:expr, $b:expr, [$($k:ident),*]) => {
+        match $op {
+            $(BinaryOp::$k => map2($o, $a, $b, |x, y| ops::binary(BinaryOp::$k, x, y)),)*
+        }
+    };
+}
+
+fn unary_block(op: UnaryOp, o: &mut [f64], a: Src<'_>) {
+    // Sine and cosine: the branch-free kernel when the whole block is in its range (the
+    // same values `ops::sin`/`ops::cos` give there), so the loop vectorises.
+    if let (UnaryOp::Sin | UnaryOp::Cos, Src::S(s)) = (op, a)
+        && s.iter().all(|v| v.abs() <= ops::TRIG_FAST_LIMIT)
+    {
+        if op == UnaryOp::Sin {
+            map1(o, a, ops::sin_reduced);
+        } else {
+            map1(o, a, ops::cos_reduced);
+        }
+        return;
+    }
+    unary_arms!(
+        op,
+        o,
+        a,
+        [
+            Neg, Abs, Sqrt, Square, Exp, Ln, Log10, Sin, Cos, Tan, Asin, Acos, Atan, Sinh, Cosh,
+            Tanh, Floor, Ceil, Sign, Not
+        ]
+    );
+}
+
+fn binary_block(op: BinaryOp, o: &mut [f64], a: Src<'_>, b: Src<'_>) {
+    binary_arms!(
+        op,
+        o,
+        a,
+        b,
+        [
+            Add, Sub, Mul, Div, Min, Max, Pow, Atan2, Lt, Le, Eq, Ne, And, Or
+        ]
+    );
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::shape::Builder;
+
+    #[test]
+    fn registers_are_reused() {
+        // A long chain needs two registers however long it is.
+        let s = Shape::build(|b, [x, y, _]| {
+            let mut acc = b.add(x, y);
+            for k in 0..100 {
+                let c = b.constant(f64::from(k));
+                let t = b.mul(acc, c);
+                acc = b.unary(UnaryOp::Sin, t);
+            }
+            acc
+        });
+        let t = Tape::new(&s);
+        assert!(t.register_count() <= 3, "{}", t.register_count());
+        let p = DVec3::new(0.3, 0.2, 0.0);
+        assert_eq!(t.eval(p), s.eval_reference(p.to_array()));
+    }
+
+    #[test]
+    fn simplify_is_exact_inside_the_box() {
+        let s = Shape::build(|b: &mut Builder, [x, y, z]| {
+            let a = b.add_c(x, -1.0);
+            let c = b.mul(y, z);
+            let m = b.binary(BinaryOp::Min, a, c);
+            let n = b.binary(BinaryOp::Max, m, y);
+            b.unary(UnaryOp::Sin, n)
+        });
+        let t = Tape::new(&s);
+        let mut sc = IntervalScratch::default();
+        let (lo, hi) = (DVec3::new(-1.0, 2.0, 3.0), DVec3::new(-0.5, 3.0, 4.0));
+        let _ = t.interval_with(lo, hi, &mut sc);
+        let small = t.simplify(&sc).expect("min is decided");
+        assert!(small.len() < t.len());
+        for i in 0..50 {
+            let f = f64::from(i) / 49.0;
+            let p = lo + (hi - lo) * DVec3::new(f, 1.0 - f, f * f);
+            assert_eq!(small.eval(p).to_bits(), t.eval(p).to_bits());
+        }
+    }
+}
