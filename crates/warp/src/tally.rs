@@ -278,6 +278,9 @@ pub(crate) fn splat<C: Cell>(
         let (xs, xe, px) = clip(x, rx, dx);
         let (ys, ye, py) = clip(y, ry, dy);
         let (zs, ze, pz) = clip(z, rz, dz);
+        if xs >= xe || ys >= ye || zs >= ze {
+            return false;
+        }
         for qz in zs..ze {
             let wz = sign * wz[qz - za];
             for qy in ys..ye {
@@ -544,4 +547,30 @@ pub(crate) fn tally_averaged<T: Voxel, C: Cell>(
         }
     }
     stats
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// Regression: a short box beside the region along x (but across it along y and z)
+    /// made the clipped path compute an index below zero.
+    #[test]
+    fn short_box_beside_the_region_touches_nothing() {
+        let region = Region {
+            lo: [4, 0, 0],
+            dims: [4, 4, 4],
+        };
+        let mut buf = vec![[0.0f64; 2]; region.len()];
+        let (lo, hi) = (DVec3::new(0.7, -0.3, -0.3), DVec3::new(1.6, 0.6, 0.6));
+        assert!(!splat(lo, hi, 5.0, 1.0, [8, 4, 4], &region, &mut buf));
+        assert!(buf.iter().all(|c| *c == [0.0, 0.0]));
+        // Shifted to straddle the region's edge: only the overlap with cell 4 ([3.5, 4.5]),
+        // 4.1 − 3.5 = 0.6, lands (cell 3 lies outside); y and z are inside.
+        let (lo, hi) = (lo + DVec3::X * 2.5, hi + DVec3::X * 2.5);
+        assert!(splat(lo, hi, 5.0, 1.0, [8, 4, 4], &region, &mut buf));
+        let total: f64 = buf.iter().map(|c| c[1]).sum();
+        assert!((total - 0.6 * 0.9 * 0.9).abs() < 1e-12, "{total}");
+        assert!(buf.iter().all(|c| (c[0] - 5.0 * c[1]).abs() < 1e-12));
+    }
 }
