@@ -1,0 +1,25 @@
+//! volmorph-trivariate: trivariate NURBS volumes carrying attribute volumes
+//! (Martin & Cohen, "Representation and Extraction of Volumetric Attributes Using Trivariate
+//! Splines", §2–§4).
+//!
+//! * [`Aggregate`] ([`AggregateCurve`], [`AggregateSurface`], [`AggregateVolume`]) — a geometry
+//!   spline in R³ plus named attribute splines, each with its own order, knots and control
+//!   net, on the shared domain `[0, 1]^N` ([`aggregate`] states the conventions).
+//! * [`extrude`], [`revolve`], [`rule`] — modeling operators lifting curves to surfaces and
+//!   surfaces to volumes, carrying attributes along ([`modeling`]).
+//! * [`format`] — the documented JSON file format with [`load`] / [`save`].
+//!
+//! The spline machinery (knot vectors, bases, refinement, Greville interpolation) is
+//! `volmorph_spline`'s; this crate builds on it.
+
+pub mod aggregate;
+mod error;
+pub mod eval;
+pub mod modeling;
+
+pub use aggregate::{
+    Aggregate, AggregateCurve, AggregateSurface, AggregateVolume, Attribute, GEOMETRY_DIM,
+};
+pub use error::TrivariateError;
+pub use eval::{EvalMethod, VolumeEvaluator};
+pub use modeling::{extrude, revolve, rule};
