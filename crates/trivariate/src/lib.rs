@@ -15,6 +15,7 @@
 pub mod aggregate;
 mod error;
 pub mod eval;
+pub mod format;
 pub mod modeling;
 
 pub use aggregate::{
@@ -22,4 +23,5 @@ pub use aggregate::{
 };
 pub use error::TrivariateError;
 pub use eval::{EvalMethod, VolumeEvaluator};
+pub use format::{AnyAggregate, load, load_volume, save};
 pub use modeling::{extrude, revolve, rule};
