@@ -15,6 +15,7 @@
 pub mod aggregate;
 mod error;
 pub mod eval;
+pub mod fit;
 pub mod format;
 pub mod modeling;
 
