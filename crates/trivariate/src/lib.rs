@@ -8,6 +8,10 @@
 //! * [`extrude`], [`revolve`], [`rule`] — modeling operators lifting curves to surfaces and
 //!   surfaces to volumes, carrying attributes along ([`modeling`]).
 //! * [`format`] — the documented JSON file format with [`load`] / [`save`].
+//! * [`fit`] — interpolation at the Greville abscissae and separable least squares (§3).
+//! * [`VolumeEvaluator`] — points and first partial derivatives by knot refinement (the α
+//!   scheme of §4) or de Boor, per point or in rayon batches ([`eval`]).
+//! * [`invert`] — physical point → parameters by Newton with a subdivision fallback.
 //!
 //! The spline machinery (knot vectors, bases, refinement, Greville interpolation) is
 //! `volmorph_spline`'s; this crate builds on it.
@@ -17,6 +21,7 @@ mod error;
 pub mod eval;
 pub mod fit;
 pub mod format;
+pub mod invert;
 pub mod modeling;
 
 pub use aggregate::{
@@ -25,4 +30,5 @@ pub use aggregate::{
 pub use error::TrivariateError;
 pub use eval::{EvalMethod, VolumeEvaluator};
 pub use format::{AnyAggregate, load, load_volume, save};
+pub use invert::{InversionOptions, invert};
 pub use modeling::{extrude, revolve, rule};
