@@ -56,14 +56,21 @@ pub enum EvalMethod {
 /// point `s − p + q` to give the refined point `D_{μ−k+1}` (the curve point), `deriv[q]` gives
 /// the derivative. `knots` is the full knot vector, `s` a non-empty span containing `t`.
 #[inline]
-fn alpha_rows(knots: &[f64], p: usize, s: usize, t: f64, point: &mut [f64], deriv: &mut [f64]) {
+fn alpha_rows<const R: usize>(
+    knots: &[f64],
+    p: usize,
+    s: usize,
+    t: f64,
+    point: &mut [f64],
+    deriv: &mut [f64],
+) {
     if p == 0 {
         point[0] = 1.0;
         deriv[0] = 0.0;
         return;
     }
-    let mut l = [0.0; ROW];
-    let mut r = [0.0; ROW];
+    let mut l = [0.0; R];
+    let mut r = [0.0; R];
     l[p - 1] = 1.0;
     r[p] = 1.0;
     // Levels p−1 … 1 of the triangle, from the leaves towards the control points.
@@ -146,6 +153,26 @@ impl<'a> VolumeEvaluator<'a> {
         value: &mut [f64],
         gradient: &mut [f64],
     ) -> Result<(), TrivariateError> {
+        let maxdeg = self.spline.degrees().into_iter().max().unwrap_or(0);
+        // Row buffers sized to the degree: zeroing MAX_DEGREE-sized buffers per point would
+        // cost more than the arithmetic of a tricubic evaluation.
+        if maxdeg < 4 {
+            self.refinement_kernel::<4>(u, value, gradient)
+        } else if maxdeg < 8 {
+            self.refinement_kernel::<8>(u, value, gradient)
+        } else {
+            self.refinement_kernel::<ROW>(u, value, gradient)
+        }
+    }
+
+    /// [`VolumeEvaluator::refinement_into`] with per-axis rows of `R > max degree` entries.
+    #[inline]
+    fn refinement_kernel<const R: usize>(
+        &self,
+        u: [f64; 3],
+        value: &mut [f64],
+        gradient: &mut [f64],
+    ) -> Result<(), TrivariateError> {
         let s = self.spline;
         let dim = s.dim();
         if value.len() < dim || gradient.len() < 3 * dim {
@@ -156,22 +183,22 @@ impl<'a> VolumeEvaluator<'a> {
             });
         }
         let knots = s.knots();
-        let mut pt = [[0.0; ROW]; 3];
-        let mut de = [[0.0; ROW]; 3];
+        let mut pt = [[0.0; R]; 3];
+        let mut de = [[0.0; R]; 3];
         let mut first = [0usize; 3];
         let mut ord = [0usize; 3];
         for a in 0..3 {
             let kv = &knots[a];
             let span = kv.find_span(u[a]).map_err(ctx("refinement evaluation"))?;
             let p = kv.degree();
-            alpha_rows(kv.knots(), p, span, u[a], &mut pt[a], &mut de[a]);
+            alpha_rows::<R>(kv.knots(), p, span, u[a], &mut pt[a], &mut de[a]);
             first[a] = span - p;
             ord[a] = p + 1;
         }
         let hdim = s.homogeneous_dim();
         macro_rules! go {
             ($h:literal) => {
-                contract::<$h>(s, first, ord, &pt, &de, value, gradient)
+                contract::<$h, R>(s, first, ord, &pt, &de, value, gradient)
             };
         }
         match hdim {
@@ -242,12 +269,12 @@ impl<'a> VolumeEvaluator<'a> {
 /// Sum-factorised application of the per-axis rows to the sub-net at `first` (homogeneous
 /// dimension `H`), then projection of rational results.
 #[inline]
-fn contract<const H: usize>(
+fn contract<const H: usize, const R: usize>(
     s: &TensorBSpline<3>,
     first: [usize; 3],
     ord: [usize; 3],
-    pt: &[[f64; ROW]; 3],
-    de: &[[f64; ROW]; 3],
+    pt: &[[f64; R]; 3],
+    de: &[[f64; R]; 3],
     value: &mut [f64],
     gradient: &mut [f64],
 ) {
@@ -355,7 +382,7 @@ mod tests {
         for i in 0..=50 {
             let t = f64::from(i) / 50.0;
             let s = kv.find_span(t).unwrap();
-            alpha_rows(kv.knots(), 3, s, t, &mut p, &mut d);
+            alpha_rows::<ROW>(kv.knots(), 3, s, t, &mut p, &mut d);
             let m = volmorph_spline::basis::basis_derivs(&kv, s, t, 1).unwrap();
             let (v, g) = m.split_at(4);
             for q in 0..4 {
