@@ -1,0 +1,479 @@
+//! Evaluation of trivariate splines: points and first partial derivatives (Martin & Cohen §4).
+//!
+//! Two methods give the same numbers (up to rounding; the tests check agreement):
+//!
+//! * [`EvalMethod::Refinement`] — the paper's scheme. Stacking `k − 1 = p` copies of `t` in the
+//!   span `[u_s, u_{s+1})` makes the refined control point `D_{μ−k+1}` the point on the curve,
+//!   and `D_{μ−k+2}` together with it gives the derivative (eq. 4). Only the rows of the
+//!   refinement matrix producing these points are generated, by the triangular α scheme run
+//!   from its leaves: the two leaf rows `l` (`= A_{μ−k}`, the blossom `P(t,…,t,u_s)`) and `r`
+//!   (`= A_{μ−k+2}`, the blossom `P(t,…,t,u_{s+1})`) are propagated together through the
+//!   `p − 1` levels that do not involve the first-level factor `γ = (t − u_s)/(u_{s+1} − u_s)`,
+//!   and the point row is their blend `(1 − γ)·l + γ·r` (paper, Figure 2). The derivative row is
+//!   `p/(u_{s+1} − t)·(A_{μ−k+2} − A_{μ−k+1}) = p/(u_{s+1} − u_s)·(r − l)`; the second form is
+//!   used because it stays finite at the right end of the domain, where `t = u_{s+1}`. The
+//!   per-axis rows are applied as `A_w ⊗² (A_v ⊗¹ (A_u ⊗⁰ P^w))` restricted to the four
+//!   refined points needed (point and one neighbour per axis), sum-factorised over the
+//!   `(p_u+1)(p_v+1)(p_w+1)` sub-net. For rational volumes the derivative of the projected
+//!   point is eq. (6), `P_u = p·w_{100}/((u_{s+1} − u_*)·w_{000})·(D_{100} − D_{000})`, which
+//!   is the quotient rule `(H_u − w_u·P)/w` on the homogeneous sums; the latter is computed.
+//! * [`EvalMethod::DeBoor`] — Cox–de Boor basis functions and their derivatives contracted with
+//!   the control net, as [`TensorBSpline::eval_with_gradient_into`] does.
+//!
+//! Output layout (both methods): `value[..dim]` is the point, `gradient[a·dim + c]` is
+//! `∂S_c/∂u_a` (axis-major, `a` = 0 for u). Neither method allocates per point.
+//! [`EvalMethod::default`] is the faster one on the benchmark `benches/evaluate.rs`.
+
+use rayon::prelude::*;
+use volmorph_spline::{MAX_DEGREE, TensorBSpline};
+
+use crate::TrivariateError;
+use crate::error::ctx;
+
+/// Per-axis row buffer length.
+const ROW: usize = MAX_DEGREE + 1;
+
+/// Largest homogeneous dimension (value dimension + 1 if rational) evaluated by the refinement
+/// kernel; larger attribute tuples use [`EvalMethod::DeBoor`].
+pub const MAX_REFINEMENT_HDIM: usize = 8;
+
+/// Points per rayon task in batch evaluation: large enough to amortise scheduling, small enough
+/// to balance two to a few dozen cores.
+const BATCH: usize = 4096;
+
+/// Which evaluation algorithm to use (see the [module docs](self)).
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
+pub enum EvalMethod {
+    /// Knot refinement with the triangular α scheme (Martin & Cohen §4). The default: it was
+    /// faster than de Boor on `benches/evaluate.rs`.
+    #[default]
+    Refinement,
+    /// Cox–de Boor basis contraction.
+    DeBoor,
+}
+
+/// The rows of the evaluation refinement matrix for one axis: `point[q]` multiplies control
+/// point `s − p + q` to give the refined point `D_{μ−k+1}` (the curve point), `deriv[q]` gives
+/// the derivative. `knots` is the full knot vector, `s` a non-empty span containing `t`.
+#[inline]
+fn alpha_rows<const R: usize>(
+    knots: &[f64],
+    p: usize,
+    s: usize,
+    t: f64,
+    point: &mut [f64],
+    deriv: &mut [f64],
+) {
+    if p == 0 {
+        point[0] = 1.0;
+        deriv[0] = 0.0;
+        return;
+    }
+    let mut l = [0.0; R];
+    let mut r = [0.0; R];
+    l[p - 1] = 1.0;
+    r[p] = 1.0;
+    // Levels p−1 … 1 of the triangle, from the leaves towards the control points.
+    for lev in (1..p).rev() {
+        l[lev - 1] = 0.0;
+        r[lev - 1] = 0.0;
+        for q in lev..=p {
+            let j = s + q - p;
+            let lo = knots[j];
+            let a = (t - lo) / (knots[j + p + 1 - lev] - lo);
+            let (tl, tr) = (l[q], r[q]);
+            l[q - 1] += (1.0 - a) * tl;
+            r[q - 1] += (1.0 - a) * tr;
+            l[q] = a * tl;
+            r[q] = a * tr;
+        }
+    }
+    let (us, ue) = (knots[s], knots[s + 1]);
+    let d = ue - us;
+    let g = (t - us) / d;
+    let c = p as f64 / d;
+    for q in 0..=p {
+        point[q] = (1.0 - g) * l[q] + g * r[q];
+        deriv[q] = c * (r[q] - l[q]);
+    }
+}
+
+/// A prepared evaluator for one trivariate spline (geometry or attribute).
+#[derive(Debug, Clone, Copy)]
+pub struct VolumeEvaluator<'a> {
+    spline: &'a TensorBSpline<3>,
+}
+
+impl<'a> VolumeEvaluator<'a> {
+    /// An evaluator borrowing `spline`.
+    #[must_use]
+    pub fn new(spline: &'a TensorBSpline<3>) -> Self {
+        Self { spline }
+    }
+
+    /// The evaluated spline.
+    #[must_use]
+    pub fn spline(&self) -> &'a TensorBSpline<3> {
+        self.spline
+    }
+
+    /// Point and first partial derivatives at `u` by `method` (layout in the
+    /// [module docs](self)). No allocation.
+    ///
+    /// # Errors
+    /// [`TrivariateError::Spline`] for parameters outside the domain (or NaN) and for
+    /// `value.len() < dim` or `gradient.len() < 3·dim`.
+    pub fn eval_into(
+        &self,
+        method: EvalMethod,
+        u: [f64; 3],
+        value: &mut [f64],
+        gradient: &mut [f64],
+    ) -> Result<(), TrivariateError> {
+        match method {
+            EvalMethod::Refinement if self.spline.homogeneous_dim() <= MAX_REFINEMENT_HDIM => {
+                self.refinement_into(u, value, gradient)
+            }
+            _ => self
+                .spline
+                .eval_with_gradient_into(u, value, gradient)
+                .map_err(ctx("de Boor evaluation")),
+        }
+    }
+
+    /// [`EvalMethod::Refinement`] evaluation (see [`VolumeEvaluator::eval_into`]); for
+    /// homogeneous dimensions above [`MAX_REFINEMENT_HDIM`] it returns
+    /// [`TrivariateError::InvalidArgument`].
+    ///
+    /// # Errors
+    /// As [`VolumeEvaluator::eval_into`].
+    pub fn refinement_into(
+        &self,
+        u: [f64; 3],
+        value: &mut [f64],
+        gradient: &mut [f64],
+    ) -> Result<(), TrivariateError> {
+        let maxdeg = self.spline.degrees().into_iter().max().unwrap_or(0);
+        // Row buffers sized to the degree: zeroing MAX_DEGREE-sized buffers per point would
+        // cost more than the arithmetic of a tricubic evaluation.
+        if maxdeg < 4 {
+            self.refinement_kernel::<4>(u, value, gradient)
+        } else if maxdeg < 8 {
+            self.refinement_kernel::<8>(u, value, gradient)
+        } else {
+            self.refinement_kernel::<ROW>(u, value, gradient)
+        }
+    }
+
+    /// [`VolumeEvaluator::refinement_into`] with per-axis rows of `R > max degree` entries.
+    #[inline]
+    fn refinement_kernel<const R: usize>(
+        &self,
+        u: [f64; 3],
+        value: &mut [f64],
+        gradient: &mut [f64],
+    ) -> Result<(), TrivariateError> {
+        let s = self.spline;
+        let dim = s.dim();
+        if value.len() < dim || gradient.len() < 3 * dim {
+            return Err(TrivariateError::DataLength {
+                what: "evaluation output",
+                expected: 4 * dim,
+                got: value.len().min(dim) + gradient.len(),
+            });
+        }
+        let knots = s.knots();
+        let mut pt = [[0.0; R]; 3];
+        let mut de = [[0.0; R]; 3];
+        let mut first = [0usize; 3];
+        let mut ord = [0usize; 3];
+        for a in 0..3 {
+            let kv = &knots[a];
+            let span = kv.find_span(u[a]).map_err(ctx("refinement evaluation"))?;
+            let p = kv.degree();
+            alpha_rows::<R>(kv.knots(), p, span, u[a], &mut pt[a], &mut de[a]);
+            first[a] = span - p;
+            ord[a] = p + 1;
+        }
+        let hdim = s.homogeneous_dim();
+        macro_rules! go {
+            ($h:literal) => {
+                contract::<$h, R>(s, first, ord, &pt, &de, value, gradient)
+            };
+        }
+        match hdim {
+            1 => go!(1),
+            2 => go!(2),
+            3 => go!(3),
+            4 => go!(4),
+            5 => go!(5),
+            6 => go!(6),
+            7 => go!(7),
+            8 => go!(8),
+            _ => {
+                return Err(TrivariateError::InvalidArgument(format!(
+                    "refinement evaluation supports at most {MAX_REFINEMENT_HDIM} homogeneous \
+                     coordinates, got {hdim}"
+                )));
+            }
+        }
+        Ok(())
+    }
+
+    /// Evaluate many parameter triples in parallel (rayon over batches of points):
+    /// `values[i·dim..]` and `gradients[i·3·dim..]` receive point `i` in the layout of
+    /// [`VolumeEvaluator::eval_into`].
+    ///
+    /// # Errors
+    /// [`TrivariateError::DataLength`] for output slices of the wrong length; the error of
+    /// the first failing point otherwise.
+    pub fn eval_batch(
+        &self,
+        method: EvalMethod,
+        params: &[[f64; 3]],
+        values: &mut [f64],
+        gradients: &mut [f64],
+    ) -> Result<(), TrivariateError> {
+        let dim = self.spline.dim();
+        if values.len() != params.len() * dim {
+            return Err(TrivariateError::DataLength {
+                what: "batch values",
+                expected: params.len() * dim,
+                got: values.len(),
+            });
+        }
+        if gradients.len() != params.len() * 3 * dim {
+            return Err(TrivariateError::DataLength {
+                what: "batch gradients",
+                expected: params.len() * 3 * dim,
+                got: gradients.len(),
+            });
+        }
+        params
+            .par_chunks(BATCH)
+            .zip(values.par_chunks_mut(BATCH * dim))
+            .zip(gradients.par_chunks_mut(BATCH * 3 * dim))
+            .try_for_each(|((ps, vs), gs)| {
+                for ((u, v), g) in ps
+                    .iter()
+                    .zip(vs.chunks_exact_mut(dim))
+                    .zip(gs.chunks_exact_mut(3 * dim))
+                {
+                    self.eval_into(method, *u, v, g)?;
+                }
+                Ok(())
+            })
+    }
+}
+
+/// Sum-factorised application of the per-axis rows to the sub-net at `first` (homogeneous
+/// dimension `H`), then projection of rational results.
+#[inline]
+fn contract<const H: usize, const R: usize>(
+    s: &TensorBSpline<3>,
+    first: [usize; 3],
+    ord: [usize; 3],
+    pt: &[[f64; R]; 3],
+    de: &[[f64; R]; 3],
+    value: &mut [f64],
+    gradient: &mut [f64],
+) {
+    let coefs = s.homogeneous_coefficients();
+    let [n0, n1, _] = s.counts();
+    let s1 = H * n0;
+    let s2 = s1 * n1;
+    let (o0, o1, o2) = (ord[0], ord[1], ord[2]);
+    let mut h = [0.0; H];
+    let mut hu = [0.0; H];
+    let mut hv = [0.0; H];
+    let mut hw = [0.0; H];
+    for k in 0..o2 {
+        let mut sp = [0.0; H];
+        let mut su = [0.0; H];
+        let mut sv = [0.0; H];
+        for j in 0..o1 {
+            let base = first[0] * H + (first[1] + j) * s1 + (first[2] + k) * s2;
+            let row = &coefs[base..base + o0 * H];
+            let mut rp = [0.0; H];
+            let mut ru = [0.0; H];
+            for (c, (&a, &b)) in row
+                .chunks_exact(H)
+                .zip(pt[0][..o0].iter().zip(&de[0][..o0]))
+            {
+                for x in 0..H {
+                    rp[x] += a * c[x];
+                    ru[x] += b * c[x];
+                }
+            }
+            let (bp, bd) = (pt[1][j], de[1][j]);
+            for x in 0..H {
+                sp[x] += bp * rp[x];
+                su[x] += bp * ru[x];
+                sv[x] += bd * rp[x];
+            }
+        }
+        let (cp, cd) = (pt[2][k], de[2][k]);
+        for x in 0..H {
+            h[x] += cp * sp[x];
+            hu[x] += cp * su[x];
+            hv[x] += cp * sv[x];
+            hw[x] += cd * sp[x];
+        }
+    }
+    let dim = s.dim();
+    if s.is_rational() {
+        let w = h[dim];
+        let inv = 1.0 / w;
+        for c in 0..dim {
+            let p = h[c] * inv;
+            value[c] = p;
+            gradient[c] = (hu[c] - hu[dim] * p) * inv;
+            gradient[dim + c] = (hv[c] - hv[dim] * p) * inv;
+            gradient[2 * dim + c] = (hw[c] - hw[dim] * p) * inv;
+        }
+    } else {
+        value[..dim].copy_from_slice(&h[..dim]);
+        gradient[..dim].copy_from_slice(&hu[..dim]);
+        gradient[dim..2 * dim].copy_from_slice(&hv[..dim]);
+        gradient[2 * dim..3 * dim].copy_from_slice(&hw[..dim]);
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use proptest::prelude::*;
+    use volmorph_spline::KnotVector;
+
+    /// A random rational volume from a seed (deterministic LCG), with non-uniform clamped knots.
+    pub(crate) fn random_volume(
+        seed: u64,
+        deg: [usize; 3],
+        n: [usize; 3],
+        dim: usize,
+    ) -> TensorBSpline<3> {
+        let mut state = seed
+            .wrapping_mul(6364136223846793005)
+            .wrapping_add(1442695040888963407);
+        let mut next = move || {
+            state = state
+                .wrapping_mul(6364136223846793005)
+                .wrapping_add(1442695040888963407);
+            (state >> 11) as f64 / (1u64 << 53) as f64
+        };
+        let knots: [KnotVector; 3] = std::array::from_fn(|a| {
+            let m = n[a] - deg[a] - 1;
+            let mut interior: Vec<f64> = (0..m).map(|_| 0.05 + 0.9 * next()).collect();
+            interior.sort_by(f64::total_cmp);
+            KnotVector::clamped(deg[a], &interior, [0.0, 1.0]).unwrap()
+        });
+        let count = n[0] * n[1] * n[2];
+        let pts: Vec<f64> = (0..count * dim).map(|_| 4.0 * next() - 2.0).collect();
+        let ws: Vec<f64> = (0..count).map(|_| 0.3 + 2.0 * next()).collect();
+        TensorBSpline::new_rational(knots, dim, pts, ws).unwrap()
+    }
+
+    #[test]
+    fn alpha_rows_are_basis_and_derivative() {
+        let kv =
+            KnotVector::new(3, vec![0., 0., 0., 0., 0.2, 0.5, 0.5, 0.9, 1., 1., 1., 1.]).unwrap();
+        let mut p = [0.0; ROW];
+        let mut d = [0.0; ROW];
+        for i in 0..=50 {
+            let t = f64::from(i) / 50.0;
+            let s = kv.find_span(t).unwrap();
+            alpha_rows::<ROW>(kv.knots(), 3, s, t, &mut p, &mut d);
+            let m = volmorph_spline::basis::basis_derivs(&kv, s, t, 1).unwrap();
+            let (v, g) = m.split_at(4);
+            for q in 0..4 {
+                assert!((p[q] - v[q]).abs() < 1e-14, "t={t} q={q}");
+                assert!((d[q] - g[q]).abs() < 1e-11, "t={t} q={q}");
+            }
+        }
+    }
+
+    #[test]
+    fn linear_precision_of_identity_volume() {
+        let kv = |n| KnotVector::clamped_uniform(3, n, [0.0, 1.0]).unwrap();
+        let s = TensorBSpline::identity([kv(5), kv(6), kv(7)]).unwrap();
+        let e = VolumeEvaluator::new(&s);
+        let mut v = [0.0; 3];
+        let mut g = [0.0; 9];
+        e.refinement_into([0.3, 0.71, 1.0], &mut v, &mut g).unwrap();
+        for (x, y) in v.iter().zip([0.3, 0.71, 1.0]) {
+            assert!((x - y).abs() < 1e-14);
+        }
+        for a in 0..3 {
+            for c in 0..3 {
+                let want = if a == c { 1.0 } else { 0.0 };
+                assert!((g[3 * a + c] - want).abs() < 1e-12);
+            }
+        }
+        assert!(e.refinement_into([1.2, 0.0, 0.0], &mut v, &mut g).is_err());
+        assert!(
+            e.refinement_into([f64::NAN, 0.0, 0.0], &mut v, &mut g)
+                .is_err()
+        );
+        assert!(e.refinement_into([0.0; 3], &mut v[..2], &mut g).is_err());
+    }
+
+    #[test]
+    fn batch_matches_pointwise() {
+        let s = random_volume(7, [3, 2, 3], [8, 5, 6], 3);
+        let e = VolumeEvaluator::new(&s);
+        let params: Vec<[f64; 3]> = (0..10_000)
+            .map(|i| {
+                let f = f64::from(i);
+                [
+                    (f * 0.618_034).fract(),
+                    (f * 0.414_214).fract(),
+                    (f * 0.732_051).fract(),
+                ]
+            })
+            .collect();
+        let mut vs = vec![0.0; params.len() * 3];
+        let mut gs = vec![0.0; params.len() * 9];
+        e.eval_batch(EvalMethod::default(), &params, &mut vs, &mut gs)
+            .unwrap();
+        let mut v = [0.0; 3];
+        let mut g = [0.0; 9];
+        for (i, u) in params.iter().enumerate().step_by(997) {
+            e.eval_into(EvalMethod::default(), *u, &mut v, &mut g)
+                .unwrap();
+            assert_eq!(&vs[3 * i..3 * i + 3], &v, "point {i}");
+            assert_eq!(&gs[9 * i..9 * i + 9], &g, "point {i}");
+        }
+        assert!(
+            e.eval_batch(EvalMethod::DeBoor, &params, &mut vs[1..], &mut gs)
+                .is_err()
+        );
+    }
+
+    proptest! {
+        #![proptest_config(ProptestConfig::with_cases(64))]
+        #[test]
+        fn refinement_equals_de_boor(
+            seed in any::<u64>(),
+            d0 in 0usize..4, d1 in 1usize..5, d2 in 1usize..4,
+            extra in 0usize..4, dim in 1usize..5,
+            u in 0.0f64..=1.0, v in 0.0f64..=1.0, w in 0.0f64..=1.0,
+        ) {
+            let deg = [d0, d1, d2];
+            let n = [d0 + 1 + extra, d1 + 2, d2 + 1 + extra / 2];
+            let s = random_volume(seed, deg, n, dim);
+            let e = VolumeEvaluator::new(&s);
+            let mut v1 = vec![0.0; dim];
+            let mut g1 = vec![0.0; 3 * dim];
+            let mut v2 = v1.clone();
+            let mut g2 = g1.clone();
+            e.eval_into(EvalMethod::Refinement, [u, v, w], &mut v1, &mut g1).unwrap();
+            e.eval_into(EvalMethod::DeBoor, [u, v, w], &mut v2, &mut g2).unwrap();
+            for (a, b) in v1.iter().zip(&v2) {
+                prop_assert!((a - b).abs() <= 1e-11 * (1.0 + b.abs()), "{a} vs {b}");
+            }
+            for (a, b) in g1.iter().zip(&g2) {
+                prop_assert!((a - b).abs() <= 1e-9 * (1.0 + b.abs()), "{a} vs {b}");
+            }
+        }
+    }
+}

@@ -1,0 +1,280 @@
+//! Point inversion: physical point → parameters of a trivariate geometry volume.
+//!
+//! Newton's iteration `u_{k+1} = u_k + J(u_k)⁻¹ (x − P(u_k))` (the iteration the paper uses to
+//! walk through volumes, §5.2 eq. 9), with steps clamped to the domain `[0, 1]³` and the 3×3
+//! system solved by Gaussian elimination with partial pivoting. If Newton from the starting
+//! guess does not converge, a **subdivision fallback** splits the volume (exact knot
+//! insertion, `TensorBSpline::split`) breadth-first, discards pieces whose control-point
+//! bounding box does not contain the point (the convex hull property of NURBS with positive
+//! weights), and restarts Newton from the parametric centre of each surviving piece.
+
+use std::collections::VecDeque;
+
+use volmorph_spline::TensorBSpline;
+
+use crate::TrivariateError;
+use crate::error::ctx;
+use crate::eval::{EvalMethod, VolumeEvaluator};
+
+/// Controls of [`invert`].
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct InversionOptions {
+    /// Accept parameters whose image is within this physical distance of the target
+    /// (caller's length unit).
+    pub tolerance: f64,
+    /// Newton iterations per start.
+    pub max_iterations: usize,
+    /// Deepest subdivision level (each level halves one parametric axis).
+    pub max_depth: usize,
+    /// Most pieces examined by the subdivision fallback (bounds the work for points outside
+    /// the volume).
+    pub max_pieces: usize,
+}
+
+impl Default for InversionOptions {
+    /// `tolerance = 1e-10`, 30 iterations, depth 15 (5 halvings per axis), 2048 pieces.
+    fn default() -> Self {
+        Self {
+            tolerance: 1e-10,
+            max_iterations: 30,
+            max_depth: 15,
+            max_pieces: 2048,
+        }
+    }
+}
+
+/// Solve the 3×3 system `j · x = b` (j column-major: `j[a]` = ∂P/∂u_a) by Gaussian elimination
+/// with partial pivoting; `None` if singular.
+fn solve3(j: &[f64; 9], b: [f64; 3]) -> Option<[f64; 3]> {
+    // Row-major augmented matrix: m[r][c] = ∂P_r/∂u_c.
+    let mut m = [[0.0; 4]; 3];
+    for r in 0..3 {
+        for c in 0..3 {
+            m[r][c] = j[3 * c + r];
+        }
+        m[r][3] = b[r];
+    }
+    let scale = j.iter().fold(0.0f64, |s, v| s.max(v.abs()));
+    if scale == 0.0 || !scale.is_finite() {
+        return None;
+    }
+    for col in 0..3 {
+        let piv = (col..3).max_by(|&a, &b| m[a][col].abs().total_cmp(&m[b][col].abs()))?;
+        if m[piv][col].abs() <= 1e-14 * scale {
+            return None;
+        }
+        m.swap(col, piv);
+        for r in col + 1..3 {
+            let f = m[r][col] / m[col][col];
+            let pivot_row = m[col];
+            for (dst, &src) in m[r][col..].iter_mut().zip(&pivot_row[col..]) {
+                *dst -= f * src;
+            }
+        }
+    }
+    let mut x = [0.0; 3];
+    for r in (0..3).rev() {
+        let mut s = m[r][3];
+        for c in r + 1..3 {
+            s -= m[r][c] * x[c];
+        }
+        x[r] = s / m[r][r];
+    }
+    Some(x)
+}
+
+fn dist(a: [f64; 3], b: [f64; 3]) -> f64 {
+    ((a[0] - b[0]).powi(2) + (a[1] - b[1]).powi(2) + (a[2] - b[2]).powi(2)).sqrt()
+}
+
+/// Newton from `u0`; returns the best parameters and their distance.
+fn newton(
+    e: &VolumeEvaluator<'_>,
+    x: [f64; 3],
+    u0: [f64; 3],
+    opts: &InversionOptions,
+) -> Result<([f64; 3], f64), TrivariateError> {
+    let mut u = u0;
+    let mut p = [0.0; 3];
+    let mut g = [0.0; 9];
+    let mut best = (u, f64::INFINITY);
+    for _ in 0..=opts.max_iterations {
+        e.eval_into(EvalMethod::default(), u, &mut p, &mut g)?;
+        let d = dist(p, x);
+        if d < best.1 {
+            best = (u, d);
+        }
+        if d <= opts.tolerance {
+            break;
+        }
+        let Some(step) = solve3(&g, [x[0] - p[0], x[1] - p[1], x[2] - p[2]]) else {
+            break;
+        };
+        let next = std::array::from_fn(|a| (u[a] + step[a]).clamp(0.0, 1.0));
+        if next == u {
+            break;
+        }
+        u = next;
+    }
+    Ok(best)
+}
+
+/// Parameters `u ∈ [0, 1]³` with `|geometry(u) − x| ≤ options.tolerance`, by Newton from
+/// `guess` (the parametric centre when `None`) with a subdivision fallback (see the
+/// [module docs](self)). `geometry` must have 3 coordinates.
+///
+/// # Errors
+/// [`TrivariateError::GeometryDimension`] unless the geometry is 3-D;
+/// [`TrivariateError::InvalidArgument`] for non-finite input or a non-positive tolerance;
+/// [`TrivariateError::InversionFailed`] when no parameters are found (e.g. the point lies
+/// outside the volume), with the smallest distance reached.
+pub fn invert(
+    geometry: &TensorBSpline<3>,
+    x: [f64; 3],
+    guess: Option<[f64; 3]>,
+    options: &InversionOptions,
+) -> Result<[f64; 3], TrivariateError> {
+    if geometry.dim() != 3 {
+        return Err(TrivariateError::GeometryDimension {
+            expected: 3,
+            got: geometry.dim(),
+        });
+    }
+    if !x.iter().all(|v| v.is_finite()) || options.tolerance.is_nan() || options.tolerance <= 0.0 {
+        return Err(TrivariateError::InvalidArgument(format!(
+            "point {x:?} must be finite and tolerance {} positive",
+            options.tolerance
+        )));
+    }
+    let e = VolumeEvaluator::new(geometry);
+    let start = guess.unwrap_or([0.5; 3]);
+    let (u, mut best) = newton(&e, x, start.map(|v| v.clamp(0.0, 1.0)), options)?;
+    if best <= options.tolerance {
+        return Ok(u);
+    }
+    let mut queue = VecDeque::new();
+    queue.push_back((geometry.clone(), 0usize));
+    let mut seen = 0usize;
+    while let Some((piece, depth)) = queue.pop_front() {
+        seen += 1;
+        if seen > options.max_pieces {
+            break;
+        }
+        let pts = piece.control_points();
+        let mut lo = [f64::INFINITY; 3];
+        let mut hi = [f64::NEG_INFINITY; 3];
+        for c in pts.chunks_exact(3) {
+            for k in 0..3 {
+                lo[k] = lo[k].min(c[k]);
+                hi[k] = hi[k].max(c[k]);
+            }
+        }
+        if (0..3).any(|k| x[k] < lo[k] - options.tolerance || x[k] > hi[k] + options.tolerance) {
+            continue;
+        }
+        let dom = piece.domain();
+        let centre = dom.map(|[a, b]| 0.5 * (a + b));
+        let (u, d) = newton(&e, x, centre, options)?;
+        if d <= options.tolerance {
+            return Ok(u);
+        }
+        best = best.min(d);
+        if depth < options.max_depth {
+            let axis = depth % 3;
+            let [a, b] = dom[axis];
+            let (l, r) = piece
+                .split(axis, 0.5 * (a + b))
+                .map_err(ctx("inversion subdivision"))?;
+            queue.push_back((l, depth + 1));
+            queue.push_back((r, depth + 1));
+        }
+    }
+    Err(TrivariateError::InversionFailed {
+        x: x[0],
+        y: x[1],
+        z: x[2],
+        residual: best,
+    })
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::{AggregateCurve, AggregateSurface, AggregateVolume, extrude, revolve};
+    use volmorph_spline::KnotVector;
+
+    fn deformed_cube() -> TensorBSpline<3> {
+        let kv = KnotVector::clamped_uniform(3, 5, [0.0, 1.0]).unwrap();
+        let mut pts = Vec::new();
+        let mut ws = Vec::new();
+        for k in 0..5 {
+            for j in 0..5 {
+                for i in 0..5 {
+                    let (x, y, z) = (f64::from(i), f64::from(j), f64::from(k));
+                    pts.extend([
+                        x + 0.2 * (y * z).sin(),
+                        y + 0.15 * (x * 1.3).cos(),
+                        z + 0.1 * x * y / 4.0,
+                    ]);
+                    ws.push(1.0 + 0.1 * ((i + 2 * j + k) % 3) as f64);
+                }
+            }
+        }
+        TensorBSpline::new_rational([kv.clone(), kv.clone(), kv], 3, pts, ws).unwrap()
+    }
+
+    #[test]
+    fn newton_inverts_a_smooth_volume() {
+        let s = deformed_cube();
+        let opts = InversionOptions::default();
+        for i in 0..50 {
+            let f = f64::from(i);
+            let u = [
+                (f * 0.618).fract(),
+                (f * 0.414).fract(),
+                (f * 0.732).fract(),
+            ];
+            let x = s.eval(u).unwrap();
+            let got = invert(&s, [x[0], x[1], x[2]], None, &opts).unwrap();
+            let back = s.eval(got).unwrap();
+            assert!(dist([back[0], back[1], back[2]], [x[0], x[1], x[2]]) <= 1e-10);
+            for a in 0..3 {
+                assert!((got[a] - u[a]).abs() < 1e-8, "{got:?} vs {u:?}");
+            }
+        }
+        assert!(matches!(
+            invert(&s, [100.0, 0.0, 0.0], None, &opts),
+            Err(TrivariateError::InversionFailed { .. })
+        ));
+        assert!(invert(&s, [f64::NAN, 0.0, 0.0], None, &opts).is_err());
+    }
+
+    #[test]
+    fn subdivision_rescues_newton_on_a_thick_shell() {
+        // A 350° revolved annulus: Newton from the centre parameter lands on the wrong side.
+        let kv = KnotVector::clamped_uniform(1, 2, [0.0, 1.0]).unwrap();
+        let c = AggregateCurve::new(
+            TensorBSpline::new([kv], 3, vec![1.0, 0.0, 0.0, 2.0, 0.0, 0.0]).unwrap(),
+        )
+        .unwrap();
+        let ring: AggregateSurface =
+            revolve(&c, [0.0; 3], [0.0, 0.0, 1.0], 350f64.to_radians()).unwrap();
+        let v: AggregateVolume = extrude(&ring, [0.0, 0.0, 1.0]).unwrap();
+        let g = v.geometry();
+        let opts = InversionOptions::default();
+        for u in [
+            [0.3, 0.02, 0.5],
+            [0.9, 0.97, 0.1],
+            [0.5, 0.5, 0.5],
+            [0.1, 0.75, 0.9],
+        ] {
+            let x = g.eval(u).unwrap();
+            let got = invert(g, [x[0], x[1], x[2]], Some([0.5, 0.0, 0.5]), &opts).unwrap();
+            for a in 0..3 {
+                assert!((got[a] - u[a]).abs() < 1e-8, "{got:?} vs {u:?}");
+            }
+        }
+        // The hole of the ring is not part of the volume.
+        assert!(invert(g, [0.0, 0.0, 0.5], None, &opts).is_err());
+    }
+}

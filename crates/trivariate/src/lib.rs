@@ -1,0 +1,34 @@
+//! volmorph-trivariate: trivariate NURBS volumes carrying attribute volumes
+//! (Martin & Cohen, "Representation and Extraction of Volumetric Attributes Using Trivariate
+//! Splines", §2–§4).
+//!
+//! * [`Aggregate`] ([`AggregateCurve`], [`AggregateSurface`], [`AggregateVolume`]) — a geometry
+//!   spline in R³ plus named attribute splines, each with its own order, knots and control
+//!   net, on the shared domain `[0, 1]^N` ([`aggregate`] states the conventions).
+//! * [`extrude`], [`revolve`], [`rule`] — modeling operators lifting curves to surfaces and
+//!   surfaces to volumes, carrying attributes along ([`modeling`]).
+//! * [`format`] — the documented JSON file format with [`load`] / [`save`].
+//! * [`fit`] — interpolation at the Greville abscissae and separable least squares (§3).
+//! * [`VolumeEvaluator`] — points and first partial derivatives by knot refinement (the α
+//!   scheme of §4) or de Boor, per point or in rayon batches ([`eval`]).
+//! * [`invert`] — physical point → parameters by Newton with a subdivision fallback.
+//!
+//! The spline machinery (knot vectors, bases, refinement, Greville interpolation) is
+//! `volmorph_spline`'s; this crate builds on it.
+
+pub mod aggregate;
+mod error;
+pub mod eval;
+pub mod fit;
+pub mod format;
+pub mod invert;
+pub mod modeling;
+
+pub use aggregate::{
+    Aggregate, AggregateCurve, AggregateSurface, AggregateVolume, Attribute, GEOMETRY_DIM,
+};
+pub use error::TrivariateError;
+pub use eval::{EvalMethod, VolumeEvaluator};
+pub use format::{AnyAggregate, load, load_volume, save};
+pub use invert::{InversionOptions, invert};
+pub use modeling::{extrude, revolve, rule};
