@@ -50,6 +50,7 @@ pub mod json;
 pub mod lattice;
 pub mod manipulate;
 pub mod map;
+pub mod volume_spline;
 
 pub use error::DeformError;
 pub use inverse::{InverseOptions, InverseStatus, PointInverse, invert_point};
@@ -58,3 +59,4 @@ pub use manipulate::{
     Drag, DragError, DragOptions, DragSolution, ManipulationSession, solve_drags,
 };
 pub use map::{Affine, Compose, Identity, SpaceMap};
+pub use volume_spline::{ThinPlateMap, VolumeSpline, VolumeSplineSystem};

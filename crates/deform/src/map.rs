@@ -325,6 +325,22 @@ macro_rules! forward_space_map {
 
 forward_space_map!(&M, Box<M>);
 
+/// Helpers shared by the crate's unit tests.
+#[cfg(test)]
+pub(crate) mod tests_support {
+    use glam::{DMat3, DVec3};
+
+    use super::SpaceMap;
+
+    /// Central-difference Jacobian with a fixed step `1e-6·max(1, |p|∞)`, independent of any
+    /// override of [`SpaceMap::jacobian`].
+    pub(crate) fn central_jacobian<M: SpaceMap + ?Sized>(m: &M, p: DVec3) -> DMat3 {
+        let h = 1e-6 * p.abs().max_element().max(1.0);
+        let col = |e: DVec3| (m.apply(p + h * e) - m.apply(p - h * e)) / (2.0 * h);
+        DMat3::from_cols(col(DVec3::X), col(DVec3::Y), col(DVec3::Z))
+    }
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
