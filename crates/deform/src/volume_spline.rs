@@ -980,7 +980,7 @@ mod tests {
         assert!((m.apply(x) - fresh.apply(x)).length() < 1e-10);
         // Analytic Jacobian against differences.
         let (_, j) = m.apply_with_jacobian(x);
-        let fd = crate::map::tests_support::central_jacobian(&m, x);
+        let fd = crate::map::central_jacobian(&m, x);
         assert!((j - fd).abs_diff_eq(DMat3::ZERO, 1e-6), "{j:?} {fd:?}");
         assert!(m.move_target(99, x).is_err());
         assert!(m.set_targets(&tgt[..3]).is_err());
