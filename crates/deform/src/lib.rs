@@ -53,6 +53,7 @@ pub mod bump;
 mod error;
 pub mod formats;
 pub mod grid;
+pub mod handles;
 pub mod inverse;
 pub mod jacobian;
 pub mod json;
@@ -65,6 +66,7 @@ pub mod volume_spline;
 
 pub use bump::BumpMap;
 pub use error::DeformError;
+pub use handles::HandleSet;
 pub use inverse::{InverseOptions, InverseStatus, PointInverse, invert_point};
 pub use lattice::{BSplineLattice, LatticeFrame};
 pub use manipulate::{
