@@ -61,6 +61,7 @@ pub mod lattice;
 pub mod manipulate;
 pub mod map;
 pub mod mls;
+pub mod mls2d;
 pub mod realtime;
 pub mod volume_spline;
 
