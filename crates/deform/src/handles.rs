@@ -182,6 +182,21 @@ impl HandleSet {
         self.points.iter().map(|p| p.1).collect()
     }
 
+    /// Check that the point handles' sources are distinct (to
+    /// [`crate::mls::MIN_HANDLE_SEPARATION`] of their radius) and every coordinate finite:
+    /// a source sent to two targets is a contradiction for every map, whichever direction it
+    /// is later built in.
+    ///
+    /// # Errors
+    /// [`DeformError::InvalidHandles`] naming the coincident pair, [`DeformError::NonFinite`].
+    pub fn validate(&self) -> Result<(), DeformError> {
+        let (s, t) = (self.sources(), self.targets());
+        if s.is_empty() {
+            return Ok(());
+        }
+        crate::mls::check_handles(&s, &t, 0, "a handle set")
+    }
+
     /// Pair two point lists by order (3D).
     ///
     /// # Errors

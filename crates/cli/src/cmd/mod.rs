@@ -4,6 +4,7 @@ pub mod bench;
 pub mod convert;
 pub mod demo;
 pub mod drag;
+pub mod handles;
 pub mod info;
 pub mod isosurface;
 pub mod lattice;
