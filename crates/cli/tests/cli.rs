@@ -1055,3 +1055,36 @@ fn mls2d_deforms_a_picture_and_reports_folds() {
     assert!(err.contains("integer"), "{err}");
     assert!(!out.exists());
 }
+
+#[test]
+fn handles_apply_maps_points_forward_with_full_precision() {
+    let dir = tempfile::tempdir().unwrap();
+    let h = dir.path().join("h.json");
+    std::fs::write(&h, handle_json(|p| [p[0] + 0.125, p[1] - 0.5, p[2]])).unwrap();
+    let pts = dir.path().join("p.txt");
+    std::fs::write(&pts, "0.1 0.2 0.3\n-0.6 -0.5 -0.7\n").unwrap();
+    for method in ["affine", "similarity", "rigid", "tps"] {
+        let out = dir.path().join(format!("{method}.txt"));
+        ok(&[
+            &"handles",
+            &"apply",
+            &pts,
+            &"--handles",
+            &h,
+            &"--method",
+            &method,
+            &"-o",
+            &out,
+        ]);
+        let text = std::fs::read_to_string(&out).unwrap();
+        let v: Vec<f64> = text
+            .split_whitespace()
+            .map(|t| t.parse().unwrap())
+            .collect();
+        // A translation of all handles is followed exactly by every method.
+        let expect = [0.225, -0.3, 0.3, -0.475, -1.0, -0.7];
+        for (a, b) in v.iter().zip(expect) {
+            assert!((a - b).abs() < 1e-12, "{method}: {v:?}");
+        }
+    }
+}

@@ -39,6 +39,25 @@ pub enum Command {
         after_help = "Examples:\n  volmorph handles warp ct.nii.gz --handles moves.json --method rigid -o ct_moved.nii.gz\n  volmorph handles warp teapot.ply --from src.fcsv --to dst.fcsv --method tps -o bent.ply\n  volmorph handles warp ct.nii.gz --handles pairs.txt --method affine --exact -o exact.nii.gz\n\nHandle files: .json {\"points\": [{\"source\": [x,y,z], \"target\": [x,y,z]}], \"frames\": [...]}\n(pairs), .txt/.xyz with 6 numbers per line (pairs), or two point lists (--from/--to,\n.fcsv Slicer markups or 3 numbers per line) paired by order."
     )]
     Warp(WarpArgs),
+    /// Map a list of points (forward: sources go to targets) and write them as text, one
+    /// `x y z` per line with every digit needed to read the same f64 back.
+    #[command(
+        after_help = "Example:\n  volmorph handles apply probes.txt --handles moves.json --method tps -o mapped.txt"
+    )]
+    Apply(ApplyArgs),
+}
+
+/// Arguments of `volmorph handles apply`.
+#[derive(Debug, clap::Args)]
+pub struct ApplyArgs {
+    /// Points to map: .fcsv (Slicer) or text with 3 numbers per line.
+    pub input: PathBuf,
+    /// The deformation, as for `handles warp`.
+    #[command(flatten)]
+    pub map: MapArgs,
+    /// Output text file.
+    #[arg(short, long)]
+    pub output: PathBuf,
 }
 
 /// Deformation method of `volmorph handles warp`.
@@ -65,11 +84,9 @@ pub enum WeightKind {
     Gaussian,
 }
 
-/// Arguments of `volmorph handles warp`.
+/// The handles and method of a deformation (shared by `handles warp` and `handles apply`).
 #[derive(Debug, clap::Args)]
-pub struct WarpArgs {
-    /// Input volume (.nii, .nii.gz, .mha, .mhd, .nrrd, .vtk) or mesh (.obj, .stl, .ply, .off).
-    pub input: PathBuf,
+pub struct MapArgs {
     /// Handle pairs: volmorph handle JSON, or text with 6 numbers per line.
     #[arg(long, conflicts_with_all = ["from", "to"])]
     pub handles: Option<PathBuf>,
@@ -97,6 +114,16 @@ pub struct WarpArgs {
     /// Smoothing of the thin-plate spline (0 interpolates the handles).
     #[arg(long, default_value_t = 0.0)]
     pub smoothing: f64,
+}
+
+/// Arguments of `volmorph handles warp`.
+#[derive(Debug, clap::Args)]
+pub struct WarpArgs {
+    /// Input volume (.nii, .nii.gz, .mha, .mhd, .nrrd, .vtk) or mesh (.obj, .stl, .ply, .off).
+    pub input: PathBuf,
+    /// The deformation.
+    #[command(flatten)]
+    pub map: MapArgs,
     /// Nodes per axis of the coarse grid the map is sampled on (trilinear in between) for
     /// volumes and for the fold report.
     #[arg(long, default_value_t = 32)]
@@ -116,11 +143,12 @@ pub struct WarpArgs {
 pub fn run(cmd: &Command) -> anyhow::Result<()> {
     match cmd {
         Command::Warp(a) => warp(a),
+        Command::Apply(a) => apply(a),
     }
 }
 
 /// Read the handle set of `--handles` or `--from/--to`.
-fn read_handle_set(a: &WarpArgs) -> anyhow::Result<HandleSet> {
+fn read_handle_set(a: &MapArgs) -> anyhow::Result<HandleSet> {
     match (&a.handles, &a.from, &a.to) {
         (Some(h), _, _) => {
             HandleSet::read(h).with_context(|| format!("cannot read handles {}", h.display()))
@@ -136,7 +164,7 @@ fn read_handle_set(a: &WarpArgs) -> anyhow::Result<HandleSet> {
     }
 }
 
-fn weighting(a: &WarpArgs) -> anyhow::Result<Weighting> {
+fn weighting(a: &MapArgs) -> anyhow::Result<Weighting> {
     Ok(match a.weight {
         WeightKind::InverseDistance => Weighting::InverseDistance { alpha: a.alpha },
         WeightKind::Gaussian => Weighting::Gaussian {
@@ -148,7 +176,7 @@ fn weighting(a: &WarpArgs) -> anyhow::Result<Weighting> {
 }
 
 /// The map sending `sources` to `targets` (points or frames) by `a.method`.
-fn build_map(a: &WarpArgs, set: &HandleSet, swap: bool) -> anyhow::Result<Box<dyn SpaceMap>> {
+fn build_map(a: &MapArgs, set: &HandleSet, swap: bool) -> anyhow::Result<Box<dyn SpaceMap>> {
     if set.dim != 3 {
         bail!(
             "3D deformations need 3D handles (the file has {}D coordinates)",
@@ -213,12 +241,12 @@ fn warp(a: &WarpArgs) -> anyhow::Result<()> {
     if a.grid < 2 {
         bail!("--grid must be at least 2 nodes per axis, got {}", a.grid);
     }
-    let set = read_handle_set(a)?;
+    let set = read_handle_set(&a.map)?;
     set.validate().context("bad handles")?;
     let pb = progress::spinner(format!("reading {}", a.input.display()));
     if is_mesh(&a.input) {
         let mut m = volmorph_mesh::read(&a.input).context("cannot read mesh")?;
-        let map = build_map(a, &set, false).context("cannot build the deformation")?;
+        let map = build_map(&a.map, &set, false).context("cannot build the deformation")?;
         pb.set_message("moving vertices");
         let pts = m.positions().to_vec();
         map.apply_batch(&pts, m.positions_mut())?;
@@ -238,7 +266,7 @@ fn warp(a: &WarpArgs) -> anyhow::Result<()> {
     let vol = format::read(&a.input).context("cannot read volume")?;
     let grid = *vol.geometry();
     // Pull-back: the map from target space to source space.
-    let map = build_map(a, &set, true)
+    let map = build_map(&a.map, &set, true)
         .context("cannot build the pull-back deformation (targets → sources)")?;
     let coarse = SampledMap::covering(&grid, coarse_dims(&grid, a.grid))?;
     let options = ResampleOptions::new(Interpolation::Linear, a.default);
@@ -264,6 +292,28 @@ fn warp(a: &WarpArgs) -> anyhow::Result<()> {
         }
     );
     say!("pull-back map {report}");
+    Ok(())
+}
+
+fn apply(a: &ApplyArgs) -> anyhow::Result<()> {
+    let set = read_handle_set(&a.map)?;
+    set.validate().context("bad handles")?;
+    let pts = read_point_list(&a.input)
+        .with_context(|| format!("cannot read points {}", a.input.display()))?;
+    let map = build_map(&a.map, &set, false).context("cannot build the deformation")?;
+    let mut out = vec![glam::DVec3::ZERO; pts.len()];
+    map.apply_batch(&pts, &mut out)?;
+    let mut text = String::with_capacity(out.len() * 64);
+    for p in &out {
+        text.push_str(&format!("{:?} {:?} {:?}\n", p.x, p.y, p.z));
+    }
+    volmorph_io::write_atomic(&a.output, |w| {
+        use std::io::Write;
+        w.write_all(text.as_bytes())
+            .map_err(|e| volmorph_io::IoError::os(&a.output, e))
+    })
+    .context("cannot write")?;
+    say!("mapped {} points by {} handles", out.len(), set.len());
     Ok(())
 }
 
