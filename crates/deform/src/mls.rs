@@ -375,10 +375,7 @@ impl AffineMls {
     /// [module docs](self)) `f(v) = v − p* + Σ_j (w_j/W) q_j` and the centroid weights are
     /// written.
     pub fn coefficients(&self, v: DVec3, out: &mut [f64]) {
-        let node = self.node(v);
-        for (k, o) in out.iter_mut().enumerate().take(self.sources.len()) {
-            *o = self.coefficient(k, v, &node);
-        }
+        self.coefficients_into(v, out);
     }
 }
 
@@ -395,27 +392,7 @@ pub(crate) fn set_targets(dst: &mut [DVec3], targets: &[DVec3]) -> Result<(), De
     Ok(())
 }
 
-/// Per-point data of [`AffineMls`]'s coefficient form.
-#[derive(Debug, Clone, Copy)]
-pub enum AffineNode {
-    /// `v` is source handle `i`.
-    AtHandle(usize),
-    /// Regular point: `α_j = w_j (1/W + (p_j − p*)·z)`, `z = P⁻¹(v − p*)`.
-    Regular {
-        /// Smallest squared distance to a handle (weight normalisation).
-        d2min: f64,
-        /// `1 / Σ w`.
-        inv_w: f64,
-        /// `p*`.
-        pc: DVec3,
-        /// `P⁻¹ (v − p*)`, zero where the linear part falls back to the identity.
-        z: DVec3,
-    },
-}
-
 impl LinearHandleMap for AffineMls {
-    type Node = AffineNode;
-
     fn target_vectors(&self) -> Vec<DVec3> {
         self.targets.clone()
     }
@@ -424,51 +401,55 @@ impl LinearHandleMap for AffineMls {
         self.set_targets(targets)
     }
 
-    fn node(&self, v: DVec3) -> AffineNode {
+    fn coefficients_into(&self, v: DVec3, out: &mut [f64]) -> DVec3 {
+        let n = self.sources.len();
+        if out.len() < n {
+            // Short buffer: compute all, write what fits (not a hot path).
+            let mut all = vec![0.0; n];
+            let b = self.coefficients_into(v, &mut all);
+            let m = out.len();
+            out.copy_from_slice(&all[..m]);
+            return b;
+        }
+        let out = &mut out[..n];
         let d2min = match nearest(&self.weighting, &self.sources, v) {
-            Nearest::AtHandle(i) => return AffineNode::AtHandle(i),
+            Nearest::AtHandle(i) => {
+                out.fill(0.0);
+                if let Some(o) = out.get_mut(i) {
+                    *o = 1.0;
+                }
+                return DVec3::ZERO;
+            }
             Nearest::Distance(d) => d,
         };
+        // Pass 1: weights (kept in `out`) and moments about v.
         let mut w = 0.0;
         let mut sp = DVec3::ZERO;
         let mut pp = DMat3::ZERO;
-        for p in &self.sources {
+        for (p, o) in self.sources.iter().zip(out.iter_mut()) {
             let a = *p - v;
             let wi = self.weighting.relative(a.length_squared(), d2min);
+            *o = wi;
             w += wi;
             sp += wi * a;
             pp += outer(wi * a, a);
         }
         let pcv = sp / w;
         let pp = pp - w * outer(pcv, pcv);
-        let z = if is_degenerate(&pp) {
-            DVec3::ZERO
-        } else {
-            pp.inverse() * (-pcv)
-        };
-        AffineNode::Regular {
-            d2min,
-            inv_w: 1.0 / w,
-            pc: pcv + v,
-            z,
-        }
-    }
-
-    #[inline]
-    fn coefficient(&self, k: usize, v: DVec3, node: &AffineNode) -> f64 {
-        match *node {
-            AffineNode::AtHandle(i) => f64::from(u8::from(i == k)),
-            AffineNode::Regular {
-                d2min,
-                inv_w,
-                pc,
-                z,
-            } => {
-                let p = self.sources[k];
-                let w = self.weighting.relative((p - v).length_squared(), d2min);
-                w * (inv_w + (p - pc).dot(z))
+        let inv_w = 1.0 / w;
+        if is_degenerate(&pp) {
+            for o in out.iter_mut() {
+                *o *= inv_w;
             }
+            return -pcv; // v − p*
         }
+        let z = pp.inverse() * (-pcv);
+        // Pass 2: α_j = w_j (1/W + (p_j − p*)·z), with p_j − p* = (p_j − v) − (p* − v).
+        let zc = inv_w - pcv.dot(z);
+        for (p, o) in self.sources.iter().zip(out.iter_mut()) {
+            *o *= zc + (*p - v).dot(z);
+        }
+        DVec3::ZERO
     }
 }
 
@@ -946,7 +927,7 @@ impl SpaceMap for FrameMls {
 
 /// Per-point data of [`FrameMls`]'s coefficient form.
 #[derive(Debug, Clone, Copy)]
-pub enum FrameNode {
+enum FrameNode {
     /// `v` is the origin of source frame `i`.
     AtHandle(usize),
     /// Regular point: origin `j`: `w_j (1/W + p̂_j·z)`; axis `(j, a)`: `β w_j f_ja·z`, with
@@ -964,8 +945,6 @@ pub enum FrameNode {
 }
 
 impl LinearHandleMap for FrameMls {
-    type Node = FrameNode;
-
     fn target_vectors(&self) -> Vec<DVec3> {
         frames_to_vectors(&self.targets)
     }
@@ -988,6 +967,20 @@ impl LinearHandleMap for FrameMls {
         self.set_targets(&frames)
     }
 
+    fn coefficients_into(&self, v: DVec3, out: &mut [f64]) -> DVec3 {
+        let node = self.node(v);
+        for (k, o) in out.iter_mut().enumerate().take(4 * self.sources.len()) {
+            *o = self.coefficient(k, v, &node);
+        }
+        match node {
+            FrameNode::Regular { pc, z, .. } if z == DVec3::ZERO && pc != v => v - pc,
+            _ => DVec3::ZERO,
+        }
+    }
+}
+
+impl FrameMls {
+    /// Per-point data of the coefficient form.
     fn node(&self, v: DVec3) -> FrameNode {
         let d2min = match nearest(&self.weighting, &self.origins, v) {
             Nearest::AtHandle(i) => return FrameNode::AtHandle(i),
@@ -1020,6 +1013,7 @@ impl LinearHandleMap for FrameMls {
         }
     }
 
+    /// Coefficient `k` at `v` given `node = self.node(v)`.
     #[inline]
     fn coefficient(&self, k: usize, v: DVec3, node: &FrameNode) -> f64 {
         let n = self.sources.len();
@@ -1246,10 +1240,9 @@ mod tests {
         let fm = FrameMls::new(&fs, &ft, 2.0, Weighting::default()).unwrap();
         let t = fm.target_vectors();
         for x in probes() {
-            let node = fm.node(x);
-            let s: DVec3 = (0..t.len())
-                .map(|k| fm.coefficient(k, x, &node) * t[k])
-                .sum();
+            let mut c = vec![0.0; t.len()];
+            let base = fm.coefficients_into(x, &mut c);
+            let s: DVec3 = base + (0..t.len()).map(|k| c[k] * t[k]).sum::<DVec3>();
             assert!(close(s, fm.apply(x), 1e-11));
         }
     }

@@ -31,10 +31,6 @@ use crate::{DeformError, SpaceMap};
 /// positions, frame axes, segment end points: anything the user moves). See the
 /// [module docs](self).
 pub trait LinearHandleMap: SpaceMap {
-    /// Per-point data shared by all coefficients at one point (weights' normalisation,
-    /// centroids, solved moment systems).
-    type Node: Copy + Send + Sync;
-
     /// The current target vectors `t_k`, in the order of the coefficients.
     fn target_vectors(&self) -> Vec<DVec3>;
 
@@ -46,12 +42,10 @@ pub trait LinearHandleMap: SpaceMap {
     /// NaN/infinite vector.
     fn set_target_vectors(&mut self, targets: &[DVec3]) -> Result<(), DeformError>;
 
-    /// Per-point data at `v`.
-    fn node(&self, v: DVec3) -> Self::Node;
-
-    /// The coefficient `c_k(v)` of target `k` (0 for `k` out of range); `node` is
-    /// `self.node(v)`.
-    fn coefficient(&self, k: usize, v: DVec3, node: &Self::Node) -> f64;
+    /// Write the coefficients `c_k(v)` into `out[..K]` (`K` = number of target vectors; only
+    /// `min(out.len(), K)` are written) and return the base `b(v)`, so that
+    /// `f(v) = b(v) + Σ_k c_k(v) t_k`.
+    fn coefficients_into(&self, v: DVec3, out: &mut [f64]) -> DVec3;
 }
 
 /// A map sampled at the nodes of a grid and interpolated trilinearly; see the
@@ -255,37 +249,48 @@ impl<M: LinearHandleMap> HandleGrid<M> {
     /// As [`SampledMap::from_map`]; [`DeformError::Io`] if nodes × targets coefficients
     /// exceed the allocation limit.
     pub fn new(map: M, grid: Geometry) -> Result<Self, DeformError> {
-        let sampled = SampledMap::from_map(&map, grid)?;
+        grid.validate()?;
+        let nodes = volmorph_io::checked_len(&grid.dims, std::mem::size_of::<DVec3>())?;
         let targets = map.target_vectors();
-        let nodes = sampled.grid.len();
-        let len = volmorph_io::checked_len(&[nodes, targets.len()], std::mem::size_of::<f64>())?;
-        let g = &sampled.grid;
-        let [nx, ny, _] = g.dims;
-        let point = |n: usize| {
-            g.index_to_physical(DVec3::new(
-                (n % nx) as f64,
-                (n / nx % ny) as f64,
-                (n / (nx * ny)) as f64,
-            ))
-        };
-        let node_data: Vec<(DVec3, M::Node)> = (0..nodes)
-            .into_par_iter()
-            .map(|n| {
-                let v = point(n);
-                (v, map.node(v))
-            })
-            .collect();
+        let k = targets.len();
+        let len = volmorph_io::checked_len(&[nodes, k], std::mem::size_of::<f64>())?;
+        let [nx, ny, _] = grid.dims;
         let mut coefficients = vec![0.0; len];
+        let mut positions = vec![DVec3::ZERO; nodes];
+        // One pass over the nodes, in parallel chunks; each chunk owns its piece of every
+        // target's coefficient row (rows are target-major for the updates).
+        const CHUNK: usize = 512;
+        let chunks = nodes.div_ceil(CHUNK);
+        let mut pieces: Vec<Vec<&mut [f64]>> = (0..chunks).map(|_| Vec::with_capacity(k)).collect();
         if nodes > 0 {
-            coefficients
-                .par_chunks_mut(nodes)
-                .enumerate()
-                .for_each(|(k, row)| {
-                    for (c, (v, node)) in row.iter_mut().zip(&node_data) {
-                        *c = map.coefficient(k, *v, node);
-                    }
-                });
+            for row in coefficients.chunks_mut(nodes) {
+                for (c, piece) in row.chunks_mut(CHUNK).enumerate() {
+                    pieces[c].push(piece);
+                }
+            }
         }
+        pieces
+            .into_par_iter()
+            .zip(positions.par_chunks_mut(CHUNK))
+            .enumerate()
+            .for_each(|(c, (mut rows, pos))| {
+                let mut scratch = vec![0.0; k];
+                for (local, p) in pos.iter_mut().enumerate() {
+                    let n = c * CHUNK + local;
+                    let v = grid.index_to_physical(DVec3::new(
+                        (n % nx) as f64,
+                        (n / nx % ny) as f64,
+                        (n / (nx * ny)) as f64,
+                    ));
+                    let mut f = map.coefficients_into(v, &mut scratch);
+                    for ((row, &ck), t) in rows.iter_mut().zip(&scratch).zip(&targets) {
+                        row[local] = ck;
+                        f += ck * *t;
+                    }
+                    *p = f;
+                }
+            });
+        let sampled = SampledMap::from_positions(grid, positions)?;
         Ok(Self {
             map,
             sampled,

@@ -322,6 +322,7 @@ impl<const D: usize> VolumeSplineSystem<D> {
             value_dim,
             weights: Vec::new(),
             polynomial: Vec::new(),
+            packed: Vec::new(),
         };
         self.solve_into(values, value_dim, &mut spline)?;
         Ok(spline)
@@ -392,6 +393,21 @@ impl<const D: usize> VolumeSplineSystem<D> {
                 "volume spline solve produced non-finite coefficients".into(),
             ));
         }
+        spline.packed.clear();
+        if D == 3 && value_dim == 3 {
+            let c = &self.frame.centres;
+            for (b, chunk) in c.chunks(4).enumerate() {
+                let mut blk = [0.0; 24];
+                for (l, p) in chunk.iter().enumerate() {
+                    let i = 4 * b + l;
+                    for a in 0..3 {
+                        blk[4 * a + l] = p[a];
+                        blk[12 + 4 * a + l] = spline.weights[3 * i + a];
+                    }
+                }
+                spline.packed.push(blk);
+            }
+        }
         Ok(())
     }
 }
@@ -406,6 +422,9 @@ pub struct VolumeSpline<const D: usize> {
     weights: Vec<f64>,
     /// `(D + 1) × V`, row-major: constant term, then one row per coordinate (normalised).
     polynomial: Vec<f64>,
+    /// For `D = V = 3` only: centres and weights in blocks of four, `[x0..x3, y0..y3, z0..z3,
+    /// wx0..wx3, wy0..wy3, wz0..wz3]` (padding has weight 0), so the hot loop vectorises.
+    packed: Vec<[f64; 24]>,
 }
 
 impl<const D: usize> VolumeSpline<D> {
@@ -498,35 +517,27 @@ impl VolumeSpline<3> {
     fn eval3(&self, x: DVec3) -> DVec3 {
         let xn = self.frame.map([x.x, x.y, x.z]);
         let p = &self.polynomial;
-        let mut acc = [
+        let acc = [
             p[0] + p[3] * xn[0] + p[6] * xn[1] + p[9] * xn[2],
             p[1] + p[4] * xn[0] + p[7] * xn[1] + p[10] * xn[2],
             p[2] + p[5] * xn[0] + p[8] * xn[1] + p[11] * xn[2],
         ];
-        let c = &self.frame.centres;
-        let w = &self.weights;
         let mut ax = [0.0f64; 4];
         let mut ay = [0.0f64; 4];
         let mut az = [0.0f64; 4];
-        let chunks = c.len() / 4;
-        for k in 0..chunks {
-            let cc = &c[4 * k..4 * k + 4];
-            let ww = &w[12 * k..12 * k + 12];
+        for blk in &self.packed {
+            let mut r = [0.0f64; 4];
             for l in 0..4 {
-                let dx = xn[0] - cc[l][0];
-                let dy = xn[1] - cc[l][1];
-                let dz = xn[2] - cc[l][2];
-                let r = (dx * dx + dy * dy + dz * dz).sqrt();
-                ax[l] += r * ww[3 * l];
-                ay[l] += r * ww[3 * l + 1];
-                az[l] += r * ww[3 * l + 2];
+                let dx = xn[0] - blk[l];
+                let dy = xn[1] - blk[4 + l];
+                let dz = xn[2] - blk[8 + l];
+                r[l] = (dx * dx + dy * dy + dz * dz).sqrt();
             }
-        }
-        for i in 4 * chunks..c.len() {
-            let r = dist(&xn, &c[i]);
-            acc[0] += r * w[3 * i];
-            acc[1] += r * w[3 * i + 1];
-            acc[2] += r * w[3 * i + 2];
+            for l in 0..4 {
+                ax[l] += r[l] * blk[12 + l];
+                ay[l] += r[l] * blk[16 + l];
+                az[l] += r[l] * blk[20 + l];
+            }
         }
         DVec3::new(
             acc[0] + (ax[0] + ax[1]) + (ax[2] + ax[3]),
@@ -665,6 +676,7 @@ impl ThinPlateMap {
             value_dim: 3,
             weights: vec![0.0; 3 * sources.len()],
             polynomial: vec![0.0; 12],
+            packed: Vec::new(),
         };
         let mut map = Self {
             system,
