@@ -182,9 +182,74 @@ impl SampledMap {
     }
 }
 
+impl SampledMap {
+    /// Trilinear interpolation at a continuous index strictly usable as is (every
+    /// coordinate in `[0, n − 1]`), without the outside extension.
+    #[inline]
+    fn interior(&self, idx: DVec3) -> DVec3 {
+        let [nx, ny, nz] = self.grid.dims;
+        let cell = |c: f64, n: usize| -> (usize, f64, usize) {
+            if n == 1 {
+                (0, 0.0, 0)
+            } else {
+                let i0 = (c as usize).min(n - 2);
+                (i0, c - i0 as f64, 1)
+            }
+        };
+        let (i0, u, si) = cell(idx.x, nx);
+        let (j0, v, sj) = cell(idx.y, ny);
+        let (k0, w, sk) = cell(idx.z, nz);
+        let sj = sj * nx;
+        let sk = sk * nx * ny;
+        let o = i0 + nx * (j0 + ny * k0);
+        let p = &self.positions;
+        let x00 = p[o].lerp(p[o + si], u);
+        let x10 = p[o + sj].lerp(p[o + sj + si], u);
+        let x01 = p[o + sk].lerp(p[o + sk + si], u);
+        let x11 = p[o + sk + sj].lerp(p[o + sk + sj + si], u);
+        x00.lerp(x10, v).lerp(x01.lerp(x11, v), w)
+    }
+}
+
 impl SpaceMap for SampledMap {
+    fn apply_grid(&self, grid: &Geometry, out: &mut [DVec3]) -> Result<(), DeformError> {
+        let [nx, ny, _] = crate::map::check_grid(grid, out)?;
+        if out.is_empty() {
+            return Ok(());
+        }
+        // Voxel index → index of this map's grid, an affine map applied incrementally.
+        let a = self.to_index * grid.index_to_physical_matrix();
+        let b = self.to_index * (grid.origin - self.grid.origin);
+        let hi = DVec3::new(
+            (self.grid.dims[0] - 1) as f64,
+            (self.grid.dims[1] - 1) as f64,
+            (self.grid.dims[2] - 1) as f64,
+        );
+        out.par_chunks_mut(nx * ny)
+            .enumerate()
+            .for_each(|(k, slab)| {
+                for (j, row) in slab.chunks_exact_mut(nx).enumerate() {
+                    let start = b + a * DVec3::new(0.0, j as f64, k as f64);
+                    for (i, o) in row.iter_mut().enumerate() {
+                        let idx = start + a.x_axis * i as f64;
+                        *o = if idx.cmpge(DVec3::ZERO).all() && idx.cmple(hi).all() {
+                            self.interior(idx)
+                        } else {
+                            self.apply(
+                                grid.index_to_physical(DVec3::new(i as f64, j as f64, k as f64)),
+                            )
+                        };
+                    }
+                }
+            });
+        Ok(())
+    }
+
     fn apply(&self, x: DVec3) -> DVec3 {
-        let (base, t, clamped, _) = self.locate(x);
+        let (base, t, clamped, inside) = self.locate(x);
+        if inside.iter().all(|&b| b) {
+            return self.interior(clamped);
+        }
         let c = self.corners(base);
         let x00 = c[0].lerp(c[1], t.x);
         let x10 = c[2].lerp(c[3], t.x);
@@ -529,6 +594,26 @@ mod tests {
         let n = grid().index_to_physical(DVec3::new(4.0, 5.0, 6.0));
         assert!((sm.apply(n) - m.apply(n)).length() < 1e-10);
         assert!(SampledMap::from_positions(grid(), vec![DVec3::ZERO; 3]).is_err());
+        // The grid fast path agrees with pointwise evaluation, inside and outside.
+        let fine = Geometry::new([23, 9, 11])
+            .with_spacing(DVec3::new(2.0, 5.0, 4.0))
+            .with_origin(DVec3::new(-10.0, -5.0, -3.0));
+        let mut out = vec![DVec3::ZERO; fine.len()];
+        sm.apply_grid(&fine, &mut out).unwrap();
+        let mut outside = 0;
+        for k in 0..11 {
+            for j in 0..9 {
+                for i in 0..23 {
+                    let x = fine.index_to_physical(DVec3::new(i as f64, j as f64, k as f64));
+                    let idx = grid().physical_to_index(x);
+                    if idx.min_element() < 0.0 || idx.cmpgt(DVec3::new(8.0, 7.0, 6.0)).any() {
+                        outside += 1;
+                    }
+                    assert!((out[fine.offset(i, j, k)] - sm.apply(x)).length() < 1e-9);
+                }
+            }
+        }
+        assert!(outside > 0 && outside < fine.len());
     }
 
     #[test]
