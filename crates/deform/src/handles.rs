@@ -228,7 +228,7 @@ impl HandleSet {
     /// # Errors
     /// [`DeformError::Json`] for malformed JSON or unknown fields, [`DeformError::Parse`] for
     /// a wrong version/kind, coordinate count or more than [`MAX_HANDLES`] handles,
-    /// [`DeformError::NonFinite`] never (JSON has no NaN) but kept for completeness.
+    /// and [`DeformError::NonFinite`] for a non-finite coordinate (checked although JSON cannot spell one).
     pub fn from_json(text: &str) -> Result<Self, DeformError> {
         if !text.trim_start().starts_with('{') {
             return Err(json_err("expected a JSON object".into()));
