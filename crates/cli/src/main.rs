@@ -89,6 +89,15 @@ enum Command {
     /// B-spline lattice (space map) tasks.
     #[command(subcommand)]
     Lattice(cmd::lattice::Command),
+    /// Handle-driven deformations (moving least squares, thin-plate splines) of volumes and
+    /// meshes.
+    #[command(subcommand)]
+    Handles(cmd::handles::Command),
+    /// Deform a picture with 2D moving least squares through point and segment handles.
+    #[command(
+        after_help = "Example:\n  volmorph mls2d face.png --handles smile.json -o smiling.png --method rigid\n\nHandles: {\"points\": [{\"source\": [x, y], \"target\": [x, y]}], \"segments\": [{\"source\": [[x, y], [x, y]], \"target\": [[x, y], [x, y]]}]}\nin pixel coordinates (x right, y down)."
+    )]
+    Mls2d(cmd::handles::Mls2dArgs),
     /// Polygon mesh tasks.
     #[command(subcommand)]
     Mesh(cmd::mesh::Command),
@@ -116,6 +125,8 @@ fn main() -> ExitCode {
         Command::Jacobian(a) => cmd::warp::run_jacobian(&a),
         Command::Mesh(c) => cmd::mesh::run(&c),
         Command::Frep(c) => cmd::frep::run(&c),
+        Command::Handles(c) => cmd::handles::run(&c),
+        Command::Mls2d(a) => cmd::handles::run_mls2d(&a),
         Command::Bench(c) => cmd::bench::run(&c),
     };
     match result {

@@ -1165,3 +1165,309 @@ fn frep_bad_models_fail_cleanly() {
     ]);
     assert!(err.contains("schedule"), "{err}");
 }
+
+// ---------------------------------------------------------------------------------------------
+// Handle-driven deformations: `volmorph handles warp` and `volmorph mls2d`.
+// ---------------------------------------------------------------------------------------------
+
+/// Eight handles at the corners of a box inside the phantoms' [-1, 1]³ domain, moved by `f`,
+/// as a handle JSON.
+fn handle_json(f: impl Fn([f64; 3]) -> [f64; 3]) -> String {
+    let mut items = Vec::new();
+    for k in 0..2 {
+        for j in 0..2 {
+            for i in 0..2 {
+                let p = [
+                    -0.6 + 1.1 * f64::from(i),
+                    -0.5 + 1.0 * f64::from(j),
+                    -0.7 + 1.3 * f64::from(k),
+                ];
+                let q = f(p);
+                items.push(format!(
+                    "{{\"source\": [{}, {}, {}], \"target\": [{}, {}, {}]}}",
+                    p[0], p[1], p[2], q[0], q[1], q[2]
+                ));
+            }
+        }
+    }
+    format!("{{\"points\": [{}]}}", items.join(", "))
+}
+
+#[test]
+fn handles_warp_identity_volume_is_unchanged_for_every_method() {
+    let dir = tempfile::tempdir().unwrap();
+    let vol = dir.path().join("sphere.nii");
+    ok(&[&"phantom", &"sphere", &"-o", &vol, &"--dims", &"18,16,14"]);
+    let h = dir.path().join("id.json");
+    std::fs::write(&h, handle_json(|p| p)).unwrap();
+    let before = raw_bytes(dir.path(), &vol);
+    for method in ["affine", "similarity", "rigid", "tps"] {
+        let out = dir.path().join(format!("{method}.nii"));
+        let text = ok(&[
+            &"handles",
+            &"warp",
+            &vol,
+            &"--handles",
+            &h,
+            &"--method",
+            &method,
+            &"-o",
+            &out,
+        ]);
+        assert!(text.contains("0 of"), "{method}: {text}");
+        assert_eq!(raw_bytes(dir.path(), &out), before, "{method}");
+    }
+    // Exact per-voxel mode too.
+    let out = dir.path().join("exact.nii");
+    ok(&[
+        &"handles",
+        &"warp",
+        &vol,
+        &"--handles",
+        &h,
+        &"--exact",
+        &"-o",
+        &out,
+    ]);
+    assert_eq!(raw_bytes(dir.path(), &out), before);
+}
+
+#[test]
+fn handles_warp_moves_meshes_forward_and_reads_point_lists() {
+    let dir = tempfile::tempdir().unwrap();
+    let vol = dir.path().join("sphere.nii");
+    ok(&[&"phantom", &"sphere", &"-o", &vol, &"--dims", &"20,20,20"]);
+    let mesh = dir.path().join("sphere.ply");
+    ok(&[&"isosurface", &vol, &"--level", &"127", &"-o", &mesh]);
+    let bounds = |p: &Path| -> String {
+        let text = ok(&[&"mesh", &"info", &p]);
+        text.lines()
+            .find(|l| l.starts_with("bounds:"))
+            .unwrap()
+            .to_string()
+    };
+    // A rigid translation by (0.25, 0, 0) of the handles moves every vertex by it.
+    let h = dir.path().join("shift.txt");
+    let mut pairs = String::from("# sx sy sz tx ty tz\n");
+    let src = [
+        [-0.6, -0.5, -0.7],
+        [0.5, -0.5, -0.7],
+        [-0.6, 0.5, -0.7],
+        [0.1, 0.2, 0.6],
+        [0.4, -0.3, 0.5],
+    ];
+    for p in src {
+        pairs.push_str(&format!(
+            "{} {} {} {} {} {}\n",
+            p[0],
+            p[1],
+            p[2],
+            p[0] + 0.25,
+            p[1],
+            p[2]
+        ));
+    }
+    std::fs::write(&h, pairs).unwrap();
+    let out = dir.path().join("moved.ply");
+    let text = ok(&[
+        &"handles",
+        &"warp",
+        &mesh,
+        &"--handles",
+        &h,
+        &"--method",
+        &"tps",
+        &"-o",
+        &out,
+    ]);
+    assert!(text.contains("moved"), "{text}");
+    let parse = |s: &str| -> Vec<f64> {
+        s.replace(['(', ')', ','], " ")
+            .split_whitespace()
+            .filter_map(|t| t.parse().ok())
+            .collect()
+    };
+    let (b0, b1) = (parse(&bounds(&mesh)), parse(&bounds(&out)));
+    assert_eq!(b0.len(), 6);
+    assert!((b1[0] - b0[0] - 0.25).abs() < 1e-4, "{b0:?} {b1:?}");
+    assert!((b1[4] - b0[4]).abs() < 1e-4, "{b0:?} {b1:?}");
+
+    // The same handles as two point lists: Slicer .fcsv (RAS) and 3-column text (LPS).
+    let fcsv = dir.path().join("src.fcsv");
+    let mut f = String::from("# Markups fiducial file version = 4.11\n# CoordinateSystem = RAS\n");
+    for (i, p) in src.iter().enumerate() {
+        f.push_str(&format!(
+            "m{i},{},{},{},0,0,0,1,1,1,0,F-{i},,\n",
+            -p[0], -p[1], p[2]
+        ));
+    }
+    std::fs::write(&fcsv, f).unwrap();
+    let to = dir.path().join("dst.xyz");
+    let t: String = src
+        .iter()
+        .map(|p| format!("{} {} {}\n", p[0] + 0.25, p[1], p[2]))
+        .collect();
+    std::fs::write(&to, t).unwrap();
+    let out2 = dir.path().join("moved2.ply");
+    ok(&[
+        &"handles",
+        &"warp",
+        &mesh,
+        &"--from",
+        &fcsv,
+        &"--to",
+        &to,
+        &"--method",
+        &"rigid",
+        &"-o",
+        &out2,
+    ]);
+    let b2 = parse(&bounds(&out2));
+    assert!((b2[0] - b0[0] - 0.25).abs() < 1e-4, "{b0:?} {b2:?}");
+}
+
+#[test]
+fn handles_warp_bad_input_fails_cleanly() {
+    let dir = tempfile::tempdir().unwrap();
+    let vol = dir.path().join("sphere.nii");
+    ok(&[&"phantom", &"sphere", &"-o", &vol, &"--dims", &"12,12,12"]);
+    let out = dir.path().join("out.nii");
+    let write = |name: &str, text: &str| {
+        let p = dir.path().join(name);
+        std::fs::write(&p, text).unwrap();
+        p
+    };
+    let dup = write(
+        "dup.txt",
+        "0 0 0 0 0 0\n0 0 0 1 1 1\n0.5 0 0 0.5 0 0\n0 0.5 0 0 0.5 0\n0 0 0.5 0 0 0.5\n",
+    );
+    let err = fails(&[&"handles", &"warp", &vol, &"--handles", &dup, &"-o", &out]);
+    assert!(err.contains("coincide"), "{err}");
+    let nan = write("nan.txt", "0 0 0 nan 0 0\n");
+    let err = fails(&[&"handles", &"warp", &vol, &"--handles", &nan, &"-o", &out]);
+    assert!(err.contains("nan.txt"), "{err}");
+    let three = write(
+        "three.json",
+        r#"{"points": [{"source": [0,0,0], "target": [0,0,0]}, {"source": [0.5,0,0], "target": [0.5,0,0]}, {"source": [0,0.5,0], "target": [0,0.5,0]}]}"#,
+    );
+    let err = fails(&[
+        &"handles",
+        &"warp",
+        &vol,
+        &"--handles",
+        &three,
+        &"--method",
+        &"affine",
+        &"-o",
+        &out,
+    ]);
+    assert!(err.contains("at least 4"), "{err}");
+    let err = fails(&[
+        &"handles",
+        &"warp",
+        &vol,
+        &"--handles",
+        &three,
+        &"--method",
+        &"frames",
+        &"-o",
+        &out,
+    ]);
+    assert!(err.contains("frame"), "{err}");
+    let err = fails(&[&"handles", &"warp", &vol, &"-o", &out]);
+    assert!(err.contains("--handles"), "{err}");
+    let bad = write(
+        "bad.json",
+        "{\"points\": [{\"source\": [0, 0], \"target\": [1, 2, 3]}]}",
+    );
+    let err = fails(&[&"handles", &"warp", &vol, &"--handles", &bad, &"-o", &out]);
+    assert!(err.contains("bad.json"), "{err}");
+    assert!(!out.exists());
+}
+
+#[test]
+fn mls2d_deforms_a_picture_and_reports_folds() {
+    let dir = tempfile::tempdir().unwrap();
+    let vol = dir.path().join("sphere.nii");
+    ok(&[&"phantom", &"sphere", &"-o", &vol, &"--dims", &"40,30,8"]);
+    let png = dir.path().join("slice.png");
+    ok(&[
+        &"slice", &vol, &"-o", &png, &"--axis", &"z", &"--index", &"4",
+    ]);
+    let h = dir.path().join("h2.json");
+    std::fs::write(
+        &h,
+        r#"{"points": [{"source": [5, 5], "target": [5, 5]}, {"source": [30, 6], "target": [33, 8]},
+                       {"source": [10, 25], "target": [10, 25]}],
+            "segments": [{"source": [[20, 10], [20, 20]], "target": [[22, 10], [24, 20]]}]}"#,
+    )
+    .unwrap();
+    for method in ["affine", "similarity", "rigid"] {
+        let out = dir.path().join(format!("{method}.png"));
+        let text = ok(&[
+            &"mls2d",
+            &png,
+            &"--handles",
+            &h,
+            &"--method",
+            &method,
+            &"--grid",
+            &"20",
+            &"-o",
+            &out,
+        ]);
+        assert!(text.contains("0.000% of the grid folds"), "{text}");
+        assert!(out.exists());
+    }
+    // 3D handles are refused; so is a non-integer α with segments.
+    let h3 = dir.path().join("h3.json");
+    std::fs::write(&h3, handle_json(|p| p)).unwrap();
+    let out = dir.path().join("x.png");
+    let err = fails(&[&"mls2d", &png, &"--handles", &h3, &"-o", &out]);
+    assert!(err.contains("2D"), "{err}");
+    let err = fails(&[
+        &"mls2d",
+        &png,
+        &"--handles",
+        &h,
+        &"--alpha",
+        &"1.5",
+        &"-o",
+        &out,
+    ]);
+    assert!(err.contains("integer"), "{err}");
+    assert!(!out.exists());
+}
+
+#[test]
+fn handles_apply_maps_points_forward_with_full_precision() {
+    let dir = tempfile::tempdir().unwrap();
+    let h = dir.path().join("h.json");
+    std::fs::write(&h, handle_json(|p| [p[0] + 0.125, p[1] - 0.5, p[2]])).unwrap();
+    let pts = dir.path().join("p.txt");
+    std::fs::write(&pts, "0.1 0.2 0.3\n-0.6 -0.5 -0.7\n").unwrap();
+    for method in ["affine", "similarity", "rigid", "tps"] {
+        let out = dir.path().join(format!("{method}.txt"));
+        ok(&[
+            &"handles",
+            &"apply",
+            &pts,
+            &"--handles",
+            &h,
+            &"--method",
+            &method,
+            &"-o",
+            &out,
+        ]);
+        let text = std::fs::read_to_string(&out).unwrap();
+        let v: Vec<f64> = text
+            .split_whitespace()
+            .map(|t| t.parse().unwrap())
+            .collect();
+        // A translation of all handles is followed exactly by every method.
+        let expect = [0.225, -0.3, 0.3, -0.475, -1.0, -0.7];
+        for (a, b) in v.iter().zip(expect) {
+            assert!((a - b).abs() < 1e-12, "{method}: {v:?}");
+        }
+    }
+}

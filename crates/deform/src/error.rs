@@ -78,6 +78,14 @@ pub enum DeformError {
     /// transform type, a composite transform, a non-cubic or non-uniform lattice, …).
     #[error("unsupported: {0}")]
     Unsupported(String),
+    /// Handles (control points, frames, segments, spline centres) unusable for the requested
+    /// map: too few, coincident, degenerate (all on a plane), mismatched source/target counts,
+    /// an index out of range, or parameters out of their domain.
+    #[error("invalid handles: {0}")]
+    InvalidHandles(String),
+    /// A linear system that should be regular is numerically singular.
+    #[error("singular system: {0}")]
+    Singular(String),
     /// Reading or writing a file failed.
     #[error(transparent)]
     Io(#[from] volmorph_io::IoError),

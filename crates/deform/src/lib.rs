@@ -22,6 +22,14 @@
 //!   and move the control points by the least-norm amounts that land them exactly, with a tool
 //!   radius, a frozen-boundary option and an undo/redo [`manipulate::ManipulationSession`].
 //!
+//! * Handle-driven maps: [`mls`] (affine, similarity and rigid moving least squares through
+//!   point handles in 3D, frame-based MLS; McPhail's thesis ch. 4–5), [`volume_spline`]
+//!   (Savchenko's volume splines on Green's function in 2D and 3D, with scalar or vector values,
+//!   and the [`ThinPlateMap`] built on them), [`bump`] (Bryson's bump transform), [`mls2d`]
+//!   (2D MLS through points and line segments, for images), [`handles`] (handle files) and
+//!   [`realtime`] (coarse sampled maps with per-node coefficients, updated by one multiply-add
+//!   per node when a target handle moves).
+//!
 //! Physical coordinates follow the ITK convention of [`volmorph_volume::Geometry`]:
 //! `physical = origin + direction·(spacing ⊙ index)`, voxels x fastest.
 //!
@@ -41,20 +49,31 @@
 //! }
 //! ```
 
+pub mod bump;
 mod error;
 pub mod formats;
 pub mod grid;
+pub mod handles;
 pub mod inverse;
 pub mod jacobian;
 pub mod json;
 pub mod lattice;
 pub mod manipulate;
 pub mod map;
+pub mod mls;
+pub mod mls2d;
+pub mod realtime;
+pub mod volume_spline;
 
+pub use bump::BumpMap;
 pub use error::DeformError;
+pub use handles::HandleSet;
 pub use inverse::{InverseOptions, InverseStatus, PointInverse, invert_point};
 pub use lattice::{BSplineLattice, LatticeFrame};
 pub use manipulate::{
     Drag, DragError, DragOptions, DragSolution, ManipulationSession, solve_drags,
 };
 pub use map::{Affine, Compose, Identity, SpaceMap};
+pub use mls::{AffineMls, Frame, FrameMls, RigidMls, SimilarityMls, Weighting};
+pub use realtime::{HandleGrid, LinearHandleMap, SampledMap};
+pub use volume_spline::{ThinPlateMap, VolumeSpline, VolumeSplineSystem};

@@ -48,9 +48,7 @@ pub trait SpaceMap: Send + Sync {
     /// [`CENTRAL_DIFFERENCE_STEP`]` · max(1, |p|_∞)` (error `O(h²)` plus rounding
     /// `O(ε/h)`, about 1e-10 relative for smooth maps); maps with a closed form override it.
     fn jacobian(&self, p: DVec3) -> DMat3 {
-        let h = CENTRAL_DIFFERENCE_STEP * p.abs().max_element().max(1.0);
-        let col = |e: DVec3| (self.apply(p + h * e) - self.apply(p - h * e)) / (2.0 * h);
-        DMat3::from_cols(col(DVec3::X), col(DVec3::Y), col(DVec3::Z))
+        central_jacobian(self, p)
     }
 
     /// Map every point: `out[i] = self.apply(points[i])`. The default runs a parallel loop.
@@ -165,6 +163,16 @@ fn for_each_voxel<T: Send>(grid: &Geometry, out: &mut [T], f: impl Fn(DVec3) -> 
                 }
             }
         });
+}
+
+/// The central-difference Jacobian of `map` at `p` with the default step of
+/// [`SpaceMap::jacobian`], whatever `map` overrides: column `a` is
+/// `(map(p + h e_a) − map(p − h e_a)) / 2h`, `h = CENTRAL_DIFFERENCE_STEP · max(1, |p|∞)`.
+/// Used by maps that have no closed form at some points, and to test closed forms.
+pub fn central_jacobian<M: SpaceMap + ?Sized>(map: &M, p: DVec3) -> DMat3 {
+    let h = CENTRAL_DIFFERENCE_STEP * p.abs().max_element().max(1.0);
+    let col = |e: DVec3| (map.apply(p + h * e) - map.apply(p - h * e)) / (2.0 * h);
+    DMat3::from_cols(col(DVec3::X), col(DVec3::Y), col(DVec3::Z))
 }
 
 /// Fill a grid's Jacobian buffer with one constant matrix (maps with a constant Jacobian).

@@ -6,6 +6,7 @@ pub mod demo;
 pub mod drag;
 pub mod ffd;
 pub mod frep;
+pub mod handles;
 pub mod info;
 pub mod isosurface;
 pub mod lattice;
