@@ -58,26 +58,6 @@ const BATCH_CHUNK: usize = 4096;
 /// Largest order (degree + 1) of the small-degree batch kernel.
 const SMALL_ORDER: usize = 4;
 
-/// Cox–de Boor (The NURBS Book A2.2) for degree `p < SMALL_ORDER` on a valid `span` of a
-/// validated knot vector (so every index is in range).
-#[inline]
-fn small_basis(knots: &[f64], p: usize, span: usize, u: f64, out: &mut [f64; SMALL_ORDER]) {
-    let mut left = [0.0; SMALL_ORDER];
-    let mut right = [0.0; SMALL_ORDER];
-    out[0] = 1.0;
-    for j in 1..=p {
-        left[j] = u - knots[span + 1 - j];
-        right[j] = knots[span + j] - u;
-        let mut saved = 0.0;
-        for r in 0..j {
-            let temp = out[r] / (right[r + 1] + left[j - r]);
-            out[r] = saved + right[r + 1] * temp;
-            saved = left[j - r] * temp;
-        }
-        out[j] = saved;
-    }
-}
-
 /// Largest allowed deviation of `axesᵀ·axes` from the identity in a [`LatticeFrame`]; frames
 /// read from text with ~15 significant digits pass, frames with visibly skewed axes do not.
 pub const FRAME_ORTHONORMAL_TOL: f64 = 1e-9;
@@ -631,7 +611,13 @@ impl BSplineLattice {
             // Stack buffers of the order only (degrees ≤ 3, the common case).
             let mut b = [[0.0; SMALL_ORDER]; 3];
             for a in 0..3 {
-                small_basis(knots[a].knots(), deg[a], spans[a], u[a], &mut b[a]);
+                volmorph_spline::basis_in_span::<SMALL_ORDER>(
+                    knots[a].knots(),
+                    deg[a],
+                    spans[a],
+                    u[a],
+                    &mut b[a],
+                );
             }
             return self.contract(ctrl, spans, deg, &b).unwrap_or(p);
         }

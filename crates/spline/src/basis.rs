@@ -96,8 +96,29 @@ pub fn basis_funs_and_derivs_into(
 /// `out.len() ≥ p + 1`.
 #[inline]
 pub(crate) fn basis_unchecked(knots: &[f64], p: usize, span: usize, u: f64, out: &mut [f64]) {
-    let mut left = [0.0; BASIS_BUF];
-    let mut right = [0.0; BASIS_BUF];
+    basis_in_span::<BASIS_BUF>(knots, p, span, u, out);
+}
+
+/// The `p + 1` B-spline basis functions of degree `p` that are non-zero on knot span `span`
+/// (`[knots[span], knots[span + 1])`), at `u`, into `out[..=p]` (Cox–de Boor, The NURBS
+/// Book A2.2), with scratch arrays of `L` entries on the stack — a small `L` for low degrees
+/// keeps hot per-point kernels lean.
+///
+/// Unchecked variant of [`basis_funs_into`] for callers that found `span` themselves on a
+/// validated knot vector: `span` must satisfy `p ≤ span` and `span + p < knots.len()`.
+///
+/// # Panics
+/// If `p ≥ L`, `out.len() ≤ p`, or `span` violates the bounds above.
+#[inline]
+pub fn basis_in_span<const L: usize>(
+    knots: &[f64],
+    p: usize,
+    span: usize,
+    u: f64,
+    out: &mut [f64],
+) {
+    let mut left = [0.0; L];
+    let mut right = [0.0; L];
     out[0] = 1.0;
     for j in 1..=p {
         left[j] = u - knots[span + 1 - j];

@@ -36,7 +36,7 @@ pub mod spline;
 
 pub use basis::{
     BasisWorkspace, basis_derivs, basis_funs, basis_funs_and_derivs_into, basis_funs_into,
-    uniform_cubic, uniform_cubic_derivative, uniform_cubic_second_derivative,
+    basis_in_span, uniform_cubic, uniform_cubic_derivative, uniform_cubic_second_derivative,
 };
 pub use bernstein::{bernstein, bernstein_derivative_into, bernstein_into};
 pub use bezier::{BezierCell, BezierPatch, BezierPiece, BezierSegment};

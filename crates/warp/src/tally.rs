@@ -447,38 +447,37 @@ pub(crate) struct Row<'a, T> {
 }
 
 impl<T> Row<'_, T> {
+    /// Per voxel of the row: its value, centre image and the six neighbours' (−x, +x, −y,
+    /// +y, −z, +z).
+    #[inline(always)]
+    fn stencils(&self) -> impl Iterator<Item = (&T, DVec3, [DVec3; 6])> {
+        self.centres
+            .windows(3)
+            .zip(self.values)
+            .zip(self.ym.iter().zip(self.yp))
+            .zip(self.zm.iter().zip(self.zp))
+            .map(
+                #[inline(always)]
+                |(((w, v), (ym, yp)), (zm, zp))| (v, w[1], [w[0], w[2], *ym, *yp, *zm, *zp]),
+            )
+    }
+
     /// Per voxel of the row: its value and proxy box ([`averaged_bounds`]).
     #[inline(always)]
     pub fn boxes(&self) -> impl Iterator<Item = (&T, Option<(DVec3, DVec3)>)> {
-        self.centres
-            .windows(3)
-            .zip(self.values)
-            .zip(self.ym.iter().zip(self.yp))
-            .zip(self.zm.iter().zip(self.zp))
-            .map(
-                #[inline(always)]
-                |(((w, v), (ym, yp)), (zm, zp))| {
-                    (v, averaged_bounds(w[1], [w[0], w[2], *ym, *yp, *zm, *zp]))
-                },
-            )
+        self.stencils().map(
+            #[inline(always)]
+            |(v, p, nb)| (v, averaged_bounds(p, nb)),
+        )
     }
-}
 
-impl<T> Row<'_, T> {
     /// [`Row::boxes`] for centre images known to satisfy [`unchecked_bounds`]' condition.
     #[inline(always)]
     pub fn boxes_unchecked(&self) -> impl Iterator<Item = (&T, (DVec3, DVec3))> {
-        self.centres
-            .windows(3)
-            .zip(self.values)
-            .zip(self.ym.iter().zip(self.yp))
-            .zip(self.zm.iter().zip(self.zp))
-            .map(
-                #[inline(always)]
-                |(((w, v), (ym, yp)), (zm, zp))| {
-                    (v, unchecked_bounds(w[1], [w[0], w[2], *ym, *yp, *zm, *zp]))
-                },
-            )
+        self.stencils().map(
+            #[inline(always)]
+            |(v, p, nb)| (v, unchecked_bounds(p, nb)),
+        )
     }
 }
 
