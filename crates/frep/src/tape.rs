@@ -50,6 +50,8 @@ pub struct Tape {
     output: Arg,
     /// Number of `min`, `max` and `select` instructions (what specialisation can prune).
     choices: usize,
+    /// Per instruction, the lanes row-structured evaluation computes it on.
+    classes: Vec<Class>,
 }
 
 impl Tape {
@@ -70,7 +72,28 @@ impl Tape {
         let mut free: Vec<u32> = Vec::new();
         let mut regs = 0u32;
         let mut instrs = Vec::new();
+        let mut classes = Vec::new();
+        let mut dep_of: Vec<u8> = Vec::with_capacity(n);
+        let mut class_of: Vec<Class> = Vec::with_capacity(n);
         for (i, node) in nodes.iter().enumerate() {
+            let d = match *node {
+                Node::Input(a) => 1u8 << a.min(2),
+                Node::Const(_) => 0,
+                _ => args(node).fold(0u8, |m, a| m | dep_of[a as usize]),
+            };
+            dep_of.push(d);
+            // Compact evaluation pays off for costly operations and what is computed from
+            // their compact results; cheap operations of raw inputs run on every lane
+            // (expanding their results would cost as much as computing them).
+            let allowed = Class::of(d);
+            let class = if allowed != Class::Full
+                && (costly(node) || args(node).any(|a| class_of[a as usize] != Class::Full))
+            {
+                allowed
+            } else {
+                Class::Full
+            };
+            class_of.push(class);
             let leaf = match *node {
                 Node::Input(a) => Some(Arg::Input(a.min(2))),
                 Node::Const(b) => Some(Arg::Imm(f64::from_bits(b))),
@@ -85,6 +108,7 @@ impl Tape {
                 regs - 1
             });
             let g = |a: Id| arg_of[a as usize];
+            classes.push(class);
             instrs.push(match *node {
                 Node::Unary(op, a) => Instr::Unary(op, out, g(a)),
                 Node::Binary(op, a, b) => Instr::Binary(op, out, g(a), g(b)),
@@ -120,6 +144,7 @@ impl Tape {
             instrs,
             regs: regs as usize,
             choices,
+            classes,
         }
     }
 
@@ -298,6 +323,110 @@ impl Tape {
         }
     }
 
+    /// Evaluate on a block of whole grid rows: lane `r · row_len + i` is point `i` of row
+    /// `r`, where the x coordinate depends only on `i` (every row holds the same x values)
+    /// and y and z only on `r` (constant along each row). Each instruction is evaluated
+    /// only on the lanes its inputs distinguish: once if it depends on no input, once per
+    /// row position if only on x, once per row if not on x, and at every lane otherwise.
+    /// Every value is the one [`Tape::eval_batch`] gives (each operation is a pure function
+    /// of its arguments), bit for bit.
+    ///
+    /// The caller guarantees the row structure; `row_len` must be in `1..=LANES` and divide
+    /// the length (otherwise this falls back to [`Tape::eval_batch_with`]).
+    pub(crate) fn eval_rows_with(
+        &self,
+        row_len: usize,
+        x: &[f64],
+        y: &[f64],
+        z: &[f64],
+        out: &mut [f64],
+        scratch: &mut BatchScratch,
+    ) {
+        let n = x.len().min(y.len()).min(z.len()).min(out.len());
+        if row_len == 0 || row_len > LANES || !n.is_multiple_of(row_len) {
+            self.eval_batch_with(x, y, z, out, scratch);
+            return;
+        }
+        if scratch.regs.len() < self.regs {
+            scratch.regs.resize(self.regs, [0.0; LANES]);
+        }
+        if scratch.class.len() < self.regs {
+            scratch.class.resize(self.regs, Class::Full);
+        }
+        let block = (LANES / row_len) * row_len;
+        let mut start = 0;
+        while start < n {
+            let end = (start + block).min(n);
+            let xs = [&x[start..end], &y[start..end], &z[start..end]];
+            self.eval_rows_block(row_len, xs, scratch, &mut out[start..end]);
+            start = end;
+        }
+    }
+
+    fn eval_rows_block(
+        &self,
+        row_len: usize,
+        xs: [&[f64]; 3],
+        scratch: &mut BatchScratch,
+        out: &mut [f64],
+    ) {
+        let n = out.len();
+        let rows = n / row_len;
+        let BatchScratch { regs, class, tmp } = scratch;
+        // Row heads: the y and z of every row, and the x of one row.
+        let mut heads = [[0.0f64; LANES]; 2];
+        for (r, chunk) in xs[1].chunks_exact(row_len).enumerate() {
+            heads[0][r] = chunk[0];
+        }
+        for (r, chunk) in xs[2].chunks_exact(row_len).enumerate() {
+            heads[1][r] = chunk[0];
+        }
+        let compact = Compact {
+            row_len,
+            rows,
+            n,
+            x: &xs[0][..row_len],
+            y: &heads[0][..rows],
+            z: &heads[1][..rows],
+            full: xs,
+        };
+        for (ins, &c) in self.instrs.iter().zip(&self.classes) {
+            let (o, m) = match *ins {
+                Instr::Unary(_, o, _) | Instr::Binary(_, o, _, _) | Instr::Select(o, _, _, _) => {
+                    (o, compact.len(c))
+                }
+            };
+            let (dst, lo, hi) = split(regs, o as usize);
+            let [t0, t1, t2] = tmp;
+            let ctx = (lo, hi, o, &class[..]);
+            match *ins {
+                Instr::Unary(op, _, a) => {
+                    let a = compact.src(a, c, ctx, t0);
+                    unary_block(op, &mut dst[..m], a);
+                }
+                Instr::Binary(op, _, a, b) => {
+                    let a = compact.src(a, c, ctx, t0);
+                    let b = compact.src(b, c, ctx, t1);
+                    binary_block(op, &mut dst[..m], a, b);
+                }
+                Instr::Select(_, cc, a, b) => {
+                    let cc = compact.src(cc, c, ctx, t0);
+                    let a = compact.src(a, c, ctx, t1);
+                    let b = compact.src(b, c, ctx, t2);
+                    for (i, d) in dst[..m].iter_mut().enumerate() {
+                        *d = ops::select(cc.at(i), a.at(i), b.at(i));
+                    }
+                }
+            }
+            class[o as usize] = c;
+        }
+        match self.output {
+            Arg::Reg(r) => compact.expand(&regs[r as usize], class[r as usize], out),
+            Arg::Imm(v) => out.fill(v),
+            Arg::Input(k) => out.copy_from_slice(xs[usize::from(k)]),
+        }
+    }
+
     /// An enclosure of `f` over the box `[lo, hi]` (every point value lies in it, NaN only
     /// if the `nan` flag is set).
     #[must_use]
@@ -359,6 +488,24 @@ impl Tape {
 fn unreachable_leaf() -> Instr {
     // Leaves were handled before; a harmless placeholder keeps this total.
     Instr::Unary(UnaryOp::Neg, 0, Arg::Imm(f64::NAN))
+}
+
+/// Whether a node's operation is costly enough to evaluate on as few lanes as possible.
+fn costly(n: &Node) -> bool {
+    match *n {
+        Node::Unary(op, _) => !matches!(
+            op,
+            UnaryOp::Neg
+                | UnaryOp::Abs
+                | UnaryOp::Square
+                | UnaryOp::Floor
+                | UnaryOp::Ceil
+                | UnaryOp::Sign
+                | UnaryOp::Not
+        ),
+        Node::Binary(op, _, _) => matches!(op, BinaryOp::Div | BinaryOp::Pow | BinaryOp::Atan2),
+        _ => false,
+    }
 }
 
 /// Arguments of a node.
@@ -446,6 +593,149 @@ fn const_bits(v: f64) -> u64 {
 #[derive(Debug, Clone, Default)]
 pub struct BatchScratch {
     regs: Vec<[f64; LANES]>,
+    /// Layout of every register in row-structured evaluation.
+    class: Vec<Class>,
+    /// Expanded operands of row-structured evaluation.
+    tmp: [Vec<f64>; 3],
+}
+
+/// Which lanes of a row-structured block an instruction is evaluated on (by the inputs it
+/// depends on).
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+enum Class {
+    /// No input: one value (lane 0).
+    Const,
+    /// Only x: one row's worth (`row_len` values).
+    X,
+    /// Not x: one value per row (`rows` values).
+    Rows,
+    /// Every lane.
+    Full,
+}
+
+impl Class {
+    fn of(deps: u8) -> Class {
+        match deps {
+            0 => Class::Const,
+            1 => Class::X,
+            d if d & 1 == 0 => Class::Rows,
+            _ => Class::Full,
+        }
+    }
+}
+
+type Ctx<'a> = (&'a Regs, &'a Regs, u32, &'a [Class]);
+
+/// Shapes of a row-structured block.
+struct Compact<'a> {
+    row_len: usize,
+    rows: usize,
+    n: usize,
+    x: &'a [f64],
+    y: &'a [f64],
+    z: &'a [f64],
+    full: [&'a [f64]; 3],
+}
+
+impl Compact<'_> {
+    fn len(&self, c: Class) -> usize {
+        match c {
+            Class::Const => 1,
+            Class::X => self.row_len,
+            Class::Rows => self.rows,
+            Class::Full => self.n,
+        }
+    }
+
+    /// Operand `a` of an instruction of class `c`, expanded into `tmp` if its register is
+    /// stored more compactly than `c` needs.
+    #[inline(always)]
+    fn src<'b>(&'b self, a: Arg, c: Class, ctx: Ctx<'b>, tmp: &'b mut Vec<f64>) -> Src<'b> {
+        let (lo, hi, o, class) = ctx;
+        match a {
+            Arg::Imm(v) => Src::C(v),
+            Arg::Input(k) => match (c, k) {
+                (Class::Full, _) => Src::S(self.full[usize::from(k)]),
+                (_, 0) => Src::S(self.x),
+                (_, 1) => Src::S(self.y),
+                _ => Src::S(self.z),
+            },
+            Arg::Reg(r) => {
+                let reg: &'b [f64; LANES] = if r < o {
+                    &lo[r as usize]
+                } else {
+                    &hi[(r - o - 1) as usize]
+                };
+                let rc = class[r as usize];
+                if rc == c {
+                    Src::S(&reg[..self.len(c)])
+                } else if rc == Class::Const {
+                    Src::C(reg[0])
+                } else if rc == Class::Full {
+                    self.compact(&reg[..self.n], c, tmp)
+                } else {
+                    tmp.resize(self.n, 0.0);
+                    self.expand(reg, rc, tmp);
+                    if c == Class::Full {
+                        Src::S(&tmp[..])
+                    } else {
+                        // Not produced by compilation (a compact instruction's register
+                        // arguments are full, constant or of its own class), but total.
+                        let mut t2 = std::mem::take(tmp);
+                        let v = self.compact_owned(&mut t2, c);
+                        *tmp = t2;
+                        v.map_or(Src::S(&tmp[..self.len(c)]), Src::C)
+                    }
+                }
+            }
+        }
+    }
+
+    /// The lanes of class `c` of full-lane values `full` (gathered into `tmp` for rows).
+    fn compact<'b>(&self, full: &'b [f64], c: Class, tmp: &'b mut Vec<f64>) -> Src<'b> {
+        match c {
+            Class::Const => Src::C(full[0]),
+            Class::X => Src::S(&full[..self.row_len]),
+            Class::Full => Src::S(full),
+            Class::Rows => {
+                tmp.clear();
+                tmp.extend(full.iter().step_by(self.row_len).take(self.rows));
+                Src::S(&tmp[..])
+            }
+        }
+    }
+
+    /// Compact full-lane values in place to the lanes of class `c` (`Some` for a constant).
+    fn compact_owned(&self, v: &mut [f64], c: Class) -> Option<f64> {
+        match c {
+            Class::Const => Some(v[0]),
+            Class::X | Class::Full => None,
+            Class::Rows => {
+                for r in 0..self.rows {
+                    v[r] = v[r * self.row_len];
+                }
+                None
+            }
+        }
+    }
+
+    /// Write the full-lane values of a register stored with class `c` into `out`.
+    fn expand(&self, reg: &[f64; LANES], c: Class, out: &mut [f64]) {
+        match c {
+            Class::Const => out.fill(reg[0]),
+            Class::X => {
+                for row in out.chunks_exact_mut(self.row_len) {
+                    row.copy_from_slice(&reg[..self.row_len]);
+                }
+            }
+            Class::Rows => {
+                for (row, &v) in out.chunks_exact_mut(self.row_len).zip(&reg[..self.rows]) {
+                    row.fill(v);
+                }
+            }
+            Class::Full => out.copy_from_slice(&reg[..self.n]),
+        }
+    }
 }
 
 /// Scratch space of interval evaluation: one interval and one [`Choice`] per graph node.
@@ -555,7 +845,8 @@ fn unary_block(op: UnaryOp, o: &mut [f64], a: Src<'_>) {
     // Sine and cosine: the branch-free kernel when the whole block is in its range (the
     // same values `ops::sin`/`ops::cos` give there), so the loop vectorises.
     if let (UnaryOp::Sin | UnaryOp::Cos, Src::S(s)) = (op, a)
-        && s.iter().all(|v| v.abs() <= ops::TRIG_FAST_LIMIT)
+        && s.iter()
+            .fold(true, |ok, v| ok & (v.abs() <= ops::TRIG_FAST_LIMIT))
     {
         if op == UnaryOp::Sin {
             map1(o, a, ops::sin_reduced);
@@ -608,6 +899,67 @@ mod tests {
         assert!(t.register_count() <= 3, "{}", t.register_count());
         let p = DVec3::new(0.3, 0.2, 0.0);
         assert_eq!(t.eval(p), s.eval_reference(p.to_array()));
+    }
+
+    #[test]
+    fn row_structured_evaluation_equals_batch_evaluation() {
+        // Operations of every class: constant-only, x-only, y/z-only and mixed, costly and
+        // cheap, a select, and special values (division by zero, NaN from sqrt).
+        let s = Shape::build(|b: &mut Builder, [x, y, z]| {
+            let two = b.constant(2.0);
+            let k = b.unary(UnaryOp::Sin, two);
+            let x3 = b.mul(x, k);
+            let sx = b.unary(UnaryOp::Sin, x3);
+            let cy = b.unary(UnaryOp::Cos, y);
+            let yz = b.add(y, z);
+            let dyz = b.binary(BinaryOp::Div, cy, yz);
+            let e = b.unary(UnaryOp::Exp, dyz);
+            let p = b.mul(sx, e);
+            let q = b.unary(UnaryOp::Sqrt, z);
+            let c = b.binary(BinaryOp::Lt, sx, cy);
+            let sel = b.select(c, p, q);
+            let xx = b.mul(x, x);
+            let m = b.binary(BinaryOp::Max, sel, xx);
+            let w = b.add(m, cy);
+            b.add(w, q)
+        });
+        let t = Tape::new(&s);
+        for row_len in [1, 3, 7, 16, 37, LANES] {
+            let rows = 700 / row_len + 1;
+            let n = rows * row_len;
+            let (mut xs, mut ys, mut zs) = (vec![0.0; n], vec![0.0; n], vec![0.0; n]);
+            for r in 0..rows {
+                for i in 0..row_len {
+                    let l = r * row_len + i;
+                    xs[l] = -1.5 + 0.37 * i as f64;
+                    ys[l] = if r % 5 == 0 {
+                        0.0
+                    } else {
+                        0.9 - 0.11 * r as f64
+                    };
+                    zs[l] = if r % 5 == 0 {
+                        0.0
+                    } else {
+                        0.3 - 0.4 * (r % 3) as f64
+                    };
+                }
+            }
+            let mut a = vec![0.0; n];
+            let mut b = vec![0.0; n];
+            let mut sc = BatchScratch::default();
+            t.eval_batch_with(&xs, &ys, &zs, &mut a, &mut sc);
+            t.eval_rows_with(row_len, &xs, &ys, &zs, &mut b, &mut sc);
+            for l in 0..n {
+                assert_eq!(
+                    a[l].to_bits(),
+                    b[l].to_bits(),
+                    "row_len {row_len}, lane {l}"
+                );
+                let p = DVec3::new(xs[l], ys[l], zs[l]);
+                assert_eq!(t.eval(p).to_bits(), b[l].to_bits());
+            }
+            assert!(b.iter().any(|v| v.is_nan()) && b.iter().any(|v| v.is_finite()));
+        }
     }
 
     #[test]
