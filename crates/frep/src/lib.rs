@@ -3,7 +3,7 @@
 //! of Savchenko & Pasko.
 //!
 //! * [`lang`] — lexer and hand-written parser of HyperFun programs (grammar in its docs);
-//!   [`compile`] — symbolic execution into a deduplicated expression graph ([`Shape`]),
+//!   [`compile`](mod@compile) — symbolic execution into a deduplicated expression graph ([`Shape`]),
 //!   with the HyperFun [`library`] of primitives, blends and transformations expanded inline.
 //! * [`ops`] — the canonical operations and their semantics on values, [`Interval`]s and
 //!   [`Dual`] numbers; [`Tape`] — the register-allocated evaluator at points, on batches,

@@ -12,7 +12,7 @@
 //!   logic (unlike IEEE `minNum`): a NaN anywhere in a model makes the result NaN, so a bad
 //!   model fails loudly instead of being silently clipped.
 //! * **Booleans** are numbers: comparisons and logic give `1` (true) or `0` (false);
-//!   [`select`](select) takes its first argument as true when it is non-zero.
+//!   [`select`] takes its first argument as true when it is non-zero.
 //! * IEEE arithmetic otherwise: `1/0 = +∞`, `0/0 = NaN`, `sqrt(-1) = NaN`, `ln(0) = −∞`.
 
 use glam::DVec3;

@@ -7,7 +7,7 @@
 //! cut by the box still gives a closed surface (capped at the box).
 //!
 //! **Pictures.** [`render`] casts one ray per pixel through a
-//! [`Camera`](volmorph_render::Camera), restricted to a bounding box. For compiled shapes
+//! [`Camera`], restricted to a bounding box. For compiled shapes
 //! the first root along each ray is found by **interval-bounded subdivision**: a segment
 //! whose interval enclosure is negative holds no solid and is skipped whole; otherwise it is
 //! halved (front half first) with the tape specialised to the segment, down to

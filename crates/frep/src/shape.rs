@@ -486,7 +486,7 @@ impl Builder {
 /// of [`Node`]s with one root. Cheap to clone (shared storage).
 ///
 /// The solid is `{p : f(p) ≥ 0}`. Build shapes by compiling a model
-/// ([`crate::compile`]), with a [`Builder`], or from other shapes with the operations of
+/// ([`crate::compile`](mod@crate::compile)), with a [`Builder`], or from other shapes with the operations of
 /// [`crate::mapping`].
 #[derive(Debug, Clone, PartialEq)]
 pub struct Shape {

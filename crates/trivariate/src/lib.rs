@@ -7,11 +7,11 @@
 //!   net, on the shared domain `[0, 1]^N` ([`aggregate`] states the conventions).
 //! * [`extrude`], [`revolve`], [`rule`] — modeling operators lifting curves to surfaces and
 //!   surfaces to volumes, carrying attributes along ([`modeling`]).
-//! * [`format`] — the documented JSON file format with [`load`] / [`save`].
+//! * [`format`](mod@format) — the documented JSON file format with [`load`] / [`save`].
 //! * [`fit`] — interpolation at the Greville abscissae and separable least squares (§3).
 //! * [`VolumeEvaluator`] — points and first partial derivatives by knot refinement (the α
 //!   scheme of §4) or de Boor, per point or in rayon batches ([`eval`]).
-//! * [`invert`] — physical point → parameters by Newton with a subdivision fallback.
+//! * [`invert`](mod@invert) — physical point → parameters by Newton with a subdivision fallback.
 //!
 //! The spline machinery (knot vectors, bases, refinement, Greville interpolation) is
 //! `volmorph_spline`'s; this crate builds on it.
