@@ -64,32 +64,24 @@ impl Field for Tape {
     }
 }
 
-impl<F: Field + ?Sized> Field for &F {
-    fn value(&self, p: DVec3) -> f64 {
-        (**self).value(p)
-    }
-    fn gradient(&self, p: DVec3) -> (f64, DVec3) {
-        (**self).gradient(p)
-    }
-    fn bound(&self, lo: DVec3, hi: DVec3) -> Interval {
-        (**self).bound(lo, hi)
-    }
-    fn tape(&self) -> Option<&Tape> {
-        (**self).tape()
-    }
+/// `Field` for references and boxes, forwarding every method (one definition for both).
+macro_rules! forward_field {
+    ($($ptr:ty),*) => {$(
+        impl<F: Field + ?Sized> Field for $ptr {
+            fn value(&self, p: DVec3) -> f64 {
+                (**self).value(p)
+            }
+            fn gradient(&self, p: DVec3) -> (f64, DVec3) {
+                (**self).gradient(p)
+            }
+            fn bound(&self, lo: DVec3, hi: DVec3) -> Interval {
+                (**self).bound(lo, hi)
+            }
+            fn tape(&self) -> Option<&Tape> {
+                (**self).tape()
+            }
+        }
+    )*};
 }
 
-impl<F: Field + ?Sized> Field for Box<F> {
-    fn value(&self, p: DVec3) -> f64 {
-        (**self).value(p)
-    }
-    fn gradient(&self, p: DVec3) -> (f64, DVec3) {
-        (**self).gradient(p)
-    }
-    fn bound(&self, lo: DVec3, hi: DVec3) -> Interval {
-        (**self).bound(lo, hi)
-    }
-    fn tape(&self) -> Option<&Tape> {
-        (**self).tape()
-    }
-}
+forward_field!(&F, Box<F>);

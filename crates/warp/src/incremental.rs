@@ -779,42 +779,32 @@ impl IncrementalPushForward {
             cdims: [nx + 2, ny + 2],
         };
         let out = self.output.dims;
-        let plane = Region {
-            lo: [r.lo[0], r.lo[1], 0],
-            dims: [r.dims[0], r.dims[1], 1],
-        };
-        (r.lo[2]..r.lo[2] + r.dims[2])
-            .into_par_iter()
-            .for_each(|k| {
-                for dj in 0..r.dims[1] {
-                    let s = r.lo[0] + nx * (r.lo[1] + dj + ny * k);
-                    let Some(slots) = self.status.get(s..s + r.dims[0]) else {
-                        continue;
-                    };
-                    if sane {
-                        for slot in slots {
-                            slot.store(OUTSIDE, Relaxed);
-                        }
-                        continue;
+        let c0 = [0, 1, 2].map(|a| r.lo[a] + 1);
+        (0..r.dims[2]).into_par_iter().for_each(|dk| {
+            for dj in 0..r.dims[1] {
+                let s = r.lo[0] + nx * (r.lo[1] + dj + ny * (r.lo[2] + dk));
+                let Some(slots) = self.status.get(s..s + r.dims[0]) else {
+                    continue;
+                };
+                if sane {
+                    for slot in slots {
+                        slot.store(OUTSIDE, Relaxed);
                     }
-                    let vbox = Region {
-                        lo: [plane.lo[0], plane.lo[1], k],
-                        ..plane
-                    };
-                    let c0 = [vbox.lo[0] + 1, vbox.lo[1] + 1, k + 1];
-                    let Some(row) = row(&src, &vbox, c0, dj, 0) else {
-                        continue;
-                    };
-                    for (slot, (_, proxy)) in slots.iter().zip(row.boxes()) {
-                        let status = match proxy {
-                            Some((lo, hi)) if reaches_grid(lo, hi, out) => MAPPED,
-                            Some(_) => OUTSIDE,
-                            None => NON_FINITE,
-                        };
-                        slot.store(status, Relaxed);
-                    }
+                    continue;
                 }
-            });
+                let Some(row) = row(&src, r, c0, dj, dk) else {
+                    continue;
+                };
+                for (slot, (_, proxy)) in slots.iter().zip(row.boxes()) {
+                    let status = match proxy {
+                        Some((lo, hi)) if reaches_grid(lo, hi, out) => MAPPED,
+                        Some(_) => OUTSIDE,
+                        None => NON_FINITE,
+                    };
+                    slot.store(status, Relaxed);
+                }
+            }
+        });
     }
 
     /// Counts of the statuses of the source voxels in `r`.

@@ -390,16 +390,7 @@ pub(crate) fn unchecked_bounds(p: DVec3, nb: [DVec3; 6]) -> (DVec3, DVec3) {
 #[inline(always)]
 fn raw_bounds(p: DVec3, nb: [DVec3; 6]) -> (DVec3, DVec3, bool) {
     let s = p + nb[0] + nb[1] + nb[2] + nb[3] + nb[4] + nb[5];
-    let mn = vmin(
-        vmin(vmin(nb[0], nb[1]), vmin(nb[2], nb[3])),
-        vmin(nb[4], nb[5]),
-    );
-    let mx = vmax(
-        vmax(vmax(nb[0], nb[1]), vmax(nb[2], nb[3])),
-        vmax(nb[4], nb[5]),
-    );
-    let lo = 0.5 * (p + mn);
-    let hi = 0.5 * (p + mx);
+    let (lo, hi) = unchecked_bounds(p, nb);
     // A finite sum means every point is finite (NaN and infinities propagate), and then the
     // cheap min/max select exactly.
     let ok = (s.x + s.y + s.z + lo.x + lo.y + lo.z + hi.x + hi.y + hi.z).is_finite();

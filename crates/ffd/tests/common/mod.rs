@@ -48,38 +48,10 @@ pub fn cube() -> Mesh {
     Mesh::from_triangles(p, &tris).unwrap()
 }
 
-/// A UV sphere of `n` rings × `2n` segments, radius `r`, centre `c` (closed, outward).
+/// A UV sphere of `n` rings × `2n` segments, radius `r`, centre `c` (closed, outward):
+/// [`volmorph_ffd::shapes::uv_sphere`].
 pub fn sphere(n: u32, r: f64, c: DVec3) -> Mesh {
-    let m = 2 * n;
-    let mut p = vec![c + DVec3::new(0.0, 0.0, -r)];
-    for i in 1..n {
-        let th = std::f64::consts::PI * f64::from(i) / f64::from(n);
-        for j in 0..m {
-            let ph = 2.0 * std::f64::consts::PI * f64::from(j) / f64::from(m);
-            p.push(c + r * DVec3::new(th.sin() * ph.cos(), th.sin() * ph.sin(), -th.cos()));
-        }
-    }
-    p.push(c + DVec3::new(0.0, 0.0, r));
-    let top = (p.len() - 1) as u32;
-    let ring = |i: u32, j: u32| 1 + (i - 1) * m + (j % m);
-    let mut t = Vec::new();
-    for j in 0..m {
-        t.push([0, ring(1, j + 1), ring(1, j)]);
-        t.push([top, ring(n - 1, j), ring(n - 1, j + 1)]);
-    }
-    for i in 1..n - 1 {
-        for j in 0..m {
-            let (a, b, c2, d) = (
-                ring(i, j),
-                ring(i, j + 1),
-                ring(i + 1, j + 1),
-                ring(i + 1, j),
-            );
-            t.push([a, b, c2]);
-            t.push([a, c2, d]);
-        }
-    }
-    Mesh::from_triangles(p, &t).unwrap()
+    volmorph_ffd::shapes::uv_sphere(n, r, c).unwrap()
 }
 
 /// Move every control point of `lat` by up to `amp` times the box size, pseudo-randomly.
