@@ -287,7 +287,7 @@ impl<const N: usize> Aggregate<N> {
             .attribute(name)
             .ok_or_else(|| TrivariateError::UnknownAttribute(name.to_owned()))?;
         s.eval_into(u, out)
-            .map_err(ctx(format!("attribute {name:?}")))
+            .map_err(|e| ctx(format!("attribute {name:?}"))(e))
     }
 
     /// Assemble without re-validating (components produced by this crate's operators).

@@ -107,8 +107,13 @@ pub enum TrivariateError {
     },
 }
 
-/// Attach a context to a spline-layer error.
-pub(crate) fn ctx(context: impl Into<String>) -> impl FnOnce(SplineError) -> TrivariateError {
-    let context = context.into();
-    move |source| TrivariateError::Spline { context, source }
+/// Attach a context to a spline-layer error. The context is converted to a `String` only
+/// when an error occurs, so `ctx("literal")` costs nothing on the success path of per-point
+/// code (pass a closure's `format!` through `map_err(|e| ctx(format!(…))(e))` when the
+/// context must be formatted).
+pub(crate) fn ctx<C: Into<String>>(context: C) -> impl FnOnce(SplineError) -> TrivariateError {
+    move |source| TrivariateError::Spline {
+        context: context.into(),
+        source,
+    }
 }
