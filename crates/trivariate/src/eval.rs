@@ -46,7 +46,8 @@ const BATCH: usize = 4096;
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
 pub enum EvalMethod {
     /// Knot refinement with the triangular α scheme (Martin & Cohen §4). The default: it was
-    /// faster than de Boor on `benches/evaluate.rs` (12.0 M points with derivatives per second against 4.7 M on two cores).
+    /// faster than de Boor on `benches/evaluate.rs` (12.0 M points with derivatives per
+    /// second against 4.7 M, two cores).
     #[default]
     Refinement,
     /// Cox–de Boor basis contraction.
