@@ -1471,3 +1471,250 @@ fn handles_apply_maps_points_forward_with_full_precision() {
         }
     }
 }
+
+// ---------------------------------------------------------------------------------------------
+// volmorph nurbs: fit, eval, slice, isosurface.
+
+/// A 14³ sphere signed-distance phantom fitted as the attribute `d`; returns (dir, model).
+fn nurbs_sphere_model(dir: &Path) -> PathBuf {
+    let src = dir.join("sphere_sdf.nii");
+    ok(&[
+        &"phantom", &"sphere", &"-o", &src, &"--kind", &"sdf", &"--size", &"14",
+    ]);
+    let model = dir.join("sphere.json");
+    let out = ok(&[&"nurbs", &"fit", &src, &"-o", &model, &"--name", &"d"]);
+    assert!(
+        out.contains("interpolation at the Greville abscissae"),
+        "{out}"
+    );
+    model
+}
+
+#[test]
+fn nurbs_fit_eval_isosurface_and_slice() {
+    let dir = tempfile::tempdir().unwrap();
+    let model = nurbs_sphere_model(dir.path());
+    // Least squares with fewer control points.
+    let small = dir.path().join("small.json");
+    let src = dir.path().join("sphere_sdf.nii");
+    let out = ok(&[
+        &"nurbs",
+        &"fit",
+        &src,
+        &"-o",
+        &small,
+        &"--control-points",
+        &"8",
+        &"--order",
+        &"3",
+    ]);
+    assert!(
+        out.contains("least squares") && out.contains("8x8x8"),
+        "{out}"
+    );
+
+    // eval: the box centre maps to the physical centre, the SDF is negative there.
+    let info = info_json(&src);
+    let origin: Vec<f64> = serde_json::from_value(info["origin"].clone()).unwrap();
+    let spacing: Vec<f64> = serde_json::from_value(info["spacing"].clone()).unwrap();
+    let j: serde_json::Value = serde_json::from_str(&ok(&[
+        &"nurbs",
+        &"eval",
+        &model,
+        &"--at",
+        &"0.5,0.5,0.5",
+        &"--at",
+        &"0,0,0",
+        &"--json",
+    ]))
+    .unwrap();
+    let c = &j[0];
+    for a in 0..3 {
+        let centre = origin[a] + spacing[a] * 6.5;
+        assert!(
+            (c["point"][a].as_f64().unwrap() - centre).abs() < 1e-9,
+            "{c}"
+        );
+        // du of the trilinear box geometry is the box edge along its axis.
+        let edge = spacing[a] * 13.0;
+        let key = ["du", "dv", "dw"][a];
+        assert!((c[key][a].as_f64().unwrap() - edge).abs() < 1e-9, "{c}");
+    }
+    assert!(c["attributes"]["d"][0].as_f64().unwrap() < 0.0);
+    assert!((j[1]["point"][0].as_f64().unwrap() - origin[0]).abs() < 1e-9);
+    let text = ok(&[&"nurbs", &"eval", &model, &"--at", &"0.25,0.5,1"]);
+    assert!(text.contains("point") && text.contains("d = "), "{text}");
+
+    // isosurface d = 0: a closed surface, coloured by d itself, written as PLY with u v w.
+    let iso = dir.path().join("iso.ply");
+    let out = ok(&[
+        &"nurbs",
+        &"isosurface",
+        &model,
+        &"--attribute",
+        &"d",
+        &"--level",
+        &"0",
+        &"-o",
+        &iso,
+        &"--color-by",
+        &"d",
+    ]);
+    assert!(out.contains("closed"), "{out}");
+    let bytes = std::fs::read(&iso).unwrap();
+    let head = String::from_utf8_lossy(&bytes[..bytes.len().min(600)]).into_owned();
+    for p in [
+        "property double u",
+        "property double w",
+        "property float d",
+        "property uchar red",
+        "property uchar blue",
+    ] {
+        assert!(head.contains(p), "{head}");
+    }
+
+    // slice x = centre, per-polygon colours in PLY, per-vertex colours in OBJ.
+    let cx = origin[0] + spacing[0] * 6.5;
+    let plane = format!("1,0,0,{}", -cx);
+    let cut = dir.path().join("cut.ply");
+    let out = ok(&[
+        &"nurbs",
+        &"slice",
+        &model,
+        &"--plane",
+        &plane,
+        &"--attribute",
+        &"d",
+        &"-o",
+        &cut,
+        &"--per-polygon",
+        &"--colormap",
+        &"hot",
+        &"--range=-1,1",
+    ]);
+    assert!(out.contains("triangles"), "{out}");
+    let bytes = std::fs::read(&cut).unwrap();
+    let head = String::from_utf8_lossy(&bytes[..bytes.len().min(600)]).into_owned();
+    let face = &head[head.find("element face").unwrap()..];
+    assert!(face.contains("property float d") && face.contains("property uchar red"));
+    let obj = dir.path().join("cut.obj");
+    ok(&[
+        &"nurbs",
+        &"slice",
+        &model,
+        &"--plane",
+        &plane,
+        &"--attribute",
+        &"d",
+        &"-o",
+        &obj,
+    ]);
+    let text = std::fs::read_to_string(&obj).unwrap();
+    let v = text.lines().find(|l| l.starts_with("v ")).unwrap();
+    assert_eq!(v.split_whitespace().count(), 7, "{v}");
+    let x: f64 = v.split_whitespace().nth(1).unwrap().parse().unwrap();
+    assert!((x - cx).abs() < 1e-9);
+    // Geometry-only slice.
+    let plain = dir.path().join("plain.obj");
+    ok(&[
+        &"nurbs", &"slice", &model, &"--plane", &plane, &"-o", &plain,
+    ]);
+    let text = std::fs::read_to_string(&plain).unwrap();
+    let v = text.lines().find(|l| l.starts_with("v ")).unwrap();
+    assert_eq!(v.split_whitespace().count(), 4, "{v}");
+}
+
+#[test]
+fn nurbs_bad_inputs_fail_cleanly() {
+    let dir = tempfile::tempdir().unwrap();
+    let model = nurbs_sphere_model(dir.path());
+    let out = dir.path().join("o.ply");
+    let e = fails(&[
+        &"nurbs",
+        &"isosurface",
+        &model,
+        &"--attribute",
+        &"d",
+        &"--level",
+        &"NaN",
+        &"-o",
+        &out,
+    ]);
+    assert!(e.contains("finite"), "{e}");
+    let e = fails(&[
+        &"nurbs",
+        &"isosurface",
+        &model,
+        &"--attribute",
+        &"nope",
+        &"--level",
+        &"0",
+        &"-o",
+        &out,
+    ]);
+    assert!(e.contains("nope"), "{e}");
+    let e = fails(&[
+        &"nurbs", &"slice", &model, &"--plane", &"0,0,0,1", &"-o", &out,
+    ]);
+    assert!(e.contains("normal"), "{e}");
+    let e = fails(&[
+        &"nurbs", &"slice", &model, &"--plane", &"1,0,0", &"-o", &out,
+    ]);
+    assert!(e.contains("4 numbers"), "{e}");
+    for t in ["0", "-1"] {
+        let e = fails(&[
+            &"nurbs",
+            &"slice",
+            &model,
+            &"--plane",
+            &"1,0,0,0",
+            &"-o",
+            &out,
+            &"--tolerance",
+            &t,
+        ]);
+        assert!(e.contains("tolerance"), "{e}");
+    }
+    let e = fails(&[
+        &"nurbs",
+        &"slice",
+        &model,
+        &"--plane",
+        &"1,0,0,0",
+        &"-o",
+        &dir.path().join("o.stl"),
+    ]);
+    assert!(e.contains(".ply or .obj"), "{e}");
+    assert!(!out.exists());
+    let e = fails(&[&"nurbs", &"eval", &model, &"--at", &"2,0,0"]);
+    assert!(e.contains("cannot evaluate"), "{e}");
+    let e = fails(&[
+        &"nurbs",
+        &"eval",
+        &dir.path().join("missing.json"),
+        &"--at",
+        &"0,0,0",
+    ]);
+    assert!(e.contains("missing.json"), "{e}");
+    let src = dir.path().join("sphere_sdf.nii");
+    let e = fails(&[
+        &"nurbs",
+        &"fit",
+        &src,
+        &"-o",
+        &dir.path().join("m.json"),
+        &"--control-points",
+        &"40",
+    ]);
+    assert!(e.contains("exceed"), "{e}");
+    let e = fails(&[
+        &"nurbs",
+        &"fit",
+        &src,
+        &"-o",
+        &dir.path().join("m.json"),
+        &"--control-points",
+        &"2",
+    ]);
+    assert!(e.contains("too few"), "{e}");
+}

@@ -77,3 +77,4 @@ pub use qef::{DEFAULT_SINGULAR_THRESHOLD, Qef, QefSolution, symmetric_eigen};
 
 pub use error::ContourError;
 pub use marching::{EDGE_MARGIN, IsoSurface, McOptions, marching_cubes, marching_cubes_any};
+pub use table::{mc_case_triangles, mc_corner_offset, mc_edge_corners};

@@ -129,6 +129,32 @@ impl Case {
     }
 }
 
+/// The triangles of marching-cubes case `case` (bit `c` set when corner `c` is inside), as
+/// triples of cube edge numbers, counter-clockwise seen from outside (normals point from the
+/// inside to the outside). Corner `c` sits at [`mc_corner_offset`]`(c)`, edge `e` joins the
+/// corners [`mc_edge_corners`]`(e)` along axis `e / 4`; ambiguous faces always separate their
+/// inside corners. This is the one case table of volmorph, for
+/// callers that polygonise their own lattices (the surface is crack-free across cells that
+/// agree on their shared corner signs).
+#[must_use]
+pub fn mc_case_triangles(case: u8) -> &'static [[u8; 3]] {
+    CASES[usize::from(case)].triangles()
+}
+
+/// Offset `(x, y, z) ∈ {0, 1}³` of cube corner `corner` (0–7) from the cell's lowest corner:
+/// bit 0 = x, bit 1 = y, bit 2 = z. Only the low three bits of `corner` are used.
+#[must_use]
+pub const fn mc_corner_offset(corner: usize) -> [usize; 3] {
+    corner_offset(corner & 7)
+}
+
+/// The corners `(from, to)` of cube edge `edge` (0–11, taken modulo 12): the edge runs along
+/// axis `edge / 4` from `from` to `to = from + 2^axis`.
+#[must_use]
+pub const fn mc_edge_corners(edge: usize) -> [usize; 2] {
+    edge_corners(edge % 12)
+}
+
 /// The 256 cases, indexed by the inside-corner bit mask.
 pub(crate) static CASES: LazyLock<[Case; 256]> =
     LazyLock::new(|| std::array::from_fn(|case| derive_case(case as u8).0));

@@ -69,6 +69,10 @@ pub enum MeshError {
     /// The mesh exceeds the 32-bit index space (more than `u32::MAX` vertices or face corners).
     #[error("mesh too large: {0}")]
     TooLarge(String),
+    /// An extra per-element property to write is malformed (wrong number of values, empty,
+    /// non-ASCII or whitespace-containing name, or a name used twice or by a standard property).
+    #[error("invalid PLY property: {0}")]
+    InvalidProperty(String),
     /// A valid request volmorph does not handle (unknown extension, binary OFF, …).
     #[error("unsupported: {0}")]
     Unsupported(String),

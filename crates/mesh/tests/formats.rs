@@ -820,3 +820,115 @@ fn truncated_and_mutated_inputs_never_panic() {
         }
     }
 }
+
+#[test]
+fn ply_extra_properties_are_declared_written_and_skipped_by_the_reader() {
+    use volmorph_mesh::format::ply::{
+        PlyEncoding, PlyProperties, PlyProperty, PlyValues, write_ply_with_properties,
+    };
+    let m = Mesh::from_triangles(
+        vec![
+            DVec3::new(0.0, 0.0, 0.0),
+            DVec3::new(1.0, 0.0, 0.0),
+            DVec3::new(0.0, 1.0, 0.5),
+        ],
+        &[[0, 1, 2]],
+    )
+    .unwrap();
+    let red = [255u8, 0, 7];
+    let temp = [1.5f32, -2.25, 3.0];
+    let par = [0.125f64, 0.5, 1.0];
+    let area = [0.75f32];
+    let extra = PlyProperties {
+        vertex: vec![
+            PlyProperty {
+                name: "u",
+                values: PlyValues::F64(&par),
+            },
+            PlyProperty {
+                name: "temperature",
+                values: PlyValues::F32(&temp),
+            },
+            PlyProperty {
+                name: "red",
+                values: PlyValues::U8(&red),
+            },
+        ],
+        face: vec![PlyProperty {
+            name: "mean",
+            values: PlyValues::F32(&area),
+        }],
+    };
+    for enc in [
+        PlyEncoding::Ascii,
+        PlyEncoding::BinaryLittleEndian,
+        PlyEncoding::BinaryBigEndian,
+    ] {
+        let mut out = Vec::new();
+        write_ply_with_properties(&mut out, &m, enc, false, &extra).unwrap();
+        let text = String::from_utf8_lossy(&out);
+        let header = &text[..text.find("end_header").unwrap()];
+        assert!(header.contains(
+            "property double z\nproperty double u\nproperty float temperature\nproperty uchar red\nelement face 1\n"
+        ));
+        assert!(header.contains("vertex_indices\nproperty float mean\n"));
+        let back = volmorph_mesh::read_ply_bytes(&out).unwrap();
+        assert_eq!(back, m);
+        if enc == PlyEncoding::Ascii {
+            assert!(text.contains("\n1 0 0 0.5 -2.25 0\n"), "{text}");
+            assert!(text.contains("\n3 0 1 2 0.75\n"), "{text}");
+        } else {
+            // 3 vertices × (3·8 + 8 + 4 + 1) bytes + face (1 + 3·4 + 4) bytes after the header.
+            let body = out.len() - (text.find("end_header\n").unwrap() + 11);
+            assert_eq!(body, 3 * 37 + 17);
+        }
+    }
+    // Wrong counts and bad names are refused before writing.
+    let bad_len = PlyProperties {
+        vertex: vec![PlyProperty {
+            name: "t",
+            values: PlyValues::F32(&area),
+        }],
+        face: Vec::new(),
+    };
+    for bad in [
+        bad_len,
+        PlyProperties {
+            vertex: vec![PlyProperty {
+                name: "x",
+                values: PlyValues::F32(&temp),
+            }],
+            face: Vec::new(),
+        },
+        PlyProperties {
+            vertex: vec![PlyProperty {
+                name: "two words",
+                values: PlyValues::F32(&temp),
+            }],
+            face: Vec::new(),
+        },
+    ] {
+        let mut out = Vec::new();
+        let e = write_ply_with_properties(&mut out, &m, PlyEncoding::Ascii, false, &bad);
+        assert!(matches!(e, Err(MeshError::InvalidProperty(_))));
+        assert!(out.is_empty());
+    }
+}
+
+#[test]
+fn obj_vertex_colours_are_written_in_unit_range_and_read_back() {
+    let m = Mesh::from_triangles(vec![DVec3::ZERO, DVec3::X, DVec3::Y], &[[0, 1, 2]]).unwrap();
+    let mut out = Vec::new();
+    volmorph_mesh::format::obj::write_obj_with_colors(
+        &mut out,
+        &m,
+        &[[255, 0, 51], [0; 3], [1; 3]],
+    )
+    .unwrap();
+    let text = String::from_utf8(out.clone()).unwrap();
+    assert!(text.contains("v 0 0 0 1 0 0.2\n"), "{text}");
+    assert_eq!(volmorph_mesh::read_obj_bytes(&out).unwrap(), m);
+    let mut out = Vec::new();
+    let e = volmorph_mesh::format::obj::write_obj_with_colors(&mut out, &m, &[[0; 3]]);
+    assert!(matches!(e, Err(MeshError::InvalidProperty(_))));
+}

@@ -19,6 +19,9 @@ pub enum TrivariateError {
     /// Reading or writing a file failed.
     #[error(transparent)]
     Io(#[from] IoError),
+    /// Encoding a mesh failed (invalid extra property, writer failure).
+    #[error(transparent)]
+    Mesh(#[from] volmorph_mesh::MeshError),
     /// A JSON document is malformed or does not follow the format (message names the place).
     #[error("invalid trivariate JSON: {0}")]
     Json(String),

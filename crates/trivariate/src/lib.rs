@@ -12,6 +12,11 @@
 //! * [`VolumeEvaluator`] — points and first partial derivatives by knot refinement (the α
 //!   scheme of §4) or de Boor, per point or in rayon batches ([`eval`]).
 //! * [`invert`](mod@invert) — physical point → parameters by Newton with a subdivision fallback.
+//! * [`extract`] — the zero finding of §5.1: the scalar spline `D` of an isosurface or planar
+//!   slice, and root isolation by Bézier subdivision ([`isolate_roots`]).
+//! * [`isosurface`](mod@isosurface) — crack-free polygonisation of isosurfaces ([`isosurface()`])
+//!   and planar slices ([`slice()`]) with per-vertex parameters and attribute values, written as
+//!   coloured PLY or OBJ.
 //!
 //! The spline machinery (knot vectors, bases, refinement, Greville interpolation) is
 //! `volmorph_spline`'s; this crate builds on it.
@@ -19,9 +24,11 @@
 pub mod aggregate;
 mod error;
 pub mod eval;
+pub mod extract;
 pub mod fit;
 pub mod format;
 pub mod invert;
+pub mod isosurface;
 pub mod modeling;
 
 pub use aggregate::{
@@ -29,6 +36,8 @@ pub use aggregate::{
 };
 pub use error::TrivariateError;
 pub use eval::{EvalMethod, VolumeEvaluator};
+pub use extract::{RootCell, RootOptions, isolate_roots, isosurface_function, plane_function};
 pub use format::{AnyAggregate, load, load_volume, save};
 pub use invert::{InversionOptions, invert};
+pub use isosurface::{Coloring, PolygonizeOptions, ZeroSetMesh, isosurface, slice};
 pub use modeling::{extrude, revolve, rule};

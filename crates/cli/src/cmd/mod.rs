@@ -11,6 +11,7 @@ pub mod info;
 pub mod isosurface;
 pub mod lattice;
 pub mod mesh;
+pub mod nurbs;
 pub mod phantom;
 pub mod picture;
 pub mod slice;

@@ -12,13 +12,17 @@
 //!
 //! **Write.** A comment line, one `v x y z` line per vertex (shortest round-trip decimals, so
 //! reading gives back the same `f64` bits) and one `f a b c …` line per face (1-based).
+//! [`write_obj_with_colors`] writes the widespread vertex-colour extension instead,
+//! `v x y z r g b` with each 8-bit channel `c` written as `c / 255` in `[0, 1]`.
 
 use std::io::Write;
 
 use glam::DVec3;
 
 use super::Builder;
-use super::text::{Lines, Words, parse_f64, parse_i64, show, write_face_indices, write_xyz};
+use super::text::{
+    Lines, Words, parse_f64, parse_i64, show, write_f64, write_face_indices, write_xyz,
+};
 use crate::error::Location;
 use crate::{Mesh, MeshError, MeshFormat};
 
@@ -127,6 +131,35 @@ pub fn read_obj_bytes(bytes: &[u8]) -> Result<Mesh, MeshError> {
 /// [`Mesh::from_csr_unvalidated`] that has such faces (nothing is written then);
 /// [`MeshError::Write`] when the writer fails.
 pub fn write_obj<W: Write>(w: &mut W, mesh: &Mesh) -> Result<(), MeshError> {
+    write_obj_impl(w, mesh, None)
+}
+
+/// Write `mesh` as OBJ text with one 8-bit sRGB colour per vertex, as `v x y z r g b` lines
+/// with channels scaled to `[0, 1]` (see the module documentation).
+///
+/// # Errors
+/// As [`write_obj`], plus [`MeshError::InvalidProperty`] unless there is exactly one colour
+/// per vertex (nothing is written then).
+pub fn write_obj_with_colors<W: Write>(
+    w: &mut W,
+    mesh: &Mesh,
+    colors: &[[u8; 3]],
+) -> Result<(), MeshError> {
+    if colors.len() != mesh.vertex_count() {
+        return Err(MeshError::InvalidProperty(format!(
+            "{} vertex colours for {} vertices",
+            colors.len(),
+            mesh.vertex_count()
+        )));
+    }
+    write_obj_impl(w, mesh, Some(colors))
+}
+
+fn write_obj_impl<W: Write>(
+    w: &mut W,
+    mesh: &Mesh,
+    colors: Option<&[[u8; 3]]>,
+) -> Result<(), MeshError> {
     mesh.check_faces()?;
     writeln!(
         w,
@@ -134,9 +167,15 @@ pub fn write_obj<W: Write>(w: &mut W, mesh: &Mesh) -> Result<(), MeshError> {
         mesh.vertex_count(),
         mesh.face_count()
     )?;
-    for p in mesh.positions() {
+    for (i, p) in mesh.positions().iter().enumerate() {
         w.write_all(b"v ")?;
         write_xyz(w, *p)?;
+        if let Some(c) = colors.and_then(|c| c.get(i)) {
+            for ch in c {
+                w.write_all(b" ")?;
+                write_f64(w, f64::from(*ch) / 255.0)?;
+            }
+        }
         w.write_all(b"\n")?;
     }
     for face in mesh.faces() {

@@ -19,6 +19,12 @@
 //! **Write.** `vertex` with `double` (or `float`, on request) `x y z`, and `face` with
 //! `property list uchar int vertex_indices` (wider count/index types only when a face has
 //! more than 255 vertices or there are more than 2³¹ vertices).
+//!
+//! **Extra properties.** [`write_ply_with_properties`] appends caller-supplied scalar
+//! properties ([`PlyProperties`]) to the `vertex` element (after `x y z`, in the order given)
+//! and to the `face` element (after `vertex_indices`): `uchar` ([`PlyValues::U8`], e.g. the
+//! conventional `red green blue` colour channels), `float` ([`PlyValues::F32`]) or `double`
+//! ([`PlyValues::F64`]), one value per vertex or face. The reader skips such properties.
 
 use std::io::Write;
 
@@ -668,6 +674,122 @@ fn read_ascii(h: &Header, roles: &Roles, data: &[u8]) -> Result<Mesh, MeshError>
     Ok(b.finish())
 }
 
+/// Values of one extra PLY property, one per element (vertex or face).
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub enum PlyValues<'a> {
+    /// Written as `uchar` (colour channels `red`, `green`, `blue`, `alpha` by convention).
+    U8(&'a [u8]),
+    /// Written as `float`.
+    F32(&'a [f32]),
+    /// Written as `double`.
+    F64(&'a [f64]),
+}
+
+impl PlyValues<'_> {
+    fn len(&self) -> usize {
+        match self {
+            Self::U8(v) => v.len(),
+            Self::F32(v) => v.len(),
+            Self::F64(v) => v.len(),
+        }
+    }
+
+    fn type_name(&self) -> &'static str {
+        match self {
+            Self::U8(_) => "uchar",
+            Self::F32(_) => "float",
+            Self::F64(_) => "double",
+        }
+    }
+}
+
+/// One named extra scalar property of the `vertex` or `face` element.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct PlyProperty<'a> {
+    /// Property name: non-empty printable ASCII without whitespace, not `x`, `y`, `z` or
+    /// `vertex_indices`, unique within its element.
+    pub name: &'a str,
+    /// One value per vertex (vertex properties) or per face (face properties).
+    pub values: PlyValues<'a>,
+}
+
+/// Extra per-vertex and per-face properties for [`write_ply_with_properties`] (see the module
+/// documentation). The default has none.
+#[derive(Debug, Clone, Default, PartialEq)]
+pub struct PlyProperties<'a> {
+    /// Written after `x y z` of every vertex, in this order.
+    pub vertex: Vec<PlyProperty<'a>>,
+    /// Written after `vertex_indices` of every face, in this order.
+    pub face: Vec<PlyProperty<'a>>,
+}
+
+fn check_properties(
+    props: &[PlyProperty<'_>],
+    count: usize,
+    element: &str,
+    reserved: &[&str],
+) -> Result<(), MeshError> {
+    for (i, p) in props.iter().enumerate() {
+        let ok = !p.name.is_empty() && p.name.bytes().all(|b| b.is_ascii_graphic());
+        if !ok {
+            return Err(MeshError::InvalidProperty(format!(
+                "{element} property name {:?} must be non-empty printable ASCII without spaces",
+                p.name
+            )));
+        }
+        if reserved.contains(&p.name) || props[..i].iter().any(|q| q.name == p.name) {
+            return Err(MeshError::InvalidProperty(format!(
+                "{element} property {:?} is used twice",
+                p.name
+            )));
+        }
+        if p.values.len() != count {
+            return Err(MeshError::InvalidProperty(format!(
+                "{element} property {:?} has {} values for {count} {element}s",
+                p.name,
+                p.values.len()
+            )));
+        }
+    }
+    Ok(())
+}
+
+/// Write the `i`-th value of each property (ASCII: preceded by a space).
+fn write_props<W: Write>(
+    w: &mut W,
+    props: &[PlyProperty<'_>],
+    i: usize,
+    encoding: PlyEncoding,
+) -> Result<(), MeshError> {
+    let big = encoding == PlyEncoding::BinaryBigEndian;
+    for p in props {
+        match encoding {
+            PlyEncoding::Ascii => {
+                w.write_all(b" ")?;
+                match p.values {
+                    PlyValues::U8(v) => write!(w, "{}", v[i])?,
+                    PlyValues::F32(v) => write_f32(w, v[i])?,
+                    PlyValues::F64(v) => write_f64(w, v[i])?,
+                }
+            }
+            _ => match p.values {
+                PlyValues::U8(v) => w.write_all(&[v[i]])?,
+                PlyValues::F32(v) => w.write_all(&if big {
+                    v[i].to_be_bytes()
+                } else {
+                    v[i].to_le_bytes()
+                })?,
+                PlyValues::F64(v) => w.write_all(&if big {
+                    v[i].to_be_bytes()
+                } else {
+                    v[i].to_le_bytes()
+                })?,
+            },
+        }
+    }
+    Ok(())
+}
+
 /// Write `mesh` as PLY in `encoding`, with `float` instead of `double` coordinates when
 /// `single_precision` (see the module documentation).
 ///
@@ -681,7 +803,36 @@ pub fn write_ply<W: Write>(
     encoding: PlyEncoding,
     single_precision: bool,
 ) -> Result<(), MeshError> {
+    write_ply_with_properties(
+        w,
+        mesh,
+        encoding,
+        single_precision,
+        &PlyProperties::default(),
+    )
+}
+
+/// [`write_ply`] with extra per-vertex and per-face scalar properties (see the module
+/// documentation).
+///
+/// # Errors
+/// As [`write_ply`], plus [`MeshError::InvalidProperty`] (nothing is written then) when a
+/// property has the wrong number of values or a bad, reserved or repeated name.
+pub fn write_ply_with_properties<W: Write>(
+    w: &mut W,
+    mesh: &Mesh,
+    encoding: PlyEncoding,
+    single_precision: bool,
+    extra: &PlyProperties<'_>,
+) -> Result<(), MeshError> {
     mesh.check_faces()?;
+    check_properties(
+        &extra.vertex,
+        mesh.vertex_count(),
+        "vertex",
+        &["x", "y", "z"],
+    )?;
+    check_properties(&extra.face, mesh.face_count(), "face", &["vertex_indices"])?;
     let max_len = mesh.max_face_len();
     let count_ty = if max_len <= 255 {
         Scalar::U8
@@ -705,17 +856,27 @@ pub fn write_ply<W: Write>(
     write!(
         w,
         "ply\nformat {} 1.0\ncomment volmorph mesh\nelement vertex {}\n\
-         property {coord} x\nproperty {coord} y\nproperty {coord} z\n\
-         element face {}\nproperty list {} {} vertex_indices\nend_header\n",
+         property {coord} x\nproperty {coord} y\nproperty {coord} z\n",
         encoding.keyword(),
         mesh.vertex_count(),
+    )?;
+    for p in &extra.vertex {
+        writeln!(w, "property {} {}", p.values.type_name(), p.name)?;
+    }
+    write!(
+        w,
+        "element face {}\nproperty list {} {} vertex_indices\n",
         mesh.face_count(),
         name(count_ty),
         name(index_ty)
     )?;
+    for p in &extra.face {
+        writeln!(w, "property {} {}", p.values.type_name(), p.name)?;
+    }
+    w.write_all(b"end_header\n")?;
     match encoding {
         PlyEncoding::Ascii => {
-            for p in mesh.positions() {
+            for (i, p) in mesh.positions().iter().enumerate() {
                 for (k, x) in p.to_array().into_iter().enumerate() {
                     if k > 0 {
                         w.write_all(b" ")?;
@@ -726,11 +887,20 @@ pub fn write_ply<W: Write>(
                         write_f64(w, x)?;
                     }
                 }
+                write_props(w, &extra.vertex, i, encoding)?;
                 w.write_all(b"\n")?;
             }
-            for face in mesh.faces() {
+            for (f, face) in mesh.faces().enumerate() {
                 write!(w, "{}", face.len())?;
-                write_face_indices(w, face, 0)?;
+                if extra.face.is_empty() {
+                    write_face_indices(w, face, 0)?;
+                } else {
+                    for &i in face {
+                        write!(w, " {i}")?;
+                    }
+                    write_props(w, &extra.face, f, encoding)?;
+                    w.write_all(b"\n")?;
+                }
             }
         }
         PlyEncoding::BinaryLittleEndian | PlyEncoding::BinaryBigEndian => {
@@ -744,7 +914,7 @@ pub fn write_ply<W: Write>(
                     }
                 };
             }
-            for p in mesh.positions() {
+            for (i, p) in mesh.positions().iter().enumerate() {
                 for x in p.to_array() {
                     if single_precision {
                         put!(x as f32);
@@ -752,8 +922,9 @@ pub fn write_ply<W: Write>(
                         put!(x);
                     }
                 }
+                write_props(w, &extra.vertex, i, encoding)?;
             }
-            for face in mesh.faces() {
+            for (f, face) in mesh.faces().enumerate() {
                 let n = face.len();
                 match count_ty {
                     Scalar::U8 => put!(n as u8),
@@ -764,6 +935,7 @@ pub fn write_ply<W: Write>(
                     // Both index types hold `i` with the same bit pattern.
                     put!(i);
                 }
+                write_props(w, &extra.face, f, encoding)?;
             }
         }
     }

@@ -1,0 +1,397 @@
+//! `volmorph nurbs`: trivariate NURBS volumes carrying attributes (Martin & Cohen) — fit a
+//! sampled volume, evaluate points and derivatives, and extract planar slices and isosurfaces
+//! as coloured meshes.
+
+use std::path::{Path, PathBuf};
+
+use anyhow::{Context, bail};
+use volmorph_render::Colormap;
+use volmorph_spline::{KnotVector, TensorBSpline};
+use volmorph_trivariate::{
+    Aggregate, AggregateVolume, Coloring, PolygonizeOptions, ZeroSetMesh, fit, isosurface,
+    load_volume, save, slice,
+};
+use volmorph_volume::format;
+
+use crate::progress;
+
+/// Trivariate NURBS subcommands.
+#[derive(Debug, clap::Subcommand)]
+pub enum Command {
+    /// Fit a sampled volume as an attribute over a geometry volume and write the JSON model.
+    #[command(
+        after_help = "Examples:\n  volmorph nurbs fit ct.nii.gz -o ct.json --order 4\n  volmorph nurbs fit ct.nii.gz -o ct.json --control-points 16 --name density\n\nThe geometry is the volume's physical box (trilinear, corners at the first and last voxel\ncentres). With as many control points as samples the attribute interpolates the samples at\nthe Greville abscissae (the paper's nodal values); with fewer it is the least-squares fit of\nthe samples at their parameters i/(n-1)."
+    )]
+    Fit(FitArgs),
+    /// Print the point, its partial derivatives and every attribute at parameters (u, v, w).
+    #[command(
+        after_help = "Example:\n  volmorph nurbs eval ct.json --at 0.5,0.5,0.5 --at 0,0,1 --json"
+    )]
+    Eval(EvalArgs),
+    /// Mesh the region of a plane inside the volume, coloured by an attribute.
+    #[command(
+        after_help = "Example:\n  volmorph nurbs slice ct.json --plane 1,0,0,-10 --attribute density -o cut.ply --colormap viridis\n\nThe plane is {x : a*x + b*y + c*z + d = 0}. PLY vertices carry double x y z u v w, the\nattribute as float and uchar red green blue; --per-polygon colours each triangle by its\naverage value (PLY face properties). OBJ gets `v x y z r g b` lines."
+    )]
+    Slice(SliceArgs),
+    /// Mesh the isosurface A = level of a scalar attribute.
+    #[command(
+        after_help = "Example:\n  volmorph nurbs isosurface ct.json --attribute density --level 0.5 -o skin.ply --tolerance 0.01"
+    )]
+    Isosurface(IsosurfaceArgs),
+}
+
+/// Arguments of `volmorph nurbs fit`.
+#[derive(Debug, clap::Args)]
+pub struct FitArgs {
+    /// Input volume (any format volmorph reads).
+    pub input: PathBuf,
+    /// Output model (volmorph trivariate JSON).
+    #[arg(short, long)]
+    pub output: PathBuf,
+    /// Order k (degree k − 1) of the attribute spline on every axis.
+    #[arg(long, default_value_t = 4)]
+    pub order: usize,
+    /// Control points per axis: `n` or `nx,ny,nz`; default the sample grid (interpolation).
+    #[arg(long)]
+    pub control_points: Option<String>,
+    /// Name of the fitted attribute.
+    #[arg(long, default_value = "value")]
+    pub name: String,
+}
+
+/// Arguments of `volmorph nurbs eval`.
+#[derive(Debug, clap::Args)]
+pub struct EvalArgs {
+    /// Model (volmorph trivariate JSON).
+    pub model: PathBuf,
+    /// Parameters `u,v,w` in [0, 1]³ (repeatable).
+    #[arg(long = "at", required = true)]
+    pub at: Vec<String>,
+    /// Print JSON instead of text.
+    #[arg(long)]
+    pub json: bool,
+}
+
+/// Colour and tolerance options shared by `slice` and `isosurface`.
+#[derive(Debug, Clone, clap::Args)]
+pub struct MeshOptions {
+    /// Output mesh (.ply or .obj).
+    #[arg(short, long)]
+    pub output: PathBuf,
+    /// Flatness tolerance in physical length units (default: --relative-tolerance times the
+    /// geometry's bounding-box diagonal).
+    #[arg(long, allow_hyphen_values = true)]
+    pub tolerance: Option<f64>,
+    /// Flatness tolerance relative to the bounding-box diagonal.
+    #[arg(
+        long,
+        allow_hyphen_values = true,
+        default_value_t = volmorph_trivariate::isosurface::DEFAULT_RELATIVE_TOLERANCE
+    )]
+    pub relative_tolerance: f64,
+    /// Colour map (grey, hot, viridis, turbo, cool-warm).
+    #[arg(long, default_value = "viridis")]
+    pub colormap: String,
+    /// Attribute range `lo,hi` mapped onto the colour map (default: the values' range).
+    #[arg(long, allow_hyphen_values = true)]
+    pub range: Option<String>,
+    /// Colour each triangle by its average value instead of each vertex (PLY only).
+    #[arg(long)]
+    pub per_polygon: bool,
+}
+
+/// Arguments of `volmorph nurbs slice`.
+#[derive(Debug, clap::Args)]
+pub struct SliceArgs {
+    /// Model (volmorph trivariate JSON).
+    pub model: PathBuf,
+    /// Plane `a,b,c,d`: the points x with a·x + b·y + c·z + d = 0.
+    #[arg(long, allow_hyphen_values = true)]
+    pub plane: String,
+    /// Scalar attribute colouring the slice (none: geometry only).
+    #[arg(long)]
+    pub attribute: Option<String>,
+    /// Output and colouring.
+    #[command(flatten)]
+    pub mesh: MeshOptions,
+}
+
+/// Arguments of `volmorph nurbs isosurface`.
+#[derive(Debug, clap::Args)]
+pub struct IsosurfaceArgs {
+    /// Model (volmorph trivariate JSON).
+    pub model: PathBuf,
+    /// Scalar attribute whose level set is meshed.
+    #[arg(long)]
+    pub attribute: String,
+    /// Level A* of the surface.
+    #[arg(long, allow_hyphen_values = true)]
+    pub level: f64,
+    /// Colour the surface by this scalar attribute (default: no colours).
+    #[arg(long)]
+    pub color_by: Option<String>,
+    /// Output and colouring.
+    #[command(flatten)]
+    pub mesh: MeshOptions,
+}
+
+/// Run a `volmorph nurbs` subcommand.
+pub fn run(cmd: &Command) -> anyhow::Result<()> {
+    match cmd {
+        Command::Fit(a) => fit_cmd(a),
+        Command::Eval(a) => eval_cmd(a),
+        Command::Slice(a) => slice_cmd(a),
+        Command::Isosurface(a) => isosurface_cmd(a),
+    }
+}
+
+/// Parse `n` or `nx,ny,nz`.
+fn counts(s: &str) -> anyhow::Result<[usize; 3]> {
+    let parts: Vec<&str> = s.split(',').map(str::trim).collect();
+    let parse = |p: &str| {
+        p.parse::<usize>()
+            .with_context(|| format!("control-point count {p:?} is not a whole number"))
+    };
+    match parts.as_slice() {
+        [n] => Ok([parse(n)?; 3]),
+        [x, y, z] => Ok([parse(x)?, parse(y)?, parse(z)?]),
+        _ => bail!("--control-points wants n or nx,ny,nz, got {s:?}"),
+    }
+}
+
+/// Parse comma-separated finite numbers, exactly `N` of them.
+fn numbers<const N: usize>(s: &str, what: &str) -> anyhow::Result<[f64; N]> {
+    let v: Vec<f64> = s
+        .split(',')
+        .map(|p| {
+            p.trim()
+                .parse::<f64>()
+                .with_context(|| format!("{what}: {p:?} is not a number"))
+        })
+        .collect::<anyhow::Result<_>>()?;
+    let arr: [f64; N] = v
+        .try_into()
+        .map_err(|v: Vec<f64>| anyhow::anyhow!("{what} needs {N} numbers, got {}", v.len()))?;
+    if let Some(x) = arr.iter().find(|x| !x.is_finite()) {
+        bail!("{what}: {x} is not finite");
+    }
+    Ok(arr)
+}
+
+fn fit_cmd(args: &FitArgs) -> anyhow::Result<()> {
+    let pb = progress::spinner(format!("reading {}", args.input.display()));
+    let vol = format::read(&args.input).context("cannot read volume")?;
+    let typed = vol.to_typed::<f64>();
+    let g = typed.geometry();
+    let dims = g.dims;
+    if dims.iter().any(|&d| d < 2) {
+        bail!("the volume needs at least 2 samples per axis to fit, has {dims:?}");
+    }
+    if args.order < 2 {
+        bail!("--order must be at least 2 (linear), got {}", args.order);
+    }
+    let degree = args.order - 1;
+    let n = match &args.control_points {
+        Some(s) => counts(s)?,
+        None => dims,
+    };
+    for a in 0..3 {
+        if n[a] < args.order {
+            bail!(
+                "axis {a}: {} control points are too few for order {} (need at least the order)",
+                n[a],
+                args.order
+            );
+        }
+        if n[a] > dims[a] {
+            bail!(
+                "axis {a}: {} control points exceed the {} samples",
+                n[a],
+                dims[a]
+            );
+        }
+    }
+    // Geometry: the trilinear map of the box of voxel centres.
+    let lin = KnotVector::clamped_uniform(1, 2, [0.0, 1.0])?;
+    let mut pts = Vec::with_capacity(24);
+    for k in 0..2 {
+        for j in 0..2 {
+            for i in 0..2 {
+                let idx = volmorph_mesh::DVec3::new(
+                    (i * (dims[0] - 1)) as f64,
+                    (j * (dims[1] - 1)) as f64,
+                    (k * (dims[2] - 1)) as f64,
+                );
+                pts.extend(g.index_to_physical(idx).to_array());
+            }
+        }
+    }
+    let geometry = TensorBSpline::new([lin.clone(), lin.clone(), lin], 3, pts)?;
+    let knots: [KnotVector; 3] = [
+        KnotVector::clamped_uniform(degree, n[0], [0.0, 1.0])?,
+        KnotVector::clamped_uniform(degree, n[1], [0.0, 1.0])?,
+        KnotVector::clamped_uniform(degree, n[2], [0.0, 1.0])?,
+    ];
+    pb.set_message("fitting");
+    let data = typed.data();
+    let (attr, how) = if n == dims {
+        (
+            fit::interpolate(knots, 1, data)?,
+            "interpolation at the Greville abscissae",
+        )
+    } else {
+        let sites: [Vec<f64>; 3] = std::array::from_fn(|a| {
+            (0..dims[a])
+                .map(|i| i as f64 / (dims[a] - 1) as f64)
+                .collect()
+        });
+        (
+            fit::least_squares(knots, [&sites[0], &sites[1], &sites[2]], 1, data)?,
+            "least squares",
+        )
+    };
+    let model = Aggregate::new(geometry)?.with_attribute(args.name.clone(), attr)?;
+    save(&args.output, &model).context("cannot write the model")?;
+    pb.finish_and_clear();
+    say!(
+        "fitted {:?} samples with {}x{}x{} control points of order {} ({how}) -> {}",
+        dims,
+        n[0],
+        n[1],
+        n[2],
+        args.order,
+        args.output.display()
+    );
+    Ok(())
+}
+
+fn load(path: &Path) -> anyhow::Result<AggregateVolume> {
+    load_volume(path).with_context(|| format!("cannot load model {}", path.display()))
+}
+
+fn eval_cmd(args: &EvalArgs) -> anyhow::Result<()> {
+    let model = load(&args.model)?;
+    let mut out = Vec::new();
+    for s in &args.at {
+        let u: [f64; 3] = numbers(s, "--at")?;
+        let (p, d) = model
+            .geometry()
+            .eval_with_gradient(u)
+            .with_context(|| format!("cannot evaluate at {s}"))?;
+        let mut attrs = serde_json::Map::new();
+        for a in model.attributes() {
+            let v = a
+                .spline()
+                .eval(u)
+                .with_context(|| format!("cannot evaluate attribute {:?}", a.name()))?;
+            attrs.insert(a.name().to_owned(), serde_json::json!(v));
+        }
+        out.push(serde_json::json!({
+            "u": u,
+            "point": p,
+            "du": &d[0..3],
+            "dv": &d[3..6],
+            "dw": &d[6..9],
+            "attributes": attrs,
+        }));
+    }
+    if args.json {
+        say!("{}", serde_json::to_string_pretty(&out)?);
+    } else {
+        for o in &out {
+            say!("u = {}", o["u"]);
+            for key in ["point", "du", "dv", "dw"] {
+                say!("  {key:<6} {}", o[key]);
+            }
+            if let Some(m) = o["attributes"].as_object() {
+                for (k, v) in m {
+                    say!("  {k} = {v}");
+                }
+            }
+        }
+    }
+    Ok(())
+}
+
+fn options(m: &MeshOptions) -> PolygonizeOptions {
+    PolygonizeOptions {
+        tolerance: m.tolerance,
+        relative_tolerance: m.relative_tolerance,
+        ..PolygonizeOptions::default()
+    }
+}
+
+/// Write `z` coloured per the options, and print a summary.
+fn write_mesh(z: &ZeroSetMesh, m: &MeshOptions, colour: bool) -> anyhow::Result<()> {
+    let colormap: Colormap = m.colormap.parse()?;
+    let coloring = match (z.values.is_empty() || !colour, m.per_polygon) {
+        (true, false) => Coloring::None,
+        (true, true) => {
+            bail!("--per-polygon needs an attribute to colour by (--attribute / --color-by)")
+        }
+        (false, false) => Coloring::PerVertex,
+        (false, true) => Coloring::PerPolygon,
+    };
+    let [lo, hi] = match &m.range {
+        Some(r) => {
+            let [lo, hi] = numbers::<2>(r, "--range")?;
+            if hi <= lo {
+                bail!("--range: hi must exceed lo, got {lo},{hi}");
+            }
+            [lo, hi]
+        }
+        None => z.value_range().unwrap_or([0.0, 1.0]),
+    };
+    let span = if hi > lo { hi - lo } else { 1.0 };
+    let color = move |v: f64| colormap.map(((v - lo) / span) as f32);
+    z.write(&m.output, coloring, &color)
+        .with_context(|| format!("cannot write {}", m.output.display()))?;
+    let report = z.mesh.validate();
+    say!(
+        "{} vertices, {} triangles ({} root cells, lattice {}x{}x{}, tolerance {:.3e}){}",
+        z.mesh.vertex_count(),
+        z.mesh.face_count(),
+        z.root_cells,
+        z.lattice[0],
+        z.lattice[1],
+        z.lattice[2],
+        z.tolerance,
+        if report.is_closed_manifold() {
+            ", closed"
+        } else {
+            ""
+        }
+    );
+    if let (Some(name), Some([vlo, vhi])) = (&z.attribute, z.value_range()) {
+        say!("{name} on the mesh: [{vlo}, {vhi}]");
+    }
+    Ok(())
+}
+
+fn slice_cmd(args: &SliceArgs) -> anyhow::Result<()> {
+    let plane: [f64; 4] = numbers(&args.plane, "--plane")?;
+    let model = load(&args.model)?;
+    let pb = progress::spinner("slicing".to_owned());
+    let z = slice(
+        &model,
+        plane,
+        args.attribute.as_deref(),
+        &options(&args.mesh),
+    )
+    .context("cannot slice the model")?;
+    pb.finish_and_clear();
+    write_mesh(&z, &args.mesh, true)
+}
+
+fn isosurface_cmd(args: &IsosurfaceArgs) -> anyhow::Result<()> {
+    let model = load(&args.model)?;
+    let pb = progress::spinner("extracting the isosurface".to_owned());
+    let mut z = isosurface(&model, &args.attribute, args.level, &options(&args.mesh))
+        .context("cannot extract the isosurface")?;
+    if let Some(name) = &args.color_by {
+        z.report_attribute(&model, name)
+            .context("cannot colour the surface")?;
+    }
+    pb.finish_and_clear();
+    write_mesh(&z, &args.mesh, args.color_by.is_some())
+}
