@@ -1483,10 +1483,7 @@ fn nurbs_sphere_model(dir: &Path) -> PathBuf {
     ]);
     let model = dir.join("sphere.json");
     let out = ok(&[&"nurbs", &"fit", &src, &"-o", &model, &"--name", &"d"]);
-    assert!(
-        out.contains("interpolation at the Greville abscissae"),
-        "{out}"
-    );
+    assert!(out.contains("interpolation at the voxel centres"), "{out}");
     model
 }
 

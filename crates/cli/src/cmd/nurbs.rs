@@ -20,7 +20,7 @@ use crate::progress;
 pub enum Command {
     /// Fit a sampled volume as an attribute over a geometry volume and write the JSON model.
     #[command(
-        after_help = "Examples:\n  volmorph nurbs fit ct.nii.gz -o ct.json --order 4\n  volmorph nurbs fit ct.nii.gz -o ct.json --control-points 16 --name density\n\nThe geometry is the volume's physical box (trilinear, corners at the first and last voxel\ncentres). With as many control points as samples the attribute interpolates the samples at\nthe Greville abscissae (the paper's nodal values); with fewer it is the least-squares fit of\nthe samples at their parameters i/(n-1)."
+        after_help = "Examples:\n  volmorph nurbs fit ct.nii.gz -o ct.json --order 4\n  volmorph nurbs fit ct.nii.gz -o ct.json --control-points 16 --name density\n\nThe geometry is the volume's physical box (trilinear, corners at the first and last voxel\ncentres), so voxel (i,j,k) sits at parameters (i,j,k)/(dims-1). With as many control points as\nsamples the attribute interpolates every voxel at its centre; with fewer it is the\nleast-squares fit over the voxel centres."
     )]
     Fit(FitArgs),
     /// Print the point, its partial derivatives and every attribute at parameters (u, v, w).
@@ -234,21 +234,20 @@ fn fit_cmd(args: &FitArgs) -> anyhow::Result<()> {
     ];
     pb.set_message("fitting");
     let data = typed.data();
-    let (attr, how) = if n == dims {
-        (
-            fit::interpolate(knots, 1, data)?,
-            "interpolation at the Greville abscissae",
-        )
+    // Sample (i, j, k) sits at the voxel centre, i.e. at parameters (i, j, k)/(dims − 1) of
+    // the trilinear geometry; fitting at exactly those sites keeps every sample at its own
+    // position. With as many control points as samples the square system is interpolation
+    // (the Schoenberg–Whitney conditions hold for uniform sites and clamped uniform knots).
+    let sites: [Vec<f64>; 3] = std::array::from_fn(|a| {
+        (0..dims[a])
+            .map(|i| i as f64 / (dims[a] - 1) as f64)
+            .collect()
+    });
+    let attr = fit::least_squares(knots, [&sites[0], &sites[1], &sites[2]], 1, data)?;
+    let how = if n == dims {
+        "interpolation at the voxel centres"
     } else {
-        let sites: [Vec<f64>; 3] = std::array::from_fn(|a| {
-            (0..dims[a])
-                .map(|i| i as f64 / (dims[a] - 1) as f64)
-                .collect()
-        });
-        (
-            fit::least_squares(knots, [&sites[0], &sites[1], &sites[2]], 1, data)?,
-            "least squares",
-        )
+        "least squares over the voxel centres"
     };
     let model = Aggregate::new(geometry)?.with_attribute(args.name.clone(), attr)?;
     save(&args.output, &model).context("cannot write the model")?;
