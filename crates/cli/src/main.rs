@@ -104,6 +104,9 @@ enum Command {
     /// F-rep models (HyperFun language): sample, mesh, render, morph.
     #[command(subcommand)]
     Frep(cmd::frep::Command),
+    /// Trivariate NURBS volumes with attributes: ray-traced rendering, optical paths.
+    #[command(subcommand)]
+    Nurbs(cmd::nurbs::Command),
     /// Time the warps and isosurface extractors on built-in inputs, against their targets.
     #[command(subcommand)]
     Bench(cmd::bench::Command),
@@ -127,6 +130,7 @@ fn main() -> ExitCode {
         Command::Frep(c) => cmd::frep::run(&c),
         Command::Handles(c) => cmd::handles::run(&c),
         Command::Mls2d(a) => cmd::handles::run_mls2d(&a),
+        Command::Nurbs(c) => cmd::nurbs::run(&c),
         Command::Bench(c) => cmd::bench::run(&c),
     };
     match result {

@@ -11,6 +11,8 @@ pub mod info;
 pub mod isosurface;
 pub mod lattice;
 pub mod mesh;
+pub mod nurbs;
+pub mod nurbs_trace;
 pub mod phantom;
 pub mod picture;
 pub mod slice;
