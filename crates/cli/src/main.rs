@@ -104,7 +104,8 @@ enum Command {
     /// F-rep models (HyperFun language): sample, mesh, render, morph.
     #[command(subcommand)]
     Frep(cmd::frep::Command),
-    /// Trivariate NURBS volumes with attributes: fit, evaluate, slice, isosurface.
+    /// Trivariate NURBS volumes with attributes: fit, evaluate, slice, isosurface, ray-traced
+    /// rendering, optical paths.
     #[command(subcommand)]
     Nurbs(cmd::nurbs::Command),
     /// Time the warps and isosurface extractors on built-in inputs, against their targets.

@@ -1715,3 +1715,142 @@ fn nurbs_bad_inputs_fail_cleanly() {
     ]);
     assert!(e.contains("too few"), "{e}");
 }
+
+#[test]
+fn nurbs_trace_optics_grin_lens_reports_focal_length_and_writes_paths() {
+    let dir = tempfile::tempdir().unwrap();
+    let png = dir.path().join("grin.png");
+    let obj = dir.path().join("grin.obj");
+    let text = ok(&[
+        &"nurbs",
+        &"trace-optics",
+        &"--example",
+        &"grin-lens",
+        &"--rays",
+        &"5",
+        &"--size",
+        &"120x80",
+        &"-o",
+        &png,
+        &"--paths",
+        &obj,
+    ]);
+    assert!(
+        text.contains("paraxial back focal distance 1.10333"),
+        "{text}"
+    );
+    // The measured distance is printed with its deviation, which is within 2 %.
+    let pct: f64 = text
+        .split("focal distance ")
+        .nth(2)
+        .and_then(|s| s.split(", ").nth(1))
+        .and_then(|s| s.split(" %").next())
+        .and_then(|s| s.trim().parse().ok())
+        .unwrap_or_else(|| panic!("no deviation in {text}"));
+    assert!(pct.abs() < 2.0, "{text}");
+    let img = volmorph_render_png_size(&png);
+    assert_eq!(img, (120, 80));
+    let obj_text = std::fs::read_to_string(&obj).unwrap();
+    assert_eq!(obj_text.lines().filter(|l| l.starts_with("l ")).count(), 5);
+    // Bad input: no model, unknown example, zero rays, missing attribute.
+    let err = fails(&[&"nurbs", &"trace-optics", &"-o", &png]);
+    assert!(err.contains("--example"), "{err}");
+    let err = fails(&[
+        &"nurbs",
+        &"trace-optics",
+        &"--example",
+        &"teapot",
+        &"-o",
+        &png,
+    ]);
+    assert!(err.contains("grin-lens"), "{err}");
+    let err = fails(&[
+        &"nurbs",
+        &"trace-optics",
+        &"--example",
+        &"grin-lens",
+        &"--rays",
+        &"0",
+        &"-o",
+        &png,
+    ]);
+    assert!(err.contains("--rays"), "{err}");
+    let err = fails(&[
+        &"nurbs",
+        &"trace-optics",
+        &"--example",
+        &"grin-lens",
+        &"--attribute",
+        &"density",
+        &"-o",
+        &png,
+    ]);
+    assert!(err.contains("density"), "{err}");
+}
+
+/// Width and height of a PNG file, from its IHDR chunk.
+fn volmorph_render_png_size(path: &Path) -> (u32, u32) {
+    let b = std::fs::read(path).unwrap();
+    assert_eq!(&b[1..4], b"PNG");
+    let w = u32::from_be_bytes([b[16], b[17], b[18], b[19]]);
+    let h = u32::from_be_bytes([b[20], b[21], b[22], b[23]]);
+    (w, h)
+}
+
+#[test]
+fn nurbs_example_and_render_write_a_picture() {
+    let dir = tempfile::tempdir().unwrap();
+    let lens = dir.path().join("lens.json");
+    ok(&[&"nurbs", &"example", &"grin-lens", &"-o", &lens]);
+    assert!(lens.exists());
+    let png = dir.path().join("lens.png");
+    let text = ok(&[
+        &"nurbs",
+        &"render",
+        &lens,
+        &"--attribute",
+        &"eta",
+        &"--size",
+        &"24x16",
+        &"--step",
+        &"0.05",
+        &"-o",
+        &png,
+    ]);
+    assert!(text.contains("rendered"), "{text}");
+    assert_eq!(volmorph_render_png_size(&png), (24, 16));
+    let bad = dir.path().join("bad.png");
+    let err = fails(&[
+        &"nurbs",
+        &"render",
+        &lens,
+        &"--attribute",
+        &"density",
+        &"-o",
+        &bad,
+    ]);
+    assert!(err.contains("density"), "{err}");
+    let err = fails(&[
+        &"nurbs",
+        &"render",
+        &lens,
+        &"--attribute",
+        &"eta",
+        &"--transfer",
+        &"0:1,1",
+        &"-o",
+        &bad,
+    ]);
+    assert!(err.contains("transfer"), "{err}");
+    let err = fails(&[
+        &"nurbs",
+        &"render",
+        &"missing.json",
+        &"--attribute",
+        &"eta",
+        &"-o",
+        &bad,
+    ]);
+    assert!(err.contains("missing.json"), "{err}");
+    assert!(!bad.exists());
+}

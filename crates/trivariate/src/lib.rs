@@ -1,6 +1,6 @@
 //! volmorph-trivariate: trivariate NURBS volumes carrying attribute volumes
 //! (Martin & Cohen, "Representation and Extraction of Volumetric Attributes Using Trivariate
-//! Splines", §2–§4).
+//! Splines", §2–§5).
 //!
 //! * [`Aggregate`] ([`AggregateCurve`], [`AggregateSurface`], [`AggregateVolume`]) — a geometry
 //!   spline in R³ plus named attribute splines, each with its own order, knots and control
@@ -17,27 +17,45 @@
 //! * [`isosurface`](mod@isosurface) — crack-free polygonisation of isosurfaces ([`isosurface()`])
 //!   and planar slices ([`slice()`]) with per-vertex parameters and attribute values, written as
 //!   coloured PLY or OBJ.
+//! * [`RayTracer`] — ray–boundary intersection (faces and `det J = 0`, Theorem 1, with
+//!   [`cone`] culling) and parameter tracking along rays (§5.2, [`raytrace`]).
+//! * [`VolumeRenderer`] — front-to-back volume rendering of an attribute through
+//!   [`TransferFunction`]s ([`volrender`]).
+//! * [`trace_optical_path`] — bent rays through a refractive-index attribute (§5.3,
+//!   [`optics`]); [`grin_lens`] builds the gradient-index lens example ([`examples`]).
 //!
 //! The spline machinery (knot vectors, bases, refinement, Greville interpolation) is
 //! `volmorph_spline`'s; this crate builds on it.
 
 pub mod aggregate;
+pub mod cone;
 mod error;
 pub mod eval;
+pub mod examples;
 pub mod extract;
 pub mod fit;
 pub mod format;
 pub mod invert;
 pub mod isosurface;
 pub mod modeling;
+pub mod optics;
+pub mod raytrace;
+pub mod volrender;
 
 pub use aggregate::{
     Aggregate, AggregateCurve, AggregateSurface, AggregateVolume, Attribute, GEOMETRY_DIM,
 };
 pub use error::TrivariateError;
 pub use eval::{EvalMethod, VolumeEvaluator};
+pub use examples::{GRIN_ATTRIBUTE, GrinLensSpec, ParaxialFocus, grin_lens, paraxial_focus};
 pub use extract::{RootCell, RootOptions, isolate_roots, isosurface_function, plane_function};
 pub use format::{AnyAggregate, load, load_volume, save};
 pub use invert::{InversionOptions, invert};
 pub use isosurface::{Coloring, PolygonizeOptions, ZeroSetMesh, isosurface, slice};
 pub use modeling::{extrude, revolve, rule};
+pub use optics::{
+    OpticalPath, OpticsOptions, PathMethod, draw_paths, refract, trace_optical_path,
+    write_paths_obj,
+};
+pub use raytrace::{BoundaryHit, HitKind, RayTracer, TraceOptions, Tracked};
+pub use volrender::{RayColor, RenderOptions, TransferFunction, TransferPoint, VolumeRenderer};

@@ -12,6 +12,7 @@ pub mod isosurface;
 pub mod lattice;
 pub mod mesh;
 pub mod nurbs;
+pub mod nurbs_trace;
 pub mod phantom;
 pub mod picture;
 pub mod slice;

@@ -1,6 +1,6 @@
 //! `volmorph nurbs`: trivariate NURBS volumes carrying attributes (Martin & Cohen) — fit a
-//! sampled volume, evaluate points and derivatives, and extract planar slices and isosurfaces
-//! as coloured meshes.
+//! sampled volume, evaluate points and derivatives, extract planar slices and isosurfaces as
+//! coloured meshes, and ray trace (volume rendering, optical paths; in [`nurbs_trace`]).
 
 use std::path::{Path, PathBuf};
 
@@ -13,6 +13,7 @@ use volmorph_trivariate::{
 };
 use volmorph_volume::format;
 
+use crate::cmd::nurbs_trace;
 use crate::progress;
 
 /// Trivariate NURBS subcommands.
@@ -38,6 +39,21 @@ pub enum Command {
         after_help = "Example:\n  volmorph nurbs isosurface ct.json --attribute density --level 0.5 -o skin.ply --tolerance 0.01"
     )]
     Isosurface(IsosurfaceArgs),
+    /// Volume-render an attribute of a trivariate model by ray tracing (front-to-back
+    /// compositing through a transfer function).
+    #[command(
+        after_help = "Examples:\n  volmorph nurbs render lens.json --attribute eta -o lens.png\n  volmorph nurbs render part.json --attribute density --transfer '0:0,0,1,0;1:1,1,0,0.8' --view 30,20 --size 512x512 -o part.png"
+    )]
+    Render(nurbs_trace::RenderArgs),
+    /// Trace light rays bent by a refractive-index attribute (gradient-index optics) and draw
+    /// their paths.
+    #[command(
+        after_help = "Examples:\n  volmorph nurbs trace-optics --example grin-lens --rays 11 -o grin.png --paths grin.obj\n  volmorph nurbs trace-optics lens.json --attribute eta --direction 0,0,1 -o rays.png"
+    )]
+    TraceOptics(nurbs_trace::TraceOpticsArgs),
+    /// Write a built-in trivariate model as JSON.
+    #[command(after_help = "Example:\n  volmorph nurbs example grin-lens -o lens.json")]
+    Example(nurbs_trace::ExampleArgs),
 }
 
 /// Arguments of `volmorph nurbs fit`.
@@ -142,6 +158,9 @@ pub fn run(cmd: &Command) -> anyhow::Result<()> {
         Command::Eval(a) => eval_cmd(a),
         Command::Slice(a) => slice_cmd(a),
         Command::Isosurface(a) => isosurface_cmd(a),
+        Command::Render(a) => nurbs_trace::run_render(a),
+        Command::TraceOptics(a) => nurbs_trace::run_trace_optics(a),
+        Command::Example(a) => nurbs_trace::run_example(a),
     }
 }
 

@@ -1,0 +1,389 @@
+//! `volmorph nurbs render`, `volmorph nurbs trace-optics` and `volmorph nurbs example`:
+//! ray tracing of trivariate NURBS volumes with attributes (Martin & Cohen §5.2–§5.4).
+
+use std::path::PathBuf;
+
+use anyhow::{Context, bail};
+use glam::DVec3;
+use volmorph_render::{Camera, Colormap, Projection, RgbaImage, write_png_rgba};
+use volmorph_trivariate::{
+    AggregateVolume, GRIN_ATTRIBUTE, GrinLensSpec, OpticalPath, OpticsOptions, RayTracer,
+    RenderOptions, TraceOptions, TransferFunction, VolumeRenderer, draw_paths, grin_lens,
+    load_volume, paraxial_focus, save, trace_optical_path, write_paths_obj,
+};
+
+use crate::progress;
+
+/// Largest picture side accepted.
+const MAX_PIXELS_SIDE: u32 = 8192;
+
+/// Most rays `trace-optics` accepts.
+const MAX_RAYS: usize = 100_000;
+
+/// Arguments of `volmorph nurbs render`.
+#[derive(Debug, clap::Args)]
+pub struct RenderArgs {
+    /// Trivariate model (volmorph JSON, a volume with attributes).
+    pub model: PathBuf,
+    /// Attribute to render (its first component drives the transfer function).
+    #[arg(long)]
+    pub attribute: String,
+    /// Transfer function `value:r,g,b,opacity;…` (channels in [0, 1], opacity per unit
+    /// length, piecewise linear in the value). Default: viridis over the attribute's range
+    /// with opacity rising to 0.9.
+    #[arg(long)]
+    pub transfer: Option<String>,
+    /// Viewing direction `azimuth,elevation` in degrees (z up; the camera looks at the model's
+    /// centre).
+    #[arg(long, default_value = "35,25", allow_hyphen_values = true)]
+    pub view: String,
+    /// Picture size `WxH` (or one number for a square).
+    #[arg(long, default_value = "256x256")]
+    pub size: String,
+    /// Step along rays in model units (default: model diagonal / 256).
+    #[arg(long)]
+    pub step: Option<f64>,
+    /// Output PNG.
+    #[arg(short, long)]
+    pub output: PathBuf,
+}
+
+/// Arguments of `volmorph nurbs trace-optics`.
+#[derive(Debug, clap::Args)]
+pub struct TraceOpticsArgs {
+    /// Trivariate model (volmorph JSON) carrying a refractive index attribute; omit with
+    /// `--example`.
+    pub model: Option<PathBuf>,
+    /// Built-in model instead of a file: `grin-lens`.
+    #[arg(long)]
+    pub example: Option<String>,
+    /// Number of parallel rays, spread over the lens aperture (or the model's box).
+    #[arg(long, default_value_t = 11)]
+    pub rays: usize,
+    /// Refractive index attribute.
+    #[arg(long, default_value = GRIN_ATTRIBUTE)]
+    pub attribute: String,
+    /// Ray direction `x,y,z` for models from files (rays start before the model's box).
+    #[arg(long, default_value = "0,0,1", allow_hyphen_values = true)]
+    pub direction: String,
+    /// Picture size `WxH` (or one number for a square).
+    #[arg(long, default_value = "800x500")]
+    pub size: String,
+    /// Output PNG (side view of the paths).
+    #[arg(short, long)]
+    pub output: PathBuf,
+    /// Also write the paths as OBJ polylines.
+    #[arg(long)]
+    pub paths: Option<PathBuf>,
+}
+
+/// Arguments of `volmorph nurbs example`.
+#[derive(Debug, clap::Args)]
+pub struct ExampleArgs {
+    /// Which model: `grin-lens`.
+    pub name: String,
+    /// Output JSON.
+    #[arg(short, long)]
+    pub output: PathBuf,
+}
+
+fn size(s: &str) -> anyhow::Result<(u32, u32)> {
+    let (w, h) = match s.split_once('x') {
+        Some((w, h)) => (w.trim().parse::<u32>(), h.trim().parse::<u32>()),
+        None => (s.trim().parse::<u32>(), s.trim().parse::<u32>()),
+    };
+    let (Ok(w), Ok(h)) = (w, h) else {
+        bail!("--size {s}: expected WxH, e.g. 640x480");
+    };
+    if !(1..=MAX_PIXELS_SIDE).contains(&w) || !(1..=MAX_PIXELS_SIDE).contains(&h) {
+        bail!("--size {s}: sides must be 1 to {MAX_PIXELS_SIDE}");
+    }
+    Ok((w, h))
+}
+
+fn load(path: &std::path::Path) -> anyhow::Result<AggregateVolume> {
+    load_volume(path).with_context(|| format!("cannot read model {}", path.display()))
+}
+
+fn bounds(tracer: &RayTracer) -> (DVec3, DVec3) {
+    let (lo, hi) = tracer.bounds();
+    (DVec3::from_array(lo), DVec3::from_array(hi))
+}
+
+/// Range of an attribute's first component over its control points (it contains every value,
+/// by the convex hull property).
+fn attribute_range(v: &AggregateVolume, name: &str) -> anyhow::Result<(f64, f64)> {
+    let s = v
+        .attribute(name)
+        .with_context(|| format!("model has no attribute {name:?}"))?;
+    let dim = s.dim();
+    let (mut lo, mut hi) = (f64::INFINITY, f64::NEG_INFINITY);
+    for c in s.control_points().chunks_exact(dim) {
+        lo = lo.min(c[0]);
+        hi = hi.max(c[0]);
+    }
+    if hi <= lo {
+        hi = lo + 1.0;
+    }
+    Ok((lo, hi))
+}
+
+/// `volmorph nurbs render`.
+///
+/// # Errors
+/// Unreadable model, unknown attribute, bad transfer function, view or size, or an unwritable
+/// output.
+pub fn run_render(a: &RenderArgs) -> anyhow::Result<()> {
+    let (w, h) = size(&a.size)?;
+    let model = load(&a.model)?;
+    let (lo, hi) = attribute_range(&model, &a.attribute)?;
+    let transfer = match &a.transfer {
+        Some(t) => TransferFunction::parse(t).context("--transfer")?,
+        None => TransferFunction::ramp(lo, hi, Colormap::Viridis, 0.9)?,
+    };
+    let tracer = RayTracer::new(&model, TraceOptions::default()).context("cannot prepare model")?;
+    let mut options = RenderOptions::for_diagonal(tracer.diagonal());
+    if let Some(step) = a.step {
+        if !(step.is_finite() && step > 0.0) {
+            bail!("--step {step}: must be finite and > 0");
+        }
+        options.step = step;
+    }
+    let renderer = VolumeRenderer::new(&model, &tracer, &a.attribute, transfer, options)?;
+    let [az, el] = crate::args::pair(&a.view).context("--view")?;
+    if !(az.is_finite() && el.is_finite() && el.abs() < 89.9) {
+        bail!(
+            "--view {}: elevation must be within (−90, 90) degrees",
+            a.view
+        );
+    }
+    let (az, el) = (az.to_radians(), el.to_radians());
+    let dir = DVec3::new(el.cos() * az.cos(), el.cos() * az.sin(), el.sin());
+    let (b0, b1) = bounds(&tracer);
+    let center = 0.5 * (b0 + b1);
+    let cam = Camera::look_at(
+        center + dir,
+        center,
+        DVec3::Z,
+        Projection::Perspective { fov_y: 0.6 },
+        w,
+        h,
+    )?
+    .fit_bounds(b0, b1)?;
+    let pb = progress::spinner(format!("ray tracing {}", a.model.display()));
+    let t0 = std::time::Instant::now();
+    let img = renderer.render_image(&cam).context("cannot render")?;
+    pb.finish_and_clear();
+    let img = img.composite_over([0, 0, 0, 255]);
+    write_png_rgba(&a.output, &img)
+        .with_context(|| format!("cannot write {}", a.output.display()))?;
+    say!(
+        "rendered {} ({w}×{h}, attribute {:?}, step {:.4}) in {:.2} s → {}",
+        a.model.display(),
+        a.attribute,
+        options.step,
+        t0.elapsed().as_secs_f64(),
+        a.output.display()
+    );
+    Ok(())
+}
+
+/// `volmorph nurbs trace-optics`.
+///
+/// # Errors
+/// No model or both a model and `--example`, unknown example or attribute, bad ray count,
+/// direction or size, tracing errors, or unwritable outputs.
+pub fn run_trace_optics(a: &TraceOpticsArgs) -> anyhow::Result<()> {
+    if a.rays == 0 || a.rays > MAX_RAYS {
+        bail!("--rays {}: must be 1 to {MAX_RAYS}", a.rays);
+    }
+    let (w, h) = size(&a.size)?;
+    let spec = GrinLensSpec::default();
+    let (model, example) = match (&a.model, a.example.as_deref()) {
+        (Some(_), Some(_)) => bail!("give either a model file or --example, not both"),
+        (None, None) => bail!("give a model file or --example grin-lens"),
+        (Some(p), None) => (load(p)?, false),
+        (None, Some("grin-lens")) => (grin_lens(&spec)?, true),
+        (None, Some(other)) => bail!("--example {other:?}: the built-in example is grin-lens"),
+    };
+    if model.attribute(&a.attribute).is_none() {
+        bail!("model has no attribute {:?}", a.attribute);
+    }
+    let tracer = RayTracer::new(&model, TraceOptions::default()).context("cannot prepare model")?;
+    let (b0, b1) = bounds(&tracer);
+    let diag = tracer.diagonal();
+    let opts = OpticsOptions::for_diagonal(diag);
+    // Rays: parallel to `dir`, starting before the box, spread over a line across it.
+    let (dir, starts): (DVec3, Vec<DVec3>) = if example {
+        // Meridional plane at azimuth 0.3 rad (off the revolution seam), heights ±0.9 R.
+        let radial = DVec3::new(0.3f64.cos(), 0.3f64.sin(), 0.0);
+        let n = a.rays;
+        let starts = (0..n)
+            .map(|i| {
+                let f = if n == 1 {
+                    0.5
+                } else {
+                    i as f64 / (n - 1) as f64
+                };
+                let r = (2.0 * f - 1.0) * 0.9 * spec.radius;
+                r * radial + DVec3::new(0.0, 0.0, -0.5 * spec.thickness)
+            })
+            .collect();
+        (DVec3::Z, starts)
+    } else {
+        let d: [f64; 3] = crate::args::triple(&a.direction).context("--direction")?;
+        let d = DVec3::from_array(d)
+            .try_normalize()
+            .with_context(|| format!("--direction {}: must be finite and non-zero", a.direction))?;
+        let center = 0.5 * (b0 + b1);
+        let side = d.any_orthonormal_vector();
+        let n = a.rays;
+        let starts = (0..n)
+            .map(|i| {
+                let f = if n == 1 {
+                    0.5
+                } else {
+                    i as f64 / (n - 1) as f64
+                };
+                center - diag * d + (f - 0.5) * 0.9 * diag * side
+            })
+            .collect();
+        (d, starts)
+    };
+    let pb = progress::spinner(format!("tracing {} rays", starts.len()));
+    let paths: Vec<OpticalPath> = starts
+        .iter()
+        .map(|s| {
+            trace_optical_path(
+                &model,
+                &tracer,
+                &a.attribute,
+                s.to_array(),
+                dir.to_array(),
+                &opts,
+            )
+        })
+        .collect::<Result<_, _>>()
+        .context("cannot trace rays")?;
+    pb.finish_and_clear();
+    // Side view: orthographic, looking across the plane of the rays.
+    let mut lo = b0;
+    let mut hi = b1;
+    for p in &paths {
+        for q in &p.points {
+            lo = lo.min(DVec3::from_array(*q));
+            hi = hi.max(DVec3::from_array(*q));
+        }
+    }
+    let spread = if example {
+        DVec3::new(0.3f64.cos(), 0.3f64.sin(), 0.0)
+    } else {
+        dir.any_orthonormal_vector()
+    };
+    let look = dir.cross(spread).normalize_or(DVec3::Y);
+    let center = 0.5 * (lo + hi);
+    let cam = Camera::look_at(
+        center + look,
+        center,
+        spread,
+        Projection::Orthographic { view_height: 1.0 },
+        w,
+        h,
+    )?
+    .fit_bounds(lo, hi)?;
+    let mut img = RgbaImage::new(w, h, [255, 255, 255, 255])?;
+    outline_box(&mut img, &cam, b0, b1);
+    draw_paths(&mut img, &cam, &paths, [200, 30, 30, 255]);
+    write_png_rgba(&a.output, &img)
+        .with_context(|| format!("cannot write {}", a.output.display()))?;
+    if let Some(p) = &a.paths {
+        write_paths_obj(p, &paths).with_context(|| format!("cannot write {}", p.display()))?;
+    }
+    say!(
+        "traced {} rays through {:?} → {}",
+        paths.len(),
+        a.attribute,
+        a.output.display()
+    );
+    if example {
+        let focus = paraxial_focus(&spec)?;
+        let radial = DVec3::new(0.3f64.cos(), 0.3f64.sin(), 0.0);
+        // Measured back focal distance: a paraxial probe ray at height 0.02 R (not drawn)
+        // crossing the axis after the exit face.
+        let r0 = 0.02 * spec.radius;
+        let probe = r0 * radial + DVec3::new(0.0, 0.0, -0.5 * spec.thickness);
+        let p = trace_optical_path(
+            &model,
+            &tracer,
+            &a.attribute,
+            probe.to_array(),
+            [0.0, 0.0, 1.0],
+            &opts,
+        )
+        .context("cannot trace the paraxial probe ray")?;
+        let best = p.exit.and_then(|(e, v)| {
+            let (e, v) = (DVec3::from_array(e), DVec3::from_array(v));
+            let (re, vr) = (e.dot(radial), v.dot(radial));
+            (vr.abs() > 1e-15).then(|| (r0, e.z + (-re / vr) * v.z - spec.thickness))
+        });
+        say!(
+            "GRIN lens R = {}, d = {}, n(r) = {}·(1 − {}·r²/2): paraxial back focal distance \
+             {:.5}, effective focal length {:.5}",
+            spec.radius,
+            spec.thickness,
+            spec.n0,
+            spec.gradient,
+            focus.back_focal_distance,
+            focus.effective_focal_length
+        );
+        match best {
+            Some((r0, bfd)) => say!(
+                "measured back focal distance {bfd:.5} (ray at height {r0:.4}), {:+.2} % from \
+                 paraxial",
+                100.0 * (bfd - focus.back_focal_distance) / focus.back_focal_distance
+            ),
+            None => say!("no off-axis ray left the lens; use --rays 2 or more"),
+        }
+    }
+    Ok(())
+}
+
+/// Draw the edges of the box `[lo, hi]` in grey.
+fn outline_box(img: &mut RgbaImage, cam: &Camera, lo: DVec3, hi: DVec3) {
+    let c = |i: usize| {
+        DVec3::new(
+            if i & 1 == 0 { lo.x } else { hi.x },
+            if i & 2 == 0 { lo.y } else { hi.y },
+            if i & 4 == 0 { lo.z } else { hi.z },
+        )
+    };
+    for i in 0..8usize {
+        for bit in [1usize, 2, 4] {
+            if i & bit == 0 {
+                let (a, b) = (cam.project(c(i)), cam.project(c(i | bit)));
+                if let (Some(a), Some(b)) = (a, b) {
+                    volmorph_render::draw::draw_line(
+                        img,
+                        (a.0, a.1),
+                        (b.0, b.1),
+                        [150, 150, 150, 255],
+                    );
+                }
+            }
+        }
+    }
+}
+
+/// `volmorph nurbs example`.
+///
+/// # Errors
+/// Unknown example name or an unwritable output.
+pub fn run_example(a: &ExampleArgs) -> anyhow::Result<()> {
+    let model = match a.name.as_str() {
+        "grin-lens" => grin_lens(&GrinLensSpec::default())?,
+        other => bail!("unknown example {other:?}: the built-in example is grin-lens"),
+    };
+    save(&a.output, &model).with_context(|| format!("cannot write {}", a.output.display()))?;
+    say!("wrote {} → {}", a.name, a.output.display());
+    Ok(())
+}

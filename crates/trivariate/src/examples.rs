@@ -1,0 +1,188 @@
+//! Built-in models. [`grin_lens`] is the gradient-index lens of the paper's modeling pipeline
+//! (Fig. 1, §2.2): an aggregate line carrying a refractive index, revolved into a disk and
+//! extruded into a rod.
+//!
+//! # The GRIN lens and its paraxial focal length
+//!
+//! The index profile is `n(r) = n₀·(1 − A·r²/2)` for `0 ≤ r ≤ R`, about the optical axis `z`.
+//! The generating line runs from the axis `(0, 0, 0)` to `(R, 0, 0)` with degree 1, so
+//! `r = R·u`, and the index is the quadratic Bézier in `u` with coefficients
+//! `n₀, n₀, n₀·(1 − A·R²/2)` — exactly `n₀·(1 − A·R²u²/2)`, no fitting error. Revolving by `2π`
+//! about `z` (exact rational circle, parameter `v`) gives a disk; extruding by `(0, 0, d)`
+//! (parameter `w`) gives the rod `0 ≤ z ≤ d`. The index attribute is named
+//! [`GRIN_ATTRIBUTE`].
+//!
+//! Paraxial optics ([`paraxial_focus`]): for rays near the axis, `n ≈ n₀` and the ray equation
+//! `d/ds (n dr/ds) = ∂n/∂r = −n₀·A·r` becomes `r'' = −A·r` (primes are `d/dz`). A ray entering
+//! the flat face `z = 0` parallel to the axis at height `r₀` (no refraction at normal incidence)
+//! follows `r(z) = r₀·cos(√A·z)`, so at the exit face `r = r₀ cos(√A d)` with slope
+//! `r' = −r₀ √A sin(√A d)`. Refraction at the flat exit face into air (index 1) multiplies the
+//! small slope by `n(r) ≈ n₀` (Snell, `n sin θ = sin θ'`, small angles). The ray then meets the
+//! axis after the **back focal distance** `BFD = r/|slope'| = cot(√A d)/(n₀ √A)` measured from
+//! the exit face, and the **effective focal length** (height over exit angle) is
+//! `EFL = r₀/|slope'| = 1/(n₀ √A sin(√A d))`. Assumptions: paraxial rays (`r₀ ≪ R`, so
+//! `A r₀² ≪ 1`), the lens in air, and `0 < √A d < π/2` so the focus lies behind the lens.
+
+use volmorph_spline::{KnotVector, TensorBSpline};
+
+use crate::error::ctx;
+use crate::{AggregateCurve, AggregateSurface, AggregateVolume, TrivariateError, extrude, revolve};
+
+/// Name of the refractive-index attribute of [`grin_lens`].
+pub const GRIN_ATTRIBUTE: &str = "eta";
+
+/// Parameters of [`grin_lens`] (lengths in the model's unit).
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct GrinLensSpec {
+    /// Lens radius `R` (> 0).
+    pub radius: f64,
+    /// Thickness `d` along the axis (> 0).
+    pub thickness: f64,
+    /// Index on the axis `n₀` (≥ 1).
+    pub n0: f64,
+    /// Gradient constant `A` (> 0, units 1/length²) of `n(r) = n₀(1 − A r²/2)`.
+    pub gradient: f64,
+}
+
+impl Default for GrinLensSpec {
+    /// `R = 1`, `d = 1`, `n₀ = 1.5`, `A = 0.5` (index 1.125 at the rim, `√A d ≈ 0.707`).
+    fn default() -> Self {
+        Self {
+            radius: 1.0,
+            thickness: 1.0,
+            n0: 1.5,
+            gradient: 0.5,
+        }
+    }
+}
+
+impl GrinLensSpec {
+    /// Check the parameters.
+    ///
+    /// # Errors
+    /// [`TrivariateError::InvalidArgument`] unless all are finite, `R, d, A > 0`, `n₀ ≥ 1`,
+    /// the rim index `n₀(1 − A R²/2)` is at least 1 and `√A d < π/2`.
+    pub fn validate(&self) -> Result<(), TrivariateError> {
+        let ok = [self.radius, self.thickness, self.n0, self.gradient]
+            .iter()
+            .all(|v| v.is_finite())
+            && self.radius > 0.0
+            && self.thickness > 0.0
+            && self.gradient > 0.0
+            && self.n0 >= 1.0;
+        if !ok {
+            return Err(TrivariateError::InvalidArgument(format!(
+                "GRIN lens needs finite radius, thickness, gradient > 0 and n0 >= 1, got {self:?}"
+            )));
+        }
+        let rim = self.n0 * (1.0 - 0.5 * self.gradient * self.radius * self.radius);
+        if rim < 1.0 {
+            return Err(TrivariateError::InvalidArgument(format!(
+                "GRIN lens rim index n0(1 - A R^2/2) = {rim} is below 1"
+            )));
+        }
+        if self.gradient.sqrt() * self.thickness >= std::f64::consts::FRAC_PI_2 {
+            return Err(TrivariateError::InvalidArgument(format!(
+                "GRIN lens sqrt(A)·d = {} must be below π/2 (focus behind the lens)",
+                self.gradient.sqrt() * self.thickness
+            )));
+        }
+        Ok(())
+    }
+}
+
+/// Paraxial focal distances of a GRIN rod (formulas in the [module docs](self)).
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct ParaxialFocus {
+    /// Effective focal length `1/(n₀ √A sin(√A d))`.
+    pub effective_focal_length: f64,
+    /// Back focal distance from the exit face, `cot(√A d)/(n₀ √A)`.
+    pub back_focal_distance: f64,
+}
+
+/// The paraxial focus of the lens `spec`.
+///
+/// # Errors
+/// As [`GrinLensSpec::validate`].
+pub fn paraxial_focus(spec: &GrinLensSpec) -> Result<ParaxialFocus, TrivariateError> {
+    spec.validate()?;
+    let g = spec.gradient.sqrt();
+    let phase = g * spec.thickness;
+    Ok(ParaxialFocus {
+        effective_focal_length: 1.0 / (spec.n0 * g * phase.sin()),
+        back_focal_distance: phase.cos() / (phase.sin() * spec.n0 * g),
+    })
+}
+
+/// The GRIN lens of the [module docs](self): parameters `(u, v, w)` = (radius fraction,
+/// revolution angle fraction, axial fraction); the axis is `z`, the entry face `z = 0`, the
+/// exit face `z = d`; attribute [`GRIN_ATTRIBUTE`] holds the index.
+///
+/// # Errors
+/// As [`GrinLensSpec::validate`].
+pub fn grin_lens(spec: &GrinLensSpec) -> Result<AggregateVolume, TrivariateError> {
+    spec.validate()?;
+    let line_kv = KnotVector::bezier(1, [0.0, 1.0]).map_err(ctx("GRIN line knots"))?;
+    let line = TensorBSpline::new([line_kv], 3, vec![0.0, 0.0, 0.0, spec.radius, 0.0, 0.0])
+        .map_err(ctx("GRIN line"))?;
+    let idx_kv = KnotVector::bezier(2, [0.0, 1.0]).map_err(ctx("GRIN index knots"))?;
+    let n0 = spec.n0;
+    let rim = n0 * (1.0 - 0.5 * spec.gradient * spec.radius * spec.radius);
+    let index = TensorBSpline::new([idx_kv], 1, vec![n0, n0, rim]).map_err(ctx("GRIN index"))?;
+    let curve = AggregateCurve::new(line)?.with_attribute(GRIN_ATTRIBUTE, index)?;
+    let disk: AggregateSurface = revolve(&curve, [0.0; 3], [0.0, 0.0, 1.0], std::f64::consts::TAU)?;
+    extrude(&disk, [0.0, 0.0, spec.thickness])
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn lens_geometry_and_index_are_exact() {
+        let spec = GrinLensSpec::default();
+        let lens = grin_lens(&spec).unwrap();
+        let mut n = [0.0];
+        for i in 0..=10 {
+            for j in 0..=7 {
+                let u = [f64::from(i) / 10.0, f64::from(j) / 7.0, 0.37];
+                let p = lens.point(u).unwrap();
+                let r = p[0].hypot(p[1]);
+                assert!((r - spec.radius * u[0]).abs() < 1e-13, "{p:?}");
+                assert!((p[2] - 0.37 * spec.thickness).abs() < 1e-13);
+                lens.attribute_into(GRIN_ATTRIBUTE, u, &mut n).unwrap();
+                let want = spec.n0 * (1.0 - 0.5 * spec.gradient * r * r);
+                assert!((n[0] - want).abs() < 1e-13);
+            }
+        }
+    }
+
+    #[test]
+    fn paraxial_formulas_and_validation() {
+        let spec = GrinLensSpec::default();
+        let f = paraxial_focus(&spec).unwrap();
+        let g = 0.5f64.sqrt();
+        assert!((f.effective_focal_length - 1.0 / (1.5 * g * g.sin())).abs() < 1e-15);
+        assert!((f.back_focal_distance - 1.0 / (g.tan() * 1.5 * g)).abs() < 1e-14);
+        for bad in [
+            GrinLensSpec {
+                radius: 0.0,
+                ..spec
+            },
+            GrinLensSpec {
+                gradient: f64::NAN,
+                ..spec
+            },
+            GrinLensSpec {
+                thickness: 3.0,
+                ..spec
+            },
+            GrinLensSpec {
+                gradient: 1.9,
+                ..spec
+            },
+        ] {
+            assert!(grin_lens(&bad).is_err(), "{bad:?}");
+        }
+    }
+}
