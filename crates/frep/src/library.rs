@@ -22,6 +22,8 @@
 //! | `hfSoft(x, x0, y0, z0, d, T)` | `Σ (1 − 22r²/9d² + 17r⁴/9d⁴ − 4r⁶/9d⁶)[r ≤ d] − T` |
 //! | `hfConvPoint(x, p, S, T)` | `Σ 1/(1 + Sᵢ² rᵢ²)² − T` (Cauchy kernel; `p` holds 3 values per point) |
 //! | `hfConvLine(x, b, e, S, T)` | closed-form Cauchy convolution of each segment `bᵢ → eᵢ`, minus `T` |
+//! | `hfConvArc(x, c, r, θ, axis, angle, S, T)` | `Σ ∫₀^θᵢ dφ / (1 + Sᵢ² |x' − rᵢ(cos φ, sin φ, 0)|²)² − T` in closed form, `x' = Rot(axisᵢ, −angleᵢ)(x − cᵢ)`; angles in degrees, `θ` capped at 360 (arcs over 180° in two halves), HyperFun's `10⁻⁶` added to the angle and to each axis component |
+//! | `hfConvCurve(x, v, S, T)` | the same for the polyline `v₀ → v₁ → … → v_N`: segment `i` joins points `i` and `i + 1` of `v` (3 values per point) with width `Sᵢ`; `N` = length of `S` |
 //! | `hfBlendUni(f1, f2, a0, a1, a2)` | `f1 + f2 + √(f1² + f2²) + a0/(1 + (f1/a1)² + (f2/a2)²)` |
 //! | `hfBlendInt(f1, f2, a0, a1, a2)` | `f1 + f2 − √(f1² + f2²) + a0/(1 + (f1/a1)² + (f2/a2)²)` |
 //!
@@ -119,6 +121,17 @@ fn signature(name: &str) -> Option<&'static [(Kind, &'static str)]> {
         ],
         "hfConvPoint" => &[(P, "x"), (A, "vect"), (A, "S"), (S, "T")],
         "hfConvLine" => &[(P, "x"), (A, "begin"), (A, "end"), (A, "S"), (S, "T")],
+        "hfConvCurve" => &[(P, "x"), (A, "vect"), (A, "S"), (S, "T")],
+        "hfConvArc" => &[
+            (P, "x"),
+            (A, "center"),
+            (A, "radius"),
+            (A, "theta"),
+            (A, "axis"),
+            (A, "angle"),
+            (A, "S"),
+            (S, "T"),
+        ],
         "hfBlendUni" | "hfBlendInt" => &[(S, "f1"), (S, "f2"), (S, "a0"), (S, "a1"), (S, "a2")],
         "hfShift3D" => &[(P, "x"), (S, "dx"), (S, "dy"), (S, "dz")],
         "hfScale3D" => &[(P, "x"), (S, "sx"), (S, "sy"), (S, "sz")],
@@ -167,6 +180,8 @@ pub fn library_names() -> Vec<&'static str> {
         "hfSoft",
         "hfConvPoint",
         "hfConvLine",
+        "hfConvCurve",
+        "hfConvArc",
         "hfBlendUni",
         "hfBlendInt",
         "hfShift3D",
@@ -470,6 +485,46 @@ pub(crate) fn call(b: &mut Builder, name: &str, args: &[Value]) -> Result<CallRe
             }
             plain(b.sub(sum, s(&args[4])))
         }
+        "hfConvCurve" => {
+            let (v, sv) = (arr(&args[1]), arr(&args[2]));
+            if v.len() < 3 * (sv.len() + 1) {
+                return Err(format!(
+                    "`hfConvCurve`: `vect` needs 3 values per point ({} for {} segments), has {}",
+                    3 * (sv.len() + 1),
+                    sv.len(),
+                    v.len()
+                ));
+            }
+            let mut sum = b.constant(0.0);
+            for (i, &si) in sv.iter().enumerate() {
+                let term = conv_line(b, &x, &v[3 * i..3 * i + 3], &v[3 * i + 3..3 * i + 6], si);
+                sum = b.add(sum, term);
+            }
+            plain(b.sub(sum, s(&args[3])))
+        }
+        "hfConvArc" => {
+            let [c, r, th, ax, an, sv] = [1, 2, 3, 4, 5, 6].map(|k| arr(&args[k]));
+            let n = sv.len();
+            if c.len() < 3 * n || ax.len() < 3 * n || r.len() < n || th.len() < n || an.len() < n {
+                return Err(format!(
+                    "`hfConvArc`: {n} arcs (the length of `S`) need 3 values per arc in `center` and `axis` and one in `radius`, `theta` and `angle`"
+                ));
+            }
+            let mut sum = b.constant(0.0);
+            for i in 0..n {
+                let arc = ConvArc {
+                    centre: [c[3 * i], c[3 * i + 1], c[3 * i + 2]],
+                    radius: r[i],
+                    theta: th[i],
+                    axis: [ax[3 * i], ax[3 * i + 1], ax[3 * i + 2]],
+                    angle: an[i],
+                    s: sv[i],
+                };
+                let term = conv_arc(b, &x, &arc);
+                sum = b.add(sum, term);
+            }
+            plain(b.sub(sum, s(&args[7])))
+        }
         "hfBlendUni" | "hfBlendInt" => {
             let (f1, f2) = (s(&args[0]), s(&args[1]));
             let base = if name == "hfBlendUni" {
@@ -525,6 +580,175 @@ fn soft(b: &mut Builder, r2: Id, d: Id) -> Id {
 }
 
 /// Closed-form convolution of the Cauchy kernel `1/(1 + S²r²)²` along the segment `p → q`.
+/// HyperFun's `EPS`, added to the rotation angle and to each axis component of
+/// `hfConvArc` (so the closed form never divides by an exact zero on the axes).
+const HF_CONV_ARC_EPS: f64 = 1e-6;
+
+/// One arc of `hfConvArc` (nodes).
+struct ConvArc {
+    centre: [Id; 3],
+    radius: Id,
+    /// Arc angle, degrees.
+    theta: Id,
+    axis: [Id; 3],
+    /// Rotation angle, degrees.
+    angle: Id,
+    s: Id,
+}
+
+/// `hfConvArc` for one arc: rotate `x − c` by `−angle` about the normalised axis (Rodrigues),
+/// then the closed-form integral over the arc `φ ∈ [0, min(θ, 180°)]` in the local `xy`
+/// plane plus, for `θ > 180°`, the rest `θ − 180°` evaluated at the point turned by 180°
+/// about the local `z` axis (the same integral over `[180°, θ]`).
+fn conv_arc(b: &mut Builder, x: &[Id], arc: &ConvArc) -> Id {
+    let rd = std::f64::consts::PI / 180.0;
+    // Axis, perturbed and normalised (length floored at EPS as in HyperFun).
+    let a = arc.axis.map(|k| b.add_c(k, HF_CONV_ARC_EPS));
+    let mut l2 = b.constant(0.0);
+    for &k in &a {
+        let k2 = b.square(k);
+        l2 = b.add(l2, k2);
+    }
+    let len = b.sqrt(l2);
+    let eps = b.constant(HF_CONV_ARC_EPS);
+    let len = b.binary(BinaryOp::Max, len, eps);
+    let [i, j, k] = a.map(|v| b.div(v, len));
+    let ang = b.add_c(arc.angle, HF_CONV_ARC_EPS);
+    let ang = b.mul_c(ang, -rd);
+    let c = b.unary(UnaryOp::Cos, ang);
+    let s = b.unary(UnaryOp::Sin, ang);
+    let one = b.constant(1.0);
+    let oc = b.sub(one, c);
+    let d = [0, 1, 2].map(|m| b.sub(x[m], arc.centre[m]));
+    // Rotation matrix c·I + s·[n]× + (1 − c)·n nᵀ, row by row.
+    let n = [i, j, k];
+    let mut local = [0; 3];
+    for (row, out) in local.iter_mut().enumerate() {
+        let mut acc = b.constant(0.0);
+        for (col, &dc) in d.iter().enumerate() {
+            let nn = b.mul(n[row], n[col]);
+            let mut e = b.mul(nn, oc);
+            if row == col {
+                e = b.add(e, c);
+            } else {
+                // [n]× = [[0, −k, j], [k, 0, −i], [−j, i, 0]].
+                let (sign, other) = match (row, col) {
+                    (0, 1) => (-1.0, k),
+                    (0, 2) => (1.0, j),
+                    (1, 0) => (1.0, k),
+                    (1, 2) => (-1.0, i),
+                    (2, 0) => (-1.0, j),
+                    _ => (1.0, i),
+                };
+                let sk = b.mul(s, other);
+                let sk = b.mul_c(sk, sign);
+                e = b.add(e, sk);
+            }
+            let t = b.mul(e, dc);
+            acc = b.add(acc, t);
+        }
+        *out = acc;
+    }
+    let full = b.constant(360.0);
+    let half = b.constant(180.0);
+    let theta = b.binary(BinaryOp::Min, arc.theta, full);
+    let main = b.binary(BinaryOp::Min, theta, half);
+    let main = b.mul_c(main, rd);
+    let over = b.sub(theta, half);
+    let zero = b.constant(0.0);
+    let over = b.binary(BinaryOp::Max, over, zero);
+    let over = b.mul_c(over, rd);
+    let f_main = arc_integral(b, local, arc.radius, arc.s, main);
+    let turned = [b.neg(local[0]), b.neg(local[1]), local[2]];
+    let f_over = arc_integral(b, turned, arc.radius, arc.s, over);
+    b.add(f_main, f_over)
+}
+
+/// `∫₀^th dφ / (1 + S²|p − r(cos φ, sin φ, 0)|²)²` in closed form (HyperFun's expression;
+/// exactly 0 at `th = 0`).
+fn arc_integral(b: &mut Builder, p: [Id; 3], r: Id, s_: Id, th: Id) -> Id {
+    let [x, y, z] = p;
+    let s2 = b.square(s_);
+    let r2 = b.square(r);
+    let r2s2 = b.mul(r2, s2);
+    let a = b.mul(r, s2);
+    let a = b.mul_c(a, 2.0);
+    let (x2, y2, z2) = (b.square(x), b.square(y), b.square(z));
+    let xy2 = b.add(x2, y2);
+    let d2 = b.add(xy2, z2);
+    let s2d2 = b.mul(s2, d2);
+    let bb = b.add_c(r2s2, 1.0);
+    let bb = b.add(bb, s2d2);
+    // p2 = −r⁴S⁴ + 2r²S²(S²(d² − 2z²) − 1) − (1 + S²d²)²
+    let t1 = b.square(r2s2);
+    let z22 = b.mul_c(z2, 2.0);
+    let dz = b.sub(d2, z22);
+    let dz = b.mul(s2, dz);
+    let dz = b.add_c(dz, -1.0);
+    let t2 = b.mul(r2s2, dz);
+    let t2 = b.mul_c(t2, 2.0);
+    let t3 = b.add_c(s2d2, 1.0);
+    let t3 = b.square(t3);
+    let p2 = b.sub(t2, t1);
+    let p2 = b.sub(p2, t3);
+    let ap2 = b.unary(UnaryOp::Abs, p2);
+    let p1 = b.sqrt(ap2);
+    let p3 = b.mul(p1, p2);
+    let (sn, cs) = (b.unary(UnaryOp::Sin, th), b.unary(UnaryOp::Cos, th));
+    // f1 = b y / (x p2 (a x − b)) + (a(x² + y²) sin th − b y) / (x p2 (a(x cos th + y sin th) − b))
+    let by = b.mul(bb, y);
+    let xp2 = b.mul(x, p2);
+    let ax = b.mul(a, x);
+    let axb = b.sub(ax, bb);
+    let den = b.mul(xp2, axb);
+    let f1a = b.div(by, den);
+    let num = b.mul(a, xy2);
+    let num = b.mul(num, sn);
+    let num = b.sub(num, by);
+    let xc = b.mul(x, cs);
+    let ys = b.mul(y, sn);
+    let rot = b.add(xc, ys);
+    let rot = b.mul(a, rot);
+    let rot = b.sub(rot, bb);
+    let den = b.mul(xp2, rot);
+    let f1b = b.div(num, den);
+    let f1 = b.add(f1a, f1b);
+    // f2 with u = a y / p1, v = ((a x + b) tan(th/2) − a y) / p1:
+    // p2 < 0: 2b(atan(−u) − atan(v)) / p3; else 2b(atanh(u) + atanh(v)) / p3.
+    let ay = b.mul(a, y);
+    let u = b.div(ay, p1);
+    let hth = b.mul_c(th, 0.5);
+    let tn = b.unary(UnaryOp::Tan, hth);
+    let axpb = b.add(ax, bb);
+    let v = b.mul(axpb, tn);
+    let v = b.sub(v, ay);
+    let v = b.div(v, p1);
+    let atu = b.unary(UnaryOp::Atan, u);
+    let atv = b.unary(UnaryOp::Atan, v);
+    let neg_branch = b.add(atu, atv);
+    let neg_branch = b.neg(neg_branch);
+    let ahu = atanh(b, u);
+    let ahv = atanh(b, v);
+    let pos_branch = b.add(ahu, ahv);
+    let zero = b.constant(0.0);
+    let negative = b.binary(BinaryOp::Lt, p2, zero);
+    let f2 = b.select(negative, neg_branch, pos_branch);
+    let f2 = b.mul(f2, bb);
+    let f2 = b.mul_c(f2, 2.0);
+    let f2 = b.div(f2, p3);
+    b.add(f1, f2)
+}
+
+/// `atanh(u) = ½ ln((1 + u)/(1 − u))`.
+fn atanh(b: &mut Builder, u: Id) -> Id {
+    let one = b.constant(1.0);
+    let num = b.add(one, u);
+    let den = b.sub(one, u);
+    let q = b.div(num, den);
+    let l = b.unary(UnaryOp::Ln, q);
+    b.mul_c(l, 0.5)
+}
+
 fn conv_line(b: &mut Builder, x: &[Id], p: &[Id], q: &[Id], s_: Id) -> Id {
     let mut l2 = b.constant(0.0);
     let mut axis = [0; 3];

@@ -514,6 +514,13 @@ impl SectionStack {
         self.blend
     }
 
+    /// The same sections with another blend along `z`.
+    #[must_use]
+    pub fn with_blend(mut self, blend: SectionBlend) -> Self {
+        self.blend = blend;
+        self
+    }
+
     /// The bounding box of the contour points and the slab, `(lo, hi)`.
     #[must_use]
     pub fn bounds(&self) -> (DVec3, DVec3) {

@@ -216,6 +216,11 @@ fn library_primitives_follow_their_definitions() {
             "b = [0, 0, -1]; e = [0, 0, 1]; s = [1]; m = hfConvLine(x, b, e, s, 0);",
             conv_line_numeric(p, 1.0),
         ),
+        (
+            // The polyline (0,0,−1) → (0,0,−0.3) → (0,0,1): the same segment in two pieces.
+            "v = [0, 0, -1, 0, 0, -0.3, 0, 0, 1]; s = [1, 1]; m = hfConvCurve(x, v, s, 0.25);",
+            conv_line_numeric(p, 1.0) - 0.25,
+        ),
     ];
     for (body, want) in cases {
         let src = format!("m(x[3], a[1]) {{ array c[3]; {body} }}");
@@ -230,6 +235,61 @@ fn library_primitives_follow_their_definitions() {
     let q = DVec3::new(0.5, 0.5, 1.0);
     let want = r_int(r_int(0.5 * 0.5, 0.5 * 1.5), 1.0 * 2.0);
     assert!((b.eval(q) - want).abs() < 1e-12);
+}
+
+/// `∫₀^θ dφ / (1 + S²|x − c − r·(u cos φ + v sin φ)|²)²` by Simpson with many intervals.
+fn conv_arc_numeric(x: DVec3, c: DVec3, r: f64, theta_deg: f64, u: DVec3, v: DVec3, s: f64) -> f64 {
+    let n = 20_000;
+    let th = theta_deg.to_radians();
+    let h = th / f64::from(n);
+    let mut sum = 0.0;
+    for i in 0..=n {
+        let ph = f64::from(i) * h;
+        let q = c + r * (u * ph.cos() + v * ph.sin());
+        let w = if i == 0 || i == n {
+            1.0
+        } else if i % 2 == 1 {
+            4.0
+        } else {
+            2.0
+        };
+        sum += w / (1.0 + s * s * (x - q).length_squared()).powi(2);
+    }
+    sum * h / 3.0
+}
+
+#[test]
+fn conv_arc_is_the_integral_over_the_arc() {
+    let x = DVec3::new(0.3, 0.5, -0.2);
+    // (θ, axis, angle, world directions of the local x and y axes).
+    let cases = [
+        (120.0_f64, "0, 0, 1", 0.0, DVec3::X, DVec3::Y),
+        (270.0, "0, 0, 1", 0.0, DVec3::X, DVec3::Y),
+        (400.0, "0, 0, 1", 0.0, DVec3::X, DVec3::Y),
+        // The arc's plane turned by +90° about x: local y goes to world z.
+        (200.0, "1, 0, 0", 90.0, DVec3::X, DVec3::Z),
+    ];
+    let c = DVec3::new(0.1, -0.2, 0.05);
+    for (th, axis, angle, u, v) in cases {
+        let src = format!(
+            "m(x[3], a[1]) {{ array c[3], r[1], t[1], ax[3], an[1], s[1];
+               c = [0.1, -0.2, 0.05]; r = [0.8]; t = [{th}]; ax = [{axis}]; an = [{angle}];
+               s = [1.5]; m = hfConvArc(x, c, r, t, ax, an, s, 0.1); }}"
+        );
+        let t = tape(&src);
+        let want = conv_arc_numeric(x, c, 0.8, th.min(360.0), u, v, 1.5) - 0.1;
+        let got = t.eval(x);
+        assert!(
+            (got - want).abs() < 1e-5,
+            "θ = {th}, axis {axis}: {got} vs {want}"
+        );
+        // Gradients are the tape's: compare with differences.
+        let (gv, g) = t.gradient(x);
+        assert_eq!(gv, got);
+        let h = 1e-6;
+        let fd = (t.eval(x + DVec3::X * h) - t.eval(x - DVec3::X * h)) / (2.0 * h);
+        assert!((fd - g.x).abs() < 1e-5, "{fd} vs {}", g.x);
+    }
 }
 
 /// ∫ 1/(1 + S²r²)² along the segment (0,0,−1)→(0,0,1), by Simpson with many intervals.
@@ -303,6 +363,26 @@ fn bad_models_give_located_errors() {
             "m(x[3], a[1]) {\n  m = hfSphere(x, 1);\n}",
             "takes 3 arguments",
             2,
+        ),
+        (
+            "m(x[3], a[1]) {\n  m = hfConvCurve(x, 1, 2);\n}",
+            "takes 4 arguments",
+            2,
+        ),
+        (
+            "m(x[3], a[1]) {\n  array v[6];\n  m = hfConvCurve(x, v, v, 0);\n}",
+            "`vect` needs 3 values per point",
+            3,
+        ),
+        (
+            "m(x[3], a[1]) {\n  array c[3];\n  m = hfConvArc(x, c, c, c, c, c, c, c);\n}",
+            "argument 8 (`T`) of `hfConvArc` must be a number",
+            3,
+        ),
+        (
+            "m(x[3], a[1]) {\n  array c[3], s[2];\n  m = hfConvArc(x, c, c, c, c, c, s, 0);\n}",
+            "2 arcs",
+            3,
         ),
         (
             "m(x[3], a[1]) {\n  m = hfNothing(x);\n}",
