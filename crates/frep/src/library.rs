@@ -23,6 +23,9 @@
 //! | `hfConvPoint(x, p, S, T)` | `Σ 1/(1 + Sᵢ² rᵢ²)² − T` (Cauchy kernel; `p` holds 3 values per point) |
 //! | `hfConvLine(x, b, e, S, T)` | closed-form Cauchy convolution of each segment `bᵢ → eᵢ`, minus `T` |
 //! | `hfConvArc(x, c, r, θ, axis, angle, S, T)` | `Σ ∫₀^θᵢ dφ / (1 + Sᵢ² |x' − rᵢ(cos φ, sin φ, 0)|²)² − T` in closed form, `x' = Rot(axisᵢ, −angleᵢ)(x − cᵢ)`; angles in degrees, `θ` capped at 360 (arcs over 180° in two halves), HyperFun's `10⁻⁶` added to the angle and to each axis component |
+//! | `hfConvTriangle(x, v, S, T)` | `Σ Sᵢ³ ∬_{Tᵢ} dA / (1 + Sᵢ² r²)² − T` in HyperFun's closed form (its normalisation carries the factor `S³`), triangle `i` from 9 values `vᵢ` |
+//! | `hfConvMesh(x, v, tri, S, T)` | the same for the triangles whose 1-based vertex numbers are `tri[3i..3i+3]` in the vertex list `v` (3 values per vertex; the numbers must be constants) |
+//! | `hfNoiseG(x, A, f, φ)` | `X·Y·Z` with `X = A sin(f x) + (A/1.17) sin(f x/1.35 + φ sin(f z))`, `Y = A sin(f y) + (A/1.17) sin(f y/1.35 + φ sin(f x))`, `Z = A sin(f z) + (A/1.17) sin(f z/1.35 + φ sin(f y))` |
 //! | `hfConvCurve(x, v, S, T)` | the same for the polyline `v₀ → v₁ → … → v_N`: segment `i` joins points `i` and `i + 1` of `v` (3 values per point) with width `Sᵢ`; `N` = length of `S` |
 //! | `hfBlendUni(f1, f2, a0, a1, a2)` | `f1 + f2 + √(f1² + f2²) + a0/(1 + (f1/a1)² + (f2/a2)²)` |
 //! | `hfBlendInt(f1, f2, a0, a1, a2)` | `f1 + f2 − √(f1² + f2²) + a0/(1 + (f1/a1)² + (f2/a2)²)` |
@@ -121,7 +124,9 @@ fn signature(name: &str) -> Option<&'static [(Kind, &'static str)]> {
         ],
         "hfConvPoint" => &[(P, "x"), (A, "vect"), (A, "S"), (S, "T")],
         "hfConvLine" => &[(P, "x"), (A, "begin"), (A, "end"), (A, "S"), (S, "T")],
-        "hfConvCurve" => &[(P, "x"), (A, "vect"), (A, "S"), (S, "T")],
+        "hfConvCurve" | "hfConvTriangle" => &[(P, "x"), (A, "vect"), (A, "S"), (S, "T")],
+        "hfConvMesh" => &[(P, "x"), (A, "vect"), (A, "tri"), (A, "S"), (S, "T")],
+        "hfNoiseG" => &[(P, "x"), (S, "amp"), (S, "freq"), (S, "phase")],
         "hfConvArc" => &[
             (P, "x"),
             (A, "center"),
@@ -182,6 +187,9 @@ pub fn library_names() -> Vec<&'static str> {
         "hfConvLine",
         "hfConvCurve",
         "hfConvArc",
+        "hfConvTriangle",
+        "hfConvMesh",
+        "hfNoiseG",
         "hfBlendUni",
         "hfBlendInt",
         "hfShift3D",
@@ -502,6 +510,79 @@ pub(crate) fn call(b: &mut Builder, name: &str, args: &[Value]) -> Result<CallRe
             }
             plain(b.sub(sum, s(&args[3])))
         }
+        "hfConvTriangle" => {
+            let (v, sv) = (arr(&args[1]), arr(&args[2]));
+            if v.len() < 9 * sv.len() {
+                return Err(format!(
+                    "`hfConvTriangle`: `vect` needs 9 values per triangle ({} for {} triangles), has {}",
+                    9 * sv.len(),
+                    sv.len(),
+                    v.len()
+                ));
+            }
+            let mut sum = b.constant(0.0);
+            for (i, &si) in sv.iter().enumerate() {
+                let t = &v[9 * i..9 * i + 9];
+                let corners = [[t[0], t[1], t[2]], [t[3], t[4], t[5]], [t[6], t[7], t[8]]];
+                let term = conv_triangle(b, &x, corners, si);
+                sum = b.add(sum, term);
+            }
+            plain(b.sub(sum, s(&args[3])))
+        }
+        "hfConvMesh" => {
+            let (v, tri, sv) = (arr(&args[1]), arr(&args[2]), arr(&args[3]));
+            if tri.len() < 3 * sv.len() {
+                return Err(format!(
+                    "`hfConvMesh`: `tri` needs 3 vertex numbers per triangle ({} for {} triangles), has {}",
+                    3 * sv.len(),
+                    sv.len(),
+                    tri.len()
+                ));
+            }
+            let nv = v.len() / 3;
+            let mut sum = b.constant(0.0);
+            for (i, &si) in sv.iter().enumerate() {
+                let mut corners = [[0; 3]; 3];
+                for (c, &id) in corners.iter_mut().zip(&tri[3 * i..3 * i + 3]) {
+                    let k = b.const_value(id).ok_or_else(|| {
+                        format!("`hfConvMesh`: the vertex numbers in `tri` must be constants (triangle {})", i + 1)
+                    })?;
+                    if !(k >= 1.0 && k <= nv as f64 && k.fract() == 0.0) {
+                        return Err(format!(
+                            "`hfConvMesh`: vertex number {k} of triangle {} is not one of 1..{nv}",
+                            i + 1
+                        ));
+                    }
+                    let k = k as usize - 1;
+                    *c = [v[3 * k], v[3 * k + 1], v[3 * k + 2]];
+                }
+                let term = conv_triangle(b, &x, corners, si);
+                sum = b.add(sum, term);
+            }
+            plain(b.sub(sum, s(&args[4])))
+        }
+        "hfNoiseG" => {
+            let (amp, freq, phase) = (s(&args[1]), s(&args[2]), s(&args[3]));
+            let sn = [0, 1, 2].map(|k| {
+                let a = b.mul(freq, x[k]);
+                b.unary(UnaryOp::Sin, a)
+            });
+            let amp2 = b.mul_c(amp, 1.0 / 1.17);
+            // Axis k is perturbed by the sine of the previous axis (z → x, x → y, y → z).
+            let mut prod = b.constant(1.0);
+            for k in 0..3 {
+                let fx = b.mul(freq, x[k]);
+                let slow = b.mul_c(fx, 1.0 / 1.35);
+                let ph = b.mul(phase, sn[(k + 2) % 3]);
+                let arg = b.add(slow, ph);
+                let sec = b.unary(UnaryOp::Sin, arg);
+                let sec = b.mul(amp2, sec);
+                let first = b.mul(amp, sn[k]);
+                let ser = b.add(first, sec);
+                prod = b.mul(prod, ser);
+            }
+            plain(prod)
+        }
         "hfConvArc" => {
             let [c, r, th, ax, an, sv] = [1, 2, 3, 4, 5, 6].map(|k| arr(&args[k]));
             let n = sv.len();
@@ -737,6 +818,145 @@ fn arc_integral(b: &mut Builder, p: [Id; 3], r: Id, s_: Id, th: Id) -> Id {
     let f2 = b.mul_c(f2, 2.0);
     let f2 = b.div(f2, p3);
     b.add(f1, f2)
+}
+
+/// `hfConvTriangle` for one triangle (HyperFun's closed form): the corners are relabelled so
+/// that `a₁a₂` is the longest edge, `b` is the foot of the height from `a₃`, and the area
+/// integral is written in the frame `u` along `b → a₂`, `v` along `b → a₃`. The result is
+/// `S³ ∬ dA / (1 + S² r²)²`.
+fn conv_triangle(b: &mut Builder, x: &[Id], corners: [[Id; 3]; 3], s_: Id) -> Id {
+    let dist2 = |b: &mut Builder, p: [Id; 3], q: [Id; 3]| {
+        let mut acc = b.constant(0.0);
+        for k in 0..3 {
+            let d = b.sub(p[k], q[k]);
+            let d2 = b.square(d);
+            acc = b.add(acc, d2);
+        }
+        acc
+    };
+    let [p0, p1, p2] = corners;
+    let l0 = dist2(b, p0, p1);
+    let l1 = dist2(b, p1, p2);
+    let l2 = dist2(b, p2, p0);
+    // (l1 ≥ l2 ∧ l1 > l0): (p1, p2, p0); else (l2 ≥ l1 ∧ l2 > l0): (p2, p0, p1).
+    let c1a = b.binary(BinaryOp::Le, l2, l1);
+    let c1b = b.binary(BinaryOp::Lt, l0, l1);
+    let c1 = b.binary(BinaryOp::And, c1a, c1b);
+    let c2a = b.binary(BinaryOp::Le, l1, l2);
+    let c2b = b.binary(BinaryOp::Lt, l0, l2);
+    let c2 = b.binary(BinaryOp::And, c2a, c2b);
+    let pick = |b: &mut Builder, first: [Id; 3], second: [Id; 3], other: [Id; 3]| {
+        [0, 1, 2].map(|k| {
+            let inner = b.select(c2, second[k], other[k]);
+            b.select(c1, first[k], inner)
+        })
+    };
+    let a1 = pick(b, p1, p2, p0);
+    let a2 = pick(b, p2, p0, p1);
+    let a3 = pick(b, p0, p1, p2);
+    let len0 = dist2(b, a1, a2);
+    let a21 = [0, 1, 2].map(|k| b.sub(a2[k], a1[k]));
+    let a13 = [0, 1, 2].map(|k| b.sub(a1[k], a3[k]));
+    let mut dot = b.constant(0.0);
+    for k in 0..3 {
+        let t = b.mul(a21[k], a13[k]);
+        dot = b.add(dot, t);
+    }
+    let t = b.div(dot, len0);
+    let t = b.neg(t);
+    let foot = [0, 1, 2].map(|k| {
+        let m = b.mul(t, a21[k]);
+        b.add(a1[k], m)
+    });
+    let d = [0, 1, 2].map(|k| b.sub(x[k], foot[k]));
+    let uvec = [0, 1, 2].map(|k| b.sub(a2[k], foot[k]));
+    let vvec = [0, 1, 2].map(|k| b.sub(a3[k], foot[k]));
+    let ul2 = dist2(b, a2, foot);
+    let a2l = b.sqrt(ul2);
+    let vl2 = dist2(b, a3, foot);
+    let h = b.sqrt(vl2);
+    let al2 = dist2(b, a1, foot);
+    let a1l = b.sqrt(al2);
+    let (mut d2, mut du, mut dv) = (b.constant(0.0), b.constant(0.0), b.constant(0.0));
+    for k in 0..3 {
+        let sq = b.square(d[k]);
+        d2 = b.add(d2, sq);
+        let pu = b.mul(d[k], uvec[k]);
+        du = b.add(du, pu);
+        let pv = b.mul(d[k], vvec[k]);
+        dv = b.add(dv, pv);
+    }
+    let u = b.div(du, a2l);
+    let v = b.div(dv, h);
+    let g = b.sub(v, h);
+    let a2g = b.mul(a2l, g);
+    let uh = b.mul(u, h);
+    let m = b.add(a2g, uh);
+    let a1g = b.mul(a1l, g);
+    let k = b.sub(uh, a1g);
+    let s2 = b.square(s_);
+    let one = b.constant(1.0);
+    let inv_s2 = b.div(one, s2);
+    let u2 = b.square(u);
+    let c2 = b.add(inv_s2, d2);
+    let c2 = b.sub(c2, u2);
+    let c = b.sqrt(c2);
+    let v2 = b.square(v);
+    let q = b.sub(c2, v2);
+    let vh = b.mul(v, h);
+    let h2 = b.square(h);
+    let w = b.mul_c(vh, -2.0);
+    let w = b.add(c2, w);
+    let w = b.add(w, h2);
+    let qu = b.add(q, u2);
+    let hq = b.mul(h2, qu);
+    let ug = b.mul(u, g);
+    let hug = b.mul(h, ug);
+    // A² = a₁² w + h²(q + u²) − 2 a₁ h u g;  B² = a₂² w + h²(q + u²) + 2 a₂ h u g.
+    let a1sq = b.square(a1l);
+    let aw = b.mul(a1sq, w);
+    let ah = b.mul(a1l, hug);
+    let ah = b.mul_c(ah, -2.0);
+    let aa = b.add(aw, hq);
+    let aa = b.add(aa, ah);
+    let aa = b.sqrt(aa);
+    let a2sq = b.square(a2l);
+    let bw = b.mul(a2sq, w);
+    let bh = b.mul(a2l, hug);
+    let bh = b.mul_c(bh, 2.0);
+    let bb = b.add(bw, hq);
+    let bb = b.add(bb, bh);
+    let bb = b.sqrt(bb);
+    let n1 = b.add(a1l, u);
+    let n2 = b.sub(a2l, u);
+    let n3 = b.mul(a1l, n1);
+    let n3 = b.add(n3, vh);
+    let a1u = b.mul(a1l, u);
+    let gh = b.mul(g, h);
+    let n4 = b.add(a1u, gh);
+    let n4 = b.neg(n4);
+    let n5 = b.mul(a2l, n2);
+    let n5 = b.add(n5, vh);
+    let n5 = b.neg(n5);
+    let a2u = b.mul(a2l, u);
+    let n6 = b.sub(gh, a2u);
+    let arc = |b: &mut Builder, coef: Id, p: Id, q_: Id, den: Id| {
+        let r1 = b.div(p, den);
+        let r1 = b.unary(UnaryOp::Atan, r1);
+        let r2 = b.div(q_, den);
+        let r2 = b.unary(UnaryOp::Atan, r2);
+        let sum = b.add(r1, r2);
+        let t = b.mul(coef, sum);
+        b.div(t, den)
+    };
+    let arc1 = arc(b, k, n3, n4, aa);
+    let arc2 = arc(b, m, n5, n6, bb);
+    let arc3 = arc(b, v, n1, n2, c);
+    let total = b.add(arc1, arc2);
+    let total = b.add(total, arc3);
+    let den = b.mul(q, s_);
+    let den = b.mul_c(den, 2.0);
+    b.div(total, den)
 }
 
 /// `atanh(u) = ½ ln((1 + u)/(1 − u))`.

@@ -292,6 +292,85 @@ fn conv_arc_is_the_integral_over_the_arc() {
     }
 }
 
+/// `∬_T dA / (1 + S²r²)²` by the centroid rule on `n²` congruent sub-triangles.
+fn conv_triangle_numeric(x: DVec3, t: [DVec3; 3], s: f64, n: u32) -> f64 {
+    let (e1, e2) = (t[1] - t[0], t[2] - t[0]);
+    let area = 0.5 * e1.cross(e2).length() / f64::from(n * n);
+    let k = |p: DVec3| 1.0 / (1.0 + s * s * (x - p).length_squared()).powi(2);
+    let nf = f64::from(n);
+    let mut sum = 0.0;
+    for i in 0..n {
+        for j in 0..n - i {
+            let (a, b) = (f64::from(i), f64::from(j));
+            sum += k(t[0] + e1 * ((a + 1.0 / 3.0) / nf) + e2 * ((b + 1.0 / 3.0) / nf));
+            if i + j + 1 < n {
+                sum += k(t[0] + e1 * ((a + 2.0 / 3.0) / nf) + e2 * ((b + 2.0 / 3.0) / nf));
+            }
+        }
+    }
+    sum * area
+}
+
+#[test]
+fn conv_triangle_mesh_and_noise_follow_their_definitions() {
+    let x = DVec3::new(1.0, -0.5, 0.3);
+    let t = [
+        DVec3::ZERO,
+        DVec3::new(1.2, 0.1, 0.0),
+        DVec3::new(0.3, 0.9, 0.2),
+    ];
+    // Every labelling of the corners gives the same value (the longest edge is found).
+    for (order, s) in [
+        ([0, 1, 2], 1.0),
+        ([1, 2, 0], 2.0),
+        ([2, 0, 1], 0.7),
+        ([0, 2, 1], 1.3),
+    ] {
+        let v: Vec<String> = order
+            .iter()
+            .flat_map(|&i: &usize| t[i].to_array())
+            .map(|c| c.to_string())
+            .collect();
+        let src = format!(
+            "m(x[3], a[1]) {{ array v[9], s[1]; v = [{}]; s = [{s}]; m = hfConvTriangle(x, v, s, 0.05); }}",
+            v.join(", ")
+        );
+        let got = tape(&src).eval(x);
+        let want = s * s * s * conv_triangle_numeric(x, t, s, 300) - 0.05;
+        assert!(
+            (got - want).abs() < 1e-5 * want.abs().max(1.0),
+            "S = {s}: {got} vs {want}"
+        );
+    }
+    // A mesh of two triangles sharing an edge is the sum of the two triangles.
+    let quad = [
+        DVec3::ZERO,
+        DVec3::new(1.0, 0.0, 0.0),
+        DVec3::new(1.0, 1.0, 0.1),
+        DVec3::new(0.0, 1.0, 0.0),
+    ];
+    let mesh = tape(
+        "m(x[3], a[1]) { array v[12], tri[6], s[2];
+           v = [0, 0, 0, 1, 0, 0, 1, 1, 0.1, 0, 1, 0]; tri = [1, 2, 3, 1, 3, 4]; s = [1, 1];
+           m = hfConvMesh(x, v, tri, s, 0.2); }",
+    );
+    let want = conv_triangle_numeric(x, [quad[0], quad[1], quad[2]], 1.0, 300)
+        + conv_triangle_numeric(x, [quad[0], quad[2], quad[3]], 1.0, 300)
+        - 0.2;
+    assert!(
+        (mesh.eval(x) - want).abs() < 1e-5,
+        "{} vs {want}",
+        mesh.eval(x)
+    );
+    // hfNoiseG at a hand-checked point.
+    let noise = tape("m(x[3], a[1]) { m = hfNoiseG(x, 0.8, 3, 0.5); }");
+    let (a, f, ph) = (0.8f64, 3.0f64, 0.5f64);
+    let sn = [(f * x.x).sin(), (f * x.y).sin(), (f * x.z).sin()];
+    let ser = |k: usize, c: f64, prev: f64| a * sn[k] + a / 1.17 * (f * c / 1.35 + ph * prev).sin();
+    let want = ser(0, x.x, sn[2]) * ser(1, x.y, sn[0]) * ser(2, x.z, sn[1]);
+    assert!((noise.eval(x) - want).abs() < 1e-12);
+}
+
 /// ∫ 1/(1 + S²r²)² along the segment (0,0,−1)→(0,0,1), by Simpson with many intervals.
 fn conv_line_numeric(p: DVec3, s: f64) -> f64 {
     let n = 20_000;
@@ -383,6 +462,26 @@ fn bad_models_give_located_errors() {
             "m(x[3], a[1]) {\n  array c[3], s[2];\n  m = hfConvArc(x, c, c, c, c, c, s, 0);\n}",
             "2 arcs",
             3,
+        ),
+        (
+            "m(x[3], a[1]) {\n  m = hfNoiseG(x, 1, 2);\n}",
+            "takes 4 arguments",
+            2,
+        ),
+        (
+            "m(x[3], a[1]) {\n  array v[9], s[2];\n  m = hfConvTriangle(x, v, s, 0);\n}",
+            "9 values per triangle",
+            3,
+        ),
+        (
+            "m(x[3], a[1]) {\n  array v[9], t[3], s[1];\n  t = [1, 2, 4];\n  m = hfConvMesh(x, v, t, s, 0);\n}",
+            "vertex number 4 of triangle 1",
+            4,
+        ),
+        (
+            "m(x[3], a[1]) {\n  array v[9], t[3], s[1];\n  t = [1, 2, x[1]];\n  m = hfConvMesh(x, v, t, s, 0);\n}",
+            "must be constants",
+            4,
         ),
         (
             "m(x[3], a[1]) {\n  m = hfNothing(x);\n}",

@@ -344,11 +344,35 @@ fn mesh_cmd(a: &MeshArgs) -> anyhow::Result<()> {
                 report.euler_characteristic
             )
         } else {
-            "not a closed manifold (the box cuts the shape: enlarge --bounds or use --close)"
-                .to_string()
+            not_closed_reason(&report)
         }
     );
     Ok(())
+}
+
+/// Why an extracted surface is not a closed manifold: open boundaries (the box cuts the
+/// shape) or non-manifold edges/vertices (features thinner than a cell, where one cell
+/// vertex of dual contouring serves several sheets).
+fn not_closed_reason(report: &volmorph_mesh::ValidationReport) -> String {
+    let mut why = Vec::new();
+    if report.boundary_edges.count > 0 {
+        why.push(format!(
+            "{} boundary edges: the box cuts the shape, enlarge --bounds or use --close",
+            report.boundary_edges.count
+        ));
+    }
+    let nm = report.non_manifold_edges.count + report.non_manifold_vertices.count;
+    if nm > 0 {
+        why.push(format!(
+            "{} non-manifold edges/vertices: features thinner than a grid cell, refine --grid or use marching cubes",
+            nm
+        ));
+    }
+    if why.is_empty() {
+        "not a closed manifold".to_string()
+    } else {
+        format!("not a closed manifold ({})", why.join("; "))
+    }
 }
 
 fn sections_cmd(a: &SectionsArgs) -> anyhow::Result<()> {
@@ -420,7 +444,7 @@ fn sections_cmd(a: &SectionsArgs) -> anyhow::Result<()> {
                     report.euler_characteristic
                 )
             } else {
-                "not a closed manifold".to_string()
+                not_closed_reason(&report)
             }
         );
     } else {
