@@ -27,6 +27,7 @@
 //! | `hfConvMesh(x, v, tri, S, T)` | the same for the triangles whose 1-based vertex numbers are `tri[3i..3i+3]` in the vertex list `v` (3 values per vertex; the numbers must be constants) |
 //! | `hfNoiseG(x, A, f, φ)` | `X·Y·Z` with `X = A sin(f x) + (A/1.17) sin(f x/1.35 + φ sin(f z))`, `Y = A sin(f y) + (A/1.17) sin(f y/1.35 + φ sin(f x))`, `Z = A sin(f z) + (A/1.17) sin(f z/1.35 + φ sin(f y))` |
 //! | `hfConvCurve(x, v, S, T)` | the same for the polyline `v₀ → v₁ → … → v_N`: segment `i` joins points `i` and `i + 1` of `v` (3 values per point) with width `Sᵢ`; `N` = length of `S` |
+//! | `hfFMapBlob(x, f, x0, y0, z0, f0, σ)` | `f − Σ f0ᵢ / (1 + rᵢ²/σᵢ²)` over the points with `σᵢ > 10⁻⁶` (a function mapping by blobs; `rᵢ = |x − (x0ᵢ, y0ᵢ, z0ᵢ)|`, count = length of `z0`) |
 //! | `hfBlendUni(f1, f2, a0, a1, a2)` | `f1 + f2 + √(f1² + f2²) + a0/(1 + (f1/a1)² + (f2/a2)²)` |
 //! | `hfBlendInt(f1, f2, a0, a1, a2)` | `f1 + f2 − √(f1² + f2²) + a0/(1 + (f1/a1)² + (f2/a2)²)` |
 //!
@@ -40,6 +41,8 @@
 //! | `hfRotate3DX(x, θ)` | `y' = y cos θ + z sin θ`, `z' = −y sin θ + z cos θ` (`Y`: on `(z, x)`, `Z`: on `(x, y)`) |
 //! | `hfStretch3D(x, x0, sx, sy, sz)` | `x0 + (x − x0)/s` |
 //! | `hfTwistX(x, x1, x2, θ1, θ2)` | rotation of `(y, z)` by `θ = (1−t)θ1 + tθ2`, `t = (x−x1)/(x2−x1)` |
+//! | `hfSpaceMapCubic(x, src, dst, b)` | for each handle `i` in turn (3 values per handle): `δ = dstᵢ − srcᵢ`, `ρ = |((x − dstᵢ)_k / (b_{3i+k}(1 + |δ_k|)))_k|`; where `ρ ≤ 1`, `x ← x − δ (1 − ρ)³/(1 + ρ)` |
+//! | `hfSpaceMapExp(x, src, dst, b)` | the same with `x ← x − δ e^{−ρ²}` everywhere |
 //! | `hfTaperX(x, x1, x2, s1, s2)` | `(y, z) / s`, `s` from `s1` (`x < x1`) through the linear ramp to `s2` (`x > x2`); `|s| < 10⁻¹²` counts as 1 |
 
 use crate::ops::{BinaryOp, UnaryOp};
@@ -127,6 +130,16 @@ fn signature(name: &str) -> Option<&'static [(Kind, &'static str)]> {
         "hfConvCurve" | "hfConvTriangle" => &[(P, "x"), (A, "vect"), (A, "S"), (S, "T")],
         "hfConvMesh" => &[(P, "x"), (A, "vect"), (A, "tri"), (A, "S"), (S, "T")],
         "hfNoiseG" => &[(P, "x"), (S, "amp"), (S, "freq"), (S, "phase")],
+        "hfFMapBlob" => &[
+            (P, "x"),
+            (S, "fobj"),
+            (A, "x0"),
+            (A, "y0"),
+            (A, "z0"),
+            (A, "fobj0"),
+            (A, "sigma"),
+        ],
+        "hfSpaceMapCubic" | "hfSpaceMapExp" => &[(P, "x"), (A, "source"), (A, "target"), (A, "b")],
         "hfConvArc" => &[
             (P, "x"),
             (A, "center"),
@@ -153,8 +166,13 @@ fn signature(name: &str) -> Option<&'static [(Kind, &'static str)]> {
 }
 
 /// Whether `name` is a library function.
-pub(crate) fn is_library(name: &str) -> bool {
-    signature(name).is_some()
+/// The library's spelling of `name`, matched case-insensitively as HyperFun does
+/// (`hfMetaBall` and `hfSuperEll`, as its documentation writes them, are `hfMetaball` and
+/// `hfSuperell` here); `None` if no library function has that name.
+pub(crate) fn canonical(name: &str) -> Option<&'static str> {
+    library_names()
+        .into_iter()
+        .find(|n| n.eq_ignore_ascii_case(name))
 }
 
 /// Names of every library function (for documentation and error hints).
@@ -190,6 +208,7 @@ pub fn library_names() -> Vec<&'static str> {
         "hfConvTriangle",
         "hfConvMesh",
         "hfNoiseG",
+        "hfFMapBlob",
         "hfBlendUni",
         "hfBlendInt",
         "hfShift3D",
@@ -204,6 +223,8 @@ pub fn library_names() -> Vec<&'static str> {
         "hfTaperX",
         "hfTaperY",
         "hfTaperZ",
+        "hfSpaceMapCubic",
+        "hfSpaceMapExp",
     ];
     all.to_vec()
 }
@@ -560,6 +581,35 @@ pub(crate) fn call(b: &mut Builder, name: &str, args: &[Value]) -> Result<CallRe
                 sum = b.add(sum, term);
             }
             plain(b.sub(sum, s(&args[4])))
+        }
+        "hfFMapBlob" => {
+            let [x0, y0, z0, f0, sg] = [2, 3, 4, 5, 6].map(|k| arr(&args[k]));
+            let n = z0.len();
+            if x0.len() < n || y0.len() < n || f0.len() < n || sg.len() < n {
+                return Err(format!(
+                    "`hfFMapBlob`: {n} blobs (the length of `z0`) need as many values in `x0`, `y0`, `fobj0` and `sigma`"
+                ));
+            }
+            let mut f = s(&args[1]);
+            let eps = b.constant(HF_CONV_ARC_EPS);
+            let zero = b.constant(0.0);
+            for i in 0..n {
+                let c = [x0[i], y0[i], z0[i]];
+                let mut r2 = b.constant(0.0);
+                for k in 0..3 {
+                    let d = b.sub(x[k], c[k]);
+                    let d2 = b.square(d);
+                    r2 = b.add(r2, d2);
+                }
+                let s2 = b.square(sg[i]);
+                let q = b.div(r2, s2);
+                let q = b.add(one, q);
+                let term = b.div(f0[i], q);
+                let active = b.binary(BinaryOp::Lt, eps, sg[i]);
+                let term = b.select(active, term, zero);
+                f = b.sub(f, term);
+            }
+            plain(f)
         }
         "hfNoiseG" => {
             let (amp, freq, phase) = (s(&args[1]), s(&args[2]), s(&args[3]));
@@ -1093,6 +1143,48 @@ fn transform(
             let scale = b.select(tiny, one, scale);
             x[u] = b.div(x[u], scale);
             x[v] = b.div(x[v], scale);
+        }
+        "hfSpaceMapCubic" | "hfSpaceMapExp" => {
+            let (src, dst, fr) = (arr(&args[1]), arr(&args[2]), arr(&args[3]));
+            let n = src.len() / 3;
+            if src.len() % 3 != 0 || dst.len() < 3 * n || fr.len() < 3 * n {
+                return Err(format!(
+                    "`{name}`: `source` needs 3 values per handle ({} given) and `target` and `b` at least as many",
+                    src.len()
+                ));
+            }
+            let cubic = name == "hfSpaceMapCubic";
+            for i in 0..n {
+                let mut delta = [0; 3];
+                let mut rho2 = b.constant(0.0);
+                for k in 0..3 {
+                    delta[k] = b.sub(dst[3 * i + k], src[3 * i + k]);
+                    let ad = b.unary(UnaryOp::Abs, delta[k]);
+                    let ad = b.add(one, ad);
+                    let den = b.mul(fr[3 * i + k], ad);
+                    let l = b.sub(x[k], dst[3 * i + k]);
+                    let l = b.div(l, den);
+                    let l2 = b.square(l);
+                    rho2 = b.add(rho2, l2);
+                }
+                let weight = if cubic {
+                    let rho = b.sqrt(rho2);
+                    let om = b.sub(one, rho);
+                    let om3 = b.unary(UnaryOp::PowI(3), om);
+                    let op = b.add(one, rho);
+                    let w = b.div(om3, op);
+                    let inside = b.binary(BinaryOp::Le, rho, one);
+                    let zero = b.constant(0.0);
+                    b.select(inside, w, zero)
+                } else {
+                    let e = b.neg(rho2);
+                    b.unary(UnaryOp::Exp, e)
+                };
+                for k in 0..3 {
+                    let m = b.mul(weight, delta[k]);
+                    x[k] = b.sub(x[k], m);
+                }
+            }
         }
         _ => return Err(format!("unknown function `{name}`")),
     }

@@ -362,6 +362,40 @@ fn conv_triangle_mesh_and_noise_follow_their_definitions() {
         "{} vs {want}",
         mesh.eval(x)
     );
+    // hfFMapBlob: f − Σ f0/(1 + r²/σ²), the blob with σ ≤ 1e-6 ignored.
+    let blob = tape(
+        "m(x[3], a[1]) { array x0[2], y0[2], z0[2], f0[2], sg[2];
+           x0 = [1, 0]; y0 = [0, 0]; z0 = [0, 0]; f0 = [0.5, 9]; sg = [2, 0];
+           m = hfFMapBlob(x, 0.3, x0, y0, z0, f0, sg); }",
+    );
+    let r2 = (x - DVec3::X).length_squared();
+    assert!((blob.eval(x) - (0.3 - 0.5 / (1.0 + r2 / 4.0))).abs() < 1e-12);
+    // Space maps by handles: the point seen by the primitive after the in-place mapping.
+    let (src, dst, fr) = (DVec3::new(0.8, -0.4, 0.2), DVec3::new(1.1, -0.5, 0.4), 1.5);
+    let delta = dst - src;
+    let l = (x - dst) / (fr * (DVec3::ONE + delta.abs()));
+    let rho = l.length();
+    let cubic = x - delta * ((1.0 - rho).powi(3) / (1.0 + rho));
+    let expo = x - delta * (-rho * rho).exp();
+    assert!(rho <= 1.0);
+    for (name, moved) in [("hfSpaceMapCubic", cubic), ("hfSpaceMapExp", expo)] {
+        for (k, want) in moved.to_array().into_iter().enumerate() {
+            let t = tape(&format!(
+                "m(x[3], a[1]) {{ array s[3], d[3], b[3]; s = [0.8, -0.4, 0.2]; d = [1.1, -0.5, 0.4];
+                   b = [1.5, 1.5, 1.5]; dummy = {name}(x, s, d, b); m = x[{}]; }}",
+                k + 1
+            ));
+            assert!((t.eval(x) - want).abs() < 1e-12, "{name} axis {k}");
+        }
+    }
+    // Beyond the cubic map's support nothing moves.
+    let far = tape(
+        "m(x[3], a[1]) { array s[3], d[3], b[3]; s = [0, 0, 0]; d = [0.1, 0, 0]; b = [0.1, 0.1, 0.1];
+           dummy = hfSpaceMapCubic(x, s, d, b); m = x[1]; }",
+    );
+    assert_eq!(far.eval(x), x.x);
+    // Library names are case-insensitive, as in HyperFun.
+    let upper = tape("m(x[3], a[1]) { m = HFNOISEG(x, 0.8, 3, 0.5); }");
     // hfNoiseG at a hand-checked point.
     let noise = tape("m(x[3], a[1]) { m = hfNoiseG(x, 0.8, 3, 0.5); }");
     let (a, f, ph) = (0.8f64, 3.0f64, 0.5f64);
@@ -369,6 +403,7 @@ fn conv_triangle_mesh_and_noise_follow_their_definitions() {
     let ser = |k: usize, c: f64, prev: f64| a * sn[k] + a / 1.17 * (f * c / 1.35 + ph * prev).sin();
     let want = ser(0, x.x, sn[2]) * ser(1, x.y, sn[0]) * ser(2, x.z, sn[1]);
     assert!((noise.eval(x) - want).abs() < 1e-12);
+    assert_eq!(upper.eval(x), noise.eval(x));
 }
 
 /// ∫ 1/(1 + S²r²)² along the segment (0,0,−1)→(0,0,1), by Simpson with many intervals.
@@ -461,6 +496,16 @@ fn bad_models_give_located_errors() {
         (
             "m(x[3], a[1]) {\n  array c[3], s[2];\n  m = hfConvArc(x, c, c, c, c, c, s, 0);\n}",
             "2 arcs",
+            3,
+        ),
+        (
+            "m(x[3], a[1]) {\n  array s[4];\n  m = hfSpaceMapExp(x, s, s, s);\n}",
+            "3 values per handle",
+            3,
+        ),
+        (
+            "m(x[3], a[1]) {\n  array s[2], z[3];\n  m = hfFMapBlob(x, 1, s, s, z, z, z);\n}",
+            "3 blobs",
             3,
         ),
         (
