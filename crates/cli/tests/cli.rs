@@ -1472,6 +1472,82 @@ fn handles_apply_maps_points_forward_with_full_precision() {
     }
 }
 
+#[test]
+fn frep_sections_reconstructs_closed_solids() {
+    let dir = tempfile::tempdir().unwrap();
+    let json = dir.path().join("contours.json");
+    // Three octagons shrinking along z, the middle one with two loops.
+    let oct = |r: f64, cx: f64| -> String {
+        let pts: Vec<String> = (0..8)
+            .map(|i| {
+                let t = std::f64::consts::TAU * f64::from(i) / 8.0;
+                format!("[{}, {}]", cx + r * t.cos(), r * t.sin())
+            })
+            .collect();
+        format!("[{}]", pts.join(", "))
+    };
+    let text = format!(
+        r#"{{"sections": [{{"z": 0, "points": {}}}, {{"z": 1, "loops": [{}, {}]}}, {{"z": 2.5, "points": {}}}]}}"#,
+        oct(2.0, 0.0),
+        oct(0.8, -1.0),
+        oct(0.8, 1.0),
+        oct(1.0, 0.0)
+    );
+    std::fs::write(&json, text).unwrap();
+    let mesh = dir.path().join("stack.ply");
+    let out = ok(&[&"frep", &"sections", &json, &"-o", &mesh, &"--grid", &"40"]);
+    assert!(out.contains("closed manifold"), "{out}");
+    let out = ok(&[
+        &"frep",
+        &"sections",
+        &json,
+        &"-o",
+        &mesh,
+        &"--grid",
+        &"40",
+        &"--blend",
+        &"catmull-rom",
+    ]);
+    assert!(out.contains("closed manifold"), "{out}");
+
+    let femur = dir.path().join("femur.obj");
+    let out = ok(&[
+        &"frep",
+        &"sections",
+        &"--example",
+        &"femur",
+        &"-o",
+        &femur,
+        &"--grid",
+        &"64",
+    ]);
+    assert!(
+        out.contains("12 sections") && out.contains("closed manifold"),
+        "{out}"
+    );
+    let vol = dir.path().join("femur.nii");
+    ok(&[
+        &"frep",
+        &"sections",
+        &"--example",
+        &"femur",
+        &"-o",
+        &vol,
+        &"--grid",
+        &"24",
+    ]);
+    let j = info_json(&vol);
+    assert!(j["stats"]["max"].as_f64().unwrap() > 0.0);
+
+    std::fs::write(
+        &json,
+        r#"{"sections": [{"z": 0, "points": [[0, 0], [1, 0], [0, 1]]}]}"#,
+    )
+    .unwrap();
+    let err = fails(&[&"frep", &"sections", &json, &"-o", &mesh]);
+    assert!(err.contains("cross-sections"), "{err}");
+}
+
 // ---------------------------------------------------------------------------------------------
 // volmorph nurbs: fit, eval, slice, isosurface.
 

@@ -612,12 +612,12 @@ impl Ctx<'_> {
             };
             return Ok(Value::Scalar(r));
         }
-        if library::is_library(name) {
+        if let Some(lib) = library::canonical(name) {
             let mut vals = Vec::with_capacity(args.len());
             for a in args {
                 vals.push(self.expr(a, env)?);
             }
-            let res = library::call(self.b, name, &vals).map_err(|m| FrepError::compile(pos, m))?;
+            let res = library::call(self.b, lib, &vals).map_err(|m| FrepError::compile(pos, m))?;
             if let Some(p) = res.new_point {
                 match args.first() {
                     Some(Expr::Var(var, _)) => {

@@ -17,6 +17,8 @@
 //!   control points (Eq. 11) and curves (Eq. 12), metamorphosis (Eq. 13), coordinate space
 //!   mappings (Eq. 15–16), function-dependent mappings (offset along the gradient, thin
 //!   shells, the maze; Eq. 17) and combined mappings with schedules (Eq. 18).
+//! * [`reconstruct`] — solids through scattered surface points (a defining function plus a
+//!   volume spline) and from stacks of planar cross-sections (metamorphosis along `z`).
 //! * [`output`] — volumes, meshes (the project's marching cubes and dual contouring) and
 //!   ray-cast pictures (interval-bounded root finding) of shapes and animations.
 //!
@@ -42,6 +44,7 @@ pub mod library;
 pub mod mapping;
 pub mod ops;
 pub mod output;
+pub mod reconstruct;
 pub mod shape;
 pub mod tape;
 

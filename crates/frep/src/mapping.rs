@@ -25,13 +25,15 @@
 //!
 //! Schedules `h(t)` for metamorphosis and combined mappings are [`Schedule`]s.
 //!
-//! Not here: displacement by a volume spline interpolating control-point displacements
-//! (Appendix) and the reconstruction of a solid from cross-sections; both need the
-//! volume-spline (thin-plate) solver of `volmorph_deform` and plug into [`Displaced`] /
-//! [`metamorphosis`] as a `SpaceMap` or a shape.
+//! Control-point coordinate mappings (§4.2 with the Appendix's volume spline) are a
+//! [`Displaced`] field over a [`SplineDisplacement`], built by [`displace_by_handles`]. The
+//! algebraic sum of a defining function and a volume spline through scattered function values
+//! (§4.1.1, reconstruction from surface points) and the reconstruction of a solid from
+//! cross-sections by metamorphosis along `z` (Fig. 4) are in [`crate::reconstruct`].
 
 use glam::{DMat3, DVec3};
 use volmorph_deform::SpaceMap;
+use volmorph_deform::volume_spline::{VolumeSpline, VolumeSplineSystem};
 
 use crate::error::FrepError;
 use crate::field::Field;
@@ -406,6 +408,127 @@ impl<F: Field, D: SpaceMap> Field for Displaced<F, D> {
     }
 }
 
+/// A displacement field interpolated by the Appendix's volume spline (`D = 3`, Green's
+/// function `G(r) = r` plus a linear polynomial, minimal bending energy): a [`SpaceMap`] whose
+/// value **is** the displacement vector `d(x)` (not a moved point), with `d(pᵢ) = δᵢ` at the
+/// centres `pᵢ` (or a smoothing fit for `smoothing > 0`). Plug it into [`Displaced`] or
+/// [`Combined`]; [`displace_by_handles`] builds the seed's §4.2 mapping with it.
+///
+/// The Jacobian is the spline's analytic gradient (`G` has a cusp at each centre, where the
+/// one-sided gradient of the kernel term is taken as zero).
+#[derive(Debug, Clone)]
+pub struct SplineDisplacement {
+    spline: VolumeSpline<3>,
+}
+
+impl SplineDisplacement {
+    /// Interpolate the displacements `displacements[i]` at `centres[i]` (physical units), with
+    /// smoothing `smoothing ≥ 0` (0 interpolates; see
+    /// [`volmorph_deform::volume_spline`] for its normalisation).
+    ///
+    /// # Errors
+    /// [`FrepError::InvalidArgument`] when the two lists differ in length or a displacement is
+    /// not finite; [`FrepError::Deform`] from [`VolumeSplineSystem::new`] for fewer than 4
+    /// centres, coincident or coplanar centres, non-finite coordinates or a singular system.
+    pub fn new(
+        centres: &[DVec3],
+        displacements: &[DVec3],
+        smoothing: f64,
+    ) -> Result<Self, FrepError> {
+        if centres.len() != displacements.len() {
+            return Err(FrepError::InvalidArgument(format!(
+                "{} displacements for {} centres",
+                displacements.len(),
+                centres.len()
+            )));
+        }
+        if let Some((i, d)) = displacements
+            .iter()
+            .enumerate()
+            .find(|(_, d)| !d.is_finite())
+        {
+            return Err(FrepError::InvalidArgument(format!(
+                "displacement {i} is not finite: {d}"
+            )));
+        }
+        let c: Vec<[f64; 3]> = centres.iter().map(|p| p.to_array()).collect();
+        let system = VolumeSplineSystem::<3>::new(&c, smoothing)?;
+        let values: Vec<f64> = displacements.iter().flat_map(|d| d.to_array()).collect();
+        Ok(Self {
+            spline: system.solve(&values, 3)?,
+        })
+    }
+
+    /// The underlying 3-component spline.
+    #[must_use]
+    pub fn spline(&self) -> &VolumeSpline<3> {
+        &self.spline
+    }
+}
+
+impl SpaceMap for SplineDisplacement {
+    fn apply(&self, p: DVec3) -> DVec3 {
+        let mut d = [0.0; 3];
+        self.spline.eval(p.to_array(), &mut d);
+        DVec3::from_array(d)
+    }
+
+    fn jacobian(&self, p: DVec3) -> DMat3 {
+        self.apply_with_jacobian(p).1
+    }
+
+    fn apply_with_jacobian(&self, p: DVec3) -> (DVec3, DMat3) {
+        let mut d = [0.0; 3];
+        let mut g = [[0.0; 3]; 3];
+        self.spline.eval_with_gradient(p.to_array(), &mut d, &mut g);
+        // g[c][a] = ∂d_c/∂x_a; column a of the Jacobian is ∂d/∂x_a.
+        let j = DMat3::from_cols(
+            DVec3::new(g[0][0], g[1][0], g[2][0]),
+            DVec3::new(g[0][1], g[1][1], g[2][1]),
+            DVec3::new(g[0][2], g[1][2], g[2][2]),
+        );
+        (DVec3::from_array(d), j)
+    }
+}
+
+/// The seed's §4.2 coordinate space mapping driven by control points: the handles `Qᵢ`
+/// (`sources`, on or near the surface of `field`) move to `Dᵢ` (`targets`). As in the seed, the
+/// volume spline `d` interpolates `δᵢ = Dᵢ − Qᵢ` at `pᵢ = Dᵢ`, and the deformed defining
+/// function is `f(x' − d(x'))` — the inverse mapping of Eq. 16 written with the sign that
+/// sends each target back to its source (`x = x' − d(x')`, so `f̃(Dᵢ) = f(Qᵢ)`): a source on
+/// the surface `f = 0` becomes a target on the surface of the result. The returned
+/// [`Displaced`] has `scale = −1`; setting `scale = −s` gives the partial motion `s ∈ [0, 1]`
+/// of an animation (exact at `s = 0` and `s = 1` only).
+///
+/// # Errors
+/// As [`SplineDisplacement::new`] (at least 4 non-coplanar, distinct targets), plus
+/// [`FrepError::InvalidArgument`] when the lists differ in length or a point is not finite.
+pub fn displace_by_handles<F: Field>(
+    field: F,
+    sources: &[DVec3],
+    targets: &[DVec3],
+    smoothing: f64,
+) -> Result<Displaced<F, SplineDisplacement>, FrepError> {
+    if sources.len() != targets.len() {
+        return Err(FrepError::InvalidArgument(format!(
+            "{} targets for {} source handles",
+            targets.len(),
+            sources.len()
+        )));
+    }
+    if let Some(p) = sources.iter().chain(targets).find(|p| !p.is_finite()) {
+        return Err(FrepError::InvalidArgument(format!(
+            "handle {p} is not finite"
+        )));
+    }
+    let deltas: Vec<DVec3> = targets.iter().zip(sources).map(|(d, q)| *d - *q).collect();
+    Ok(Displaced {
+        field,
+        displacement: SplineDisplacement::new(targets, &deltas, smoothing)?,
+        scale: -1.0,
+    })
+}
+
 /// Combined mapping (Eq. 18, the seed's Fig. 10c form):
 /// `ξ' = (1 − h₁(t)) f(x' + h₂(t) d₂(x')) + h₁(t) d₁(x')` — a coordinate mapping toward the
 /// target by the displacement map `d₂`, corrected by metamorphosis into the target
@@ -607,5 +730,51 @@ mod tests {
                 (1.0 - w1) * ft.eval(x + w2 * DVec3::new(0.0, 0.2, 0.0)) + w1 * target.eval(x);
             assert!((c.value(x) - want).abs() < 1e-12);
         }
+    }
+
+    #[test]
+    fn handle_displacement_moves_the_surface_to_the_targets() {
+        let ft = Tape::new(&ball(1.0));
+        let sources = [
+            DVec3::X,
+            DVec3::Y,
+            DVec3::Z,
+            -DVec3::X,
+            -DVec3::Y,
+            -DVec3::Z,
+            DVec3::new(1.0, 1.0, 1.0).normalize(),
+        ];
+        let mut targets = sources;
+        targets[0] = DVec3::new(1.4, 0.1, 0.0);
+        targets[6] *= 0.8;
+        let d = displace_by_handles(&ft, &sources, &targets, 0.0).unwrap();
+        for t in &targets {
+            assert!(d.value(*t).abs() < 1e-9, "{}", d.value(*t));
+        }
+        assert_eq!(d.scale, -1.0);
+        assert!(d.value(DVec3::ZERO) > 0.0);
+        assert!(d.value(DVec3::new(1.3, 0.1, 0.0)) > 0.0);
+        assert!(d.value(DVec3::splat(2.0)) < 0.0);
+        // The chain rule against central differences.
+        let x = DVec3::new(0.4, -0.3, 0.2);
+        let (v, g) = d.gradient(x);
+        assert_eq!(v, d.value(x));
+        let h = 1e-6;
+        for e in [DVec3::X, DVec3::Y, DVec3::Z] {
+            let fd = (d.value(x + h * e) - d.value(x - h * e)) / (2.0 * h);
+            assert!((fd - g.dot(e)).abs() < 1e-6, "{fd} vs {}", g.dot(e));
+        }
+        // The displacement field interpolates δ = D − Q at D.
+        for (q, t) in sources.iter().zip(&targets) {
+            assert!((d.displacement.apply(*t) - (*t - *q)).length() < 1e-9);
+        }
+        // Identical handles: the identity.
+        let id = displace_by_handles(&ft, &sources, &sources, 0.0).unwrap();
+        assert!((id.value(x) - ft.eval(x)).abs() < 1e-12);
+        assert!(displace_by_handles(&ft, &sources, &targets[..5], 0.0).is_err());
+        assert!(displace_by_handles(&ft, &sources[..3], &targets[..3], 0.0).is_err());
+        let mut nan = targets;
+        nan[1].x = f64::NAN;
+        assert!(displace_by_handles(&ft, &sources, &nan, 0.0).is_err());
     }
 }

@@ -564,6 +564,22 @@ fn simplify_shape(shape: &Shape, choices: &[Choice]) -> Shape {
             }
             other => (other, alias),
         };
+        // Identities that hold bit for bit for every x (NaN included): x − (+0) = x,
+        // x·1 = 1·x = x, x/1 = x. A pruned `max(…, 0)` leaves such operations behind (the
+        // smooth-minimum blends: `min(a, b) − h³k/6` with `h` folded to 0).
+        let is_bits = |a: Id, v: f64| {
+            out.get(a as usize)
+                .and_then(Node::as_const)
+                .is_some_and(|c| c.to_bits() == v.to_bits())
+        };
+        let (node, alias) = match node {
+            Some(Node::Binary(BinaryOp::Sub, a, b)) if is_bits(b, 0.0) => (None, Some(a)),
+            Some(Node::Binary(BinaryOp::Mul | BinaryOp::Div, a, b)) if is_bits(b, 1.0) => {
+                (None, Some(a))
+            }
+            Some(Node::Binary(BinaryOp::Mul, a, b)) if is_bits(a, 1.0) => (None, Some(b)),
+            other => (other, alias),
+        };
         match (node, alias) {
             (_, Some(a)) => {
                 // Keep indices aligned with a dead placeholder.
@@ -980,6 +996,50 @@ mod tests {
         for i in 0..50 {
             let f = f64::from(i) / 49.0;
             let p = lo + (hi - lo) * DVec3::new(f, 1.0 - f, f * f);
+            assert_eq!(small.eval(p).to_bits(), t.eval(p).to_bits());
+        }
+    }
+
+    #[test]
+    fn simplify_drops_bit_exact_identities_left_by_pruning() {
+        // The polynomial smooth minimum of two balls (`s3_blend`): far from the blend,
+        // `h = max(k − |a − b|, 0)/k` folds to 0 and `min(a, b) − h³k/6` to `min(a, b)`.
+        let src = "m(x[3], a[1]) {
+            dx1 = x[1] - 0.45; dx2 = x[1] + 0.45;
+            a1 = sqrt(dx1*dx1 + x[2]*x[2] + x[3]*x[3]) - 0.7;
+            b1 = sqrt(dx2*dx2 + x[2]*x[2] + x[3]*x[3]) - 0.7;
+            k = 0.25; h = max(k - abs(a1 - b1), 0.0) / k;
+            f = min(a1, b1) - h*h*h*k/6.0; m = -f; }";
+        let t = Tape::new(&crate::compile_source(src, &Default::default()).unwrap());
+        let mut sc = IntervalScratch::default();
+        let (lo, hi) = (DVec3::new(0.9, -0.2, -0.2), DVec3::new(1.2, 0.2, 0.2));
+        let _ = t.interval_with(lo, hi, &mut sc);
+        let small = t.simplify(&sc).expect("the blend is decided");
+        // −(sqrt(dx1² + y² + z²) − 0.7): 8 operations, no `− 0` left.
+        assert!(
+            !small.shape().nodes().iter().any(|n| matches!(
+                n,
+                Node::Binary(BinaryOp::Sub, _, c) if small.shape().nodes()[*c as usize].as_const() == Some(0.0)
+            )),
+            "{:?}",
+            small.shape().nodes()
+        );
+        for i in 0..50 {
+            let f = f64::from(i) / 49.0;
+            let p = lo + (hi - lo) * DVec3::new(f, 1.0 - f, f * f);
+            assert_eq!(small.eval(p).to_bits(), t.eval(p).to_bits());
+        }
+        // Signed zeros: x − (−0) is not x (−0 − −0 = +0), so it must stay.
+        let s = Shape::build(|b: &mut Builder, [x, _, _]| {
+            let nz = b.constant(-0.0);
+            let m = b.binary(BinaryOp::Max, x, nz);
+            let d = b.binary(BinaryOp::Sub, x, m);
+            b.binary(BinaryOp::Min, d, x)
+        });
+        let t = Tape::new(&s);
+        let _ = t.interval_with(DVec3::splat(-2.0), DVec3::splat(-1.0), &mut sc);
+        if let Some(small) = t.simplify(&sc) {
+            let p = DVec3::splat(-1.5);
             assert_eq!(small.eval(p).to_bits(), t.eval(p).to_bits());
         }
     }

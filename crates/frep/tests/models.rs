@@ -216,6 +216,11 @@ fn library_primitives_follow_their_definitions() {
             "b = [0, 0, -1]; e = [0, 0, 1]; s = [1]; m = hfConvLine(x, b, e, s, 0);",
             conv_line_numeric(p, 1.0),
         ),
+        (
+            // The polyline (0,0,−1) → (0,0,−0.3) → (0,0,1): the same segment in two pieces.
+            "v = [0, 0, -1, 0, 0, -0.3, 0, 0, 1]; s = [1, 1]; m = hfConvCurve(x, v, s, 0.25);",
+            conv_line_numeric(p, 1.0) - 0.25,
+        ),
     ];
     for (body, want) in cases {
         let src = format!("m(x[3], a[1]) {{ array c[3]; {body} }}");
@@ -230,6 +235,175 @@ fn library_primitives_follow_their_definitions() {
     let q = DVec3::new(0.5, 0.5, 1.0);
     let want = r_int(r_int(0.5 * 0.5, 0.5 * 1.5), 1.0 * 2.0);
     assert!((b.eval(q) - want).abs() < 1e-12);
+}
+
+/// `∫₀^θ dφ / (1 + S²|x − c − r·(u cos φ + v sin φ)|²)²` by Simpson with many intervals.
+fn conv_arc_numeric(x: DVec3, c: DVec3, r: f64, theta_deg: f64, u: DVec3, v: DVec3, s: f64) -> f64 {
+    let n = 20_000;
+    let th = theta_deg.to_radians();
+    let h = th / f64::from(n);
+    let mut sum = 0.0;
+    for i in 0..=n {
+        let ph = f64::from(i) * h;
+        let q = c + r * (u * ph.cos() + v * ph.sin());
+        let w = if i == 0 || i == n {
+            1.0
+        } else if i % 2 == 1 {
+            4.0
+        } else {
+            2.0
+        };
+        sum += w / (1.0 + s * s * (x - q).length_squared()).powi(2);
+    }
+    sum * h / 3.0
+}
+
+#[test]
+fn conv_arc_is_the_integral_over_the_arc() {
+    let x = DVec3::new(0.3, 0.5, -0.2);
+    // (θ, axis, angle, world directions of the local x and y axes).
+    let cases = [
+        (120.0_f64, "0, 0, 1", 0.0, DVec3::X, DVec3::Y),
+        (270.0, "0, 0, 1", 0.0, DVec3::X, DVec3::Y),
+        (400.0, "0, 0, 1", 0.0, DVec3::X, DVec3::Y),
+        // The arc's plane turned by +90° about x: local y goes to world z.
+        (200.0, "1, 0, 0", 90.0, DVec3::X, DVec3::Z),
+    ];
+    let c = DVec3::new(0.1, -0.2, 0.05);
+    for (th, axis, angle, u, v) in cases {
+        let src = format!(
+            "m(x[3], a[1]) {{ array c[3], r[1], t[1], ax[3], an[1], s[1];
+               c = [0.1, -0.2, 0.05]; r = [0.8]; t = [{th}]; ax = [{axis}]; an = [{angle}];
+               s = [1.5]; m = hfConvArc(x, c, r, t, ax, an, s, 0.1); }}"
+        );
+        let t = tape(&src);
+        let want = conv_arc_numeric(x, c, 0.8, th.min(360.0), u, v, 1.5) - 0.1;
+        let got = t.eval(x);
+        assert!(
+            (got - want).abs() < 1e-5,
+            "θ = {th}, axis {axis}: {got} vs {want}"
+        );
+        // Gradients are the tape's: compare with differences.
+        let (gv, g) = t.gradient(x);
+        assert_eq!(gv, got);
+        let h = 1e-6;
+        let fd = (t.eval(x + DVec3::X * h) - t.eval(x - DVec3::X * h)) / (2.0 * h);
+        assert!((fd - g.x).abs() < 1e-5, "{fd} vs {}", g.x);
+    }
+}
+
+/// `∬_T dA / (1 + S²r²)²` by the centroid rule on `n²` congruent sub-triangles.
+fn conv_triangle_numeric(x: DVec3, t: [DVec3; 3], s: f64, n: u32) -> f64 {
+    let (e1, e2) = (t[1] - t[0], t[2] - t[0]);
+    let area = 0.5 * e1.cross(e2).length() / f64::from(n * n);
+    let k = |p: DVec3| 1.0 / (1.0 + s * s * (x - p).length_squared()).powi(2);
+    let nf = f64::from(n);
+    let mut sum = 0.0;
+    for i in 0..n {
+        for j in 0..n - i {
+            let (a, b) = (f64::from(i), f64::from(j));
+            sum += k(t[0] + e1 * ((a + 1.0 / 3.0) / nf) + e2 * ((b + 1.0 / 3.0) / nf));
+            if i + j + 1 < n {
+                sum += k(t[0] + e1 * ((a + 2.0 / 3.0) / nf) + e2 * ((b + 2.0 / 3.0) / nf));
+            }
+        }
+    }
+    sum * area
+}
+
+#[test]
+fn conv_triangle_mesh_and_noise_follow_their_definitions() {
+    let x = DVec3::new(1.0, -0.5, 0.3);
+    let t = [
+        DVec3::ZERO,
+        DVec3::new(1.2, 0.1, 0.0),
+        DVec3::new(0.3, 0.9, 0.2),
+    ];
+    // Every labelling of the corners gives the same value (the longest edge is found).
+    for (order, s) in [
+        ([0, 1, 2], 1.0),
+        ([1, 2, 0], 2.0),
+        ([2, 0, 1], 0.7),
+        ([0, 2, 1], 1.3),
+    ] {
+        let v: Vec<String> = order
+            .iter()
+            .flat_map(|&i: &usize| t[i].to_array())
+            .map(|c| c.to_string())
+            .collect();
+        let src = format!(
+            "m(x[3], a[1]) {{ array v[9], s[1]; v = [{}]; s = [{s}]; m = hfConvTriangle(x, v, s, 0.05); }}",
+            v.join(", ")
+        );
+        let got = tape(&src).eval(x);
+        let want = s * s * s * conv_triangle_numeric(x, t, s, 300) - 0.05;
+        assert!(
+            (got - want).abs() < 1e-5 * want.abs().max(1.0),
+            "S = {s}: {got} vs {want}"
+        );
+    }
+    // A mesh of two triangles sharing an edge is the sum of the two triangles.
+    let quad = [
+        DVec3::ZERO,
+        DVec3::new(1.0, 0.0, 0.0),
+        DVec3::new(1.0, 1.0, 0.1),
+        DVec3::new(0.0, 1.0, 0.0),
+    ];
+    let mesh = tape(
+        "m(x[3], a[1]) { array v[12], tri[6], s[2];
+           v = [0, 0, 0, 1, 0, 0, 1, 1, 0.1, 0, 1, 0]; tri = [1, 2, 3, 1, 3, 4]; s = [1, 1];
+           m = hfConvMesh(x, v, tri, s, 0.2); }",
+    );
+    let want = conv_triangle_numeric(x, [quad[0], quad[1], quad[2]], 1.0, 300)
+        + conv_triangle_numeric(x, [quad[0], quad[2], quad[3]], 1.0, 300)
+        - 0.2;
+    assert!(
+        (mesh.eval(x) - want).abs() < 1e-5,
+        "{} vs {want}",
+        mesh.eval(x)
+    );
+    // hfFMapBlob: f − Σ f0/(1 + r²/σ²), the blob with σ ≤ 1e-6 ignored.
+    let blob = tape(
+        "m(x[3], a[1]) { array x0[2], y0[2], z0[2], f0[2], sg[2];
+           x0 = [1, 0]; y0 = [0, 0]; z0 = [0, 0]; f0 = [0.5, 9]; sg = [2, 0];
+           m = hfFMapBlob(x, 0.3, x0, y0, z0, f0, sg); }",
+    );
+    let r2 = (x - DVec3::X).length_squared();
+    assert!((blob.eval(x) - (0.3 - 0.5 / (1.0 + r2 / 4.0))).abs() < 1e-12);
+    // Space maps by handles: the point seen by the primitive after the in-place mapping.
+    let (src, dst, fr) = (DVec3::new(0.8, -0.4, 0.2), DVec3::new(1.1, -0.5, 0.4), 1.5);
+    let delta = dst - src;
+    let l = (x - dst) / (fr * (DVec3::ONE + delta.abs()));
+    let rho = l.length();
+    let cubic = x - delta * ((1.0 - rho).powi(3) / (1.0 + rho));
+    let expo = x - delta * (-rho * rho).exp();
+    assert!(rho <= 1.0);
+    for (name, moved) in [("hfSpaceMapCubic", cubic), ("hfSpaceMapExp", expo)] {
+        for (k, want) in moved.to_array().into_iter().enumerate() {
+            let t = tape(&format!(
+                "m(x[3], a[1]) {{ array s[3], d[3], b[3]; s = [0.8, -0.4, 0.2]; d = [1.1, -0.5, 0.4];
+                   b = [1.5, 1.5, 1.5]; dummy = {name}(x, s, d, b); m = x[{}]; }}",
+                k + 1
+            ));
+            assert!((t.eval(x) - want).abs() < 1e-12, "{name} axis {k}");
+        }
+    }
+    // Beyond the cubic map's support nothing moves.
+    let far = tape(
+        "m(x[3], a[1]) { array s[3], d[3], b[3]; s = [0, 0, 0]; d = [0.1, 0, 0]; b = [0.1, 0.1, 0.1];
+           dummy = hfSpaceMapCubic(x, s, d, b); m = x[1]; }",
+    );
+    assert_eq!(far.eval(x), x.x);
+    // Library names are case-insensitive, as in HyperFun.
+    let upper = tape("m(x[3], a[1]) { m = HFNOISEG(x, 0.8, 3, 0.5); }");
+    // hfNoiseG at a hand-checked point.
+    let noise = tape("m(x[3], a[1]) { m = hfNoiseG(x, 0.8, 3, 0.5); }");
+    let (a, f, ph) = (0.8f64, 3.0f64, 0.5f64);
+    let sn = [(f * x.x).sin(), (f * x.y).sin(), (f * x.z).sin()];
+    let ser = |k: usize, c: f64, prev: f64| a * sn[k] + a / 1.17 * (f * c / 1.35 + ph * prev).sin();
+    let want = ser(0, x.x, sn[2]) * ser(1, x.y, sn[0]) * ser(2, x.z, sn[1]);
+    assert!((noise.eval(x) - want).abs() < 1e-12);
+    assert_eq!(upper.eval(x), noise.eval(x));
 }
 
 /// ∫ 1/(1 + S²r²)² along the segment (0,0,−1)→(0,0,1), by Simpson with many intervals.
@@ -303,6 +477,56 @@ fn bad_models_give_located_errors() {
             "m(x[3], a[1]) {\n  m = hfSphere(x, 1);\n}",
             "takes 3 arguments",
             2,
+        ),
+        (
+            "m(x[3], a[1]) {\n  m = hfConvCurve(x, 1, 2);\n}",
+            "takes 4 arguments",
+            2,
+        ),
+        (
+            "m(x[3], a[1]) {\n  array v[6];\n  m = hfConvCurve(x, v, v, 0);\n}",
+            "`vect` needs 3 values per point",
+            3,
+        ),
+        (
+            "m(x[3], a[1]) {\n  array c[3];\n  m = hfConvArc(x, c, c, c, c, c, c, c);\n}",
+            "argument 8 (`T`) of `hfConvArc` must be a number",
+            3,
+        ),
+        (
+            "m(x[3], a[1]) {\n  array c[3], s[2];\n  m = hfConvArc(x, c, c, c, c, c, s, 0);\n}",
+            "2 arcs",
+            3,
+        ),
+        (
+            "m(x[3], a[1]) {\n  array s[4];\n  m = hfSpaceMapExp(x, s, s, s);\n}",
+            "3 values per handle",
+            3,
+        ),
+        (
+            "m(x[3], a[1]) {\n  array s[2], z[3];\n  m = hfFMapBlob(x, 1, s, s, z, z, z);\n}",
+            "3 blobs",
+            3,
+        ),
+        (
+            "m(x[3], a[1]) {\n  m = hfNoiseG(x, 1, 2);\n}",
+            "takes 4 arguments",
+            2,
+        ),
+        (
+            "m(x[3], a[1]) {\n  array v[9], s[2];\n  m = hfConvTriangle(x, v, s, 0);\n}",
+            "9 values per triangle",
+            3,
+        ),
+        (
+            "m(x[3], a[1]) {\n  array v[9], t[3], s[1];\n  t = [1, 2, 4];\n  m = hfConvMesh(x, v, t, s, 0);\n}",
+            "vertex number 4 of triangle 1",
+            4,
+        ),
+        (
+            "m(x[3], a[1]) {\n  array v[9], t[3], s[1];\n  t = [1, 2, x[1]];\n  m = hfConvMesh(x, v, t, s, 0);\n}",
+            "must be constants",
+            4,
         ),
         (
             "m(x[3], a[1]) {\n  m = hfNothing(x);\n}",

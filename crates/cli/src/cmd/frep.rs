@@ -12,6 +12,7 @@ use volmorph_frep::mapping::{Schedule, morph};
 use volmorph_frep::output::{
     MeshMethod, MeshOptions, RenderOptions, mesh, render, render_animation,
 };
+use volmorph_frep::reconstruct::{SectionBlend, SectionStack, femur_sections};
 use volmorph_frep::{CompileOptions, Field, Shape, Tape, compile_source};
 use volmorph_mesh::{self as meshio, MeshWriteOptions};
 use volmorph_render::{Camera, Projection, write_png_rgba};
@@ -52,6 +53,13 @@ pub enum Command {
         after_help = "Example:\n  volmorph frep morph s1_sphere.hf s5_twist.hf --schedule smoothstep --frames 24 -o frames/"
     )]
     Morph(MorphArgs),
+    /// Reconstruct a solid from planar cross-sections (contours at heights z) by
+    /// metamorphosis along z, and write its surface as a mesh or its defining function as a
+    /// volume.
+    #[command(
+        after_help = "Contour file (JSON):\n  {\"sections\": [{\"z\": 0, \"points\": [[x, y], ...]},\n                {\"z\": 2, \"loops\": [[[x, y], ...], [[x, y], ...]]}, ...],\n   \"blend\": \"linear\" | \"catmull-rom\"}\n\nExamples:\n  volmorph frep sections contours.json -o bone.ply --grid 160\n  volmorph frep sections --example femur -o femur.obj"
+    )]
+    Sections(SectionsArgs),
 }
 
 /// Options shared by every frep command: model parameters and the box.
@@ -163,6 +171,46 @@ pub struct MorphArgs {
     pub common: Common,
 }
 
+/// Arguments of `volmorph frep sections`.
+#[derive(Debug, clap::Args)]
+pub struct SectionsArgs {
+    /// Contour file (JSON, see below); omit with `--example`.
+    #[arg(required_unless_present = "example", conflicts_with = "example")]
+    pub contours: Option<PathBuf>,
+    /// Use a built-in example instead of a file: `femur` (12 sections, centimetres).
+    #[arg(long, value_parser = ["femur"])]
+    pub example: Option<String>,
+    /// Output: a mesh (.obj, .ply, .stl, .off) of the surface, or a volume (.nii, .nii.gz,
+    /// .mha, .nrrd, .vtk) of the defining function (f32, solid where ≥ 0).
+    #[arg(short, long)]
+    pub output: PathBuf,
+    /// Grid points along the longest side of the box (the other sides get the same spacing).
+    #[arg(long, default_value_t = 128)]
+    pub grid: usize,
+    /// Box: `lo,hi` or `x0,y0,z0,x1,y1,z1`; default: the contours' bounding box and the slab
+    /// of the sections, enlarged by 5 % on every side.
+    #[arg(long, allow_hyphen_values = true)]
+    pub bounds: Option<String>,
+    /// Blend along z between sections (overrides the file's `blend`).
+    #[arg(long, value_enum)]
+    pub blend: Option<Blend>,
+    /// Surface extraction algorithm (mesh output).
+    #[arg(long, value_enum, default_value_t = Method::MarchingCubes)]
+    pub method: Method,
+    /// Write ASCII STL/PLY instead of binary.
+    #[arg(long)]
+    pub ascii: bool,
+}
+
+/// Blends between cross-sections.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, clap::ValueEnum)]
+pub enum Blend {
+    /// (1 − t) f_k + t f_{k+1} (the seed's Eq. 13).
+    Linear,
+    /// Cubic Hermite with Catmull–Rom tangents across four sections (C¹ along z).
+    CatmullRom,
+}
+
 /// Run a frep subcommand.
 pub fn run(cmd: &Command) -> anyhow::Result<()> {
     match cmd {
@@ -170,6 +218,7 @@ pub fn run(cmd: &Command) -> anyhow::Result<()> {
         Command::Mesh(a) => mesh_cmd(a),
         Command::Render(a) => render_cmd(a),
         Command::Morph(a) => morph_cmd(a),
+        Command::Sections(a) => sections_cmd(a),
     }
 }
 
@@ -295,10 +344,124 @@ fn mesh_cmd(a: &MeshArgs) -> anyhow::Result<()> {
                 report.euler_characteristic
             )
         } else {
-            "not a closed manifold (the box cuts the shape: enlarge --bounds or use --close)"
-                .to_string()
+            not_closed_reason(&report)
         }
     );
+    Ok(())
+}
+
+/// Why an extracted surface is not a closed manifold: open boundaries (the box cuts the
+/// shape) or non-manifold edges/vertices (features thinner than a cell, where one cell
+/// vertex of dual contouring serves several sheets).
+fn not_closed_reason(report: &volmorph_mesh::ValidationReport) -> String {
+    let mut why = Vec::new();
+    if report.boundary_edges.count > 0 {
+        why.push(format!(
+            "{} boundary edges: the box cuts the shape, enlarge --bounds or use --close",
+            report.boundary_edges.count
+        ));
+    }
+    let nm = report.non_manifold_edges.count + report.non_manifold_vertices.count;
+    if nm > 0 {
+        why.push(format!(
+            "{} non-manifold edges/vertices: features thinner than a grid cell, refine --grid or use marching cubes",
+            nm
+        ));
+    }
+    if why.is_empty() {
+        "not a closed manifold".to_string()
+    } else {
+        format!("not a closed manifold ({})", why.join("; "))
+    }
+}
+
+fn sections_cmd(a: &SectionsArgs) -> anyhow::Result<()> {
+    let blend = a.blend.map(|b| match b {
+        Blend::Linear => SectionBlend::Linear,
+        Blend::CatmullRom => SectionBlend::CatmullRom,
+    });
+    let (stack, name) = if let Some(path) = &a.contours {
+        let text = std::fs::read_to_string(path)
+            .with_context(|| format!("cannot read contours {}", path.display()))?;
+        let mut stack =
+            SectionStack::from_json(&text).with_context(|| format!("{}", path.display()))?;
+        if let Some(b) = blend {
+            stack = stack.with_blend(b);
+        }
+        (stack, path.display().to_string())
+    } else {
+        let sections = femur_sections(32)?;
+        let stack = SectionStack::new(&sections, blend.unwrap_or_default())?;
+        (stack, "the femur example".to_string())
+    };
+    let (lo, hi) = match &a.bounds {
+        Some(b) => bounds(b)?,
+        None => {
+            let (lo, hi) = stack.bounds();
+            let pad = 0.05 * (hi - lo).max_element();
+            (lo - DVec3::splat(pad), hi + DVec3::splat(pad))
+        }
+    };
+    if !(2..=MAX_GRID).contains(&a.grid) {
+        bail!("--grid {}: must be between 2 and {MAX_GRID}", a.grid);
+    }
+    let ext = hi - lo;
+    let step = ext.max_element() / (a.grid - 1) as f64;
+    let dims = ext
+        .to_array()
+        .map(|e| ((e / step).round() as usize + 1).clamp(2, MAX_GRID));
+    let g = box_geometry(lo, hi, dims)?;
+    if meshio::MeshFormat::from_path(&a.output).is_ok() {
+        let pb = progress::spinner(format!("meshing {name}"));
+        let options = MeshOptions {
+            method: match a.method {
+                Method::MarchingCubes => MeshMethod::MarchingCubes,
+                Method::DualContouring => MeshMethod::DualContouring,
+            },
+            close: true,
+        };
+        let surface = mesh(&stack, &g, &options).context("cannot extract the surface")?;
+        pb.set_message(format!("writing {}", a.output.display()));
+        let opts = MeshWriteOptions {
+            binary: !a.ascii,
+            ..MeshWriteOptions::default()
+        };
+        meshio::write_with(&a.output, &surface.mesh, &opts)
+            .with_context(|| format!("cannot write {}", a.output.display()))?;
+        pb.finish_and_clear();
+        let report = surface.mesh.validate();
+        say!(
+            "{} sections, {}×{}×{} grid: {} vertices, {} triangles, {}",
+            stack.heights().len(),
+            dims[0],
+            dims[1],
+            dims[2],
+            surface.mesh.vertex_count(),
+            surface.mesh.face_count(),
+            if report.is_closed_manifold() {
+                format!(
+                    "closed manifold, Euler characteristic {}",
+                    report.euler_characteristic
+                )
+            } else {
+                not_closed_reason(&report)
+            }
+        );
+    } else {
+        let pb = progress::spinner(format!("sampling {name}"));
+        let vol = sample(&stack, &g).context("cannot sample the reconstruction")?;
+        pb.set_message(format!("writing {}", a.output.display()));
+        format::write(&a.output, &AnyVolume::from(vol))
+            .with_context(|| format!("cannot write {}", a.output.display()))?;
+        pb.finish_and_clear();
+        say!(
+            "{} sections sampled on {}×{}×{}",
+            stack.heights().len(),
+            dims[0],
+            dims[1],
+            dims[2]
+        );
+    }
     Ok(())
 }
 
