@@ -959,6 +959,79 @@ fn ffd_bad_inputs_fail_cleanly() {
 }
 
 #[test]
+fn bench_handles_runs_small() {
+    let j: serde_json::Value = serde_json::from_str(&ok(&[
+        &"bench",
+        &"handles",
+        &"--image-grid",
+        &"10",
+        &"--handles",
+        &"12",
+        &"--volume",
+        &"12,10,8",
+        &"--grid",
+        &"4",
+        &"--landmarks",
+        &"20",
+        &"--repeat",
+        &"1",
+        &"--json",
+    ]))
+    .expect("bench handles --json prints JSON");
+    assert_eq!(j["suite"], "handles");
+    let items = j["items"].as_array().expect("items");
+    let names: Vec<&str> = items.iter().filter_map(|i| i["name"].as_str()).collect();
+    assert_eq!(names.len(), 8, "{names:?}");
+    for want in [
+        "2D rigid MLS, 11 points",
+        "2D rigid MLS, 7 segments",
+        "3D affine MLS: set-up",
+        "3D affine MLS: move one handle",
+        "3D affine MLS: resample volume",
+        "TPS: factorise",
+        "TPS: re-solve",
+        "TPS: evaluate",
+    ] {
+        assert!(
+            names.iter().any(|n| n.starts_with(want)),
+            "{want}: {names:?}"
+        );
+    }
+    for it in items {
+        let (min, med, max) = (
+            it["min_s"].as_f64().unwrap(),
+            it["median_s"].as_f64().unwrap(),
+            it["max_s"].as_f64().unwrap(),
+        );
+        assert!(0.0 < min && min <= med && med <= max, "{it}");
+        // Targets are stated for the default sizes only.
+        assert!(it["target_s"].is_null(), "{it}");
+    }
+    let text = ok(&[
+        &"bench",
+        &"handles",
+        &"--image-grid",
+        &"10",
+        &"--handles",
+        &"12",
+        &"--volume",
+        &"12,10,8",
+        &"--grid",
+        &"4",
+        &"--landmarks",
+        &"20",
+        &"--repeat",
+        &"2",
+    ]);
+    assert!(text.contains("TPS: factorise"), "{text}");
+    assert!(text.contains(" ms"), "{text}");
+    let err = fails(&[&"bench", &"handles", &"--landmarks", &"2"]);
+    assert!(err.contains("--landmarks 2"), "{err}");
+    let err = fails(&[&"bench", &"handles", &"--volume", &"0,4,4"]);
+    assert!(err.contains("--volume"), "{err}");
+}
+
+#[test]
 fn bench_ffd_runs_small() {
     let j: serde_json::Value = serde_json::from_str(&ok(&[
         &"bench",

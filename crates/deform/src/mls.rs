@@ -43,6 +43,29 @@
 //! handles or fewer, e.g. Gaussian weights far from all handles), the linear part falls back to
 //! the identity: `f(v) = v + q* − p*`. See [`DEGENERATE_MOMENT`].
 //!
+//! # Jacobians
+//!
+//! All four maps have closed-form Jacobians (`∂_k` = `∂/∂v_k`). The weights give
+//! `∇w_i = γ_i (v − p_i)` (`γ_i = −2α w_i/|v − p_i|²` or `−w_i/σ²`); the centroids
+//! `∂_k p* = Σ ∂_k w_i p̂_i / W` (same for `q*`); and, since `Σ w_i p̂_i = 0`, the moment matrices
+//! differentiate as if the centroids were fixed: `∂_k P = Σ ∂_k w_i p̂_i p̂_iᵀ`,
+//! `∂_k C = Σ ∂_k w_i q̂_i p̂_iᵀ`. With `u = v − p*`, column `k` of the Jacobian is
+//!
+//! ```text
+//! ∂_k f = ∂_k q* + L (e_k − ∂_k p*) + (∂_k L) u
+//! ```
+//!
+//! * affine and frame MLS: `∂_k L = (∂_k C − L ∂_k P) P⁻¹` (for frames `P`, `C` include the
+//!   `β w F Fᵀ`, `β w G Fᵀ` terms, which differentiate the same way);
+//! * rigid and similarity MLS: `R` is the rotation polar factor of `C = R H` (`H` symmetric;
+//!   this is Horn's maximiser of `tr(Rᵀ C)`). Writing `∂_k R = R [ω_k]×` and differentiating
+//!   `C = R H` gives `Rᵀ ∂_k C − ∂_k Cᵀ R = [ω]× H + H [ω]× = [(tr H·I − H) ω]×`, so
+//!   `ω_k = (tr H·I − H)⁻¹ axial(Rᵀ ∂_k C − ∂_k Cᵀ R)`. The scale `s = λ/tr P` with
+//!   `λ = tr(Rᵀ C)` has `∂_k λ = tr(Rᵀ ∂_k C)` (the rotation's own variation is stationary), so
+//!   `∂_k s = (∂_k λ − s tr ∂_k P)/tr P` and `∂_k L = ∂_k s R + s R [ω_k]×`.
+//!   `tr H·I − H` is singular exactly where the optimal rotation is not unique
+//!   ([`ROTATION_GAP`]); there, and at a handle itself, central differences are used.
+//!
 //! Every map here is a push-forward from source to target space; for a pull-back showing the
 //! sources at the targets build it with the two handle sets swapped.
 
@@ -131,8 +154,8 @@ impl Weighting {
 pub(crate) enum Nearest {
     /// Exactly on source handle `i` (inverse-distance weights): `f(v) = q_i`.
     AtHandle(usize),
-    /// Smallest squared distance to a handle.
-    Distance(f64),
+    /// Smallest squared distance to a handle, and that handle.
+    Distance(f64, usize),
 }
 
 /// The smallest squared distance from `v` to a source, or the handle `v` sits on.
@@ -149,7 +172,7 @@ pub(crate) fn nearest(weighting: &Weighting, sources: &[DVec3], v: DVec3) -> Nea
     }
     match weighting {
         Weighting::InverseDistance { .. } if best == 0.0 => Nearest::AtHandle(at),
-        _ => Nearest::Distance(best),
+        _ => Nearest::Distance(best, at),
     }
 }
 
@@ -260,13 +283,18 @@ pub(crate) fn outer(a: DVec3, b: DVec3) -> DMat3 {
     DMat3::from_cols(a * b.x, a * b.y, a * b.z)
 }
 
-/// Weighted moments of the handles about `v`.
+/// Weighted moments of the handles, accumulated about the source handle nearest to `v` and
+/// its target (`po`, `qo`).
 struct Moments {
     /// Σ w.
     w: f64,
-    /// p* − v.
+    /// Source origin `p_near`.
+    po: DVec3,
+    /// Target origin `q_near`.
+    qo: DVec3,
+    /// p* − po.
     pc: DVec3,
-    /// q* − v.
+    /// q* − qo.
     qc: DVec3,
     /// Σ w p̂ p̂ᵀ.
     pp: DMat3,
@@ -274,9 +302,31 @@ struct Moments {
     qp: DMat3,
 }
 
-/// One pass over the handles accumulating weights and moments about `v` (centroids and
-/// central moments from raw sums about `v`, which stays well-conditioned since the weights
-/// concentrate near `v`).
+impl Moments {
+    /// `p*`.
+    #[inline]
+    fn p_star(&self) -> DVec3 {
+        self.po + self.pc
+    }
+
+    /// `q*`.
+    #[inline]
+    fn q_star(&self) -> DVec3 {
+        self.qo + self.qc
+    }
+
+    /// `v − p*`, formed without cancellation near the handles.
+    #[inline]
+    fn u(&self, v: DVec3) -> DVec3 {
+        (v - self.po) - self.pc
+    }
+}
+
+/// One pass over the handles accumulating weights and moments. The raw sums are taken about
+/// the nearest source handle `near` (and its target): its term, the largest weight, vanishes
+/// from the second moments, so the central moments `raw − W·c cᵀ` do not cancel
+/// catastrophically even a hair's breadth from a handle, where the weights of all others are
+/// ~1e-12 of it.
 #[inline]
 fn moments(
     weighting: &Weighting,
@@ -284,16 +334,19 @@ fn moments(
     targets: &[DVec3],
     v: DVec3,
     d2min: f64,
+    near: usize,
 ) -> Moments {
+    let po = sources.get(near).copied().unwrap_or(v);
+    let qo = targets.get(near).copied().unwrap_or(v);
     let mut w = 0.0;
     let mut sp = DVec3::ZERO;
     let mut sq = DVec3::ZERO;
     let mut pp = DMat3::ZERO;
     let mut qp = DMat3::ZERO;
     for (p, q) in sources.iter().zip(targets) {
-        let a = *p - v;
-        let b = *q - v;
-        let wi = weighting.relative(a.length_squared(), d2min);
+        let wi = weighting.relative((*p - v).length_squared(), d2min);
+        let a = *p - po;
+        let b = *q - qo;
         w += wi;
         sp += wi * a;
         sq += wi * b;
@@ -305,6 +358,8 @@ fn moments(
     let qc = sq / w;
     Moments {
         w,
+        po,
+        qo,
         pc,
         qc,
         pp: pp - w * outer(pc, pc),
@@ -420,7 +475,7 @@ impl LinearHandleMap for AffineMls {
                 }
                 return DVec3::ZERO;
             }
-            Nearest::Distance(d) => d,
+            Nearest::Distance(d, _) => d,
         };
         // Pass 1: weights (kept in `out`) and moments about v.
         let mut w = 0.0;
@@ -455,16 +510,23 @@ impl LinearHandleMap for AffineMls {
 
 impl SpaceMap for AffineMls {
     fn apply(&self, v: DVec3) -> DVec3 {
-        let d2min = match nearest(&self.weighting, &self.sources, v) {
+        let (d2min, near) = match nearest(&self.weighting, &self.sources, v) {
             Nearest::AtHandle(i) => return self.targets[i],
-            Nearest::Distance(d) => d,
+            Nearest::Distance(d, i) => (d, i),
         };
-        let m = moments(&self.weighting, &self.sources, &self.targets, v, d2min);
+        let m = moments(
+            &self.weighting,
+            &self.sources,
+            &self.targets,
+            v,
+            d2min,
+            near,
+        );
         if is_degenerate(&m.pp) {
-            return v + m.qc - m.pc;
+            return v + (m.q_star() - m.p_star());
         }
         // f = q* + L (v − p*), L = qp · pp⁻¹; with centroids relative to v, v − p* = −pc.
-        v + m.qc - m.qp * (m.pp.inverse() * m.pc)
+        m.q_star() + m.qp * (m.pp.inverse() * m.u(v))
     }
 
     fn jacobian(&self, v: DVec3) -> DMat3 {
@@ -472,21 +534,28 @@ impl SpaceMap for AffineMls {
     }
 
     fn apply_with_jacobian(&self, v: DVec3) -> (DVec3, DMat3) {
-        let d2min = match nearest(&self.weighting, &self.sources, v) {
+        let (d2min, near) = match nearest(&self.weighting, &self.sources, v) {
             Nearest::AtHandle(i) => {
                 return (self.targets[i], crate::map::central_jacobian(self, v));
             }
-            Nearest::Distance(d) => d,
+            Nearest::Distance(d, i) => (d, i),
         };
-        let m = moments(&self.weighting, &self.sources, &self.targets, v, d2min);
+        let m = moments(
+            &self.weighting,
+            &self.sources,
+            &self.targets,
+            v,
+            d2min,
+            near,
+        );
         if is_degenerate(&m.pp) {
             // Identity linear part; the centroids still move with v.
             let (dp, dq) = centroid_derivatives(self, v, d2min, &m);
-            return (v + m.qc - m.pc, DMat3::IDENTITY + dq - dp);
+            return (v + (m.q_star() - m.p_star()), DMat3::IDENTITY + dq - dp);
         }
         let pinv = m.pp.inverse();
         let l = m.qp * pinv;
-        let u = -m.pc; // v − p*
+        let u = m.u(v); // v − p*
         // Second pass: derivatives of the weights, g_i = γ_i (v − p_i).
         let mut dpp = [DMat3::ZERO; 3];
         let mut dqp = [DMat3::ZERO; 3];
@@ -497,8 +566,8 @@ impl SpaceMap for AffineMls {
             let d2 = a.length_squared();
             let wi = self.weighting.relative(d2, d2min);
             let g = self.weighting.gradient_factor(wi, d2) * (-a); // ∇w_i
-            let ph = a - m.pc;
-            let qh = (*q - v) - m.qc;
+            let ph = (*p - m.po) - m.pc;
+            let qh = (*q - m.qo) - m.qc;
             let pph = outer(ph, ph);
             let qph = outer(qh, ph);
             for k in 0..3 {
@@ -519,7 +588,7 @@ impl SpaceMap for AffineMls {
         }
         // Same expression as `apply`, so both agree to the last bit.
         (
-            v + m.qc - m.qp * (pinv * m.pc),
+            m.q_star() + m.qp * (pinv * u),
             DMat3::from_cols(cols[0], cols[1], cols[2]),
         )
     }
@@ -534,8 +603,8 @@ fn centroid_derivatives(map: &AffineMls, v: DVec3, d2min: f64, m: &Moments) -> (
         let d2 = a.length_squared();
         let wi = map.weighting.relative(d2, d2min);
         let g = map.weighting.gradient_factor(wi, d2) * (-a);
-        dp += outer(a - m.pc, g);
-        dq += outer((*q - v) - m.qc, g);
+        dp += outer((*p - m.po) - m.pc, g);
+        dq += outer((*q - m.qo) - m.qc, g);
     }
     (dp / m.w, dq / m.w)
 }
@@ -653,13 +722,20 @@ impl ProcrustesMls {
         })
     }
 
-    /// `(q*, s·R, p*)` at `v`, or the target when `v` is a handle.
+    /// `(q*, s·R, v − p*)` at `v`, or the target when `v` is a handle.
     fn fit(&self, v: DVec3) -> Result<(DVec3, DMat3, DVec3), DVec3> {
-        let d2min = match nearest(&self.weighting, &self.sources, v) {
+        let (d2min, near) = match nearest(&self.weighting, &self.sources, v) {
             Nearest::AtHandle(i) => return Err(self.targets[i]),
-            Nearest::Distance(d) => d,
+            Nearest::Distance(d, i) => (d, i),
         };
-        let m = moments(&self.weighting, &self.sources, &self.targets, v, d2min);
+        let m = moments(
+            &self.weighting,
+            &self.sources,
+            &self.targets,
+            v,
+            d2min,
+            near,
+        );
         // M = Σ w p̂ q̂ᵀ = (Σ w q̂ p̂ᵀ)ᵀ.
         let (r, lambda) = horn_rotation(&m.qp.transpose());
         let s = if self.scale {
@@ -668,16 +744,108 @@ impl ProcrustesMls {
         } else {
             1.0
         };
-        Ok((m.qc + v, s * r, m.pc + v))
+        Ok((m.q_star(), s * r, m.u(v)))
     }
 
     fn apply(&self, v: DVec3) -> DVec3 {
         match self.fit(v) {
-            Ok((qc, l, pc)) => qc + l * (v - pc),
+            Ok((qc, l, u)) => qc + l * u,
             Err(q) => q,
         }
     }
+
+    /// `f(v)` and its analytic Jacobian (see the module docs, "Jacobians"); central
+    /// differences only where the closed form does not exist (at a handle, or where the
+    /// optimal rotation is not unique).
+    fn apply_with_jacobian<M: SpaceMap + ?Sized>(&self, map: &M, v: DVec3) -> (DVec3, DMat3) {
+        let (d2min, near) = match nearest(&self.weighting, &self.sources, v) {
+            Nearest::AtHandle(i) => return (self.targets[i], crate::map::central_jacobian(map, v)),
+            Nearest::Distance(d, i) => (d, i),
+        };
+        let m = moments(
+            &self.weighting,
+            &self.sources,
+            &self.targets,
+            v,
+            d2min,
+            near,
+        );
+        let c = m.qp; // C = Σ w q̂ p̂ᵀ = R H
+        let (r, lambda) = horn_rotation(&c.transpose());
+        let trp = m.pp.x_axis.x + m.pp.y_axis.y + m.pp.z_axis.z;
+        let s = if self.scale && trp > 0.0 {
+            lambda / trp
+        } else {
+            1.0
+        };
+        let u = m.u(v); // v − p*
+        // Same expression as `apply`, so both agree to the last bit.
+        let y = m.q_star() + (s * r) * u;
+        // ω_k = (tr H·I − H)⁻¹ axial(Rᵀ ∂_k C − ∂_k Cᵀ R); singular where R is not unique.
+        let h = r.transpose() * c;
+        let h = 0.5 * (h + h.transpose());
+        let trh = h.x_axis.x + h.y_axis.y + h.z_axis.z;
+        let a = DMat3::from_diagonal(DVec3::splat(trh)) - h;
+        let det = a.determinant();
+        let scale3 =
+            c.x_axis.length_squared() + c.y_axis.length_squared() + c.z_axis.length_squared();
+        if !(det.is_finite() && det.abs() > ROTATION_GAP * scale3 * scale3.sqrt()) {
+            return (y, crate::map::central_jacobian(map, v));
+        }
+        let a_inv = a.inverse();
+        // Second pass: derivatives of the weights, g_i = ∇w_i.
+        let mut dc = [DMat3::ZERO; 3];
+        let mut dtrp = DVec3::ZERO;
+        let mut dp = DMat3::ZERO; // column k: Σ g_ik p̂_i
+        let mut dq = DMat3::ZERO;
+        for (p, q) in self.sources.iter().zip(&self.targets) {
+            let a = *p - v;
+            let d2 = a.length_squared();
+            let wi = self.weighting.relative(d2, d2min);
+            let g = self.weighting.gradient_factor(wi, d2) * (-a);
+            let ph = (*p - m.po) - m.pc;
+            let qh = (*q - m.qo) - m.qc;
+            let qph = outer(qh, ph);
+            for k in 0..3 {
+                dc[k] += g[k] * qph;
+            }
+            dtrp += g * ph.length_squared();
+            dp += outer(ph, g);
+            dq += outer(qh, g);
+        }
+        let inv_w = 1.0 / m.w;
+        dp *= inv_w;
+        dq *= inv_w;
+        let sr = s * r;
+        let ru = r * u;
+        let mut cols = [DVec3::ZERO; 3];
+        for (k, col) in cols.iter_mut().enumerate() {
+            let rtdc = r.transpose() * dc[k];
+            let x = rtdc - rtdc.transpose();
+            // axial vector of the skew matrix x: x = [ξ]×.
+            let xi = DVec3::new(x.y_axis.z, x.z_axis.x, x.x_axis.y);
+            let omega = a_inv * xi;
+            // ∂_k R u = R (ω × u).
+            let mut d_lin_u = s * (r * omega.cross(u));
+            if self.scale && trp > 0.0 {
+                // ∂λ = tr(Rᵀ ∂C) (the rotation term vanishes at the optimum).
+                let dlambda = rtdc.x_axis.x + rtdc.y_axis.y + rtdc.z_axis.z;
+                let ds = (dlambda - s * dtrp[k]) / trp;
+                d_lin_u += ds * ru;
+            }
+            *col = dq.col(k) + sr * (DVec3::AXES[k] - dp.col(k)) + d_lin_u;
+        }
+        (y, DMat3::from_cols(cols[0], cols[1], cols[2]))
+    }
 }
+
+/// The rotation of [`SimilarityMls`] / [`RigidMls`] is differentiated in closed form only
+/// where `|det(tr H·I − H)|` exceeds this times `‖C‖_F³` (see the module docs): the
+/// determinant is the product of the pairwise sums of the signed singular values of `C`, which
+/// vanishes exactly where the optimal rotation is not unique (e.g. a collinear weighted handle
+/// cluster); below it the rotation's derivative is ill-conditioned and central differences are
+/// used instead.
+pub const ROTATION_GAP: f64 = 1e-10;
 
 macro_rules! procrustes_map {
     ($(#[$doc:meta])* $name:ident, $scale:expr, $what:literal) => {
@@ -732,6 +900,14 @@ macro_rules! procrustes_map {
             fn apply(&self, v: DVec3) -> DVec3 {
                 self.0.apply(v)
             }
+
+            fn jacobian(&self, v: DVec3) -> DMat3 {
+                self.0.apply_with_jacobian(self, v).1
+            }
+
+            fn apply_with_jacobian(&self, v: DVec3) -> (DVec3, DMat3) {
+                self.0.apply_with_jacobian(self, v)
+            }
         }
     };
 }
@@ -739,7 +915,7 @@ macro_rules! procrustes_map {
 procrustes_map!(
     /// Similarity moving-least-squares deformation in 3D (§4.3.2 generalised; rotation by
     /// Horn's quaternion, uniform scale from the same fit); see the [module docs](self). The
-    /// Jacobian is by central differences.
+    /// Jacobian is analytic.
     SimilarityMls,
     true,
     "similarity"
@@ -747,7 +923,7 @@ procrustes_map!(
 
 procrustes_map!(
     /// Rigid moving-least-squares deformation in 3D (§4.3.3, Theorem 4.1: the rotation of the
-    /// similarity fit); see the [module docs](self). The Jacobian is by central differences.
+    /// similarity fit); see the [module docs](self). The Jacobian is analytic.
     RigidMls,
     false,
     "rigid"
@@ -873,7 +1049,7 @@ impl FrameMls {
     fn fit(&self, v: DVec3) -> Result<(DVec3, DMat3, DVec3), DVec3> {
         let d2min = match nearest(&self.weighting, &self.origins, v) {
             Nearest::AtHandle(i) => return Err(self.targets[i].origin),
-            Nearest::Distance(d) => d,
+            Nearest::Distance(d, _) => d,
         };
         let mut w = 0.0;
         let mut sp = DVec3::ZERO;
@@ -922,6 +1098,71 @@ impl SpaceMap for FrameMls {
             Ok((qc, l, pc)) => qc + l * (v - pc),
             Err(q) => q,
         }
+    }
+
+    fn jacobian(&self, v: DVec3) -> DMat3 {
+        self.apply_with_jacobian(v).1
+    }
+
+    /// `f(v)` and its analytic Jacobian: with `Q = Σ w (p̂p̂ᵀ + β F Fᵀ)`,
+    /// `C = Σ w (q̂p̂ᵀ + β G Fᵀ)` and `L = C Q⁻¹`, `∂_k L = (∂_k C − L ∂_k Q) Q⁻¹` where
+    /// `∂_k Q`, `∂_k C` are the same sums with `w_i` replaced by `∂_k w_i` (the centroid terms
+    /// cancel since `Σ w p̂ = 0`). Central differences at a frame origin.
+    fn apply_with_jacobian(&self, v: DVec3) -> (DVec3, DMat3) {
+        let d2min = match nearest(&self.weighting, &self.origins, v) {
+            Nearest::AtHandle(i) => {
+                return (
+                    self.targets[i].origin,
+                    crate::map::central_jacobian(self, v),
+                );
+            }
+            Nearest::Distance(d, _) => d,
+        };
+        let Ok((qc, l, pc)) = self.fit(v) else {
+            return (self.apply(v), crate::map::central_jacobian(self, v));
+        };
+        let y = qc + l * (v - pc);
+        let pcv = pc - v;
+        let qcv = qc - v;
+        let mut w = 0.0;
+        let mut dq_mat = [DMat3::ZERO; 3];
+        let mut dc_mat = [DMat3::ZERO; 3];
+        let mut dp = DMat3::ZERO;
+        let mut dq = DMat3::ZERO;
+        let mut q = DMat3::ZERO;
+        for (s, t) in self.sources.iter().zip(&self.targets) {
+            let a = s.origin - v;
+            let d2 = a.length_squared();
+            let wi = self.weighting.relative(d2, d2min);
+            let g = self.weighting.gradient_factor(wi, d2) * (-a);
+            let ph = a - pcv;
+            let qh = (t.origin - v) - qcv;
+            let ffi = s.axes * s.axes.transpose();
+            let qm = outer(ph, ph) + self.beta * ffi;
+            let cm = outer(qh, ph) + self.beta * (t.axes * s.axes.transpose());
+            w += wi;
+            q += wi * qm;
+            for k in 0..3 {
+                dq_mat[k] += g[k] * qm;
+                dc_mat[k] += g[k] * cm;
+            }
+            dp += outer(ph, g);
+            dq += outer(qh, g);
+        }
+        dp *= 1.0 / w;
+        dq *= 1.0 / w;
+        if is_degenerate(&q) {
+            // Identity linear part; the centroids still move with v.
+            return (y, DMat3::IDENTITY + dq - dp);
+        }
+        let q_inv = q.inverse();
+        let u = v - pc;
+        let mut cols = [DVec3::ZERO; 3];
+        for (k, col) in cols.iter_mut().enumerate() {
+            let dl = (dc_mat[k] - l * dq_mat[k]) * q_inv;
+            *col = dq.col(k) + l * (DVec3::AXES[k] - dp.col(k)) + dl * u;
+        }
+        (y, DMat3::from_cols(cols[0], cols[1], cols[2]))
     }
 }
 
@@ -984,7 +1225,7 @@ impl FrameMls {
     fn node(&self, v: DVec3) -> FrameNode {
         let d2min = match nearest(&self.weighting, &self.origins, v) {
             Nearest::AtHandle(i) => return FrameNode::AtHandle(i),
-            Nearest::Distance(d) => d,
+            Nearest::Distance(d, _) => d,
         };
         let mut w = 0.0;
         let mut sp = DVec3::ZERO;
@@ -1244,6 +1485,168 @@ mod tests {
             let base = fm.coefficients_into(x, &mut c);
             let s: DVec3 = base + (0..t.len()).map(|k| c[k] * t[k]).sum::<DVec3>();
             assert!(close(s, fm.apply(x), 1e-11));
+        }
+    }
+
+    /// Richardson-extrapolated central differences (error O(h⁴)) with a step scaled to the
+    /// distance `d` from `x` to the nearest handle, so near-handle points are resolved.
+    fn richardson_jacobian(m: &dyn SpaceMap, x: DVec3, d: f64) -> DMat3 {
+        let h = 0.02 * d.min(1.0);
+        let cd = |h: f64, e: DVec3| (m.apply(x + h * e) - m.apply(x - h * e)) / (2.0 * h);
+        // Two Richardson levels: O(h⁴) from h, h/2 and h/2, h/4, then O(h⁶).
+        let col = |e: DVec3| {
+            let (d1, d2, d4) = (cd(h, e), cd(0.5 * h, e), cd(0.25 * h, e));
+            let r1 = (4.0 * d2 - d1) / 3.0;
+            let r2 = (4.0 * d4 - d2) / 3.0;
+            (16.0 * r2 - r1) / 15.0
+        };
+        DMat3::from_cols(col(DVec3::X), col(DVec3::Y), col(DVec3::Z))
+    }
+
+    fn frobenius(m: DMat3) -> f64 {
+        (m.x_axis.length_squared() + m.y_axis.length_squared() + m.z_axis.length_squared()).sqrt()
+    }
+
+    /// Random probes (some far, some within 1e-2..1e-4 of a handle) with their distance to the
+    /// nearest handle.
+    fn jacobian_probes(p: &[DVec3], seed: u64) -> Vec<(DVec3, f64)> {
+        let mut s = seed;
+        let mut out = Vec::new();
+        for k in 0..12 {
+            let x = if k % 3 == 2 {
+                let i = (lcg(&mut s) * p.len() as f64) as usize % p.len();
+                let dir =
+                    DVec3::new(lcg(&mut s) - 0.5, lcg(&mut s) - 0.5, lcg(&mut s) - 0.5).normalize();
+                p[i] + dir * 10f64.powi(-2 - (k / 3) % 3)
+            } else {
+                DVec3::new(lcg(&mut s), lcg(&mut s), lcg(&mut s)) * 50.0 - 15.0
+            };
+            let d = p
+                .iter()
+                .map(|q| (*q - x).length())
+                .fold(f64::INFINITY, f64::min);
+            out.push((x, d));
+        }
+        out
+    }
+
+    fn frame_pair(p: &[DVec3], q: &[DVec3], seed: u64) -> (Vec<Frame>, Vec<Frame>) {
+        let mut s = seed;
+        let mut m = || {
+            DMat3::from_cols(
+                DVec3::new(
+                    1.0 + 0.3 * lcg(&mut s),
+                    0.2 * lcg(&mut s),
+                    -0.1 * lcg(&mut s),
+                ),
+                DVec3::new(
+                    0.1 * lcg(&mut s),
+                    0.9 + 0.3 * lcg(&mut s),
+                    0.2 * lcg(&mut s),
+                ),
+                DVec3::new(
+                    -0.2 * lcg(&mut s),
+                    0.1 * lcg(&mut s),
+                    1.1 + 0.2 * lcg(&mut s),
+                ),
+            )
+        };
+        let fs = p
+            .iter()
+            .map(|&o| Frame {
+                origin: o,
+                axes: m(),
+            })
+            .collect();
+        let ft = q
+            .iter()
+            .map(|&o| Frame {
+                origin: o,
+                axes: m(),
+            })
+            .collect();
+        (fs, ft)
+    }
+
+    #[test]
+    fn analytic_jacobians_match_richardson_differences() {
+        for (n, seed) in [(4usize, 21u64), (9, 22), (25, 23)] {
+            let p = random_handles(n, seed);
+            let q = jitter(&p, 9.0, seed + 100);
+            let (fs, ft) = frame_pair(&p, &q, seed + 200);
+            for wt in WEIGHTINGS {
+                let maps: Vec<(&str, Box<dyn SpaceMap>)> = vec![
+                    (
+                        "similarity",
+                        Box::new(SimilarityMls::new(&p, &q, wt).unwrap()),
+                    ),
+                    ("rigid", Box::new(RigidMls::new(&p, &q, wt).unwrap())),
+                    ("frame", Box::new(FrameMls::new(&fs, &ft, 1.5, wt).unwrap())),
+                    ("affine", Box::new(AffineMls::new(&p, &q, wt).unwrap())),
+                ];
+                for (name, m) in &maps {
+                    for (x, d) in jacobian_probes(&p, seed + 300) {
+                        let (y, j) = m.apply_with_jacobian(x);
+                        assert_eq!(y, m.apply(x), "{name}");
+                        assert_eq!(j, m.jacobian(x), "{name}");
+                        let fd = richardson_jacobian(m.as_ref(), x, d);
+                        let err = frobenius(j - fd);
+                        assert!(
+                            err <= 1e-6 * frobenius(fd).max(1e-3),
+                            "{name} {wt:?} n={n} x={x} d={d:e}: err {err:e}\n{j}\n{fd}"
+                        );
+                    }
+                }
+            }
+        }
+    }
+
+    #[test]
+    fn identity_handles_have_identity_jacobian_and_rigid_motion_its_rotation() {
+        let p = random_handles(11, 31);
+        let rot = DMat3::from_quat(DQuat::from_axis_angle(
+            DVec3::new(-0.3, 1.0, 0.7).normalize(),
+            2.3,
+        ));
+        let qr: Vec<DVec3> = p
+            .iter()
+            .map(|&x| rot * x + DVec3::new(4.0, -1.0, 2.0))
+            .collect();
+        let fs: Vec<Frame> = p.iter().map(|&o| Frame::at(o)).collect();
+        let fr: Vec<Frame> = qr
+            .iter()
+            .map(|&o| Frame {
+                origin: o,
+                axes: rot,
+            })
+            .collect();
+        for wt in WEIGHTINGS {
+            let ident: Vec<Box<dyn SpaceMap>> = vec![
+                Box::new(SimilarityMls::new(&p, &p, wt).unwrap()),
+                Box::new(RigidMls::new(&p, &p, wt).unwrap()),
+                Box::new(FrameMls::new(&fs, &fs, 0.7, wt).unwrap()),
+            ];
+            let moved: Vec<Box<dyn SpaceMap>> = vec![
+                Box::new(SimilarityMls::new(&p, &qr, wt).unwrap()),
+                Box::new(RigidMls::new(&p, &qr, wt).unwrap()),
+                Box::new(FrameMls::new(&fs, &fr, 0.7, wt).unwrap()),
+            ];
+            for (x, _) in jacobian_probes(&p, 32) {
+                for m in &ident {
+                    assert!(
+                        (m.jacobian(x) - DMat3::IDENTITY).abs_diff_eq(DMat3::ZERO, 1e-9),
+                        "{wt:?} {x}\n{}",
+                        m.jacobian(x)
+                    );
+                }
+                for (k, m) in moved.iter().enumerate() {
+                    assert!(
+                        (m.jacobian(x) - rot).abs_diff_eq(DMat3::ZERO, 1e-9),
+                        "{k} {wt:?} {x}\n{}\n{rot}",
+                        m.jacobian(x)
+                    );
+                }
+            }
         }
     }
 

@@ -38,9 +38,13 @@
 //! [`VolumeSplineSystem::new`] depends on the centres only: it centres and scales them to the
 //! unit ball (the interpolant is unchanged by this for both kernels — the extra terms a scale
 //! introduces are killed by the side conditions — while the system's conditioning improves),
-//! checks them, builds the matrix and factorises it once with a dense Bunch–Kaufman `LBLᵀ`
-//! factorisation (faer's `Lblt`; the matrix is symmetric but indefinite, so Cholesky does not
-//! apply and no inverse is ever formed). Every [`VolumeSplineSystem::solve`] afterwards is two
+//! checks them, builds the matrix and factorises it once by the null-space method: the
+//! polynomial block is reduced by four (three in 2D) Householder reflectors, `P = Q [R; 0]`,
+//! which are applied to both sides of the kernel block in `O(N²)`; on the null space of `Pᵀ`
+//! the kernel block is definite (`σΦ` is conditionally positive definite of order ≤ 2, which
+//! the linear polynomial covers), so the reduced `(N − D − 1)²` block `σ·Z ᵀ(Φ + σλI)Z` is
+//! factorised by Cholesky (faer's `Llt`), about half the work of a symmetric indefinite
+//! factorisation; a failed Cholesky is the "singular" error. No inverse is ever formed. Every [`VolumeSplineSystem::solve`] afterwards is two
 //! triangular solves — `O(N²)` per value component — so new values at the same centres (a
 //! dragged handle, another scalar field) cost nothing like the `O(N³)` factorisation.
 //! Smoothing `λ` is added in these normalised coordinates.
@@ -142,8 +146,220 @@ pub struct VolumeSplineSystem<const D: usize> {
     frame: Arc<Normalised<D>>,
     /// Smoothing λ (normalised units).
     smoothing: f64,
-    /// `LBLᵀ` factorisation of the `(N + D + 1)²` matrix.
-    factor: faer::linalg::solvers::Lblt<f64>,
+    /// Null-space factorisation of the `(N + D + 1)²` matrix.
+    factor: NullSpaceFactor,
+}
+
+/// The saddle-point system `[[A, P], [Pᵀ, 0]]` (`A` = `N × N`, `P` = `N × k`) factorised by the
+/// null-space method: `P = Q [R; 0]` by `k` Householder reflectors `H_j = I − τ_j v_j v_jᵀ`
+/// (`Q = H_0 ⋯ H_{k−1}`), `B = Qᵀ A Q` formed by applying them to both sides of `A`
+/// (`O(N²)` each), and the reduced block `σ·B₂₂` — definite on the null space of `Pᵀ` for
+/// these Green's functions — factorised by Cholesky.
+#[derive(Debug)]
+struct NullSpaceFactor {
+    n: usize,
+    k: usize,
+    /// `(v_j, τ_j)`, `v_j` of length `N` (zero above row `j`).
+    reflectors: Vec<(Vec<f64>, f64)>,
+    /// `R`, `k × k` upper triangular, row-major.
+    r: Vec<f64>,
+    /// The first `k` rows of `B`, row-major `k × N`.
+    top: Vec<f64>,
+    /// `σ` with `σ·B₂₂` positive definite.
+    sigma: f64,
+    /// Cholesky factor of `σ·B₂₂`.
+    llt: faer::linalg::solvers::Llt<f64>,
+}
+
+#[allow(clippy::needless_range_loop)] // triangular solves in textbook index form
+impl NullSpaceFactor {
+    /// Factorise from the full symmetric `A` (consumed as workspace) and `P` (`N × k`).
+    fn new(mut a: Mat<f64>, mut p: Mat<f64>, sigma: f64) -> Result<Self, DeformError> {
+        let n = a.nrows();
+        let k = p.ncols();
+        let singular = || {
+            DeformError::Singular(format!(
+                "the volume spline system of {n} centres is singular (coincident centres, or \
+                 all on one line or plane)"
+            ))
+        };
+        let mut reflectors = Vec::with_capacity(k);
+        let mut av = vec![0.0; n];
+        for j in 0..k {
+            let norm = (j..n).map(|i| p[(i, j)] * p[(i, j)]).sum::<f64>().sqrt();
+            if !(norm.is_finite() && norm > 0.0) {
+                return Err(singular());
+            }
+            let pjj = p[(j, j)];
+            let alpha = if pjj >= 0.0 { -norm } else { norm };
+            let mut v = vec![0.0; n];
+            v[j] = pjj - alpha;
+            for i in j + 1..n {
+                v[i] = p[(i, j)];
+            }
+            let vtv: f64 = v[j..].iter().map(|x| x * x).sum();
+            let tau = if vtv > 0.0 { 2.0 / vtv } else { 0.0 };
+            for c in j..k {
+                let col = p
+                    .col_mut(c)
+                    .try_as_col_major_mut()
+                    .map(|c| c.as_slice_mut());
+                let Some(col) = col else {
+                    return Err(singular());
+                };
+                let d: f64 = col[j..].iter().zip(&v[j..]).map(|(x, y)| x * y).sum();
+                let f = tau * d;
+                for (x, y) in col[j..].iter_mut().zip(&v[j..]) {
+                    *x -= f * y;
+                }
+            }
+            // A ← H A H: p = τ A v, w = p − (τ/2)(vᵀp) v, A ← A − v wᵀ − w vᵀ.
+            av.fill(0.0);
+            for c in j..n {
+                let f = tau * v[c];
+                if f != 0.0 {
+                    let col = column(&a, c);
+                    for (o, x) in av.iter_mut().zip(col) {
+                        *o += f * x;
+                    }
+                }
+            }
+            let kf = 0.5 * tau * v.iter().zip(&av).map(|(x, y)| x * y).sum::<f64>();
+            for (o, x) in av.iter_mut().zip(&v) {
+                *o -= kf * x;
+            }
+            for c in 0..n {
+                let (vc, wc) = (v[c], av[c]);
+                let Some(col) = a
+                    .col_mut(c)
+                    .try_as_col_major_mut()
+                    .map(|c| c.as_slice_mut())
+                else {
+                    return Err(singular());
+                };
+                for ((x, vi), wi) in col.iter_mut().zip(&v).zip(&av) {
+                    *x -= vi * wc + wi * vc;
+                }
+            }
+            reflectors.push((v, tau));
+        }
+        let mut r = vec![0.0; k * k];
+        for i in 0..k {
+            for j in i..k {
+                r[i * k + j] = p[(i, j)];
+            }
+        }
+        let mut top = vec![0.0; k * n];
+        for i in 0..k {
+            for j in 0..n {
+                top[i * n + j] = a[(i, j)];
+            }
+        }
+        let m = n - k;
+        let reduced = Mat::<f64>::from_fn(m, m, |i, j| sigma * a[(k + i, k + j)]);
+        let llt = reduced.llt(Side::Lower).map_err(|_| singular())?;
+        Ok(Self {
+            n,
+            k,
+            reflectors,
+            r,
+            top,
+            sigma,
+            llt,
+        })
+    }
+
+    /// `x ← Qᵀ x` (`forward`) or `x ← Q x`.
+    fn apply_q(&self, x: &mut [f64], forward: bool) {
+        let mut step = |(v, tau): &(Vec<f64>, f64)| {
+            let d: f64 = x.iter().zip(v).map(|(a, b)| a * b).sum();
+            let f = tau * d;
+            for (a, b) in x.iter_mut().zip(v) {
+                *a -= f * b;
+            }
+        };
+        if forward {
+            self.reflectors.iter().for_each(&mut step);
+        } else {
+            self.reflectors.iter().rev().for_each(&mut step);
+        }
+    }
+
+    /// Solve in place for every column of `rhs` (`N + k` rows: `[δ; e]` → `[λ; c]`).
+    fn solve_in_place(&self, mut rhs: faer::MatMut<'_, f64>) {
+        let (n, k) = (self.n, self.k);
+        let m = n - k;
+        let cols = rhs.ncols();
+        let mut w = vec![0.0; n * cols];
+        let mut z1 = vec![0.0; k * cols];
+        let mut t = Mat::<f64>::zeros(m, cols);
+        for c in 0..cols {
+            let wc = &mut w[c * n..(c + 1) * n];
+            for (i, o) in wc.iter_mut().enumerate() {
+                *o = rhs[(i, c)];
+            }
+            self.apply_q(wc, true);
+            // Rᵀ z1 = e (forward substitution; Rᵀ is lower triangular).
+            let zc = &mut z1[c * k..(c + 1) * k];
+            for i in 0..k {
+                let mut s = rhs[(n + i, c)];
+                for j in 0..i {
+                    s -= self.r[j * k + i] * zc[j];
+                }
+                zc[i] = s / self.r[i * k + i];
+            }
+            // σ B₂₂ z2 = σ (w2 − B₂₁ z1).
+            for i in 0..m {
+                let mut s = wc[k + i];
+                for (r, z) in zc.iter().enumerate() {
+                    s -= self.top[r * n + k + i] * z;
+                }
+                t[(i, c)] = self.sigma * s;
+            }
+        }
+        self.llt.solve_in_place(t.as_mut());
+        for c in 0..cols {
+            let wc = &mut w[c * n..(c + 1) * n];
+            let zc = &z1[c * k..(c + 1) * k];
+            // R c = w1 − B₁₁ z1 − B₁₂ z2.
+            let mut rc = vec![0.0; k];
+            for (i, o) in rc.iter_mut().enumerate() {
+                let row = &self.top[i * n..(i + 1) * n];
+                let mut s = wc[i];
+                for (j, z) in zc.iter().enumerate() {
+                    s -= row[j] * z;
+                }
+                for j in 0..m {
+                    s -= row[k + j] * t[(j, c)];
+                }
+                *o = s;
+            }
+            for i in (0..k).rev() {
+                let mut s = rc[i];
+                for j in i + 1..k {
+                    s -= self.r[i * k + j] * rc[j];
+                }
+                rc[i] = s / self.r[i * k + i];
+            }
+            // λ = Q [z1; z2].
+            wc[..k].copy_from_slice(zc);
+            for j in 0..m {
+                wc[k + j] = t[(j, c)];
+            }
+            self.apply_q(wc, false);
+            for (i, &x) in wc.iter().enumerate() {
+                rhs[(i, c)] = x;
+            }
+            for (i, &x) in rc.iter().enumerate() {
+                rhs[(n + i, c)] = x;
+            }
+        }
+    }
+}
+
+/// Column `c` of a column-major matrix as a slice.
+fn column(a: &Mat<f64>, c: usize) -> &[f64] {
+    a.col(c).try_as_col_major().map_or(&[], |c| c.as_slice())
 }
 
 /// Centres mapped to the unit ball, `x̃ = (x − shift)·scale`.
@@ -218,22 +434,26 @@ impl<const D: usize> VolumeSplineSystem<D> {
         check_polynomial_rank(&frame.centres)?;
 
         let sigma = kernel_sign::<D>();
-        let mut a = Mat::<f64>::zeros(size, size);
-        // Lower triangle only: Lblt reads the lower half.
-        {
-            let c = &frame.centres;
-            for j in 0..n {
-                a[(j, j)] = sigma * smoothing;
-                for i in j + 1..n {
-                    a[(i, j)] = green::<D>(dist(&c[i], &c[j]));
-                }
-                a[(n, j)] = 1.0;
-                for ax in 0..D {
-                    a[(n + 1 + ax, j)] = c[j][ax];
-                }
+        // The kernel block in full (both triangles) and the polynomial block.
+        let c = &frame.centres;
+        let mut kernel = Mat::<f64>::zeros(n, n);
+        for j in 0..n {
+            kernel[(j, j)] = sigma * smoothing;
+            for i in j + 1..n {
+                let g = green::<D>(dist(&c[i], &c[j]));
+                kernel[(i, j)] = g;
+                kernel[(j, i)] = g;
             }
         }
-        let factor = a.lblt(Side::Lower);
+        let poly = Mat::<f64>::from_fn(n, D + 1, |i, t| if t == 0 { 1.0 } else { c[i][t - 1] });
+        // The whole matrix, lower triangle, for the residual check.
+        let a = Mat::<f64>::from_fn(size, size, |i, j| match (i < n, j < n) {
+            _ if i < j => 0.0,
+            (true, true) => kernel[(i, j)],
+            (false, true) => poly[(j, i - n)],
+            _ => 0.0,
+        });
+        let factor = NullSpaceFactor::new(kernel, poly, sigma)?;
         let system = Self {
             centres: centres.to_vec(),
             frame,

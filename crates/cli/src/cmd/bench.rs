@@ -1,5 +1,6 @@
-//! `volmorph bench …`: time the warps and the isosurface extractors on built-in inputs and
-//! print each item's min / median / max wall-clock time next to its target.
+//! `volmorph bench …`: time the warps, the isosurface extractors, mesh FFD, F-rep sampling and
+//! the handle-driven deformations on built-in inputs and print each item's min / median / max
+//! wall-clock time next to its target.
 //!
 //! Every input is built before the clock starts; each item runs `--repeat` times and its
 //! result is dropped after the clock stops, so a time covers exactly one call of the library
@@ -65,6 +66,50 @@ pub enum Command {
         after_help = "Example:\n  volmorph bench frep s1_sphere.hf c1_gear.hf --grid 193 --repeat 7 --json"
     )]
     Frep(crate::cmd::frep::BenchArgs),
+    /// Time the handle-driven deformations against their targets: 2D rigid MLS on a 100×100
+    /// grid (11 point handles; 7 segment handles), 3D affine MLS with 200 handles sampled on a
+    /// 32³ grid over a 256×256×112 volume (set-up, update after one handle moves, resampling
+    /// the volume) and a thin-plate spline through 1000 landmarks (factorise, re-solve after
+    /// one landmark moves, evaluate on 32³).
+    #[command(after_help = "Example:\n  volmorph bench handles --repeat 7 --json")]
+    Handles(HandlesArgs),
+}
+
+/// Default vertices per axis of the 2D image grid.
+const HANDLES_IMAGE_GRID: usize = 100;
+/// Default 3D MLS handles.
+const HANDLES_MLS: usize = 200;
+/// Default dims of the resampled volume (a CT slab).
+const HANDLES_VOLUME: [usize; 3] = [256, 256, 112];
+/// Default nodes per axis of the sampled handle grid and the TPS evaluation grid.
+const HANDLES_GRID: usize = 32;
+/// Default thin-plate landmarks.
+const HANDLES_TPS: usize = 1000;
+
+/// Arguments of `volmorph bench handles`. Targets are shown only for the default sizes.
+#[derive(Debug, clap::Args)]
+pub struct HandlesArgs {
+    /// Vertices per axis of the 2D MLS image grid.
+    #[arg(long, default_value_t = HANDLES_IMAGE_GRID)]
+    pub image_grid: usize,
+    /// Handles of the 3D affine MLS map.
+    #[arg(long, default_value_t = HANDLES_MLS)]
+    pub handles: usize,
+    /// Voxels of the resampled volume along x, y, z.
+    #[arg(long, value_delimiter = ',', default_values_t = HANDLES_VOLUME)]
+    pub volume: Vec<usize>,
+    /// Nodes per axis of the sampled MLS grid and of the thin-plate evaluation grid.
+    #[arg(long, default_value_t = HANDLES_GRID)]
+    pub grid: usize,
+    /// Landmarks of the thin-plate spline.
+    #[arg(long, default_value_t = HANDLES_TPS)]
+    pub landmarks: usize,
+    /// Timed runs per item.
+    #[arg(long, default_value_t = 7)]
+    pub repeat: usize,
+    /// Print the results as JSON instead of a table.
+    #[arg(long)]
+    pub json: bool,
 }
 
 /// Default rings of the accurate-FFD sphere: 4·133·132 = 70 224 triangles.
@@ -131,6 +176,7 @@ pub fn run(cmd: &Command) -> anyhow::Result<()> {
         Command::Isosurface(a) => isosurface(a),
         Command::Ffd(a) => ffd(a),
         Command::Frep(a) => crate::cmd::frep::bench(a),
+        Command::Handles(a) => handles(a),
     }
 }
 
@@ -482,6 +528,196 @@ fn isosurface(a: &IsosurfaceArgs) -> anyhow::Result<()> {
     Ok(())
 }
 
+/// `n` seeded points uniform in the box `[lo, hi]`.
+fn random_points(r: &mut Lcg, n: usize, lo: DVec3, hi: DVec3) -> Vec<DVec3> {
+    (0..n)
+        .map(|_| lo + (hi - lo) * DVec3::new(r.next(), r.next(), r.next()))
+        .collect()
+}
+
+/// Each point moved by a seeded random vector with components uniform in `±amount/2`.
+fn jittered(r: &mut Lcg, points: &[DVec3], amount: DVec3) -> Vec<DVec3> {
+    points
+        .iter()
+        .map(|p| *p + amount * DVec3::new(r.next() - 0.5, r.next() - 0.5, r.next() - 0.5))
+        .collect()
+}
+
+fn handles(a: &HandlesArgs) -> anyhow::Result<()> {
+    use glam::DVec2;
+    use volmorph_deform::mls2d::{Mls2dHandles, Mls2dKind, image_grid};
+    use volmorph_deform::volume_spline::VolumeSplineSystem;
+    use volmorph_deform::{AffineMls, HandleGrid, SampledMap, SpaceMap, ThinPlateMap, Weighting};
+
+    if !(1..=MAX_REPEAT).contains(&a.repeat) {
+        bail!("--repeat {} must be between 1 and {MAX_REPEAT}", a.repeat);
+    }
+    if !(2..=2048).contains(&a.image_grid) {
+        bail!("--image-grid {} must be between 2 and 2048", a.image_grid);
+    }
+    if !(4..=20_000).contains(&a.handles) {
+        bail!("--handles {} must be between 4 and 20000", a.handles);
+    }
+    if !(4..=20_000).contains(&a.landmarks) {
+        bail!("--landmarks {} must be between 4 and 20000", a.landmarks);
+    }
+    if !(2..=256).contains(&a.grid) {
+        bail!("--grid {} must be between 2 and 256", a.grid);
+    }
+    let dims: [usize; 3] = match a.volume.as_slice() {
+        &[x, y, z] if [x, y, z].iter().all(|d| (2..=MAX_SIZE).contains(d)) => [x, y, z],
+        v => bail!("--volume {v:?} must be three sizes between 2 and {MAX_SIZE}"),
+    };
+    let mut r = Lcg(LATTICE_SEED);
+    let mut items = Vec::new();
+    let defaults = a.image_grid == HANDLES_IMAGE_GRID
+        && a.handles == HANDLES_MLS
+        && dims == HANDLES_VOLUME
+        && a.grid == HANDLES_GRID
+        && a.landmarks == HANDLES_TPS;
+    let target = |t: f64| defaults.then_some(t);
+    let pb = progress::spinner("2D rigid MLS");
+
+    // 2D rigid MLS on a 500×500 image through a 100×100 grid (thesis Table 4.1: 3.8 ms for
+    // 11 points, 3.3 ms for 7 lines).
+    let n = a.image_grid;
+    let verts = image_grid(500, 500, n, n)?;
+    let points: Vec<DVec2> = (0..11)
+        .map(|_| DVec2::new(50.0 + 400.0 * r.next(), 50.0 + 400.0 * r.next()))
+        .collect();
+    let moved: Vec<DVec2> = points
+        .iter()
+        .map(|p| *p + DVec2::new(40.0 * r.next() - 20.0, 40.0 * r.next() - 20.0))
+        .collect();
+    let h = Mls2dHandles::new(&points, &[], 1.0)?;
+    let plan = h.plan(&verts, Mls2dKind::Rigid)?;
+    let mut out2 = vec![DVec2::ZERO; verts.len()];
+    let (times, ()) = time(a.repeat, || Ok(plan.deform(&moved, &mut out2)?))?;
+    items.push(Item {
+        name: "2D rigid MLS, 11 points",
+        times,
+        target: target(0.0038),
+        triangles: None,
+    });
+    let segs: Vec<[DVec2; 2]> = (0..7)
+        .map(|_| {
+            let s = DVec2::new(50.0 + 400.0 * r.next(), 50.0 + 400.0 * r.next());
+            [
+                s,
+                s + DVec2::new(60.0 * r.next() + 10.0, 60.0 * r.next() - 30.0),
+            ]
+        })
+        .collect();
+    let hs = Mls2dHandles::new(&[], &segs, 2.0)?;
+    let seg_targets: Vec<DVec2> = segs
+        .iter()
+        .flat_map(|s| [s[0] + DVec2::new(5.0, 3.0), s[1] - DVec2::new(2.0, 4.0)])
+        .collect();
+    let splan = hs.plan(&verts, Mls2dKind::Rigid)?;
+    let (times, ()) = time(a.repeat, || Ok(splan.deform(&seg_targets, &mut out2)?))?;
+    items.push(Item {
+        name: "2D rigid MLS, 7 segments",
+        times,
+        target: target(0.0033),
+        triangles: None,
+    });
+
+    // 3D affine MLS through 200 handles on a CT slab (thesis Tables 5.1, 5.2: set-up 1.5 s,
+    // interaction 0.62 ms), resampled trilinearly through the 32³ grid (≤ 0.3 s).
+    pb.set_message("3D affine MLS");
+    let g = Geometry::new(dims).with_spacing(DVec3::new(1.2, 1.2, 2.5));
+    let input = Volume::from_fn(g, |i, j, k| ((i * 7 + j * 3 + k * 11) % 251) as f32)?;
+    let (lo, hi) = g.physical_bounds();
+    let src = random_points(&mut r, a.handles, lo, hi);
+    let dst = jittered(&mut r, &src, DVec3::new(10.0, 10.0, 6.0));
+    // Pull-back: the map from targets to sources.
+    let map = AffineMls::new(&dst, &src, Weighting::default())?;
+    let coarse = SampledMap::covering(&g, [a.grid; 3])?;
+    let (times, mut hg) = time(a.repeat, || Ok(HandleGrid::new(map.clone(), coarse)?))?;
+    items.push(Item {
+        name: "3D affine MLS: set-up",
+        times,
+        target: target(1.5),
+        triangles: None,
+    });
+    let mut sign = -1.0;
+    let (times, ()) = time(a.repeat, || {
+        sign = -sign;
+        Ok(hg.move_target(0, src[0] + sign * DVec3::new(1.5, -1.0, 0.5))?)
+    })?;
+    items.push(Item {
+        name: "3D affine MLS: move one handle",
+        times,
+        target: target(0.00062),
+        triangles: None,
+    });
+    let opts = ResampleOptions::new(Interpolation::Linear, 0.0);
+    let (times, _) = time(a.repeat, || {
+        Ok(resample::<f32, f32, _>(&input, hg.sampled(), &g, &opts)?)
+    })?;
+    items.push(Item {
+        name: "3D affine MLS: resample volume",
+        times,
+        target: target(0.3),
+        triangles: None,
+    });
+
+    // Thin-plate spline through 1000 landmarks.
+    pb.set_message("thin-plate spline");
+    let src = random_points(&mut r, a.landmarks, lo, hi);
+    let dst = jittered(&mut r, &src, DVec3::splat(6.0));
+    let centres: Vec<[f64; 3]> = src.iter().map(|p| p.to_array()).collect();
+    let (times, system) = time(a.repeat, || {
+        Ok(VolumeSplineSystem::<3>::new(&centres, 0.0)?)
+    })?;
+    items.push(Item {
+        name: "TPS: factorise",
+        times,
+        target: target(0.030),
+        triangles: None,
+    });
+    let mut tps = ThinPlateMap::with_system(std::sync::Arc::new(system), &dst)?;
+    let (times, ()) = time(a.repeat, || {
+        sign = -sign;
+        Ok(tps.move_target(3, dst[3] + sign * DVec3::new(1.0, 0.5, -0.5))?)
+    })?;
+    items.push(Item {
+        name: "TPS: re-solve after one moves",
+        times,
+        target: target(0.005),
+        triangles: None,
+    });
+    let eval_grid = g.resampled([a.grid; 3]);
+    let mut out3 = vec![DVec3::ZERO; eval_grid.len()];
+    let (times, ()) = time(a.repeat, || Ok(tps.apply_grid(&eval_grid, &mut out3)?))?;
+    items.push(Item {
+        name: "TPS: evaluate on grid",
+        times,
+        target: target(0.030),
+        triangles: None,
+    });
+    pb.finish_and_clear();
+
+    let title = format!(
+        "2D rigid MLS on a {n}x{n} grid; 3D affine MLS with {h} handles on a {c}^3 grid over a \
+         {x}x{y}x{z} f32 volume; TPS with {l} landmarks evaluated on {c}^3; {rep} runs each, \
+         {t} threads",
+        h = a.handles,
+        c = a.grid,
+        x = dims[0],
+        y = dims[1],
+        z = dims[2],
+        l = a.landmarks,
+        rep = a.repeat,
+        t = rayon::current_num_threads(),
+    );
+    report(a.json, "handles", &title, a.grid, a.repeat, None, &items);
+    if !defaults && !a.json {
+        say!("(targets are stated for the default sizes)");
+    }
+    Ok(())
+}
+
 /// Print the items as a table (or JSON with `json`).
 fn report(
     json: bool,
@@ -529,18 +765,24 @@ fn report(
         header.push_str(&format!(" {:>10}", "triangles"));
     }
     say!("{}", header.trim_end());
+    // Millisecond items (the handle suite) are shown in ms.
+    let (unit, factor) = if suite == "handles" {
+        ("ms", 1e3)
+    } else {
+        ("s", 1.0)
+    };
     for it in items {
         let target = match it.target {
-            Some(t) if it.median() <= t => format!("<= {t:.2} s  met"),
-            Some(t) => format!("<= {t:.2} s  MISSED"),
+            Some(t) if it.median() <= t => format!("<= {:.2} {unit}  met", t * factor),
+            Some(t) => format!("<= {:.2} {unit}  MISSED", t * factor),
             None => String::from("-"),
         };
         let mut line = format!(
-            "{:<32} {:>7.3} s {:>7.3} s {:>7.3} s  {:<16}",
+            "{:<32} {:>7.3} {unit} {:>7.3} {unit} {:>7.3} {unit}  {:<16}",
             it.name,
-            it.min(),
-            it.median(),
-            it.max(),
+            it.min() * factor,
+            it.median() * factor,
+            it.max() * factor,
             target
         );
         if let Some(t) = it.triangles {
@@ -548,7 +790,7 @@ fn report(
         }
         say!("{}", line.trim_end());
     }
-    if suite != "ffd" && size != TARGET_SIZE {
+    if suite != "ffd" && suite != "handles" && size != TARGET_SIZE {
         say!(
             "(targets are stated for --size {TARGET_SIZE}; the editing items' for --edit-size \
              {EDIT_TARGET_SIZE})"
