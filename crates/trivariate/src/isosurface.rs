@@ -39,9 +39,11 @@
 //!    [`VERTEX_RESIDUAL`] relative to the attribute's control-value range (isosurface) or to
 //!    `|(a,b,c)|` times the geometry's bounding-box diagonal (slice).
 //!
-//! Triangles are wound counter-clockwise seen from the *outside* side (`D ≥ 0`, i.e. larger
-//! attribute values, or the side the plane normal `(a, b, c)` points to), in physical space:
-//! the winding is flipped when the geometry's Jacobian determinant is negative at the domain
+//! Triangles are wound counter-clockwise seen from the *outside* of the solid, in physical
+//! space: for isosurfaces the solid is where the attribute is at or above the level (smaller
+//! values outside; [`PolygonizeOptions::inside_below`] reverses this for distance-like
+//! attributes), for slices the outside is the side the plane normal `(a, b, c)` points to. The
+//! winding is also flipped when the geometry's Jacobian determinant is negative at the domain
 //! centre (a mirrored parametrisation).
 //!
 //! The lattice resolves the zero set to the flatness tolerance; features thinner than one
@@ -92,6 +94,11 @@ pub struct PolygonizeOptions {
     pub relative_tolerance: f64,
     /// Options of the root isolation.
     pub roots: RootOptions,
+    /// Isosurfaces only: the solid is where the attribute is at or *below* the level
+    /// (distances, negative inside), so triangles face larger values. By default (`false`) the
+    /// solid is where it is at or above the level (densities, CT numbers), as for
+    /// `volmorph isosurface`, and triangles face smaller values.
+    pub inside_below: bool,
 }
 
 impl Default for PolygonizeOptions {
@@ -100,6 +107,7 @@ impl Default for PolygonizeOptions {
             tolerance: None,
             relative_tolerance: DEFAULT_RELATIVE_TOLERANCE,
             roots: RootOptions::default(),
+            inside_below: false,
         }
     }
 }
@@ -709,8 +717,22 @@ fn polygonize(
     let roots = isolate_roots(d, &options.roots)?;
 
     // 1. Elements of the merged breakpoints, and the Bézier pieces of D and P on them.
-    let bps: [Vec<f64>; 3] =
+    let mut bps: [Vec<f64>; 3] =
         std::array::from_fn(|a| merged_breakpoints(&d.knots()[a], &geometry.knots()[a]));
+    // A slice reports an attribute that varies across the plane: its elements are merged in
+    // too, and each active one gets at least `degree` steps per axis, so the colours follow
+    // the attribute (an isosurface's reported attribute is constant, the level).
+    let colour_degrees = match (&target, value_spline) {
+        (Target::Plane { .. }, Some(v)) => {
+            for (a, b) in bps.iter_mut().enumerate() {
+                b.extend(v.knots()[a].breakpoints().into_iter().map(|(x, _)| x));
+                b.sort_by(f64::total_cmp);
+                b.dedup();
+            }
+            v.degrees()
+        }
+        _ => [1; 3],
+    };
     let counts: [usize; 3] = std::array::from_fn(|a| bps[a].len() - 1);
     let nelem = counts[0] * counts[1] * counts[2];
     let mut active = vec![false; nelem];
@@ -751,7 +773,7 @@ fn polygonize(
                 e / (counts[0] * counts[1]),
             ];
             for a in 0..3 {
-                steps[a][idx[a]] = steps[a][idx[a]].max(n[a]);
+                steps[a][idx[a]] = steps[a][idx[a]].max(n[a]).max(colour_degrees[a]);
             }
         }
     }
@@ -861,7 +883,10 @@ fn polygonize(
         }
         None => Vec::new(),
     };
-    let flip = jacobian_negative(geometry)?;
+    // The cases above wind counter-clockwise seen from `D ≥ 0` (larger attribute values, or
+    // the side the plane normal points to).
+    let toward_smaller = matches!(target, Target::Iso { .. }) && !options.inside_below;
+    let flip = jacobian_negative(geometry)? != toward_smaller;
     let mut indices = Vec::with_capacity(triangles.len() * 3);
     for t in &triangles {
         let mut tri = [0u32; 3];
@@ -982,7 +1007,11 @@ mod tests {
             .with_attribute("r", attr)
             .unwrap();
         let r = 0.6;
-        let z = isosurface(&vol, "r", r, &PolygonizeOptions::default()).unwrap();
+        let below = PolygonizeOptions {
+            inside_below: true,
+            ..PolygonizeOptions::default()
+        };
+        let z = isosurface(&vol, "r", r, &below).unwrap();
         let report = z.mesh.validate();
         assert!(report.is_closed_manifold(), "{report:?}");
         assert_eq!(report.euler_characteristic, 2);
@@ -998,16 +1027,20 @@ mod tests {
             assert!((v - r).abs() < 1e-9 * range);
         }
         check_vertices(&z, &vol);
-        // Outward orientation: the signed volume is positive.
-        let vol6: f64 = z
-            .mesh
-            .fan_triangles()
-            .map(|[a, b, c]| {
-                let p = z.mesh.positions();
-                p[a as usize].dot(p[b as usize].cross(p[c as usize]))
-            })
-            .sum();
-        let v = vol6 / 6.0;
+        // Outward orientation: the signed volume is positive (the solid is r ≤ level); with
+        // the default convention (solid r ≥ level) the same surface faces inward.
+        let signed_volume = |m: &Mesh| {
+            m.fan_triangles()
+                .map(|[a, b, c]| {
+                    let p = m.positions();
+                    p[a as usize].dot(p[b as usize].cross(p[c as usize]))
+                })
+                .sum::<f64>()
+                / 6.0
+        };
+        let v = signed_volume(&z.mesh);
+        let default = isosurface(&vol, "r", r, &PolygonizeOptions::default()).unwrap();
+        assert!((signed_volume(&default.mesh) + v).abs() < 1e-9 * v.abs());
         let expect_v = 4.0 / 3.0 * std::f64::consts::PI * r.powi(3);
         assert!(
             (v - expect_v).abs() < 1e-2 * expect_v,
@@ -1020,7 +1053,7 @@ mod tests {
             r,
             &PolygonizeOptions {
                 tolerance: Some(1e-4),
-                ..PolygonizeOptions::default()
+                ..below
             },
         )
         .unwrap();
@@ -1077,6 +1110,39 @@ mod tests {
         check_vertices(&z, &vol);
         // Element resolutions differ along some axis (the curved part needs more steps).
         assert!(z.lattice.iter().any(|&d| d > 4));
+    }
+
+    /// Regression: a slice through a flat geometry used to be two triangles whatever the
+    /// attribute did across it, so its colours were four corner values. The slice now follows
+    /// the attribute's elements: the linear interpolation of the vertex values over each
+    /// triangle stays close to the attribute.
+    #[test]
+    fn slice_colours_follow_a_varying_attribute() {
+        let geo = box_geometry(1, 2, [1.0, 1.0, 1.0]);
+        let attr = fitted(12, |u| (6.0 * u[1]).sin() * (4.0 * u[2]).cos());
+        let vol = Aggregate::new(geo)
+            .unwrap()
+            .with_attribute("q", attr.clone())
+            .unwrap();
+        let z = slice(
+            &vol,
+            [1.0, 0.0, 0.0, -0.4],
+            Some("q"),
+            &PolygonizeOptions::default(),
+        )
+        .unwrap();
+        assert!(z.mesh.face_count() > 100, "{} faces", z.mesh.face_count());
+        let mut worst = 0.0f64;
+        for t in z.mesh.fan_triangles() {
+            let [a, b, c] = t.map(|i| i as usize);
+            let u: [f64; 3] =
+                std::array::from_fn(|k| (z.params[a][k] + z.params[b][k] + z.params[c][k]) / 3.0);
+            let mut v = [0.0];
+            attr.eval_into(u, &mut v).unwrap();
+            let mean = (z.values[a] + z.values[b] + z.values[c]) / 3.0;
+            worst = worst.max((v[0] - mean).abs());
+        }
+        assert!(worst < 0.05, "centroid error {worst}");
     }
 
     #[test]

@@ -146,6 +146,11 @@ pub struct IsosurfaceArgs {
     /// Colour the surface by this scalar attribute (default: no colours).
     #[arg(long)]
     pub color_by: Option<String>,
+    /// The object is where the attribute is at or below the level (signed distances, negative
+    /// inside); by default it is where it is at or above it (densities, CT). Triangles face
+    /// out of the object.
+    #[arg(long)]
+    pub inside_below: bool,
     /// Output and colouring.
     #[command(flatten)]
     pub mesh: MeshOptions,
@@ -404,7 +409,11 @@ fn slice_cmd(args: &SliceArgs) -> anyhow::Result<()> {
 fn isosurface_cmd(args: &IsosurfaceArgs) -> anyhow::Result<()> {
     let model = load(&args.model)?;
     let pb = progress::spinner("extracting the isosurface".to_owned());
-    let mut z = isosurface(&model, &args.attribute, args.level, &options(&args.mesh))
+    let opts = PolygonizeOptions {
+        inside_below: args.inside_below,
+        ..options(&args.mesh)
+    };
+    let mut z = isosurface(&model, &args.attribute, args.level, &opts)
         .context("cannot extract the isosurface")?;
     if let Some(name) = &args.color_by {
         z.report_attribute(&model, name)
