@@ -43,44 +43,57 @@ impl Default for InversionOptions {
     }
 }
 
-/// Solve the 3×3 system `j · x = b` (j column-major: `j[a]` = ∂P/∂u_a) by Gaussian elimination
-/// with partial pivoting; `None` if singular.
+/// Solve the 3×3 system `j · x = b` (j column-major: `j[a]` = ∂P/∂u_a); `None` if singular.
 fn solve3(j: &[f64; 9], b: [f64; 3]) -> Option<[f64; 3]> {
-    // Row-major augmented matrix: m[r][c] = ∂P_r/∂u_c.
-    let mut m = [[0.0; 4]; 3];
+    solve3_rows(
+        std::array::from_fn(|r| std::array::from_fn(|c| j[3 * c + r])),
+        b,
+    )
+}
+
+/// Solve the 3×3 system `m · x = b` (row-major `m`) by Gaussian elimination with partial
+/// pivoting; `None` when singular relative to the matrix scale.
+pub(crate) fn solve3_rows(m: [[f64; 3]; 3], b: [f64; 3]) -> Option<[f64; 3]> {
+    let mut a = [[0.0; 4]; 3];
+    let mut scale: f64 = 0.0;
     for r in 0..3 {
         for c in 0..3 {
-            m[r][c] = j[3 * c + r];
+            a[r][c] = m[r][c];
+            scale = scale.max(m[r][c].abs());
         }
-        m[r][3] = b[r];
+        a[r][3] = b[r];
     }
-    let scale = j.iter().fold(0.0f64, |s, v| s.max(v.abs()));
-    if scale == 0.0 || !scale.is_finite() {
+    if !(scale > 0.0 && scale.is_finite()) {
         return None;
     }
-    for col in 0..3 {
-        let piv = (col..3).max_by(|&a, &b| m[a][col].abs().total_cmp(&m[b][col].abs()))?;
-        if m[piv][col].abs() <= 1e-14 * scale {
+    for c in 0..3 {
+        let mut piv = c;
+        for r in c + 1..3 {
+            if a[r][c].abs() > a[piv][c].abs() {
+                piv = r;
+            }
+        }
+        if a[piv][c].abs() <= 1e-14 * scale {
             return None;
         }
-        m.swap(col, piv);
-        for r in col + 1..3 {
-            let f = m[r][col] / m[col][col];
-            let pivot_row = m[col];
-            for (dst, &src) in m[r][col..].iter_mut().zip(&pivot_row[col..]) {
+        a.swap(c, piv);
+        for r in c + 1..3 {
+            let f = a[r][c] / a[c][c];
+            let pivot_row = a[c];
+            for (dst, &src) in a[r][c..].iter_mut().zip(&pivot_row[c..]) {
                 *dst -= f * src;
             }
         }
     }
     let mut x = [0.0; 3];
     for r in (0..3).rev() {
-        let mut s = m[r][3];
+        let mut s = a[r][3];
         for c in r + 1..3 {
-            s -= m[r][c] * x[c];
+            s -= a[r][c] * x[c];
         }
-        x[r] = s / m[r][r];
+        x[r] = s / a[r][r];
     }
-    Some(x)
+    x.iter().all(|v| v.is_finite()).then_some(x)
 }
 
 fn dist(a: [f64; 3], b: [f64; 3]) -> f64 {

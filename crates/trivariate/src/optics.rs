@@ -50,7 +50,8 @@ use std::path::Path;
 use volmorph_render::{Camera, RgbaImage, draw::draw_line};
 
 use crate::eval::{EvalMethod, VolumeEvaluator};
-use crate::raytrace::{RayTracer, check_ray, solve3_rows};
+use crate::invert::solve3_rows;
+use crate::raytrace::{RayTracer, check_ray};
 use crate::volrender::{ENTRY_PROBE, find_entry, find_exit};
 use crate::{AggregateVolume, TrivariateError};
 

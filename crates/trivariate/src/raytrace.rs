@@ -48,7 +48,7 @@ use volmorph_spline::{BezierPiece, TensorBSpline};
 use crate::cone::Cone;
 use crate::error::ctx;
 use crate::eval::{EvalMethod, VolumeEvaluator};
-use crate::invert::{InversionOptions, invert};
+use crate::invert::{InversionOptions, invert, solve3_rows};
 use crate::{AggregateVolume, TrivariateError};
 
 /// Relative step (in parameter units) of the central differences of `det JP` used by the fold
@@ -305,51 +305,6 @@ fn col(j: &[f64; 9], a: usize) -> [f64; 3] {
 /// `det JP` from a column-major Jacobian.
 pub(crate) fn det3(j: &[f64; 9]) -> f64 {
     dot3(col(j, 0), cross3(col(j, 1), col(j, 2)))
-}
-
-/// Solve the 3×3 system `m · x = b` (row-major `m`) by Gaussian elimination with partial
-/// pivoting; `None` when singular relative to the matrix scale.
-pub(crate) fn solve3_rows(m: [[f64; 3]; 3], b: [f64; 3]) -> Option<[f64; 3]> {
-    let mut a = [[0.0; 4]; 3];
-    let mut scale: f64 = 0.0;
-    for r in 0..3 {
-        for c in 0..3 {
-            a[r][c] = m[r][c];
-            scale = scale.max(m[r][c].abs());
-        }
-        a[r][3] = b[r];
-    }
-    if !(scale > 0.0 && scale.is_finite()) {
-        return None;
-    }
-    for c in 0..3 {
-        let mut piv = c;
-        for r in c + 1..3 {
-            if a[r][c].abs() > a[piv][c].abs() {
-                piv = r;
-            }
-        }
-        if a[piv][c].abs() <= 1e-14 * scale {
-            return None;
-        }
-        a.swap(c, piv);
-        for r in c + 1..3 {
-            let f = a[r][c] / a[c][c];
-            let pivot_row = a[c];
-            for (dst, &src) in a[r][c..].iter_mut().zip(&pivot_row[c..]) {
-                *dst -= f * src;
-            }
-        }
-    }
-    let mut x = [0.0; 3];
-    for r in (0..3).rev() {
-        let mut s = a[r][3];
-        for c in r + 1..3 {
-            s -= a[r][c] * x[c];
-        }
-        x[r] = s / a[r][r];
-    }
-    x.iter().all(|v| v.is_finite()).then_some(x)
 }
 
 /// Two unit plane normals orthogonal to the unit direction `d` (and to each other).
