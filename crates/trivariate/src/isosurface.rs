@@ -70,9 +70,11 @@ pub const DEFAULT_RELATIVE_TOLERANCE: f64 = 1e-3;
 /// far below the model's own accuracy.
 pub const MAX_STEPS_PER_ELEMENT: usize = 64;
 
-/// Largest number of lattice nodes (`2²⁵`, 256 MiB of f64 values): polygonising more would take
-/// more memory than a mesh of that resolution is worth; a larger tolerance is asked for instead.
-pub const MAX_LATTICE_NODES: usize = 1 << 25;
+/// Largest number of lattice nodes (`2²⁶`; about 17 bytes per node are held while
+/// polygonising, so at most about 1.1 GB): enough for the default tolerance on a CT fitted with
+/// a fine control net (a 256×256×108 CT with 24³ control points needs 42 M nodes and 0.7 GB);
+/// beyond it a larger tolerance is asked for.
+pub const MAX_LATTICE_NODES: usize = 1 << 26;
 
 /// Relative residual at which a vertex counts as on the zero set: `1e-13` of the attribute's
 /// control-value range (isosurfaces) or of `|(a,b,c)|·diagonal` (slices), three orders below the
