@@ -732,6 +732,23 @@ impl<const D: usize> VolumeSpline<D> {
 }
 
 impl VolumeSpline<3> {
+    /// A 3D vector field's value `U(x)` and Jacobian `∂U/∂x` (column `a` is `∂U/∂x_a`, physical
+    /// units), e.g. a displacement field. Components beyond the spline's value dimension are
+    /// zero.
+    #[must_use]
+    pub fn eval_with_jacobian(&self, x: DVec3) -> (DVec3, DMat3) {
+        let mut d = [0.0; 3];
+        let mut g = [[0.0; 3]; 3];
+        self.eval_with_gradient(x.to_array(), &mut d, &mut g);
+        // g[c][a] = ∂U_c/∂x_a.
+        let j = DMat3::from_cols(
+            DVec3::new(g[0][0], g[1][0], g[2][0]),
+            DVec3::new(g[0][1], g[1][1], g[2][1]),
+            DVec3::new(g[0][2], g[1][2], g[2][2]),
+        );
+        (DVec3::from_array(d), j)
+    }
+
     /// Evaluate a 3-component spline of `D = 3` (a displacement field) at `x`: the hot loop of
     /// [`ThinPlateMap`], four centres per step so it vectorises. Requires `value_dim == 3`
     /// (callers check).
@@ -1009,16 +1026,8 @@ impl SpaceMap for ThinPlateMap {
     }
 
     fn apply_with_jacobian(&self, p: DVec3) -> (DVec3, DMat3) {
-        let mut d = [0.0; 3];
-        let mut g = [[0.0; 3]; 3];
-        self.spline.eval_with_gradient(p.to_array(), &mut d, &mut g);
-        // g[c][a] = ∂d_c/∂x_a; column a of the Jacobian is ∂f/∂x_a.
-        let j = DMat3::from_cols(
-            DVec3::new(g[0][0], g[1][0], g[2][0]),
-            DVec3::new(g[0][1], g[1][1], g[2][1]),
-            DVec3::new(g[0][2], g[1][2], g[2][2]),
-        );
-        (p + DVec3::from_array(d), DMat3::IDENTITY + j)
+        let (d, j) = self.spline.eval_with_jacobian(p);
+        (p + d, DMat3::IDENTITY + j)
     }
 
     fn apply_batch(&self, points: &[DVec3], out: &mut [DVec3]) -> Result<(), DeformError> {

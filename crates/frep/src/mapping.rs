@@ -478,16 +478,7 @@ impl SpaceMap for SplineDisplacement {
     }
 
     fn apply_with_jacobian(&self, p: DVec3) -> (DVec3, DMat3) {
-        let mut d = [0.0; 3];
-        let mut g = [[0.0; 3]; 3];
-        self.spline.eval_with_gradient(p.to_array(), &mut d, &mut g);
-        // g[c][a] = ∂d_c/∂x_a; column a of the Jacobian is ∂d/∂x_a.
-        let j = DMat3::from_cols(
-            DVec3::new(g[0][0], g[1][0], g[2][0]),
-            DVec3::new(g[0][1], g[1][1], g[2][1]),
-            DVec3::new(g[0][2], g[1][2], g[2][2]),
-        );
-        (DVec3::from_array(d), j)
+        self.spline.eval_with_jacobian(p)
     }
 }
 

@@ -13,6 +13,7 @@ use std::collections::VecDeque;
 use volmorph_spline::TensorBSpline;
 
 use crate::TrivariateError;
+use crate::bounds::point_box;
 use crate::error::ctx;
 use crate::eval::{EvalMethod, VolumeEvaluator};
 
@@ -173,15 +174,7 @@ pub fn invert(
         if seen > options.max_pieces {
             break;
         }
-        let pts = piece.control_points();
-        let mut lo = [f64::INFINITY; 3];
-        let mut hi = [f64::NEG_INFINITY; 3];
-        for c in pts.chunks_exact(3) {
-            for k in 0..3 {
-                lo[k] = lo[k].min(c[k]);
-                hi[k] = hi[k].max(c[k]);
-            }
-        }
+        let (lo, hi) = point_box(&piece.control_points());
         if (0..3).any(|k| x[k] < lo[k] - options.tolerance || x[k] > hi[k] + options.tolerance) {
             continue;
         }

@@ -28,6 +28,7 @@
 //! `volmorph_spline`'s; this crate builds on it.
 
 pub mod aggregate;
+mod bounds;
 pub mod cone;
 mod error;
 pub mod eval;

@@ -45,6 +45,7 @@
 use volmorph_render::{Aabb, Ray};
 use volmorph_spline::{BezierPiece, TensorBSpline};
 
+use crate::bounds::point_box;
 use crate::cone::Cone;
 use crate::error::ctx;
 use crate::eval::{EvalMethod, VolumeEvaluator};
@@ -173,15 +174,7 @@ impl Tree {
 
 /// Control-point bounding box of a Bézier piece (projected points).
 fn piece_box<const N: usize>(p: &BezierPiece<N>) -> ([f64; 3], [f64; 3]) {
-    let mut lo = [f64::INFINITY; 3];
-    let mut hi = [f64::NEG_INFINITY; 3];
-    for c in p.control_points().chunks_exact(3) {
-        for k in 0..3 {
-            lo[k] = lo[k].min(c[k]);
-            hi[k] = hi[k].max(c[k]);
-        }
-    }
-    (lo, hi)
+    point_box(&p.control_points())
 }
 
 /// Largest distance of a patch's control points from the bilinear patch of its corners.
@@ -401,15 +394,7 @@ impl RayTracer {
         for a in 0..3 {
             g = g.clamp_ends(a).map_err(ctx("clamping geometry"))?;
         }
-        let pts = g.control_points();
-        let mut lo = [f64::INFINITY; 3];
-        let mut hi = [f64::NEG_INFINITY; 3];
-        for c in pts.chunks_exact(3) {
-            for k in 0..3 {
-                lo[k] = lo[k].min(c[k]);
-                hi[k] = hi[k].max(c[k]);
-            }
-        }
+        let (lo, hi) = point_box(&g.control_points());
         let ext = [hi[0] - lo[0], hi[1] - lo[1], hi[2] - lo[2]];
         let diagonal = norm3(ext);
         if !(diagonal > 0.0 && diagonal.is_finite()) {

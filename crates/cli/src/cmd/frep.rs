@@ -122,6 +122,15 @@ pub enum Method {
     DualContouring,
 }
 
+impl From<Method> for MeshMethod {
+    fn from(m: Method) -> Self {
+        match m {
+            Method::MarchingCubes => MeshMethod::MarchingCubes,
+            Method::DualContouring => MeshMethod::DualContouring,
+        }
+    }
+}
+
 /// Picture options shared by `render` and `morph`.
 #[derive(Debug, Clone, clap::Args)]
 pub struct View {
@@ -318,36 +327,40 @@ fn mesh_cmd(a: &MeshArgs) -> anyhow::Result<()> {
     let pb = progress::spinner(format!("meshing {}", a.model.display()));
     let tape = Tape::new(&shape);
     let options = MeshOptions {
-        method: match a.method {
-            Method::MarchingCubes => MeshMethod::MarchingCubes,
-            Method::DualContouring => MeshMethod::DualContouring,
-        },
+        method: a.method.into(),
         close: a.close,
     };
     let surface = mesh(&tape, &g, &options).context("cannot extract the surface")?;
     pb.set_message(format!("writing {}", a.output.display()));
+    let summary = write_surface(&surface.mesh, &a.output, a.ascii)?;
+    pb.finish_and_clear();
+    say!("{summary}");
+    Ok(())
+}
+
+/// Write an extracted surface (binary unless `ascii`) and describe it: vertex and triangle
+/// counts, and whether it is a closed manifold (with its Euler characteristic) or why not.
+fn write_surface(m: &volmorph_mesh::Mesh, path: &Path, ascii: bool) -> anyhow::Result<String> {
     let opts = MeshWriteOptions {
-        binary: !a.ascii,
+        binary: !ascii,
         ..MeshWriteOptions::default()
     };
-    meshio::write_with(&a.output, &surface.mesh, &opts)
-        .with_context(|| format!("cannot write {}", a.output.display()))?;
-    pb.finish_and_clear();
-    let report = surface.mesh.validate();
-    say!(
-        "{} vertices, {} triangles, {}",
-        surface.mesh.vertex_count(),
-        surface.mesh.face_count(),
-        if report.is_closed_manifold() {
-            format!(
-                "closed manifold, Euler characteristic {}",
-                report.euler_characteristic
-            )
-        } else {
-            not_closed_reason(&report)
-        }
-    );
-    Ok(())
+    meshio::write_with(path, m, &opts)
+        .with_context(|| format!("cannot write {}", path.display()))?;
+    let report = m.validate();
+    let closed = if report.is_closed_manifold() {
+        format!(
+            "closed manifold, Euler characteristic {}",
+            report.euler_characteristic
+        )
+    } else {
+        not_closed_reason(&report)
+    };
+    Ok(format!(
+        "{} vertices, {} triangles, {closed}",
+        m.vertex_count(),
+        m.face_count()
+    ))
 }
 
 /// Why an extracted surface is not a closed manifold: open boundaries (the box cuts the
@@ -414,38 +427,19 @@ fn sections_cmd(a: &SectionsArgs) -> anyhow::Result<()> {
     if meshio::MeshFormat::from_path(&a.output).is_ok() {
         let pb = progress::spinner(format!("meshing {name}"));
         let options = MeshOptions {
-            method: match a.method {
-                Method::MarchingCubes => MeshMethod::MarchingCubes,
-                Method::DualContouring => MeshMethod::DualContouring,
-            },
+            method: a.method.into(),
             close: true,
         };
         let surface = mesh(&stack, &g, &options).context("cannot extract the surface")?;
         pb.set_message(format!("writing {}", a.output.display()));
-        let opts = MeshWriteOptions {
-            binary: !a.ascii,
-            ..MeshWriteOptions::default()
-        };
-        meshio::write_with(&a.output, &surface.mesh, &opts)
-            .with_context(|| format!("cannot write {}", a.output.display()))?;
+        let summary = write_surface(&surface.mesh, &a.output, a.ascii)?;
         pb.finish_and_clear();
-        let report = surface.mesh.validate();
         say!(
-            "{} sections, {}×{}×{} grid: {} vertices, {} triangles, {}",
+            "{} sections, {}×{}×{} grid: {summary}",
             stack.heights().len(),
             dims[0],
             dims[1],
             dims[2],
-            surface.mesh.vertex_count(),
-            surface.mesh.face_count(),
-            if report.is_closed_manifold() {
-                format!(
-                    "closed manifold, Euler characteristic {}",
-                    report.euler_characteristic
-                )
-            } else {
-                not_closed_reason(&report)
-            }
         );
     } else {
         let pb = progress::spinner(format!("sampling {name}"));

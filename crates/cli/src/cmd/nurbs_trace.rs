@@ -213,19 +213,22 @@ pub fn run_trace_optics(a: &TraceOpticsArgs) -> anyhow::Result<()> {
     let (b0, b1) = bounds(&tracer);
     let diag = tracer.diagonal();
     let opts = OpticsOptions::for_diagonal(diag);
-    // Rays: parallel to `dir`, starting before the box, spread over a line across it.
+    // Rays: parallel to `dir`, starting before the box, spread over a line across it; ray `i`
+    // sits at fraction `spread(i)` of that line.
+    let n = a.rays;
+    let spread = |i: usize| {
+        if n == 1 {
+            0.5
+        } else {
+            i as f64 / (n - 1) as f64
+        }
+    };
     let (dir, starts): (DVec3, Vec<DVec3>) = if example {
         // Meridional plane at azimuth 0.3 rad (off the revolution seam), heights ±0.9 R.
         let radial = DVec3::new(0.3f64.cos(), 0.3f64.sin(), 0.0);
-        let n = a.rays;
         let starts = (0..n)
             .map(|i| {
-                let f = if n == 1 {
-                    0.5
-                } else {
-                    i as f64 / (n - 1) as f64
-                };
-                let r = (2.0 * f - 1.0) * 0.9 * spec.radius;
+                let r = (2.0 * spread(i) - 1.0) * 0.9 * spec.radius;
                 r * radial + DVec3::new(0.0, 0.0, -0.5 * spec.thickness)
             })
             .collect();
@@ -237,16 +240,8 @@ pub fn run_trace_optics(a: &TraceOpticsArgs) -> anyhow::Result<()> {
             .with_context(|| format!("--direction {}: must be finite and non-zero", a.direction))?;
         let center = 0.5 * (b0 + b1);
         let side = d.any_orthonormal_vector();
-        let n = a.rays;
         let starts = (0..n)
-            .map(|i| {
-                let f = if n == 1 {
-                    0.5
-                } else {
-                    i as f64 / (n - 1) as f64
-                };
-                center - diag * d + (f - 0.5) * 0.9 * diag * side
-            })
+            .map(|i| center - diag * d + (spread(i) - 0.5) * 0.9 * diag * side)
             .collect();
         (d, starts)
     };
