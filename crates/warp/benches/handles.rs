@@ -4,7 +4,8 @@
 
 use criterion::{Criterion, criterion_group, criterion_main};
 use glam::DVec3;
-use volmorph_deform::{AffineMls, HandleGrid, SampledMap, Weighting};
+use volmorph_deform::{HandleGrid, SampledMap};
+use volmorph_handles::{AffineMls, Weighting};
 use volmorph_volume::sample::Interpolation;
 use volmorph_volume::{Geometry, Volume};
 use volmorph_warp::pullback::{ResampleOptions, resample};

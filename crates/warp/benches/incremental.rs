@@ -10,8 +10,8 @@ use criterion::{Criterion, criterion_group, criterion_main};
 use glam::DVec3;
 use std::time::{Duration, Instant};
 
-use volmorph_deform::BSplineLattice;
-use volmorph_deform::manipulate::{Drag, DragOptions, ManipulationSession};
+use volmorph_lattice::BSplineLattice;
+use volmorph_lattice::manipulate::{Drag, DragOptions, ManipulationSession};
 use volmorph_volume::{Geometry, Volume};
 use volmorph_warp::incremental::IncrementalPushForward;
 use volmorph_warp::pushforward::{AntialiasOptions, push_forward_antialiased_f32};

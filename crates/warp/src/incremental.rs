@@ -72,7 +72,7 @@
 //!
 //! ```
 //! use glam::DVec3;
-//! use volmorph_deform::BSplineLattice;
+//! use volmorph_lattice::BSplineLattice;
 //! use volmorph_volume::{Geometry, Volume};
 //! use volmorph_warp::incremental::IncrementalPushForward;
 //! use volmorph_warp::pushforward::{AntialiasOptions, push_forward_antialiased_f32};
@@ -98,7 +98,8 @@ use std::sync::atomic::Ordering::Relaxed;
 
 use glam::DVec3;
 use rayon::prelude::*;
-use volmorph_deform::{BSplineLattice, SpaceMap};
+use volmorph_deform::SpaceMap;
+use volmorph_lattice::BSplineLattice;
 use volmorph_volume::{Geometry, Volume, Voxel};
 
 use crate::WarpError;

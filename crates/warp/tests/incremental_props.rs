@@ -2,7 +2,8 @@
 //! of control-point moves it equals a full antialiased push-forward with the final lattice.
 
 use glam::{DMat3, DVec3};
-use volmorph_deform::{BSplineLattice, DeformError, SpaceMap};
+use volmorph_deform::{DeformError, SpaceMap};
+use volmorph_lattice::BSplineLattice;
 use volmorph_spline::KnotVector;
 use volmorph_volume::{Geometry, Volume};
 use volmorph_warp::WarpError;

@@ -11,8 +11,8 @@ use std::time::{Duration, Instant};
 
 use anyhow::bail;
 use volmorph_contour::{DcOptions, McOptions, dual_contouring, marching_cubes};
-use volmorph_deform::BSplineLattice;
-use volmorph_deform::manipulate::{Drag, DragOptions, ManipulationSession};
+use volmorph_lattice::BSplineLattice;
+use volmorph_lattice::manipulate::{Drag, DragOptions, ManipulationSession};
 use volmorph_volume::DVec3;
 use volmorph_volume::phantom::{self, Phantom};
 use volmorph_volume::sample::Interpolation;
@@ -545,9 +545,10 @@ fn jittered(r: &mut Lcg, points: &[DVec3], amount: DVec3) -> Vec<DVec3> {
 
 fn handles(a: &HandlesArgs) -> anyhow::Result<()> {
     use glam::DVec2;
-    use volmorph_deform::mls2d::{Mls2dHandles, Mls2dKind, image_grid};
-    use volmorph_deform::volume_spline::VolumeSplineSystem;
-    use volmorph_deform::{AffineMls, HandleGrid, SampledMap, SpaceMap, ThinPlateMap, Weighting};
+    use volmorph_deform::{HandleGrid, SampledMap, SpaceMap};
+    use volmorph_handles::mls2d::{Mls2dHandles, Mls2dKind, image_grid};
+    use volmorph_handles::volume_spline::VolumeSplineSystem;
+    use volmorph_handles::{AffineMls, ThinPlateMap, Weighting};
 
     if !(1..=MAX_REPEAT).contains(&a.repeat) {
         bail!("--repeat {} must be between 1 and {MAX_REPEAT}", a.repeat);

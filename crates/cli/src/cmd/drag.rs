@@ -7,11 +7,12 @@ use std::time::Instant;
 
 use anyhow::{Context, bail};
 use glam::DVec3;
-use volmorph_deform::formats::{read_lattice, write_lattice};
+use volmorph_deform::SpaceMap;
 use volmorph_deform::inverse::{InverseOptions, invert_point};
-use volmorph_deform::manipulate::{Drag, DragOptions, solve_drags};
-use volmorph_deform::{BSplineLattice, SpaceMap};
-use volmorph_volume::format;
+use volmorph_lattice::BSplineLattice;
+use volmorph_lattice::formats::{read_lattice, write_lattice};
+use volmorph_lattice::manipulate::{Drag, DragOptions, solve_drags};
+use volmorph_volume_io as format;
 use volmorph_warp::jacobian::{FoldingReport, jacobian_determinant};
 
 use super::lattice::lattice_around;

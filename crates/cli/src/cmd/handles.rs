@@ -1,7 +1,7 @@
 //! `volmorph handles …` and `volmorph mls2d`: handle-driven deformations (moving least
 //! squares, thin-plate / volume splines) of volumes, meshes and images.
 //!
-//! Handle files are described in `volmorph_deform::handles`: a volmorph handle JSON with
+//! Handle files are described in `volmorph_handles::handles`: a volmorph handle JSON with
 //! source → target pairs (`--handles H.json`), a six-column `x y z x' y' z'` text file
 //! (`--handles pairs.txt`), or two point lists paired by order (`--from src.fcsv --to
 //! dst.fcsv`, Slicer markups or three-column text).
@@ -15,16 +15,17 @@ use std::path::{Path, PathBuf};
 
 use anyhow::{Context, bail};
 use glam::DVec2;
-use volmorph_deform::handles::{HandleSet, read_point_list};
-use volmorph_deform::mls2d::{Mls2dHandles, Mls2dKind, fold_fraction, image_grid, warp_rgba};
-use volmorph_deform::{
-    AffineMls, Frame, FrameMls, RigidMls, SampledMap, SimilarityMls, SpaceMap, ThinPlateMap,
-    Weighting,
+use volmorph_deform::{SampledMap, SpaceMap};
+use volmorph_handles::handles::{HandleSet, read_point_list};
+use volmorph_handles::mls2d::{Mls2dHandles, Mls2dKind, fold_fraction, image_grid, warp_rgba};
+use volmorph_handles::{
+    AffineMls, Frame, FrameMls, RigidMls, SimilarityMls, ThinPlateMap, Weighting,
 };
 use volmorph_render::RgbaImage;
 use volmorph_render::{read_png, write_png_rgba};
+use volmorph_volume::Geometry;
 use volmorph_volume::sample::Interpolation;
-use volmorph_volume::{Geometry, format};
+use volmorph_volume_io as format;
 use volmorph_warp::jacobian::FoldingReport;
 use volmorph_warp::pullback::{ResampleOptions, resample_any};
 

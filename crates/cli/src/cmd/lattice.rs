@@ -3,9 +3,9 @@
 use std::path::PathBuf;
 
 use anyhow::{Context, bail};
-use volmorph_deform::BSplineLattice;
-use volmorph_deform::formats::{read_lattice, write_lattice};
-use volmorph_volume::format;
+use volmorph_lattice::BSplineLattice;
+use volmorph_lattice::formats::{read_lattice, write_lattice};
+use volmorph_volume_io as format;
 
 use crate::args;
 

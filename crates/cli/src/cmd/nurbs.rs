@@ -11,7 +11,7 @@ use volmorph_trivariate::{
     Aggregate, AggregateVolume, Coloring, PolygonizeOptions, ZeroSetMesh, fit, isosurface,
     load_volume, save, slice,
 };
-use volmorph_volume::format;
+use volmorph_volume_io as format;
 
 use crate::cmd::nurbs_trace;
 use crate::progress;

@@ -4,10 +4,11 @@
 use std::path::PathBuf;
 
 use anyhow::{Context, bail};
-use volmorph_deform::BSplineLattice;
-use volmorph_deform::formats::read_lattice;
+use volmorph_lattice::BSplineLattice;
+use volmorph_lattice::formats::read_lattice;
 use volmorph_volume::sample::Interpolation;
-use volmorph_volume::{AnyVolume, Volume, format, with_volume};
+use volmorph_volume::{AnyVolume, Volume, with_volume};
+use volmorph_volume_io as format;
 use volmorph_warp::inverse::{InverseResampleOptions, pullback_through_inverse_any};
 use volmorph_warp::jacobian::{FoldingReport, jacobian_determinant};
 use volmorph_warp::pullback::{ResampleOptions, resample_any};
