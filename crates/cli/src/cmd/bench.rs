@@ -457,7 +457,10 @@ fn edit_items(a: &WarpArgs, items: &mut Vec<Item>) -> anyhow::Result<()> {
     let mut sign = -1.0;
     let (times, _) = time(a.repeat, || {
         sign = -sign;
-        Ok(engine.move_control_points(&[([c, c, c], step * sign)])?)
+        let changes = engine
+            .map()
+            .changes_for_displacements(&[([c, c, c], step * sign)])?;
+        Ok(engine.set_parameters(&changes)?)
     })?;
     items.push(Item {
         name: "incremental update, 1 control pt",
@@ -467,16 +470,16 @@ fn edit_items(a: &WarpArgs, items: &mut Vec<Item>) -> anyhow::Result<()> {
     });
     // Each run starts from the undeformed lattice (restored, untimed, by undo) and times the
     // drag: the least-norm solve and the incremental update.
-    engine.set_lattice(base.clone())?;
+    engine.set_map(base.clone())?;
     let mut session = ManipulationSession::new(base, DragOptions::with_radius(0.5 * region))?;
     let mut times = Vec::with_capacity(a.repeat);
     for _ in 0..a.repeat {
         let start = Instant::now();
         session.drag(&[Drag::new(centre, centre + step)])?;
-        engine.set_lattice(session.lattice().clone())?;
+        engine.set_map(session.lattice().clone())?;
         times.push(start.elapsed());
         session.undo();
-        engine.set_lattice(session.lattice().clone())?;
+        engine.set_map(session.lattice().clone())?;
     }
     times.sort();
     items.push(Item {
@@ -545,7 +548,7 @@ fn jittered(r: &mut Lcg, points: &[DVec3], amount: DVec3) -> Vec<DVec3> {
 
 fn handles(a: &HandlesArgs) -> anyhow::Result<()> {
     use glam::DVec2;
-    use volmorph_deform::{HandleGrid, SampledMap, SpaceMap};
+    use volmorph_deform::{LiveGrid, SampledMap, SpaceMap};
     use volmorph_handles::mls2d::{Mls2dHandles, Mls2dKind, image_grid};
     use volmorph_handles::volume_spline::VolumeSplineSystem;
     use volmorph_handles::{AffineMls, ThinPlateMap, Weighting};
@@ -635,7 +638,7 @@ fn handles(a: &HandlesArgs) -> anyhow::Result<()> {
     // Pull-back: the map from targets to sources.
     let map = AffineMls::new(&dst, &src, Weighting::default())?;
     let coarse = SampledMap::covering(&g, [a.grid; 3])?;
-    let (times, mut hg) = time(a.repeat, || Ok(HandleGrid::new(map.clone(), coarse)?))?;
+    let (times, mut hg) = time(a.repeat, || Ok(LiveGrid::new(map.clone(), coarse)?))?;
     items.push(Item {
         name: "3D affine MLS: set-up",
         times,
@@ -645,7 +648,7 @@ fn handles(a: &HandlesArgs) -> anyhow::Result<()> {
     let mut sign = -1.0;
     let (times, ()) = time(a.repeat, || {
         sign = -sign;
-        Ok(hg.move_target(0, src[0] + sign * DVec3::new(1.5, -1.0, 0.5))?)
+        Ok(hg.move_parameter(0, src[0] + sign * DVec3::new(1.5, -1.0, 0.5))?)
     })?;
     items.push(Item {
         name: "3D affine MLS: move one handle",
