@@ -44,7 +44,8 @@ pub mod lattice;
 pub mod live;
 pub mod manipulate;
 
-pub use lattice::{BSplineLattice, LatticeFrame};
+pub use lattice::{BSplineLattice, FengForm, LatticeFrame};
 pub use manipulate::{
-    Drag, DragError, DragOptions, DragSolution, ManipulationSession, solve_drags,
+    Drag, DragError, DragOptions, DragSolution, ManipulationSession, drags_from_deformed,
+    solve_drags,
 };

@@ -106,7 +106,7 @@ use std::sync::atomic::Ordering::Relaxed;
 use glam::DVec3;
 use rayon::prelude::*;
 use volmorph_deform::live::{Influence, LinearMap, changed_parameters};
-use volmorph_volume::{Geometry, Volume, Voxel};
+use volmorph_volume::{Geometry, IndexBox, Volume, Voxel};
 
 use crate::WarpError;
 use crate::pushforward::{
@@ -120,48 +120,6 @@ use crate::tally::{Region, Voxels, reaches_grid, row, splat, vmax, vmin};
 /// along different roundings (≈1e-13 relative); a voxel redone needlessly costs a little
 /// time, a voxel missed would be wrong, so the margin is generous.
 pub const PARAMETER_MARGIN: f64 = 1e-6;
-
-/// A box of voxel indices `start[a] .. end[a]` per axis (half-open; empty if any
-/// `start[a] >= end[a]`).
-#[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
-pub struct IndexBox {
-    /// First index per axis (x, y, z).
-    pub start: [usize; 3],
-    /// One past the last index per axis.
-    pub end: [usize; 3],
-}
-
-impl IndexBox {
-    /// Number of voxels in the box.
-    #[must_use]
-    pub fn len(&self) -> usize {
-        (0..3)
-            .map(|a| self.end[a].saturating_sub(self.start[a]))
-            .product()
-    }
-
-    /// `true` if the box holds no voxel.
-    #[must_use]
-    pub fn is_empty(&self) -> bool {
-        self.len() == 0
-    }
-
-    /// `true` if voxel `[i, j, k]` lies in the box.
-    #[must_use]
-    pub fn contains(&self, index: [usize; 3]) -> bool {
-        (0..3).all(|a| index[a] >= self.start[a] && index[a] < self.end[a])
-    }
-
-    fn of(r: &Region) -> Self {
-        if r.is_empty() {
-            return Self::default();
-        }
-        Self {
-            start: r.lo,
-            end: [0, 1, 2].map(|a| r.lo[a] + r.dims[a]),
-        }
-    }
-}
 
 /// What an update of an [`IncrementalPushForward`] did. Counts only, no timings.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
@@ -373,6 +331,17 @@ impl Segments {
             }
             *seg = (lo, hi);
         }
+    }
+}
+
+/// The [`IndexBox`] of a region (empty for an empty region).
+fn index_box_of(r: &Region) -> IndexBox {
+    if r.is_empty() {
+        return IndexBox::default();
+    }
+    IndexBox {
+        start: r.lo,
+        end: [0, 1, 2].map(|a| r.lo[a] + r.dims[a]),
     }
 }
 
@@ -637,8 +606,8 @@ impl<M: LinearMap + Clone> IncrementalPushForward<M> {
         };
         report.remapped = len;
         report.redone = redo.len();
-        report.source_box = IndexBox::of(&redo);
-        report.output_box = IndexBox::of(&touched);
+        report.source_box = index_box_of(&redo);
+        report.output_box = index_box_of(&touched);
         report.before = before;
         report.after = after;
         Ok(report)

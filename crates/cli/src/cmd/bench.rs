@@ -24,7 +24,6 @@ use volmorph_warp::pushforward::{
     AntialiasOptions, push_forward_antialiased, push_forward_nearest,
 };
 
-use crate::cmd::lattice::lattice_around;
 use crate::progress;
 
 /// Size at which the targets are stated.
@@ -332,7 +331,7 @@ impl Lcg {
 /// every control point off the outer layer moved by a random vector (fixed seed) whose
 /// components are uniform in `[−½, ½]` region along each axis (length at most ≈0.87 region).
 fn moved_lattice(g: &Geometry, counts: usize) -> anyhow::Result<BSplineLattice> {
-    let mut lat = lattice_around(g, [counts; 3])?;
+    let mut lat = volmorph_lattice::BSplineLattice::identity_on_voxels(g, [counts; 3])?;
     let extent = g.spacing
         * DVec3::new(
             g.dims[0].saturating_sub(1) as f64,
@@ -447,7 +446,7 @@ fn edit_items(a: &WarpArgs, items: &mut Vec<Item>) -> anyhow::Result<()> {
     let target = |t: f64| (a.edit_size == EDIT_TARGET_SIZE).then_some(t);
     let density = phantom::density(Phantom::Teapot, [a.edit_size; 3])?;
     let grid = *density.geometry();
-    let base = lattice_around(&grid, [a.lattice; 3])?;
+    let base = volmorph_lattice::BSplineLattice::identity_on_voxels(&grid, [a.lattice; 3])?;
     let c = a.lattice / 2;
     let centre = base.control_point([c, c, c])?;
     let region = (base.control_point([c + 1, c, c])? - centre).length();

@@ -127,7 +127,7 @@ fn warp_demo(args: &Args, index: &mut String, timings: &mut Timings) -> anyhow::
         phantom::density(Phantom::Teapot, [n; 3])
     })?;
     let grid = *source.geometry();
-    let lattice = super::lattice::lattice_around(&grid, LATTICE_COUNTS)?;
+    let lattice = volmorph_lattice::BSplineLattice::identity_on_voxels(&grid, LATTICE_COUNTS)?;
 
     pb.set_message("initial push-forward");
     let options = AntialiasOptions::default();

@@ -1,0 +1,2 @@
+//! Scene benchmarks (filled in below).
+fn main() {}
