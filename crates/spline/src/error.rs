@@ -222,7 +222,7 @@ pub enum SplineError {
         /// The axis.
         axis: usize,
     },
-    /// A size computation overflowed or exceeds [`crate::MAX_ALLOC_BYTES`].
+    /// A size computation overflowed or exceeds the memory budget ([`volmorph_io::memory_limit`]).
     #[error("requested size is too large: {0}")]
     TooLarge(String),
 }

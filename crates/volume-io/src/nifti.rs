@@ -1492,7 +1492,7 @@ fn read_stream<R: Read>(
 /// [`VolumeError::Format`] for a malformed header, truncated data or a corrupt gzip stream;
 /// [`VolumeError::Unsupported`] for valid files volmorph does not handle (two-file pairs,
 /// NIfTI-2, other datatypes, more than three non-trivial dimensions);
-/// [`VolumeError::Io`] when the declared size exceeds [`volmorph_io::MAX_ALLOC_BYTES`].
+/// [`VolumeError::Io`] when the declared size exceeds the memory budget ([`volmorph_io::memory_limit`]).
 pub fn read_bytes(bytes: &[u8]) -> Result<(AnyVolume, Header), VolumeError> {
     if is_gzip(bytes) {
         read_stream(&mut MultiGzDecoder::new(bytes), None)

@@ -170,10 +170,7 @@ pub fn read(path: &Path) -> Result<Mesh, MeshError> {
 /// [`MeshError::Io`] for a corrupt gzip stream, and the format reader's errors.
 pub fn read_bytes(bytes: &[u8], format: MeshFormat) -> Result<Mesh, MeshError> {
     if volmorph_io::is_gzip(bytes) {
-        let raw = volmorph_io::gunzip(bytes).map_err(|error| volmorph_io::IoError::Os {
-            path: "gzip stream".into(),
-            error,
-        })?;
+        let raw = volmorph_io::gunzip(bytes)?;
         return read_bytes(&raw, format);
     }
     match format {
