@@ -52,8 +52,8 @@ pub enum IoError {
     Size(String),
     /// A size exceeds the memory budget ([`budget`]); checked before allocating.
     #[error(
-        "{what} needs {} but the memory budget is {} (set {MEMORY_LIMIT_ENV} or \
-         --memory-limit to change it)",
+        "{what} needs {}, which exceeds the memory budget of {} (set {MEMORY_LIMIT_ENV} \
+         or --memory-limit to change it)",
         human_bytes(*bytes),
         human_bytes(*limit)
     )]

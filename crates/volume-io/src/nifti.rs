@@ -100,7 +100,6 @@
 //! header claims costs only what it holds. Big-endian data are swapped in place; rescaling
 //! runs in parallel.
 
-use std::fs::File;
 use std::io::{self, BufRead, BufReader, Read, Write};
 use std::path::Path;
 
@@ -1504,7 +1503,7 @@ pub fn read_bytes(bytes: &[u8]) -> Result<(AnyVolume, Header), VolumeError> {
 /// Read a `.nii` or `.nii.gz` file (gzip detected by magic number).
 pub(crate) fn read(path: &Path) -> Result<(AnyVolume, Header), VolumeError> {
     let os = crate::text_header::os_err(path);
-    let file = File::open(path).map_err(os)?;
+    let file = volmorph_io::open_regular(path)?;
     let len = file.metadata().map_err(os)?.len();
     let mut br = BufReader::with_capacity(1 << 20, file);
     let gz = is_gzip(br.fill_buf().map_err(os)?);
