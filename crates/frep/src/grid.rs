@@ -45,7 +45,10 @@ fn buffer(geometry: &Geometry) -> Result<Vec<f32>, FrepError> {
 ///
 /// # Errors
 /// [`FrepError::Volume`] for an invalid geometry; [`FrepError::InvalidArgument`] when the
-/// grid exceeds the allocation limit.
+/// grid exceeds the memory budget (checked before allocating);
+/// [`FrepError::LoopBudget`] naming the loop when a data-dependent loop of the model had not
+/// ended at some voxel (its value would be NaN); [`FrepError::AllNan`] when every value is
+/// NaN.
 pub fn sample(field: &dyn Field, geometry: &Geometry) -> Result<Volume<f32>, FrepError> {
     let mut data = buffer(geometry)?;
     let [nx, ny, _] = geometry.dims;
@@ -83,7 +86,47 @@ pub fn sample(field: &dyn Field, geometry: &Geometry) -> Result<Volume<f32>, Fre
             });
         }
     }
+    check_nan(field, geometry, &data)?;
     Ok(Volume::new(*geometry, data)?)
+}
+
+/// Refuse a sampled field that is NaN everywhere, or NaN where a data-dependent loop of the
+/// model had not ended (see [`crate::Shape::unfinished_loops`]).
+fn check_nan(field: &dyn Field, geometry: &Geometry, data: &[f32]) -> Result<(), FrepError> {
+    let nan = data.par_iter().filter(|v| v.is_nan()).count();
+    if nan == 0 {
+        return Ok(());
+    }
+    if let Some(tape) = field.tape() {
+        let [nx, ny, _] = geometry.dims;
+        let frame = Frame::new(geometry);
+        for guard in tape.shape().unfinished_loops() {
+            let active = Tape::new(&guard.active);
+            let points = data
+                .par_iter()
+                .enumerate()
+                .filter(|&(idx, v)| {
+                    v.is_nan() && {
+                        let (i, j, k) = (idx % nx, (idx / nx) % ny, idx / (nx * ny));
+                        let p = frame.point(frame.row(j, k), i);
+                        let a = active.eval(p);
+                        a != 0.0 && !a.is_nan()
+                    }
+                })
+                .count();
+            if points > 0 {
+                return Err(FrepError::LoopBudget {
+                    pos: guard.pos,
+                    passes: guard.passes,
+                    points,
+                });
+            }
+        }
+    }
+    if nan == data.len() {
+        return Err(FrepError::AllNan { points: nan });
+    }
+    Ok(())
 }
 
 /// Reference sampler: the full tape at every voxel centre, one point at a time (parallel
