@@ -37,7 +37,7 @@ pub enum DeformError {
         max: usize,
     },
     /// The box a lattice is built around is empty, inverted or not finite along an axis.
-    #[error("lattice box is degenerate along axis {axis}: min {min}, max {max}")]
+    #[error("lattice box is degenerate along axis {axis}: min {}, max {}", volmorph_io::Num(*min), volmorph_io::Num(*max))]
     DegenerateBox {
         /// Axis 0 (x), 1 (y) or 2 (z) of the box.
         axis: usize,
@@ -51,7 +51,7 @@ pub enum DeformError {
     #[error("invalid lattice frame: {0}")]
     InvalidFrame(String),
     /// A control point or other coordinate is NaN or infinite.
-    #[error("{what} is not finite: {value}")]
+    #[error("{what} is not finite: {}", volmorph_io::Num(*value))]
     NonFinite {
         /// Which value (e.g. "control point 12, component 1").
         what: String,

@@ -182,6 +182,24 @@ pub fn human_bytes(b: u64) -> String {
     }
 }
 
+/// An `f64` for messages: ordinary notation for magnitudes from 1e-4 to 1e9 (and 0), `{:e}`
+/// notation beyond, so that a value such as 1e308 prints as `1e308`, not as 309 digits.
+/// Non-finite values print as `NaN`, `inf`, `-inf`.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Num(pub f64);
+
+impl std::fmt::Display for Num {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        let x = self.0;
+        let a = x.abs();
+        if !x.is_finite() || x == 0.0 || (1e-4..1e9).contains(&a) {
+            write!(f, "{x}")
+        } else {
+            write!(f, "{x:e}")
+        }
+    }
+}
+
 /// Check that `bytes` (needed for `what`, e.g. "a 2000³ f32 grid") fit the budget.
 ///
 /// # Errors
@@ -262,6 +280,19 @@ mod tests {
         let s = "MemTotal:       24576000 kB\nMemFree: 1 kB\n";
         assert_eq!(meminfo_total(s), Some(24_576_000 * 1024));
         assert_eq!(meminfo_total("nothing"), None);
+    }
+
+    /// 1e308 was printed as a 309-digit number, giving 1 KB error lines.
+    #[test]
+    fn numbers_past_1e9_printed_with_309_digits() {
+        assert_eq!(Num(1e308).to_string(), "1e308");
+        assert_eq!(Num(-2.5e12).to_string(), "-2.5e12");
+        assert_eq!(Num(1e-300).to_string(), "1e-300");
+        assert_eq!(Num(123456.5).to_string(), "123456.5");
+        assert_eq!(Num(0.25).to_string(), "0.25");
+        assert_eq!(Num(0.0).to_string(), "0");
+        assert_eq!(Num(f64::NAN).to_string(), "NaN");
+        assert_eq!(Num(f64::NEG_INFINITY).to_string(), "-inf");
     }
 
     #[test]

@@ -25,7 +25,7 @@ use std::path::Path;
 
 pub use atomic::{write_atomic, write_detached};
 pub use budget::{
-    MEMORY_LIMIT_ENV, check_bytes, check_elems, human_bytes, memory_limit, set_memory_limit,
+    MEMORY_LIMIT_ENV, Num, check_bytes, check_elems, human_bytes, memory_limit, set_memory_limit,
     try_vec, try_with_capacity,
 };
 pub use progress::{Cancelled, NoProgress, Progress};

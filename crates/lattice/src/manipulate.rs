@@ -175,7 +175,7 @@ pub enum DragError {
     #[error("no drags given")]
     NoDrags,
     /// A material point or target has a NaN or infinite coordinate.
-    #[error("drag {drag}: {what} {value} is not finite")]
+    #[error("drag {drag}: {what} {} is not finite", volmorph_io::Num(*value))]
     NonFinite {
         /// Index of the drag in the list.
         drag: usize,
@@ -215,7 +215,7 @@ pub enum DragError {
         domain: [[f64; 2]; 3],
     },
     /// The tool radius is NaN or not > 0.
-    #[error("tool radius {radius} must be > 0")]
+    #[error("tool radius {} must be > 0", volmorph_io::Num(*radius))]
     InvalidRadius {
         /// The radius given.
         radius: f64,
