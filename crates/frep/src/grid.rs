@@ -50,14 +50,34 @@ fn buffer(geometry: &Geometry) -> Result<Vec<f32>, FrepError> {
 /// ended at some voxel (its value would be NaN); [`FrepError::AllNan`] when every value is
 /// NaN.
 pub fn sample(field: &dyn Field, geometry: &Geometry) -> Result<Volume<f32>, FrepError> {
+    sample_with(field, geometry, &volmorph_io::NoProgress)
+}
+
+/// [`sample`] reporting one step per z-layer to `progress`; when it is cancelled the
+/// remaining layers are skipped and [`FrepError::InvalidArgument`] "cancelled" is returned.
+///
+/// # Errors
+/// As [`sample`].
+pub fn sample_with(
+    field: &dyn Field,
+    geometry: &Geometry,
+    progress: &dyn volmorph_io::Progress,
+) -> Result<Volume<f32>, FrepError> {
     let mut data = buffer(geometry)?;
-    let [nx, ny, _] = geometry.dims;
+    let [nx, ny, nz] = geometry.dims;
     let layer = nx * ny;
+    progress.start(
+        &format!("sampling a {nx}×{ny}×{nz} grid"),
+        nz as u64,
+    );
     match field.tape() {
         Some(tape) => {
             data.par_chunks_mut(layer * SLAB)
                 .enumerate()
                 .for_each(|(s, slab)| {
+                    if progress.is_cancelled() {
+                        return;
+                    }
                     let k0 = s * SLAB;
                     let nz = slab.len() / layer;
                     let frame = Frame::new(geometry);
@@ -72,20 +92,28 @@ pub fn sample(field: &dyn Field, geometry: &Geometry) -> Result<Volume<f32>, Fre
                         coords: vec![[0.0; LEAF_POINTS]; 4],
                     };
                     w.region(tape, [0, 0, k0], [nx, ny, k0 + nz]);
+                    progress.advance(nz as u64);
                 });
         }
         None => {
             let frame = Frame::new(geometry);
             data.par_chunks_mut(layer).enumerate().for_each(|(k, sl)| {
+                if progress.is_cancelled() {
+                    return;
+                }
                 for (j, row) in sl.chunks_mut(nx).enumerate() {
                     let r = frame.row(j, k);
                     for (i, o) in row.iter_mut().enumerate() {
                         *o = field.value(frame.point(r, i)) as f32;
                     }
                 }
+                progress.advance(1);
             });
         }
     }
+    progress
+        .check()
+        .map_err(|c| FrepError::InvalidArgument(format!("grid sampling {c}")))?;
     check_nan(field, geometry, &data)?;
     Ok(Volume::new(*geometry, data)?)
 }

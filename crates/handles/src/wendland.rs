@@ -389,11 +389,13 @@ fn cancelled(c: volmorph_io::Cancelled) -> DeformError {
 impl SpaceMap for WendlandMap {
     fn apply(&self, p: DVec3) -> DVec3 {
         let inv = 1.0 / self.support;
+        let r2max = self.support * self.support;
         let mut d = DVec3::ZERO;
         self.grid.for_each_near(p, |i| {
-            let s = (p - self.sources[i]).length() * inv;
-            if s < 1.0 {
-                d += self.weights[i] * wendland_c2(s);
+            // Most candidates lie outside the support: reject them before the square root.
+            let r2 = (p - self.sources[i]).length_squared();
+            if r2 < r2max {
+                d += self.weights[i] * wendland_c2(r2.sqrt() * inv);
             }
         });
         self.affine * p + self.translation + d

@@ -175,7 +175,7 @@ pub enum DragError {
     #[error("no drags given")]
     NoDrags,
     /// A material point or target has a NaN or infinite coordinate.
-    #[error("drag {drag}: {what} {} is not finite", volmorph_io::Num(*value))]
+    #[error("drag {drag}: {what} {value} is not finite")]
     NonFinite {
         /// Index of the drag in the list.
         drag: usize,
