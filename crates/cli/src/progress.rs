@@ -14,8 +14,8 @@ pub fn bar(len: u64) -> ProgressBar {
         ProgressStyle::with_template(
             "{elapsed_precise:.dim} [{bar:30}] {percent:>3}% ETA {eta} {msg}",
         )
-            .expect("static template")
-            .progress_chars("=> "),
+        .expect("static template")
+        .progress_chars("=> "),
     );
     pb
 }

@@ -199,9 +199,15 @@ mod tests {
         let bad = serde_json::from_str::<serde_json::Value>("{").unwrap_err();
         let e = DeformError::json("handle JSON")(bad);
         let msg = e.to_string();
-        assert!(msg.starts_with("handle JSON: ") && !msg.contains("lattice"), "{msg}");
+        assert!(
+            msg.starts_with("handle JSON: ") && !msg.contains("lattice"),
+            "{msg}"
+        );
         let at = e.at(std::path::Path::new("dir/h.json"));
-        assert!(at.to_string().starts_with("dir/h.json: handle JSON: "), "{at}");
+        assert!(
+            at.to_string().starts_with("dir/h.json: handle JSON: "),
+            "{at}"
+        );
         assert!(matches!(at.innermost(), DeformError::Json { .. }));
     }
 }

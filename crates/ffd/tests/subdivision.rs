@@ -184,9 +184,13 @@ fn ffd_adaptive_tiny_tolerance_runs_unbounded() {
         }
     }
     let bend = Bend;
-    let e = adaptive_ffd(&mesh, &bend, 1e-300, 8).unwrap_err().to_string();
+    let e = adaptive_ffd(&mesh, &bend, 1e-300, 8)
+        .unwrap_err()
+        .to_string();
     assert!(e.contains("1e-300") && e.contains("diagonal"), "{e}");
-    let e = adaptive_ffd(&mesh, &bend, 0.01, 100).unwrap_err().to_string();
+    let e = adaptive_ffd(&mesh, &bend, 0.01, 100)
+        .unwrap_err()
+        .to_string();
     assert!(e.contains(&MAX_ADAPTIVE_DEPTH.to_string()), "{e}");
     let count = Counter::new();
     let out = adaptive_ffd_with(&mesh, &bend, 1e-3, 6, &count).unwrap();

@@ -66,10 +66,7 @@ pub fn sample_with(
     let mut data = buffer(geometry)?;
     let [nx, ny, nz] = geometry.dims;
     let layer = nx * ny;
-    progress.start(
-        &format!("sampling a {nx}×{ny}×{nz} grid"),
-        nz as u64,
-    );
+    progress.start(&format!("sampling a {nx}×{ny}×{nz} grid"), nz as u64);
     match field.tape() {
         Some(tape) => {
             data.par_chunks_mut(layer * SLAB)

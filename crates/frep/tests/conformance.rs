@@ -419,7 +419,11 @@ fn hyperfun_loop_over_64_passes_yields_all_nan_silently() {
     assert_eq!(long.unfinished_loops().len(), 1);
     let e = sample(&Tape::new(&long), &g).unwrap_err();
     match &e {
-        FrepError::LoopBudget { pos, passes, points } => {
+        FrepError::LoopBudget {
+            pos,
+            passes,
+            points,
+        } => {
             assert_eq!((pos.line, *passes, *points), (6, 64, 64), "{e}");
         }
         other => panic!("{other}"),

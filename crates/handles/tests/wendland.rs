@@ -25,7 +25,13 @@ fn interpolates_handles_and_matches_the_jacobian() {
     let src = points(3000, 1, 50.0);
     let dst: Vec<DVec3> = src
         .iter()
-        .map(|&p| p + DVec3::new((p.y * 0.1).sin(), (p.z * 0.08).cos(), 0.3 * (p.x * 0.05).sin()))
+        .map(|&p| {
+            p + DVec3::new(
+                (p.y * 0.1).sin(),
+                (p.z * 0.08).cos(),
+                0.3 * (p.x * 0.05).sin(),
+            )
+        })
         .collect();
     let w = WendlandMap::new(&src, &dst, 0.0).unwrap();
     for (p, q) in src.iter().zip(&dst) {
@@ -41,7 +47,11 @@ fn interpolates_handles_and_matches_the_jacobian() {
             let mut e = DVec3::ZERO;
             e[a] = h;
             let fd = (w.apply(x + e) - w.apply(x - e)) / (2.0 * h);
-            assert!((fd - j.col(a)).length() < 1e-6, "{x} axis {a}: {fd} vs {}", j.col(a));
+            assert!(
+                (fd - j.col(a)).length() < 1e-6,
+                "{x} axis {a}: {fd} vs {}",
+                j.col(a)
+            );
         }
     }
     // Batch evaluation equals point evaluation.

@@ -319,7 +319,11 @@ mod tests {
     #[test]
     fn data_file_names_are_recognised_exactly() {
         assert!(is_data_file_of("a.mhd.0123abcd.raw", "a.mhd", &["raw"]));
-        assert!(is_data_file_of("a.mhd.0123ABCD.zraw", "a.mhd", &["raw", "zraw"]));
+        assert!(is_data_file_of(
+            "a.mhd.0123ABCD.zraw",
+            "a.mhd",
+            &["raw", "zraw"]
+        ));
         assert!(!is_data_file_of("a.mhd.0123abcd.raw", "a.nhdr", &["raw"]));
         assert!(!is_data_file_of("a.mhd.0123abcx.raw", "a.mhd", &["raw"]));
         assert!(!is_data_file_of("a.mhd.0123abcd.raw.gz", "a.mhd", &["raw"]));
@@ -338,7 +342,10 @@ mod tests {
         assert_ne!(first, theirs);
         let second = write_pair(&h, b"new data", false).unwrap();
         assert_ne!(first, second);
-        assert_eq!(std::fs::read(dir.path().join(&second)).unwrap(), b"new data");
+        assert_eq!(
+            std::fs::read(dir.path().join(&second)).unwrap(),
+            b"new data"
+        );
         assert_eq!(
             std::fs::read_to_string(&h).unwrap(),
             format!("data = {second}\n")

@@ -99,10 +99,13 @@ pub fn physical_memory() -> Option<u64> {
         let total = std::fs::read_to_string("/proc/meminfo")
             .ok()
             .and_then(|s| meminfo_total(&s));
-        let cgroup = ["/sys/fs/cgroup/memory.max", "/sys/fs/cgroup/memory/memory.limit_in_bytes"]
-            .iter()
-            .find_map(|p| std::fs::read_to_string(p).ok())
-            .and_then(|s| s.trim().parse::<u64>().ok());
+        let cgroup = [
+            "/sys/fs/cgroup/memory.max",
+            "/sys/fs/cgroup/memory/memory.limit_in_bytes",
+        ]
+        .iter()
+        .find_map(|p| std::fs::read_to_string(p).ok())
+        .and_then(|s| s.trim().parse::<u64>().ok());
         match (total, cgroup) {
             (Some(t), Some(c)) => Some(t.min(c)),
             (t, c) => t.or(c),
@@ -221,9 +224,11 @@ pub fn check_bytes(what: &str, bytes: u64) -> Result<(), IoError> {
 /// # Errors
 /// [`IoError::Size`] on overflow, [`IoError::Budget`] beyond the budget.
 pub fn check_elems(what: &str, count: u64, elem_size: u64) -> Result<u64, IoError> {
-    let bytes = count
-        .checked_mul(elem_size)
-        .ok_or_else(|| IoError::Size(format!("{what}: {count} elements of {elem_size} bytes overflow")))?;
+    let bytes = count.checked_mul(elem_size).ok_or_else(|| {
+        IoError::Size(format!(
+            "{what}: {count} elements of {elem_size} bytes overflow"
+        ))
+    })?;
     check_bytes(what, bytes)?;
     Ok(bytes)
 }
@@ -317,7 +322,10 @@ mod tests {
         // 2^60 bytes exceeds any budget; the error names what was asked for.
         let e = try_vec::<u8>("a test grid", 1 << 60, 0).unwrap_err();
         let msg = e.to_string();
-        assert!(msg.contains("a test grid") && msg.contains(MEMORY_LIMIT_ENV), "{msg}");
+        assert!(
+            msg.contains("a test grid") && msg.contains(MEMORY_LIMIT_ENV),
+            "{msg}"
+        );
         assert!(matches!(e, IoError::Budget { .. }));
         assert!(check_elems("x", u64::MAX, 8).is_err());
         assert_eq!(try_vec("small", 4, 7u16).unwrap(), vec![7; 4]);

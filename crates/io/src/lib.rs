@@ -193,7 +193,10 @@ pub fn gunzip(bytes: &[u8]) -> Result<Vec<u8>, IoError> {
 /// # Errors
 /// As [`gunzip`].
 pub fn gunzip_bounded(bytes: &[u8], limit: u64, what: &str) -> Result<Vec<u8>, IoError> {
-    let guess = bytes.len().saturating_mul(3).min(usize::try_from(limit).unwrap_or(usize::MAX));
+    let guess = bytes
+        .len()
+        .saturating_mul(3)
+        .min(usize::try_from(limit).unwrap_or(usize::MAX));
     let mut out = try_with_capacity(what, guess)?;
     let os = |error| IoError::Os {
         path: "gzip stream".into(),
@@ -226,7 +229,10 @@ pub fn checked_len(dims: &[usize], elem_size: usize) -> Result<usize, IoError> {
     }
     let what = format!(
         "{} array of {elem_size}-byte elements",
-        dims.iter().map(ToString::to_string).collect::<Vec<_>>().join("×")
+        dims.iter()
+            .map(ToString::to_string)
+            .collect::<Vec<_>>()
+            .join("×")
     );
     check_elems(&what, n as u64, elem_size as u64)?;
     Ok(n)

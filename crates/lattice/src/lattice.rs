@@ -211,7 +211,11 @@ impl BSplineLattice {
     /// is too large (checked before allocating), [`DeformError::NonFinite`] if a control
     /// point overflows.
     pub fn identity(frame: LatticeFrame, knots: [KnotVector; 3]) -> Result<Self, DeformError> {
-        check_net_size([knots[0].num_basis(), knots[1].num_basis(), knots[2].num_basis()])?;
+        check_net_size([
+            knots[0].num_basis(),
+            knots[1].num_basis(),
+            knots[2].num_basis(),
+        ])?;
         let mut spline = TensorBSpline::identity(knots)?;
         let params = spline.control_points();
         for (lin, u) in params.chunks_exact(3).enumerate() {

@@ -48,5 +48,8 @@ fn gzipped_meshes_decompressed_whole_with_no_limit() {
     let stl = dir.path().join("bomb.stl.gz");
     std::fs::write(&stl, &gz).unwrap();
     let msg = volmorph_mesh::read(&stl).unwrap_err().to_string();
-    assert!(msg.contains("memory budget") && msg.contains("bomb.stl.gz"), "{msg}");
+    assert!(
+        msg.contains("memory budget") && msg.contains("bomb.stl.gz"),
+        "{msg}"
+    );
 }

@@ -207,10 +207,16 @@ fn nurbs_render_step_has_no_lower_bound() {
     let tiny = RenderOptions { step: 1e-9, ..base };
     let e = VolumeRenderer::new(&v, &tracer, "d", tf.clone(), tiny).unwrap_err();
     let msg = e.to_string();
-    assert!(msg.contains("1e-9") && msg.contains("could not cross"), "{msg}");
+    assert!(
+        msg.contains("1e-9") && msg.contains("could not cross"),
+        "{msg}"
+    );
     // Just at the bound it is accepted.
     let min = tracer.diagonal() / base.max_samples as f64;
-    let ok = RenderOptions { step: min * 1.0001, ..base };
+    let ok = RenderOptions {
+        step: min * 1.0001,
+        ..base
+    };
     assert!(VolumeRenderer::new(&v, &tracer, "d", tf.clone(), ok).is_ok());
     // Rendering reports rows and can be cancelled.
     let r = VolumeRenderer::new(&v, &tracer, "d", tf, base).unwrap();

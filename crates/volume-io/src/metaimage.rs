@@ -384,10 +384,7 @@ pub fn read_bytes(bytes: &[u8]) -> Result<(AnyVolume, Header), VolumeError> {
     Ok((v, meta.header))
 }
 
-pub(crate) fn read(
-    path: &Path,
-    options: &ReadOptions,
-) -> Result<(AnyVolume, Header), VolumeError> {
+pub(crate) fn read(path: &Path, options: &ReadOptions) -> Result<(AnyVolume, Header), VolumeError> {
     let (prefix, len) = text_header::read_prefix(path)?;
     let meta = parse_header(&prefix, prefix.len() as u64 == len)?;
     let v = match &meta.data_file {

@@ -601,10 +601,7 @@ pub fn read_bytes(bytes: &[u8]) -> Result<(AnyVolume, Header), VolumeError> {
     Ok((v, nrrd.header))
 }
 
-pub(crate) fn read(
-    path: &Path,
-    options: &ReadOptions,
-) -> Result<(AnyVolume, Header), VolumeError> {
+pub(crate) fn read(path: &Path, options: &ReadOptions) -> Result<(AnyVolume, Header), VolumeError> {
     let (prefix, len) = text_header::read_prefix(path)?;
     let nrrd = parse_header(&prefix, prefix.len() as u64 == len)?;
     let v = match &nrrd.data_file {

@@ -39,12 +39,14 @@ fn listing(dir: &Path) -> Vec<String> {
 #[test]
 fn two_file_output_interrupted_never_pairs_old_header_with_new_data() {
     let dir = tempfile::tempdir().unwrap();
-    for (ext, compress) in [("mhd", false), ("mhd", true), ("nhdr", false), ("nhdr", true)] {
+    for (ext, compress) in [
+        ("mhd", false),
+        ("mhd", true),
+        ("nhdr", false),
+        ("nhdr", true),
+    ] {
         let h = dir.path().join(format!("pair_{compress}.{ext}"));
-        let opts = WriteOptions {
-            compress,
-            level: 1,
-        };
+        let opts = WriteOptions { compress, level: 1 };
         let old = vol([16, 16, 16], 1);
         let new = vol([32, 32, 32], 2);
         format::write_with(&h, &old, &opts).unwrap();

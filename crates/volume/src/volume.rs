@@ -359,8 +359,16 @@ impl AnyVolume {
     /// [`VolumeError::InvalidArgument`] when `lo` or `hi` is not finite, `lo == hi`, either
     /// lies outside what `to` can hold (so the output would saturate or be infinite), the
     /// input has no finite value, or the slope overflows.
-    pub fn rescaled(&self, to: VoxelType, range: Option<(f64, f64)>) -> Result<AnyVolume, VolumeError> {
-        let (lo, hi) = range.unwrap_or(if to.is_float() { (0.0, 1.0) } else { to.range() });
+    pub fn rescaled(
+        &self,
+        to: VoxelType,
+        range: Option<(f64, f64)>,
+    ) -> Result<AnyVolume, VolumeError> {
+        let (lo, hi) = range.unwrap_or(if to.is_float() {
+            (0.0, 1.0)
+        } else {
+            to.range()
+        });
         let bad = |m: String| {
             VolumeError::InvalidArgument(format!(
                 "rescale range {},{}: {m}",

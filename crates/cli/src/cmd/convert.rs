@@ -130,4 +130,3 @@ pub fn parse_type(s: &str) -> anyhow::Result<VoxelType> {
         )
     })
 }
-
