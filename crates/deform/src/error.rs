@@ -139,7 +139,6 @@ fn line_part(line: usize) -> String {
 
 impl DeformError {
     /// A [`DeformError::Json`] for text parsed as `what` (e.g. "handle JSON").
-    #[must_use]
     pub fn json(what: &'static str) -> impl FnOnce(serde_json::Error) -> Self {
         move |error| Self::Json { what, error }
     }

@@ -190,7 +190,7 @@ fn affine_fit(sources: &[DVec3], targets: &[DVec3]) -> (DMat3, DVec3) {
     // det / trace³ is a scale-free flatness test of the (positive semi-definite) covariance:
     // it is 1/27 for an isotropic set and 0 for a coplanar one.
     let tr = spp.x_axis.x + spp.y_axis.y + spp.z_axis.z;
-    let flat = !(tr > 0.0) || spp.determinant() <= MIN_AFFINE_CONDITION * tr * tr * tr;
+    let flat = tr.is_nan() || tr <= 0.0 || spp.determinant() <= MIN_AFFINE_CONDITION * tr * tr * tr;
     if flat {
         return (DMat3::IDENTITY, qs - ps);
     }
