@@ -14,7 +14,7 @@
 //! over a class of linear maps `L`:
 //!
 //! * [`AffineMls`] — any 3×3 matrix: `L = (Σ w q̂ p̂ᵀ)(Σ w p̂ p̂ᵀ)⁻¹`. `f` is *affine in the
-//!   targets*, `f(v) = Σ_j α_j(v) q_j` (§5.4.2), which [`crate::realtime::HandleGrid`] exploits.
+//!   targets*, `f(v) = Σ_j α_j(v) q_j` (§5.4.2), which [`volmorph_deform::HandleGrid`] exploits.
 //! * [`SimilarityMls`] — `L = sR` (rotation times a uniform scale). In 3D this is not a
 //!   quadratic problem (thesis §4.6); the rotation is the one of the rigid problem (Theorem 4.1
 //!   holds in any dimension) and is found with Horn's closed form: the unit quaternion is the
@@ -948,7 +948,7 @@ impl Frame {
 ///
 /// The map is affine in the target origins and axes: with target vectors ordered
 /// `[q_0 … q_{N−1}, g_00, g_01, g_02, g_10, …]` (origins, then each frame's three axes),
-/// `f(v) = Σ_k c_k(v) t_k`, which [`crate::realtime::HandleGrid`] exploits.
+/// `f(v) = Σ_k c_k(v) t_k`, which [`volmorph_deform::HandleGrid`] exploits.
 #[derive(Debug, Clone, PartialEq)]
 pub struct FrameMls {
     weighting: Weighting,

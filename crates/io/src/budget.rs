@@ -4,7 +4,7 @@
 //! Every size that comes from a file, an option or a parameter (volume dims, grid sizes,
 //! lattice control-point counts, handle counts, decompressed lengths, picture sizes) goes
 //! through [`check_bytes`] (or [`checked_len`](crate::checked_len), [`try_vec`]) so that an
-//! impossible request becomes an [`IoError::Budget`](crate::IoError::Budget) naming what was
+//! impossible request becomes an [`crate::IoError::Budget`] naming what was
 //! asked for, instead of an abort in the allocator.
 //!
 //! The limit is, in order of precedence:
