@@ -1,6 +1,7 @@
 #!/usr/bin/env bash
-# Fault injection on every output format: a write that fails (EIO/ENOSPC on write, EIO on
-# the committing rename or link) or is killed (SIGKILL at a write or at the rename) must leave
+# Fault injection on every output format (volumes, meshes, lattices, maps, PNG, STEP, JSON):
+# a write that fails (EIO/ENOSPC on write, EIO on the committing rename or link) or is killed
+# (SIGKILL at a write or at the rename) must leave
 # the old output or the complete new one, never a mix, and the next write must leave no
 # temporary file behind.
 #
@@ -41,6 +42,8 @@ RUN=""
 "$VM" phantom torus --kind sdf --size 24 -o torus.nii >/dev/null
 "$VM" isosurface sphere.nii --level 127 -o ball.obj >/dev/null
 "$VM" lattice init --mesh ball.obj --degree 2,2,2 --size 4,4,4 -o mesh_lat.json >/dev/null
+"$VM" lattice init sphere.nii --counts 5,5,5 -o la.json >/dev/null
+"$VM" lattice init torus.nii --counts 6,6,6 -o lb.json >/dev/null
 python3 - <<'PY' 2>/dev/null || cp mesh_lat.json mesh_lat2.json
 import json
 d = json.load(open("mesh_lat.json"))
@@ -59,6 +62,7 @@ cmd_old() {
     *.png) $RUN "$VM" slice sphere.nii --axis z -o "$out" ;;
     *.step) $RUN "$VM" ffd ball.obj --lattice mesh_lat.json --mode accurate -o "$out" ;;
     model_*.json) $RUN "$VM" nurbs fit sphere.nii --control-points 4 -o "$out" ;;
+    map_*.json | map_*.tfm) $RUN "$VM" map compose la.json la.json -o "$out" ;;
     esac
 }
 cmd_new() {
@@ -71,6 +75,7 @@ cmd_new() {
     *.png) $RUN "$VM" slice torus.nii --axis z -o "$out" ;;
     *.step) $RUN "$VM" ffd ball.obj --lattice mesh_lat2.json --mode accurate -o "$out" ;;
     model_*.json) $RUN "$VM" nurbs fit torus.nii --control-points 5 -o "$out" ;;
+    map_*.json | map_*.tfm) $RUN "$VM" map compose lb.json la.json -o "$out" ;;
     esac
 }
 
@@ -90,7 +95,7 @@ fingerprint() {
 }
 
 outputs="v.nii v.nii.gz v.mha v.mhd v.nrrd v.nhdr v.vtk v.raw m.obj m.stl m.ply m.off
-lat_l.json l.tfm l.bxf p.png s.step model_n.json"
+lat_l.json l.tfm l.bxf p.png s.step model_n.json map_c.json map_c.tfm"
 
 # Faults: failures and kills at the first, a middle and the committing system calls.
 faults="write:error=EIO:when=1
@@ -117,7 +122,7 @@ for out in $outputs; do
     while IFS= read -r fault; do
         sc="${fault%%:*}"
         dir="case_$$" && rm -rf "$dir" && mkdir "$dir" && cd "$dir" || exit 1
-        ln -s ../sphere.nii ../torus.nii ../ball.obj ../mesh_lat.json ../mesh_lat2.json . 2>/dev/null
+        ln -s ../sphere.nii ../torus.nii ../ball.obj ../mesh_lat.json ../mesh_lat2.json ../la.json ../lb.json . 2>/dev/null
         cmd_old "$out" >/dev/null 2>&1
         # Injected into the writing command only; syscalls this program never makes (e.g.
         # rename when it uses renameat) leave the write intact, which must then be complete.

@@ -84,7 +84,8 @@ fn check_dense_budget(n: usize, size: usize) -> Result<(), DeformError> {
     volmorph_io::check_elems(
         &format!(
             "a thin-plate system of {n} handles (for large handle sets use the compactly \
-             supported Wendland map, which scales with the number of handles)"
+             supported Wendland map, handle method `wendland`, which scales with the number \
+             of handles)"
         ),
         entries,
         DENSE_BYTES_PER_ENTRY,
