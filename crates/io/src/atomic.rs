@@ -167,8 +167,10 @@ where
 }
 
 /// A 32-bit token that differs between calls (random seed of the standard hasher, time,
-/// process id).
-fn token() -> u32 {
+/// process id): the per-write part of data file names, so that a write never replaces a
+/// file that the previously committed header or manifest names.
+#[must_use]
+pub fn token() -> u32 {
     let mut h = std::collections::hash_map::RandomState::new().build_hasher();
     h.write_u128(
         SystemTime::now()
