@@ -4,7 +4,7 @@
 #![no_main]
 
 use libfuzzer_sys::fuzz_target;
-use volmorph_deform::handles::{HandleSet, parse_fcsv, parse_text};
+use volmorph_handles::handles::{HandleSet, parse_fcsv, parse_text};
 
 fuzz_target!(|data: &[u8]| {
     let text = String::from_utf8_lossy(data);

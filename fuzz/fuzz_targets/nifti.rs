@@ -5,5 +5,5 @@
 use libfuzzer_sys::fuzz_target;
 
 fuzz_target!(|data: &[u8]| {
-    let _ = volmorph_volume::format::nifti::read_bytes(data);
+    let _ = volmorph_volume_io::nifti::read_bytes(data);
 });

@@ -5,5 +5,5 @@
 use libfuzzer_sys::fuzz_target;
 
 fuzz_target!(|data: &[u8]| {
-    let _ = volmorph_volume::format::vtk::read_bytes(data);
+    let _ = volmorph_volume_io::vtk::read_bytes(data);
 });

@@ -34,6 +34,14 @@ use clap::{Parser, Subcommand};
 struct Cli {
     #[command(subcommand)]
     command: Command,
+    /// Memory budget: the most any one array may take, e.g. 8G, 512M or 50% (of physical
+    /// memory). Default: 3/4 of physical memory, or the VOLMORPH_MEMORY_LIMIT variable.
+    #[arg(long, global = true, value_name = "SIZE", value_parser = volmorph_io::budget::parse_limit)]
+    memory_limit: Option<u64>,
+    /// Read a detached data file (MetaImage ElementDataFile, NRRD data file) even when it
+    /// lies outside its header's folder.
+    #[arg(long, global = true)]
+    allow_external_data: bool,
 }
 
 #[derive(Debug, Subcommand)]
@@ -119,6 +127,16 @@ enum Command {
 
 fn main() -> ExitCode {
     let cli = Cli::parse();
+    match cli.memory_limit {
+        Some(bytes) => volmorph_io::set_memory_limit(bytes),
+        None => {
+            if let Err(e) = volmorph_io::budget::memory_limit_from_env() {
+                eprintln!("volmorph: error: {e}");
+                return ExitCode::FAILURE;
+            }
+        }
+    }
+    volmorph_volume_io::set_allow_external_data_default(cli.allow_external_data);
     let result = match cli.command {
         Command::Demo(a) => cmd::demo::run(&a),
         Command::Info(a) => cmd::info::run(&a),

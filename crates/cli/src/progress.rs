@@ -1,5 +1,6 @@
 //! Progress reporting: an indicatif bar on standard error, hidden when standard error is not
-//! a terminal (pipes, CI logs).
+//! a terminal (pipes, CI logs), and [`Bar`], the adapter through which library functions
+//! that take a [`volmorph_io::Progress`] drive it.
 
 use std::io::IsTerminal;
 use std::time::Duration;
@@ -10,9 +11,11 @@ use indicatif::{ProgressBar, ProgressDrawTarget, ProgressStyle};
 pub fn bar(len: u64) -> ProgressBar {
     let pb = ProgressBar::with_draw_target(Some(len), target());
     pb.set_style(
-        ProgressStyle::with_template("{elapsed_precise:.dim} [{bar:30}] {pos}/{len} {msg}")
-            .expect("static template")
-            .progress_chars("=> "),
+        ProgressStyle::with_template(
+            "{elapsed_precise:.dim} [{bar:30}] {percent:>3}% ETA {eta} {msg}",
+        )
+        .expect("static template")
+        .progress_chars("=> "),
     );
     pb
 }
@@ -34,5 +37,29 @@ fn target() -> ProgressDrawTarget {
         ProgressDrawTarget::stderr()
     } else {
         ProgressDrawTarget::hidden()
+    }
+}
+
+/// A [`volmorph_io::Progress`] that draws on an indicatif bar: each stage a library function
+/// starts becomes the bar's message and length, with percentage and ETA.
+pub struct Bar<'a>(pub &'a ProgressBar);
+
+impl volmorph_io::Progress for Bar<'_> {
+    fn start(&self, label: &str, total: u64) {
+        if total > 0 {
+            self.0.set_style(
+                ProgressStyle::with_template(
+                    "{elapsed_precise:.dim} [{bar:30}] {percent:>3}% ETA {eta} {msg}",
+                )
+                .expect("static template")
+                .progress_chars("=> "),
+            );
+            self.0.set_length(total);
+        }
+        self.0.set_position(0);
+        self.0.set_message(label.to_string());
+    }
+    fn advance(&self, steps: u64) {
+        self.0.inc(steps);
     }
 }

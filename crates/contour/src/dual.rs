@@ -425,9 +425,8 @@ impl<T: Voxel> Dual<'_, T> {
             total += l.cells.len();
         }
         offsets.push(total);
-        let limit = volmorph_mesh::MAX_ELEMENTS.min(
-            usize::try_from(volmorph_io::MAX_ALLOC_BYTES).unwrap_or(usize::MAX) / VERTEX_BYTES,
-        );
+        let limit = volmorph_mesh::MAX_ELEMENTS
+            .min(usize::try_from(volmorph_io::memory_limit()).unwrap_or(usize::MAX) / VERTEX_BYTES);
         if total > limit {
             return Err(ContourError::TooManyVertices {
                 count: total,

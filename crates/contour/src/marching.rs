@@ -644,7 +644,7 @@ fn extract<T: Voxel>(field: &Field<'_, T>, flip: bool) -> Result<IsoSurface, Con
     }
     offsets.push(total);
     let limit = volmorph_mesh::MAX_ELEMENTS
-        .min(usize::try_from(volmorph_io::MAX_ALLOC_BYTES).unwrap_or(usize::MAX) / VERTEX_BYTES);
+        .min(usize::try_from(volmorph_io::memory_limit()).unwrap_or(usize::MAX) / VERTEX_BYTES);
     if total > limit {
         return Err(ContourError::TooManyVertices {
             count: total,

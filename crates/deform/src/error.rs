@@ -24,8 +24,20 @@ pub enum DeformError {
         /// Minimum for that axis (degree + 1).
         min: usize,
     },
+    /// A lattice would have more control points than any lattice may have (the same cap
+    /// for lattices read from files and lattices created from options).
+    #[error(
+        "a lattice of {}×{}×{} control points exceeds the limit of {max} control points",
+        counts[0], counts[1], counts[2]
+    )]
+    TooManyControlPoints {
+        /// Control points per axis asked for.
+        counts: [usize; 3],
+        /// The cap.
+        max: usize,
+    },
     /// The box a lattice is built around is empty, inverted or not finite along an axis.
-    #[error("lattice box is degenerate along axis {axis}: min {min}, max {max}")]
+    #[error("lattice box is degenerate along axis {axis}: min {}, max {}", volmorph_io::Num(*min), volmorph_io::Num(*max))]
     DegenerateBox {
         /// Axis 0 (x), 1 (y) or 2 (z) of the box.
         axis: usize,
@@ -39,7 +51,7 @@ pub enum DeformError {
     #[error("invalid lattice frame: {0}")]
     InvalidFrame(String),
     /// A control point or other coordinate is NaN or infinite.
-    #[error("{what} is not finite: {value}")]
+    #[error("{what} is not finite: {}", volmorph_io::Num(*value))]
     NonFinite {
         /// Which value (e.g. "control point 12, component 1").
         what: String,
@@ -65,7 +77,7 @@ pub enum DeformError {
     TableUnavailable(String),
     /// A transform file (ITK `.tfm`, plastimatch `.bxf`) that does not have its documented
     /// layout.
-    #[error("{format} file, line {line}: {message}")]
+    #[error("{format} file{}: {message}", line_part(*line))]
     Parse {
         /// Format name, e.g. "ITK transform".
         format: &'static str,
@@ -90,12 +102,111 @@ pub enum DeformError {
     #[error(transparent)]
     Io(#[from] volmorph_io::IoError),
     /// JSON text that does not parse or does not have the documented shape.
-    #[error("lattice JSON: {0}")]
-    Json(#[from] serde_json::Error),
+    #[error("{what}: {error}")]
+    Json {
+        /// What the text was parsed as, e.g. "lattice JSON" or "handle JSON".
+        what: &'static str,
+        /// The parser's error (it names the line and column).
+        error: serde_json::Error,
+    },
     /// An invalid voxel grid was passed to a grid evaluation.
     #[error(transparent)]
     Grid(#[from] VolumeError),
     /// An error from the spline layer (knot vectors, evaluation).
     #[error(transparent)]
     Spline(#[from] SplineError),
+    /// An error attributed to a file path.
+    ///
+    /// Displays as `path: error`; the inner error is part of the message, not a separate
+    /// `source()`, so error chains do not repeat it.
+    #[error("{path}: {error}")]
+    File {
+        /// The file concerned.
+        path: String,
+        /// What went wrong.
+        error: Box<DeformError>,
+    },
+}
+
+/// `", line N"` for a 1-based line, nothing for 0 (a problem of the whole file).
+fn line_part(line: usize) -> String {
+    if line == 0 {
+        String::new()
+    } else {
+        format!(", line {line}")
+    }
+}
+
+impl DeformError {
+    /// A [`DeformError::Json`] for text parsed as `what` (e.g. "handle JSON").
+    pub fn json(what: &'static str) -> impl FnOnce(serde_json::Error) -> Self {
+        move |error| Self::Json { what, error }
+    }
+
+    /// Attach a file path to this error (no-op if it already carries one, or if it is an OS
+    /// error about this very file, which names it already).
+    #[must_use]
+    pub fn at(self, path: &std::path::Path) -> Self {
+        match self {
+            e @ Self::File { .. } => e,
+            Self::Io(volmorph_io::IoError::Os { path: p, error })
+                if std::path::Path::new(&p) == path =>
+            {
+                Self::Io(volmorph_io::IoError::Os { path: p, error })
+            }
+            e => Self::File {
+                path: path.display().to_string(),
+                error: Box::new(e),
+            },
+        }
+    }
+
+    /// The error without the file paths attached by [`DeformError::at`].
+    #[must_use]
+    pub fn innermost(&self) -> &Self {
+        match self {
+            Self::File { error, .. } => error.innermost(),
+            e => e,
+        }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// A handle file error about the whole file said "line 0".
+    #[test]
+    fn handle_error_reports_line_0() {
+        let e = DeformError::Parse {
+            format: "handle JSON",
+            line: 0,
+            message: "version 7 not supported".into(),
+        };
+        assert_eq!(e.to_string(), "handle JSON file: version 7 not supported");
+        let e = DeformError::Parse {
+            format: "ITK transform",
+            line: 3,
+            message: "x".into(),
+        };
+        assert_eq!(e.to_string(), "ITK transform file, line 3: x");
+    }
+
+    /// Handle JSON errors were labelled "lattice JSON".
+    #[test]
+    fn handle_json_parse_error_labelled_lattice_json() {
+        let bad = serde_json::from_str::<serde_json::Value>("{").unwrap_err();
+        let e = DeformError::json("handle JSON")(bad);
+        let msg = e.to_string();
+        assert!(
+            msg.starts_with("handle JSON: ") && !msg.contains("lattice"),
+            "{msg}"
+        );
+        let at = e.at(std::path::Path::new("dir/h.json"));
+        assert!(
+            at.to_string().starts_with("dir/h.json: handle JSON: "),
+            "{at}"
+        );
+        assert!(matches!(at.innermost(), DeformError::Json { .. }));
+    }
 }

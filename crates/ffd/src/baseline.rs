@@ -19,6 +19,15 @@ use crate::FfdError;
 /// Largest number of triangles a subdivision may produce (2²⁸, about 13 GiB of output mesh).
 pub const MAX_TRIANGLES: usize = 1 << 28;
 
+/// Most rounds of adaptive subdivision: 2²⁴ pieces per input edge, far beyond what any
+/// tolerance above [`MIN_RELATIVE_TOLERANCE`] can ask for.
+pub const MAX_ADAPTIVE_DEPTH: u32 = 24;
+
+/// Smallest adaptive tolerance, relative to the mesh's bounding-box diagonal: the mid-edge
+/// deviation is computed from f64 map evaluations, whose rounding (≈ 1e-13 relative) makes
+/// any finer test meaningless.
+pub const MIN_RELATIVE_TOLERANCE: f64 = 1e-9;
+
 /// Point-wise FFD of the vertices: the same faces, every position `x` replaced by
 /// `map.apply(x)` (in parallel).
 ///
@@ -136,19 +145,55 @@ pub fn uniform_ffd(mesh: &Mesh, map: &dyn SpaceMap, levels: u32) -> Result<Mesh,
 /// Returns the deformed triangle mesh.
 ///
 /// # Errors
-/// [`FfdError::InvalidOption`] for a tolerance that is not finite and > 0, and the errors of
-/// [`subdivide_uniform`].
+/// [`FfdError::InvalidOption`] for a tolerance that is not finite or below
+/// [`MIN_RELATIVE_TOLERANCE`] of the mesh's diagonal, or a depth above
+/// [`MAX_ADAPTIVE_DEPTH`]; [`FfdError::TooLarge`] when a round would exceed
+/// [`MAX_TRIANGLES`] or the memory budget; and the errors of [`subdivide_uniform`].
 pub fn adaptive_ffd(
     mesh: &Mesh,
     map: &dyn SpaceMap,
     tolerance: f64,
     max_depth: u32,
 ) -> Result<Mesh, FfdError> {
+    adaptive_ffd_with(mesh, map, tolerance, max_depth, &volmorph_io::NoProgress)
+}
+
+/// [`adaptive_ffd`] reporting one step per subdivision round to `progress` and stopping
+/// (with [`FfdError::InvalidOption`] "cancelled") when it is cancelled.
+///
+/// # Errors
+/// As [`adaptive_ffd`].
+pub fn adaptive_ffd_with(
+    mesh: &Mesh,
+    map: &dyn SpaceMap,
+    tolerance: f64,
+    max_depth: u32,
+    progress: &dyn volmorph_io::Progress,
+) -> Result<Mesh, FfdError> {
     if !(tolerance.is_finite() && tolerance > 0.0) {
         return Err(FfdError::InvalidOption(format!(
-            "adaptive tolerance must be finite and > 0, got {tolerance}"
+            "adaptive tolerance must be finite and > 0, got {}",
+            volmorph_io::Num(tolerance)
         )));
     }
+    if max_depth > MAX_ADAPTIVE_DEPTH {
+        return Err(FfdError::InvalidOption(format!(
+            "adaptive depth {max_depth} exceeds {MAX_ADAPTIVE_DEPTH} rounds (2^{MAX_ADAPTIVE_DEPTH} \
+             pieces per edge)"
+        )));
+    }
+    if let Some((lo, hi)) = mesh.bounding_box() {
+        let min_tol = MIN_RELATIVE_TOLERANCE * (hi - lo).length();
+        if tolerance < min_tol {
+            return Err(FfdError::InvalidOption(format!(
+                "adaptive tolerance {} is below {} ({MIN_RELATIVE_TOLERANCE:e} of the mesh's \
+                 diagonal), finer than the map can be evaluated",
+                volmorph_io::Num(tolerance),
+                volmorph_io::Num(min_tol)
+            )));
+        }
+    }
+    progress.start("adaptive subdivision", u64::from(max_depth));
     let (mut pos, mut tris) = triangles_of(mesh)?;
     let mut img: Vec<DVec3> = pos.iter().map(|&p| map.apply(p)).collect();
     let mut passed: std::collections::HashSet<(u32, u32)> = Default::default();
@@ -178,6 +223,16 @@ pub fn adaptive_ffd(
         if split.is_empty() {
             break;
         }
+        progress
+            .check()
+            .map_err(|c| FfdError::InvalidOption(c.to_string()))?;
+        // Each triangle becomes at most four; positions grow by one per split edge.
+        volmorph_io::check_elems(
+            "adaptive subdivision",
+            (tris.len() as u64).saturating_mul(4 * 12) + (pos.len() as u64).saturating_mul(48),
+            1,
+        )
+        .map_err(|e| FfdError::TooLarge(e.to_string()))?;
         let mut next = Vec::with_capacity(tris.len() * 2);
         for &t in &tris {
             let m = [0, 1, 2].map(|k| {
@@ -234,6 +289,7 @@ pub fn adaptive_ffd(
             )));
         }
         tris = next;
+        progress.advance(1);
     }
     Ok(Mesh::from_triangles(img, &tris)?)
 }

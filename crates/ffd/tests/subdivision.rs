@@ -159,3 +159,42 @@ fn planes_exactly_through_every_vertex() {
     check(&mesh, [2, 2, 2], [6, 6, 6]);
     check(&mesh, [1, 1, 1], [5, 5, 5]);
 }
+
+/// Issue: `ffd --mode adaptive:1e-300 --max-depth 100` ran for 400 s and 2.9 GB without end
+/// or progress. The tolerance and depth are now bounded, rounds are reported, and the work
+/// can be cancelled.
+#[test]
+fn ffd_adaptive_tiny_tolerance_runs_unbounded() {
+    use volmorph_ffd::baseline::{MAX_ADAPTIVE_DEPTH, adaptive_ffd, adaptive_ffd_with};
+    use volmorph_io::progress::Counter;
+    let mesh = volmorph_mesh::Mesh::from_triangles(
+        vec![
+            glam::DVec3::ZERO,
+            glam::DVec3::X,
+            glam::DVec3::Y,
+            glam::DVec3::Z,
+        ],
+        &[[0, 2, 1], [0, 1, 3], [1, 2, 3], [0, 3, 2]],
+    )
+    .unwrap();
+    struct Bend;
+    impl volmorph_deform::SpaceMap for Bend {
+        fn apply(&self, p: glam::DVec3) -> glam::DVec3 {
+            p + glam::DVec3::new(0.0, 0.0, 0.3 * (3.0 * p.x).sin())
+        }
+    }
+    let bend = Bend;
+    let e = adaptive_ffd(&mesh, &bend, 1e-300, 8)
+        .unwrap_err()
+        .to_string();
+    assert!(e.contains("1e-300") && e.contains("diagonal"), "{e}");
+    let e = adaptive_ffd(&mesh, &bend, 0.01, 100)
+        .unwrap_err()
+        .to_string();
+    assert!(e.contains(&MAX_ADAPTIVE_DEPTH.to_string()), "{e}");
+    let count = Counter::new();
+    let out = adaptive_ffd_with(&mesh, &bend, 1e-3, 6, &count).unwrap();
+    assert!(out.face_count() > mesh.face_count() && count.steps() >= 1);
+    let stop = Counter::cancel_after(1);
+    assert!(adaptive_ffd_with(&mesh, &bend, 1e-6, 12, &stop).is_err());
+}

@@ -15,8 +15,12 @@
 //!   the other branch is taken. A data-dependent `while` is unrolled
 //!   [`MAX_DEPENDENT_ITERATIONS`] times with an *active* mask (`active ∧ cond` after every
 //!   pass) guarding each update; points still looping after the last pass evaluate to NaN,
-//!   so a loop that needs more iterations there fails loudly instead of giving a wrong
-//!   value.
+//!   and the loop is recorded in the shape ([`crate::Shape::unfinished_loops`]) with its
+//!   still-running mask, so the grid sampler fails with the loop's line and column
+//!   ([`crate::FrepError::LoopBudget`]) instead of returning NaN silently. The pass budget
+//!   is [`MAX_DEPENDENT_ITERATIONS`]; a loop that needs more at the sampled points must be
+//!   rewritten (for example with a closed form, or a loop counter bound known at compile
+//!   time, which unrolls up to [`MAX_ITERATIONS`]).
 //! * Array indices are 1-based; a constant index out of range is an error, a data-dependent
 //!   index is compiled into a chain of selects over the elements (NaN when out of range).
 //!
@@ -124,9 +128,19 @@ pub fn compile(program: &Program, options: &CompileOptions) -> Result<Shape, Fre
         iterations: 0,
         bools: Default::default(),
         pending: Vec::new(),
+        unfinished: Vec::new(),
     };
     let root = ctx.object(obj, args, obj.pos)?;
-    Ok(b.finish(root))
+    let loops = ctx
+        .unfinished
+        .iter()
+        .map(|&(pos, active)| crate::shape::LoopGuard {
+            pos,
+            passes: MAX_DEPENDENT_ITERATIONS,
+            active: b.finish(active),
+        })
+        .collect();
+    Ok(b.finish(root).with_loops(loops))
 }
 
 struct Ctx<'a> {
@@ -139,6 +153,8 @@ struct Ctx<'a> {
     /// In-place updates of point arrays by transformation calls, applied after the
     /// expression that made them.
     pending: Vec<(String, Value)>,
+    /// Data-dependent loops unrolled to the pass budget, with their still-running masks.
+    unfinished: Vec<(Pos, Id)>,
 }
 
 type Env = HashMap<String, Value>;
@@ -412,7 +428,9 @@ impl Ctx<'_> {
                 return Ok(());
             }
         }
-        // Points still looping: NaN.
+        // Points still looping: NaN, and the loop is recorded so that a sampler that meets
+        // those points names it.
+        self.unfinished.push((pos, active));
         let mut poisoned = env.clone();
         let nan = self.b.constant(f64::NAN);
         for v in poisoned.values_mut() {

@@ -40,6 +40,30 @@ pub enum FrepError {
     /// an empty box, a radius of influence that is not positive, …).
     #[error("invalid argument: {0}")]
     InvalidArgument(String),
+    /// A data-dependent `while` loop had not ended after its pass budget at some sampled
+    /// points (their values would be NaN).
+    #[error(
+        "the loop at {pos} had not ended after {passes} passes at {points} of the sampled \
+         points (their values would be NaN); a data-dependent loop is unrolled at most \
+         {passes} times: bound it by a counter known at compile time, or sample elsewhere"
+    )]
+    LoopBudget {
+        /// Position of the `while`.
+        pos: Pos,
+        /// The pass budget.
+        passes: usize,
+        /// Sampled points where the loop was still running.
+        points: usize,
+    },
+    /// Every sampled value is NaN: the function is undefined on the whole grid.
+    #[error(
+        "every one of the {points} sampled values is NaN: the function is undefined on this \
+         grid (check the bounds, the parameters, and divisions or roots of negative numbers)"
+    )]
+    AllNan {
+        /// Number of samples.
+        points: usize,
+    },
     /// Writing or building a volume failed.
     #[error(transparent)]
     Volume(#[from] volmorph_volume::VolumeError),

@@ -45,16 +45,36 @@ fn buffer(geometry: &Geometry) -> Result<Vec<f32>, FrepError> {
 ///
 /// # Errors
 /// [`FrepError::Volume`] for an invalid geometry; [`FrepError::InvalidArgument`] when the
-/// grid exceeds the allocation limit.
+/// grid exceeds the memory budget (checked before allocating);
+/// [`FrepError::LoopBudget`] naming the loop when a data-dependent loop of the model had not
+/// ended at some voxel (its value would be NaN); [`FrepError::AllNan`] when every value is
+/// NaN.
 pub fn sample(field: &dyn Field, geometry: &Geometry) -> Result<Volume<f32>, FrepError> {
+    sample_with(field, geometry, &volmorph_io::NoProgress)
+}
+
+/// [`sample`] reporting one step per z-layer to `progress`; when it is cancelled the
+/// remaining layers are skipped and [`FrepError::InvalidArgument`] "cancelled" is returned.
+///
+/// # Errors
+/// As [`sample`].
+pub fn sample_with(
+    field: &dyn Field,
+    geometry: &Geometry,
+    progress: &dyn volmorph_io::Progress,
+) -> Result<Volume<f32>, FrepError> {
     let mut data = buffer(geometry)?;
-    let [nx, ny, _] = geometry.dims;
+    let [nx, ny, nz] = geometry.dims;
     let layer = nx * ny;
+    progress.start(&format!("sampling a {nx}×{ny}×{nz} grid"), nz as u64);
     match field.tape() {
         Some(tape) => {
             data.par_chunks_mut(layer * SLAB)
                 .enumerate()
                 .for_each(|(s, slab)| {
+                    if progress.is_cancelled() {
+                        return;
+                    }
                     let k0 = s * SLAB;
                     let nz = slab.len() / layer;
                     let frame = Frame::new(geometry);
@@ -69,21 +89,69 @@ pub fn sample(field: &dyn Field, geometry: &Geometry) -> Result<Volume<f32>, Fre
                         coords: vec![[0.0; LEAF_POINTS]; 4],
                     };
                     w.region(tape, [0, 0, k0], [nx, ny, k0 + nz]);
+                    progress.advance(nz as u64);
                 });
         }
         None => {
             let frame = Frame::new(geometry);
             data.par_chunks_mut(layer).enumerate().for_each(|(k, sl)| {
+                if progress.is_cancelled() {
+                    return;
+                }
                 for (j, row) in sl.chunks_mut(nx).enumerate() {
                     let r = frame.row(j, k);
                     for (i, o) in row.iter_mut().enumerate() {
                         *o = field.value(frame.point(r, i)) as f32;
                     }
                 }
+                progress.advance(1);
             });
         }
     }
+    progress
+        .check()
+        .map_err(|c| FrepError::InvalidArgument(format!("grid sampling {c}")))?;
+    check_nan(field, geometry, &data)?;
     Ok(Volume::new(*geometry, data)?)
+}
+
+/// Refuse a sampled field that is NaN everywhere, or NaN where a data-dependent loop of the
+/// model had not ended (see [`crate::Shape::unfinished_loops`]).
+fn check_nan(field: &dyn Field, geometry: &Geometry, data: &[f32]) -> Result<(), FrepError> {
+    let nan = data.par_iter().filter(|v| v.is_nan()).count();
+    if nan == 0 {
+        return Ok(());
+    }
+    if let Some(tape) = field.tape() {
+        let [nx, ny, _] = geometry.dims;
+        let frame = Frame::new(geometry);
+        for guard in tape.shape().unfinished_loops() {
+            let active = Tape::new(&guard.active);
+            let points = data
+                .par_iter()
+                .enumerate()
+                .filter(|&(idx, v)| {
+                    v.is_nan() && {
+                        let (i, j, k) = (idx % nx, (idx / nx) % ny, idx / (nx * ny));
+                        let p = frame.point(frame.row(j, k), i);
+                        let a = active.eval(p);
+                        a != 0.0 && !a.is_nan()
+                    }
+                })
+                .count();
+            if points > 0 {
+                return Err(FrepError::LoopBudget {
+                    pos: guard.pos,
+                    passes: guard.passes,
+                    points,
+                });
+            }
+        }
+    }
+    if nan == data.len() {
+        return Err(FrepError::AllNan { points: nan });
+    }
+    Ok(())
 }
 
 /// Reference sampler: the full tape at every voxel centre, one point at a time (parallel

@@ -52,5 +52,5 @@ pub use compile::{CompileOptions, compile, compile_source};
 pub use error::{FrepError, Pos};
 pub use field::Field;
 pub use ops::{Dual, Interval};
-pub use shape::{Builder, Shape};
+pub use shape::{Builder, LoopGuard, Shape};
 pub use tape::Tape;

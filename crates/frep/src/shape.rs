@@ -476,6 +476,7 @@ impl Builder {
     }
 
     /// Freeze the graph below `root` into a [`Shape`] (unreachable nodes dropped).
+    /// [`Shape::unfinished_loops`] is empty; the compiler attaches its loops.
     #[must_use]
     pub fn finish(&self, root: Id) -> Shape {
         Shape::compact(&self.nodes, root)
@@ -492,6 +493,21 @@ impl Builder {
 pub struct Shape {
     nodes: Arc<[Node]>,
     root: Id,
+    loops: Arc<[LoopGuard]>,
+}
+
+/// A data-dependent `while` loop that was unrolled to its pass budget without ending at
+/// every point: where [`LoopGuard::active`] is non-zero the loop was still running after
+/// [`LoopGuard::passes`] passes, and the shape's value there is NaN. Samplers use it to
+/// name the loop instead of returning NaN silently.
+#[derive(Debug, Clone, PartialEq)]
+pub struct LoopGuard {
+    /// Position of the `while` in the model text.
+    pub pos: crate::error::Pos,
+    /// Passes unrolled ([`crate::compile::MAX_DEPENDENT_ITERATIONS`]).
+    pub passes: usize,
+    /// Non-zero where the loop had not ended after the last pass.
+    pub active: Shape,
 }
 
 impl Shape {
@@ -543,7 +559,21 @@ impl Shape {
         Shape {
             nodes: out.into(),
             root,
+            loops: Arc::from(Vec::new()),
         }
+    }
+
+    /// The data-dependent loops of a compiled model that may not have ended within their
+    /// pass budget at some points (empty for shapes built otherwise).
+    #[must_use]
+    pub fn unfinished_loops(&self) -> &[LoopGuard] {
+        &self.loops
+    }
+
+    /// This shape with `loops` attached (see [`Shape::unfinished_loops`]).
+    pub(crate) fn with_loops(mut self, loops: Vec<LoopGuard>) -> Shape {
+        self.loops = loops.into();
+        self
     }
 
     /// The constant shape `f ≡ v`.

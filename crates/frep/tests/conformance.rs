@@ -397,3 +397,48 @@ proptest! {
         }
     }
 }
+
+/// Issue: a HyperFun loop that needs more than 64 passes gave an all-NaN volume silently
+/// (`frep eval` exited 0 with "0 inside"). Now sampling fails with the loop's position;
+/// a loop that ends in time samples normally, and a field NaN everywhere is an error.
+#[test]
+fn hyperfun_loop_over_64_passes_yields_all_nan_silently() {
+    use volmorph_frep::grid::sample;
+    use volmorph_frep::{CompileOptions, FrepError, Tape, compile_source};
+    use volmorph_volume::Geometry;
+    let model = |limit: &str| {
+        format!(
+            "my_model(x[3], a[1])\n{{\n  array p[3];\n  n = 0;\n  t = x[1] + 2;\n  \
+             while (t < {limit}) loop\n    t = t + 1;\n    n = n + 1;\n  endloop;\n  \
+             my_model = 1 - n / 1000;\n}}\n"
+        )
+    };
+    let g = Geometry::new([4, 4, 4]);
+    // Needs up to ~98 passes: beyond the budget of 64.
+    let long = compile_source(&model("100"), &CompileOptions::default()).unwrap();
+    assert_eq!(long.unfinished_loops().len(), 1);
+    let e = sample(&Tape::new(&long), &g).unwrap_err();
+    match &e {
+        FrepError::LoopBudget {
+            pos,
+            passes,
+            points,
+        } => {
+            assert_eq!((pos.line, *passes, *points), (6, 64, 64), "{e}");
+        }
+        other => panic!("{other}"),
+    }
+    assert!(e.to_string().contains("line 6"), "{e}");
+    // Needs at most ~10 passes: samples fine, no NaN.
+    let short = compile_source(&model("10"), &CompileOptions::default()).unwrap();
+    let v = sample(&Tape::new(&short), &g).unwrap();
+    assert!(v.data().iter().all(|x| x.is_finite()));
+    // A function undefined everywhere.
+    let nan = compile_source(
+        "m(x[3], a[1]) { m = sqrt(-1 - x[1] * x[1]); }",
+        &CompileOptions::default(),
+    )
+    .unwrap();
+    let e = sample(&Tape::new(&nan), &g).unwrap_err();
+    assert!(matches!(e, FrepError::AllNan { points: 64 }), "{e}");
+}

@@ -1,7 +1,8 @@
 //! Handle-driven deformations against the targets of McPhail's thesis (Table 4.1, §5.5.4)
 //! and the thin-plate targets: 2D rigid MLS on a 100×100 grid (11 points; 7 segments), 3D
 //! affine MLS on a 32³ grid with 200 handles (set-up, update after one handle moves), and
-//! a 1000-landmark thin-plate spline (factorisation, re-solve, 32³ grid evaluation).
+//! a 1000-landmark thin-plate spline (factorisation, re-solve, 32³ grid evaluation); and the
+//! compactly supported Wendland map with 3k, 10k and 30k handles (set-up, 32³ evaluation).
 
 use criterion::{BatchSize, Criterion, criterion_group, criterion_main};
 use glam::{DVec2, DVec3};
@@ -9,7 +10,7 @@ use volmorph_deform::{LiveGrid, SpaceMap};
 use volmorph_handles::mls2d::{Mls2dHandles, Mls2dKind, image_grid};
 use volmorph_handles::volume_spline::VolumeSplineSystem;
 use volmorph_handles::{
-    AffineMls, Frame, FrameMls, RigidMls, SimilarityMls, ThinPlateMap, Weighting,
+    AffineMls, Frame, FrameMls, RigidMls, SimilarityMls, ThinPlateMap, Weighting, WendlandMap,
 };
 use volmorph_volume::Geometry;
 
@@ -199,5 +200,36 @@ fn bench_3d(c: &mut Criterion) {
     g.finish();
 }
 
-criterion_group!(benches, bench_2d, bench_3d);
+/// Landmark-dense registration: the compactly supported Wendland map through 3k, 10k and 30k
+/// handles scattered in a 256 mm cube (each moved by a smooth field plus noise): set-up
+/// (neighbour grid, assembly, sparse Cholesky, solve) and evaluation on a 32³ grid.
+fn bench_wendland(c: &mut Criterion) {
+    let mut g = c.benchmark_group("wendland");
+    g.sample_size(10);
+    let grid = Geometry::new([32, 32, 32]).with_spacing(DVec3::splat(8.0));
+    for n in [3_000usize, 10_000, 30_000] {
+        let mut r = Lcg(n as u64);
+        let src: Vec<DVec3> = (0..n)
+            .map(|_| DVec3::new(r.next(), r.next(), r.next()) * 256.0)
+            .collect();
+        let dst: Vec<DVec3> = src
+            .iter()
+            .map(|&p| {
+                p + DVec3::new((p.y * 0.02).sin(), (p.z * 0.03).cos(), (p.x * 0.025).sin()) * 4.0
+                    + DVec3::new(r.next(), r.next(), r.next())
+            })
+            .collect();
+        g.bench_function(format!("factorise {n} handles"), |b| {
+            b.iter(|| WendlandMap::new(&src, &dst, 0.0).expect("wendland"));
+        });
+        let map = WendlandMap::new(&src, &dst, 0.0).expect("wendland");
+        let mut out = vec![DVec3::ZERO; grid.len()];
+        g.bench_function(format!("evaluate 32³ grid, {n} handles"), |b| {
+            b.iter(|| map.apply_grid(&grid, &mut out).expect("grid"));
+        });
+    }
+    g.finish();
+}
+
+criterion_group!(benches, bench_2d, bench_3d, bench_wendland);
 criterion_main!(benches);

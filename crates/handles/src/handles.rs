@@ -233,7 +233,8 @@ impl HandleSet {
         if !text.trim_start().starts_with('{') {
             return Err(json_err("expected a JSON object".into()));
         }
-        let j: HandlesJson = serde_json::from_str(text)?;
+        let j: HandlesJson =
+            serde_json::from_str(text).map_err(DeformError::json("handle JSON"))?;
         if let Some(v) = j.version
             && v != HANDLES_JSON_VERSION
         {
@@ -339,6 +340,10 @@ impl HandleSet {
     /// format, and [`DeformError::Unsupported`] for a point-list file (`.fcsv`, 3-column text)
     /// — those need a second list, see [`HandleSet::from_lists`] — or an unknown extension.
     pub fn read(path: &Path) -> Result<Self, DeformError> {
+        Self::read_inner(path).map_err(|e| e.at(path))
+    }
+
+    fn read_inner(path: &Path) -> Result<Self, DeformError> {
         let text = read_text(path)?;
         match extension(path).as_str() {
             "json" => Self::from_json(&text),
@@ -381,7 +386,9 @@ fn extension(path: &Path) -> String {
 }
 
 fn read_text(path: &Path) -> Result<String, DeformError> {
-    let meta = std::fs::metadata(path).map_err(|e| io_err(path, e))?;
+    let meta = volmorph_io::open_regular(path)?
+        .metadata()
+        .map_err(|e| io_err(path, e))?;
     if meta.len() > MAX_HANDLE_FILE_BYTES {
         return Err(DeformError::Unsupported(format!(
             "{}: {} bytes is more than a handle file may hold ({MAX_HANDLE_FILE_BYTES})",
@@ -403,6 +410,10 @@ fn io_err(path: &Path, e: std::io::Error) -> DeformError {
 /// [`DeformError::Io`], the parse errors of the format, [`DeformError::Unsupported`] for
 /// 6-column text or another extension.
 pub fn read_point_list(path: &Path) -> Result<Vec<DVec3>, DeformError> {
+    read_point_list_inner(path).map_err(|e| e.at(path))
+}
+
+fn read_point_list_inner(path: &Path) -> Result<Vec<DVec3>, DeformError> {
     let text = read_text(path)?;
     match extension(path).as_str() {
         "fcsv" => parse_fcsv(&text),

@@ -5,6 +5,8 @@
 //!   and frame-based MLS.
 //! * [`volume_spline`] — Savchenko's volume splines on Green's function in 2D and 3D, scalar or
 //!   vector valued, and the [`ThinPlateMap`] built on them.
+//! * [`wendland`] — affine trend plus compactly supported Wendland kernels solved by sparse
+//!   Cholesky: the handle map that scales to tens of thousands of handles ([`WendlandMap`]).
 //! * [`bump`] — Bryson's bump transform.
 //! * [`mls2d`] — 2D MLS through points and line segments, for pictures.
 //! * [`handles`] — handle files (volmorph JSON, Slicer `.fcsv`, text).
@@ -19,8 +21,10 @@ pub mod handles;
 pub mod mls;
 pub mod mls2d;
 pub mod volume_spline;
+pub mod wendland;
 
 pub use bump::BumpMap;
 pub use handles::HandleSet;
 pub use mls::{AffineMls, Frame, FrameMls, RigidMls, SimilarityMls, Weighting};
 pub use volume_spline::{ThinPlateMap, VolumeSpline, VolumeSplineSystem};
+pub use wendland::WendlandMap;

@@ -1,8 +1,12 @@
 //! File plumbing shared by every volmorph format reader and writer.
 //!
-//! * [`write_atomic`] — outputs are written to a temporary file in the target's directory and
-//!   renamed into place only when the writer succeeded, so a failure never leaves a
-//!   half-written file behind.
+//! * [`write_atomic`] / [`write_detached`] — outputs are written to a temporary file in the
+//!   target's directory and renamed into place only when the writer succeeded, so a failure
+//!   or a kill never leaves a half-written file behind; a header and its detached data file
+//!   are committed as one (see [`atomic`]).
+//! * [`budget`] — the memory budget every size from input is checked against before
+//!   allocating ([`check_bytes`], [`try_vec`], [`checked_len`]).
+//! * [`progress`] — the [`Progress`] trait through which long work reports and is cancelled.
 //! * [`read_maybe_gz`] / [`is_gzip`] — transparent gzip detection by magic number.
 //! * [`ByteReader`] — a bounds-checked cursor over an in-memory byte buffer for binary
 //!   headers; every read returns a [`Truncated`] error instead of panicking.
@@ -12,15 +16,19 @@
 //! These are hand-written because they are a few dozen lines each and every parser in the
 //! project needs the same guarantees (no panic on hostile input, no unbounded allocation).
 
-use std::fs::File;
-use std::io::{self, BufWriter, Read, Write};
+pub mod atomic;
+pub mod budget;
+pub mod progress;
+
+use std::io::{self, Read};
 use std::path::Path;
 
-/// Largest payload (in bytes) any reader will allocate for a single array: 64 GiB.
-///
-/// Larger declared sizes are refused before allocation. This is far above any volume a
-/// workstation handles in memory, and far below what an overflowing header can claim.
-pub const MAX_ALLOC_BYTES: u64 = 64 << 30;
+pub use atomic::{write_atomic, write_detached};
+pub use budget::{
+    MEMORY_LIMIT_ENV, Num, check_bytes, check_elems, human_bytes, memory_limit, set_memory_limit,
+    try_vec, try_with_capacity,
+};
+pub use progress::{Cancelled, NoProgress, Progress};
 
 /// Error produced by the helpers in this crate.
 #[derive(Debug, thiserror::Error)]
@@ -39,9 +47,32 @@ pub enum IoError {
     /// Input ended before a field could be read.
     #[error(transparent)]
     Truncated(#[from] Truncated),
-    /// A size computation overflowed or exceeded [`MAX_ALLOC_BYTES`].
+    /// A size computation overflowed.
     #[error("declared size is impossible: {0}")]
     Size(String),
+    /// A size exceeds the memory budget ([`budget`]); checked before allocating.
+    #[error(
+        "{what} needs {}, which exceeds the memory budget of {} (set {MEMORY_LIMIT_ENV} \
+         or --memory-limit to change it)",
+        human_bytes(*bytes),
+        human_bytes(*limit)
+    )]
+    Budget {
+        /// What the memory was for, e.g. "a 2000×2000×2000 f32 grid".
+        what: String,
+        /// Bytes requested.
+        bytes: u64,
+        /// The budget in force.
+        limit: u64,
+    },
+    /// The allocator refused a request within the budget (memory is used by others).
+    #[error("cannot allocate {} for {what}: out of memory", human_bytes(*bytes))]
+    Alloc {
+        /// What the memory was for.
+        what: String,
+        /// Bytes requested.
+        bytes: u64,
+    },
 }
 
 /// The input ended before `needed` bytes could be read at `offset`.
@@ -54,54 +85,6 @@ pub struct Truncated {
     pub needed: usize,
     /// Number of bytes left at `offset`.
     pub available: usize,
-}
-
-/// Write a file atomically: `f` writes into a temporary file created next to `path`, which is
-/// flushed, synced and renamed over `path` only if `f` returns `Ok`.
-///
-/// On error the temporary file is removed and any existing file at `path` is untouched.
-///
-/// # Errors
-/// Returns the error of `f`, or an [`IoError::Os`] (converted into `E`) if the temporary file
-/// cannot be created, flushed or renamed.
-pub fn write_atomic<E, F>(path: &Path, f: F) -> Result<(), E>
-where
-    E: From<IoError>,
-    F: FnOnce(&mut BufWriter<&mut File>) -> Result<(), E>,
-{
-    let os = |error| IoError::os(path, error);
-    let dir = match path.parent() {
-        Some(p) if !p.as_os_str().is_empty() => p,
-        _ => Path::new("."),
-    };
-    let mut builder = tempfile::Builder::new();
-    builder.prefix(".volmorph-").suffix(".partial");
-    // Temporary files are private (0600) by default; an output file gets the ordinary
-    // permissions of a new file (0666 less the process umask, applied by the OS at creation).
-    #[cfg(unix)]
-    {
-        use std::os::unix::fs::PermissionsExt;
-        builder.permissions(std::fs::Permissions::from_mode(0o666));
-    }
-    let mut tmp = builder.tempfile_in(dir).map_err(|e| {
-        // tempfile's message names the random temporary path; say what the user can act on.
-        let why = match e.kind() {
-            io::ErrorKind::NotFound => format!("folder {} does not exist", dir.display()),
-            io::ErrorKind::PermissionDenied => {
-                format!("no permission to create files in {}", dir.display())
-            }
-            kind => format!("cannot create a file in {}: {kind}", dir.display()),
-        };
-        os(io::Error::new(e.kind(), why))
-    })?;
-    {
-        let mut w = BufWriter::with_capacity(1 << 20, tmp.as_file_mut());
-        f(&mut w)?;
-        w.flush().map_err(os)?;
-    }
-    tmp.as_file().sync_all().map_err(os)?;
-    tmp.persist(path).map_err(|e| os(e.error))?;
-    Ok(())
 }
 
 impl IoError {
@@ -122,36 +105,121 @@ pub fn is_gzip(bytes: &[u8]) -> bool {
 }
 
 /// Read a whole file, transparently decompressing it when it is gzip-compressed (detected by
-/// magic number, not by extension).
+/// magic number, not by extension). Both the file and its decompressed content are bounded
+/// by the memory budget.
 ///
 /// # Errors
-/// [`IoError::Os`] when the file cannot be read or the gzip stream is corrupt.
+/// [`IoError::Os`] when the file cannot be read or the gzip stream is corrupt;
+/// [`IoError::Budget`] when the file, or what it decompresses to, exceeds the budget.
 pub fn read_maybe_gz(path: &Path) -> Result<Vec<u8>, IoError> {
     let os = |error| IoError::os(path, error);
-    let raw = std::fs::read(path).map_err(os)?;
+    let mut file = open_regular(path)?;
+    let len = file.metadata().map_err(os)?.len();
+    let what = format!("reading {}", path.display());
+    let mut raw: Vec<u8> = try_with_capacity(&what, usize::try_from(len).unwrap_or(usize::MAX))?;
+    (&mut file)
+        .take(budget::memory_limit())
+        .read_to_end(&mut raw)
+        .map_err(os)?;
     if is_gzip(&raw) {
-        gunzip(&raw).map_err(os)
+        gunzip_bounded(&raw, budget::memory_limit(), &what).map_err(|e| match e {
+            IoError::Os { error, .. } => os(error),
+            e => e,
+        })
     } else {
         Ok(raw)
     }
 }
 
-/// Decompress a complete gzip stream (multi-member streams are concatenated, as `gzip -d`
-/// does).
+/// Open `path` for reading, refusing what is not a regular file (a folder, a FIFO, a device
+/// such as `/dev/zero`) with a message that says what it is.
 ///
 /// # Errors
-/// The decoder's error when the stream is corrupt or truncated.
-pub fn gunzip(bytes: &[u8]) -> io::Result<Vec<u8>> {
-    let mut out = Vec::with_capacity(bytes.len().saturating_mul(3));
-    flate2::read::MultiGzDecoder::new(bytes).read_to_end(&mut out)?;
+/// [`IoError::Os`] naming the path: not found, no permission, or not a regular file.
+pub fn open_regular(path: &Path) -> Result<std::fs::File, IoError> {
+    let os = |error| IoError::os(path, error);
+    let meta = std::fs::metadata(path).map_err(os)?;
+    if !meta.is_file() {
+        return Err(os(io::Error::new(
+            io::ErrorKind::InvalidInput,
+            format!("is {}, not a regular file", file_kind(&meta)),
+        )));
+    }
+    std::fs::File::open(path).map_err(os)
+}
+
+/// What kind of file system object `meta` describes, for messages ("a folder", "a FIFO").
+#[must_use]
+pub fn file_kind(meta: &std::fs::Metadata) -> &'static str {
+    let ft = meta.file_type();
+    if ft.is_dir() {
+        return "a folder";
+    }
+    if ft.is_file() {
+        return "a regular file";
+    }
+    #[cfg(unix)]
+    {
+        use std::os::unix::fs::FileTypeExt;
+        if ft.is_fifo() {
+            return "a FIFO (named pipe)";
+        }
+        if ft.is_char_device() {
+            return "a character device";
+        }
+        if ft.is_block_device() {
+            return "a block device";
+        }
+        if ft.is_socket() {
+            return "a socket";
+        }
+    }
+    "not a regular file"
+}
+
+/// Decompress a complete gzip stream (multi-member streams are concatenated, as `gzip -d`
+/// does), within the memory budget.
+///
+/// # Errors
+/// The decoder's error when the stream is corrupt or truncated; [`IoError::Budget`] when
+/// the decompressed content exceeds the budget.
+pub fn gunzip(bytes: &[u8]) -> Result<Vec<u8>, IoError> {
+    gunzip_bounded(bytes, budget::memory_limit(), "decompressed gzip data")
+}
+
+/// Decompress a gzip stream, refusing more than `limit` decompressed bytes (reported as
+/// [`IoError::Budget`] for `what`).
+///
+/// # Errors
+/// As [`gunzip`].
+pub fn gunzip_bounded(bytes: &[u8], limit: u64, what: &str) -> Result<Vec<u8>, IoError> {
+    let guess = bytes
+        .len()
+        .saturating_mul(3)
+        .min(usize::try_from(limit).unwrap_or(usize::MAX));
+    let mut out = try_with_capacity(what, guess)?;
+    let os = |error| IoError::Os {
+        path: "gzip stream".into(),
+        error,
+    };
+    let mut dec = flate2::read::MultiGzDecoder::new(bytes).take(limit.saturating_add(1));
+    dec.read_to_end(&mut out).map_err(os)?;
+    if out.len() as u64 > limit {
+        return Err(IoError::Budget {
+            what: format!("{what} (more than the budget once decompressed)"),
+            bytes: limit.saturating_add(1),
+            limit,
+        });
+    }
     Ok(out)
 }
 
 /// Multiply sizes with overflow checking and require the product (times `elem_size` bytes)
-/// to stay within [`MAX_ALLOC_BYTES`]. Returns the element count.
+/// to stay within the memory budget ([`memory_limit`]). Returns the element count.
 ///
 /// # Errors
-/// [`IoError::Size`] naming the offending dimensions.
+/// [`IoError::Size`] on overflow, [`IoError::Budget`] beyond the budget; both name the
+/// dimensions.
 pub fn checked_len(dims: &[usize], elem_size: usize) -> Result<usize, IoError> {
     let mut n: usize = 1;
     for &d in dims {
@@ -159,13 +227,15 @@ pub fn checked_len(dims: &[usize], elem_size: usize) -> Result<usize, IoError> {
             .checked_mul(d)
             .ok_or_else(|| IoError::Size(format!("dims {dims:?} overflow")))?;
     }
-    let bytes = (n as u64).checked_mul(elem_size as u64);
-    match bytes {
-        Some(b) if b <= MAX_ALLOC_BYTES => Ok(n),
-        _ => Err(IoError::Size(format!(
-            "dims {dims:?} of {elem_size}-byte elements exceed {MAX_ALLOC_BYTES} bytes"
-        ))),
-    }
+    let what = format!(
+        "{} array of {elem_size}-byte elements",
+        dims.iter()
+            .map(ToString::to_string)
+            .collect::<Vec<_>>()
+            .join("×")
+    );
+    check_elems(&what, n as u64, elem_size as u64)?;
+    Ok(n)
 }
 
 /// Format an `f64` so that parsing it back gives the same bits, in a form C++ streams and
@@ -271,6 +341,7 @@ impl<'a> ByteReader<'a> {
 #[cfg(test)]
 mod tests {
     use super::*;
+    use std::io::Write;
 
     #[test]
     fn atomic_write_leaves_no_file_on_error() {

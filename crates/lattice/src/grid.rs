@@ -16,7 +16,7 @@
 //!   sum of Eq. 5.
 //!
 //! Both run in parallel over z-slabs and allocate nothing per voxel; voxels outside the
-//! lattice box are mapped to themselves, exactly as [`SpaceMap::apply`](crate::SpaceMap::apply) does. Results agree
+//! lattice box are mapped to themselves, exactly as [`SpaceMap::apply`](volmorph_deform::SpaceMap::apply) does. Results agree
 //! with pointwise `apply` to rounding (≈1e-13 relative).
 
 use glam::DVec3;
@@ -226,7 +226,7 @@ impl LatticeGridPlan {
 
     /// Evaluate `lattice` at every voxel centre of the plan's grid into `out` (x fastest);
     /// voxels outside the lattice box are mapped to themselves. Parallel over z-slabs, no
-    /// allocation per voxel; agrees with pointwise [`SpaceMap::apply`](crate::SpaceMap::apply)
+    /// allocation per voxel; agrees with pointwise [`SpaceMap::apply`](volmorph_deform::SpaceMap::apply)
     /// to rounding.
     ///
     /// # Errors
@@ -432,13 +432,13 @@ fn centre(grid: &Geometry, i: usize, j: usize, k: usize) -> DVec3 {
 impl BSplineLattice {
     /// Evaluate the map at every voxel centre of `grid` (x fastest) with separable per-axis
     /// basis tables (see the [module docs](self)); works for any spacing ratio. Agrees with
-    /// pointwise [`SpaceMap::apply`](crate::SpaceMap::apply) to rounding. Builds a
+    /// pointwise [`SpaceMap::apply`](volmorph_deform::SpaceMap::apply) to rounding. Builds a
     /// [`LatticeGridPlan`] each call; keep one to evaluate repeatedly.
     ///
     /// # Errors
     /// [`DeformError::Grid`] for an invalid geometry, [`DeformError::BufferLength`] for a
     /// wrong `out` length, [`DeformError::GridNotAligned`] if the grid axes are not parallel to
-    /// the lattice axes (use [`SpaceMap::apply_grid`](crate::SpaceMap::apply_grid), which
+    /// the lattice axes (use [`SpaceMap::apply_grid`](volmorph_deform::SpaceMap::apply_grid), which
     /// falls back to pointwise evaluation).
     pub fn apply_grid_separable(
         &self,
@@ -454,7 +454,7 @@ impl BSplineLattice {
     /// `G_a` of voxels along each axis (knot spans of equal length), so that the basis values
     /// repeat with period `G_a`; each voxel is then a sum of `(p_u+1)(p_v+1)(p_w+1)` (64 for
     /// cubic lattices) contiguous table weights times control points. Agrees with pointwise
-    /// [`SpaceMap::apply`](crate::SpaceMap::apply) to rounding. Builds a [`LatticeGridPlan`]
+    /// [`SpaceMap::apply`](volmorph_deform::SpaceMap::apply) to rounding. Builds a [`LatticeGridPlan`]
     /// each call; keep one to evaluate repeatedly.
     ///
     /// # Errors

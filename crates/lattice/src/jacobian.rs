@@ -32,9 +32,9 @@
 //! voxel centre lying exactly on a knot of a lattice that is only C⁰ there (degree 1, or a
 //! repeated knot) the two may pick the derivative of different sides.
 //!
-//! [`SpaceMap::jacobian`]: crate::SpaceMap::jacobian
-//! [`SpaceMap::apply_with_jacobian`]: crate::SpaceMap::apply_with_jacobian
-//! [`SpaceMap::jacobian_grid`]: crate::SpaceMap::jacobian_grid
+//! [`SpaceMap::jacobian`]: volmorph_deform::SpaceMap::jacobian
+//! [`SpaceMap::apply_with_jacobian`]: volmorph_deform::SpaceMap::apply_with_jacobian
+//! [`SpaceMap::jacobian_grid`]: volmorph_deform::SpaceMap::jacobian_grid
 
 use glam::{DMat3, DVec3};
 use rayon::prelude::*;
@@ -200,8 +200,8 @@ impl BSplineLattice {
     /// the lattice axes (use [`SpaceMap::jacobian_grid`], which falls back to pointwise
     /// evaluation), [`DeformError::Spline`] for an absurd table size.
     ///
-    /// [`SpaceMap::jacobian`]: crate::SpaceMap::jacobian
-    /// [`SpaceMap::jacobian_grid`]: crate::SpaceMap::jacobian_grid
+    /// [`SpaceMap::jacobian`]: volmorph_deform::SpaceMap::jacobian
+    /// [`SpaceMap::jacobian_grid`]: volmorph_deform::SpaceMap::jacobian_grid
     pub fn jacobian_grid_separable(
         &self,
         grid: &Geometry,

@@ -89,7 +89,7 @@ impl BSplineLattice {
             },
             control_points: self.control_points().iter().map(|p| p.to_array()).collect(),
         };
-        Ok(serde_json::to_string_pretty(&doc)?)
+        serde_json::to_string_pretty(&doc).map_err(DeformError::json("lattice JSON"))
     }
 
     /// Read a lattice from JSON text in the documented [format](crate::json), validating
@@ -102,7 +102,8 @@ impl BSplineLattice {
     /// points; [`DeformError::Spline`] for invalid knot vectors; [`DeformError::InvalidFrame`];
     /// [`DeformError::NonFinite`] for an out-of-range control point coordinate.
     pub fn from_json(text: &str) -> Result<Self, DeformError> {
-        let doc: LatticeJson = serde_json::from_str(text)?;
+        let doc: LatticeJson =
+            serde_json::from_str(text).map_err(DeformError::json("lattice JSON"))?;
         if doc.version != LATTICE_JSON_VERSION {
             return Err(DeformError::InvalidDescription(format!(
                 "version {} is not supported (expected {LATTICE_JSON_VERSION})",

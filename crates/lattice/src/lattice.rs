@@ -220,9 +220,16 @@ impl BSplineLattice {
     /// the box `F(domain)`.
     ///
     /// # Errors
-    /// [`DeformError::Spline`] if a knot vector has degree 0 or the net is absurdly large,
-    /// [`DeformError::NonFinite`] if a control point overflows.
+    /// [`DeformError::Spline`] if a knot vector has degree 0,
+    /// [`DeformError::TooManyControlPoints`] or [`DeformError::Io`] (memory budget) if the net
+    /// is too large (checked before allocating), [`DeformError::NonFinite`] if a control
+    /// point overflows.
     pub fn identity(frame: LatticeFrame, knots: [KnotVector; 3]) -> Result<Self, DeformError> {
+        check_net_size([
+            knots[0].num_basis(),
+            knots[1].num_basis(),
+            knots[2].num_basis(),
+        ])?;
         let mut spline = TensorBSpline::identity(knots)?;
         let params = spline.control_points();
         for (lin, u) in params.chunks_exact(3).enumerate() {
@@ -369,6 +376,7 @@ impl BSplineLattice {
         counts: [usize; 3],
     ) -> Result<Self, DeformError> {
         check_extent(min, max - min)?;
+        check_net_size(counts)?;
         let mut knots = Vec::with_capacity(3);
         let mut coords: Vec<Vec<f64>> = Vec::with_capacity(3);
         for a in 0..3 {
@@ -397,7 +405,7 @@ impl BSplineLattice {
             .try_into()
             .map_err(|_| DeformError::InvalidFrame("three knot vectors expected".into()))?;
         let frame = LatticeFrame::axis_aligned(DVec3::ZERO, DVec3::ONE)?;
-        let mut pts = Vec::with_capacity(counts[0] * counts[1] * counts[2]);
+        let mut pts = Vec::with_capacity(check_net_size(counts)?);
         for z in &coords[2] {
             for y in &coords[1] {
                 for x in &coords[0] {
@@ -848,9 +856,32 @@ impl SpaceMap for BSplineLattice {
 }
 
 /// Knot vectors of True's uniform cubic lattice: integers `−3 … n` with domain `[0, n − 3]`.
+/// Refuse a control net of `counts` points above [`crate::json::MAX_CONTROL_POINTS`] (the
+/// cap lattice readers enforce) or beyond the memory budget, before anything is allocated.
+/// Returns the number of control points.
+///
+/// # Errors
+/// [`DeformError::TooManyControlPoints`], or [`DeformError::Io`] for the budget.
+pub fn check_net_size(counts: [usize; 3]) -> Result<usize, DeformError> {
+    let max = crate::json::MAX_CONTROL_POINTS;
+    let total = counts
+        .iter()
+        .try_fold(1usize, |acc, &n| acc.checked_mul(n))
+        .filter(|&t| t <= max)
+        .ok_or(DeformError::TooManyControlPoints { counts, max })?;
+    volmorph_io::check_elems(
+        &format!(
+            "a lattice of {}×{}×{} control points",
+            counts[0], counts[1], counts[2]
+        ),
+        total as u64,
+        std::mem::size_of::<DVec3>() as u64,
+    )?;
+    Ok(total)
+}
+
 pub(crate) fn uniform_cubic_knots(counts: [usize; 3]) -> Result<[KnotVector; 3], DeformError> {
-    try_axes(|a| {
-        let n = counts[a];
+    for (a, &n) in counts.iter().enumerate() {
         if n < 4 {
             return Err(DeformError::TooFewControlPoints {
                 axis: a,
@@ -858,6 +889,10 @@ pub(crate) fn uniform_cubic_knots(counts: [usize; 3]) -> Result<[KnotVector; 3],
                 min: 4,
             });
         }
+    }
+    check_net_size(counts)?;
+    try_axes(|a| {
+        let n = counts[a];
         Ok(KnotVector::uniform(3, n, [0.0, (n - 3) as f64])?)
     })
 }

@@ -215,7 +215,7 @@ pub enum DragError {
         domain: [[f64; 2]; 3],
     },
     /// The tool radius is NaN or not > 0.
-    #[error("tool radius {radius} must be > 0")]
+    #[error("tool radius {} must be > 0", volmorph_io::Num(*radius))]
     InvalidRadius {
         /// The radius given.
         radius: f64,

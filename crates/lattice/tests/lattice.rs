@@ -490,11 +490,11 @@ fn malformed_json_is_rejected_with_clear_errors() {
     );
     assert!(matches!(
         edit(&|w| w["control_points"][3][1] = serde_json::Value::Null),
-        DeformError::Json(_)
+        DeformError::Json { .. }
     ));
     assert!(matches!(
         edit(&|w| w["control_points"][3] = serde_json::json!([1.0, 2.0])),
-        DeformError::Json(_)
+        DeformError::Json { .. }
     ));
     assert!(matches!(
         edit(&|w| w["frame"]["spacing"][2] = (-1.0).into()),
@@ -515,7 +515,7 @@ fn malformed_json_is_rejected_with_clear_errors() {
     assert!(degree0.to_string().contains("degree"), "{degree0}");
     assert!(matches!(
         edit(&|w| w["extra"] = 1.into()),
-        DeformError::Json(_)
+        DeformError::Json { .. }
     ));
     assert!(matches!(
         edit(&|w| w["counts"] = serde_json::json!([1 << 20, 1 << 20, 4])),

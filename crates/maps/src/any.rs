@@ -3,7 +3,9 @@
 use glam::{DMat3, DVec3};
 use volmorph_deform::inverse::Inverse;
 use volmorph_deform::{Affine, DeformError, Identity, SampledMap, SpaceMap};
-use volmorph_handles::{AffineMls, BumpMap, FrameMls, RigidMls, SimilarityMls, ThinPlateMap};
+use volmorph_handles::{
+    AffineMls, BumpMap, FrameMls, RigidMls, SimilarityMls, ThinPlateMap, WendlandMap,
+};
 use volmorph_lattice::BSplineLattice;
 use volmorph_trivariate::GeometryMap;
 use volmorph_volume::Geometry;
@@ -35,6 +37,9 @@ pub enum AnyMap {
     FrameMls(FrameMls),
     /// Thin-plate / volume spline through point handles.
     ThinPlate(ThinPlateMap),
+    /// Affine trend plus compactly supported Wendland kernels through point handles (the
+    /// handle map that scales to tens of thousands of handles).
+    Wendland(WendlandMap),
     /// Bryson's bump transform.
     Bump(BumpMap),
     /// A trivariate NURBS geometry acting on its placement box.
@@ -58,6 +63,7 @@ impl AnyMap {
             AnyMap::AffineMls(_) | AnyMap::SimilarityMls(_) | AnyMap::RigidMls(_) => "mls",
             AnyMap::FrameMls(_) => "frame-mls",
             AnyMap::ThinPlate(_) => "thin-plate",
+            AnyMap::Wendland(_) => "wendland",
             AnyMap::Bump(_) => "bump",
             AnyMap::Geometry(_) => "nurbs-geometry",
             AnyMap::Sampled(_) => "sampled",
@@ -91,6 +97,11 @@ impl AnyMap {
             AnyMap::RigidMls(m) => format!("rigid MLS, {} point handles", m.sources().len()),
             AnyMap::FrameMls(m) => format!("frame MLS, {} frames", m.sources().len()),
             AnyMap::ThinPlate(m) => format!("thin-plate spline, {} handles", m.sources().len()),
+            AnyMap::Wendland(m) => format!(
+                "Wendland compact-support spline, {} handles, support radius {}",
+                m.sources().len(),
+                volmorph_io::fmt_f64(m.support())
+            ),
             AnyMap::Bump(b) => format!("bump, radii {} .. {}", b.inner(), b.outer()),
             AnyMap::Geometry(g) => {
                 let [cx, cy, cz] = g.geometry().counts();
@@ -174,6 +185,7 @@ impl AnyMap {
             AnyMap::RigidMls(m) => m,
             AnyMap::FrameMls(m) => m,
             AnyMap::ThinPlate(m) => m,
+            AnyMap::Wendland(m) => m,
             AnyMap::Bump(m) => m,
             AnyMap::Geometry(m) => m,
             AnyMap::Sampled(m) => m,
@@ -269,6 +281,7 @@ from_map!(
     RigidMls => RigidMls,
     FrameMls => FrameMls,
     ThinPlateMap => ThinPlate,
+    WendlandMap => Wendland,
     BumpMap => Bump,
     GeometryMap => Geometry,
     SampledMap => Sampled,

@@ -4,6 +4,7 @@
 use volmorph_deform::DeformError;
 use volmorph_handles::{
     AffineMls, Frame, FrameMls, HandleSet, RigidMls, SimilarityMls, ThinPlateMap, Weighting,
+    WendlandMap,
 };
 
 use crate::AnyMap;
@@ -22,20 +23,26 @@ pub enum HandleMethod {
     Tps,
     /// Frame-based moving least squares (frame handles).
     Frames,
+    /// Affine trend plus compactly supported Wendland kernels, solved by sparse Cholesky (at
+    /// least 1 point handle; the support radius is chosen from the handles' density, see
+    /// [`volmorph_handles::wendland::default_support`]). Interpolates like `tps` but scales
+    /// to tens of thousands of handles, where the thin-plate spline's dense system does not.
+    Wendland,
 }
 
 impl HandleMethod {
     /// Every method, in the order above.
-    pub const ALL: [HandleMethod; 5] = [
+    pub const ALL: [HandleMethod; 6] = [
         HandleMethod::Affine,
         HandleMethod::Similarity,
         HandleMethod::Rigid,
         HandleMethod::Tps,
         HandleMethod::Frames,
+        HandleMethod::Wendland,
     ];
 
     /// The method's name as on the command line (`affine`, `similarity`, `rigid`, `tps`,
-    /// `frames`).
+    /// `frames`, `wendland`).
     #[must_use]
     pub fn name(self) -> &'static str {
         match self {
@@ -44,6 +51,7 @@ impl HandleMethod {
             HandleMethod::Rigid => "rigid",
             HandleMethod::Tps => "tps",
             HandleMethod::Frames => "frames",
+            HandleMethod::Wendland => "wendland",
         }
     }
 }
@@ -55,7 +63,7 @@ pub struct HandleOptions {
     pub weighting: Weighting,
     /// Weight `β > 0` of the frame axes (frames).
     pub beta: f64,
-    /// Smoothing `λ ≥ 0` of the thin-plate spline (0 interpolates).
+    /// Smoothing `λ ≥ 0` of the thin-plate and Wendland splines (0 interpolates).
     pub smoothing: f64,
 }
 
@@ -114,6 +122,7 @@ pub fn handle_map(
         HandleMethod::Similarity => AnyMap::SimilarityMls(SimilarityMls::new(&s, &t, w)?),
         HandleMethod::Rigid => AnyMap::RigidMls(RigidMls::new(&s, &t, w)?),
         HandleMethod::Tps => AnyMap::ThinPlate(ThinPlateMap::new(&s, &t, options.smoothing)?),
+        HandleMethod::Wendland => AnyMap::Wendland(WendlandMap::new(&s, &t, options.smoothing)?),
         HandleMethod::Frames => {
             if set.frames.is_empty() {
                 return Err(DeformError::InvalidHandles(

@@ -13,6 +13,7 @@
 //! | `mls` | `method` (`affine`, `similarity`, `rigid`), `weighting`, `sources`, `targets` |
 //! | `frame-mls` | `beta`, `weighting`, `sources`, `targets`: frames `{"origin": p, "axes": [a0, a1, a2]}` (axis vectors) |
 //! | `thin-plate` | `smoothing`, `sources`, `targets` |
+//! | `wendland` | `support` (radius, physical units), `smoothing`, `sources`, `targets` |
 //! | `bump` | `center`, `inner`, `outer`, `matrix`, `offset` |
 //! | `nurbs-geometry` | `model` (a trivariate volume file's JSON object), `box`: `{"min": p, "max": p}` |
 //! | `sampled` | `grid` (`dims`, `spacing`, `origin`, `direction` rows), `positions` (x fastest) |
@@ -29,6 +30,7 @@ use volmorph_deform::inverse::Inverse;
 use volmorph_deform::{Affine, InverseOptions, SampledMap};
 use volmorph_handles::{
     AffineMls, BumpMap, Frame, FrameMls, RigidMls, SimilarityMls, ThinPlateMap, Weighting,
+    WendlandMap,
 };
 use volmorph_lattice::BSplineLattice;
 use volmorph_trivariate::{AnyAggregate, GeometryMap};
@@ -104,6 +106,15 @@ struct FrameMlsJson {
 #[derive(Serialize, Deserialize)]
 #[serde(deny_unknown_fields)]
 struct ThinPlateJson {
+    smoothing: f64,
+    sources: Vec<[f64; 3]>,
+    targets: Vec<[f64; 3]>,
+}
+
+#[derive(Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+struct WendlandJson {
+    support: f64,
     smoothing: f64,
     sources: Vec<[f64; 3]>,
     targets: Vec<[f64; 3]>,
@@ -249,6 +260,15 @@ impl AnyMap {
                 "thin-plate",
                 ThinPlateJson {
                     smoothing: m.system().smoothing(),
+                    sources: points(m.sources()),
+                    targets: points(m.targets()),
+                },
+            )?,
+            AnyMap::Wendland(m) => tagged(
+                "wendland",
+                WendlandJson {
+                    support: m.support(),
+                    smoothing: m.smoothing(),
                     sources: points(m.sources()),
                     targets: points(m.targets()),
                 },
@@ -425,6 +445,16 @@ impl AnyMap {
                     m.smoothing,
                 )?)
             }
+            "wendland" => {
+                let m: WendlandJson = serde_json::from_value(body()).map_err(parse("wendland"))?;
+                AnyMap::Wendland(WendlandMap::with_support(
+                    &vecs(&m.sources),
+                    &vecs(&m.targets),
+                    Some(m.support),
+                    m.smoothing,
+                    &volmorph_io::NoProgress,
+                )?)
+            }
             "bump" => {
                 let b: BumpJson = serde_json::from_value(body()).map_err(parse("bump"))?;
                 AnyMap::Bump(BumpMap::new(
@@ -527,7 +557,8 @@ impl AnyMap {
             other => {
                 return Err(MapError::Invalid(format!(
                     "unknown map kind {other:?} (known: identity, affine, bspline-lattice, mls, \
-                     frame-mls, thin-plate, bump, nurbs-geometry, sampled, compose, inverse)"
+                     frame-mls, thin-plate, wendland, bump, nurbs-geometry, sampled, compose, \
+                     inverse)"
                 )));
             }
         })

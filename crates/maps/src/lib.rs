@@ -1,7 +1,8 @@
 //! volmorph-maps: every space map volmorph has, by name.
 //!
 //! * [`AnyMap`] — one value for every kind of map: identity, affine, B-spline lattices, MLS
-//!   (affine, similarity, rigid, frames), thin-plate splines, Bryson's bump, NURBS geometry,
+//!   (affine, similarity, rigid, frames), thin-plate splines, Wendland compact-support splines,
+//!   Bryson's bump, NURBS geometry,
 //!   sampled maps, compositions and numerical inverses. It is a
 //!   [`SpaceMap`](volmorph_deform::SpaceMap) that keeps each kind's fast paths.
 //! * [`json`] — the tagged, versioned JSON form of every kind; [`itk`] — ITK text transforms

@@ -10,6 +10,7 @@ use volmorph_deform::inverse::Inverse;
 use volmorph_deform::{Affine, InverseOptions, SampledMap};
 use volmorph_handles::{
     AffineMls, BumpMap, Frame, FrameMls, RigidMls, SimilarityMls, ThinPlateMap, Weighting,
+    WendlandMap,
 };
 use volmorph_lattice::BSplineLattice;
 use volmorph_maps::{AnyMap, LiveMap};
@@ -272,6 +273,20 @@ space_map_conformance!(
     suite(
         || AnyMap::ThinPlate(tps(false)),
         || AnyMap::ThinPlate(tps(true)),
+        1e-5
+    )
+);
+space_map_conformance!(
+    wendland,
+    suite(
+        || {
+            let (s, t) = handles(60, 16);
+            AnyMap::Wendland(WendlandMap::new(&s, &t, 0.0).unwrap())
+        },
+        || {
+            let (s, _) = handles(60, 16);
+            AnyMap::Wendland(WendlandMap::new(&s, &s, 0.0).unwrap())
+        },
         1e-5
     )
 );

@@ -32,7 +32,10 @@ pub enum FileKind {
 }
 
 fn read_small_text(path: &Path) -> Result<String, SceneError> {
-    let meta = std::fs::metadata(path).map_err(|e| volmorph_io::IoError::os(path, e))?;
+    // A FIFO or a device (`/dev/zero`) reports length 0: refuse what is not a regular file.
+    let meta = volmorph_io::open_regular(path)?
+        .metadata()
+        .map_err(|e| volmorph_io::IoError::os(path, e))?;
     if meta.len() > MAX_TEXT_FILE_BYTES {
         return Err(SceneError::invalid(format!(
             "{}: {} bytes is more than a text model may have ({MAX_TEXT_FILE_BYTES})",

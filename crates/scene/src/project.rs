@@ -3,21 +3,28 @@
 //!
 //! ```text
 //! scene.vmproj            the manifest (JSON, written last, atomically)
-//! scene.vmproj.data/      one file per object that has bulk data: <id>.mha (volumes, exact
-//!                         geometry), <id>.ply (meshes, binary double), <id>.json (NURBS)
+//! scene.vmproj.data/      one file per object that has bulk data: <id>.<tag>.mha (volumes,
+//!                         exact geometry), <id>.<tag>.ply (meshes, binary double),
+//!                         <id>.<tag>.json (NURBS); <tag> is 8 hex digits, new on every save
 //! ```
+//!
+//! Saving is one commit: the data files get names no earlier save used, the manifest's atomic
+//! rename commits them, and only then are the data files of earlier saves removed. A save that
+//! fails or is killed at any point leaves the previous manifest with its own, untouched data
+//! files (plus at worst unreferenced new ones, removed by the next save), never a manifest
+//! beside data that is not its own.
 //!
 //! ```json
 //! {
 //!   "format": "volmorph-scene", "version": 1, "next_id": 4,
 //!   "objects": [
-//!     {"id": 1, "name": "teapot", "kind": "volume", "file": "scene.vmproj.data/1.mha"},
+//!     {"id": 1, "name": "teapot", "kind": "volume", "file": "scene.vmproj.data/1.3f09a2c1.mha"},
 //!     {"id": 2, "name": "lattice", "kind": "map", "map": { …map JSON… }},
 //!     {"id": 3, "name": "handles", "kind": "handles", "handles": { …handle JSON… },
 //!      "method": "rigid", "options": {"weighting": {"type": "inverse-distance", "alpha": 1},
 //!      "beta": 1, "smoothing": 0}},
 //!     {"id": 4, "name": "warped", "kind": "derived", "recipe": { … },
-//!      "file": "scene.vmproj.data/4.mha"}
+//!      "file": "scene.vmproj.data/4.3f09a2c1.mha"}
 //!   ]
 //! }
 //! ```
@@ -121,6 +128,25 @@ impl From<OptionsJson> for HandleOptions {
     }
 }
 
+/// `true` for a data file name that [`Scene::save`] writes: `<id>.<8 hex digits>.<ext>`, or
+/// `<id>.<ext>` as earlier versions wrote, for the extensions of saved data.
+fn is_saved_data_file(name: &str) -> bool {
+    let mut parts = name.split('.');
+    let (Some(id), Some(second)) = (parts.next(), parts.next()) else {
+        return false;
+    };
+    let third = parts.next();
+    if parts.next().is_some() || id.is_empty() || !id.bytes().all(|b| b.is_ascii_digit()) {
+        return false;
+    }
+    let ext = match third {
+        None => second,
+        Some(ext) if second.len() == 8 && second.bytes().all(|b| b.is_ascii_hexdigit()) => ext,
+        Some(_) => return false,
+    };
+    matches!(ext, "mha" | "ply" | "json")
+}
+
 /// The data folder of the project file `path`: `<file name>.data` beside it.
 #[must_use]
 pub fn data_folder(path: &Path) -> PathBuf {
@@ -138,15 +164,45 @@ fn project_err(path: &Path, message: impl Into<String>) -> SceneError {
 
 impl Scene {
     /// Save the scene as the project `path` (see the [module docs](self)): data files first,
-    /// each written atomically, then the manifest, atomically. A failure leaves any previous
-    /// manifest in place.
+    /// under names new to this save, then the manifest, atomically, then the data files of
+    /// earlier saves are removed. A failure leaves any previous manifest and its data files in
+    /// place.
     ///
     /// # Errors
     /// I/O errors naming the file; [`SceneError::Map`] if a map cannot be serialised.
     pub fn save(&self, path: &Path) -> Result<(), SceneError> {
         let folder = data_folder(path);
-        let base = path.parent().unwrap_or(Path::new(""));
         std::fs::create_dir_all(&folder).map_err(|e| volmorph_io::IoError::os(&folder, e))?;
+        let tag = format!("{:08x}", volmorph_io::atomic::token());
+        let mut written: Vec<String> = Vec::new();
+        let result = self.save_with(path, &folder, &tag, &mut written);
+        if result.is_err() {
+            // Uncommitted: the previous manifest still names its own files.
+            for name in &written {
+                let _ = std::fs::remove_file(folder.join(name));
+            }
+            return result;
+        }
+        // Committed: the data files of earlier saves (and of saves that never committed).
+        if let Ok(entries) = std::fs::read_dir(&folder) {
+            for entry in entries.flatten() {
+                let name = entry.file_name().to_string_lossy().into_owned();
+                if is_saved_data_file(&name) && !written.contains(&name) {
+                    let _ = std::fs::remove_file(entry.path());
+                }
+            }
+        }
+        Ok(())
+    }
+
+    fn save_with(
+        &self,
+        path: &Path,
+        folder: &Path,
+        tag: &str,
+        written: &mut Vec<String>,
+    ) -> Result<(), SceneError> {
+        let base = path.parent().unwrap_or(Path::new(""));
         let rel = |file: &str| -> String {
             let f = folder.join(file);
             f.strip_prefix(base)
@@ -171,17 +227,20 @@ impl Scene {
             };
             match &entry.object {
                 Object::Volume(v) => {
-                    let name = format!("{}.mha", id.0);
+                    let name = format!("{}.{tag}.mha", id.0);
+                    written.push(name.clone());
                     volmorph_volume_io::write(&folder.join(&name), v)?;
                     o.file = Some(rel(&name));
                 }
                 Object::Mesh(m) => {
-                    let name = format!("{}.ply", id.0);
+                    let name = format!("{}.{tag}.ply", id.0);
+                    written.push(name.clone());
                     volmorph_mesh::write(&folder.join(&name), m)?;
                     o.file = Some(rel(&name));
                 }
                 Object::Nurbs(a) => {
-                    let name = format!("{}.json", id.0);
+                    let name = format!("{}.{tag}.json", id.0);
+                    written.push(name.clone());
                     volmorph_trivariate::save(&folder.join(&name), a)?;
                     o.file = Some(rel(&name));
                 }
@@ -203,12 +262,14 @@ impl Scene {
                     o.recipe = Some(d.recipe().clone());
                     match d.output() {
                         Some(DerivedOutput::Volume(v)) => {
-                            let name = format!("{}.mha", id.0);
+                            let name = format!("{}.{tag}.mha", id.0);
+                            written.push(name.clone());
                             volmorph_volume_io::write(&folder.join(&name), v)?;
                             o.file = Some(rel(&name));
                         }
                         Some(DerivedOutput::Mesh(m)) => {
-                            let name = format!("{}.ply", id.0);
+                            let name = format!("{}.{tag}.ply", id.0);
+                            written.push(name.clone());
                             volmorph_mesh::write(&folder.join(&name), m)?;
                             o.file = Some(rel(&name));
                         }
@@ -237,7 +298,10 @@ impl Scene {
     /// duplicate id, a data path outside the project's folder, or a recipe reading an object
     /// that does not precede it; the errors of the data files' readers.
     pub fn load(path: &Path) -> Result<Scene, SceneError> {
-        let text = std::fs::read_to_string(path).map_err(|e| volmorph_io::IoError::os(path, e))?;
+        // Bounded by the memory budget; FIFOs and devices are refused by name.
+        let bytes = volmorph_io::read_maybe_gz(path)?;
+        let text = String::from_utf8(bytes)
+            .map_err(|e| project_err(path, format!("not UTF-8 text: {e}")))?;
         let m: Manifest =
             serde_json::from_str(&text).map_err(|e| project_err(path, e.to_string()))?;
         if m.format != PROJECT_FORMAT {

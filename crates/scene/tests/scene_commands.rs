@@ -545,3 +545,80 @@ fn frep_models_are_sampled_through_maps_and_follow_edits() {
     assert!(e.to_string().contains("line 1"), "{e}");
     assert!((value(&scene, plain, p) - (2.25 - p.length_squared())).abs() < 1e-6);
 }
+
+/// Saving a project again rewrote `<id>.mha` in place before the manifest, so a save that
+/// failed or was killed in between left the old manifest beside new data, read back without
+/// an error. Every save now writes data files under new names and removes the old ones only
+/// after the manifest's commit: the files the old manifest names are never touched.
+#[test]
+fn project_resave_rewrote_data_files_the_old_manifest_names() {
+    let (mut scene, _, _, l, w) = teapot_scene();
+    let dir = tempfile::tempdir().unwrap();
+    let path = dir.path().join("scene.vmproj");
+    scene.save(&path).unwrap();
+    let folder = volmorph_scene::project::data_folder(&path);
+    let listing = || {
+        let mut v: Vec<String> = std::fs::read_dir(&folder)
+            .unwrap()
+            .map(|e| e.unwrap().file_name().to_string_lossy().into_owned())
+            .collect();
+        v.sort();
+        v
+    };
+    let first = listing();
+    let first_manifest = std::fs::read_to_string(&path).unwrap();
+    assert!(first.iter().all(|n| first_manifest.contains(n.as_str())));
+
+    let spout = DVec3::new(0.76, 0.0, 0.25);
+    drag(&mut scene, l, spout, spout + DVec3::new(0.05, 0.0, -0.1));
+    // What a save killed before its commit leaves: an unreferenced data file.
+    std::fs::write(folder.join("9.0badf00d.mha"), b"orphan").unwrap();
+    // A file of the user's own in the data folder is not ours to remove.
+    std::fs::write(folder.join("notes.txt"), b"mine").unwrap();
+    scene.save(&path).unwrap();
+    let second = listing();
+    let second_manifest = std::fs::read_to_string(&path).unwrap();
+    // Disjoint names: the second save never wrote a file the first manifest names, so the
+    // first manifest with its data stayed consistent until the second manifest's rename.
+    for n in &first {
+        assert!(!second_manifest.contains(n.as_str()), "{n} reused");
+    }
+    let data: Vec<&String> = second.iter().filter(|n| *n != "notes.txt").collect();
+    assert_eq!(data.len(), first.len(), "{second:?}");
+    assert!(data.iter().all(|n| second_manifest.contains(n.as_str())));
+    assert!(second.contains(&"notes.txt".to_string()));
+    let back = Scene::load(&path).unwrap();
+    assert_eq!(volume_bytes(&scene, w), volume_bytes(&back, w));
+
+    // A failed save (the manifest cannot be renamed over a folder) leaves no new data file.
+    let blocked = dir.path().join("blocked.vmproj");
+    std::fs::create_dir(&blocked).unwrap();
+    assert!(scene.save(&blocked).is_err());
+    let blocked_data = volmorph_scene::project::data_folder(&blocked);
+    assert_eq!(std::fs::read_dir(&blocked_data).unwrap().count(), 0);
+}
+
+/// A FIFO (or a device such as `/dev/zero`) reports length 0, so the size check let it
+/// through and reading blocked forever (or grew without bound). It is refused by name.
+#[cfg(unix)]
+#[test]
+fn fifo_as_model_file_reported_as_not_found_or_hangs() {
+    let dir = tempfile::tempdir().unwrap();
+    let fifo = dir.path().join("model.hf");
+    let made = std::process::Command::new("mkfifo").arg(&fifo).status();
+    if !made.is_ok_and(|s| s.success()) {
+        eprintln!("mkfifo unavailable; skipped");
+        return;
+    }
+    let e = volmorph_scene::files::read_object(&fifo)
+        .unwrap_err()
+        .to_string();
+    assert!(e.contains("FIFO") && e.contains("model.hf"), "{e}");
+    let path = dir.path().join("p.vmproj");
+    std::process::Command::new("mkfifo")
+        .arg(&path)
+        .status()
+        .unwrap();
+    let e = Scene::load(&path).unwrap_err().to_string();
+    assert!(e.contains("FIFO") && e.contains("p.vmproj"), "{e}");
+}

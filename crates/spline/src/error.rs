@@ -9,7 +9,7 @@
 #[derive(Debug, Clone, PartialEq, thiserror::Error)]
 pub enum SplineError {
     /// A knot is NaN or infinite.
-    #[error("knot {index} is not finite ({value})")]
+    #[error("knot {index} is not finite ({})", volmorph_io::Num(*value))]
     NonFiniteKnot {
         /// Position of the knot in the knot vector.
         index: usize,
@@ -17,7 +17,7 @@ pub enum SplineError {
         value: f64,
     },
     /// Knots must be non-decreasing: `knots[index] < knots[index - 1]`.
-    #[error("knots decrease at index {index}: {previous} then {value}")]
+    #[error("knots decrease at index {index}: {} then {}", volmorph_io::Num(*previous), volmorph_io::Num(*value))]
     DecreasingKnots {
         /// Position of the first knot smaller than its predecessor.
         index: usize,
@@ -57,7 +57,7 @@ pub enum SplineError {
         max: usize,
     },
     /// A knot value is repeated more than `degree + 1` times.
-    #[error("knot {value} has multiplicity {multiplicity}, more than degree + 1 = {max}")]
+    #[error("knot {} has multiplicity {multiplicity}, more than degree + 1 = {max}", volmorph_io::Num(*value))]
     MultiplicityTooHigh {
         /// The repeated knot.
         value: f64,
@@ -67,7 +67,7 @@ pub enum SplineError {
         max: usize,
     },
     /// The parametric domain `[u_p, u_n]` is empty or not finite.
-    #[error("parametric domain [{start}, {end}] is empty or not finite")]
+    #[error("parametric domain [{}, {}] is empty or not finite", volmorph_io::Num(*start), volmorph_io::Num(*end))]
     EmptyDomain {
         /// Domain start.
         start: f64,
@@ -75,7 +75,7 @@ pub enum SplineError {
         end: f64,
     },
     /// An interior knot given to a clamped constructor does not lie strictly inside the domain.
-    #[error("interior knot {value} is not strictly inside the domain [{start}, {end}]")]
+    #[error("interior knot {} is not strictly inside the domain [{}, {}]", volmorph_io::Num(*value), volmorph_io::Num(*start), volmorph_io::Num(*end))]
     InteriorKnotOutsideDomain {
         /// The knot.
         value: f64,
@@ -85,7 +85,7 @@ pub enum SplineError {
         end: f64,
     },
     /// A parameter lies outside the domain `[start, end]` of `axis` (or is NaN).
-    #[error("parameter {value} on axis {axis} is outside the domain [{start}, {end}]")]
+    #[error("parameter {} on axis {axis} is outside the domain [{}, {}]", volmorph_io::Num(*value), volmorph_io::Num(*start), volmorph_io::Num(*end))]
     ParameterOutsideDomain {
         /// Parametric axis (0 = u, 1 = v, 2 = w).
         axis: usize,
@@ -103,7 +103,7 @@ pub enum SplineError {
         span: usize,
     },
     /// A knot to insert lies outside the domain.
-    #[error("knot {value} to insert is outside the domain [{start}, {end}]")]
+    #[error("knot {} to insert is outside the domain [{}, {}]", volmorph_io::Num(*value), volmorph_io::Num(*start), volmorph_io::Num(*end))]
     KnotOutsideDomain {
         /// The knot.
         value: f64,
@@ -124,7 +124,7 @@ pub enum SplineError {
         got: usize,
     },
     /// A control value is NaN or infinite.
-    #[error("coefficient {index} is not finite ({value})")]
+    #[error("coefficient {index} is not finite ({})", volmorph_io::Num(*value))]
     NonFiniteCoefficient {
         /// Position in the flat coefficient array.
         index: usize,
@@ -132,7 +132,7 @@ pub enum SplineError {
         value: f64,
     },
     /// A rational weight is not finite and strictly positive.
-    #[error("weight {index} is {value}; weights must be finite and > 0")]
+    #[error("weight {index} is {}; weights must be finite and > 0", volmorph_io::Num(*value))]
     NonPositiveWeight {
         /// Linear control-point index.
         index: usize,
@@ -196,7 +196,7 @@ pub enum SplineError {
         got: usize,
     },
     /// Interpolation sites must be non-decreasing and inside the domain.
-    #[error("interpolation site {index} ({value}) is decreasing or outside the domain")]
+    #[error("interpolation site {index} ({}) is decreasing or outside the domain", volmorph_io::Num(*value))]
     InvalidSite {
         /// Position of the site.
         index: usize,
@@ -222,7 +222,7 @@ pub enum SplineError {
         /// The axis.
         axis: usize,
     },
-    /// A size computation overflowed or exceeds [`crate::MAX_ALLOC_BYTES`].
+    /// A size computation overflowed or exceeds the memory budget ([`volmorph_io::memory_limit`]).
     #[error("requested size is too large: {0}")]
     TooLarge(String),
 }

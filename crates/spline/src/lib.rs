@@ -44,4 +44,4 @@ pub use error::SplineError;
 pub use grid::BasisTable;
 pub use interpolate::{Collocation, Interpolator, interpolate_greville};
 pub use knots::{KnotSpan, KnotVector, MAX_DEGREE};
-pub use spline::{BSplineCurve, BSplineSurface, BSplineVolume, MAX_ALLOC_BYTES, TensorBSpline};
+pub use spline::{BSplineCurve, BSplineSurface, BSplineVolume, TensorBSpline};

@@ -24,12 +24,8 @@
 use crate::basis::{BASIS_BUF, basis_and_first_unchecked, basis_unchecked};
 use crate::{KnotVector, MAX_DEGREE, SplineError};
 
-/// Largest total size (in bytes) of any array this crate allocates from sizes it computes
-/// (control nets after refinement, Bézier pieces): 64 GiB, the same bound as volmorph's readers.
-pub const MAX_ALLOC_BYTES: u64 = 64 << 30;
-
-/// Multiply sizes with overflow checking and require `product · 8` bytes to stay within
-/// [`MAX_ALLOC_BYTES`]. Returns the product.
+/// Multiply sizes with overflow checking and require `product · 8` bytes to stay within the
+/// memory budget ([`volmorph_io::memory_limit`]). Returns the product.
 pub(crate) fn checked_count(dims: &[usize]) -> Result<usize, SplineError> {
     let mut n: usize = 1;
     for &d in dims {
@@ -37,11 +33,8 @@ pub(crate) fn checked_count(dims: &[usize]) -> Result<usize, SplineError> {
             .checked_mul(d)
             .ok_or_else(|| SplineError::TooLarge(format!("sizes {dims:?} overflow")))?;
     }
-    if (n as u64).saturating_mul(8) > MAX_ALLOC_BYTES {
-        return Err(SplineError::TooLarge(format!(
-            "sizes {dims:?} need more than {MAX_ALLOC_BYTES} bytes"
-        )));
-    }
+    volmorph_io::check_elems(&format!("a spline array of sizes {dims:?}"), n as u64, 8)
+        .map_err(|e| SplineError::TooLarge(e.to_string()))?;
     Ok(n)
 }
 

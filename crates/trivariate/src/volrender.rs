@@ -322,7 +322,19 @@ impl<'a> VolumeRenderer<'a> {
         if !(options.step.is_finite() && options.step > 0.0) {
             return Err(TrivariateError::InvalidArgument(format!(
                 "render step {} must be finite and > 0",
-                options.step
+                volmorph_io::Num(options.step)
+            )));
+        }
+        // A ray takes at most `max_samples` steps: a shorter step could not cross the model
+        // and would spend the whole sample budget on every ray.
+        let min_step = tracer.diagonal() / options.max_samples.max(1) as f64;
+        if options.step < min_step {
+            return Err(TrivariateError::InvalidArgument(format!(
+                "render step {} is below {} (the model's diagonal / {} samples per ray): a ray \
+                 could not cross the model",
+                volmorph_io::Num(options.step),
+                volmorph_io::Num(min_step),
+                options.max_samples
             )));
         }
         if !(0.0..1.0).contains(&options.min_transmittance) || options.max_samples == 0 {
@@ -423,7 +435,22 @@ impl<'a> VolumeRenderer<'a> {
     /// # Errors
     /// The first ray's error; image allocation errors as [`TrivariateError::InvalidArgument`].
     pub fn render_image(&self, camera: &Camera) -> Result<RgbaImage, TrivariateError> {
+        self.render_image_with(camera, &volmorph_io::NoProgress)
+    }
+
+    /// [`VolumeRenderer::render_image`] reporting one step per image row to `progress` and
+    /// stopping when it is cancelled.
+    ///
+    /// # Errors
+    /// As [`VolumeRenderer::render_image`]; [`TrivariateError::InvalidArgument`] saying
+    /// "cancelled" when `progress` asks to stop.
+    pub fn render_image_with(
+        &self,
+        camera: &Camera,
+        progress: &dyn volmorph_io::Progress,
+    ) -> Result<RgbaImage, TrivariateError> {
         let (w, h) = (camera.width(), camera.height());
+        progress.start("volume rendering", u64::from(h));
         let mut img = RgbaImage::new(w, h, [0, 0, 0, 0])
             .map_err(|e| TrivariateError::InvalidArgument(e.to_string()))?;
         let width = w as usize;
@@ -438,7 +465,10 @@ impl<'a> VolumeRenderer<'a> {
                     let c = self.render_ray(ray.origin.to_array(), ray.dir.to_array())?;
                     *px = to_pixel(&c);
                 }
-                Ok(())
+                progress.advance(1);
+                progress
+                    .check()
+                    .map_err(|c| TrivariateError::InvalidArgument(c.to_string()))
             })?;
         Ok(img)
     }

@@ -192,6 +192,50 @@ fn jacobian_vanishing_boundary_is_found_on_a_folded_volume() {
     assert!(fold.normal[0] < -0.999, "{fold:?}");
 }
 
+/// Issue: `nurbs render --step 1e-9` had no lower bound and ran without end. The step is
+/// now bounded below by the model's diagonal over the samples a ray may take.
+#[test]
+fn nurbs_render_step_has_no_lower_bound() {
+    let g = box_geometry([1.0; 3]);
+    let tracer = RayTracer::from_geometry(&g, TraceOptions::default()).unwrap();
+    let v = AggregateVolume::new(g)
+        .unwrap()
+        .with_attribute("d", constant(1.0))
+        .unwrap();
+    let tf = TransferFunction::parse("0:1,1,1,0.5").unwrap();
+    let base = RenderOptions::for_diagonal(tracer.diagonal());
+    let tiny = RenderOptions { step: 1e-9, ..base };
+    let e = VolumeRenderer::new(&v, &tracer, "d", tf.clone(), tiny).unwrap_err();
+    let msg = e.to_string();
+    assert!(
+        msg.contains("1e-9") && msg.contains("could not cross"),
+        "{msg}"
+    );
+    // Just at the bound it is accepted.
+    let min = tracer.diagonal() / base.max_samples as f64;
+    let ok = RenderOptions {
+        step: min * 1.0001,
+        ..base
+    };
+    assert!(VolumeRenderer::new(&v, &tracer, "d", tf.clone(), ok).is_ok());
+    // Rendering reports rows and can be cancelled.
+    let r = VolumeRenderer::new(&v, &tracer, "d", tf, base).unwrap();
+    let cam = volmorph_render::Camera::look_at(
+        glam::DVec3::new(3.0, 2.0, 4.0),
+        glam::DVec3::splat(0.5),
+        glam::DVec3::Z,
+        volmorph_render::Projection::Perspective { fov_y: 0.8 },
+        8,
+        6,
+    )
+    .unwrap();
+    let count = volmorph_io::progress::Counter::new();
+    r.render_image_with(&cam, &count).unwrap();
+    assert_eq!(count.steps(), 6);
+    let stop = volmorph_io::progress::Counter::cancel_after(1);
+    assert!(r.render_image_with(&cam, &stop).is_err());
+}
+
 #[test]
 fn bad_rays_are_errors() {
     let g = box_geometry([1.0; 3]);

@@ -127,6 +127,34 @@ impl Default for WriteOptions {
     }
 }
 
+/// Options for readers.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub struct ReadOptions {
+    /// Accept a detached data file (MetaImage `ElementDataFile`, NRRD `data file`) that
+    /// resolves, after symbolic links, outside the header's folder. Off by default: a header
+    /// from an untrusted source could otherwise make volmorph read any file the user can
+    /// read (and, through `convert`, copy it). The default of [`ReadOptions::default`] can
+    /// be changed for the whole process with [`set_allow_external_data_default`].
+    pub allow_external_data: bool,
+}
+
+static ALLOW_EXTERNAL_DEFAULT: std::sync::atomic::AtomicBool =
+    std::sync::atomic::AtomicBool::new(false);
+
+/// Set the value of [`ReadOptions::allow_external_data`] in [`ReadOptions::default`] (and so
+/// in [`read`]) for the rest of the process: the command line's `--allow-external-data`.
+pub fn set_allow_external_data_default(allow: bool) {
+    ALLOW_EXTERNAL_DEFAULT.store(allow, std::sync::atomic::Ordering::Relaxed);
+}
+
+impl Default for ReadOptions {
+    fn default() -> Self {
+        Self {
+            allow_external_data: ALLOW_EXTERNAL_DEFAULT.load(std::sync::atomic::Ordering::Relaxed),
+        }
+    }
+}
+
 /// The header of a volume file as `(field, value)` pairs in file order, for display.
 #[derive(Debug, Clone, PartialEq, Default)]
 pub struct Header {
@@ -145,25 +173,35 @@ pub struct VolumeFile {
     pub header: Header,
 }
 
-/// Read a volume; the format is chosen by extension.
+/// Read a volume with default [`ReadOptions`]; the format is chosen by extension.
 ///
 /// # Errors
-/// Any [`VolumeError`], carrying the file path. Reading a `.raw` file needs [`raw::read`]
-/// with a [`raw::RawSpec`] and is refused here.
+/// Any [`VolumeError`], carrying the file path: a path that is not a regular file (a
+/// folder, a FIFO, a device) is refused before reading, and so is a detached data file
+/// outside the header's folder ([`VolumeError::ExternalData`]). Reading a `.raw` file
+/// needs [`raw::read`] with a [`raw::RawSpec`] and is refused here.
 pub fn read(path: &Path) -> Result<AnyVolume, VolumeError> {
     read_with_header(path).map(|f| f.volume)
+}
+
+/// Read a volume and its header fields with default [`ReadOptions`].
+///
+/// # Errors
+/// As [`read`].
+pub fn read_with_header(path: &Path) -> Result<VolumeFile, VolumeError> {
+    read_with(path, &ReadOptions::default())
 }
 
 /// Read a volume and its header fields; the format is chosen by extension.
 ///
 /// # Errors
 /// As [`read`].
-pub fn read_with_header(path: &Path) -> Result<VolumeFile, VolumeError> {
+pub fn read_with(path: &Path, options: &ReadOptions) -> Result<VolumeFile, VolumeError> {
     let format = Format::from_path(path)?;
     let res = match format {
         Format::Nifti => nifti::read(path),
-        Format::MetaImage => metaimage::read(path),
-        Format::Nrrd => nrrd::read(path),
+        Format::MetaImage => metaimage::read(path, options),
+        Format::Nrrd => nrrd::read(path, options),
         Format::Vtk => vtk::read(path),
         Format::Raw => Err(VolumeError::Unsupported(
             "a .raw file has no header: give its dims and voxel type (raw::RawSpec)".into(),

@@ -34,8 +34,17 @@
 //! # Writing
 //! Always `NDims = 3`, little-endian, with every number printed in shortest round-trip form
 //! so spacing, origin and direction read back bit-exactly. `.mha` holds the voxels inline;
-//! `.mhd` gets a data file beside it, `<stem>.raw` (or `<stem>.zraw` when compressed),
-//! written atomically before the header. [`WriteOptions::compress`] selects
+//! `.mhd` gets a data file beside it named after the header and the write,
+//! `<name>.mhd.<8 hex digits>.raw` (`.zraw` when compressed), written before the header and
+//! committed by the header's rename (see [`volmorph_io::atomic`]): a failed or killed write
+//! leaves the old header with its own old data, and `X.mhd` never shares a data file with
+//! `X.nhdr`.
+//!
+//! # Data file location
+//! A detached data file must lie in the header's folder (after resolving symbolic links);
+//! an absolute path, `../` or a link leading out is refused with
+//! [`VolumeError::ExternalData`] unless [`ReadOptions::allow_external_data`] is set. A data
+//! file that is not a regular file (a FIFO, a device) is refused. [`WriteOptions::compress`] selects
 //! `CompressedData = True` at [`WriteOptions::level`].
 
 use std::io::Write;
@@ -46,10 +55,19 @@ use glam::{DMat3, DVec3};
 use crate::text_header::{
     self, CountingWriter, DataSpec, Encoding, Input, Lines, Start, fmt_f64, os_err,
 };
-use crate::{Header, WriteOptions};
+use crate::{Header, ReadOptions, WriteOptions};
 use volmorph_volume::{AnyVolume, Geometry, VolumeError, VoxelType};
 
 const FMT: &str = "MetaImage";
+
+/// Extensions of the data files written beside a `.mhd` header.
+const DATA_EXTS: [&str; 2] = ["raw", "zraw"];
+
+/// `true` for a `.mhd` name (ASCII case ignored): the voxels go to a detached data file.
+fn is_detached_name(path: &Path) -> bool {
+    path.extension()
+        .is_some_and(|e| e.eq_ignore_ascii_case("mhd"))
+}
 
 fn err(msg: impl Into<String>) -> VolumeError {
     VolumeError::format(FMT, msg)
@@ -366,13 +384,14 @@ pub fn read_bytes(bytes: &[u8]) -> Result<(AnyVolume, Header), VolumeError> {
     Ok((v, meta.header))
 }
 
-pub(crate) fn read(path: &Path) -> Result<(AnyVolume, Header), VolumeError> {
+pub(crate) fn read(path: &Path, options: &ReadOptions) -> Result<(AnyVolume, Header), VolumeError> {
     let (prefix, len) = text_header::read_prefix(path)?;
     let meta = parse_header(&prefix, prefix.len() as u64 == len)?;
     let v = match &meta.data_file {
         None => decode(&meta, Input::File(path), false)?,
         Some(name) => {
-            let data = text_header::existing_data_file(FMT, "ElementDataFile", path, name)?;
+            let data =
+                text_header::existing_data_file(FMT, "ElementDataFile", path, name, options)?;
             decode(&meta, Input::File(&data), true).map_err(|e| e.at(&data))?
         }
     };
@@ -467,18 +486,25 @@ pub(crate) fn write(
     volume.geometry().validate()?;
     let os = os_err(path);
     let data_ext = if options.compress { "zraw" } else { "raw" };
-    if let Some((data_name, data_path)) = text_header::detached_data_file(path, ".mhd", data_ext) {
-        let dos = os_err(&data_path);
-        let mut size = None;
-        volmorph_io::write_atomic::<VolumeError, _>(&data_path, |w| {
-            if options.compress {
-                size = Some(zlib(volume, options, w).map_err(&dos)?);
-            } else {
-                text_header::write_voxels(w, volume, false).map_err(&dos)?;
-            }
-            Ok(())
-        })?;
-        text_header::write_text(path, &header_text(volume, size, &data_name))
+    if is_detached_name(path) {
+        volmorph_io::write_detached::<VolumeError, _, _, _>(
+            path,
+            data_ext,
+            &DATA_EXTS,
+            |w| {
+                if options.compress {
+                    Ok(Some(zlib(volume, options, w).map_err(&os)?))
+                } else {
+                    text_header::write_voxels(w, volume, false).map_err(&os)?;
+                    Ok(None)
+                }
+            },
+            |w, data_name, size| {
+                w.write_all(header_text(volume, size, data_name).as_bytes())
+                    .map_err(&os)
+            },
+        )
+        .map(drop)
     } else if options.compress {
         let mut buf = Vec::new();
         let size = zlib(volume, options, &mut buf).map_err(&os)?;

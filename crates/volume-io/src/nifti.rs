@@ -100,7 +100,6 @@
 //! header claims costs only what it holds. Big-endian data are swapped in place; rescaling
 //! runs in parallel.
 
-use std::fs::File;
 use std::io::{self, BufRead, BufReader, Read, Write};
 use std::path::Path;
 
@@ -1492,7 +1491,7 @@ fn read_stream<R: Read>(
 /// [`VolumeError::Format`] for a malformed header, truncated data or a corrupt gzip stream;
 /// [`VolumeError::Unsupported`] for valid files volmorph does not handle (two-file pairs,
 /// NIfTI-2, other datatypes, more than three non-trivial dimensions);
-/// [`VolumeError::Io`] when the declared size exceeds [`volmorph_io::MAX_ALLOC_BYTES`].
+/// [`VolumeError::Io`] when the declared size exceeds the memory budget ([`volmorph_io::memory_limit`]).
 pub fn read_bytes(bytes: &[u8]) -> Result<(AnyVolume, Header), VolumeError> {
     if is_gzip(bytes) {
         read_stream(&mut MultiGzDecoder::new(bytes), None)
@@ -1504,7 +1503,7 @@ pub fn read_bytes(bytes: &[u8]) -> Result<(AnyVolume, Header), VolumeError> {
 /// Read a `.nii` or `.nii.gz` file (gzip detected by magic number).
 pub(crate) fn read(path: &Path) -> Result<(AnyVolume, Header), VolumeError> {
     let os = crate::text_header::os_err(path);
-    let file = File::open(path).map_err(os)?;
+    let file = volmorph_io::open_regular(path)?;
     let len = file.metadata().map_err(os)?.len();
     let mut br = BufReader::with_capacity(1 << 20, file);
     let gz = is_gzip(br.fill_buf().map_err(os)?);

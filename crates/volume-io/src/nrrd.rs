@@ -43,8 +43,12 @@
 //! `NRRD0004`, `space: left-posterior-superior`, `space directions` = columns of
 //! `direction · diag(spacing)`, `space origin`, `kinds: domain domain domain`,
 //! `endian: little`, `encoding: raw` or `gzip` ([`WriteOptions::compress`], at
-//! [`WriteOptions::level`]). `.nhdr` gets its data in `<stem>.raw` (or `<stem>.raw.gz`),
-//! written atomically before the header. Numbers are printed in shortest round-trip form;
+//! [`WriteOptions::level`]). `.nhdr` gets its data in a file named after the header and
+//! the write, `<name>.nhdr.<8 hex digits>.raw` (`.raw.gz` when compressed), written before
+//! the header and committed by the header's rename (see [`volmorph_io::atomic`]): a failed
+//! or killed write leaves the old header with its own old data, and `X.nhdr` never shares a
+//! data file with `X.mhd`. A `data file` outside the header's folder is refused on reading
+//! unless [`ReadOptions::allow_external_data`] is set. Numbers are printed in shortest round-trip form;
 //! since NRRD stores only the product `direction · diag(spacing)`, an oblique direction
 //! and its spacing read back to within a few ulps (axis-aligned geometry is exact).
 
@@ -54,7 +58,7 @@ use std::path::Path;
 use glam::{DMat3, DVec3};
 
 use crate::text_header::{self, DataSpec, Encoding, Input, Lines, Start, fmt_f64, os_err};
-use crate::{Header, WriteOptions};
+use crate::{Header, ReadOptions, WriteOptions};
 use volmorph_volume::{AnyVolume, Geometry, VolumeError, VoxelType};
 
 const FMT: &str = "NRRD";
@@ -597,7 +601,7 @@ pub fn read_bytes(bytes: &[u8]) -> Result<(AnyVolume, Header), VolumeError> {
     Ok((v, nrrd.header))
 }
 
-pub(crate) fn read(path: &Path) -> Result<(AnyVolume, Header), VolumeError> {
+pub(crate) fn read(path: &Path, options: &ReadOptions) -> Result<(AnyVolume, Header), VolumeError> {
     let (prefix, len) = text_header::read_prefix(path)?;
     let nrrd = parse_header(&prefix, prefix.len() as u64 == len)?;
     let v = match &nrrd.data_file {
@@ -606,7 +610,7 @@ pub(crate) fn read(path: &Path) -> Result<(AnyVolume, Header), VolumeError> {
             decode(&nrrd, Input::File(path), off)?
         }
         Some(name) => {
-            let data = text_header::existing_data_file(FMT, "data file", path, name)?;
+            let data = text_header::existing_data_file(FMT, "data file", path, name, options)?;
             decode(&nrrd, Input::File(&data), 0).map_err(|e| e.at(&data))?
         }
     };
@@ -674,15 +678,21 @@ pub(crate) fn write(
     volume.geometry().validate()?;
     let os = os_err(path);
     let data_ext = if options.compress { "raw.gz" } else { "raw" };
-    if let Some((data_name, data_path)) = text_header::detached_data_file(path, ".nhdr", data_ext) {
-        let dos = os_err(&data_path);
-        volmorph_io::write_atomic::<VolumeError, _>(&data_path, |w| {
-            write_data(w, volume, options).map_err(&dos)
-        })?;
-        text_header::write_text(
+    if path
+        .extension()
+        .is_some_and(|e| e.eq_ignore_ascii_case("nhdr"))
+    {
+        volmorph_io::write_detached::<VolumeError, _, _, _>(
             path,
-            &header_text(volume, options.compress, Some(&data_name)),
+            data_ext,
+            &["raw", "raw.gz"],
+            |w| write_data(w, volume, options).map_err(&os),
+            |w, data_name, ()| {
+                w.write_all(header_text(volume, options.compress, Some(data_name)).as_bytes())
+                    .map_err(&os)
+            },
         )
+        .map(drop)
     } else {
         let text = header_text(volume, options.compress, None);
         volmorph_io::write_atomic::<VolumeError, _>(path, |w| {

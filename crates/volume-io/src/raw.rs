@@ -91,7 +91,7 @@ fn read_inner(path: &Path, spec: &RawSpec) -> Result<AnyVolume, VolumeError> {
     let mut magic = [0u8; 2];
     let got = {
         use std::io::Read;
-        let mut f = std::fs::File::open(path).map_err(os_err(path))?;
+        let mut f = volmorph_io::open_regular(path)?;
         let mut k = 0;
         while k < 2 {
             match f.read(&mut magic[k..]).map_err(os_err(path))? {

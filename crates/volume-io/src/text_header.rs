@@ -48,7 +48,7 @@ pub(crate) fn os_err(path: &Path) -> impl Fn(io::Error) -> VolumeError + Copy + 
 /// I/O errors carrying the path.
 pub(crate) fn read_prefix(path: &Path) -> Result<(Vec<u8>, u64), VolumeError> {
     let err = os_err(path);
-    let file = File::open(path).map_err(&err)?;
+    let file = volmorph_io::open_regular(path)?;
     let len = file.metadata().map_err(&err)?.len();
     let mut prefix = Vec::with_capacity(
         usize::try_from(len).map_or(MAX_HEADER_BYTES, |l| l.min(MAX_HEADER_BYTES)),
@@ -755,54 +755,68 @@ pub(crate) fn require_attached(fmt: &str, data_file: Option<&str>) -> Result<(),
 }
 
 /// The path of the data file `name` that the header at `header_path` names in its field
-/// `key` (see [`resolve_data_file`]).
+/// `key` (see [`resolve_data_file`]), checked to be a regular file inside the header's folder
+/// (after resolving symbolic links) unless `options` allow external data.
 ///
 /// # Errors
 /// [`VolumeError::Format`] naming the field, the name and the path looked for when no such
-/// file exists.
+/// file exists or it is not a regular file (a folder, a FIFO, a device);
+/// [`VolumeError::ExternalData`] when it lies outside the header's folder.
 pub(crate) fn existing_data_file(
     fmt: &'static str,
     key: &str,
     header_path: &Path,
     name: &str,
+    options: &crate::ReadOptions,
 ) -> Result<PathBuf, VolumeError> {
     let data = resolve_data_file(Some(header_path), name);
-    if data.is_file() {
-        Ok(data)
-    } else {
-        Err(VolumeError::format(
+    let meta = match std::fs::metadata(&data) {
+        Ok(m) => m,
+        Err(e) if e.kind() == io::ErrorKind::NotFound => {
+            return Err(VolumeError::format(
+                fmt,
+                format!("{key} `{name}` not found (looked for {})", data.display()),
+            ));
+        }
+        Err(e) => {
+            return Err(VolumeError::format(
+                fmt,
+                format!("{key} `{name}`: cannot read {}: {e}", data.display()),
+            ));
+        }
+    };
+    if !meta.is_file() {
+        return Err(VolumeError::format(
             fmt,
-            format!("{key} `{name}` not found (looked for {})", data.display()),
-        ))
+            format!(
+                "{key} `{name}` is {}, not a regular file ({})",
+                volmorph_io::file_kind(&meta),
+                data.display()
+            ),
+        ));
     }
-}
-
-/// For a header written to `path` whose file name ends with `header_ext` (ASCII case
-/// ignored, e.g. `.mhd`), the name and path of its detached data file: the same stem with
-/// `data_ext` (e.g. `raw`) in the same directory. `None` when the name has another ending.
-pub(crate) fn detached_data_file(
-    path: &Path,
-    header_ext: &str,
-    data_ext: &str,
-) -> Option<(String, PathBuf)> {
-    let name = path.file_name()?.to_string_lossy();
-    let stem_len = name.len().checked_sub(header_ext.len())?;
-    let ext = name.get(stem_len..)?;
-    if !ext.eq_ignore_ascii_case(header_ext) {
-        return None;
+    if !options.allow_external_data {
+        let dir = match header_path.parent() {
+            Some(d) if !d.as_os_str().is_empty() => d,
+            _ => Path::new("."),
+        };
+        let inside = match (dir.canonicalize(), data.canonicalize()) {
+            (Ok(d), Ok(f)) => f.starts_with(&d),
+            _ => false,
+        };
+        if !inside {
+            return Err(VolumeError::ExternalData {
+                field: format!("{fmt} {key}"),
+                name: name.to_string(),
+                resolved: data
+                    .canonicalize()
+                    .unwrap_or_else(|_| data.clone())
+                    .display()
+                    .to_string(),
+            });
+        }
     }
-    let data_name = format!("{}.{data_ext}", name.get(..stem_len)?);
-    let data_path = path.with_file_name(&data_name);
-    Some((data_name, data_path))
-}
-
-/// Write `text` as the whole file at `path` (atomically).
-///
-/// # Errors
-/// I/O errors carrying the path.
-pub(crate) fn write_text(path: &Path, text: &str) -> Result<(), VolumeError> {
-    let os = os_err(path);
-    volmorph_io::write_atomic::<VolumeError, _>(path, |w| w.write_all(text.as_bytes()).map_err(&os))
+    Ok(data)
 }
 
 /// Compression level for flate2 from a user level (clamped to 0–9).

@@ -42,10 +42,16 @@ fn round_trip_every_type_and_variant() {
                 Some(if compress { "True" } else { "False" })
             );
             if ext == "mhd" {
-                let data = p.with_extension(if compress { "zraw" } else { "raw" });
+                // The data file is named after the header and the write.
+                let name = get("ElementDataFile").unwrap();
+                let header_name = p.file_name().unwrap().to_string_lossy().into_owned();
+                let ext = if compress { ".zraw" } else { ".raw" };
+                assert!(
+                    name.starts_with(&format!("{header_name}.")) && name.ends_with(ext),
+                    "{name}"
+                );
+                let data = dir.path().join(&name);
                 assert!(data.is_file(), "{}", data.display());
-                let name = data.file_name().unwrap().to_string_lossy().into_owned();
-                assert_eq!(get("ElementDataFile"), Some(name));
                 if !compress {
                     assert_eq!(
                         std::fs::metadata(&data).unwrap().len() as usize,

@@ -50,11 +50,17 @@ fn round_trip_every_type_and_variant() {
                 .unwrap();
             assert_eq!(enc.1, if compress { "gzip" } else { "raw" });
             if ext == "nhdr" {
-                let data = dir.path().join(format!(
-                    "v_{vt}_{compress}.{}",
-                    if compress { "raw.gz" } else { "raw" }
-                ));
-                assert!(data.is_file());
+                let name = &f
+                    .header
+                    .fields
+                    .iter()
+                    .find(|(k, _)| k == "data file")
+                    .unwrap()
+                    .1;
+                let prefix = format!("v_{vt}_{compress}.nhdr.");
+                let ext = if compress { ".raw.gz" } else { ".raw" };
+                assert!(name.starts_with(&prefix) && name.ends_with(ext), "{name}");
+                assert!(dir.path().join(name).is_file());
             } else {
                 let (v2, _) = nrrd::read_bytes(&std::fs::read(&p).unwrap()).unwrap();
                 assert_close(&vol, &v2);

@@ -37,6 +37,22 @@ pub enum VolumeError {
     /// A valid file uses a feature volmorph does not handle (e.g. a 5-D NIfTI image).
     #[error("unsupported: {0}")]
     Unsupported(String),
+    /// A header names a data file outside its own folder (an absolute path, `../`, or a
+    /// symbolic link leading out), which is refused unless the reader is allowed external
+    /// data (`ReadOptions::allow_external_data` in `volmorph-volume-io`, the command-line
+    /// option `--allow-external-data`).
+    #[error(
+        "{field} `{name}` resolves to {resolved}, outside the header's folder; data files \
+         outside it are refused unless allowed (--allow-external-data)"
+    )]
+    ExternalData {
+        /// Format and header field, e.g. "MetaImage ElementDataFile".
+        field: String,
+        /// The name as written in the header.
+        name: String,
+        /// Where it resolves to.
+        resolved: String,
+    },
     /// An error attributed to a file path.
     ///
     /// Displays as `path: error`; the inner error is part of the message, not a separate

@@ -237,7 +237,7 @@ impl<'a> Sampler<'a> {
     ///
     /// # Errors
     /// [`VolumeError::Io`] if the coefficient array would exceed
-    /// [`volmorph_io::MAX_ALLOC_BYTES`]; [`VolumeError::Unsupported`] if a foreign [`Voxel`]
+    /// the memory budget ([`volmorph_io::memory_limit`]); [`VolumeError::Unsupported`] if a foreign [`Voxel`]
     /// implementation does not have the memory layout of the type its `TYPE` names.
     pub fn new<T: Voxel>(
         volume: &'a Volume<T>,

@@ -350,6 +350,71 @@ impl AnyVolume {
         with_voxel_type!(to, T => with_volume!(self, v => AnyVolume::from(v.cast_scaled::<T>(slope, inter))))
     }
 
+    /// Convert to `to`, mapping the input's finite value range `[min, max]` linearly onto
+    /// `range` (`(lo, hi)`; `lo > hi` inverts), or by default onto the full range of an
+    /// integer type or `[0, 1]` for a float type. A constant input maps to `lo`; NaN inputs
+    /// stay NaN in float outputs (0 in integer outputs).
+    ///
+    /// # Errors
+    /// [`VolumeError::InvalidArgument`] when `lo` or `hi` is not finite, `lo == hi`, either
+    /// lies outside what `to` can hold (so the output would saturate or be infinite), the
+    /// input has no finite value, or the slope overflows.
+    pub fn rescaled(
+        &self,
+        to: VoxelType,
+        range: Option<(f64, f64)>,
+    ) -> Result<AnyVolume, VolumeError> {
+        let (lo, hi) = range.unwrap_or(if to.is_float() {
+            (0.0, 1.0)
+        } else {
+            to.range()
+        });
+        let bad = |m: String| {
+            VolumeError::InvalidArgument(format!(
+                "rescale range {},{}: {m}",
+                volmorph_io::Num(lo),
+                volmorph_io::Num(hi)
+            ))
+        };
+        if !(lo.is_finite() && hi.is_finite()) {
+            return Err(bad("both ends must be finite numbers".into()));
+        }
+        if lo == hi {
+            return Err(bad("the ends must differ".into()));
+        }
+        let (tmin, tmax) = to.range();
+        for v in [lo, hi] {
+            if !(tmin..=tmax).contains(&v) {
+                return Err(bad(format!(
+                    "{} lies outside what {to} can hold ({}, {})",
+                    volmorph_io::Num(v),
+                    volmorph_io::Num(tmin),
+                    volmorph_io::Num(tmax)
+                )));
+            }
+        }
+        let st = crate::stats::Statistics::of_any(self);
+        if st.finite == 0 {
+            return Err(VolumeError::InvalidArgument(
+                "no finite values to rescale".into(),
+            ));
+        }
+        let (slope, inter) = if st.max > st.min {
+            let slope = (hi - lo) / (st.max - st.min);
+            (slope, lo - st.min * slope)
+        } else {
+            (0.0, lo)
+        };
+        if !(slope.is_finite() && inter.is_finite()) {
+            return Err(bad(format!(
+                "mapping the input range [{}, {}] onto it overflows",
+                volmorph_io::Num(st.min),
+                volmorph_io::Num(st.max)
+            )));
+        }
+        Ok(self.cast(to, slope, inter))
+    }
+
     /// The voxels as raw native-endian bytes.
     #[must_use]
     pub fn as_bytes(&self) -> &[u8] {

@@ -278,3 +278,44 @@ mod prop {
         }
     }
 }
+
+/// Issue: `convert --rescale --range NaN,1` wrote an all-NaN volume with exit 0, and
+/// `--range=-1e300,1e300` gave ±inf. The range is now validated against the output type.
+#[test]
+fn convert_rescale_range_nan_writes_all_nan_volume() {
+    use volmorph_volume::{AnyVolume, Geometry, Volume, VoxelType};
+    let v = AnyVolume::from(
+        Volume::new(Geometry::new([4, 1, 1]), vec![-1024i16, 0, 1000, 3071]).unwrap(),
+    );
+    for (lo, hi) in [(f64::NAN, 1.0), (0.0, f64::INFINITY), (2.0, 2.0)] {
+        let e = v.rescaled(VoxelType::F32, Some((lo, hi))).unwrap_err();
+        assert!(e.to_string().contains("rescale range"), "{e}");
+    }
+    // Representable in f64 but not in f32, and printed short.
+    let e = v
+        .rescaled(VoxelType::F32, Some((-1e300, 1e300)))
+        .unwrap_err()
+        .to_string();
+    assert!(
+        e.contains("-1e300") && e.contains("f32") && e.len() < 200,
+        "{e}"
+    );
+    assert!(v.rescaled(VoxelType::U8, Some((0.0, 300.0))).is_err());
+    // Valid ranges map the extremes exactly; a reversed range inverts.
+    let r = v.rescaled(VoxelType::U8, None).unwrap().to_typed::<u8>();
+    // (v + 1024) · 255 / 4095, rounded.
+    assert_eq!(r.data(), &[0, 64, 126, 255]);
+    let r = v
+        .rescaled(VoxelType::F64, Some((1.0, -1.0)))
+        .unwrap()
+        .to_typed::<f64>();
+    assert_eq!((r.data()[0], r.data()[3]), (1.0, -1.0));
+    let r = v
+        .rescaled(VoxelType::F64, Some((-1e300, 1e300)))
+        .unwrap()
+        .to_typed::<f64>();
+    assert!(r.data().iter().all(|x| x.is_finite()));
+    // No finite input.
+    let nan = AnyVolume::from(Volume::new(Geometry::new([2, 1, 1]), vec![f32::NAN; 2]).unwrap());
+    assert!(nan.rescaled(VoxelType::F32, None).is_err());
+}

@@ -240,7 +240,7 @@ pub struct InverseResample<V> {
 ///
 /// # Errors
 /// [`WarpError::Geometry`] if `output` is invalid or too large for a `U` (or mask) array
-/// within [`volmorph_io::MAX_ALLOC_BYTES`]; [`WarpError::InvalidOption`] for a tolerance
+/// within the memory budget ([`volmorph_io::memory_limit`]); [`WarpError::InvalidOption`] for a tolerance
 /// that is not a finite number > 0; [`WarpError::Volume`] if the sampler cannot be built.
 pub fn pullback_through_inverse<T: Voxel, U: Voxel, M: SpaceMap + ?Sized>(
     input: &Volume<T>,

@@ -47,7 +47,7 @@ const SLAB_POINTS: usize = 1 << 14;
 ///
 /// # Errors
 /// [`WarpError::Geometry`] if `grid` is invalid or too large for an `f32` array within
-/// [`volmorph_io::MAX_ALLOC_BYTES`]; [`WarpError::Map`] if the map's grid evaluation fails.
+/// the memory budget ([`volmorph_io::memory_limit`]); [`WarpError::Map`] if the map's grid evaluation fails.
 pub fn jacobian_determinant<M: SpaceMap + ?Sized>(
     map: &M,
     grid: &Geometry,

@@ -128,7 +128,7 @@ impl ResampleOptions {
 ///
 /// # Errors
 /// [`WarpError::Geometry`] if `output` is invalid or its voxel count times the size of `U`
-/// exceeds [`volmorph_io::MAX_ALLOC_BYTES`]; [`WarpError::Map`] if the map's grid evaluation
+/// exceeds the memory budget ([`volmorph_io::memory_limit`]); [`WarpError::Map`] if the map's grid evaluation
 /// fails; [`WarpError::Volume`] if the sampler cannot be built (cubic coefficient array over
 /// the allocation limit).
 pub fn resample<T: Voxel, U: Voxel, M: SpaceMap + ?Sized>(

@@ -2,8 +2,7 @@
 
 use std::path::PathBuf;
 
-use anyhow::{Context, bail};
-use volmorph_volume::stats::Statistics;
+use anyhow::Context;
 use volmorph_volume::{AnyVolume, DVec3, VoxelType};
 use volmorph_volume_io::{self as format, WriteOptions, raw::RawSpec};
 
@@ -69,27 +68,21 @@ pub fn run(args: &Args) -> anyhow::Result<()> {
         Some(t) => parse_type(t)?,
         None => input.voxel_type(),
     };
-    let (slope, inter) = if args.rescale {
-        let st = Statistics::of_any(&input);
-        if st.finite == 0 {
-            bail!("{}: no finite values to rescale", args.input.display());
-        }
-        let (lo, hi) = match &args.range {
+    let output = if args.rescale {
+        let range = match &args.range {
             Some(r) => {
-                let [a, b] = args::pair(r)?;
-                (a, b)
+                let [a, b] = args::pair(r).context("--range")?;
+                Some((a, b))
             }
-            None if out_type.is_float() => (0.0, 1.0),
-            None => out_type.range(),
+            None => None,
         };
-        rescale_coefficients(st.min, st.max, lo, hi)
-    } else {
-        (1.0, 0.0)
-    };
-    let output = if out_type == input.voxel_type() && slope == 1.0 && inter == 0.0 {
+        input
+            .rescaled(out_type, range)
+            .with_context(|| format!("cannot rescale {}", args.input.display()))?
+    } else if out_type == input.voxel_type() {
         input
     } else {
-        input.cast(out_type, slope, inter)
+        input.cast(out_type, 1.0, 0.0)
     };
     pb.inc(1);
     pb.set_message(format!("writing {}", args.output.display()));
@@ -136,27 +129,4 @@ pub fn parse_type(s: &str) -> anyhow::Result<VoxelType> {
             names.join(", ")
         )
     })
-}
-
-/// Slope and intercept mapping [min, max] onto [lo, hi]; a constant input maps to lo.
-fn rescale_coefficients(min: f64, max: f64, lo: f64, hi: f64) -> (f64, f64) {
-    if max > min {
-        let slope = (hi - lo) / (max - min);
-        (slope, lo - min * slope)
-    } else {
-        (0.0, lo)
-    }
-}
-
-#[cfg(test)]
-mod tests {
-    use super::*;
-
-    #[test]
-    fn rescale_maps_range_endpoints() {
-        let (s, i) = rescale_coefficients(-1024.0, 3071.0, 0.0, 255.0);
-        assert!(((-1024.0f64).mul_add(s, i)).abs() < 1e-12);
-        assert!((3071.0f64.mul_add(s, i) - 255.0).abs() < 1e-12);
-        assert_eq!(rescale_coefficients(5.0, 5.0, 0.0, 1.0), (0.0, 0.0));
-    }
 }

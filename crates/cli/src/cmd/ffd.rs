@@ -162,7 +162,9 @@ pub fn run(a: &Args) -> anyhow::Result<()> {
             let out = match mode {
                 Mode::Vertex => baseline::vertex_ffd(&m, &lattice),
                 Mode::Uniform(n) => baseline::uniform_ffd(&m, &lattice, n),
-                Mode::Adaptive(t) => baseline::adaptive_ffd(&m, &lattice, t, a.max_depth),
+                Mode::Adaptive(t) => {
+                    baseline::adaptive_ffd_with(&m, &lattice, t, a.max_depth, &progress::Bar(&pb))
+                }
                 Mode::Accurate => unreachable!("handled above"),
             }
             .with_context(|| format!("FFD of {}", a.input.display()))?;

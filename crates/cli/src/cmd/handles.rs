@@ -71,6 +71,9 @@ pub enum Method {
     Tps,
     /// Frame-based moving least squares (frame handles from the JSON "frames" list).
     Frames,
+    /// Affine trend plus compactly supported Wendland kernels (sparse Cholesky): interpolates
+    /// like tps and scales to tens of thousands of handles.
+    Wendland,
 }
 
 /// Weight function of the moving-least-squares methods.
@@ -145,6 +148,7 @@ impl From<Method> for HandleMethod {
             Method::Rigid => HandleMethod::Rigid,
             Method::Tps => HandleMethod::Tps,
             Method::Frames => HandleMethod::Frames,
+            Method::Wendland => HandleMethod::Wendland,
         }
     }
 }

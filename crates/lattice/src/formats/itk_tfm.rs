@@ -33,7 +33,7 @@
 //! of that file lists the entries column by column, the code does not; grid origin = domain
 //! origin − `D·(s·(order − 1)/2)`; grid size = mesh size + order) and empirically with
 //! SimpleITK 2.5 (ITK 5.4), whose `BSplineTransformInitializer` writes exactly this layout:
-//! `TransformPoint` agrees with the lattice's [`apply`](crate::SpaceMap::apply) to rounding
+//! `TransformPoint` agrees with the lattice's [`apply`](volmorph_deform::SpaceMap::apply) to rounding
 //! (the reference values are in the crate's tests; `scripts/itk_bspline_check.py` repeats the
 //! comparison on random lattices).
 //!

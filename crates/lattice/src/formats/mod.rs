@@ -276,11 +276,12 @@ pub(crate) fn parse_f64(tok: &str, format: &'static str, line: usize) -> Result<
 /// # Errors
 /// [`DeformError::Unsupported`] for another extension; the format reader's errors otherwise.
 pub fn read_lattice(path: &Path) -> Result<BSplineLattice, DeformError> {
-    match lattice_extension(path)?.as_str() {
+    let read = || match lattice_extension(path)?.as_str() {
         "json" => BSplineLattice::from_json(&read_text(path, "lattice JSON")?),
         "bxf" => bxf::read_bxf(path),
         _ => itk_tfm::read_itk_tfm(path),
-    }
+    };
+    read().map_err(|e| e.at(path))
 }
 
 /// Write a lattice file atomically; the format follows the extension as in [`read_lattice`].
@@ -312,7 +313,7 @@ fn lattice_extension(path: &Path) -> Result<String, DeformError> {
 }
 
 pub(crate) fn read_text(path: &Path, format: &'static str) -> Result<String, DeformError> {
-    let bytes = std::fs::read(path).map_err(|e| volmorph_io::IoError::os(path, e))?;
+    let bytes = volmorph_io::read_maybe_gz(path)?;
     String::from_utf8(bytes).map_err(|e| DeformError::Parse {
         format,
         line: 0,

@@ -158,6 +158,21 @@ impl MeshWriteOptions {
 pub fn read(path: &Path) -> Result<Mesh, MeshError> {
     let run = || {
         let format = MeshFormat::from_path(path)?;
+        if format == MeshFormat::Obj {
+            // OBJ is parsed line by line as it is read (and inflated), never held whole.
+            let file = volmorph_io::open_regular(path)?;
+            let mut r = std::io::BufReader::with_capacity(1 << 16, file);
+            let gz = volmorph_io::is_gzip(
+                std::io::BufRead::fill_buf(&mut r)
+                    .map_err(|e| volmorph_io::IoError::os(path, e))?,
+            );
+            return if gz {
+                let dec = flate2::read::MultiGzDecoder::new(r);
+                obj::read_obj_stream(&mut std::io::BufReader::with_capacity(1 << 16, dec))
+            } else {
+                obj::read_obj_stream(&mut r)
+            };
+        }
         let bytes = volmorph_io::read_maybe_gz(path)?;
         read_bytes(&bytes, format)
     };
@@ -170,10 +185,7 @@ pub fn read(path: &Path) -> Result<Mesh, MeshError> {
 /// [`MeshError::Io`] for a corrupt gzip stream, and the format reader's errors.
 pub fn read_bytes(bytes: &[u8], format: MeshFormat) -> Result<Mesh, MeshError> {
     if volmorph_io::is_gzip(bytes) {
-        let raw = volmorph_io::gunzip(bytes).map_err(|error| volmorph_io::IoError::Os {
-            path: "gzip stream".into(),
-            error,
-        })?;
+        let raw = volmorph_io::gunzip(bytes)?;
         return read_bytes(&raw, format);
     }
     match format {
@@ -265,6 +277,26 @@ pub(crate) struct Builder {
     pub(crate) offsets: Vec<u32>,
 }
 
+impl Default for Builder {
+    fn default() -> Self {
+        Self::new()
+    }
+}
+
+/// Check that a vector about to grow from `len` (at capacity) to twice that stays within the
+/// memory budget, so a hostile file is refused before the allocator is asked.
+#[inline]
+fn check_growth<T>(v: &Vec<T>, what: &str) -> Result<(), MeshError> {
+    if v.len() == v.capacity() && v.len() >= 1 << 16 {
+        volmorph_io::check_elems(
+            what,
+            (v.len() as u64).saturating_mul(2),
+            std::mem::size_of::<T>() as u64,
+        )?;
+    }
+    Ok(())
+}
+
 impl Builder {
     pub(crate) fn new() -> Self {
         Self {
@@ -280,6 +312,7 @@ impl Builder {
     pub(crate) fn end_face(&mut self) -> Result<(), MeshError> {
         let n = self.indices.len();
         crate::mesh::check_corner_count(n)?;
+        check_growth(&self.offsets, "mesh faces")?;
         self.offsets.push(n as u32);
         Ok(())
     }
@@ -289,7 +322,16 @@ impl Builder {
         if self.positions.len() >= crate::mesh::MAX_ELEMENTS {
             crate::mesh::check_vertex_count(self.positions.len() + 1)?;
         }
+        check_growth(&self.positions, "mesh vertices")?;
         self.positions.push(p);
+        Ok(())
+    }
+
+    /// Append one corner index of the current face, within the memory budget.
+    #[inline]
+    pub(crate) fn push_index(&mut self, i: u32) -> Result<(), MeshError> {
+        check_growth(&self.indices, "mesh face corners")?;
+        self.indices.push(i);
         Ok(())
     }
 

@@ -37,18 +37,109 @@ fn err(line: usize, message: impl Into<String>) -> MeshError {
 /// index outside the vertices, or a face with fewer than three vertices;
 /// [`MeshError::TooLarge`] beyond the 32-bit limits.
 pub fn read_obj_bytes(bytes: &[u8]) -> Result<Mesh, MeshError> {
-    let mut b = Builder::new();
-    // Largest positive (1-based) index seen, and its line: positive indices may in principle
-    // refer forward, so they are checked against the final vertex count.
-    let mut max_index: (u64, usize) = (0, 0);
+    let mut p = ObjParser::default();
     for (line_no, raw) in Lines::new(bytes, 1) {
+        p.line(line_no, raw)?;
+    }
+    p.finish()
+}
+
+/// Longest OBJ line read from a stream (16 MiB): a polygon with a million corners still fits;
+/// a longer line is refused instead of being buffered without bound. Text after `#` does not
+/// count towards it (comments are skipped while reading).
+pub const MAX_STREAM_LINE: usize = 16 << 20;
+
+/// Parse an OBJ file from a stream, line by line, as it is read (for instance while a gzip
+/// file is inflated): memory holds the mesh and one line, never the whole text, so a file
+/// of gigabytes of comments costs nothing. The mesh itself is checked against the memory
+/// budget as it grows.
+///
+/// # Errors
+/// As [`read_obj_bytes`]; [`MeshError::Io`] when reading fails or a line is longer than
+/// [`MAX_STREAM_LINE`].
+pub fn read_obj_stream(r: &mut dyn std::io::BufRead) -> Result<Mesh, MeshError> {
+    let mut p = ObjParser::default();
+    let mut line: Vec<u8> = Vec::new();
+    let mut line_no = 0usize;
+    let io = |e: std::io::Error| {
+        MeshError::Io(volmorph_io::IoError::Os {
+            path: "OBJ stream".into(),
+            error: e,
+        })
+    };
+    loop {
+        line.clear();
+        line_no += 1;
+        let mut in_comment = false;
+        let mut ended = false;
+        // Read one line, dropping everything after `#` as it arrives.
+        loop {
+            let buf = match r.fill_buf() {
+                Ok(b) => b,
+                Err(e) if e.kind() == std::io::ErrorKind::Interrupted => continue,
+                Err(e) => return Err(io(e)),
+            };
+            if buf.is_empty() {
+                ended = true;
+                break;
+            }
+            let (chunk, used, eol) = match buf.iter().position(|&c| c == b'\n') {
+                Some(i) => (&buf[..i], i + 1, true),
+                None => (buf, buf.len(), false),
+            };
+            if !in_comment {
+                let keep = match chunk.iter().position(|&c| c == b'#') {
+                    Some(h) => {
+                        in_comment = true;
+                        &chunk[..h]
+                    }
+                    None => chunk,
+                };
+                if line.len() + keep.len() > MAX_STREAM_LINE {
+                    return Err(err(
+                        line_no,
+                        format!("line is longer than {MAX_STREAM_LINE} bytes"),
+                    ));
+                }
+                line.extend_from_slice(keep);
+            }
+            r.consume(used);
+            if eol {
+                break;
+            }
+        }
+        if ended && line.is_empty() {
+            break;
+        }
+        let text = line.strip_suffix(b"\r").unwrap_or(&line);
+        p.line(line_no, text)?;
+        if ended {
+            break;
+        }
+    }
+    p.finish()
+}
+
+/// The OBJ statements seen so far.
+#[derive(Default)]
+struct ObjParser {
+    b: Builder,
+    /// Largest positive (1-based) index seen, and its line: positive indices may in
+    /// principle refer forward, so they are checked against the final vertex count.
+    max_index: (u64, usize),
+}
+
+impl ObjParser {
+    fn line(&mut self, line_no: usize, raw: &[u8]) -> Result<(), MeshError> {
+        let b = &mut self.b;
+        let max_index = &mut self.max_index;
         let line = match raw.iter().position(|&c| c == b'#') {
             Some(n) => &raw[..n],
             None => raw,
         };
         let mut words = Words::new(line);
         let Some(keyword) = words.next() else {
-            continue;
+            return Ok(());
         };
         match keyword {
             b"v" => {
@@ -76,7 +167,7 @@ pub fn read_obj_bytes(bytes: &[u8]) -> Result<Mesh, MeshError> {
                     let zero_based = if i > 0 {
                         let i = i as u64;
                         if i > max_index.0 {
-                            max_index = (i, line_no);
+                            *max_index = (i, line_no);
                         }
                         i - 1
                     } else if i < 0 {
@@ -97,7 +188,7 @@ pub fn read_obj_bytes(bytes: &[u8]) -> Result<Mesh, MeshError> {
                     if zero_based >= u64::from(u32::MAX) {
                         return Err(err(line_no, format!("index {i} is out of range")));
                     }
-                    b.indices.push(zero_based as u32);
+                    b.push_index(zero_based as u32)?;
                 }
                 let k = b.indices.len() - start;
                 if k < 3 {
@@ -110,18 +201,23 @@ pub fn read_obj_bytes(bytes: &[u8]) -> Result<Mesh, MeshError> {
             }
             _ => {}
         }
+        Ok(())
     }
-    if max_index.0 > b.positions.len() as u64 {
-        return Err(err(
-            max_index.1,
-            format!(
-                "index {} is out of range: the file has {} vertices",
-                max_index.0,
-                b.positions.len()
-            ),
-        ));
+
+    fn finish(self) -> Result<Mesh, MeshError> {
+        let (b, max_index) = (self.b, self.max_index);
+        if max_index.0 > b.positions.len() as u64 {
+            return Err(err(
+                max_index.1,
+                format!(
+                    "index {} is out of range: the file has {} vertices",
+                    max_index.0,
+                    b.positions.len()
+                ),
+            ));
+        }
+        Ok(b.finish())
     }
-    Ok(b.finish())
 }
 
 /// Write `mesh` as OBJ text (positions and faces only).

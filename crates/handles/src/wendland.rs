@@ -1,0 +1,481 @@
+//! Handle deformation that scales to tens of thousands of handles: an affine trend plus
+//! compactly supported radial basis functions (Wendland's C² kernel), solved by a sparse
+//! Cholesky factorisation.
+//!
+//! # The map
+//!
+//! For handle pairs `p_i → q_i` (`i < N`), [`WendlandMap`] is the push-forward
+//!
+//! ```text
+//! f(x) = A x + b + Σ_i w_i φ(‖x − p_i‖ / ρ),        φ(s) = (1 − s)⁴₊ (4s + 1)
+//! ```
+//!
+//! where `(A, b)` is the least-squares affine map of the pairs (a translation only when the
+//! sources are too flat to fix an affine map, see [`MIN_AFFINE_CONDITION`]), and the weights
+//! `w_i ∈ ℝ³` make the map interpolate the handles: `(K + λI) W = R` with
+//! `K_ij = φ(‖p_i − p_j‖/ρ)` and `R_i = q_i − A p_i − b`. `φ` is Wendland's `φ₃,₁`, positive
+//! definite in ℝ³ and C² (Wendland 1995; used for elastic registration by Fornefett, Rohr &
+//! Stiehl 2001), so `K` is symmetric positive definite for distinct sources and is factorised
+//! by Cholesky. Because `φ` vanishes beyond the support radius `ρ`, `K` has only the pairs
+//! of sources closer than `ρ`: with `k` neighbours per handle it holds `≈ kN` entries, and
+//! faer's supernodal sparse Cholesky (with its fill-reducing ordering) factorises it in far
+//! less than the `O(N³)` time and `O(N²)` memory of the thin-plate spline's dense system.
+//! Evaluation touches only the sources within `ρ` of the point, found through a uniform
+//! cell grid of cell size `ρ`.
+//!
+//! Away from every handle (farther than `ρ`) the map is the affine trend; near the handles it
+//! bends to pass through them exactly (with smoothing `λ = 0`). The Jacobian is analytic:
+//! `∂f/∂x = A + Σ_i w_i ∇φ_iᵀ` with `∇φ_i = −20 (1 − s)³ (x − p_i) / ρ²`.
+//!
+//! # Support radius
+//! By default `ρ` is chosen so that a handle has about [`DEFAULT_NEIGHBOURS`] others within
+//! reach on average, from the sources' bounding box: `ρ = (3 k V / (4π N))^{1/3}` (the box
+//! volume `V` with each edge at least 1 % of the diagonal, so flat handle sets get a finite
+//! radius). A larger radius gives smoother, more global corrections at more cost.
+//!
+//! The neighbour grid is written here because it is twenty lines, needed for both the
+//! assembly and every evaluation, and a general k-d tree crate would add more than it saves.
+
+use faer::linalg::solvers::Solve;
+use faer::sparse::{SparseColMat, Triplet};
+use faer::{Mat, Side};
+use glam::{DMat3, DVec3};
+use rayon::prelude::*;
+
+use volmorph_deform::{DeformError, SpaceMap};
+
+/// Average number of other handles within the support radius chosen by default. Enough for
+/// the corrections between neighbouring handles to overlap smoothly; the factorisation cost
+/// grows with it.
+pub const DEFAULT_NEIGHBOURS: f64 = 40.0;
+
+/// Smallest ratio of the smallest to the largest eigenvalue of the sources' covariance for
+/// which the least-squares affine trend is fitted; flatter (coplanar, collinear) handle sets
+/// get a translation only, which any set determines.
+pub const MIN_AFFINE_CONDITION: f64 = 1e-8;
+
+/// Bytes of sparse storage counted per kernel entry for the memory check: the triplet, the
+/// assembled matrix, and the Cholesky factor's fill (taken as eight times the matrix).
+const BYTES_PER_ENTRY: u64 = 24 + 16 + 8 * 16;
+
+/// Wendland's `φ₃,₁(s) = (1 − s)⁴ (4s + 1)` for `s < 1`, 0 beyond.
+#[must_use]
+#[inline]
+pub fn wendland_c2(s: f64) -> f64 {
+    if s >= 1.0 {
+        0.0
+    } else {
+        let t = 1.0 - s;
+        let t2 = t * t;
+        t2 * t2 * (4.0 * s + 1.0)
+    }
+}
+
+/// Sources bucketed in cubic cells of edge `cell` (compressed rows: the indices of cell `c`
+/// are `items[start[c]..start[c + 1]]`).
+#[derive(Debug, Clone)]
+struct CellGrid {
+    origin: DVec3,
+    inv_cell: f64,
+    dims: [usize; 3],
+    start: Vec<u32>,
+    items: Vec<u32>,
+}
+
+impl CellGrid {
+    fn new(points: &[DVec3], cell: f64) -> Result<Self, DeformError> {
+        let (lo, hi) = bounds(points);
+        let inv_cell = 1.0 / cell;
+        let mut dims = [1usize; 3];
+        let mut total: usize = 1;
+        for (a, d) in dims.iter_mut().enumerate() {
+            *d = ((hi[a] - lo[a]) * inv_cell).floor() as usize + 1;
+            total = total.saturating_mul(*d);
+        }
+        let mut start = volmorph_io::try_vec("the handle neighbour grid", total + 1, 0u32)?;
+        let mut grid = Self {
+            origin: lo,
+            inv_cell,
+            dims,
+            start: Vec::new(),
+            items: vec![0; points.len()],
+        };
+        let keys: Vec<usize> = points.iter().map(|&p| grid.key(grid.cell_of(p))).collect();
+        for &k in &keys {
+            start[k + 1] += 1;
+        }
+        for c in 0..total {
+            start[c + 1] += start[c];
+        }
+        let mut fill = start.clone();
+        for (i, &k) in keys.iter().enumerate() {
+            grid.items[fill[k] as usize] = i as u32;
+            fill[k] += 1;
+        }
+        grid.start = start;
+        Ok(grid)
+    }
+
+    fn cell_of(&self, p: DVec3) -> [i64; 3] {
+        let q = (p - self.origin) * self.inv_cell;
+        [q.x.floor() as i64, q.y.floor() as i64, q.z.floor() as i64]
+    }
+
+    fn key(&self, c: [i64; 3]) -> usize {
+        (c[0] as usize) + self.dims[0] * ((c[1] as usize) + self.dims[1] * (c[2] as usize))
+    }
+
+    /// Call `f(i)` for every point in the 27 cells around `p` (a superset of the points
+    /// within one cell edge of `p`).
+    #[inline]
+    fn for_each_near(&self, p: DVec3, mut f: impl FnMut(usize)) {
+        let c = self.cell_of(p);
+        for dz in -1..=1 {
+            let z = c[2].saturating_add(dz);
+            if z < 0 || z >= self.dims[2] as i64 {
+                continue;
+            }
+            for dy in -1..=1 {
+                let y = c[1].saturating_add(dy);
+                if y < 0 || y >= self.dims[1] as i64 {
+                    continue;
+                }
+                for dx in -1..=1 {
+                    let x = c[0].saturating_add(dx);
+                    if x < 0 || x >= self.dims[0] as i64 {
+                        continue;
+                    }
+                    let k = self.key([x, y, z]);
+                    for &i in &self.items[self.start[k] as usize..self.start[k + 1] as usize] {
+                        f(i as usize);
+                    }
+                }
+            }
+        }
+    }
+}
+
+fn bounds(points: &[DVec3]) -> (DVec3, DVec3) {
+    points.iter().fold(
+        (DVec3::splat(f64::INFINITY), DVec3::splat(f64::NEG_INFINITY)),
+        |(lo, hi), &p| (lo.min(p), hi.max(p)),
+    )
+}
+
+/// The default support radius for `sources` (see the module documentation).
+#[must_use]
+pub fn default_support(sources: &[DVec3]) -> f64 {
+    let (lo, hi) = bounds(sources);
+    let ext = hi - lo;
+    let floor = (0.01 * ext.length()).max(f64::MIN_POSITIVE);
+    let e = ext.max(DVec3::splat(floor));
+    let v = e.x * e.y * e.z;
+    let n = sources.len().max(1) as f64;
+    (3.0 * DEFAULT_NEIGHBOURS * v / (4.0 * std::f64::consts::PI * n)).cbrt()
+}
+
+/// Least-squares affine map `x ↦ A x + b` sending `sources` towards `targets`; a translation
+/// when the sources are too flat (see [`MIN_AFFINE_CONDITION`]).
+fn affine_fit(sources: &[DVec3], targets: &[DVec3]) -> (DMat3, DVec3) {
+    let n = sources.len() as f64;
+    let ps = sources.iter().sum::<DVec3>() / n;
+    let qs = targets.iter().sum::<DVec3>() / n;
+    let mut spp = DMat3::ZERO;
+    let mut sqp = DMat3::ZERO;
+    for (&p, &q) in sources.iter().zip(targets) {
+        let (dp, dq) = (p - ps, q - qs);
+        spp += outer(dp, dp);
+        sqp += outer(dq, dp);
+    }
+    // det / trace³ is a scale-free flatness test of the (positive semi-definite) covariance:
+    // it is 1/27 for an isotropic set and 0 for a coplanar one.
+    let tr = spp.x_axis.x + spp.y_axis.y + spp.z_axis.z;
+    let flat = tr.is_nan() || tr <= 0.0 || spp.determinant() <= MIN_AFFINE_CONDITION * tr * tr * tr;
+    if flat {
+        return (DMat3::IDENTITY, qs - ps);
+    }
+    let a = sqp * spp.inverse();
+    (a, qs - a * ps)
+}
+
+fn outer(a: DVec3, b: DVec3) -> DMat3 {
+    DMat3::from_cols(a * b.x, a * b.y, a * b.z)
+}
+
+/// Affine trend plus compactly supported Wendland corrections through handle pairs (see the
+/// module documentation): a push-forward `SpaceMap` sending each source to its target.
+#[derive(Debug, Clone)]
+pub struct WendlandMap {
+    sources: Vec<DVec3>,
+    targets: Vec<DVec3>,
+    weights: Vec<DVec3>,
+    affine: DMat3,
+    translation: DVec3,
+    support: f64,
+    smoothing: f64,
+    grid: CellGrid,
+}
+
+impl WendlandMap {
+    /// The map sending `sources[i]` to `targets[i]`, with the default support radius
+    /// ([`default_support`]) and smoothing `smoothing ≥ 0` (0 interpolates; larger values
+    /// trade exactness at the handles for smoothness, in units of the kernel's peak).
+    ///
+    /// # Errors
+    /// As [`WendlandMap::with_support`].
+    pub fn new(sources: &[DVec3], targets: &[DVec3], smoothing: f64) -> Result<Self, DeformError> {
+        Self::with_support(sources, targets, None, smoothing, &volmorph_io::NoProgress)
+    }
+
+    /// The map with support radius `support` (physical units; `None` for the default), and
+    /// progress reported through `progress` (stages: assembly, factorisation).
+    ///
+    /// # Errors
+    /// [`DeformError::InvalidHandles`] for no handles, mismatched counts, a non-positive
+    /// support or negative smoothing; [`DeformError::NonFinite`] for a non-finite coordinate;
+    /// [`DeformError::Io`] when the sparse system would exceed the memory budget;
+    /// [`DeformError::Singular`] when the factorisation fails (coincident sources);
+    /// [`DeformError::Io`] wrapping [`volmorph_io::Cancelled`] when cancelled.
+    pub fn with_support(
+        sources: &[DVec3],
+        targets: &[DVec3],
+        support: Option<f64>,
+        smoothing: f64,
+        progress: &dyn volmorph_io::Progress,
+    ) -> Result<Self, DeformError> {
+        let n = sources.len();
+        if n == 0 || n != targets.len() {
+            return Err(DeformError::InvalidHandles(format!(
+                "{n} sources and {} targets: give at least one pair, as many targets as \
+                 sources",
+                targets.len()
+            )));
+        }
+        for (what, pts) in [("source", sources), ("target", targets)] {
+            for (i, p) in pts.iter().enumerate() {
+                for a in 0..3 {
+                    if !p[a].is_finite() {
+                        return Err(DeformError::NonFinite {
+                            what: format!("{what} {i}, component {a}"),
+                            value: p[a],
+                        });
+                    }
+                }
+            }
+        }
+        if !(smoothing.is_finite() && smoothing >= 0.0) {
+            return Err(DeformError::InvalidHandles(format!(
+                "smoothing must be finite and ≥ 0, got {smoothing}"
+            )));
+        }
+        let rho = support.unwrap_or_else(|| default_support(sources));
+        if !(rho.is_finite() && rho > 0.0) {
+            return Err(DeformError::InvalidHandles(format!(
+                "support radius must be positive and finite, got {rho}"
+            )));
+        }
+        let (affine, translation) = affine_fit(sources, targets);
+        let grid = CellGrid::new(sources, rho)?;
+
+        // Assembly: the lower triangle, one column per source, in parallel.
+        progress.start("assembling the compact-support system", n as u64);
+        let inv_rho = 1.0 / rho;
+        let columns: Vec<Vec<(u32, f64)>> = (0..n)
+            .into_par_iter()
+            .map(|j| {
+                let pj = sources[j];
+                let mut col = Vec::new();
+                grid.for_each_near(pj, |i| {
+                    if i >= j {
+                        let s = (sources[i] - pj).length() * inv_rho;
+                        if s < 1.0 {
+                            let v = wendland_c2(s) + if i == j { smoothing } else { 0.0 };
+                            col.push((i as u32, v));
+                        }
+                    }
+                });
+                progress.advance(1);
+                col
+            })
+            .collect();
+        progress.check().map_err(cancelled)?;
+        let nnz: usize = columns.iter().map(Vec::len).sum();
+        volmorph_io::check_elems(
+            &format!("a compact-support system of {n} handles ({nnz} kernel entries)"),
+            nnz as u64,
+            BYTES_PER_ENTRY,
+        )?;
+        let mut triplets = volmorph_io::try_with_capacity("kernel entries", nnz)?;
+        for (j, col) in columns.into_iter().enumerate() {
+            for (i, v) in col {
+                triplets.push(Triplet::new(i as usize, j, v));
+            }
+        }
+        let k = SparseColMat::<usize, f64>::try_new_from_triplets(n, n, &triplets)
+            .map_err(|e| DeformError::Singular(format!("assembling the sparse system: {e:?}")))?;
+        drop(triplets);
+
+        progress.start("factorising (sparse Cholesky)", 1);
+        let llt = k.sp_cholesky(Side::Lower).map_err(|e| {
+            DeformError::Singular(format!(
+                "the compact-support system is not positive definite ({e}); two sources \
+                 coincide or nearly so"
+            ))
+        })?;
+        progress.advance(1);
+        let mut rhs = Mat::<f64>::zeros(n, 3);
+        for i in 0..n {
+            let r = targets[i] - (affine * sources[i] + translation);
+            for c in 0..3 {
+                rhs[(i, c)] = r[c];
+            }
+        }
+        llt.solve_in_place(rhs.as_mut());
+        let weights: Vec<DVec3> = (0..n)
+            .map(|i| DVec3::new(rhs[(i, 0)], rhs[(i, 1)], rhs[(i, 2)]))
+            .collect();
+        if weights.iter().any(|w| !w.is_finite()) {
+            return Err(DeformError::Singular(
+                "the compact-support solve gave non-finite weights".into(),
+            ));
+        }
+        Ok(Self {
+            sources: sources.to_vec(),
+            targets: targets.to_vec(),
+            weights,
+            affine,
+            translation,
+            support: rho,
+            smoothing,
+            grid,
+        })
+    }
+
+    /// The support radius `ρ` in physical units.
+    #[must_use]
+    pub fn support(&self) -> f64 {
+        self.support
+    }
+
+    /// The smoothing parameter.
+    #[must_use]
+    pub fn smoothing(&self) -> f64 {
+        self.smoothing
+    }
+
+    /// The handles' sources.
+    #[must_use]
+    pub fn sources(&self) -> &[DVec3] {
+        &self.sources
+    }
+
+    /// The handles' targets.
+    #[must_use]
+    pub fn targets(&self) -> &[DVec3] {
+        &self.targets
+    }
+
+    /// The affine trend `(A, b)`: the map far from every handle.
+    #[must_use]
+    pub fn affine(&self) -> (DMat3, DVec3) {
+        (self.affine, self.translation)
+    }
+}
+
+fn cancelled(c: volmorph_io::Cancelled) -> DeformError {
+    DeformError::InvalidHandles(format!("handle deformation {c}"))
+}
+
+impl SpaceMap for WendlandMap {
+    fn apply(&self, p: DVec3) -> DVec3 {
+        let inv = 1.0 / self.support;
+        let r2max = self.support * self.support;
+        let mut d = DVec3::ZERO;
+        self.grid.for_each_near(p, |i| {
+            // Most candidates lie outside the support: reject them before the square root.
+            let r2 = (p - self.sources[i]).length_squared();
+            if r2 < r2max {
+                d += self.weights[i] * wendland_c2(r2.sqrt() * inv);
+            }
+        });
+        self.affine * p + self.translation + d
+    }
+
+    fn jacobian(&self, p: DVec3) -> DMat3 {
+        self.apply_with_jacobian(p).1
+    }
+
+    fn apply_with_jacobian(&self, p: DVec3) -> (DVec3, DMat3) {
+        let inv = 1.0 / self.support;
+        let mut d = DVec3::ZERO;
+        let mut j = self.affine;
+        self.grid.for_each_near(p, |i| {
+            let r = p - self.sources[i];
+            let s = r.length() * inv;
+            if s < 1.0 {
+                let w = self.weights[i];
+                d += w * wendland_c2(s);
+                let t = 1.0 - s;
+                // ∇φ(‖r‖/ρ) = −20 (1 − s)³ r / ρ².
+                let g = r * (-20.0 * t * t * t * inv * inv);
+                j += outer(w, g);
+            }
+        });
+        (self.affine * p + self.translation + d, j)
+    }
+
+    fn apply_batch(&self, points: &[DVec3], out: &mut [DVec3]) -> Result<(), DeformError> {
+        volmorph_deform::map::check_len(points.len(), out.len())?;
+        out.par_chunks_mut(1024)
+            .zip(points.par_chunks(1024))
+            .for_each(|(o, p)| {
+                for (o, &p) in o.iter_mut().zip(p) {
+                    *o = self.apply(p);
+                }
+            });
+        Ok(())
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn kernel_is_c2_with_compact_support() {
+        assert_eq!(wendland_c2(0.0), 1.0);
+        assert_eq!(wendland_c2(1.0), 0.0);
+        assert_eq!(wendland_c2(1.5), 0.0);
+        // φ'(s) = −20 s (1 − s)³, so φ'(0) = 0 and φ'(1) = 0: check by differences.
+        let h = 1e-6;
+        for s in [0.1, 0.37, 0.8] {
+            let fd = (wendland_c2(s + h) - wendland_c2(s - h)) / (2.0 * h);
+            let exact = -20.0 * s * (1.0 - s).powi(3);
+            assert!((fd - exact).abs() < 1e-6, "{s}: {fd} vs {exact}");
+        }
+    }
+
+    #[test]
+    fn affine_fit_recovers_affine_and_falls_back_for_flat_sets() {
+        let a = DMat3::from_cols(
+            DVec3::new(1.1, 0.2, 0.0),
+            DVec3::new(-0.1, 0.9, 0.3),
+            DVec3::new(0.0, 0.1, 1.2),
+        );
+        let b = DVec3::new(3.0, -1.0, 2.0);
+        let src: Vec<DVec3> = (0..20)
+            .map(|i| {
+                let t = i as f64;
+                DVec3::new((t * 0.7).sin() * 5.0, (t * 1.3).cos() * 4.0, t * 0.3)
+            })
+            .collect();
+        let dst: Vec<DVec3> = src.iter().map(|&p| a * p + b).collect();
+        let (fa, fb) = affine_fit(&src, &dst);
+        assert!((fa - a).abs_diff_eq(DMat3::ZERO, 1e-9) && fb.abs_diff_eq(b, 1e-9));
+        let flat: Vec<DVec3> = src.iter().map(|p| DVec3::new(p.x, p.y, 0.0)).collect();
+        let moved: Vec<DVec3> = flat.iter().map(|&p| p + b).collect();
+        let (fa, fb) = affine_fit(&flat, &moved);
+        assert_eq!(fa, DMat3::IDENTITY);
+        assert!(fb.abs_diff_eq(b, 1e-12));
+    }
+}

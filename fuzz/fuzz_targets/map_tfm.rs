@@ -1,0 +1,12 @@
+//! Fuzz the ITK transform reader of the map layer (affine, B-spline, composite): any text must
+//! give a map or an error, never a panic, a hang or an unbounded allocation.
+#![no_main]
+
+use libfuzzer_sys::fuzz_target;
+
+fuzz_target!(|data: &[u8]| {
+    let text = String::from_utf8_lossy(data);
+    if let Ok(map) = volmorph_maps::itk::parse_tfm(&text) {
+        let _ = volmorph_maps::itk::to_tfm_string(&map);
+    }
+});

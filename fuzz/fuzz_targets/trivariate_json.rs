@@ -1,0 +1,8 @@
+//! Fuzz the trivariate NURBS model JSON parser: any text must give a model or an error,
+//! never a panic, a hang or an unbounded allocation.
+#![no_main]
+use libfuzzer_sys::fuzz_target;
+fuzz_target!(|data: &[u8]| {
+    let text = String::from_utf8_lossy(data);
+    let _ = volmorph_trivariate::format::from_json_str(&text);
+});
