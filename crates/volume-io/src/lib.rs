@@ -5,7 +5,8 @@
 //! | `.nii`, `.nii.gz` | NIfTI-1 single file | [`nifti`] |
 //! | `.mha`, `.mhd` (+ data file) | MetaImage | [`metaimage`] |
 //! | `.nrrd`, `.nhdr` (+ data file) | NRRD | [`nrrd`] |
-//! | `.vtk` | VTK legacy `STRUCTURED_POINTS` | [`vtk`] |
+//! | `.vtk` | VTK legacy `STRUCTURED_POINTS` (axis-aligned only) | [`vtk`] |
+//! | `.vti` | VTK XML image data (with direction, VTK ≥ 9) | [`vti`] |
 //! | `.raw` | headerless voxels, described by a [`raw::RawSpec`] | [`raw`] |
 //!
 //! Every reader returns the volume in volmorph's convention (see [`volmorph_volume::Geometry`]: ITK
@@ -44,10 +45,12 @@ pub mod nifti;
 pub mod nrrd;
 pub mod raw;
 mod text_header;
+pub mod vti;
 pub mod vtk;
 
 use std::path::Path;
 
+use volmorph_volume::direction::snap_direction;
 use volmorph_volume::{AnyVolume, VolumeError};
 
 /// A volume file format, as chosen by extension.
@@ -61,6 +64,8 @@ pub enum Format {
     Nrrd,
     /// VTK legacy `STRUCTURED_POINTS` (`.vtk`).
     Vtk,
+    /// VTK XML image data (`.vti`), with a direction matrix.
+    Vti,
     /// Headerless raw voxels (`.raw`); reading needs a [`raw::RawSpec`].
     Raw,
 }
@@ -83,12 +88,14 @@ impl Format {
             Self::Nrrd
         } else if name.ends_with(".vtk") {
             Self::Vtk
+        } else if name.ends_with(".vti") {
+            Self::Vti
         } else if name.ends_with(".raw") {
             Self::Raw
         } else {
             return Err(VolumeError::Unsupported(format!(
                 "cannot tell the volume format of {} from its extension \
-                 (known: .nii .nii.gz .mha .mhd .nrrd .nhdr .vtk .raw)",
+                 (known: .nii .nii.gz .mha .mhd .nrrd .nhdr .vtk .vti .raw)",
                 path.display()
             )));
         };
@@ -103,6 +110,7 @@ impl Format {
             Self::MetaImage => "MetaImage",
             Self::Nrrd => "NRRD",
             Self::Vtk => "VTK legacy",
+            Self::Vti => "VTK XML image data",
             Self::Raw => "raw",
         }
     }
@@ -137,21 +145,35 @@ pub struct Header {
 /// A volume together with the format and header it was read from.
 #[derive(Debug, Clone, PartialEq)]
 pub struct VolumeFile {
-    /// The voxels and geometry.
+    /// The voxels and geometry (of the frame that was read).
     pub volume: AnyVolume,
     /// The format that was read.
     pub format: Format,
     /// The file's header fields.
     pub header: Header,
+    /// Number of 3-D frames the file holds (a 4-D NIfTI's `dim[4]`; 1 for 3-D files).
+    pub frames: usize,
+    /// The frame that was read (`0 ≤ frame < frames`).
+    pub frame: usize,
+}
+
+/// Options for readers.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
+pub struct ReadOptions {
+    /// The 3-D frame to read from a 4-D file (0-based). `None` reads files with a single frame
+    /// and refuses a file with more, naming how many it holds, so a time series is never
+    /// silently cut to its first volume. Files with one frame accept `Some(0)`.
+    pub frame: Option<usize>,
 }
 
 /// Read a volume; the format is chosen by extension.
 ///
 /// # Errors
 /// Any [`VolumeError`], carrying the file path. Reading a `.raw` file needs [`raw::read`]
-/// with a [`raw::RawSpec`] and is refused here.
+/// with a [`raw::RawSpec`] and is refused here; a 4-D file with more than one frame needs
+/// [`read_with`] and [`ReadOptions::frame`].
 pub fn read(path: &Path) -> Result<AnyVolume, VolumeError> {
-    read_with_header(path).map(|f| f.volume)
+    read_with(path, &ReadOptions::default()).map(|f| f.volume)
 }
 
 /// Read a volume and its header fields; the format is chosen by extension.
@@ -159,21 +181,52 @@ pub fn read(path: &Path) -> Result<AnyVolume, VolumeError> {
 /// # Errors
 /// As [`read`].
 pub fn read_with_header(path: &Path) -> Result<VolumeFile, VolumeError> {
+    read_with(path, &ReadOptions::default())
+}
+
+/// Read a volume, its header fields and its frame count, with `options`; the format is chosen
+/// by extension. This is the one read path of every command.
+///
+/// The direction matrix goes through [`volmorph_volume::direction::snap_direction`]: a
+/// direction orthonormal within
+/// [`DIRECTION_ORTHONORMAL_TOL`](volmorph_volume::direction::DIRECTION_ORTHONORMAL_TOL) (an
+/// oblique scan stored in single precision) becomes exactly orthonormal (its polar factor,
+/// at most about 1e-7 from what the file holds), a skewed one is kept as it is.
+///
+/// # Errors
+/// Any [`VolumeError`], carrying the file path; [`VolumeError::InvalidArgument`] for a frame
+/// the file does not hold, or no frame for a file with several.
+pub fn read_with(path: &Path, options: &ReadOptions) -> Result<VolumeFile, VolumeError> {
     let format = Format::from_path(path)?;
+    let single = |r: Result<(AnyVolume, Header), VolumeError>| {
+        let (v, h) = r?;
+        match options.frame {
+            None | Some(0) => Ok((v, h, 1)),
+            Some(f) => Err(VolumeError::InvalidArgument(format!(
+                "frame {f} does not exist: the file holds a single 3-D volume (frame 0)"
+            ))),
+        }
+    };
     let res = match format {
-        Format::Nifti => nifti::read(path),
-        Format::MetaImage => metaimage::read(path),
-        Format::Nrrd => nrrd::read(path),
-        Format::Vtk => vtk::read(path),
+        Format::Nifti => nifti::read(path, options.frame),
+        Format::MetaImage => single(metaimage::read(path)),
+        Format::Nrrd => single(nrrd::read(path)),
+        Format::Vtk => single(vtk::read(path)),
+        Format::Vti => single(vti::read(path)),
         Format::Raw => Err(VolumeError::Unsupported(
             "a .raw file has no header: give its dims and voxel type (raw::RawSpec)".into(),
         )),
     };
-    let (volume, header) = res.map_err(|e| e.at(path))?;
+    let (mut volume, header, frames) = res.map_err(|e| e.at(path))?;
+    let mut g = *volume.geometry();
+    g.direction = snap_direction(g.direction);
+    volume.set_geometry(g).map_err(|e| e.at(path))?;
     Ok(VolumeFile {
         volume,
         format,
         header,
+        frames,
+        frame: options.frame.unwrap_or(0),
     })
 }
 
@@ -200,6 +253,7 @@ pub fn write_with(
         Format::MetaImage => metaimage::write(path, volume, options),
         Format::Nrrd => nrrd::write(path, volume, options),
         Format::Vtk => vtk::write(path, volume, options),
+        Format::Vti => vti::write(path, volume, options),
         Format::Raw => raw::write(path, volume, options),
     };
     res.map_err(|e| e.at(path))
@@ -219,6 +273,7 @@ mod tests {
             ("x.nrrd", Format::Nrrd),
             ("x.nhdr", Format::Nrrd),
             ("x.vtk", Format::Vtk),
+            ("x.VTI", Format::Vti),
             ("x.raw", Format::Raw),
         ] {
             assert_eq!(Format::from_path(Path::new(p)).unwrap(), f, "{p}");

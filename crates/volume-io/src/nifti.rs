@@ -118,6 +118,13 @@ use volmorph_volume::{AnyVolume, Geometry, Volume, VolumeError, Voxel, VoxelType
 const FMT: &str = "NIfTI-1";
 /// `sizeof(nifti_1_header)`.
 const HEADER_SIZE: usize = 348;
+/// `sizeof(nifti_2_header)`.
+const HEADER2_SIZE: usize = 540;
+/// The NIfTI-2 single-file magic, `"n+2\0\r\n\032\n"` (the trailing bytes detect text-mode
+/// corruption, as in PNG).
+const NIFTI2_MAGIC: &[u8; 8] = b"n+2\0\r\n\x1a\n";
+/// Offset of the voxel data in NIfTI-2 files volmorph writes (header + 4-byte extender).
+const WRITE2_VOX_OFFSET: usize = 544;
 /// Offset of the voxel data in files volmorph writes (header + 4-byte extender).
 const WRITE_VOX_OFFSET: usize = 352;
 /// `NIFTI_XFORM_SCANNER_ANAT`.
@@ -160,7 +167,8 @@ struct RawHeader {
     big_endian: bool,
     sizeof_hdr: i32,
     dim_info: u8,
-    dim: [i16; 8],
+    /// `dim[0..8]` (16-bit in NIfTI-1, 64-bit in NIfTI-2).
+    dim: [i64; 8],
     intent_p: [f32; 3],
     intent_code: i16,
     datatype: i16,
@@ -186,6 +194,28 @@ struct RawHeader {
     srow: [[f32; 4]; 3],
     intent_name: [u8; 16],
     magic: [u8; 4],
+    /// The double-precision and 64-bit fields of a NIfTI-2 header (the `f32` fields above
+    /// then hold them rounded, for ITK's single-precision decisions); `None` for NIfTI-1.
+    wide: Option<Box<Wide>>,
+}
+
+/// NIfTI-2 fields kept at full width.
+#[derive(Debug, Clone)]
+struct Wide {
+    pixdim: [f64; 8],
+    vox_offset: i64,
+    scl_slope: f64,
+    scl_inter: f64,
+    quatern: [f64; 3],
+    qoffset: [f64; 3],
+    srow: [[f64; 4]; 3],
+    cal: [f64; 2],
+    slice_duration: f64,
+    toffset: f64,
+    intent_p: [f64; 3],
+    slice_start: i64,
+    slice_end: i64,
+    magic: [u8; 8],
 }
 
 fn c_string(bytes: &[u8]) -> String {
@@ -218,21 +248,32 @@ impl RawHeader {
         }
         let le = i32::from_le_bytes([bytes[0], bytes[1], bytes[2], bytes[3]]);
         let be = i32::from_be_bytes([bytes[0], bytes[1], bytes[2], bytes[3]]);
-        let big_endian = if le == HEADER_SIZE as i32 {
-            false
+        let (big_endian, v2) = if le == HEADER_SIZE as i32 {
+            (false, false)
         } else if be == HEADER_SIZE as i32 {
-            true
-        } else if le == 540 || be == 540 {
-            return Err(VolumeError::Unsupported(
-                "NIfTI-2 files (sizeof_hdr 540) are not supported; only NIfTI-1".into(),
-            ));
+            (true, false)
+        } else if le == HEADER2_SIZE as i32 {
+            (false, true)
+        } else if be == HEADER2_SIZE as i32 {
+            (true, true)
         } else {
             return Err(err(format!(
                 "sizeof_hdr is {le} (little-endian) / {be} (big-endian); a NIfTI-1 header \
-                 has 348 in one byte order"
+                 has 348 and a NIfTI-2 header 540, in one byte order"
             )));
         };
-        Self::decode(&bytes[..HEADER_SIZE], big_endian).map_err(|e| VolumeError::Io(e.into()))
+        let decoded = if v2 {
+            if bytes.len() < HEADER2_SIZE {
+                return Err(err(format!(
+                    "file too short for a NIfTI-2 header: {} bytes, it has {HEADER2_SIZE}",
+                    bytes.len()
+                )));
+            }
+            Self::decode2(&bytes[..HEADER2_SIZE], big_endian)
+        } else {
+            Self::decode(&bytes[..HEADER_SIZE], big_endian)
+        };
+        decoded.map_err(|e| VolumeError::Io(e.into()))
     }
 
     fn decode(bytes: &[u8], big_endian: bool) -> Result<Self, Truncated> {
@@ -240,9 +281,9 @@ impl RawHeader {
         let sizeof_hdr = r.i32()?;
         r.take(10 + 18 + 4 + 2 + 1)?; // data_type, db_name, extents, session_error, regular
         let dim_info = r.u8()?;
-        let mut dim = [0i16; 8];
+        let mut dim = [0i64; 8];
         for d in &mut dim {
-            *d = r.i16()?;
+            *d = i64::from(r.i16()?);
         }
         let intent_p = f32s::<3>(&mut r)?;
         let intent_code = r.i16()?;
@@ -297,6 +338,108 @@ impl RawHeader {
             srow,
             intent_name,
             magic,
+            wide: None,
+        })
+    }
+
+    /// Decode the 540 bytes of a NIfTI-2 header (`nifti_2_header`, byte order already known).
+    fn decode2(bytes: &[u8], big_endian: bool) -> Result<Self, Truncated> {
+        let mut r = ByteReader::new(bytes, big_endian);
+        let sizeof_hdr = r.i32()?;
+        let magic8 = fixed::<8>(&mut r)?;
+        let datatype = r.i16()?;
+        let bitpix = r.i16()?;
+        let mut dim = [0i64; 8];
+        for d in &mut dim {
+            *d = r.i64()?;
+        }
+        let f64s = |r: &mut ByteReader<'_>, out: &mut [f64]| -> Result<(), Truncated> {
+            for v in out {
+                *v = r.f64()?;
+            }
+            Ok(())
+        };
+        let mut intent_p = [0f64; 3];
+        f64s(&mut r, &mut intent_p)?;
+        let mut pixdim = [0f64; 8];
+        f64s(&mut r, &mut pixdim)?;
+        let vox_offset = r.i64()?;
+        let mut sc = [0f64; 6]; // slope, inter, cal_max, cal_min, slice_duration, toffset
+        f64s(&mut r, &mut sc)?;
+        let slice_start = r.i64()?;
+        let slice_end = r.i64()?;
+        let descrip = fixed::<80>(&mut r)?;
+        let aux_file = fixed::<24>(&mut r)?;
+        let qform_code = r.i32()?;
+        let sform_code = r.i32()?;
+        let mut q = [0f64; 6];
+        f64s(&mut r, &mut q)?;
+        let mut srow = [[0f64; 4]; 3];
+        for row in &mut srow {
+            f64s(&mut r, row)?;
+        }
+        let slice_code = r.i32()?;
+        let xyzt_units = r.i32()?;
+        let intent_code = r.i32()?;
+        let intent_name = fixed::<16>(&mut r)?;
+        let dim_info = r.u8()?;
+        let wide = Wide {
+            pixdim,
+            vox_offset,
+            scl_slope: sc[0],
+            scl_inter: sc[1],
+            quatern: [q[0], q[1], q[2]],
+            qoffset: [q[3], q[4], q[5]],
+            srow,
+            cal: [sc[2], sc[3]],
+            slice_duration: sc[4],
+            toffset: sc[5],
+            intent_p,
+            slice_start,
+            slice_end,
+            magic: magic8,
+        };
+        // Codes beyond 16 bits are invalid anyway; saturate so they stay invalid.
+        let small = |v: i32| v.clamp(i32::from(i16::MIN), i32::from(i16::MAX)) as i16;
+        let mut magic = [0u8; 4];
+        magic.copy_from_slice(&magic8[..4]);
+        Ok(Self {
+            big_endian,
+            sizeof_hdr,
+            dim_info,
+            dim,
+            intent_p: intent_p.map(|v| v as f32),
+            intent_code: small(intent_code),
+            datatype,
+            bitpix,
+            slice_start: small(slice_start.clamp(i64::from(i16::MIN), i64::from(i16::MAX)) as i32),
+            pixdim: pixdim.map(|v| v as f32),
+            vox_offset: vox_offset as f32,
+            scl_slope: sc[0] as f32,
+            scl_inter: sc[1] as f32,
+            slice_end: small(slice_end.clamp(i64::from(i16::MIN), i64::from(i16::MAX)) as i32),
+            slice_code: slice_code.clamp(0, 255) as u8,
+            xyzt_units: xyzt_units.clamp(0, 255) as u8,
+            cal_max: sc[2] as f32,
+            cal_min: sc[3] as f32,
+            slice_duration: sc[4] as f32,
+            toffset: sc[5] as f32,
+            descrip,
+            aux_file,
+            qform_code: small(qform_code),
+            sform_code: small(sform_code),
+            quatern: wide.quatern.map(|v| v as f32),
+            qoffset: wide.qoffset.map(|v| v as f32),
+            srow: srow.map(|row| row.map(|v| v as f32)),
+            intent_name,
+            magic: if magic8 == *NIFTI2_MAGIC {
+                *b"n+2\0"
+            } else if &magic8[..4] == b"ni2\0" {
+                *b"ni2\0"
+            } else {
+                magic
+            },
+            wide: Some(Box::new(wide)),
         })
     }
 
@@ -379,6 +522,44 @@ impl RawHeader {
         push("srow_z", list(&self.srow[2]));
         push("intent_name", c_string(&self.intent_name));
         push("magic", c_string(&self.magic));
+        if let Some(w) = &self.wide {
+            // NIfTI-2: show the stored doubles and 64-bit integers, not their f32 roundings.
+            let list = |v: &[f64]| {
+                v.iter()
+                    .map(ToString::to_string)
+                    .collect::<Vec<_>>()
+                    .join(" ")
+            };
+            for (k, v) in &mut f {
+                let wide = match k.as_str() {
+                    "intent_p1" => w.intent_p[0].to_string(),
+                    "intent_p2" => w.intent_p[1].to_string(),
+                    "intent_p3" => w.intent_p[2].to_string(),
+                    "slice_start" => w.slice_start.to_string(),
+                    "slice_end" => w.slice_end.to_string(),
+                    "pixdim" => list(&w.pixdim),
+                    "vox_offset" => w.vox_offset.to_string(),
+                    "scl_slope" => w.scl_slope.to_string(),
+                    "scl_inter" => w.scl_inter.to_string(),
+                    "cal_max" => w.cal[0].to_string(),
+                    "cal_min" => w.cal[1].to_string(),
+                    "slice_duration" => w.slice_duration.to_string(),
+                    "toffset" => w.toffset.to_string(),
+                    "quatern_b" => w.quatern[0].to_string(),
+                    "quatern_c" => w.quatern[1].to_string(),
+                    "quatern_d" => w.quatern[2].to_string(),
+                    "qoffset_x" => w.qoffset[0].to_string(),
+                    "qoffset_y" => w.qoffset[1].to_string(),
+                    "qoffset_z" => w.qoffset[2].to_string(),
+                    "srow_x" => list(&w.srow[0]),
+                    "srow_y" => list(&w.srow[1]),
+                    "srow_z" => list(&w.srow[2]),
+                    "magic" => format!("{:?}", String::from_utf8_lossy(&w.magic)),
+                    _ => continue,
+                };
+                *v = wide;
+            }
+        }
         Header { fields: f }
     }
 }
@@ -477,10 +658,12 @@ struct Layout {
     dims: [usize; 3],
     /// ITK's number of image dimensions (1, 2 or 3).
     ndim: usize,
-    /// Number of voxels.
+    /// Number of voxels of one frame.
     len: usize,
     /// Byte offset of the data.
     offset: usize,
+    /// Number of 3-D frames (`dim[4]` of a 4-D image; 1 otherwise).
+    frames: usize,
 }
 
 impl Layout {
@@ -491,7 +674,33 @@ impl Layout {
 
 /// Check everything about the header that does not concern geometry.
 fn validate(h: &RawHeader) -> Result<Layout, VolumeError> {
+    if let Some(w) = &h.wide {
+        match &w.magic {
+            m if m == NIFTI2_MAGIC => {}
+            [b'n', b'i', b'2', 0, ..] => {
+                return Err(VolumeError::Unsupported(
+                    "this is the header of a two-file NIfTI-2 pair (.hdr/.img, magic \"ni2\"); \
+                     only single-file .nii/.nii.gz is supported"
+                        .into(),
+                ));
+            }
+            [b'n', b'+', b'2', 0, ..] => {
+                return Err(err(format!(
+                    "NIfTI-2 magic {:02x?} has damaged trailing bytes (should be \\r\\n\\032\\n): \
+                     was the file copied in text mode?",
+                    w.magic
+                )));
+            }
+            m => {
+                return Err(err(format!(
+                    "magic is {:?} (bytes {m:02x?}); a single-file NIfTI-2 has \"n+2\\0\\r\\n\\032\\n\"",
+                    String::from_utf8_lossy(m)
+                )));
+            }
+        }
+    }
     match &h.magic {
+        _ if h.wide.is_some() => {}
         b"n+1\0" => {}
         b"ni1\0" => {
             return Err(VolumeError::Unsupported(
@@ -531,6 +740,13 @@ fn validate(h: &RawHeader) -> Result<Layout, VolumeError> {
     while realdim > 3 && h.dim[realdim] == 1 {
         realdim -= 1;
     }
+    // A 4-D image is a series of 3-D frames (dim[4], usually time); one is read at a time.
+    let frames = if realdim == 4 {
+        realdim = 3;
+        usize::try_from(h.dim[4]).map_err(|_| err(format!("dim[4] = {} overflows", h.dim[4])))?
+    } else {
+        1
+    };
     if realdim > 3 {
         let what = if matches!(h.intent_code, 1005 | 1007) && ndim_file >= 5 && h.dim[5] > 1 {
             format!(
@@ -539,8 +755,8 @@ fn validate(h: &RawHeader) -> Result<Layout, VolumeError> {
             )
         } else {
             format!(
-                "a {realdim}-D image (dim = {:?}); only 1-D to 3-D images, or higher \
-                 dimensions of size 1, are supported",
+                "a {realdim}-D image (dim = {:?}); only 1-D to 3-D images and 4-D series of \
+                 3-D frames, or higher dimensions of size 1, are supported",
                 &h.dim[..=ndim_file]
             )
         };
@@ -565,19 +781,44 @@ fn validate(h: &RawHeader) -> Result<Layout, VolumeError> {
     }
     let mut dims = [1usize; 3];
     for (a, d) in dims.iter_mut().enumerate().take(realdim) {
-        *d = h.dim[a + 1] as usize;
+        *d = usize::try_from(h.dim[a + 1])
+            .map_err(|_| err(format!("dim[{}] = {} overflows", a + 1, h.dim[a + 1])))?;
     }
     let len = checked_len(&dims, voxel_type.size())?;
-    if !h.vox_offset.is_finite() || h.vox_offset < WRITE_VOX_OFFSET as f32 {
-        return Err(err(format!(
-            "vox_offset is {}; a single-file NIfTI-1 has its data at 352 or later",
-            h.vox_offset
-        )));
+    checked_len(&[len, frames], voxel_type.size())?;
+    let offset = if let Some(w) = &h.wide {
+        if w.vox_offset < WRITE2_VOX_OFFSET as i64 {
+            return Err(err(format!(
+                "vox_offset is {}; a single-file NIfTI-2 has its data at 544 or later",
+                w.vox_offset
+            )));
+        }
+        if w.vox_offset > 1 << 50 {
+            return Err(err(format!("vox_offset {} is absurd", w.vox_offset)));
+        }
+        w.vox_offset as usize
+    } else {
+        if !h.vox_offset.is_finite() || h.vox_offset < WRITE_VOX_OFFSET as f32 {
+            return Err(err(format!(
+                "vox_offset is {}; a single-file NIfTI-1 has its data at 352 or later",
+                h.vox_offset
+            )));
+        }
+        if h.vox_offset > 1e15 {
+            return Err(err(format!("vox_offset {} is absurd", h.vox_offset)));
+        }
+        h.vox_offset as usize // truncation, as nifti1_io's (int) cast
+    };
+    if let Some(w) = &h.wide {
+        let finite = w.pixdim.iter().all(|v| v.is_finite())
+            && (h.qform_code <= 0 || w.quatern.iter().chain(&w.qoffset).all(|v| v.is_finite()))
+            && (h.sform_code <= 0 || w.srow.iter().flatten().all(|v| v.is_finite()));
+        if !finite {
+            return Err(err(
+                "pixdim, the quaternion or srow holds a value that is not a finite number",
+            ));
+        }
     }
-    if h.vox_offset > 1e15 {
-        return Err(err(format!("vox_offset {} is absurd", h.vox_offset)));
-    }
-    let offset = h.vox_offset as usize; // truncation, as nifti1_io's (int) cast
     for (i, &p) in h.pixdim.iter().enumerate() {
         if !p.is_finite() {
             return Err(err(format!("pixdim[{i}] is {p}, not a finite number")));
@@ -611,6 +852,7 @@ fn validate(h: &RawHeader) -> Result<Layout, VolumeError> {
         ndim: realdim,
         len,
         offset,
+        frames,
     })
 }
 
@@ -618,10 +860,20 @@ fn validate(h: &RawHeader) -> Result<Layout, VolumeError> {
 // nifti1_io matrix helpers (single-precision storage, double-precision arithmetic)
 // ---------------------------------------------------------------------------------------------
 
-/// `nifti_quatern_to_mat44`: quaternion, offsets, grid steps and `qfac` to the qform matrix.
-#[allow(clippy::too_many_arguments)]
+/// `nifti_quatern_to_mat44`: quaternion, offsets, grid steps and `qfac` to the qform matrix
+/// (computed in `f64`, stored in `f32` as `nifti1_io` does).
 fn quatern_to_mat44(q: [f32; 3], offset: [f32; 3], d: [f32; 3], qfac: f32) -> Mat44 {
-    let (mut b, mut c, mut dd) = (f64::from(q[0]), f64::from(q[1]), f64::from(q[2]));
+    let m = quatern_to_mat44_f64(q.map(f64::from), [0.0; 3], d.map(f64::from), qfac);
+    let mut out: Mat44 = m.map(|row| row.map(|v| v as f32));
+    for i in 0..3 {
+        out[i][3] = offset[i];
+    }
+    out
+}
+
+/// The qform matrix in double precision (NIfTI-2, and the arithmetic of [`quatern_to_mat44`]).
+fn quatern_to_mat44_f64(q: [f64; 3], offset: [f64; 3], d: [f64; 3], qfac: f32) -> [[f64; 4]; 4] {
+    let [mut b, mut c, mut dd] = q;
     let mut a = 1.0 - (b * b + c * c + dd * dd);
     if a < 1e-7 {
         // 180° rotation: normalise (b, c, d), a = 0.
@@ -633,7 +885,7 @@ fn quatern_to_mat44(q: [f32; 3], offset: [f32; 3], d: [f32; 3], qfac: f32) -> Ma
     } else {
         a = a.sqrt();
     }
-    let pos = |v: f32| if v > 0.0 { f64::from(v) } else { 1.0 };
+    let pos = |v: f64| if v > 0.0 { v } else { 1.0 };
     let (xd, yd, mut zd) = (pos(d[0]), pos(d[1]), pos(d[2]));
     if qfac < 0.0 {
         zd = -zd;
@@ -641,21 +893,21 @@ fn quatern_to_mat44(q: [f32; 3], offset: [f32; 3], d: [f32; 3], qfac: f32) -> Ma
     let d2 = dd;
     [
         [
-            ((a * a + b * b - c * c - d2 * d2) * xd) as f32,
-            (2.0 * (b * c - a * d2) * yd) as f32,
-            (2.0 * (b * d2 + a * c) * zd) as f32,
+            (a * a + b * b - c * c - d2 * d2) * xd,
+            2.0 * (b * c - a * d2) * yd,
+            2.0 * (b * d2 + a * c) * zd,
             offset[0],
         ],
         [
-            (2.0 * (b * c + a * d2) * xd) as f32,
-            ((a * a + c * c - b * b - d2 * d2) * yd) as f32,
-            (2.0 * (c * d2 - a * b) * zd) as f32,
+            2.0 * (b * c + a * d2) * xd,
+            (a * a + c * c - b * b - d2 * d2) * yd,
+            2.0 * (c * d2 - a * b) * zd,
             offset[1],
         ],
         [
-            (2.0 * (b * d2 - a * c) * xd) as f32,
-            (2.0 * (c * d2 + a * b) * yd) as f32,
-            ((a * a + d2 * d2 - c * c - b * b) * zd) as f32,
+            2.0 * (b * d2 - a * c) * xd,
+            2.0 * (c * d2 + a * b) * yd,
+            (a * a + d2 * d2 - c * c - b * b) * zd,
             offset[2],
         ],
         [0.0, 0.0, 0.0, 1.0],
@@ -1224,7 +1476,30 @@ fn itk_geometry(h: &RawHeader, layout: &Layout) -> Result<Geometry, VolumeError>
         }
     }
     let pixdim = [pd[1], pd[2], pd[3]];
-    let (source, m) = choose_matrix(h, pixdim)?;
+    let (source, m32) = choose_matrix(h, pixdim)?;
+    let mut m: [[f64; 4]; 4] = m32.map(|row| row.map(f64::from));
+    // NIfTI-2 stores doubles: ITK's choice is made as above, the chosen matrix is rebuilt at
+    // full precision.
+    let mut spacing_source: [f64; 3] = pixdim.map(f64::from);
+    if let Some(w) = &h.wide {
+        let mut pd = w.pixdim;
+        for p in pd.iter_mut().take(ndim_file + 1).skip(1) {
+            if *p == 0.0 {
+                *p = 1.0;
+            }
+        }
+        spacing_source = [pd[1], pd[2], pd[3]];
+        match source {
+            Source::Qform => {
+                let qfac = if w.pixdim[0] < 0.0 { -1.0 } else { 1.0 };
+                m = quatern_to_mat44_f64(w.quatern, w.qoffset, spacing_source, qfac);
+            }
+            Source::Sform => {
+                m = [w.srow[0], w.srow[1], w.srow[2], [0.0, 0.0, 0.0, 1.0]];
+            }
+            Source::Neither => {}
+        }
+    }
     let ndim = layout.ndim;
     let unit_scale = match h.xyzt_units & 0x07 {
         1 => 1e3,
@@ -1235,18 +1510,18 @@ fn itk_geometry(h: &RawHeader, layout: &Layout) -> Result<Geometry, VolumeError>
     let mut origin = DVec3::ZERO;
     let mut direction = DMat3::IDENTITY;
     for a in 0..ndim {
-        spacing[a] = f64::from(pixdim[a]) * unit_scale;
+        spacing[a] = spacing_source[a] * unit_scale;
     }
     if source != Source::Neither {
         let flip = [-1.0, -1.0, 1.0];
         for a in 0..ndim {
-            origin[a] = flip[a] * f64::from(m[a][3]) * unit_scale + 0.0;
+            origin[a] = flip[a] * m[a][3] * unit_scale + 0.0;
         }
         let mut cols = [DVec3::X, DVec3::Y, DVec3::Z];
         for (j, col) in cols.iter_mut().enumerate().take(ndim) {
             let mut c = DVec3::ZERO;
             for i in 0..ndim {
-                c[i] = flip[i] * f64::from(m[i][j]) + 0.0; // + 0.0: no negative zeros
+                c[i] = flip[i] * m[i][j] + 0.0; // + 0.0: no negative zeros
             }
             let n = c.length();
             *col = if n == 0.0 { c } else { c / n };
@@ -1274,9 +1549,13 @@ fn itk_geometry(h: &RawHeader, layout: &Layout) -> Result<Geometry, VolumeError>
 
 /// ITK's rescale decision: `Some((slope, inter))` when the data must be rescaled.
 fn rescale_of(h: &RawHeader) -> Option<(f64, f64)> {
-    let fix = |v: f32| if v.is_finite() { f64::from(v) } else { 0.0 };
-    let mut slope = fix(h.scl_slope);
-    let inter = fix(h.scl_inter);
+    let fix = |v: f64| if v.is_finite() { v } else { 0.0 };
+    let (slope, inter) = match &h.wide {
+        Some(w) => (w.scl_slope, w.scl_inter),
+        None => (f64::from(h.scl_slope), f64::from(h.scl_inter)),
+    };
+    let mut slope = fix(slope);
+    let inter = fix(inter);
     if slope.abs() < f64::EPSILON {
         slope = 1.0;
     }
@@ -1442,14 +1721,45 @@ where
 fn read_stream<R: Read>(
     r: &mut R,
     file_len: Option<u64>,
-) -> Result<(AnyVolume, Header), VolumeError> {
-    let mut hb = [0u8; HEADER_SIZE];
-    let got = fill(r, &mut hb, "header")?;
+    frame: Option<usize>,
+) -> Result<(AnyVolume, Header, usize), VolumeError> {
+    let mut hb = [0u8; HEADER2_SIZE];
+    let mut got = fill(r, &mut hb[..HEADER_SIZE], "header")?;
+    let sizeof = [hb[0], hb[1], hb[2], hb[3]];
+    let header_len = if got >= 4
+        && (i32::from_le_bytes(sizeof) == HEADER2_SIZE as i32
+            || i32::from_be_bytes(sizeof) == HEADER2_SIZE as i32)
+    {
+        got += fill(r, &mut hb[HEADER_SIZE..], "header")?;
+        HEADER2_SIZE
+    } else {
+        HEADER_SIZE
+    };
     let h = RawHeader::parse(&hb[..got])?;
     let layout = validate(&h)?;
+    let frame = match frame {
+        Some(f) if f < layout.frames => f,
+        Some(f) => {
+            return Err(VolumeError::InvalidArgument(format!(
+                "frame {f} does not exist: the file holds {} frame{} (0 to {})",
+                layout.frames,
+                if layout.frames == 1 { "" } else { "s" },
+                layout.frames - 1
+            )));
+        }
+        None if layout.frames > 1 => {
+            return Err(VolumeError::InvalidArgument(format!(
+                "this 4-D image holds {} frames (dim[4]); choose one with --frame N \
+                 (ReadOptions::frame), 0 to {}",
+                layout.frames,
+                layout.frames - 1
+            )));
+        }
+        None => 0,
+    };
     let geometry = itk_geometry(&h, &layout)?;
     if let Some(len) = file_len {
-        let need = layout.offset as u64 + layout.data_bytes() as u64;
+        let need = layout.offset as u64 + (layout.data_bytes() as u64) * layout.frames as u64;
         if (layout.offset as u64) > len {
             return Err(err(format!(
                 "vox_offset {} lies beyond the end of the file ({len} bytes)",
@@ -1459,15 +1769,16 @@ fn read_stream<R: Read>(
         if need > len {
             return Err(err(format!(
                 "truncated data: {} voxels of {} need {} bytes from offset {}, the file has {}",
-                layout.len,
+                layout.len * layout.frames,
                 layout.voxel_type,
-                layout.data_bytes(),
+                layout.data_bytes() * layout.frames,
                 layout.offset,
                 len.saturating_sub(layout.offset as u64)
             )));
         }
     }
-    skip(r, (layout.offset - HEADER_SIZE) as u64, "extensions")?;
+    skip(r, (layout.offset - header_len) as u64, "extensions")?;
+    skip(r, (layout.data_bytes() as u64) * frame as u64, "earlier frames")?;
     let rescale = rescale_of(&h);
     let be = h.big_endian;
     let checked = file_len.is_some();
@@ -1481,37 +1792,55 @@ fn read_stream<R: Read>(
         io::copy(&mut r.take(GZ_TAIL_LIMIT), &mut io::sink())
             .map_err(|e| io_err(e, "after the voxel data"))?;
     }
-    Ok((volume, h.fields()))
+    Ok((volume, h.fields(), layout.frames))
 }
 
-/// Parse a complete NIfTI-1 single file held in memory, plain or gzip-compressed (detected by
-/// the gzip magic number), into a volume in volmorph's (ITK's LPS) geometry and its raw header
-/// fields. This is what [`crate::read`] does for a `.nii`/`.nii.gz` path.
+/// Parse a complete NIfTI-1 or NIfTI-2 single file held in memory, plain or gzip-compressed
+/// (detected by the gzip magic number), into a volume in ITK's LPS geometry — exactly the
+/// numbers ITK derives, before the direction rule of [`crate::read`] — and its raw header
+/// fields. A 4-D file needs `frame` (`None` is refused for more than one frame); the count of
+/// frames is returned too.
 ///
 /// # Errors
 /// [`VolumeError::Format`] for a malformed header, truncated data or a corrupt gzip stream;
 /// [`VolumeError::Unsupported`] for valid files volmorph does not handle (two-file pairs,
-/// NIfTI-2, other datatypes, more than three non-trivial dimensions);
+/// other datatypes, more than four non-trivial dimensions);
+/// [`VolumeError::InvalidArgument`] for a missing or out-of-range `frame`;
 /// [`VolumeError::Io`] when the declared size exceeds [`volmorph_io::MAX_ALLOC_BYTES`].
-pub fn read_bytes(bytes: &[u8]) -> Result<(AnyVolume, Header), VolumeError> {
+pub fn read_frame_bytes(
+    bytes: &[u8],
+    frame: Option<usize>,
+) -> Result<(AnyVolume, Header, usize), VolumeError> {
     if is_gzip(bytes) {
-        read_stream(&mut MultiGzDecoder::new(bytes), None)
+        read_stream(&mut MultiGzDecoder::new(bytes), None, frame)
     } else {
-        read_stream(&mut &bytes[..], Some(bytes.len() as u64))
+        read_stream(&mut &bytes[..], Some(bytes.len() as u64), frame)
     }
 }
 
+/// [`read_frame_bytes`] of a file with a single 3-D frame (a 4-D file with more frames is
+/// refused, naming its frame count).
+///
+/// # Errors
+/// As [`read_frame_bytes`].
+pub fn read_bytes(bytes: &[u8]) -> Result<(AnyVolume, Header), VolumeError> {
+    read_frame_bytes(bytes, None).map(|(v, h, _)| (v, h))
+}
+
 /// Read a `.nii` or `.nii.gz` file (gzip detected by magic number).
-pub(crate) fn read(path: &Path) -> Result<(AnyVolume, Header), VolumeError> {
+pub(crate) fn read(
+    path: &Path,
+    frame: Option<usize>,
+) -> Result<(AnyVolume, Header, usize), VolumeError> {
     let os = crate::text_header::os_err(path);
     let file = File::open(path).map_err(os)?;
     let len = file.metadata().map_err(os)?.len();
     let mut br = BufReader::with_capacity(1 << 20, file);
     let gz = is_gzip(br.fill_buf().map_err(os)?);
     if gz {
-        read_stream(&mut MultiGzDecoder::new(br), None)
+        read_stream(&mut MultiGzDecoder::new(br), None, frame)
     } else {
-        read_stream(&mut br, Some(len))
+        read_stream(&mut br, Some(len), frame)
     }
 }
 
