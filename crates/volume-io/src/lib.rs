@@ -7,6 +7,7 @@
 //! | `.nrrd`, `.nhdr` (+ data file) | NRRD | [`nrrd`] |
 //! | `.vtk` | VTK legacy `STRUCTURED_POINTS` (axis-aligned only) | [`vtk`] |
 //! | `.vti` | VTK XML image data (with direction, VTK ≥ 9) | [`vti`] |
+//! | `.mgh`, `.mgz` | FreeSurfer MGH (4-D: one frame at a time) | [`mgh`] |
 //! | `.raw` | headerless voxels, described by a [`raw::RawSpec`] | [`raw`] |
 //!
 //! Every reader returns the volume in volmorph's convention (see [`volmorph_volume::Geometry`]: ITK
@@ -41,6 +42,7 @@
 //! ```
 
 pub mod metaimage;
+pub mod mgh;
 pub mod nifti;
 pub mod nrrd;
 pub mod raw;
@@ -66,6 +68,8 @@ pub enum Format {
     Vtk,
     /// VTK XML image data (`.vti`), with a direction matrix.
     Vti,
+    /// FreeSurfer MGH (`.mgh`, or gzip-compressed `.mgz`).
+    Mgh,
     /// Headerless raw voxels (`.raw`); reading needs a [`raw::RawSpec`].
     Raw,
 }
@@ -90,12 +94,14 @@ impl Format {
             Self::Vtk
         } else if name.ends_with(".vti") {
             Self::Vti
+        } else if name.ends_with(".mgh") || name.ends_with(".mgz") {
+            Self::Mgh
         } else if name.ends_with(".raw") {
             Self::Raw
         } else {
             return Err(VolumeError::Unsupported(format!(
                 "cannot tell the volume format of {} from its extension \
-                 (known: .nii .nii.gz .mha .mhd .nrrd .nhdr .vtk .vti .raw)",
+                 (known: .nii .nii.gz .mha .mhd .nrrd .nhdr .vtk .vti .mgh .mgz .raw)",
                 path.display()
             )));
         };
@@ -111,6 +117,7 @@ impl Format {
             Self::Nrrd => "NRRD",
             Self::Vtk => "VTK legacy",
             Self::Vti => "VTK XML image data",
+            Self::Mgh => "FreeSurfer MGH",
             Self::Raw => "raw",
         }
     }
@@ -166,6 +173,28 @@ pub struct ReadOptions {
     pub frame: Option<usize>,
 }
 
+/// The frame to read from a file holding `frames` 3-D frames (see [`ReadOptions::frame`]).
+///
+/// # Errors
+/// [`VolumeError::InvalidArgument`] for a frame past the end, or no frame for a file with
+/// several.
+pub(crate) fn choose_frame(frame: Option<usize>, frames: usize) -> Result<usize, VolumeError> {
+    match frame {
+        Some(f) if f < frames => Ok(f),
+        Some(f) => Err(VolumeError::InvalidArgument(format!(
+            "frame {f} does not exist: the file holds {frames} frame{} (0 to {})",
+            if frames == 1 { "" } else { "s" },
+            frames.saturating_sub(1)
+        ))),
+        None if frames > 1 => Err(VolumeError::InvalidArgument(format!(
+            "this 4-D image holds {frames} frames; choose one with --frame N \
+             (ReadOptions::frame), 0 to {}",
+            frames - 1
+        ))),
+        None => Ok(0),
+    }
+}
+
 /// Read a volume; the format is chosen by extension.
 ///
 /// # Errors
@@ -213,6 +242,7 @@ pub fn read_with(path: &Path, options: &ReadOptions) -> Result<VolumeFile, Volum
         Format::Nrrd => single(nrrd::read(path)),
         Format::Vtk => single(vtk::read(path)),
         Format::Vti => single(vti::read(path)),
+        Format::Mgh => mgh::read(path, options.frame),
         Format::Raw => Err(VolumeError::Unsupported(
             "a .raw file has no header: give its dims and voxel type (raw::RawSpec)".into(),
         )),
@@ -254,6 +284,7 @@ pub fn write_with(
         Format::Nrrd => nrrd::write(path, volume, options),
         Format::Vtk => vtk::write(path, volume, options),
         Format::Vti => vti::write(path, volume, options),
+        Format::Mgh => mgh::write(path, volume, options),
         Format::Raw => raw::write(path, volume, options),
     };
     res.map_err(|e| e.at(path))
@@ -274,6 +305,8 @@ mod tests {
             ("x.nhdr", Format::Nrrd),
             ("x.vtk", Format::Vtk),
             ("x.VTI", Format::Vti),
+            ("brain.mgz", Format::Mgh),
+            ("x.mgh", Format::Mgh),
             ("x.raw", Format::Raw),
         ] {
             assert_eq!(Format::from_path(Path::new(p)).unwrap(), f, "{p}");

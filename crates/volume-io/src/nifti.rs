@@ -1737,26 +1737,7 @@ fn read_stream<R: Read>(
     };
     let h = RawHeader::parse(&hb[..got])?;
     let layout = validate(&h)?;
-    let frame = match frame {
-        Some(f) if f < layout.frames => f,
-        Some(f) => {
-            return Err(VolumeError::InvalidArgument(format!(
-                "frame {f} does not exist: the file holds {} frame{} (0 to {})",
-                layout.frames,
-                if layout.frames == 1 { "" } else { "s" },
-                layout.frames - 1
-            )));
-        }
-        None if layout.frames > 1 => {
-            return Err(VolumeError::InvalidArgument(format!(
-                "this 4-D image holds {} frames (dim[4]); choose one with --frame N \
-                 (ReadOptions::frame), 0 to {}",
-                layout.frames,
-                layout.frames - 1
-            )));
-        }
-        None => 0,
-    };
+    let frame = crate::choose_frame(frame, layout.frames)?;
     let geometry = itk_geometry(&h, &layout)?;
     if let Some(len) = file_len {
         let need = layout.offset as u64 + (layout.data_bytes() as u64) * layout.frames as u64;
