@@ -8,6 +8,7 @@
 //! | `.vtk` | VTK legacy `STRUCTURED_POINTS` (axis-aligned only) | [`vtk`] |
 //! | `.vti` | VTK XML image data (with direction, VTK ≥ 9) | [`vti`] |
 //! | `.mgh`, `.mgz` | FreeSurfer MGH (4-D: one frame at a time) | [`mgh`] |
+//! | a folder, `.dcm`, `.dicom`, `.ima` (or the `DICM` preamble) | DICOM series and multi-frame files (read only) | [`dicom`] |
 //! | `.raw` | headerless voxels, described by a [`raw::RawSpec`] | [`raw`] |
 //!
 //! Every reader returns the volume in volmorph's convention (see [`volmorph_volume::Geometry`]: ITK
@@ -41,6 +42,7 @@
 //! # Ok::<(), Box<dyn std::error::Error>>(())
 //! ```
 
+pub mod dicom;
 pub mod metaimage;
 pub mod mgh;
 pub mod nifti;
@@ -70,16 +72,23 @@ pub enum Format {
     Vti,
     /// FreeSurfer MGH (`.mgh`, or gzip-compressed `.mgz`).
     Mgh,
+    /// DICOM: a folder holding a series, one file of a series (`.dcm`, `.dicom`, `.ima`, or
+    /// any name with the `DICM` preamble), or a multi-frame file. Read only.
+    Dicom,
     /// Headerless raw voxels (`.raw`); reading needs a [`raw::RawSpec`].
     Raw,
 }
 
 impl Format {
-    /// Choose the format from `path`'s extension (case-insensitive; `.nii.gz` counts as NIfTI).
+    /// Choose the format from `path`'s extension (case-insensitive; `.nii.gz` counts as NIfTI);
+    /// an existing folder is a DICOM series.
     ///
     /// # Errors
     /// [`VolumeError::Unsupported`] for an unknown or missing extension.
     pub fn from_path(path: &Path) -> Result<Self, VolumeError> {
+        if path.is_dir() {
+            return Ok(Self::Dicom);
+        }
         let name = path
             .file_name()
             .map(|n| n.to_string_lossy().to_ascii_lowercase())
@@ -96,12 +105,15 @@ impl Format {
             Self::Vti
         } else if name.ends_with(".mgh") || name.ends_with(".mgz") {
             Self::Mgh
+        } else if name.ends_with(".dcm") || name.ends_with(".dicom") || name.ends_with(".ima") {
+            Self::Dicom
         } else if name.ends_with(".raw") {
             Self::Raw
         } else {
             return Err(VolumeError::Unsupported(format!(
                 "cannot tell the volume format of {} from its extension \
-                 (known: .nii .nii.gz .mha .mhd .nrrd .nhdr .vtk .vti .mgh .mgz .raw)",
+                 (known: .nii .nii.gz .mha .mhd .nrrd .nhdr .vtk .vti .mgh .mgz .raw, DICOM .dcm files or \
+                 a folder of them)",
                 path.display()
             )));
         };
@@ -118,6 +130,7 @@ impl Format {
             Self::Vtk => "VTK legacy",
             Self::Vti => "VTK XML image data",
             Self::Mgh => "FreeSurfer MGH",
+            Self::Dicom => "DICOM",
             Self::Raw => "raw",
         }
     }
@@ -226,7 +239,11 @@ pub fn read_with_header(path: &Path) -> Result<VolumeFile, VolumeError> {
 /// Any [`VolumeError`], carrying the file path; [`VolumeError::InvalidArgument`] for a frame
 /// the file does not hold, or no frame for a file with several.
 pub fn read_with(path: &Path, options: &ReadOptions) -> Result<VolumeFile, VolumeError> {
-    let format = Format::from_path(path)?;
+    let format = match Format::from_path(path) {
+        // DICOM files often have no extension: recognise them by their preamble.
+        Err(_) if dicom::has_dicom_magic(path) => Format::Dicom,
+        f => f?,
+    };
     let single = |r: Result<(AnyVolume, Header), VolumeError>| {
         let (v, h) = r?;
         match options.frame {
@@ -243,6 +260,7 @@ pub fn read_with(path: &Path, options: &ReadOptions) -> Result<VolumeFile, Volum
         Format::Vtk => single(vtk::read(path)),
         Format::Vti => single(vti::read(path)),
         Format::Mgh => mgh::read(path, options.frame),
+        Format::Dicom => single(dicom::read(path)),
         Format::Raw => Err(VolumeError::Unsupported(
             "a .raw file has no header: give its dims and voxel type (raw::RawSpec)".into(),
         )),
@@ -285,6 +303,11 @@ pub fn write_with(
         Format::Vtk => vtk::write(path, volume, options),
         Format::Vti => vti::write(path, volume, options),
         Format::Mgh => mgh::write(path, volume, options),
+        Format::Dicom => Err(VolumeError::Unsupported(
+            "volmorph reads DICOM but does not write it (a DICOM file needs patient and study \
+             identity a volume does not carry): write .nii.gz, .nrrd, .mha or .vti"
+                .into(),
+        )),
         Format::Raw => raw::write(path, volume, options),
     };
     res.map_err(|e| e.at(path))
@@ -307,6 +330,7 @@ mod tests {
             ("x.VTI", Format::Vti),
             ("brain.mgz", Format::Mgh),
             ("x.mgh", Format::Mgh),
+            ("IM0001.DCM", Format::Dicom),
             ("x.raw", Format::Raw),
         ] {
             assert_eq!(Format::from_path(Path::new(p)).unwrap(), f, "{p}");
