@@ -46,7 +46,7 @@
 use glam::{DMat3, DVec3};
 use volmorph_spline::{BSplineVolume, KnotVector, SplineError, TensorBSpline};
 use volmorph_volume::Geometry;
-use volmorph_volume::direction::{DIRECTION_ORTHONORMAL_TOL, orthonormalize};
+use volmorph_volume::direction::orthonormalize;
 
 use rayon::prelude::*;
 
@@ -74,14 +74,16 @@ impl LatticeFrame {
     /// (columns: physical directions of u, v, w; either handedness) and physical length
     /// `spacing` of one parameter unit along each axis.
     ///
-    /// Axes orthonormal within [`DIRECTION_ORTHONORMAL_TOL`] (e.g. an oblique scan's direction,
+    /// Axes orthonormal within
+    /// [`DIRECTION_ORTHONORMAL_TOL`](volmorph_volume::direction::DIRECTION_ORTHONORMAL_TOL) (e.g. an oblique scan's direction,
     /// orthonormal only to single precision) are replaced by their polar factor, the nearest
     /// orthonormal matrix, by [`orthonormalize`] — the rule every direction entering volmorph
     /// follows; [`LatticeFrame::axes`] returns the snapped matrix.
     ///
     /// # Errors
     /// [`DeformError::InvalidFrame`] for non-finite values, a spacing that is not > 0, or axes
-    /// whose Gram matrix deviates from `I` by more than [`DIRECTION_ORTHONORMAL_TOL`].
+    /// whose Gram matrix deviates from `I` by more than
+    /// [`DIRECTION_ORTHONORMAL_TOL`](volmorph_volume::direction::DIRECTION_ORTHONORMAL_TOL).
     pub fn new(origin: DVec3, axes: DMat3, spacing: DVec3) -> Result<Self, DeformError> {
         if !origin.is_finite() {
             return Err(DeformError::InvalidFrame(format!(

@@ -1,4 +1,4 @@
-//! NIfTI-1 single-file volumes (`.nii`, and gzip-compressed `.nii.gz`).
+//! NIfTI-1 and NIfTI-2 single-file volumes (`.nii`, and gzip-compressed `.nii.gz`).
 //!
 //! Geometry follows `itk::NiftiImageIO` (ITK 5.3/5.4, with `nifti1_io` underneath) rule for
 //! rule, because ITK is volmorph's geometry reference: a file read here lands on the same
@@ -10,12 +10,18 @@
 //!
 //! # Header
 //!
-//! All 348 bytes are parsed. The byte order is whichever makes `sizeof_hdr` equal 348 (a file
-//! whose `sizeof_hdr` is 540 is NIfTI-2 and refused as such). The magic must be `"n+1\0"`; the
-//! two-file magic `"ni1\0"` is recognised only to say that `.hdr`/`.img` pairs are not supported.
-//! `dim[0]` must be 1–7 and `dim[1..=dim[0]]` positive; entries past `dim[0]` are ignored (as
-//! `nifti1_io` does). Trailing dimensions of size 1 past the third are dropped (ITK's
-//! `realdim`); a fourth or higher dimension larger than 1 is refused. `datatype` must be one of
+//! All 348 bytes are parsed. The byte order is whichever makes `sizeof_hdr` equal 348, or 540
+//! for a **NIfTI-2** header (`nifti_2_header`: the same fields with 64-bit sizes and offsets and
+//! double-precision geometry, magic `"n+2\0\r\n\032\n"`, data at 544 or later). The NIfTI-1
+//! magic must be `"n+1\0"`; the two-file magics `"ni1\0"`/`"ni2\0"` are recognised only to say
+//! that `.hdr`/`.img` pairs are not supported. `dim[0]` must be 1–7 and `dim[1..=dim[0]]`
+//! positive; entries past `dim[0]` are ignored (as `nifti1_io` does). Trailing dimensions of
+//! size 1 past the third are dropped (ITK's `realdim`). A 4-D image is a series of `dim[4]`
+//! 3-D frames, read one at a time ([`crate::ReadOptions::frame`]; reading without a frame is
+//! refused when there are several); a fifth or higher dimension larger than 1 is refused.
+//!
+//! For NIfTI-2, ITK's choice between qform and sform below is made on the values rounded to
+//! single precision, and the chosen matrix is then rebuilt from the stored doubles. `datatype` must be one of
 //! uint8 (2), int16 (4), int32 (8), float32 (16), float64 (64), int8 (256), uint16 (512),
 //! uint32 (768), and `bitpix` must agree with it. `vox_offset` must be at least 352 (truncated
 //! to an integer, as `nifti1_io` does); the data must lie inside the file. NaN or infinite
@@ -73,6 +79,8 @@
 //!
 //! # Writing
 //!
+//! NIfTI-2 (540-byte header, data at 544, geometry fields in double precision) when a size
+//! exceeds NIfTI-1's 16-bit fields, otherwise NIfTI-1 as follows.
 //! One file: 348-byte header, a zero 4-byte extender, data at `vox_offset = 352`, little-endian,
 //! magic `n+1`, `xyzt_units = 10` (millimetres, seconds — what ITK writes), `dim[0] = 3`, gzip
 //! when the name ends in `.gz` (level [`WriteOptions::level`]). As in ITK's
@@ -1977,9 +1985,67 @@ fn write_data<W: Write>(w: &mut W, v: &AnyVolume) -> io::Result<()> {
     })
 }
 
-/// Write a single-file NIfTI-1; gzip-compressed when the file name ends in `.gz`.
+/// The 544 bytes (header and extender) of a NIfTI-2 file for `v`: the fields of
+/// [`encode_header`] at full width — sizes as 64-bit integers, `pixdim`, offsets and `srow_*`
+/// in double precision (the exact direction times the spacing); the quaternion is the
+/// single-precision one ITK's rules give, so both forms describe the same grid.
+fn encode_header2(v: &AnyVolume) -> Result<Vec<u8>, VolumeError> {
+    let g = v.geometry();
+    g.validate()?;
+    let x = write_xform(g)?;
+    let t = v.voxel_type();
+    let mut b = vec![0u8; WRITE2_VOX_OFFSET];
+    let mut put = |off: usize, bytes: &[u8]| b[off..off + bytes.len()].copy_from_slice(bytes);
+    put(0, &(HEADER2_SIZE as i32).to_le_bytes());
+    put(4, NIFTI2_MAGIC);
+    put(12, &datatype_of(t).to_le_bytes());
+    put(14, &((8 * t.size()) as i16).to_le_bytes());
+    let dims = [3i64, g.dims[0] as i64, g.dims[1] as i64, g.dims[2] as i64, 1, 1, 1, 1];
+    for (i, d) in dims.iter().enumerate() {
+        put(16 + 8 * i, &d.to_le_bytes());
+    }
+    let pixdim = [
+        f64::from(x.qfac),
+        g.spacing.x,
+        g.spacing.y,
+        g.spacing.z,
+        0.0,
+        0.0,
+        0.0,
+        0.0,
+    ];
+    for (i, p) in pixdim.iter().enumerate() {
+        put(104 + 8 * i, &p.to_le_bytes());
+    }
+    put(168, &(WRITE2_VOX_OFFSET as i64).to_le_bytes());
+    put(176, &1f64.to_le_bytes()); // scl_slope
+    put(240, b"volmorph");
+    put(344, &i32::from(XFORM_SCANNER_ANAT).to_le_bytes());
+    put(348, &i32::from(XFORM_SCANNER_ANAT).to_le_bytes());
+    let flip = [-1.0f64, -1.0, 1.0];
+    let offset = [-g.origin.x, -g.origin.y, g.origin.z];
+    for (i, q) in x.quatern.iter().map(|&q| f64::from(q)).chain(offset).enumerate() {
+        put(352 + 8 * i, &q.to_le_bytes());
+    }
+    for r in 0..3 {
+        for c in 0..3 {
+            let m = flip[r] * g.direction.col(c)[r] * g.spacing[c];
+            put(400 + 32 * r + 8 * c, &(m + 0.0).to_le_bytes());
+        }
+        put(400 + 32 * r + 24, &(offset[r] + 0.0).to_le_bytes());
+    }
+    put(500, &i32::from(WRITE_XYZT_UNITS).to_le_bytes());
+    Ok(b)
+}
+
+/// Write a single-file NIfTI (gzip-compressed when the name ends in `.gz`): NIfTI-1, or
+/// NIfTI-2 when a size exceeds NIfTI-1's 16-bit fields.
 pub(crate) fn write(path: &Path, v: &AnyVolume, o: &WriteOptions) -> Result<(), VolumeError> {
-    let header = encode_header(v)?;
+    let header = if v.geometry().dims.iter().any(|&d| d > i16::MAX as usize) {
+        encode_header2(v)?
+    } else {
+        encode_header(v)?.to_vec()
+    };
     let gz = path
         .file_name()
         .is_some_and(|n| n.to_string_lossy().to_ascii_lowercase().ends_with(".gz"));
@@ -2002,6 +2068,32 @@ pub(crate) fn write(path: &Path, v: &AnyVolume, o: &WriteOptions) -> Result<(), 
 #[allow(clippy::needless_range_loop)] // matrix code reads best with indices
 mod tests {
     use super::*;
+
+    #[test]
+    fn sizes_beyond_16_bits_are_written_as_nifti2_and_read_back() {
+        let rot = DMat3::from_rotation_z(0.25);
+        let g = Geometry::new([40_000, 2, 1])
+            .with_spacing(DVec3::new(0.1, 0.7, 1.3))
+            .with_origin(DVec3::new(-12.345_678_9, 3.25, 1e-3))
+            .with_direction(rot);
+        let v: AnyVolume = Volume::from_fn(g, |i, j, _| ((i + 7 * j) % 251) as u8)
+            .unwrap()
+            .into();
+        let dir = tempfile::tempdir().unwrap();
+        let p = dir.path().join("long.nii.gz");
+        write(&p, &v, &WriteOptions::default()).unwrap();
+        let (back, h, frames) = read(&p, None).unwrap();
+        assert_eq!(frames, 1);
+        assert_eq!(back.as_bytes(), v.as_bytes());
+        let size = h.fields.iter().find(|(k, _)| k == "sizeof_hdr").unwrap();
+        assert_eq!(size.1, "540");
+        let b = back.geometry();
+        assert_eq!(b.dims, g.dims);
+        // Double precision: spacing and origin exactly, direction to rounding.
+        assert_eq!(b.spacing, g.spacing);
+        assert_eq!(b.origin, g.origin);
+        assert!((b.direction - rot).abs_diff_eq(DMat3::ZERO, 1e-15));
+    }
 
     #[test]
     fn quaternion_round_trip_through_matrix() {
