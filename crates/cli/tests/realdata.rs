@@ -69,7 +69,15 @@ fn oblique_scan_lattice_init_and_drag_are_accepted() {
     for scan in ["nibabel_oblique.nii.gz", "sitk_oblique.nii.gz"] {
         let scan = fixture(scan);
         let lat = dir.path().join("l.json");
-        ok(&[&"lattice", &"init", &scan, &"--counts", &"6,6,5", &"-o", &lat]);
+        ok(&[
+            &"lattice",
+            &"init",
+            &scan,
+            &"--counts",
+            &"6,6,5",
+            &"-o",
+            &lat,
+        ]);
         let l: serde_json::Value =
             serde_json::from_str(&std::fs::read_to_string(&lat).unwrap()).unwrap();
         assert!(l.is_object());
@@ -79,7 +87,16 @@ fn oblique_scan_lattice_init_and_drag_are_accepted() {
         let to = format!("{},{},{}", c[0] + 0.5, c[1], c[2]);
         let out = dir.path().join("dragged.nii.gz");
         ok(&[
-            &"drag", &scan, &"--from", &from, &"--to", &to, &"--radius", &"4", &"-o", &out,
+            &"drag",
+            &scan,
+            &"--from",
+            &from,
+            &"--to",
+            &to,
+            &"--radius",
+            &"4",
+            &"-o",
+            &out,
         ]);
         let o = info_json(&out, &[]);
         assert_eq!(o["dims"], j["dims"]);
@@ -111,7 +128,10 @@ fn four_d_nifti_info_lists_frames_and_convert_takes_one() {
     let dir = tempfile::tempdir().unwrap();
     let series = fixture("nibabel_4d.nii.gz");
     let text = ok(&[&"info", &series]);
-    assert!(text.contains("frames:     3 (0 to 2); this is frame 0"), "{text}");
+    assert!(
+        text.contains("frames:     3 (0 to 2); this is frame 0"),
+        "{text}"
+    );
     let j = info_json(&series, &["--frame", "2"]);
     assert_eq!(j["frames"], 3);
     assert_eq!(j["frame"], 2);

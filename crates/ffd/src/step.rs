@@ -158,8 +158,7 @@ fn plane_of(s: &BezierSurface) -> Option<(DVec3, DVec3, DVec3)> {
         return None;
     }
     let n = n / len;
-    if s
-        .control_points
+    if s.control_points
         .iter()
         .any(|q| (*q - p).dot(n).abs() > PLANAR_TOL)
     {

@@ -61,7 +61,10 @@ fn identity_lattice_writes_planes_lines_and_a_solid() {
     assert!(lines.iter().all(|b| b.contains(".POLYLINE_FORM.")));
     let vertex_points: HashSet<&str> = bodies(&text, "VERTEX_POINT")
         .iter()
-        .map(|b| b.trim_start_matches("VERTEX_POINT('',").trim_end_matches(");"))
+        .map(|b| {
+            b.trim_start_matches("VERTEX_POINT('',")
+                .trim_end_matches(");")
+        })
         .collect();
     for b in &lines {
         let inner = b.split_once(",(").unwrap().1.split_once(")").unwrap().0;

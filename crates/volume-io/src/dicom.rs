@@ -115,9 +115,7 @@ struct PixelFormat {
 
 impl PixelFormat {
     fn of(obj: &InMemDicomObject, what: &str) -> Result<Self, VolumeError> {
-        let need = |tag, name: &str| {
-            int(obj, tag).ok_or_else(|| err(format!("{what}: no {name}")))
-        };
+        let need = |tag, name: &str| int(obj, tag).ok_or_else(|| err(format!("{what}: no {name}")));
         let spp = int(obj, tags::SAMPLES_PER_PIXEL).unwrap_or(1);
         if spp != 1 {
             let pi = text(obj, tags::PHOTOMETRIC_INTERPRETATION).unwrap_or_default();
@@ -215,9 +213,9 @@ fn plane_from(
             "{what}: no ImageOrientationPatient (6 numbers): not a slice in patient space"
         ))
     })?;
-    let ipp = ipp.filter(|v| v.len() == 3).ok_or_else(|| {
-        err(format!("{what}: no ImagePositionPatient (3 numbers)"))
-    })?;
+    let ipp = ipp
+        .filter(|v| v.len() == 3)
+        .ok_or_else(|| err(format!("{what}: no ImagePositionPatient (3 numbers)")))?;
     let r = DVec3::new(iop[0], iop[1], iop[2]);
     let c = DVec3::new(iop[3], iop[4], iop[5]);
     let (rn, cn) = (r.length(), c.length());
@@ -228,7 +226,9 @@ fn plane_from(
     }
     let p = DVec3::new(ipp[0], ipp[1], ipp[2]);
     if !p.is_finite() {
-        return Err(err(format!("{what}: ImagePositionPatient {ipp:?} is not finite")));
+        return Err(err(format!(
+            "{what}: ImagePositionPatient {ipp:?} is not finite"
+        )));
     }
     let s = match spacing {
         Some(s) if s.len() == 2 => {
@@ -313,9 +313,8 @@ pub(crate) fn read(path: &Path) -> Result<(AnyVolume, Header), VolumeError> {
         }
         (files, None)
     } else {
-        let me = scan(path).ok_or_else(|| {
-            err(format!("{} is not a DICOM image file", path.display()))
-        })?;
+        let me = scan(path)
+            .ok_or_else(|| err(format!("{} is not a DICOM image file", path.display())))?;
         if me.frames > 1 {
             return read_multiframe(path);
         }
@@ -411,8 +410,10 @@ fn read_series(series: &[Scanned]) -> Result<(AnyVolume, Header), VolumeError> {
     let (geometry, order) = assemble(&mut planes, single_step, &|p: &Plane| {
         paths[p.file].display().to_string()
     })?;
-    let mut header = summary(&first, &format, &planes, geometry, series.len());
-    header.fields.push(("files".into(), series.len().to_string()));
+    let mut header = summary(&first, &format, &planes, geometry);
+    header
+        .fields
+        .push(("files".into(), series.len().to_string()));
     // Decode slice by slice (one file at a time in memory).
     let volume = fill(&format, &planes, &order, geometry, |p: &Plane| {
         let obj = open_full(paths[p.file])?;
@@ -426,7 +427,8 @@ fn read_multiframe(path: &Path) -> Result<(AnyVolume, Header), VolumeError> {
     let obj = open_full(path)?;
     let format = PixelFormat::of(&obj, &what)?;
     let frames = int(&obj, tags::NUMBER_OF_FRAMES).unwrap_or(1).max(1);
-    let frames = u32::try_from(frames).map_err(|_| err(format!("{what}: NumberOfFrames {frames}")))?;
+    let frames =
+        u32::try_from(frames).map_err(|_| err(format!("{what}: NumberOfFrames {frames}")))?;
     let shared = item(&obj, tags::SHARED_FUNCTIONAL_GROUPS_SEQUENCE);
     let per_frame: &[InMemDicomObject] = obj
         .get(tags::PER_FRAME_FUNCTIONAL_GROUPS_SEQUENCE)
@@ -438,7 +440,11 @@ fn read_multiframe(path: &Path) -> Result<(AnyVolume, Header), VolumeError> {
             .get(f)
             .and_then(|it| item(it, seq))
             .and_then(|s| floats(s, tag))
-            .or_else(|| shared.and_then(|it| item(it, seq)).and_then(|s| floats(s, tag)))
+            .or_else(|| {
+                shared
+                    .and_then(|it| item(it, seq))
+                    .and_then(|s| floats(s, tag))
+            })
     };
     let enhanced = !per_frame.is_empty() || shared.is_some();
     if enhanced && per_frame.len() != frames as usize {
@@ -448,24 +454,40 @@ fn read_multiframe(path: &Path) -> Result<(AnyVolume, Header), VolumeError> {
         )));
     }
     let mut planes = Vec::with_capacity(frames as usize);
-    let top_step = float(&obj, tags::SPACING_BETWEEN_SLICES)
-        .or_else(|| float(&obj, tags::SLICE_THICKNESS));
+    let top_step =
+        float(&obj, tags::SPACING_BETWEEN_SLICES).or_else(|| float(&obj, tags::SLICE_THICKNESS));
     for f in 0..frames as usize {
         let fw = format!("{what} frame {}", f + 1);
         let (ipp, iop, ps, slope, inter) = if enhanced {
             (
-                fg(f, tags::PLANE_POSITION_SEQUENCE, tags::IMAGE_POSITION_PATIENT)
-                    .or_else(|| floats(&obj, tags::IMAGE_POSITION_PATIENT)),
-                fg(f, tags::PLANE_ORIENTATION_SEQUENCE, tags::IMAGE_ORIENTATION_PATIENT)
-                    .or_else(|| floats(&obj, tags::IMAGE_ORIENTATION_PATIENT)),
+                fg(
+                    f,
+                    tags::PLANE_POSITION_SEQUENCE,
+                    tags::IMAGE_POSITION_PATIENT,
+                )
+                .or_else(|| floats(&obj, tags::IMAGE_POSITION_PATIENT)),
+                fg(
+                    f,
+                    tags::PLANE_ORIENTATION_SEQUENCE,
+                    tags::IMAGE_ORIENTATION_PATIENT,
+                )
+                .or_else(|| floats(&obj, tags::IMAGE_ORIENTATION_PATIENT)),
                 fg(f, tags::PIXEL_MEASURES_SEQUENCE, tags::PIXEL_SPACING)
                     .or_else(|| floats(&obj, tags::PIXEL_SPACING)),
-                fg(f, tags::PIXEL_VALUE_TRANSFORMATION_SEQUENCE, tags::RESCALE_SLOPE)
-                    .and_then(|v| v.first().copied())
-                    .or_else(|| float(&obj, tags::RESCALE_SLOPE)),
-                fg(f, tags::PIXEL_VALUE_TRANSFORMATION_SEQUENCE, tags::RESCALE_INTERCEPT)
-                    .and_then(|v| v.first().copied())
-                    .or_else(|| float(&obj, tags::RESCALE_INTERCEPT)),
+                fg(
+                    f,
+                    tags::PIXEL_VALUE_TRANSFORMATION_SEQUENCE,
+                    tags::RESCALE_SLOPE,
+                )
+                .and_then(|v| v.first().copied())
+                .or_else(|| float(&obj, tags::RESCALE_SLOPE)),
+                fg(
+                    f,
+                    tags::PIXEL_VALUE_TRANSFORMATION_SEQUENCE,
+                    tags::RESCALE_INTERCEPT,
+                )
+                .and_then(|v| v.first().copied())
+                .or_else(|| float(&obj, tags::RESCALE_INTERCEPT)),
             )
         } else {
             // Classic multi-frame: frames stepped along the normal from the top-level position.
@@ -511,7 +533,7 @@ fn read_multiframe(path: &Path) -> Result<(AnyVolume, Header), VolumeError> {
     let (geometry, order) = assemble(&mut planes, single_step, &|p: &Plane| {
         format!("{what} frame {}", p.frame + 1)
     })?;
-    let mut header = summary(&obj, &format, &planes, geometry, 1);
+    let mut header = summary(&obj, &format, &planes, geometry);
     header.fields.push(("frames".into(), frames.to_string()));
     // Check the decoded size before decoding everything.
     volmorph_io::checked_len(
@@ -641,7 +663,9 @@ fn assemble(
         let v = (last - first) / (n - 1) as f64;
         (v / v.length(), v.length())
     } else {
-        let s = single_step.filter(|s| s.is_finite() && *s > 0.0).unwrap_or(1.0);
+        let s = single_step
+            .filter(|s| s.is_finite() && *s > 0.0)
+            .unwrap_or(1.0);
         (normal, s)
     };
     let geometry = Geometry {
@@ -659,7 +683,6 @@ fn summary(
     format: &PixelFormat,
     planes: &[Plane],
     geometry: Geometry,
-    files: usize,
 ) -> Header {
     let mut f: Vec<(String, String)> = Vec::new();
     for (k, tag) in [
@@ -668,7 +691,10 @@ fn summary(
         ("SeriesDescription", tags::SERIES_DESCRIPTION),
         ("SeriesInstanceUID", tags::SERIES_INSTANCE_UID),
         ("SOPClassUID", tags::SOP_CLASS_UID),
-        ("PhotometricInterpretation", tags::PHOTOMETRIC_INTERPRETATION),
+        (
+            "PhotometricInterpretation",
+            tags::PHOTOMETRIC_INTERPRETATION,
+        ),
         ("SliceThickness", tags::SLICE_THICKNESS),
     ] {
         if let Some(v) = text(obj, tag) {
@@ -699,11 +725,7 @@ fn summary(
             format!("{} different per slice", rescales.len())
         },
     ));
-    f.push((
-        "slice step".into(),
-        format!("{} mm", geometry.spacing.z),
-    ));
-    let _ = files;
+    f.push(("slice step".into(), format!("{} mm", geometry.spacing.z)));
     Header { fields: f }
 }
 
@@ -794,7 +816,10 @@ mod tests {
         // A missing slice.
         let mut ps = vec![plane(1.0, 0), plane(3.0, 1), plane(7.0, 2), plane(9.0, 3)];
         let e = assemble(&mut ps, None, &name).unwrap_err().to_string();
-        assert!(e.contains("not evenly spaced") && e.contains("slice 1 → slice 2"), "{e}");
+        assert!(
+            e.contains("not evenly spaced") && e.contains("slice 1 → slice 2"),
+            "{e}"
+        );
         // Two stacks at the same positions.
         let mut ps = vec![plane(1.0, 0), plane(1.0, 1)];
         let e = assemble(&mut ps, None, &name).unwrap_err().to_string();

@@ -67,7 +67,11 @@ fn voxel_type(code: i32) -> Result<VoxelType, VolumeError> {
                 "MGH type 2 (MRI_LONG) is not supported".into(),
             ));
         }
-        c => return Err(err(format!("type {c} is not an MGH voxel type (0, 1, 3, 4)"))),
+        c => {
+            return Err(err(format!(
+                "type {c} is not an MGH voxel type (0, 1, 3, 4)"
+            )));
+        }
     })
 }
 
@@ -124,7 +128,10 @@ fn parse(bytes: &[u8]) -> Result<Mgh, VolumeError> {
     let mut sizes = [0usize; 4];
     for a in 0..4 {
         if d[a] <= 0 {
-            return Err(err(format!("{} = {}, sizes must be positive", names[a], d[a])));
+            return Err(err(format!(
+                "{} = {}, sizes must be positive",
+                names[a], d[a]
+            )));
         }
         sizes[a] = d[a] as usize;
     }
@@ -155,7 +162,7 @@ fn parse(bytes: &[u8]) -> Result<Mgh, VolumeError> {
     for (k, c) in cols.iter_mut().enumerate() {
         let m = mdc.col(k);
         let n = m.length();
-        if !(n > 0.0) {
+        if n.is_nan() || n <= 0.0 {
             return Err(err(format!("direction column {k} of Mdc is zero")));
         }
         *c = m / n;
@@ -382,13 +389,28 @@ mod tests {
     #[test]
     fn malformed_headers_are_clear_errors() {
         let mut h = vec![0u8; DATA_OFFSET];
-        assert!(read_bytes(&h, None).unwrap_err().to_string().contains("version"));
+        assert!(
+            read_bytes(&h, None)
+                .unwrap_err()
+                .to_string()
+                .contains("version")
+        );
         h[3] = 1;
-        assert!(read_bytes(&h, None).unwrap_err().to_string().contains("width = 0"));
+        assert!(
+            read_bytes(&h, None)
+                .unwrap_err()
+                .to_string()
+                .contains("width = 0")
+        );
         for (a, v) in [(4usize, 2i32), (8, 2), (12, 2), (16, 1), (20, 7)] {
             h[a..a + 4].copy_from_slice(&v.to_be_bytes());
         }
-        assert!(read_bytes(&h, None).unwrap_err().to_string().contains("type 7"));
+        assert!(
+            read_bytes(&h, None)
+                .unwrap_err()
+                .to_string()
+                .contains("type 7")
+        );
         h[20..24].copy_from_slice(&0i32.to_be_bytes());
         // Header fine, data missing.
         let e = read_bytes(&h, None).unwrap_err().to_string();

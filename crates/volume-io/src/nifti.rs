@@ -1767,7 +1767,11 @@ fn read_stream<R: Read>(
         }
     }
     skip(r, (layout.offset - header_len) as u64, "extensions")?;
-    skip(r, (layout.data_bytes() as u64) * frame as u64, "earlier frames")?;
+    skip(
+        r,
+        (layout.data_bytes() as u64) * frame as u64,
+        "earlier frames",
+    )?;
     let rescale = rescale_of(&h);
     let be = h.big_endian;
     let checked = file_len.is_some();
@@ -2000,7 +2004,16 @@ fn encode_header2(v: &AnyVolume) -> Result<Vec<u8>, VolumeError> {
     put(4, NIFTI2_MAGIC);
     put(12, &datatype_of(t).to_le_bytes());
     put(14, &((8 * t.size()) as i16).to_le_bytes());
-    let dims = [3i64, g.dims[0] as i64, g.dims[1] as i64, g.dims[2] as i64, 1, 1, 1, 1];
+    let dims = [
+        3i64,
+        g.dims[0] as i64,
+        g.dims[1] as i64,
+        g.dims[2] as i64,
+        1,
+        1,
+        1,
+        1,
+    ];
     for (i, d) in dims.iter().enumerate() {
         put(16 + 8 * i, &d.to_le_bytes());
     }
@@ -2024,7 +2037,13 @@ fn encode_header2(v: &AnyVolume) -> Result<Vec<u8>, VolumeError> {
     put(348, &i32::from(XFORM_SCANNER_ANAT).to_le_bytes());
     let flip = [-1.0f64, -1.0, 1.0];
     let offset = [-g.origin.x, -g.origin.y, g.origin.z];
-    for (i, q) in x.quatern.iter().map(|&q| f64::from(q)).chain(offset).enumerate() {
+    for (i, q) in x
+        .quatern
+        .iter()
+        .map(|&q| f64::from(q))
+        .chain(offset)
+        .enumerate()
+    {
         put(352 + 8 * i, &q.to_le_bytes());
     }
     for r in 0..3 {

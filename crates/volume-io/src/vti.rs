@@ -403,7 +403,9 @@ fn parse(bytes: &[u8]) -> Result<Parsed, VolumeError> {
         } else if tag.contains("\"raw\"") {
             false
         } else {
-            return Err(err(format!("<AppendedData> encoding is not raw or base64: {tag}")));
+            return Err(err(format!(
+                "<AppendedData> encoding is not raw or base64: {tag}"
+            )));
         };
         let us = bytes[tag_end..]
             .iter()
@@ -413,7 +415,9 @@ fn parse(bytes: &[u8]) -> Result<Parsed, VolumeError> {
             .iter()
             .all(u8::is_ascii_whitespace)
         {
-            return Err(err("unexpected text between <AppendedData> and its `_` marker"));
+            return Err(err(
+                "unexpected text between <AppendedData> and its `_` marker",
+            ));
         }
         Some((tag_end + us + 1, base64))
     } else {
@@ -445,7 +449,9 @@ fn pick_array(
     }
     let chosen = match active {
         Some(n) => arrays.iter().position(|a| a.name == n).ok_or_else(|| {
-            err(format!("PointData names Scalars=\"{n}\" but no DataArray has that name"))
+            err(format!(
+                "PointData names Scalars=\"{n}\" but no DataArray has that name"
+            ))
         })?,
         None => arrays.iter().position(|a| a.components == 1).unwrap_or(0),
     };
@@ -516,21 +522,18 @@ impl Ints {
     }
 }
 
-/// The uncompressed bytes of the array from its encoded form: `head` holds the framing
-/// header (and, for raw storage, everything after it).
-fn unframe(
-    p: &Parsed,
-    need: u64,
-    mut head_and_data: impl FnMut(usize) -> Result<Vec<u8>, VolumeError>,
-) -> Result<Vec<u8>, VolumeError> {
+/// The uncompressed bytes of the array from its encoded form `all`: VTK's framing header
+/// (a byte count, or the block table of compressed data) followed by the data (and, for
+/// appended raw data, whatever follows them).
+fn unframe(p: &Parsed, need: u64, all: &[u8]) -> Result<Vec<u8>, VolumeError> {
     let ints = Ints {
         u64: p.header_u64,
         big_endian: p.big_endian,
     };
     let s = ints.size();
     if !p.zlib {
-        let h = head_and_data(s)?;
-        let n = ints.get(&h, 0)?;
+        let h = all;
+        let n = ints.get(h, 0)?;
         if n != need {
             return Err(err(format!(
                 "the data array holds {n} bytes, {need} expected for {} voxels",
@@ -546,10 +549,9 @@ fn unframe(
         }
         return Ok(data[..need as usize].to_vec());
     }
-    let first = head_and_data(3 * s)?;
-    let blocks = ints.get(&first, 0)?;
-    let block = ints.get(&first, 1)?;
-    let last = ints.get(&first, 2)?;
+    let blocks = ints.get(all, 0)?;
+    let block = ints.get(all, 1)?;
+    let last = ints.get(all, 2)?;
     let total = if blocks == 0 {
         0
     } else {
@@ -570,11 +572,10 @@ fn unframe(
         .and_then(|b| b.checked_mul(s))
         .filter(|&l| l as u64 <= need.saturating_add(1 << 20))
         .ok_or_else(|| err(format!("{blocks} compressed blocks is impossible")))?;
-    let all = head_and_data(hlen)?;
     let mut csizes = Vec::with_capacity(blocks as usize);
     let mut csum = 0u64;
     for b in 0..blocks as usize {
-        let c = ints.get(&all, 3 + b)?;
+        let c = ints.get(all, 3 + b)?;
         csum = csum.saturating_add(c);
         csizes.push(c);
     }
@@ -641,8 +642,7 @@ fn decode_array(bytes: &[u8], p: &Parsed) -> Result<AnyVolume, VolumeError> {
         }
         Storage::Binary(text) => {
             // The header and the data are base64-encoded separately; decode the whole.
-            let all = base64_decode(text.as_bytes())?;
-            unframe(p, need, |_| Ok(all.clone()))?
+            unframe(p, need, &base64_decode(text.as_bytes())?)?
         }
         Storage::Appended(off) => {
             let (start, base64) = p
@@ -656,10 +656,9 @@ fn decode_array(bytes: &[u8], p: &Parsed) -> Result<AnyVolume, VolumeError> {
             let tail = &bytes[at..];
             if base64 {
                 let end = tail.iter().position(|&b| b == b'<').unwrap_or(tail.len());
-                let all = base64_decode(&tail[..end])?;
-                unframe(p, need, |_| Ok(all.clone()))?
+                unframe(p, need, &base64_decode(&tail[..end])?)?
             } else {
-                unframe(p, need, |_| Ok(tail.to_vec()))?
+                unframe(p, need, tail)?
             }
         }
     };
@@ -753,6 +752,7 @@ pub(crate) fn write(
                 .map_err(os)?;
             w.write_all(bytes).map_err(os)?;
         }
-        w.write_all(b"\n  </AppendedData>\n</VTKFile>\n").map_err(os)
+        w.write_all(b"\n  </AppendedData>\n</VTKFile>\n")
+            .map_err(os)
     })
 }

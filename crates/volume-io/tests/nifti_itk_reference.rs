@@ -104,10 +104,23 @@ fn read_snaps_itk_direction_to_orthonormal() {
             assert_eq!(g.direction, itk, "{}", c.file);
         }
         assert!(orthonormality_deviation(g.direction) <= 1e-15, "{}", c.file);
-        assert!((g.direction - itk).abs_diff_eq(DMat3::ZERO, 1e-7), "{}", c.file);
-        assert_eq!(g.direction.determinant().signum(), itk.determinant().signum());
+        assert!(
+            (g.direction - itk).abs_diff_eq(DMat3::ZERO, 1e-7),
+            "{}",
+            c.file
+        );
+        assert_eq!(
+            g.direction.determinant().signum(),
+            itk.determinant().signum()
+        );
         let exact = rows(c.written);
-        let err = |m: DMat3| (m - exact).to_cols_array().iter().map(|v| v * v).sum::<f64>();
+        let err = |m: DMat3| {
+            (m - exact)
+                .to_cols_array()
+                .iter()
+                .map(|v| v * v)
+                .sum::<f64>()
+        };
         assert!(err(g.direction) <= err(itk), "{}", c.file);
         assert_eq!(g.spacing.to_array(), SPACING_READ, "{}", c.file);
         assert_eq!(g.origin.to_array(), ORIGIN, "{}", c.file);

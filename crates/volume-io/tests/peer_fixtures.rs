@@ -38,8 +38,8 @@ fn check(key: &str, want: &serde_json::Value) {
         None => (key, None),
     };
     let path = corpus().join(file);
-    let got = format::read_with(&path, &ReadOptions { frame })
-        .unwrap_or_else(|e| panic!("{key}: {e}"));
+    let got =
+        format::read_with(&path, &ReadOptions { frame }).unwrap_or_else(|e| panic!("{key}: {e}"));
     if let Some(n) = want.get("frames") {
         assert_eq!(got.frames as u64, n.as_u64().unwrap(), "{key}: frames");
     }

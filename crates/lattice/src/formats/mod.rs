@@ -76,9 +76,9 @@ use crate::json::MAX_CONTROL_POINTS;
 use crate::lattice::uniform_cubic_knots;
 use crate::{BSplineLattice, LatticeFrame};
 use volmorph_deform::DeformError;
-use volmorph_volume::direction::orthonormalize;
 #[cfg(doc)]
 use volmorph_volume::direction::DIRECTION_ORTHONORMAL_TOL;
+use volmorph_volume::direction::orthonormalize;
 
 /// A lattice seen as a uniform cubic control grid (the common model of the module docs).
 #[derive(Debug, Clone, PartialEq)]
