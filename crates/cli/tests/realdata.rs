@@ -2,38 +2,16 @@
 //! precision direction), 4-D series, DICOM folders, VTK XML. The inputs are the peer-made
 //! fixtures of `crates/volume-io/tests/corpus/peers/` (see `scripts/make_volume_fixtures.py`).
 
+mod common;
+
 use std::path::{Path, PathBuf};
-use std::process::{Command, Output};
+
+use common::{fails, ok};
 
 fn fixture(name: &str) -> PathBuf {
     PathBuf::from(env!("CARGO_MANIFEST_DIR"))
         .join("../volume-io/tests/corpus/peers")
         .join(name)
-}
-
-fn volmorph(args: &[&dyn AsRef<std::ffi::OsStr>]) -> Output {
-    Command::new(env!("CARGO_BIN_EXE_volmorph"))
-        .args(args.iter().map(|a| a.as_ref()))
-        .output()
-        .expect("the volmorph binary runs")
-}
-
-fn ok(args: &[&dyn AsRef<std::ffi::OsStr>]) -> String {
-    let out = volmorph(args);
-    assert!(
-        out.status.success(),
-        "volmorph failed: {}",
-        String::from_utf8_lossy(&out.stderr)
-    );
-    String::from_utf8(out.stdout).expect("utf-8 output")
-}
-
-fn fails(args: &[&dyn AsRef<std::ffi::OsStr>]) -> String {
-    let out = volmorph(args);
-    let err = String::from_utf8_lossy(&out.stderr).into_owned();
-    assert_eq!(out.status.code(), Some(1), "expected exit 1, stderr: {err}");
-    assert!(!err.contains("panicked"), "panic: {err}");
-    err
 }
 
 fn info_json(path: &Path, extra: &[&str]) -> serde_json::Value {

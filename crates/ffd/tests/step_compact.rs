@@ -31,7 +31,7 @@ fn points(text: &str) -> std::collections::HashMap<String, DVec3> {
         .filter(|l| l.contains("=CARTESIAN_POINT('',("))
         .filter_map(|l| {
             let (id, rest) = l.split_once('=')?;
-            let inner = rest.split_once("((")?.1.split_once("))")?.0;
+            let inner = rest.split_once("',(")?.1.split_once("))")?.0;
             let v: Vec<f64> = inner.split(',').map(|x| x.parse().unwrap()).collect();
             (v.len() == 3).then(|| (id.to_string(), DVec3::new(v[0], v[1], v[2])))
         })
