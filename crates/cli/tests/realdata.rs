@@ -132,7 +132,9 @@ fn dicom_folder_converts_to_nifti_in_hounsfield_units() {
     let series = fixture("sitk_ct_series");
     let j = info_json(&series, &[]);
     assert_eq!(j["format"], "DICOM");
-    assert_eq!(j["voxel_type"], "i16");
+    // Signed 16-bit stored values shifted by −1024 need 32 bits, as SimpleITK (GDCM) also
+    // reads this series ("32-bit signed integer").
+    assert_eq!(j["voxel_type"], "i32");
     assert_eq!(j["dims"], serde_json::json!([8, 6, 5]));
     assert_eq!(j["stats"]["min"], -1024.0);
     let out = dir.path().join("ct.nii.gz");
