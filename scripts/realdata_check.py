@@ -177,6 +177,12 @@ def check_pydicom(vm: Volmorph, max_files: int) -> None:
             continue
         if "PixelData" not in ds or "Rows" not in ds:
             continue
+        # pydicom's test folder holds unrelated files that share series UIDs (one slice in
+        # several transfer syntaxes): read each file on its own, as a one-file series.
+        alone = vm.tmp / f"dcm{len(RESULTS)}"
+        alone.mkdir()
+        (alone / p.name).write_bytes(p.read_bytes())
+        p = alone / p.name
         r = vm.run("info", "--json", p)
         greyscale = int(getattr(ds, "SamplesPerPixel", 1)) == 1
         try:
@@ -186,10 +192,11 @@ def check_pydicom(vm: Volmorph, max_files: int) -> None:
             why = str(e).splitlines()[0][:80]
         has_geometry = "ImagePositionPatient" in ds or "PerFrameFunctionalGroupsSequence" in ds
         if r.returncode != 0:
-            msg = r.stderr.strip().splitlines()[-1][:160] if r.stderr.strip() else ""
+            msg = r.stderr.strip().splitlines()[-1] if r.stderr.strip() else ""
+            msg = msg.replace(str(p.parent) + "/", "")[-200:]
             if "panicked" in r.stderr or r.returncode != 1:
                 record(name, "FAIL", f"crash: {msg}")
-            elif not greyscale or not has_geometry or arr is None:
+            elif not greyscale or not has_geometry or arr is None or "unsupported:" in msg:
                 record(name, "PASS", f"refused clearly: {msg}")
             else:
                 record(name, "FAIL", f"refused a readable slice: {msg}")

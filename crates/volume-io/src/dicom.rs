@@ -376,8 +376,7 @@ fn read_series(series: &[Scanned]) -> Result<(AnyVolume, Header), VolumeError> {
             None => format = Some(pf),
             Some(f) if f != pf => {
                 return Err(err(format!(
-                    "{what}: {}×{} pixels of {} bits differ from the series' {}×{} of {} bits",
-                    pf.cols, pf.rows, pf.bits_allocated, f.cols, f.rows, f.bits_allocated
+                    "{what}: its pixels ({pf:?}) differ from the series' ({f:?})"
                 )));
             }
             Some(_) => {}

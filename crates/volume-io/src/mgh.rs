@@ -167,7 +167,8 @@ fn parse(bytes: &[u8]) -> Result<Mgh, VolumeError> {
         }
         *c = m / n;
     }
-    let m = DMat3::from_cols(cols[0], cols[1], cols[2]) * DMat3::from_diagonal(sizes_mm);
+    // FreeSurfer and nibabel place the grid with Mdc as stored (unit in every real file).
+    let m = mdc * DMat3::from_diagonal(sizes_mm);
     let half = DVec3::new(dims[0] as f64, dims[1] as f64, dims[2] as f64) / 2.0;
     let p0 = c_ras - m * half;
     let flip = DVec3::new(-1.0, -1.0, 1.0);

@@ -263,7 +263,11 @@ fn sizes_beyond_nifti1_become_nifti2_and_bad_geometry_is_refused_without_a_file(
     format::write(&big, &v).unwrap();
     let back = format::read_with_header(&big).unwrap();
     assert_eq!(back.volume, v);
-    assert!(back.header.fields.contains(&("sizeof_hdr".into(), "540".into())));
+    assert!(
+        back.header
+            .fields
+            .contains(&("sizeof_hdr".into(), "540".into()))
+    );
     std::fs::remove_file(&big).unwrap();
     let p = dir.path().join("bad.nii");
     let g = Geometry::new([2, 2, 2]).with_origin(DVec3::new(1e300, 0.0, 0.0));
