@@ -50,11 +50,13 @@ enum Command {
     #[command(after_help = "Example:\n  volmorph demo --out volmorph-demo --size 96")]
     Demo(cmd::demo::Args),
     /// Print a volume file's header, geometry and value statistics.
-    #[command(after_help = "Example:\n  volmorph info brain.nii.gz")]
+    #[command(
+        after_help = "Examples:\n  volmorph info brain.nii.gz\n  volmorph info bold.nii.gz --frame 12\n  volmorph info dicom/ct_series/"
+    )]
     Info(cmd::info::Args),
     /// Convert a volume between formats, with optional type casting and rescaling.
     #[command(
-        after_help = "Examples:\n  volmorph convert ct.nii.gz ct.mha --compress\n  volmorph convert ct.nrrd ct_u8.nii --type u8 --rescale\n  volmorph convert scan.raw scan.nii --raw-dims 256,256,128 --raw-type i16 --raw-spacing 0.9,0.9,1.5"
+        after_help = "Examples:\n  volmorph convert ct.nii.gz ct.mha --compress\n  volmorph convert ct.nrrd ct_u8.nii --type u8 --rescale\n  volmorph convert scan.raw scan.nii --raw-dims 256,256,128 --raw-type i16 --raw-spacing 0.9,0.9,1.5\n  volmorph convert dicom/ct_series/ ct.nii.gz\n  volmorph convert bold.nii.gz frame3.vti --frame 3"
     )]
     Convert(cmd::convert::Args),
     /// Write a PNG picture of an axis-aligned slice of a volume.

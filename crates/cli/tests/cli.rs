@@ -1,34 +1,11 @@
 //! End-to-end tests of the `volmorph` binary: commands chain, errors name the file and exit
 //! with status 1 (never a panic), and failed writes leave no file behind.
 
+mod common;
+
 use std::path::{Path, PathBuf};
-use std::process::{Command, Output};
 
-fn volmorph(args: &[&dyn AsRef<std::ffi::OsStr>]) -> Output {
-    Command::new(env!("CARGO_BIN_EXE_volmorph"))
-        .args(args.iter().map(|a| a.as_ref()))
-        .output()
-        .expect("the volmorph binary runs")
-}
-
-fn ok(args: &[&dyn AsRef<std::ffi::OsStr>]) -> String {
-    let out = volmorph(args);
-    assert!(
-        out.status.success(),
-        "volmorph failed: {}",
-        String::from_utf8_lossy(&out.stderr)
-    );
-    String::from_utf8(out.stdout).expect("utf-8 output")
-}
-
-/// Runs a command that must fail cleanly; returns its standard error.
-fn fails(args: &[&dyn AsRef<std::ffi::OsStr>]) -> String {
-    let out = volmorph(args);
-    let err = String::from_utf8_lossy(&out.stderr).into_owned();
-    assert_eq!(out.status.code(), Some(1), "expected exit 1, stderr: {err}");
-    assert!(!err.contains("panicked"), "panic: {err}");
-    err
-}
+use common::{fails, ok, volmorph};
 
 fn info_json(path: &Path) -> serde_json::Value {
     serde_json::from_str(&ok(&[&"info", &"--json", &path])).expect("info --json prints JSON")

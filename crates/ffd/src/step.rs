@@ -1,18 +1,30 @@
-//! STEP (ISO 10303-21, AP214 `automotive_design`) export of a [`TrimmedModel`].
+//! STEP (ISO 10303-21, AP214 `automotive_design`) export of a [`TrimmedModel`], in compact
+//! form.
 //!
-//! Each trimmed face becomes an `ADVANCED_FACE` on its own `B_SPLINE_SURFACE_WITH_KNOTS`
-//! (the patch's Bézier surface: clamped knots on the patch rectangle `[σ₀, σ₁] × [τ₀, τ₁]`, so
-//! the parameters are the patch's `(σ, τ)`), bounded by a `FACE_OUTER_BOUND` and one
-//! `FACE_BOUND` per hole. Every topological edge is written **once** as an `EDGE_CURVE` between
-//! two shared `VERTEX_POINT`s, with a `SURFACE_CURVE` holding the exact 3D image (a
-//! `B_SPLINE_CURVE_WITH_KNOTS` on `[0, 1]`, Bézier form) and one `PCURVE` per face using it (a
-//! degree-1 line in that face's `(σ, τ)` on the same `[0, 1]` parameter); adjacent faces refer
-//! to the same `EDGE_CURVE`, one with `ORIENTED_EDGE(.T.)` and the other with `.F.`. The faces
-//! form a `CLOSED_SHELL` when every edge is used by exactly two faces in opposite directions,
-//! an `OPEN_SHELL` otherwise, inside a `SHELL_BASED_SURFACE_MODEL` of a
-//! `MANIFOLD_SURFACE_SHAPE_REPRESENTATION`, with the product, context and unit entities AP214
-//! readers expect. Lengths are written in millimetres (volmorph's physical unit) with a
-//! distance uncertainty of [`STEP_UNCERTAINTY`].
+//! Each trimmed face becomes an `ADVANCED_FACE` on its patch's surface, one surface entity per
+//! **patch** (faces of one patch share it): a `PLANE` when the patch is planar — its control
+//! points within [`PLANAR_TOL`] of one plane, as where the lattice is affine over the patch
+//! (unmoved cells, cells outside the box) — and otherwise the patch's Bézier surface as a
+//! `B_SPLINE_SURFACE_WITH_KNOTS` (clamped knots on the patch rectangle `[σ₀, σ₁] × [τ₀, τ₁]`,
+//! so the parameters are the patch's `(σ, τ)`). Faces are bounded by a `FACE_OUTER_BOUND` and
+//! one `FACE_BOUND` per hole. Every topological edge is written **once** as an `EDGE_CURVE`
+//! between two shared `VERTEX_POINT`s; its 3D image is a `B_SPLINE_CURVE_WITH_KNOTS` on `[0, 1]`
+//! (Bézier form, whose end points are the vertices' own points), or a degree-1 line through
+//! the two vertex points when it is straight. Faces on curved surfaces get a `PCURVE` (a
+//! degree-1 line in that face's `(σ, τ)` on the same `[0, 1]` parameter) inside a
+//! `SURFACE_CURVE`; planar faces need none (readers compute pcurves on planes exactly), and an
+//! edge with no pcurve refers to its 3D curve directly. Adjacent faces refer to the same
+//! `EDGE_CURVE`, one with `ORIENTED_EDGE(.T.)` and the other with `.F.`.
+//!
+//! Every geometric entity (points, directions, placements, curves, surfaces, pcurves) is written
+//! once and referred to wherever it recurs; reals are written in the shortest form that reads
+//! back to the same `f64`. When every edge is used by exactly two faces in opposite directions
+//! the faces form a `CLOSED_SHELL` bounding a `MANIFOLD_SOLID_BREP` in an
+//! `ADVANCED_BREP_SHAPE_REPRESENTATION` (a solid, as CAD systems expect); otherwise an
+//! `OPEN_SHELL` in a `SHELL_BASED_SURFACE_MODEL` of a `MANIFOLD_SURFACE_SHAPE_REPRESENTATION`.
+//! The product, context and unit entities AP214 readers expect are included. Lengths are
+//! written in millimetres (volmorph's physical unit) with a distance uncertainty of
+//! [`STEP_UNCERTAINTY`].
 
 use std::fmt::Write as _;
 use std::io::Write as _;
@@ -21,7 +33,8 @@ use std::path::Path;
 use glam::DVec3;
 
 use crate::FfdError;
-use crate::accurate::TrimmedModel;
+use crate::accurate::{BezierSurface, TrimmedModel};
+use std::collections::HashMap;
 
 /// The `distance_accuracy_value` written to the file (millimetres).
 pub const STEP_UNCERTAINTY: f64 = 1e-7;
@@ -35,7 +48,9 @@ pub struct StepSummary {
     pub edges: usize,
     /// `VERTEX_POINT` entities.
     pub vertices: usize,
-    /// Whether the shell is closed.
+    /// Faces whose patch is planar, written on a `PLANE`.
+    pub planes: usize,
+    /// Whether the shell is closed (then written as a `MANIFOLD_SOLID_BREP`).
     pub closed: bool,
     /// Number of the last entity.
     pub entities: usize,
@@ -60,13 +75,16 @@ fn real(x: f64) -> String {
     out
 }
 
-/// An entity writer handing out `#n` ids.
+/// An entity writer handing out `#n` ids. Geometric entities go through [`Out::shared`]:
+/// an entity whose text was written before is referred to, not written again.
 struct Out {
     text: String,
     next: usize,
+    shared: HashMap<String, usize>,
 }
 
 impl Out {
+    /// A new entity (topology: always its own instance).
     fn add(&mut self, body: &str) -> usize {
         let id = self.next;
         self.next += 1;
@@ -74,8 +92,18 @@ impl Out {
         id
     }
 
+    /// A geometric entity, written once however often it is used.
+    fn shared(&mut self, body: String) -> usize {
+        if let Some(&id) = self.shared.get(&body) {
+            return id;
+        }
+        let id = self.add(&body);
+        self.shared.insert(body, id);
+        id
+    }
+
     fn point3(&mut self, p: DVec3) -> usize {
-        self.add(&format!(
+        self.shared(format!(
             "CARTESIAN_POINT('',({},{},{}))",
             real(p.x),
             real(p.y),
@@ -84,10 +112,19 @@ impl Out {
     }
 
     fn point2(&mut self, p: [f64; 2]) -> usize {
-        self.add(&format!(
+        self.shared(format!(
             "CARTESIAN_POINT('',({},{}))",
             real(p[0]),
             real(p[1])
+        ))
+    }
+
+    fn direction(&mut self, d: DVec3) -> usize {
+        self.shared(format!(
+            "DIRECTION('',({},{},{}))",
+            real(d.x),
+            real(d.y),
+            real(d.z)
         ))
     }
 }
@@ -99,10 +136,64 @@ fn refs(ids: &[usize]) -> String {
         .join(",")
 }
 
+/// Largest distance of a surface control point from its fitted plane (or of an edge curve's
+/// control point from the straight line) for the surface to be written as a `PLANE` (the edge
+/// as a line): 1 % of [`STEP_UNCERTAINTY`], so replacing the exact Bézier form changes the
+/// geometry far below what the file's readers resolve. Patches where the lattice is affine
+/// (cells whose control points were not moved, cells outside the lattice box) are planar to
+/// rounding.
+pub const PLANAR_TOL: f64 = 0.01 * STEP_UNCERTAINTY;
+
+/// The plane of a surface whose control points all lie within [`PLANAR_TOL`] of it:
+/// `(point, unit normal S_σ × S_τ, unit in-plane direction along S_σ)`.
+fn plane_of(s: &BezierSurface) -> Option<(DVec3, DVec3, DVec3)> {
+    let c = [
+        0.5 * (s.rect[0][0] + s.rect[0][1]),
+        0.5 * (s.rect[1][0] + s.rect[1][1]),
+    ];
+    let (p, ds, dt) = s.eval_with_partials(c);
+    let n = ds.cross(dt);
+    let len = n.length();
+    if !(len.is_finite() && len > 0.0) {
+        return None;
+    }
+    let n = n / len;
+    if s.control_points
+        .iter()
+        .any(|q| (*q - p).dot(n).abs() > PLANAR_TOL)
+    {
+        return None;
+    }
+    let x = (ds - n * ds.dot(n)).normalize_or_zero();
+    (x != DVec3::ZERO).then_some((p, n, x))
+}
+
+/// `true` if the Bézier curve is the straight segment between its end points with linear
+/// parametrisation (control points evenly spaced on it, as degree elevation of a line gives).
+fn is_linear(cps: &[DVec3]) -> bool {
+    let (a, b) = (cps[0], cps[cps.len() - 1]);
+    let m = (cps.len() - 1) as f64;
+    cps.iter()
+        .enumerate()
+        .all(|(i, q)| (*q - a.lerp(b, i as f64 / m)).length() <= PLANAR_TOL)
+}
+
+/// `true` if every control point lies within [`PLANAR_TOL`] of the line through the ends.
+fn is_collinear(cps: &[DVec3]) -> bool {
+    let (a, b) = (cps[0], cps[cps.len() - 1]);
+    let d = (b - a).normalize_or_zero();
+    d != DVec3::ZERO
+        && cps.iter().all(|q| {
+            let r = *q - a;
+            (r - d * r.dot(d)).length() <= PLANAR_TOL
+        })
+}
+
 /// The STEP text of `model` (see the [module docs](self)); `name` is the product name.
 ///
 /// # Errors
 /// [`FfdError::Inconsistent`] if a value is not finite (a degenerate lattice).
+#[allow(clippy::too_many_lines)] // one pass over the model's entities, in file order
 pub fn step_string(model: &TrimmedModel, name: &str) -> Result<(String, StepSummary), FfdError> {
     let plan = &model.plan;
     for s in &model.surfaces {
@@ -117,9 +208,12 @@ pub fn step_string(model: &TrimmedModel, name: &str) -> Result<(String, StepSumm
         .filter(|c| c.is_ascii_graphic() || *c == ' ')
         .filter(|c| *c != '\'' && *c != '\\')
         .collect();
+    let faces = plan.faces();
+    let edges = plan.edges();
     let mut o = Out {
-        text: String::new(),
+        text: String::with_capacity(64 * (faces.len() + edges.len()) + 4096),
         next: 1,
+        shared: HashMap::new(),
     };
     let app = o.add("APPLICATION_CONTEXT('automotive_design')");
     o.add(&format!(
@@ -150,41 +244,54 @@ pub fn step_string(model: &TrimmedModel, name: &str) -> Result<(String, StepSumm
         "(GEOMETRIC_REPRESENTATION_CONTEXT(2)PARAMETRIC_REPRESENTATION_CONTEXT()REPRESENTATION_CONTEXT('2D','parameter space'))",
     );
     let origin = o.point3(DVec3::ZERO);
-    let dz = o.add("DIRECTION('',(0.,0.,1.))");
-    let dx = o.add("DIRECTION('',(1.,0.,0.))");
-    let axis = o.add(&format!("AXIS2_PLACEMENT_3D('',#{origin},#{dz},#{dx})"));
+    let dz = o.direction(DVec3::Z);
+    let dx = o.direction(DVec3::X);
+    let axis = o.shared(format!("AXIS2_PLACEMENT_3D('',#{origin},#{dz},#{dx})"));
 
-    // One surface entity per face.
-    let faces = plan.faces();
-    let mut face_surface = Vec::with_capacity(faces.len());
+    // One surface entity per patch that carries a face: a PLANE where the patch is planar.
+    let mut patch_surface: Vec<Option<(usize, bool)>> = vec![None; model.surfaces.len()];
+    let mut planes = 0usize;
     for f in faces {
-        let s = &model.surfaces[f.patch as usize];
-        let [ns, nt] = s.degrees;
-        let a = ns + 1;
-        let mut rows = Vec::with_capacity(a);
-        for i in 0..=ns {
-            let ids: Vec<usize> = (0..=nt)
-                .map(|j| o.point3(s.control_points[i + a * j]))
-                .collect();
-            rows.push(format!("({})", refs(&ids)));
+        let g = f.patch as usize;
+        if patch_surface[g].is_some() {
+            continue;
         }
-        face_surface.push(o.add(&format!(
-            "B_SPLINE_SURFACE_WITH_KNOTS('',{ns},{nt},({}),.UNSPECIFIED.,.F.,.F.,.F.,({},{}),({},{}),({},{}),({},{}),.UNSPECIFIED.)",
-            rows.join(","),
-            ns + 1,
-            ns + 1,
-            nt + 1,
-            nt + 1,
-            real(s.rect[0][0]),
-            real(s.rect[0][1]),
-            real(s.rect[1][0]),
-            real(s.rect[1][1]),
-        )));
+        let s = &model.surfaces[g];
+        patch_surface[g] = Some(if let Some((p, n, x)) = plane_of(s) {
+            planes += 1;
+            let (pp, nn, xx) = (o.point3(p), o.direction(n), o.direction(x));
+            let ax = o.shared(format!("AXIS2_PLACEMENT_3D('',#{pp},#{nn},#{xx})"));
+            (o.shared(format!("PLANE('',#{ax})")), true)
+        } else {
+            let [ns, nt] = s.degrees;
+            let a = ns + 1;
+            let mut rows = Vec::with_capacity(a);
+            for i in 0..=ns {
+                let ids: Vec<usize> = (0..=nt)
+                    .map(|j| o.point3(s.control_points[i + a * j]))
+                    .collect();
+                rows.push(format!("({})", refs(&ids)));
+            }
+            let id = o.shared(format!(
+                "B_SPLINE_SURFACE_WITH_KNOTS('',{ns},{nt},({}),.UNSPECIFIED.,.F.,.F.,.F.,({},{}),({},{}),({},{}),({},{}),.UNSPECIFIED.)",
+                rows.join(","),
+                ns + 1,
+                ns + 1,
+                nt + 1,
+                nt + 1,
+                real(s.rect[0][0]),
+                real(s.rect[0][1]),
+                real(s.rect[1][0]),
+                real(s.rect[1][1]),
+            ));
+            (id, false)
+        });
     }
+    let surface_of = |f: usize| patch_surface[faces[f].patch as usize].unwrap_or((0, false));
     // Shared vertices.
     let mut vertex_id: Vec<usize> = vec![0; model.images.len()];
     let mut vertices = 0;
-    for e in plan.edges() {
+    for e in edges {
         for p in [e.start, e.end] {
             let slot = &mut vertex_id[p as usize];
             if *slot == 0 {
@@ -194,50 +301,77 @@ pub fn step_string(model: &TrimmedModel, name: &str) -> Result<(String, StepSumm
             }
         }
     }
-    // Edges, each once, with a pcurve per use.
-    let mut edge_id = Vec::with_capacity(plan.edges().len());
+    // Edges, each once; pcurves only on curved faces (readers build them on planes).
+    let mut edge_id = Vec::with_capacity(edges.len());
     let mut closed = true;
-    for (e, curve) in plan.edges().iter().zip(&model.edge_curves) {
+    for (e, curve) in edges.iter().zip(&model.edge_curves) {
         if curve.control_points.iter().any(|p| !p.is_finite()) {
             return Err(FfdError::Inconsistent("an edge curve is not finite".into()));
         }
         if e.uses.len() != 2 || e.uses[0].1 == e.uses[1].1 {
             closed = false;
         }
-        let m = curve.degree();
-        let cps: Vec<usize> = curve.control_points.iter().map(|&p| o.point3(p)).collect();
-        let c3 = o.add(&format!(
-            "B_SPLINE_CURVE_WITH_KNOTS('',{m},({}),.UNSPECIFIED.,.F.,.F.,({},{}),(0.,1.),.UNSPECIFIED.)",
-            refs(&cps),
-            m + 1,
-            m + 1
-        ));
-        let mut pcurves = Vec::with_capacity(e.uses.len());
-        for &(f, _) in &e.uses {
-            let g = faces[f as usize].patch as usize;
-            let a = o.point2(model.param_on(g, e.start));
-            let b = o.point2(model.param_on(g, e.end));
-            let line = o.add(&format!(
-                "B_SPLINE_CURVE_WITH_KNOTS('',1,(#{a},#{b}),.UNSPECIFIED.,.F.,.F.,(2,2),(0.,1.),.UNSPECIFIED.)"
-            ));
-            let dr = o.add(&format!(
-                "DEFINITIONAL_REPRESENTATION('',(#{line}),#{ctx2})"
-            ));
-            pcurves.push(o.add(&format!("PCURVE('',#{},#{dr})", face_surface[f as usize])));
+        // The curve's ends are the vertices (equal to rounding): share their points.
+        let mut cps = curve.control_points.clone();
+        let (a, b) = (model.images[e.start as usize], model.images[e.end as usize]);
+        let last = cps.len() - 1;
+        if (cps[0] - a).length() <= PLANAR_TOL {
+            cps[0] = a;
         }
-        let sc = o.add(&format!(
-            "SURFACE_CURVE('',#{c3},({}),.CURVE_3D.)",
-            refs(&pcurves)
-        ));
+        if (cps[last] - b).length() <= PLANAR_TOL {
+            cps[last] = b;
+        }
+        let curved_uses: Vec<u32> = e
+            .uses
+            .iter()
+            .map(|&(f, _)| f)
+            .filter(|&f| !surface_of(f as usize).1)
+            .collect();
+        let line = is_linear(&cps) || (curved_uses.is_empty() && is_collinear(&cps));
+        let c3 = if line {
+            let (pa, pb) = (o.point3(cps[0]), o.point3(cps[last]));
+            o.shared(format!(
+                "B_SPLINE_CURVE_WITH_KNOTS('',1,(#{pa},#{pb}),.POLYLINE_FORM.,.F.,.F.,(2,2),(0.,1.),.UNSPECIFIED.)"
+            ))
+        } else {
+            let m = curve.degree();
+            let ids: Vec<usize> = cps.iter().map(|&p| o.point3(p)).collect();
+            o.shared(format!(
+                "B_SPLINE_CURVE_WITH_KNOTS('',{m},({}),.UNSPECIFIED.,.F.,.F.,({},{}),(0.,1.),.UNSPECIFIED.)",
+                refs(&ids),
+                m + 1,
+                m + 1
+            ))
+        };
+        let geometry = if curved_uses.is_empty() {
+            c3
+        } else {
+            let mut pcurves = Vec::with_capacity(curved_uses.len());
+            for &f in &curved_uses {
+                let g = faces[f as usize].patch as usize;
+                let pa = o.point2(model.param_on(g, e.start));
+                let pb = o.point2(model.param_on(g, e.end));
+                let line2 = o.shared(format!(
+                    "B_SPLINE_CURVE_WITH_KNOTS('',1,(#{pa},#{pb}),.POLYLINE_FORM.,.F.,.F.,(2,2),(0.,1.),.UNSPECIFIED.)"
+                ));
+                let dr = o.shared(format!(
+                    "DEFINITIONAL_REPRESENTATION('',(#{line2}),#{ctx2})"
+                ));
+                pcurves.push(o.shared(format!("PCURVE('',#{},#{dr})", surface_of(f as usize).0)));
+            }
+            o.add(&format!(
+                "SURFACE_CURVE('',#{c3},({}),.CURVE_3D.)",
+                refs(&pcurves)
+            ))
+        };
         edge_id.push(o.add(&format!(
-            "EDGE_CURVE('',#{},#{},#{sc},.T.)",
+            "EDGE_CURVE('',#{},#{},#{geometry},.T.)",
             vertex_id[e.start as usize], vertex_id[e.end as usize]
         )));
     }
     // Edge lookup by (min, max) point pair.
-    let mut lookup: std::collections::HashMap<(u32, u32), usize> =
-        std::collections::HashMap::with_capacity(plan.edges().len());
-    for (i, e) in plan.edges().iter().enumerate() {
+    let mut lookup: HashMap<(u32, u32), usize> = HashMap::with_capacity(edges.len());
+    for (i, e) in edges.iter().enumerate() {
         lookup.insert((e.start, e.end), i);
     }
     let mut face_ids = Vec::with_capacity(faces.len());
@@ -264,15 +398,22 @@ pub fn step_string(model: &TrimmedModel, name: &str) -> Result<(String, StepSumm
         face_ids.push(o.add(&format!(
             "ADVANCED_FACE('',({}),#{},.T.)",
             refs(&bounds),
-            face_surface[fi]
+            surface_of(fi).0
         )));
     }
-    let shell_kind = if closed { "CLOSED_SHELL" } else { "OPEN_SHELL" };
-    let shell = o.add(&format!("{shell_kind}('',({}))", refs(&face_ids)));
-    let sbsm = o.add(&format!("SHELL_BASED_SURFACE_MODEL('',(#{shell}))"));
-    let rep = o.add(&format!(
-        "MANIFOLD_SURFACE_SHAPE_REPRESENTATION('{name}',(#{axis},#{sbsm}),#{ctx3})"
-    ));
+    let rep = if closed {
+        let shell = o.add(&format!("CLOSED_SHELL('',({}))", refs(&face_ids)));
+        let brep = o.add(&format!("MANIFOLD_SOLID_BREP('{name}',#{shell})"));
+        o.add(&format!(
+            "ADVANCED_BREP_SHAPE_REPRESENTATION('{name}',(#{axis},#{brep}),#{ctx3})"
+        ))
+    } else {
+        let shell = o.add(&format!("OPEN_SHELL('',({}))", refs(&face_ids)));
+        let sbsm = o.add(&format!("SHELL_BASED_SURFACE_MODEL('',(#{shell}))"));
+        o.add(&format!(
+            "MANIFOLD_SURFACE_SHAPE_REPRESENTATION('{name}',(#{axis},#{sbsm}),#{ctx3})"
+        ))
+    };
     o.add(&format!("SHAPE_DEFINITION_REPRESENTATION(#{pds},#{rep})"));
 
     let mut text = String::with_capacity(o.text.len() + 512);
@@ -293,6 +434,7 @@ pub fn step_string(model: &TrimmedModel, name: &str) -> Result<(String, StepSumm
         faces: face_ids.len(),
         edges: edge_id.len(),
         vertices,
+        planes,
         closed,
         entities: o.next - 1,
     };

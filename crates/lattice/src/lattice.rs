@@ -46,6 +46,7 @@
 use glam::{DMat3, DVec3};
 use volmorph_spline::{BSplineVolume, KnotVector, SplineError, TensorBSpline};
 use volmorph_volume::Geometry;
+use volmorph_volume::direction::orthonormalize;
 
 use rayon::prelude::*;
 
@@ -57,10 +58,6 @@ const BATCH_CHUNK: usize = 4096;
 
 /// Largest order (degree + 1) of the small-degree batch kernel.
 const SMALL_ORDER: usize = 4;
-
-/// Largest allowed deviation of `axesᵀ·axes` from the identity in a [`LatticeFrame`]; frames
-/// read from text with ~15 significant digits pass, frames with visibly skewed axes do not.
-pub const FRAME_ORTHONORMAL_TOL: f64 = 1e-9;
 
 /// The affine frame of a lattice: parameter `u ↦ origin + axes·(spacing ⊙ u)`. See the
 /// [module docs](self).
@@ -77,9 +74,16 @@ impl LatticeFrame {
     /// (columns: physical directions of u, v, w; either handedness) and physical length
     /// `spacing` of one parameter unit along each axis.
     ///
+    /// Axes orthonormal within
+    /// [`DIRECTION_ORTHONORMAL_TOL`](volmorph_volume::direction::DIRECTION_ORTHONORMAL_TOL) (e.g. an oblique scan's direction,
+    /// orthonormal only to single precision) are replaced by their polar factor, the nearest
+    /// orthonormal matrix, by [`orthonormalize`] — the rule every direction entering volmorph
+    /// follows; [`LatticeFrame::axes`] returns the snapped matrix.
+    ///
     /// # Errors
     /// [`DeformError::InvalidFrame`] for non-finite values, a spacing that is not > 0, or axes
-    /// whose Gram matrix deviates from `I` by more than [`FRAME_ORTHONORMAL_TOL`].
+    /// whose Gram matrix deviates from `I` by more than
+    /// [`DIRECTION_ORTHONORMAL_TOL`](volmorph_volume::direction::DIRECTION_ORTHONORMAL_TOL).
     pub fn new(origin: DVec3, axes: DMat3, spacing: DVec3) -> Result<Self, DeformError> {
         if !origin.is_finite() {
             return Err(DeformError::InvalidFrame(format!(
@@ -94,16 +98,8 @@ impl LatticeFrame {
         if !axes.is_finite() {
             return Err(DeformError::InvalidFrame("axes are not finite".into()));
         }
-        let gram = axes.transpose() * axes - DMat3::IDENTITY;
-        let dev = gram
-            .to_cols_array()
-            .iter()
-            .fold(0.0_f64, |m, v| m.max(v.abs()));
-        if dev > FRAME_ORTHONORMAL_TOL {
-            return Err(DeformError::InvalidFrame(format!(
-                "axes are not orthonormal (|AᵀA − I| = {dev:e})"
-            )));
-        }
+        let axes = orthonormalize(axes)
+            .map_err(|e| DeformError::InvalidFrame(format!("lattice axes {axes}: {e}")))?;
         let to_param = DMat3::from_diagonal(spacing.recip()) * axes.transpose();
         Ok(Self {
             origin,

@@ -35,6 +35,7 @@ use volmorph_handles::{
 use volmorph_lattice::BSplineLattice;
 use volmorph_trivariate::{AnyAggregate, GeometryMap};
 use volmorph_volume::Geometry;
+use volmorph_volume::direction::snap_direction;
 
 use crate::{AnyMap, MapError};
 
@@ -505,7 +506,9 @@ impl AnyMap {
                     dims: s.grid.dims,
                     spacing: DVec3::from_array(s.grid.spacing),
                     origin: DVec3::from_array(s.grid.origin),
-                    direction: from_rows(s.grid.direction),
+                    // The one rule for directions entering volmorph (a sampled grid may
+                    // legitimately be skewed, so a skewed matrix is kept).
+                    direction: snap_direction(from_rows(s.grid.direction)),
                 };
                 AnyMap::Sampled(SampledMap::from_positions(grid, vecs(&s.positions))?)
             }

@@ -5,7 +5,10 @@
 //! | `.nii`, `.nii.gz` | NIfTI-1 single file | [`nifti`] |
 //! | `.mha`, `.mhd` (+ data file) | MetaImage | [`metaimage`] |
 //! | `.nrrd`, `.nhdr` (+ data file) | NRRD | [`nrrd`] |
-//! | `.vtk` | VTK legacy `STRUCTURED_POINTS` | [`vtk`] |
+//! | `.vtk` | VTK legacy `STRUCTURED_POINTS` (axis-aligned only) | [`vtk`] |
+//! | `.vti` | VTK XML image data (with direction, VTK ≥ 9) | [`vti`] |
+//! | `.mgh`, `.mgz` | FreeSurfer MGH (4-D: one frame at a time) | [`mgh`] |
+//! | a folder, `.dcm`, `.dicom`, `.ima` (or the `DICM` preamble) | DICOM series and multi-frame files (read only) | [`dicom`] |
 //! | `.raw` | headerless voxels, described by a [`raw::RawSpec`] | [`raw`] |
 //!
 //! Every reader returns the volume in volmorph's convention (see [`volmorph_volume::Geometry`]: ITK
@@ -39,15 +42,19 @@
 //! # Ok::<(), Box<dyn std::error::Error>>(())
 //! ```
 
+pub mod dicom;
 pub mod metaimage;
+pub mod mgh;
 pub mod nifti;
 pub mod nrrd;
 pub mod raw;
 mod text_header;
+pub mod vti;
 pub mod vtk;
 
 use std::path::Path;
 
+use volmorph_volume::direction::snap_direction;
 use volmorph_volume::{AnyVolume, VolumeError};
 
 /// A volume file format, as chosen by extension.
@@ -61,16 +68,27 @@ pub enum Format {
     Nrrd,
     /// VTK legacy `STRUCTURED_POINTS` (`.vtk`).
     Vtk,
+    /// VTK XML image data (`.vti`), with a direction matrix.
+    Vti,
+    /// FreeSurfer MGH (`.mgh`, or gzip-compressed `.mgz`).
+    Mgh,
+    /// DICOM: a folder holding a series, one file of a series (`.dcm`, `.dicom`, `.ima`, or
+    /// any name with the `DICM` preamble), or a multi-frame file. Read only.
+    Dicom,
     /// Headerless raw voxels (`.raw`); reading needs a [`raw::RawSpec`].
     Raw,
 }
 
 impl Format {
-    /// Choose the format from `path`'s extension (case-insensitive; `.nii.gz` counts as NIfTI).
+    /// Choose the format from `path`'s extension (case-insensitive; `.nii.gz` counts as NIfTI);
+    /// an existing folder is a DICOM series.
     ///
     /// # Errors
     /// [`VolumeError::Unsupported`] for an unknown or missing extension.
     pub fn from_path(path: &Path) -> Result<Self, VolumeError> {
+        if path.is_dir() {
+            return Ok(Self::Dicom);
+        }
         let name = path
             .file_name()
             .map(|n| n.to_string_lossy().to_ascii_lowercase())
@@ -83,12 +101,19 @@ impl Format {
             Self::Nrrd
         } else if name.ends_with(".vtk") {
             Self::Vtk
+        } else if name.ends_with(".vti") {
+            Self::Vti
+        } else if name.ends_with(".mgh") || name.ends_with(".mgz") {
+            Self::Mgh
+        } else if name.ends_with(".dcm") || name.ends_with(".dicom") || name.ends_with(".ima") {
+            Self::Dicom
         } else if name.ends_with(".raw") {
             Self::Raw
         } else {
             return Err(VolumeError::Unsupported(format!(
                 "cannot tell the volume format of {} from its extension \
-                 (known: .nii .nii.gz .mha .mhd .nrrd .nhdr .vtk .raw)",
+                 (known: .nii .nii.gz .mha .mhd .nrrd .nhdr .vtk .vti .mgh .mgz .raw, DICOM .dcm files or \
+                 a folder of them)",
                 path.display()
             )));
         };
@@ -103,6 +128,9 @@ impl Format {
             Self::MetaImage => "MetaImage",
             Self::Nrrd => "NRRD",
             Self::Vtk => "VTK legacy",
+            Self::Vti => "VTK XML image data",
+            Self::Mgh => "FreeSurfer MGH",
+            Self::Dicom => "DICOM",
             Self::Raw => "raw",
         }
     }
@@ -136,6 +164,10 @@ pub struct ReadOptions {
     /// read (and, through `convert`, copy it). The default of [`ReadOptions::default`] can
     /// be changed for the whole process with [`set_allow_external_data_default`].
     pub allow_external_data: bool,
+    /// The 3-D frame to read from a 4-D file (0-based). `None` reads files with a single frame
+    /// and refuses a file with more, naming how many it holds, so a time series is never
+    /// silently cut to its first volume. Files with one frame accept `Some(0)`.
+    pub frame: Option<usize>,
 }
 
 static ALLOW_EXTERNAL_DEFAULT: std::sync::atomic::AtomicBool =
@@ -151,6 +183,7 @@ impl Default for ReadOptions {
     fn default() -> Self {
         Self {
             allow_external_data: ALLOW_EXTERNAL_DEFAULT.load(std::sync::atomic::Ordering::Relaxed),
+            frame: None,
         }
     }
 }
@@ -165,12 +198,38 @@ pub struct Header {
 /// A volume together with the format and header it was read from.
 #[derive(Debug, Clone, PartialEq)]
 pub struct VolumeFile {
-    /// The voxels and geometry.
+    /// The voxels and geometry (of the frame that was read).
     pub volume: AnyVolume,
     /// The format that was read.
     pub format: Format,
     /// The file's header fields.
     pub header: Header,
+    /// Number of 3-D frames the file holds (a 4-D NIfTI's `dim[4]`; 1 for 3-D files).
+    pub frames: usize,
+    /// The frame that was read (`0 ≤ frame < frames`).
+    pub frame: usize,
+}
+
+/// The frame to read from a file holding `frames` 3-D frames (see [`ReadOptions::frame`]).
+///
+/// # Errors
+/// [`VolumeError::InvalidArgument`] for a frame past the end, or no frame for a file with
+/// several.
+pub(crate) fn choose_frame(frame: Option<usize>, frames: usize) -> Result<usize, VolumeError> {
+    match frame {
+        Some(f) if f < frames => Ok(f),
+        Some(f) => Err(VolumeError::InvalidArgument(format!(
+            "frame {f} does not exist: the file holds {frames} frame{} (0 to {})",
+            if frames == 1 { "" } else { "s" },
+            frames.saturating_sub(1)
+        ))),
+        None if frames > 1 => Err(VolumeError::InvalidArgument(format!(
+            "this 4-D image holds {frames} frames; choose one with --frame N \
+             (ReadOptions::frame), 0 to {}",
+            frames - 1
+        ))),
+        None => Ok(0),
+    }
 }
 
 /// Read a volume with default [`ReadOptions`]; the format is chosen by extension.
@@ -179,9 +238,10 @@ pub struct VolumeFile {
 /// Any [`VolumeError`], carrying the file path: a path that is not a regular file (a
 /// folder, a FIFO, a device) is refused before reading, and so is a detached data file
 /// outside the header's folder ([`VolumeError::ExternalData`]). Reading a `.raw` file
-/// needs [`raw::read`] with a [`raw::RawSpec`] and is refused here.
+/// needs [`raw::read`] with a [`raw::RawSpec`] and is refused here; a 4-D file with more than one
+/// frame needs [`read_with`] and [`ReadOptions::frame`].
 pub fn read(path: &Path) -> Result<AnyVolume, VolumeError> {
-    read_with_header(path).map(|f| f.volume)
+    read_with(path, &ReadOptions::default()).map(|f| f.volume)
 }
 
 /// Read a volume and its header fields with default [`ReadOptions`].
@@ -192,26 +252,56 @@ pub fn read_with_header(path: &Path) -> Result<VolumeFile, VolumeError> {
     read_with(path, &ReadOptions::default())
 }
 
-/// Read a volume and its header fields; the format is chosen by extension.
+/// Read a volume, its header fields and its frame count, with `options`; the format is chosen
+/// by extension. This is the one read path of every command.
+///
+/// The direction matrix goes through [`volmorph_volume::direction::snap_direction`]: a
+/// direction orthonormal within
+/// [`DIRECTION_ORTHONORMAL_TOL`](volmorph_volume::direction::DIRECTION_ORTHONORMAL_TOL) (an
+/// oblique scan stored in single precision) becomes exactly orthonormal (its polar factor,
+/// at most about 1e-7 from what the file holds), a skewed one is kept as it is.
 ///
 /// # Errors
-/// As [`read`].
+/// As [`read`] (a detached data file outside the header's folder is accepted with
+/// [`ReadOptions::allow_external_data`]); [`VolumeError::InvalidArgument`] for a frame the
+/// file does not hold, or no frame for a file with several.
 pub fn read_with(path: &Path, options: &ReadOptions) -> Result<VolumeFile, VolumeError> {
-    let format = Format::from_path(path)?;
+    let format = match Format::from_path(path) {
+        // DICOM files often have no extension: recognise them by their preamble.
+        Err(_) if dicom::has_dicom_magic(path) => Format::Dicom,
+        f => f?,
+    };
+    let single = |r: Result<(AnyVolume, Header), VolumeError>| {
+        let (v, h) = r?;
+        match options.frame {
+            None | Some(0) => Ok((v, h, 1)),
+            Some(f) => Err(VolumeError::InvalidArgument(format!(
+                "frame {f} does not exist: the file holds a single 3-D volume (frame 0)"
+            ))),
+        }
+    };
     let res = match format {
-        Format::Nifti => nifti::read(path),
-        Format::MetaImage => metaimage::read(path, options),
-        Format::Nrrd => nrrd::read(path, options),
-        Format::Vtk => vtk::read(path),
+        Format::Nifti => nifti::read(path, options.frame),
+        Format::MetaImage => single(metaimage::read(path, options)),
+        Format::Nrrd => single(nrrd::read(path, options)),
+        Format::Vtk => single(vtk::read(path)),
+        Format::Vti => single(vti::read(path)),
+        Format::Mgh => mgh::read(path, options.frame),
+        Format::Dicom => single(dicom::read(path)),
         Format::Raw => Err(VolumeError::Unsupported(
             "a .raw file has no header: give its dims and voxel type (raw::RawSpec)".into(),
         )),
     };
-    let (volume, header) = res.map_err(|e| e.at(path))?;
+    let (mut volume, header, frames) = res.map_err(|e| e.at(path))?;
+    let mut g = *volume.geometry();
+    g.direction = snap_direction(g.direction);
+    volume.set_geometry(g).map_err(|e| e.at(path))?;
     Ok(VolumeFile {
         volume,
         format,
         header,
+        frames,
+        frame: options.frame.unwrap_or(0),
     })
 }
 
@@ -238,6 +328,13 @@ pub fn write_with(
         Format::MetaImage => metaimage::write(path, volume, options),
         Format::Nrrd => nrrd::write(path, volume, options),
         Format::Vtk => vtk::write(path, volume, options),
+        Format::Vti => vti::write(path, volume, options),
+        Format::Mgh => mgh::write(path, volume, options),
+        Format::Dicom => Err(VolumeError::Unsupported(
+            "volmorph reads DICOM but does not write it (a DICOM file needs patient and study \
+             identity a volume does not carry): write .nii.gz, .nrrd, .mha or .vti"
+                .into(),
+        )),
         Format::Raw => raw::write(path, volume, options),
     };
     res.map_err(|e| e.at(path))
@@ -257,6 +354,10 @@ mod tests {
             ("x.nrrd", Format::Nrrd),
             ("x.nhdr", Format::Nrrd),
             ("x.vtk", Format::Vtk),
+            ("x.VTI", Format::Vti),
+            ("brain.mgz", Format::Mgh),
+            ("x.mgh", Format::Mgh),
+            ("IM0001.DCM", Format::Dicom),
             ("x.raw", Format::Raw),
         ] {
             assert_eq!(Format::from_path(Path::new(p)).unwrap(), f, "{p}");

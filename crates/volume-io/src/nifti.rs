@@ -1,4 +1,4 @@
-//! NIfTI-1 single-file volumes (`.nii`, and gzip-compressed `.nii.gz`).
+//! NIfTI-1 and NIfTI-2 single-file volumes (`.nii`, and gzip-compressed `.nii.gz`).
 //!
 //! Geometry follows `itk::NiftiImageIO` (ITK 5.3/5.4, with `nifti1_io` underneath) rule for
 //! rule, because ITK is volmorph's geometry reference: a file read here lands on the same
@@ -10,12 +10,18 @@
 //!
 //! # Header
 //!
-//! All 348 bytes are parsed. The byte order is whichever makes `sizeof_hdr` equal 348 (a file
-//! whose `sizeof_hdr` is 540 is NIfTI-2 and refused as such). The magic must be `"n+1\0"`; the
-//! two-file magic `"ni1\0"` is recognised only to say that `.hdr`/`.img` pairs are not supported.
-//! `dim[0]` must be 1–7 and `dim[1..=dim[0]]` positive; entries past `dim[0]` are ignored (as
-//! `nifti1_io` does). Trailing dimensions of size 1 past the third are dropped (ITK's
-//! `realdim`); a fourth or higher dimension larger than 1 is refused. `datatype` must be one of
+//! All 348 bytes are parsed. The byte order is whichever makes `sizeof_hdr` equal 348, or 540
+//! for a **NIfTI-2** header (`nifti_2_header`: the same fields with 64-bit sizes and offsets and
+//! double-precision geometry, magic `"n+2\0\r\n\032\n"`, data at 544 or later). The NIfTI-1
+//! magic must be `"n+1\0"`; the two-file magics `"ni1\0"`/`"ni2\0"` are recognised only to say
+//! that `.hdr`/`.img` pairs are not supported. `dim[0]` must be 1–7 and `dim[1..=dim[0]]`
+//! positive; entries past `dim[0]` are ignored (as `nifti1_io` does). Trailing dimensions of
+//! size 1 past the third are dropped (ITK's `realdim`). A 4-D image is a series of `dim[4]`
+//! 3-D frames, read one at a time ([`crate::ReadOptions::frame`]; reading without a frame is
+//! refused when there are several); a fifth or higher dimension larger than 1 is refused.
+//!
+//! For NIfTI-2, ITK's choice between qform and sform below is made on the values rounded to
+//! single precision, and the chosen matrix is then rebuilt from the stored doubles. `datatype` must be one of
 //! uint8 (2), int16 (4), int32 (8), float32 (16), float64 (64), int8 (256), uint16 (512),
 //! uint32 (768), and `bitpix` must agree with it. `vox_offset` must be at least 352 (truncated
 //! to an integer, as `nifti1_io` does); the data must lie inside the file. NaN or infinite
@@ -73,6 +79,8 @@
 //!
 //! # Writing
 //!
+//! NIfTI-2 (540-byte header, data at 544, geometry fields in double precision) when a size
+//! exceeds NIfTI-1's 16-bit fields, otherwise NIfTI-1 as follows.
 //! One file: 348-byte header, a zero 4-byte extender, data at `vox_offset = 352`, little-endian,
 //! magic `n+1`, `xyzt_units = 10` (millimetres, seconds — what ITK writes), `dim[0] = 3`, gzip
 //! when the name ends in `.gz` (level [`WriteOptions::level`]). As in ITK's
@@ -117,6 +125,13 @@ use volmorph_volume::{AnyVolume, Geometry, Volume, VolumeError, Voxel, VoxelType
 const FMT: &str = "NIfTI-1";
 /// `sizeof(nifti_1_header)`.
 const HEADER_SIZE: usize = 348;
+/// `sizeof(nifti_2_header)`.
+const HEADER2_SIZE: usize = 540;
+/// The NIfTI-2 single-file magic, `"n+2\0\r\n\032\n"` (the trailing bytes detect text-mode
+/// corruption, as in PNG).
+const NIFTI2_MAGIC: &[u8; 8] = b"n+2\0\r\n\x1a\n";
+/// Offset of the voxel data in NIfTI-2 files volmorph writes (header + 4-byte extender).
+const WRITE2_VOX_OFFSET: usize = 544;
 /// Offset of the voxel data in files volmorph writes (header + 4-byte extender).
 const WRITE_VOX_OFFSET: usize = 352;
 /// `NIFTI_XFORM_SCANNER_ANAT`.
@@ -159,7 +174,8 @@ struct RawHeader {
     big_endian: bool,
     sizeof_hdr: i32,
     dim_info: u8,
-    dim: [i16; 8],
+    /// `dim[0..8]` (16-bit in NIfTI-1, 64-bit in NIfTI-2).
+    dim: [i64; 8],
     intent_p: [f32; 3],
     intent_code: i16,
     datatype: i16,
@@ -185,6 +201,28 @@ struct RawHeader {
     srow: [[f32; 4]; 3],
     intent_name: [u8; 16],
     magic: [u8; 4],
+    /// The double-precision and 64-bit fields of a NIfTI-2 header (the `f32` fields above
+    /// then hold them rounded, for ITK's single-precision decisions); `None` for NIfTI-1.
+    wide: Option<Box<Wide>>,
+}
+
+/// NIfTI-2 fields kept at full width.
+#[derive(Debug, Clone)]
+struct Wide {
+    pixdim: [f64; 8],
+    vox_offset: i64,
+    scl_slope: f64,
+    scl_inter: f64,
+    quatern: [f64; 3],
+    qoffset: [f64; 3],
+    srow: [[f64; 4]; 3],
+    cal: [f64; 2],
+    slice_duration: f64,
+    toffset: f64,
+    intent_p: [f64; 3],
+    slice_start: i64,
+    slice_end: i64,
+    magic: [u8; 8],
 }
 
 fn c_string(bytes: &[u8]) -> String {
@@ -217,21 +255,32 @@ impl RawHeader {
         }
         let le = i32::from_le_bytes([bytes[0], bytes[1], bytes[2], bytes[3]]);
         let be = i32::from_be_bytes([bytes[0], bytes[1], bytes[2], bytes[3]]);
-        let big_endian = if le == HEADER_SIZE as i32 {
-            false
+        let (big_endian, v2) = if le == HEADER_SIZE as i32 {
+            (false, false)
         } else if be == HEADER_SIZE as i32 {
-            true
-        } else if le == 540 || be == 540 {
-            return Err(VolumeError::Unsupported(
-                "NIfTI-2 files (sizeof_hdr 540) are not supported; only NIfTI-1".into(),
-            ));
+            (true, false)
+        } else if le == HEADER2_SIZE as i32 {
+            (false, true)
+        } else if be == HEADER2_SIZE as i32 {
+            (true, true)
         } else {
             return Err(err(format!(
                 "sizeof_hdr is {le} (little-endian) / {be} (big-endian); a NIfTI-1 header \
-                 has 348 in one byte order"
+                 has 348 and a NIfTI-2 header 540, in one byte order"
             )));
         };
-        Self::decode(&bytes[..HEADER_SIZE], big_endian).map_err(|e| VolumeError::Io(e.into()))
+        let decoded = if v2 {
+            if bytes.len() < HEADER2_SIZE {
+                return Err(err(format!(
+                    "file too short for a NIfTI-2 header: {} bytes, it has {HEADER2_SIZE}",
+                    bytes.len()
+                )));
+            }
+            Self::decode2(&bytes[..HEADER2_SIZE], big_endian)
+        } else {
+            Self::decode(&bytes[..HEADER_SIZE], big_endian)
+        };
+        decoded.map_err(|e| VolumeError::Io(e.into()))
     }
 
     fn decode(bytes: &[u8], big_endian: bool) -> Result<Self, Truncated> {
@@ -239,9 +288,9 @@ impl RawHeader {
         let sizeof_hdr = r.i32()?;
         r.take(10 + 18 + 4 + 2 + 1)?; // data_type, db_name, extents, session_error, regular
         let dim_info = r.u8()?;
-        let mut dim = [0i16; 8];
+        let mut dim = [0i64; 8];
         for d in &mut dim {
-            *d = r.i16()?;
+            *d = i64::from(r.i16()?);
         }
         let intent_p = f32s::<3>(&mut r)?;
         let intent_code = r.i16()?;
@@ -296,6 +345,108 @@ impl RawHeader {
             srow,
             intent_name,
             magic,
+            wide: None,
+        })
+    }
+
+    /// Decode the 540 bytes of a NIfTI-2 header (`nifti_2_header`, byte order already known).
+    fn decode2(bytes: &[u8], big_endian: bool) -> Result<Self, Truncated> {
+        let mut r = ByteReader::new(bytes, big_endian);
+        let sizeof_hdr = r.i32()?;
+        let magic8 = fixed::<8>(&mut r)?;
+        let datatype = r.i16()?;
+        let bitpix = r.i16()?;
+        let mut dim = [0i64; 8];
+        for d in &mut dim {
+            *d = r.i64()?;
+        }
+        let f64s = |r: &mut ByteReader<'_>, out: &mut [f64]| -> Result<(), Truncated> {
+            for v in out {
+                *v = r.f64()?;
+            }
+            Ok(())
+        };
+        let mut intent_p = [0f64; 3];
+        f64s(&mut r, &mut intent_p)?;
+        let mut pixdim = [0f64; 8];
+        f64s(&mut r, &mut pixdim)?;
+        let vox_offset = r.i64()?;
+        let mut sc = [0f64; 6]; // slope, inter, cal_max, cal_min, slice_duration, toffset
+        f64s(&mut r, &mut sc)?;
+        let slice_start = r.i64()?;
+        let slice_end = r.i64()?;
+        let descrip = fixed::<80>(&mut r)?;
+        let aux_file = fixed::<24>(&mut r)?;
+        let qform_code = r.i32()?;
+        let sform_code = r.i32()?;
+        let mut q = [0f64; 6];
+        f64s(&mut r, &mut q)?;
+        let mut srow = [[0f64; 4]; 3];
+        for row in &mut srow {
+            f64s(&mut r, row)?;
+        }
+        let slice_code = r.i32()?;
+        let xyzt_units = r.i32()?;
+        let intent_code = r.i32()?;
+        let intent_name = fixed::<16>(&mut r)?;
+        let dim_info = r.u8()?;
+        let wide = Wide {
+            pixdim,
+            vox_offset,
+            scl_slope: sc[0],
+            scl_inter: sc[1],
+            quatern: [q[0], q[1], q[2]],
+            qoffset: [q[3], q[4], q[5]],
+            srow,
+            cal: [sc[2], sc[3]],
+            slice_duration: sc[4],
+            toffset: sc[5],
+            intent_p,
+            slice_start,
+            slice_end,
+            magic: magic8,
+        };
+        // Codes beyond 16 bits are invalid anyway; saturate so they stay invalid.
+        let small = |v: i32| v.clamp(i32::from(i16::MIN), i32::from(i16::MAX)) as i16;
+        let mut magic = [0u8; 4];
+        magic.copy_from_slice(&magic8[..4]);
+        Ok(Self {
+            big_endian,
+            sizeof_hdr,
+            dim_info,
+            dim,
+            intent_p: intent_p.map(|v| v as f32),
+            intent_code: small(intent_code),
+            datatype,
+            bitpix,
+            slice_start: small(slice_start.clamp(i64::from(i16::MIN), i64::from(i16::MAX)) as i32),
+            pixdim: pixdim.map(|v| v as f32),
+            vox_offset: vox_offset as f32,
+            scl_slope: sc[0] as f32,
+            scl_inter: sc[1] as f32,
+            slice_end: small(slice_end.clamp(i64::from(i16::MIN), i64::from(i16::MAX)) as i32),
+            slice_code: slice_code.clamp(0, 255) as u8,
+            xyzt_units: xyzt_units.clamp(0, 255) as u8,
+            cal_max: sc[2] as f32,
+            cal_min: sc[3] as f32,
+            slice_duration: sc[4] as f32,
+            toffset: sc[5] as f32,
+            descrip,
+            aux_file,
+            qform_code: small(qform_code),
+            sform_code: small(sform_code),
+            quatern: wide.quatern.map(|v| v as f32),
+            qoffset: wide.qoffset.map(|v| v as f32),
+            srow: srow.map(|row| row.map(|v| v as f32)),
+            intent_name,
+            magic: if magic8 == *NIFTI2_MAGIC {
+                *b"n+2\0"
+            } else if &magic8[..4] == b"ni2\0" {
+                *b"ni2\0"
+            } else {
+                magic
+            },
+            wide: Some(Box::new(wide)),
         })
     }
 
@@ -378,6 +529,44 @@ impl RawHeader {
         push("srow_z", list(&self.srow[2]));
         push("intent_name", c_string(&self.intent_name));
         push("magic", c_string(&self.magic));
+        if let Some(w) = &self.wide {
+            // NIfTI-2: show the stored doubles and 64-bit integers, not their f32 roundings.
+            let list = |v: &[f64]| {
+                v.iter()
+                    .map(ToString::to_string)
+                    .collect::<Vec<_>>()
+                    .join(" ")
+            };
+            for (k, v) in &mut f {
+                let wide = match k.as_str() {
+                    "intent_p1" => w.intent_p[0].to_string(),
+                    "intent_p2" => w.intent_p[1].to_string(),
+                    "intent_p3" => w.intent_p[2].to_string(),
+                    "slice_start" => w.slice_start.to_string(),
+                    "slice_end" => w.slice_end.to_string(),
+                    "pixdim" => list(&w.pixdim),
+                    "vox_offset" => w.vox_offset.to_string(),
+                    "scl_slope" => w.scl_slope.to_string(),
+                    "scl_inter" => w.scl_inter.to_string(),
+                    "cal_max" => w.cal[0].to_string(),
+                    "cal_min" => w.cal[1].to_string(),
+                    "slice_duration" => w.slice_duration.to_string(),
+                    "toffset" => w.toffset.to_string(),
+                    "quatern_b" => w.quatern[0].to_string(),
+                    "quatern_c" => w.quatern[1].to_string(),
+                    "quatern_d" => w.quatern[2].to_string(),
+                    "qoffset_x" => w.qoffset[0].to_string(),
+                    "qoffset_y" => w.qoffset[1].to_string(),
+                    "qoffset_z" => w.qoffset[2].to_string(),
+                    "srow_x" => list(&w.srow[0]),
+                    "srow_y" => list(&w.srow[1]),
+                    "srow_z" => list(&w.srow[2]),
+                    "magic" => format!("{:?}", String::from_utf8_lossy(&w.magic)),
+                    _ => continue,
+                };
+                *v = wide;
+            }
+        }
         Header { fields: f }
     }
 }
@@ -476,10 +665,12 @@ struct Layout {
     dims: [usize; 3],
     /// ITK's number of image dimensions (1, 2 or 3).
     ndim: usize,
-    /// Number of voxels.
+    /// Number of voxels of one frame.
     len: usize,
     /// Byte offset of the data.
     offset: usize,
+    /// Number of 3-D frames (`dim[4]` of a 4-D image; 1 otherwise).
+    frames: usize,
 }
 
 impl Layout {
@@ -490,7 +681,33 @@ impl Layout {
 
 /// Check everything about the header that does not concern geometry.
 fn validate(h: &RawHeader) -> Result<Layout, VolumeError> {
+    if let Some(w) = &h.wide {
+        match &w.magic {
+            m if m == NIFTI2_MAGIC => {}
+            [b'n', b'i', b'2', 0, ..] => {
+                return Err(VolumeError::Unsupported(
+                    "this is the header of a two-file NIfTI-2 pair (.hdr/.img, magic \"ni2\"); \
+                     only single-file .nii/.nii.gz is supported"
+                        .into(),
+                ));
+            }
+            [b'n', b'+', b'2', 0, ..] => {
+                return Err(err(format!(
+                    "NIfTI-2 magic {:02x?} has damaged trailing bytes (should be \\r\\n\\032\\n): \
+                     was the file copied in text mode?",
+                    w.magic
+                )));
+            }
+            m => {
+                return Err(err(format!(
+                    "magic is {:?} (bytes {m:02x?}); a single-file NIfTI-2 has \"n+2\\0\\r\\n\\032\\n\"",
+                    String::from_utf8_lossy(m)
+                )));
+            }
+        }
+    }
     match &h.magic {
+        _ if h.wide.is_some() => {}
         b"n+1\0" => {}
         b"ni1\0" => {
             return Err(VolumeError::Unsupported(
@@ -530,6 +747,13 @@ fn validate(h: &RawHeader) -> Result<Layout, VolumeError> {
     while realdim > 3 && h.dim[realdim] == 1 {
         realdim -= 1;
     }
+    // A 4-D image is a series of 3-D frames (dim[4], usually time); one is read at a time.
+    let frames = if realdim == 4 {
+        realdim = 3;
+        usize::try_from(h.dim[4]).map_err(|_| err(format!("dim[4] = {} overflows", h.dim[4])))?
+    } else {
+        1
+    };
     if realdim > 3 {
         let what = if matches!(h.intent_code, 1005 | 1007) && ndim_file >= 5 && h.dim[5] > 1 {
             format!(
@@ -538,8 +762,8 @@ fn validate(h: &RawHeader) -> Result<Layout, VolumeError> {
             )
         } else {
             format!(
-                "a {realdim}-D image (dim = {:?}); only 1-D to 3-D images, or higher \
-                 dimensions of size 1, are supported",
+                "a {realdim}-D image (dim = {:?}); only 1-D to 3-D images and 4-D series of \
+                 3-D frames, or higher dimensions of size 1, are supported",
                 &h.dim[..=ndim_file]
             )
         };
@@ -564,19 +788,44 @@ fn validate(h: &RawHeader) -> Result<Layout, VolumeError> {
     }
     let mut dims = [1usize; 3];
     for (a, d) in dims.iter_mut().enumerate().take(realdim) {
-        *d = h.dim[a + 1] as usize;
+        *d = usize::try_from(h.dim[a + 1])
+            .map_err(|_| err(format!("dim[{}] = {} overflows", a + 1, h.dim[a + 1])))?;
     }
     let len = checked_len(&dims, voxel_type.size())?;
-    if !h.vox_offset.is_finite() || h.vox_offset < WRITE_VOX_OFFSET as f32 {
-        return Err(err(format!(
-            "vox_offset is {}; a single-file NIfTI-1 has its data at 352 or later",
-            h.vox_offset
-        )));
+    checked_len(&[len, frames], voxel_type.size())?;
+    let offset = if let Some(w) = &h.wide {
+        if w.vox_offset < WRITE2_VOX_OFFSET as i64 {
+            return Err(err(format!(
+                "vox_offset is {}; a single-file NIfTI-2 has its data at 544 or later",
+                w.vox_offset
+            )));
+        }
+        if w.vox_offset > 1 << 50 {
+            return Err(err(format!("vox_offset {} is absurd", w.vox_offset)));
+        }
+        w.vox_offset as usize
+    } else {
+        if !h.vox_offset.is_finite() || h.vox_offset < WRITE_VOX_OFFSET as f32 {
+            return Err(err(format!(
+                "vox_offset is {}; a single-file NIfTI-1 has its data at 352 or later",
+                h.vox_offset
+            )));
+        }
+        if h.vox_offset > 1e15 {
+            return Err(err(format!("vox_offset {} is absurd", h.vox_offset)));
+        }
+        h.vox_offset as usize // truncation, as nifti1_io's (int) cast
+    };
+    if let Some(w) = &h.wide {
+        let finite = w.pixdim.iter().all(|v| v.is_finite())
+            && (h.qform_code <= 0 || w.quatern.iter().chain(&w.qoffset).all(|v| v.is_finite()))
+            && (h.sform_code <= 0 || w.srow.iter().flatten().all(|v| v.is_finite()));
+        if !finite {
+            return Err(err(
+                "pixdim, the quaternion or srow holds a value that is not a finite number",
+            ));
+        }
     }
-    if h.vox_offset > 1e15 {
-        return Err(err(format!("vox_offset {} is absurd", h.vox_offset)));
-    }
-    let offset = h.vox_offset as usize; // truncation, as nifti1_io's (int) cast
     for (i, &p) in h.pixdim.iter().enumerate() {
         if !p.is_finite() {
             return Err(err(format!("pixdim[{i}] is {p}, not a finite number")));
@@ -610,6 +859,7 @@ fn validate(h: &RawHeader) -> Result<Layout, VolumeError> {
         ndim: realdim,
         len,
         offset,
+        frames,
     })
 }
 
@@ -617,10 +867,20 @@ fn validate(h: &RawHeader) -> Result<Layout, VolumeError> {
 // nifti1_io matrix helpers (single-precision storage, double-precision arithmetic)
 // ---------------------------------------------------------------------------------------------
 
-/// `nifti_quatern_to_mat44`: quaternion, offsets, grid steps and `qfac` to the qform matrix.
-#[allow(clippy::too_many_arguments)]
+/// `nifti_quatern_to_mat44`: quaternion, offsets, grid steps and `qfac` to the qform matrix
+/// (computed in `f64`, stored in `f32` as `nifti1_io` does).
 fn quatern_to_mat44(q: [f32; 3], offset: [f32; 3], d: [f32; 3], qfac: f32) -> Mat44 {
-    let (mut b, mut c, mut dd) = (f64::from(q[0]), f64::from(q[1]), f64::from(q[2]));
+    let m = quatern_to_mat44_f64(q.map(f64::from), [0.0; 3], d.map(f64::from), qfac);
+    let mut out: Mat44 = m.map(|row| row.map(|v| v as f32));
+    for i in 0..3 {
+        out[i][3] = offset[i];
+    }
+    out
+}
+
+/// The qform matrix in double precision (NIfTI-2, and the arithmetic of [`quatern_to_mat44`]).
+fn quatern_to_mat44_f64(q: [f64; 3], offset: [f64; 3], d: [f64; 3], qfac: f32) -> [[f64; 4]; 4] {
+    let [mut b, mut c, mut dd] = q;
     let mut a = 1.0 - (b * b + c * c + dd * dd);
     if a < 1e-7 {
         // 180° rotation: normalise (b, c, d), a = 0.
@@ -632,7 +892,7 @@ fn quatern_to_mat44(q: [f32; 3], offset: [f32; 3], d: [f32; 3], qfac: f32) -> Ma
     } else {
         a = a.sqrt();
     }
-    let pos = |v: f32| if v > 0.0 { f64::from(v) } else { 1.0 };
+    let pos = |v: f64| if v > 0.0 { v } else { 1.0 };
     let (xd, yd, mut zd) = (pos(d[0]), pos(d[1]), pos(d[2]));
     if qfac < 0.0 {
         zd = -zd;
@@ -640,21 +900,21 @@ fn quatern_to_mat44(q: [f32; 3], offset: [f32; 3], d: [f32; 3], qfac: f32) -> Ma
     let d2 = dd;
     [
         [
-            ((a * a + b * b - c * c - d2 * d2) * xd) as f32,
-            (2.0 * (b * c - a * d2) * yd) as f32,
-            (2.0 * (b * d2 + a * c) * zd) as f32,
+            (a * a + b * b - c * c - d2 * d2) * xd,
+            2.0 * (b * c - a * d2) * yd,
+            2.0 * (b * d2 + a * c) * zd,
             offset[0],
         ],
         [
-            (2.0 * (b * c + a * d2) * xd) as f32,
-            ((a * a + c * c - b * b - d2 * d2) * yd) as f32,
-            (2.0 * (c * d2 - a * b) * zd) as f32,
+            2.0 * (b * c + a * d2) * xd,
+            (a * a + c * c - b * b - d2 * d2) * yd,
+            2.0 * (c * d2 - a * b) * zd,
             offset[1],
         ],
         [
-            (2.0 * (b * d2 - a * c) * xd) as f32,
-            (2.0 * (c * d2 + a * b) * yd) as f32,
-            ((a * a + d2 * d2 - c * c - b * b) * zd) as f32,
+            2.0 * (b * d2 - a * c) * xd,
+            2.0 * (c * d2 + a * b) * yd,
+            (a * a + d2 * d2 - c * c - b * b) * zd,
             offset[2],
         ],
         [0.0, 0.0, 0.0, 1.0],
@@ -1223,7 +1483,30 @@ fn itk_geometry(h: &RawHeader, layout: &Layout) -> Result<Geometry, VolumeError>
         }
     }
     let pixdim = [pd[1], pd[2], pd[3]];
-    let (source, m) = choose_matrix(h, pixdim)?;
+    let (source, m32) = choose_matrix(h, pixdim)?;
+    let mut m: [[f64; 4]; 4] = m32.map(|row| row.map(f64::from));
+    // NIfTI-2 stores doubles: ITK's choice is made as above, the chosen matrix is rebuilt at
+    // full precision.
+    let mut spacing_source: [f64; 3] = pixdim.map(f64::from);
+    if let Some(w) = &h.wide {
+        let mut pd = w.pixdim;
+        for p in pd.iter_mut().take(ndim_file + 1).skip(1) {
+            if *p == 0.0 {
+                *p = 1.0;
+            }
+        }
+        spacing_source = [pd[1], pd[2], pd[3]];
+        match source {
+            Source::Qform => {
+                let qfac = if w.pixdim[0] < 0.0 { -1.0 } else { 1.0 };
+                m = quatern_to_mat44_f64(w.quatern, w.qoffset, spacing_source, qfac);
+            }
+            Source::Sform => {
+                m = [w.srow[0], w.srow[1], w.srow[2], [0.0, 0.0, 0.0, 1.0]];
+            }
+            Source::Neither => {}
+        }
+    }
     let ndim = layout.ndim;
     let unit_scale = match h.xyzt_units & 0x07 {
         1 => 1e3,
@@ -1234,18 +1517,18 @@ fn itk_geometry(h: &RawHeader, layout: &Layout) -> Result<Geometry, VolumeError>
     let mut origin = DVec3::ZERO;
     let mut direction = DMat3::IDENTITY;
     for a in 0..ndim {
-        spacing[a] = f64::from(pixdim[a]) * unit_scale;
+        spacing[a] = spacing_source[a] * unit_scale;
     }
     if source != Source::Neither {
         let flip = [-1.0, -1.0, 1.0];
         for a in 0..ndim {
-            origin[a] = flip[a] * f64::from(m[a][3]) * unit_scale + 0.0;
+            origin[a] = flip[a] * m[a][3] * unit_scale + 0.0;
         }
         let mut cols = [DVec3::X, DVec3::Y, DVec3::Z];
         for (j, col) in cols.iter_mut().enumerate().take(ndim) {
             let mut c = DVec3::ZERO;
             for i in 0..ndim {
-                c[i] = flip[i] * f64::from(m[i][j]) + 0.0; // + 0.0: no negative zeros
+                c[i] = flip[i] * m[i][j] + 0.0; // + 0.0: no negative zeros
             }
             let n = c.length();
             *col = if n == 0.0 { c } else { c / n };
@@ -1273,9 +1556,13 @@ fn itk_geometry(h: &RawHeader, layout: &Layout) -> Result<Geometry, VolumeError>
 
 /// ITK's rescale decision: `Some((slope, inter))` when the data must be rescaled.
 fn rescale_of(h: &RawHeader) -> Option<(f64, f64)> {
-    let fix = |v: f32| if v.is_finite() { f64::from(v) } else { 0.0 };
-    let mut slope = fix(h.scl_slope);
-    let inter = fix(h.scl_inter);
+    let fix = |v: f64| if v.is_finite() { v } else { 0.0 };
+    let (slope, inter) = match &h.wide {
+        Some(w) => (w.scl_slope, w.scl_inter),
+        None => (f64::from(h.scl_slope), f64::from(h.scl_inter)),
+    };
+    let mut slope = fix(slope);
+    let inter = fix(inter);
     if slope.abs() < f64::EPSILON {
         slope = 1.0;
     }
@@ -1441,14 +1728,26 @@ where
 fn read_stream<R: Read>(
     r: &mut R,
     file_len: Option<u64>,
-) -> Result<(AnyVolume, Header), VolumeError> {
-    let mut hb = [0u8; HEADER_SIZE];
-    let got = fill(r, &mut hb, "header")?;
+    frame: Option<usize>,
+) -> Result<(AnyVolume, Header, usize), VolumeError> {
+    let mut hb = [0u8; HEADER2_SIZE];
+    let mut got = fill(r, &mut hb[..HEADER_SIZE], "header")?;
+    let sizeof = [hb[0], hb[1], hb[2], hb[3]];
+    let header_len = if got >= 4
+        && (i32::from_le_bytes(sizeof) == HEADER2_SIZE as i32
+            || i32::from_be_bytes(sizeof) == HEADER2_SIZE as i32)
+    {
+        got += fill(r, &mut hb[HEADER_SIZE..], "header")?;
+        HEADER2_SIZE
+    } else {
+        HEADER_SIZE
+    };
     let h = RawHeader::parse(&hb[..got])?;
     let layout = validate(&h)?;
+    let frame = crate::choose_frame(frame, layout.frames)?;
     let geometry = itk_geometry(&h, &layout)?;
     if let Some(len) = file_len {
-        let need = layout.offset as u64 + layout.data_bytes() as u64;
+        let need = layout.offset as u64 + (layout.data_bytes() as u64) * layout.frames as u64;
         if (layout.offset as u64) > len {
             return Err(err(format!(
                 "vox_offset {} lies beyond the end of the file ({len} bytes)",
@@ -1458,15 +1757,20 @@ fn read_stream<R: Read>(
         if need > len {
             return Err(err(format!(
                 "truncated data: {} voxels of {} need {} bytes from offset {}, the file has {}",
-                layout.len,
+                layout.len * layout.frames,
                 layout.voxel_type,
-                layout.data_bytes(),
+                layout.data_bytes() * layout.frames,
                 layout.offset,
                 len.saturating_sub(layout.offset as u64)
             )));
         }
     }
-    skip(r, (layout.offset - HEADER_SIZE) as u64, "extensions")?;
+    skip(r, (layout.offset - header_len) as u64, "extensions")?;
+    skip(
+        r,
+        (layout.data_bytes() as u64) * frame as u64,
+        "earlier frames",
+    )?;
     let rescale = rescale_of(&h);
     let be = h.big_endian;
     let checked = file_len.is_some();
@@ -1480,37 +1784,55 @@ fn read_stream<R: Read>(
         io::copy(&mut r.take(GZ_TAIL_LIMIT), &mut io::sink())
             .map_err(|e| io_err(e, "after the voxel data"))?;
     }
-    Ok((volume, h.fields()))
+    Ok((volume, h.fields(), layout.frames))
 }
 
-/// Parse a complete NIfTI-1 single file held in memory, plain or gzip-compressed (detected by
-/// the gzip magic number), into a volume in volmorph's (ITK's LPS) geometry and its raw header
-/// fields. This is what [`crate::read`] does for a `.nii`/`.nii.gz` path.
+/// Parse a complete NIfTI-1 or NIfTI-2 single file held in memory, plain or gzip-compressed
+/// (detected by the gzip magic number), into a volume in ITK's LPS geometry — exactly the
+/// numbers ITK derives, before the direction rule of [`crate::read`] — and its raw header
+/// fields. A 4-D file needs `frame` (`None` is refused for more than one frame); the count of
+/// frames is returned too.
 ///
 /// # Errors
 /// [`VolumeError::Format`] for a malformed header, truncated data or a corrupt gzip stream;
 /// [`VolumeError::Unsupported`] for valid files volmorph does not handle (two-file pairs,
-/// NIfTI-2, other datatypes, more than three non-trivial dimensions);
+/// other datatypes, more than four non-trivial dimensions);
+/// [`VolumeError::InvalidArgument`] for a missing or out-of-range `frame`;
 /// [`VolumeError::Io`] when the declared size exceeds the memory budget ([`volmorph_io::memory_limit`]).
-pub fn read_bytes(bytes: &[u8]) -> Result<(AnyVolume, Header), VolumeError> {
+pub fn read_frame_bytes(
+    bytes: &[u8],
+    frame: Option<usize>,
+) -> Result<(AnyVolume, Header, usize), VolumeError> {
     if is_gzip(bytes) {
-        read_stream(&mut MultiGzDecoder::new(bytes), None)
+        read_stream(&mut MultiGzDecoder::new(bytes), None, frame)
     } else {
-        read_stream(&mut &bytes[..], Some(bytes.len() as u64))
+        read_stream(&mut &bytes[..], Some(bytes.len() as u64), frame)
     }
 }
 
+/// [`read_frame_bytes`] of a file with a single 3-D frame (a 4-D file with more frames is
+/// refused, naming its frame count).
+///
+/// # Errors
+/// As [`read_frame_bytes`].
+pub fn read_bytes(bytes: &[u8]) -> Result<(AnyVolume, Header), VolumeError> {
+    read_frame_bytes(bytes, None).map(|(v, h, _)| (v, h))
+}
+
 /// Read a `.nii` or `.nii.gz` file (gzip detected by magic number).
-pub(crate) fn read(path: &Path) -> Result<(AnyVolume, Header), VolumeError> {
+pub(crate) fn read(
+    path: &Path,
+    frame: Option<usize>,
+) -> Result<(AnyVolume, Header, usize), VolumeError> {
     let os = crate::text_header::os_err(path);
     let file = volmorph_io::open_regular(path)?;
     let len = file.metadata().map_err(os)?.len();
     let mut br = BufReader::with_capacity(1 << 20, file);
     let gz = is_gzip(br.fill_buf().map_err(os)?);
     if gz {
-        read_stream(&mut MultiGzDecoder::new(br), None)
+        read_stream(&mut MultiGzDecoder::new(br), None, frame)
     } else {
-        read_stream(&mut br, Some(len))
+        read_stream(&mut br, Some(len), frame)
     }
 }
 
@@ -1666,9 +1988,82 @@ fn write_data<W: Write>(w: &mut W, v: &AnyVolume) -> io::Result<()> {
     })
 }
 
-/// Write a single-file NIfTI-1; gzip-compressed when the file name ends in `.gz`.
+/// The 544 bytes (header and extender) of a NIfTI-2 file for `v`: the fields of
+/// [`encode_header`] at full width — sizes as 64-bit integers, `pixdim`, offsets and `srow_*`
+/// in double precision (the exact direction times the spacing); the quaternion is the
+/// single-precision one ITK's rules give, so both forms describe the same grid.
+fn encode_header2(v: &AnyVolume) -> Result<Vec<u8>, VolumeError> {
+    let g = v.geometry();
+    g.validate()?;
+    let x = write_xform(g)?;
+    let t = v.voxel_type();
+    let mut b = vec![0u8; WRITE2_VOX_OFFSET];
+    let mut put = |off: usize, bytes: &[u8]| b[off..off + bytes.len()].copy_from_slice(bytes);
+    put(0, &(HEADER2_SIZE as i32).to_le_bytes());
+    put(4, NIFTI2_MAGIC);
+    put(12, &datatype_of(t).to_le_bytes());
+    put(14, &((8 * t.size()) as i16).to_le_bytes());
+    let dims = [
+        3i64,
+        g.dims[0] as i64,
+        g.dims[1] as i64,
+        g.dims[2] as i64,
+        1,
+        1,
+        1,
+        1,
+    ];
+    for (i, d) in dims.iter().enumerate() {
+        put(16 + 8 * i, &d.to_le_bytes());
+    }
+    let pixdim = [
+        f64::from(x.qfac),
+        g.spacing.x,
+        g.spacing.y,
+        g.spacing.z,
+        0.0,
+        0.0,
+        0.0,
+        0.0,
+    ];
+    for (i, p) in pixdim.iter().enumerate() {
+        put(104 + 8 * i, &p.to_le_bytes());
+    }
+    put(168, &(WRITE2_VOX_OFFSET as i64).to_le_bytes());
+    put(176, &1f64.to_le_bytes()); // scl_slope
+    put(240, b"volmorph");
+    put(344, &i32::from(XFORM_SCANNER_ANAT).to_le_bytes());
+    put(348, &i32::from(XFORM_SCANNER_ANAT).to_le_bytes());
+    let flip = [-1.0f64, -1.0, 1.0];
+    let offset = [-g.origin.x, -g.origin.y, g.origin.z];
+    for (i, q) in x
+        .quatern
+        .iter()
+        .map(|&q| f64::from(q))
+        .chain(offset)
+        .enumerate()
+    {
+        put(352 + 8 * i, &q.to_le_bytes());
+    }
+    for r in 0..3 {
+        for c in 0..3 {
+            let m = flip[r] * g.direction.col(c)[r] * g.spacing[c];
+            put(400 + 32 * r + 8 * c, &(m + 0.0).to_le_bytes());
+        }
+        put(400 + 32 * r + 24, &(offset[r] + 0.0).to_le_bytes());
+    }
+    put(500, &i32::from(WRITE_XYZT_UNITS).to_le_bytes());
+    Ok(b)
+}
+
+/// Write a single-file NIfTI (gzip-compressed when the name ends in `.gz`): NIfTI-1, or
+/// NIfTI-2 when a size exceeds NIfTI-1's 16-bit fields.
 pub(crate) fn write(path: &Path, v: &AnyVolume, o: &WriteOptions) -> Result<(), VolumeError> {
-    let header = encode_header(v)?;
+    let header = if v.geometry().dims.iter().any(|&d| d > i16::MAX as usize) {
+        encode_header2(v)?
+    } else {
+        encode_header(v)?.to_vec()
+    };
     let gz = path
         .file_name()
         .is_some_and(|n| n.to_string_lossy().to_ascii_lowercase().ends_with(".gz"));
@@ -1691,6 +2086,32 @@ pub(crate) fn write(path: &Path, v: &AnyVolume, o: &WriteOptions) -> Result<(), 
 #[allow(clippy::needless_range_loop)] // matrix code reads best with indices
 mod tests {
     use super::*;
+
+    #[test]
+    fn sizes_beyond_16_bits_are_written_as_nifti2_and_read_back() {
+        let rot = DMat3::from_rotation_z(0.25);
+        let g = Geometry::new([40_000, 2, 1])
+            .with_spacing(DVec3::new(0.1, 0.7, 1.3))
+            .with_origin(DVec3::new(-12.345_678_9, 3.25, 1e-3))
+            .with_direction(rot);
+        let v: AnyVolume = Volume::from_fn(g, |i, j, _| ((i + 7 * j) % 251) as u8)
+            .unwrap()
+            .into();
+        let dir = tempfile::tempdir().unwrap();
+        let p = dir.path().join("long.nii.gz");
+        write(&p, &v, &WriteOptions::default()).unwrap();
+        let (back, h, frames) = read(&p, None).unwrap();
+        assert_eq!(frames, 1);
+        assert_eq!(back.as_bytes(), v.as_bytes());
+        let size = h.fields.iter().find(|(k, _)| k == "sizeof_hdr").unwrap();
+        assert_eq!(size.1, "540");
+        let b = back.geometry();
+        assert_eq!(b.dims, g.dims);
+        // Double precision: spacing and origin exactly, direction to rounding.
+        assert_eq!(b.spacing, g.spacing);
+        assert_eq!(b.origin, g.origin);
+        assert!((b.direction - rot).abs_diff_eq(DMat3::ZERO, 1e-15));
+    }
 
     #[test]
     fn quaternion_round_trip_through_matrix() {

@@ -23,7 +23,8 @@
 //! The legacy format has **no direction matrix**: VTK's reader rejects any keyword other
 //! than those above, and VTK 9's `vtkImageData` direction is not written to legacy files.
 //! The writer therefore refuses a volume whose direction is not exactly the identity,
-//! naming the formats that can store it (MetaImage, NRRD, NIfTI) — it never drops it.
+//! naming the formats that can store it (VTK XML `.vti`, MetaImage, NRRD, NIfTI) — it never
+//! drops it.
 //!
 //! # Writing
 //! Version 3.0 header, `BINARY`, big-endian, `SCALARS scalars <type> 1`,
@@ -356,8 +357,10 @@ pub(crate) fn write(
     if g.direction != DMat3::IDENTITY {
         return Err(VolumeError::Unsupported(format!(
             "VTK legacy STRUCTURED_POINTS cannot store a direction matrix (this volume's is \
-             {:?}); write MetaImage (.mha/.mhd), NRRD (.nrrd/.nhdr) or NIfTI (.nii) to keep \
-             the orientation, or resample onto an axis-aligned grid first",
+             {:?}, e.g. any NIfTI read into LPS space); write VTK XML image data (.vti, read \
+             by VTK 9, ParaView and 3D Slicer with its direction), MetaImage (.mha/.mhd), NRRD \
+             (.nrrd/.nhdr) or NIfTI (.nii) to keep the orientation, or resample onto an \
+             axis-aligned grid first",
             g.direction.to_cols_array_2d()
         )));
     }

@@ -174,6 +174,7 @@ fn detached_data_paths_read_any_file() {
                 &h,
                 &ReadOptions {
                     allow_external_data: true,
+                    ..ReadOptions::default()
                 },
             )
             .unwrap();
@@ -197,6 +198,7 @@ fn device_or_fifo_data_file_reported_as_not_found() {
     std::fs::write(&h, mhd_naming("/dev/zero")).unwrap();
     let allow = ReadOptions {
         allow_external_data: true,
+        ..ReadOptions::default()
     };
     let msg = format::read_with(&h, &allow).unwrap_err().to_string();
     assert!(

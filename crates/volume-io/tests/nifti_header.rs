@@ -6,7 +6,7 @@
 use std::io::Write;
 
 use volmorph_volume::{AnyVolume, DMat3, DVec3, VolumeError, VoxelType};
-use volmorph_volume_io::nifti::read_bytes;
+use volmorph_volume_io::nifti::{read_bytes, read_frame_bytes};
 
 /// Every field of a NIfTI-1 header that the tests set; serialised in either byte order.
 #[derive(Clone)]
@@ -380,8 +380,26 @@ fn two_dimensional_and_trailing_unit_dimensions() {
     let mut h = Hdr::new();
     h.dim = [5, 2, 3, 4, 1, 1, 7, 7];
     assert_eq!(read(&h).geometry().dims, [2, 3, 4]);
-    // A real 4-D series is refused.
+    // A real 4-D series is a list of frames: without a frame it is refused, naming the
+    // count; each frame holds its own slab of the data.
     h.dim = [4, 2, 3, 4, 2, 1, 1, 1];
+    let bytes = h.file();
+    let e = read_bytes(&bytes).unwrap_err();
+    assert!(
+        matches!(e, VolumeError::InvalidArgument(_)) && e.to_string().contains("2 frames"),
+        "{e}"
+    );
+    for f in 0..2 {
+        let (v, _, frames) = read_frame_bytes(&bytes, Some(f)).unwrap();
+        assert_eq!(frames, 2);
+        assert_eq!(v.geometry().dims, [2, 3, 4]);
+        let want: Vec<u8> = (24 * f..24 * (f + 1)).map(|i| i as u8).collect();
+        assert_eq!(v.as_bytes(), &want[..], "frame {f}");
+    }
+    let e = read_frame_bytes(&bytes, Some(2)).unwrap_err();
+    assert!(e.to_string().contains("frame 2 does not exist"), "{e}");
+    // A 5-D image with two non-trivial dimensions past the third is still refused.
+    h.dim = [5, 2, 3, 4, 2, 2, 1, 1];
     let e = read_bytes(&h.file()).unwrap_err();
     assert!(matches!(e, VolumeError::Unsupported(_)), "{e}");
 }

@@ -2,6 +2,8 @@
 //!
 //! * [`Geometry`] — dims, spacing, origin and 3×3 direction, ITK convention:
 //!   `physical = origin + direction · (spacing ⊙ index)`, x fastest in memory.
+//! * [`direction`] — the one tolerance and orthonormalisation (polar factor) applied to every
+//!   direction matrix that enters volmorph.
 //! * [`Volume<T>`] — a typed voxel array on a [`Geometry`]; [`AnyVolume`] when the type is only
 //!   known at run time (files).
 //! * [`Voxel`] / [`VoxelType`] — the supported voxel types and their conversions.
@@ -28,6 +30,7 @@
 //! # Ok::<(), Box<dyn std::error::Error>>(())
 //! ```
 
+pub mod direction;
 mod error;
 mod geometry;
 mod index_box;

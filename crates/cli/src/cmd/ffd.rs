@@ -79,6 +79,8 @@ fn is_step(p: &Path) -> bool {
 
 /// Run `volmorph ffd`.
 pub fn run(a: &Args) -> anyhow::Result<()> {
+    // The reported total runs from here to the output written (reading included).
+    let start = Instant::now();
     let mode = parse_mode(&a.mode)?;
     let pb = progress::spinner(format!("reading {}", a.input.display()));
     let m =
@@ -92,7 +94,6 @@ pub fn run(a: &Args) -> anyhow::Result<()> {
             a.output.display()
         );
     }
-    let start = Instant::now();
     let mut json = serde_json::Map::new();
     json.insert("input_faces".into(), m.face_count().into());
     match mode {
@@ -110,10 +111,13 @@ pub fn run(a: &Args) -> anyhow::Result<()> {
             let st = model.stats;
             let area = model.surface_area();
             pb.set_message(format!("writing {}", a.output.display()));
+            let write_start = Instant::now();
             if step_out {
                 let sum = step::write_step(&a.output, &model).context("cannot write STEP")?;
                 json.insert("step_faces".into(), sum.faces.into());
+                json.insert("step_planar_faces".into(), sum.planes.into());
                 json.insert("step_edges".into(), sum.edges.into());
+                json.insert("step_entities".into(), sum.entities.into());
                 json.insert("closed_shell".into(), sum.closed.into());
             } else {
                 let tol = match a.chordal {
@@ -128,6 +132,8 @@ pub fn run(a: &Args) -> anyhow::Result<()> {
                 json.insert("chordal_tolerance".into(), tol.into());
                 mesh::write(&a.output, &t).context("cannot write")?;
             }
+            let write_s = write_start.elapsed().as_secs_f64();
+            let total_s = start.elapsed().as_secs_f64();
             pb.finish_and_clear();
             say!(
                 "input polygons: {} ({} faces)",
@@ -138,10 +144,11 @@ pub fn run(a: &Args) -> anyhow::Result<()> {
             say!("Bézier patches: {}", st.patches);
             say!("trimmed faces:  {} ({} edges)", st.faces, st.edges);
             say!(
-                "time:           {:.3} s (plan {:.3} s, surfaces {:.3} s)",
-                (st.plan_time + st.deform_time).as_secs_f64(),
+                "time:           {total_s:.3} s in all (plan {:.3} s, surfaces {:.3} s, \
+                 writing {} {write_s:.3} s)",
                 st.plan_time.as_secs_f64(),
-                st.deform_time.as_secs_f64()
+                st.deform_time.as_secs_f64(),
+                if step_out { "STEP" } else { "the tessellation" }
             );
             say!("surface area:   {area:.15e}");
             for (k, v) in [
@@ -155,6 +162,8 @@ pub fn run(a: &Args) -> anyhow::Result<()> {
             }
             json.insert("plan_s".into(), st.plan_time.as_secs_f64().into());
             json.insert("surfaces_s".into(), st.deform_time.as_secs_f64().into());
+            json.insert("write_s".into(), write_s.into());
+            json.insert("total_s".into(), total_s.into());
             json.insert("surface_area".into(), area.into());
         }
         mode => {
@@ -168,8 +177,8 @@ pub fn run(a: &Args) -> anyhow::Result<()> {
                 Mode::Accurate => unreachable!("handled above"),
             }
             .with_context(|| format!("FFD of {}", a.input.display()))?;
-            let secs = start.elapsed().as_secs_f64();
             mesh::write(&a.output, &out).context("cannot write")?;
+            let secs = start.elapsed().as_secs_f64();
             pb.finish_and_clear();
             say!("input faces:    {}", m.face_count());
             say!(

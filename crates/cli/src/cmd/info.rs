@@ -5,15 +5,19 @@ use std::path::PathBuf;
 
 use anyhow::Context;
 use volmorph_volume::stats::Statistics;
-use volmorph_volume_io::{self as format, VolumeFile};
+use volmorph_volume_io::{self as format, ReadOptions, VolumeFile};
 
 use crate::progress;
 
 /// Arguments of `volmorph info`.
 #[derive(Debug, clap::Args)]
 pub struct Args {
-    /// Volume file (.nii, .nii.gz, .mha, .mhd, .nrrd, .nhdr, .vtk).
+    /// Volume file (.nii, .nii.gz, .mha, .mhd, .nrrd, .nhdr, .vtk, .vti, .mgh, .mgz, .dcm) or
+    /// a folder holding a DICOM series.
     pub input: PathBuf,
+    /// Frame of a 4-D file to describe (0-based; default 0). The frame count is always listed.
+    #[arg(long, value_name = "N")]
+    pub frame: Option<usize>,
     /// Also print every header field of the file.
     #[arg(long)]
     pub header: bool,
@@ -28,7 +32,11 @@ pub struct Args {
 /// Run `volmorph info`.
 pub fn run(args: &Args) -> anyhow::Result<()> {
     let pb = progress::spinner(format!("reading {}", args.input.display()));
-    let file = format::read_with_header(&args.input).context("cannot read volume")?;
+    let options = ReadOptions {
+        frame: Some(args.frame.unwrap_or(0)),
+        ..ReadOptions::default()
+    };
+    let file = format::read_with(&args.input, &options).context("cannot read volume")?;
     let stats = (!args.no_stats).then(|| Statistics::of_any(&file.volume));
     pb.finish_and_clear();
     if args.json {
@@ -43,7 +51,8 @@ pub fn run(args: &Args) -> anyhow::Result<()> {
 }
 
 /// The JSON object `volmorph info --json` prints: `format`, `voxel_type`, `dims`, `spacing`,
-/// `origin`, `direction` (row-major 3×3, ITK/LPS), `header` (field → value) and `stats`.
+/// `origin`, `direction` (row-major 3×3, ITK/LPS), `frames` (3-D frames in the file), `frame`
+/// (the one described), `header` (field → value) and `stats`.
 pub fn json(file: &VolumeFile, stats: Option<&Statistics>) -> serde_json::Value {
     let g = file.volume.geometry();
     let d = g.direction.transpose().to_cols_array_2d(); // rows of the direction matrix
@@ -60,6 +69,8 @@ pub fn json(file: &VolumeFile, stats: Option<&Statistics>) -> serde_json::Value 
         "spacing": g.spacing.to_array(),
         "origin": g.origin.to_array(),
         "direction": d,
+        "frames": file.frames,
+        "frame": file.frame,
         "header": header,
     });
     if let Some(st) = stats {
@@ -87,6 +98,15 @@ pub fn report(
     let _ = writeln!(s, "file:       {}", path.display());
     let _ = writeln!(s, "format:     {}", file.format.name());
     let _ = writeln!(s, "voxel type: {}", file.volume.voxel_type());
+    if file.frames > 1 {
+        let _ = writeln!(
+            s,
+            "frames:     {} (0 to {}); this is frame {} (choose with --frame N)",
+            file.frames,
+            file.frames - 1,
+            file.frame
+        );
+    }
     let _ = writeln!(
         s,
         "dims:       {} x {} x {} ({} voxels)",

@@ -40,8 +40,9 @@
 //! degrees other than 3, knot vectors that are not uniform, and frames the format has no
 //! room for (see each module). Every frame of a volmorph lattice is orthonormal, so the
 //! direction matrix never needs approximating on export; on import a direction matrix that
-//! deviates from orthonormal by at most [`DIRECTION_TOL`] (the rounding of files written with
-//! 6 decimals) is snapped to the nearest orthonormal matrix, a larger deviation is an error.
+//! deviates from orthonormal by at most [`DIRECTION_ORTHONORMAL_TOL`] (the rounding of files
+//! written with 6 decimals or in single precision) is snapped to the nearest orthonormal matrix
+//! by the one rule of [`volmorph_volume::direction`], a larger deviation is an error.
 //!
 //! ```
 //! use glam::DVec3;
@@ -75,11 +76,9 @@ use crate::json::MAX_CONTROL_POINTS;
 use crate::lattice::uniform_cubic_knots;
 use crate::{BSplineLattice, LatticeFrame};
 use volmorph_deform::DeformError;
-
-/// Largest deviation `max |DᵀD − I|` of a direction matrix read from a file that is accepted
-/// (and then snapped to the nearest orthonormal matrix). Files that print directions with six
-/// decimals deviate by about `1e-6`.
-pub const DIRECTION_TOL: f64 = 1e-4;
+#[cfg(doc)]
+use volmorph_volume::direction::DIRECTION_ORTHONORMAL_TOL;
+use volmorph_volume::direction::orthonormalize;
 
 /// A lattice seen as a uniform cubic control grid (the common model of the module docs).
 #[derive(Debug, Clone, PartialEq)]
@@ -203,51 +202,22 @@ pub(crate) fn checked_grid_len(
 
 /// Orthonormal axes (columns) from a row-major direction matrix `rows[3r + c] = D[r][c]`
 /// (column `c` is the direction of index axis `c`), snapped to the nearest orthonormal matrix
-/// when the deviation is at most [`DIRECTION_TOL`].
+/// by [`orthonormalize`] (within [`DIRECTION_ORTHONORMAL_TOL`]).
 pub(crate) fn axes_from_rows(
     rows: [f64; 9],
     format: &'static str,
     line: usize,
 ) -> Result<DMat3, DeformError> {
-    let d = DMat3::from_cols_array(&rows).transpose();
-    let dev = gram_deviation(d);
-    if dev.is_nan() || dev > DIRECTION_TOL {
-        return Err(DeformError::Parse {
-            format,
-            line,
-            message: format!(
-                "direction matrix {rows:?} is not orthonormal (max |DᵀD − I| = {dev:e})"
-            ),
-        });
-    }
-    if dev <= crate::lattice::FRAME_ORTHONORMAL_TOL {
-        return Ok(d);
-    }
-    // Polar decomposition by Newton's iteration X ← (X + X⁻ᵀ)/2: converges quadratically to
-    // the orthonormal factor (the nearest orthonormal matrix) from a nearly orthonormal start.
-    let mut x = d;
-    for _ in 0..8 {
-        x = (x + x.inverse().transpose()) * 0.5;
-        if gram_deviation(x) <= 1e-15 {
-            break;
-        }
-    }
-    Ok(x)
+    orthonormalize(DMat3::from_cols_array(&rows).transpose()).map_err(|e| DeformError::Parse {
+        format,
+        line,
+        message: format!("direction matrix {rows:?}: {e}"),
+    })
 }
 
 /// Row-major entries `D[r][c]` of the axes matrix (columns are axis directions).
 pub(crate) fn rows_of(axes: DMat3) -> [f64; 9] {
     axes.transpose().to_cols_array()
-}
-
-fn gram_deviation(d: DMat3) -> f64 {
-    (d.transpose() * d - DMat3::IDENTITY)
-        .to_cols_array()
-        .iter()
-        .fold(
-            0.0_f64,
-            |m, v| if v.is_nan() { f64::NAN } else { m.max(v.abs()) },
-        )
 }
 
 pub(crate) use volmorph_io::fmt_f64;

@@ -1,0 +1,879 @@
+//! DICOM image series (a folder of CT/MR/PET slices) and multi-frame (enhanced) DICOM files,
+//! read into one 3-D volume in patient (LPS) space.
+//!
+//! Parsing and pixel decoding are done by the `dicom-rs` crates (`dicom-object`,
+//! `dicom-pixeldata`; the decoders of compressed transfer syntaxes — JPEG, JPEG lossless,
+//! RLE, deflate — come with the default `dicom-codecs` feature). This module does what turns
+//! files into a volume:
+//!
+//! # Finding the slices
+//!
+//! * A **folder**: every file in it (not its subfolders) that parses as DICOM and carries image
+//!   pixels is grouped by `SeriesInstanceUID`; one series is read, several are an error listing
+//!   each series (UID, description, slice count) — read one by naming any of its files.
+//! * A **file** with one frame: the series it belongs to, from the files of its folder.
+//! * A **multi-frame** file (`NumberOfFrames` > 1): its frames are the slices. Each frame's
+//!   position, orientation, pixel spacing and rescale come from the enhanced functional groups
+//!   (`PerFrameFunctionalGroupsSequence`, falling back to `SharedFunctionalGroupsSequence`:
+//!   `PlanePositionSequence`, `PlaneOrientationSequence`, `PixelMeasuresSequence`,
+//!   `PixelValueTransformationSequence`), or, in classic multi-frame files, from the top-level
+//!   `ImagePositionPatient`/`ImageOrientationPatient` with frames stepped by
+//!   `SpacingBetweenSlices` (or `SliceThickness`) along the slice normal.
+//!
+//! # Geometry
+//!
+//! `ImageOrientationPatient` gives the directions of increasing column (`i`) and row (`j`)
+//! index; their cross product is the slice normal `n`. Slices are sorted by `n ·
+//! ImagePositionPatient`, and checked: every slice has the same size, orientation (within
+//! [`ORIENTATION_TOL`]) and pixel spacing; no two slices share a position (several
+//! acquisitions, echoes or time points in one series are reported, not interleaved); and the
+//! gaps between consecutive slices are equal within [`SLICE_GAP_TOL`] of their mean (a missing
+//! slice is an error naming where it is missing). The volume's origin is the first slice's
+//! position, the third direction column and spacing come from the first to the last position:
+//! `(p_last − p_first) / (N − 1)`. That is the slice normal for ordinary series and the true
+//! sheared axis for a tilted-gantry CT (whose direction is then not orthonormal, as the grid
+//! is). Spacing along `i` and `j` is `PixelSpacing[1]` and `PixelSpacing[0]` (DICOM lists row
+//! spacing first). A single slice gets `SpacingBetweenSlices`, else `SliceThickness`, else 1.
+//!
+//! # Values
+//!
+//! Stored values (`BitsAllocated` 8, 16 or 32; `PixelRepresentation` unsigned or two's
+//! complement; the bits above `BitsStored` masked off, or sign-extended from `BitsStored` for
+//! signed data) are mapped by each slice's `RescaleSlope`/`RescaleIntercept` (`v·slope +
+//! intercept`). When every slice has slope 1 and the same integral intercept, the volume keeps
+//! an integer type — the narrowest of u8, i8, u16, i16, u32, i32 that holds every value the
+//! stored bits and the intercept can give (so CT with intercept −1024 is `i16` Hounsfield
+//! units, as in ITK); otherwise it is `f32`. Only one sample per pixel
+//! (`MONOCHROME1`/`MONOCHROME2`) is read; colour images are refused. Sizes are checked with
+//! [`volmorph_io::checked_len`] before the volume is allocated.
+//!
+//! Writing DICOM is not supported (a DICOM file needs patient and study identity that a volume
+//! does not carry): write NIfTI, NRRD, MetaImage or `.vti`.
+
+use std::collections::BTreeMap;
+use std::path::{Path, PathBuf};
+
+use dicom_dictionary_std::tags;
+use dicom_object::{DefaultDicomObject, InMemDicomObject, OpenFileOptions};
+use dicom_pixeldata::PixelDecoder;
+use glam::{DMat3, DVec3};
+
+use crate::Header;
+use volmorph_volume::{AnyVolume, Geometry, Volume, VolumeError, Voxel, VoxelType};
+
+const FMT: &str = "DICOM";
+
+/// Largest difference between the orientation vectors of two slices of one series (they are
+/// unit vectors printed as decimal strings, usually to 6 or more digits).
+pub const ORIENTATION_TOL: f64 = 1e-4;
+
+/// Largest deviation of a gap between consecutive slices from the mean gap, as a fraction of
+/// it. Positions are decimal strings of at most 16 characters, rounded by scanners to about
+/// 1e-3 mm, far below 1 % of any slice step; a missing slice doubles a gap (100 %).
+pub const SLICE_GAP_TOL: f64 = 0.01;
+
+/// Two slices closer than this along the normal (millimetres) are at the same position.
+const SAME_POSITION_TOL: f64 = 1e-4;
+
+fn err(msg: impl Into<String>) -> VolumeError {
+    VolumeError::format(FMT, msg)
+}
+
+/// Values of a numeric attribute of `obj`, if present and parsable.
+fn floats(obj: &InMemDicomObject, tag: dicom_object::Tag) -> Option<Vec<f64>> {
+    obj.get(tag)?.to_multi_float64().ok()
+}
+
+fn float(obj: &InMemDicomObject, tag: dicom_object::Tag) -> Option<f64> {
+    floats(obj, tag)?.first().copied()
+}
+
+fn int(obj: &InMemDicomObject, tag: dicom_object::Tag) -> Option<i64> {
+    obj.get(tag)?.to_int::<i64>().ok()
+}
+
+fn text(obj: &InMemDicomObject, tag: dicom_object::Tag) -> Option<String> {
+    let s = obj.get(tag)?.to_str().ok()?;
+    let s = s.trim_matches(|c: char| c == '\0' || c.is_whitespace());
+    (!s.is_empty()).then(|| s.to_owned())
+}
+
+/// The first item of sequence `seq` in `obj`.
+fn item(obj: &InMemDicomObject, seq: dicom_object::Tag) -> Option<&InMemDicomObject> {
+    obj.get(seq)?.items()?.first()
+}
+
+/// Pixel-level description shared by every slice of a volume.
+#[derive(Debug, Clone, Copy, PartialEq)]
+struct PixelFormat {
+    rows: usize,
+    cols: usize,
+    bits_allocated: u16,
+    bits_stored: u16,
+    signed: bool,
+}
+
+impl PixelFormat {
+    fn of(obj: &InMemDicomObject, what: &str) -> Result<Self, VolumeError> {
+        let need = |tag, name: &str| int(obj, tag).ok_or_else(|| err(format!("{what}: no {name}")));
+        let spp = int(obj, tags::SAMPLES_PER_PIXEL).unwrap_or(1);
+        if spp != 1 {
+            let pi = text(obj, tags::PHOTOMETRIC_INTERPRETATION).unwrap_or_default();
+            return Err(VolumeError::Unsupported(format!(
+                "{what}: {spp} samples per pixel ({pi}); only greyscale images are volumes"
+            )));
+        }
+        let rows = need(tags::ROWS, "Rows")?;
+        let cols = need(tags::COLUMNS, "Columns")?;
+        let bits_allocated = need(tags::BITS_ALLOCATED, "BitsAllocated")?;
+        let bits_stored = int(obj, tags::BITS_STORED).unwrap_or(bits_allocated);
+        let signed = int(obj, tags::PIXEL_REPRESENTATION).unwrap_or(0) == 1;
+        if rows <= 0 || cols <= 0 {
+            return Err(err(format!("{what}: Rows {rows} × Columns {cols}")));
+        }
+        if !matches!(bits_allocated, 8 | 16 | 32) {
+            return Err(VolumeError::Unsupported(format!(
+                "{what}: BitsAllocated {bits_allocated} (8, 16 or 32 are read)"
+            )));
+        }
+        if !(1..=bits_allocated).contains(&bits_stored) {
+            return Err(err(format!(
+                "{what}: BitsStored {bits_stored} with BitsAllocated {bits_allocated}"
+            )));
+        }
+        Ok(Self {
+            rows: rows as usize,
+            cols: cols as usize,
+            bits_allocated: bits_allocated as u16,
+            bits_stored: bits_stored as u16,
+            signed,
+        })
+    }
+
+    /// Range of the stored values.
+    fn range(&self) -> (f64, f64) {
+        let b = i32::from(self.bits_stored);
+        if self.signed {
+            (-(2f64.powi(b - 1)), 2f64.powi(b - 1) - 1.0)
+        } else {
+            (0.0, 2f64.powi(b) - 1.0)
+        }
+    }
+
+    /// Stored value `k` of a frame's little-endian bytes, masked / sign-extended to
+    /// `BitsStored`.
+    #[inline]
+    fn value(&self, bytes: &[u8], k: usize) -> i64 {
+        let raw: u64 = match self.bits_allocated {
+            8 => u64::from(bytes[k]),
+            16 => u64::from(u16::from_le_bytes([bytes[2 * k], bytes[2 * k + 1]])),
+            _ => u64::from(u32::from_le_bytes([
+                bytes[4 * k],
+                bytes[4 * k + 1],
+                bytes[4 * k + 2],
+                bytes[4 * k + 3],
+            ])),
+        };
+        let bits = u32::from(self.bits_stored);
+        let masked = raw & ((1u64 << bits) - 1);
+        if self.signed && masked >> (bits - 1) == 1 {
+            masked as i64 - (1i64 << bits)
+        } else {
+            masked as i64
+        }
+    }
+}
+
+/// One slice: where it is and where its pixels are.
+#[derive(Debug, Clone)]
+struct Plane {
+    position: DVec3,
+    /// Direction of increasing column index (`i`).
+    row_dir: DVec3,
+    /// Direction of increasing row index (`j`).
+    col_dir: DVec3,
+    /// Spacing along `i` and `j`.
+    spacing: [f64; 2],
+    slope: f64,
+    intercept: f64,
+    /// Index of the file in the list, and frame in that file.
+    file: usize,
+    frame: u32,
+}
+
+/// The geometry fields of a plane from `IOP`, `IPP` and `PixelSpacing` values.
+fn plane_from(
+    what: &str,
+    iop: Option<Vec<f64>>,
+    ipp: Option<Vec<f64>>,
+    spacing: Option<Vec<f64>>,
+) -> Result<(DVec3, DVec3, DVec3, [f64; 2]), VolumeError> {
+    let iop = iop.filter(|v| v.len() == 6).ok_or_else(|| {
+        err(format!(
+            "{what}: no ImageOrientationPatient (6 numbers): not a slice in patient space"
+        ))
+    })?;
+    let ipp = ipp
+        .filter(|v| v.len() == 3)
+        .ok_or_else(|| err(format!("{what}: no ImagePositionPatient (3 numbers)")))?;
+    let r = DVec3::new(iop[0], iop[1], iop[2]);
+    let c = DVec3::new(iop[3], iop[4], iop[5]);
+    let (rn, cn) = (r.length(), c.length());
+    if !(rn.is_finite() && cn.is_finite() && rn > 0.5 && cn > 0.5) {
+        return Err(err(format!(
+            "{what}: ImageOrientationPatient {iop:?} does not hold two unit vectors"
+        )));
+    }
+    let p = DVec3::new(ipp[0], ipp[1], ipp[2]);
+    if !p.is_finite() {
+        return Err(err(format!(
+            "{what}: ImagePositionPatient {ipp:?} is not finite"
+        )));
+    }
+    let s = match spacing {
+        Some(s) if s.len() == 2 => {
+            if !(s[0] > 0.0 && s[1] > 0.0 && s[0].is_finite() && s[1].is_finite()) {
+                return Err(err(format!("{what}: PixelSpacing {s:?} must be positive")));
+            }
+            [s[1], s[0]]
+        }
+        Some(s) => return Err(err(format!("{what}: PixelSpacing {s:?} needs 2 numbers"))),
+        None => [1.0, 1.0],
+    };
+    Ok((p, r / rn, c / cn, s))
+}
+
+/// Header summary of one file, read without its pixel data.
+struct Scanned {
+    path: PathBuf,
+    series: String,
+    description: String,
+    frames: u32,
+}
+
+fn open_header(path: &Path) -> Option<DefaultDicomObject> {
+    OpenFileOptions::new()
+        .read_until(tags::PIXEL_DATA)
+        .open_file(path)
+        .ok()
+}
+
+fn open_full(path: &Path) -> Result<DefaultDicomObject, VolumeError> {
+    OpenFileOptions::new()
+        .open_file(path)
+        .map_err(|e| err(format!("{}: {e}", path.display())))
+}
+
+fn scan(path: &Path) -> Option<Scanned> {
+    let obj = open_header(path)?;
+    // Images only: a pixel matrix is described.
+    int(&obj, tags::ROWS)?;
+    Some(Scanned {
+        path: path.to_path_buf(),
+        series: text(&obj, tags::SERIES_INSTANCE_UID).unwrap_or_default(),
+        description: text(&obj, tags::SERIES_DESCRIPTION).unwrap_or_default(),
+        frames: int(&obj, tags::NUMBER_OF_FRAMES)
+            .and_then(|f| u32::try_from(f).ok())
+            .unwrap_or(1)
+            .max(1),
+    })
+}
+
+fn scan_folder(dir: &Path) -> Result<Vec<Scanned>, VolumeError> {
+    let os = crate::text_header::os_err(dir);
+    let mut paths: Vec<PathBuf> = std::fs::read_dir(dir)
+        .map_err(os)?
+        .filter_map(Result::ok)
+        .map(|e| e.path())
+        .filter(|p| p.is_file())
+        .collect();
+    paths.sort();
+    Ok(paths.iter().filter_map(|p| scan(p)).collect())
+}
+
+/// `true` if `path` is a file with the DICOM preamble magic `DICM` at byte 128.
+pub(crate) fn has_dicom_magic(path: &Path) -> bool {
+    use std::io::Read;
+    let mut b = [0u8; 132];
+    std::fs::File::open(path)
+        .and_then(|mut f| f.read_exact(&mut b))
+        .is_ok()
+        && &b[128..] == b"DICM"
+}
+
+/// Read a DICOM series (a folder, or any one file of it) or a multi-frame file.
+pub(crate) fn read(path: &Path) -> Result<(AnyVolume, Header), VolumeError> {
+    let (files, chosen_series) = if path.is_dir() {
+        let files = scan_folder(path)?;
+        if files.is_empty() {
+            return Err(err(format!(
+                "folder {} holds no DICOM image files",
+                path.display()
+            )));
+        }
+        (files, None)
+    } else {
+        let me = scan(path)
+            .ok_or_else(|| err(format!("{} is not a DICOM image file", path.display())))?;
+        if me.frames > 1 {
+            return read_multiframe(path);
+        }
+        let dir = path.parent().filter(|d| !d.as_os_str().is_empty());
+        let files = match dir {
+            Some(d) => scan_folder(d)?,
+            None => scan_folder(Path::new("."))?,
+        };
+        (files, Some(me.series))
+    };
+    let mut by_series: BTreeMap<String, Vec<Scanned>> = BTreeMap::new();
+    for f in files {
+        by_series.entry(f.series.clone()).or_default().push(f);
+    }
+    let series = match chosen_series {
+        Some(uid) => by_series.remove(&uid).unwrap_or_default(),
+        None if by_series.len() == 1 => by_series.into_values().next().unwrap_or_default(),
+        None => {
+            let list: Vec<String> = by_series
+                .iter()
+                .map(|(uid, fs)| {
+                    format!(
+                        "{uid} \"{}\" ({} file{}, e.g. {})",
+                        fs[0].description,
+                        fs.len(),
+                        if fs.len() == 1 { "" } else { "s" },
+                        fs[0].path.display()
+                    )
+                })
+                .collect();
+            return Err(VolumeError::InvalidArgument(format!(
+                "the folder holds {} DICOM series; read one by giving any file of it: {}",
+                list.len(),
+                list.join("; ")
+            )));
+        }
+    };
+    if series.len() == 1 && series[0].frames > 1 {
+        return read_multiframe(&series[0].path);
+    }
+    if let Some(m) = series.iter().find(|s| s.frames > 1) {
+        return Err(VolumeError::Unsupported(format!(
+            "series mixes multi-frame files ({}) with single slices",
+            m.path.display()
+        )));
+    }
+    read_series(&series)
+}
+
+fn read_series(series: &[Scanned]) -> Result<(AnyVolume, Header), VolumeError> {
+    let mut planes = Vec::with_capacity(series.len());
+    let mut format: Option<PixelFormat> = None;
+    let mut first: Option<DefaultDicomObject> = None;
+    for (i, s) in series.iter().enumerate() {
+        let what = s.path.display().to_string();
+        let obj = open_header(&s.path).ok_or_else(|| err(format!("{what}: unreadable")))?;
+        let pf = PixelFormat::of(&obj, &what)?;
+        match format {
+            None => format = Some(pf),
+            Some(f) if f != pf => {
+                return Err(err(format!(
+                    "{what}: its pixels ({pf:?}) differ from the series' ({f:?})"
+                )));
+            }
+            Some(_) => {}
+        }
+        let (position, row_dir, col_dir, spacing) = plane_from(
+            &what,
+            floats(&obj, tags::IMAGE_ORIENTATION_PATIENT),
+            floats(&obj, tags::IMAGE_POSITION_PATIENT),
+            floats(&obj, tags::PIXEL_SPACING),
+        )?;
+        planes.push(Plane {
+            position,
+            row_dir,
+            col_dir,
+            spacing,
+            slope: float(&obj, tags::RESCALE_SLOPE).unwrap_or(1.0),
+            intercept: float(&obj, tags::RESCALE_INTERCEPT).unwrap_or(0.0),
+            file: i,
+            frame: 0,
+        });
+        if first.is_none() {
+            first = Some(obj);
+        }
+    }
+    let first = first.ok_or_else(|| err("empty series"))?;
+    let format = format.ok_or_else(|| err("empty series"))?;
+    let single_step = float(&first, tags::SPACING_BETWEEN_SLICES)
+        .or_else(|| float(&first, tags::SLICE_THICKNESS));
+    let paths: Vec<&Path> = series.iter().map(|s| s.path.as_path()).collect();
+    let (geometry, order) = assemble(&mut planes, single_step, &|p: &Plane| {
+        paths[p.file].display().to_string()
+    })?;
+    let mut header = summary(&first, &format, &planes, geometry);
+    header
+        .fields
+        .push(("files".into(), series.len().to_string()));
+    // Decode slice by slice (one file at a time in memory).
+    let volume = fill(&format, &planes, &order, geometry, |p: &Plane| {
+        let obj = open_full(paths[p.file])?;
+        decode_frame(&obj, &format, 0, &paths[p.file].display().to_string())
+    })?;
+    Ok((volume, header))
+}
+
+fn read_multiframe(path: &Path) -> Result<(AnyVolume, Header), VolumeError> {
+    let what = path.display().to_string();
+    let obj = open_full(path)?;
+    let format = PixelFormat::of(&obj, &what)?;
+    let frames = int(&obj, tags::NUMBER_OF_FRAMES).unwrap_or(1).max(1);
+    let frames =
+        u32::try_from(frames).map_err(|_| err(format!("{what}: NumberOfFrames {frames}")))?;
+    let shared = item(&obj, tags::SHARED_FUNCTIONAL_GROUPS_SEQUENCE);
+    let per_frame: &[InMemDicomObject] = obj
+        .get(tags::PER_FRAME_FUNCTIONAL_GROUPS_SEQUENCE)
+        .and_then(|e| e.items())
+        .unwrap_or(&[]);
+    // A functional-group attribute: per-frame first, then shared, then the top level.
+    let fg = |f: usize, seq, tag| -> Option<Vec<f64>> {
+        per_frame
+            .get(f)
+            .and_then(|it| item(it, seq))
+            .and_then(|s| floats(s, tag))
+            .or_else(|| {
+                shared
+                    .and_then(|it| item(it, seq))
+                    .and_then(|s| floats(s, tag))
+            })
+    };
+    let enhanced = !per_frame.is_empty() || shared.is_some();
+    if enhanced && per_frame.len() != frames as usize {
+        return Err(err(format!(
+            "{what}: {} per-frame functional groups for {frames} frames",
+            per_frame.len()
+        )));
+    }
+    let mut planes = Vec::with_capacity(frames as usize);
+    let top_step =
+        float(&obj, tags::SPACING_BETWEEN_SLICES).or_else(|| float(&obj, tags::SLICE_THICKNESS));
+    for f in 0..frames as usize {
+        let fw = format!("{what} frame {}", f + 1);
+        let (ipp, iop, ps, slope, inter) = if enhanced {
+            (
+                fg(
+                    f,
+                    tags::PLANE_POSITION_SEQUENCE,
+                    tags::IMAGE_POSITION_PATIENT,
+                )
+                .or_else(|| floats(&obj, tags::IMAGE_POSITION_PATIENT)),
+                fg(
+                    f,
+                    tags::PLANE_ORIENTATION_SEQUENCE,
+                    tags::IMAGE_ORIENTATION_PATIENT,
+                )
+                .or_else(|| floats(&obj, tags::IMAGE_ORIENTATION_PATIENT)),
+                fg(f, tags::PIXEL_MEASURES_SEQUENCE, tags::PIXEL_SPACING)
+                    .or_else(|| floats(&obj, tags::PIXEL_SPACING)),
+                fg(
+                    f,
+                    tags::PIXEL_VALUE_TRANSFORMATION_SEQUENCE,
+                    tags::RESCALE_SLOPE,
+                )
+                .and_then(|v| v.first().copied())
+                .or_else(|| float(&obj, tags::RESCALE_SLOPE)),
+                fg(
+                    f,
+                    tags::PIXEL_VALUE_TRANSFORMATION_SEQUENCE,
+                    tags::RESCALE_INTERCEPT,
+                )
+                .and_then(|v| v.first().copied())
+                .or_else(|| float(&obj, tags::RESCALE_INTERCEPT)),
+            )
+        } else {
+            // Classic multi-frame: frames stepped along the normal from the top-level position.
+            let iop = floats(&obj, tags::IMAGE_ORIENTATION_PATIENT);
+            let ipp = floats(&obj, tags::IMAGE_POSITION_PATIENT);
+            let step = top_step.ok_or_else(|| {
+                err(format!(
+                    "{what}: a multi-frame image without functional groups needs \
+                     SpacingBetweenSlices or SliceThickness to place its frames"
+                ))
+            })?;
+            let ipp = match (&iop, ipp) {
+                (Some(o), Some(p)) if o.len() == 6 && p.len() == 3 => {
+                    let n = DVec3::new(o[0], o[1], o[2]).cross(DVec3::new(o[3], o[4], o[5]));
+                    let q = DVec3::new(p[0], p[1], p[2]) + n.normalize_or_zero() * step * f as f64;
+                    Some(q.to_array().to_vec())
+                }
+                (_, p) => p,
+            };
+            (
+                ipp,
+                iop,
+                floats(&obj, tags::PIXEL_SPACING),
+                float(&obj, tags::RESCALE_SLOPE),
+                float(&obj, tags::RESCALE_INTERCEPT),
+            )
+        };
+        let (position, row_dir, col_dir, spacing) = plane_from(&fw, iop, ipp, ps)?;
+        planes.push(Plane {
+            position,
+            row_dir,
+            col_dir,
+            spacing,
+            slope: slope.unwrap_or(1.0),
+            intercept: inter.unwrap_or(0.0),
+            file: 0,
+            frame: f as u32,
+        });
+    }
+    let single_step = top_step.or_else(|| {
+        fg(0, tags::PIXEL_MEASURES_SEQUENCE, tags::SLICE_THICKNESS).and_then(|v| v.first().copied())
+    });
+    let (geometry, order) = assemble(&mut planes, single_step, &|p: &Plane| {
+        format!("{what} frame {}", p.frame + 1)
+    })?;
+    let mut header = summary(&obj, &format, &planes, geometry);
+    header.fields.push(("frames".into(), frames.to_string()));
+    // Check the decoded size before decoding everything.
+    volmorph_io::checked_len(
+        &[format.cols, format.rows, frames as usize],
+        usize::from(format.bits_allocated / 8),
+    )?;
+    let decoded = obj
+        .decode_pixel_data()
+        .map_err(|e| pixel_error(&what, &e.to_string()))?;
+    let volume = fill(&format, &planes, &order, geometry, |p: &Plane| {
+        frame_values(&decoded, &format, p.frame, &what)
+    })?;
+    Ok((volume, header))
+}
+
+fn pixel_error(what: &str, e: &str) -> VolumeError {
+    if e.contains("nsupported") || e.contains("not supported") {
+        VolumeError::Unsupported(format!("{what}: pixel data: {e}"))
+    } else {
+        err(format!("{what}: pixel data: {e}"))
+    }
+}
+
+fn decode_frame(
+    obj: &DefaultDicomObject,
+    format: &PixelFormat,
+    frame: u32,
+    what: &str,
+) -> Result<Vec<i64>, VolumeError> {
+    let decoded = obj
+        .decode_pixel_data()
+        .map_err(|e| pixel_error(what, &e.to_string()))?;
+    frame_values(&decoded, format, frame, what)
+}
+
+fn frame_values(
+    decoded: &dicom_pixeldata::DecodedPixelData<'_>,
+    format: &PixelFormat,
+    frame: u32,
+    what: &str,
+) -> Result<Vec<i64>, VolumeError> {
+    let bytes = decoded
+        .frame_data(frame)
+        .map_err(|e| err(format!("{what}: frame {}: {e}", frame + 1)))?;
+    let n = format.rows * format.cols;
+    if bytes.len() < n * usize::from(format.bits_allocated / 8) {
+        return Err(err(format!("{what}: pixel data truncated")));
+    }
+    Ok((0..n).map(|k| format.value(bytes, k)).collect())
+}
+
+/// Sort the planes along the normal, check them, and derive the geometry. Returns the
+/// geometry and the plane index of each slice `k`.
+fn assemble(
+    planes: &mut [Plane],
+    single_step: Option<f64>,
+    name: &dyn Fn(&Plane) -> String,
+) -> Result<(Geometry, Vec<usize>), VolumeError> {
+    let p0 = planes.first().ok_or_else(|| err("no slices"))?.clone();
+    for p in planes.iter() {
+        let off = (p.row_dir - p0.row_dir)
+            .abs()
+            .max_element()
+            .max((p.col_dir - p0.col_dir).abs().max_element());
+        if off > ORIENTATION_TOL {
+            return Err(err(format!(
+                "{}: orientation {:?}/{:?} differs from {}'s {:?}/{:?}: the series is not one \
+                 stack of parallel slices",
+                name(p),
+                p.row_dir.to_array(),
+                p.col_dir.to_array(),
+                name(&p0),
+                p0.row_dir.to_array(),
+                p0.col_dir.to_array()
+            )));
+        }
+        let ds = (p.spacing[0] - p0.spacing[0])
+            .abs()
+            .max((p.spacing[1] - p0.spacing[1]).abs());
+        if ds > 1e-6 * p0.spacing[0].max(p0.spacing[1]) {
+            return Err(err(format!(
+                "{}: PixelSpacing {:?} differs from the series' {:?}",
+                name(p),
+                p.spacing,
+                p0.spacing
+            )));
+        }
+    }
+    let normal = p0.row_dir.cross(p0.col_dir).normalize();
+    let mut order: Vec<usize> = (0..planes.len()).collect();
+    let d = |i: usize| normal.dot(planes[i].position);
+    order.sort_by(|&a, &b| d(a).total_cmp(&d(b)));
+    let n = order.len();
+    for w in order.windows(2) {
+        if d(w[1]) - d(w[0]) < SAME_POSITION_TOL {
+            return Err(VolumeError::Unsupported(format!(
+                "{} and {} lie at the same position along the slice normal ({:.4} mm): the \
+                 series holds several volumes (acquisitions, echoes or time points); split it",
+                name(&planes[w[0]]),
+                name(&planes[w[1]]),
+                d(w[0])
+            )));
+        }
+    }
+    let first = planes[order[0]].position;
+    let (axis, step) = if n > 1 {
+        let last = planes[order[n - 1]].position;
+        let mean = (d(order[n - 1]) - d(order[0])) / (n - 1) as f64;
+        let worst = order
+            .windows(2)
+            .max_by(|a, b| {
+                let dev = |w: &[usize]| (d(w[1]) - d(w[0]) - mean).abs();
+                dev(a).total_cmp(&dev(b))
+            })
+            .map(<[usize]>::to_vec);
+        if let Some(w) = worst {
+            let gap = d(w[1]) - d(w[0]);
+            if (gap - mean).abs() > SLICE_GAP_TOL * mean {
+                return Err(err(format!(
+                    "slices are not evenly spaced: {} → {} is {gap:.4} mm, the mean step is \
+                     {mean:.4} mm (a missing slice, or several stacks in one series)",
+                    name(&planes[w[0]]),
+                    name(&planes[w[1]])
+                )));
+            }
+        }
+        let v = (last - first) / (n - 1) as f64;
+        (v / v.length(), v.length())
+    } else {
+        let s = single_step
+            .filter(|s| s.is_finite() && *s > 0.0)
+            .unwrap_or(1.0);
+        (normal, s)
+    };
+    let geometry = Geometry {
+        dims: [1, 1, n], // the pixel matrix is set by `fill`
+        spacing: DVec3::new(p0.spacing[0], p0.spacing[1], step),
+        origin: first,
+        direction: DMat3::from_cols(p0.row_dir, p0.col_dir, axis),
+    };
+    Ok((geometry, order))
+}
+
+/// Header fields for `info`.
+fn summary(
+    obj: &InMemDicomObject,
+    format: &PixelFormat,
+    planes: &[Plane],
+    geometry: Geometry,
+) -> Header {
+    let mut f: Vec<(String, String)> = Vec::new();
+    for (k, tag) in [
+        ("Modality", tags::MODALITY),
+        ("Manufacturer", tags::MANUFACTURER),
+        ("SeriesDescription", tags::SERIES_DESCRIPTION),
+        ("SeriesInstanceUID", tags::SERIES_INSTANCE_UID),
+        ("SOPClassUID", tags::SOP_CLASS_UID),
+        (
+            "PhotometricInterpretation",
+            tags::PHOTOMETRIC_INTERPRETATION,
+        ),
+        ("SliceThickness", tags::SLICE_THICKNESS),
+    ] {
+        if let Some(v) = text(obj, tag) {
+            f.push((k.into(), v));
+        }
+    }
+    f.push((
+        "pixels".into(),
+        format!(
+            "{} columns × {} rows, {} bits allocated, {} stored, {}",
+            format.cols,
+            format.rows,
+            format.bits_allocated,
+            format.bits_stored,
+            if format.signed { "signed" } else { "unsigned" }
+        ),
+    ));
+    f.push(("slices".into(), planes.len().to_string()));
+    let rescales: std::collections::BTreeSet<String> = planes
+        .iter()
+        .map(|p| format!("slope {} intercept {}", p.slope, p.intercept))
+        .collect();
+    f.push((
+        "rescale".into(),
+        if rescales.len() == 1 {
+            rescales.into_iter().next().unwrap_or_default()
+        } else {
+            format!("{} different per slice", rescales.len())
+        },
+    ));
+    f.push(("slice step".into(), format!("{} mm", geometry.spacing.z)));
+    Header { fields: f }
+}
+
+/// The voxel type of the rescaled values (see the module docs).
+fn output_type(format: &PixelFormat, planes: &[Plane]) -> (VoxelType, bool) {
+    let b = planes[0].intercept;
+    let integral = planes
+        .iter()
+        .all(|p| p.slope == 1.0 && p.intercept == b && b.fract() == 0.0);
+    if !integral {
+        return (VoxelType::F32, false);
+    }
+    let (lo, hi) = format.range();
+    let (lo, hi) = (lo + b, hi + b);
+    for t in [
+        VoxelType::U8,
+        VoxelType::I8,
+        VoxelType::U16,
+        VoxelType::I16,
+        VoxelType::U32,
+        VoxelType::I32,
+    ] {
+        let (tl, th) = t.range();
+        if tl <= lo && hi <= th {
+            return (t, true);
+        }
+    }
+    (VoxelType::F64, false)
+}
+
+/// Allocate the volume (size checked first) and fill it slice by slice.
+fn fill(
+    format: &PixelFormat,
+    planes: &[Plane],
+    order: &[usize],
+    mut geometry: Geometry,
+    mut values: impl FnMut(&Plane) -> Result<Vec<i64>, VolumeError>,
+) -> Result<AnyVolume, VolumeError> {
+    geometry.dims = [format.cols, format.rows, order.len()];
+    let (vt, _) = output_type(format, planes);
+    let n = volmorph_io::checked_len(&geometry.dims, vt.size())?;
+    geometry.validate()?;
+    let per = format.cols * format.rows;
+    Ok(volmorph_volume::with_voxel_type!(vt, T => {
+        let mut data: Vec<T> = Vec::new();
+        data.try_reserve_exact(n)
+            .map_err(|_| err(format!("cannot allocate {n} voxels of {vt}")))?;
+        data.resize(n, T::default());
+        for (k, &pi) in order.iter().enumerate() {
+            let p = &planes[pi];
+            let v = values(p)?;
+            let out = &mut data[k * per..(k + 1) * per];
+            for (o, &s) in out.iter_mut().zip(&v) {
+                // slope·v + intercept, as ITK/GDCM apply it.
+                *o = T::from_f64(s as f64 * p.slope + p.intercept);
+            }
+        }
+        AnyVolume::from(Volume::new(geometry, data)?)
+    }))
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn plane(z: f64, file: usize) -> Plane {
+        Plane {
+            position: DVec3::new(1.0, 2.0, z),
+            row_dir: DVec3::X,
+            col_dir: DVec3::Y,
+            spacing: [0.5, 0.5],
+            slope: 1.0,
+            intercept: 0.0,
+            file,
+            frame: 0,
+        }
+    }
+
+    #[test]
+    fn slices_are_sorted_along_the_normal_and_checked() {
+        let name = |p: &Plane| format!("slice {}", p.file);
+        let mut ps = vec![plane(5.0, 0), plane(1.0, 1), plane(3.0, 2)];
+        let (g, order) = assemble(&mut ps, None, &name).unwrap();
+        assert_eq!(order, vec![1, 2, 0]);
+        assert_eq!(g.origin, DVec3::new(1.0, 2.0, 1.0));
+        assert_eq!(g.spacing, DVec3::new(0.5, 0.5, 2.0));
+        assert_eq!(g.direction, DMat3::IDENTITY);
+        // A missing slice.
+        let mut ps = vec![plane(1.0, 0), plane(3.0, 1), plane(7.0, 2), plane(9.0, 3)];
+        let e = assemble(&mut ps, None, &name).unwrap_err().to_string();
+        assert!(
+            e.contains("not evenly spaced") && e.contains("slice 1 → slice 2"),
+            "{e}"
+        );
+        // Two stacks at the same positions.
+        let mut ps = vec![plane(1.0, 0), plane(1.0, 1)];
+        let e = assemble(&mut ps, None, &name).unwrap_err().to_string();
+        assert!(e.contains("same position"), "{e}");
+        // One slice: the step from SliceThickness.
+        let mut ps = vec![plane(1.0, 0)];
+        let (g, _) = assemble(&mut ps, Some(2.5), &name).unwrap();
+        assert_eq!(g.spacing.z, 2.5);
+    }
+
+    #[test]
+    fn tilted_gantry_gives_the_sheared_axis() {
+        let name = |p: &Plane| format!("slice {}", p.file);
+        // Each slice moves 2 along z and 0.5 along y: the third axis is not the normal.
+        let mut ps: Vec<Plane> = (0..4)
+            .map(|k| {
+                let mut p = plane(2.0 * k as f64, k);
+                p.position.y += 0.5 * k as f64;
+                p
+            })
+            .collect();
+        let (g, _) = assemble(&mut ps, None, &name).unwrap();
+        let want = DVec3::new(0.0, 0.5, 2.0);
+        assert!((g.direction.z_axis * g.spacing.z - want).length() < 1e-12);
+        // Every slice's first voxel lands on its position.
+        for (k, p) in ps.iter().enumerate() {
+            let x = g.index_to_physical(DVec3::new(0.0, 0.0, k as f64));
+            assert!((x - p.position).length() < 1e-12);
+        }
+    }
+
+    #[test]
+    fn stored_bits_are_masked_and_sign_extended() {
+        let f = PixelFormat {
+            rows: 1,
+            cols: 3,
+            bits_allocated: 16,
+            bits_stored: 12,
+            signed: true,
+        };
+        let bytes: Vec<u8> = [0x0fffu16, 0x0800, 0xf7ff]
+            .iter()
+            .flat_map(|v| v.to_le_bytes())
+            .collect();
+        assert_eq!(f.value(&bytes, 0), -1);
+        assert_eq!(f.value(&bytes, 1), -2048);
+        assert_eq!(f.value(&bytes, 2), 2047); // high (overlay) bits ignored
+        let u = PixelFormat { signed: false, ..f };
+        assert_eq!(u.value(&bytes, 0), 4095);
+        assert_eq!(u.range(), (0.0, 4095.0));
+        // CT: 12 stored bits, intercept −1024 → i16.
+        let mut p = plane(0.0, 0);
+        p.intercept = -1024.0;
+        assert_eq!(output_type(&u, &[p.clone()]).0, VoxelType::I16);
+        p.slope = 0.5;
+        assert_eq!(output_type(&u, &[p]).0, VoxelType::F32);
+    }
+}
