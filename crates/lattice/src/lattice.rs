@@ -532,7 +532,7 @@ impl BSplineLattice {
                 grid.dims[2].saturating_sub(1) as f64,
             );
         for a in 0..3 {
-            if !(extent[a] > 0.0) {
+            if extent[a].is_nan() || extent[a] <= 0.0 {
                 return Err(DeformError::DegenerateBox {
                     axis: a,
                     min: 0.0,

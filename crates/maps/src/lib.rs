@@ -5,7 +5,7 @@
 //!   sampled maps, compositions and numerical inverses. It is a
 //!   [`SpaceMap`](volmorph_deform::SpaceMap) that keeps each kind's fast paths.
 //! * [`json`] — the tagged, versioned JSON form of every kind; [`itk`] — ITK text transforms
-//!   for the kinds ITK has (affine, B-spline, composite); [`file`] — map files by extension
+//!   for the kinds ITK has (affine, B-spline, composite); [`file`](mod@file) — map files by extension
 //!   ([`read_map`], [`write_map`]).
 //! * [`from_handles`] — the map a handle set builds ([`handle_map`]), in either direction.
 //! * [`live`] — the kinds linear in their parameters as one [`LiveMap`] for the live-edit

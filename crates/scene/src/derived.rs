@@ -10,6 +10,9 @@ use serde::{Deserialize, Serialize};
 use volmorph_contour::{DcOptions, McOptions, dual_contouring_any, marching_cubes_any};
 use volmorph_deform::SpaceMap;
 use volmorph_deform::live::{Influence, LinearMap};
+use volmorph_frep::Tape;
+use volmorph_frep::grid::sample as frep_sample;
+use volmorph_frep::mapping::Pullback;
 use volmorph_maps::{AnyMap, LiveMap};
 use volmorph_mesh::Mesh;
 use volmorph_volume::{AnyVolume, Geometry, IndexBox, Volume, Voxel, with_volume};
@@ -75,6 +78,19 @@ pub enum Recipe {
         /// Extraction method.
         method: SurfaceMethod,
     },
+    /// The F-rep model `model` sampled at the voxel centres of volume `grid` (f32, solid where
+    /// ≥ 0), optionally through map `map` read as a pull-back: the value at `x` is
+    /// `f(map(x))` (Savchenko–Pasko Eq. 15 with `map` = φ⁻¹), so the model appears deformed by
+    /// the inverse of `map` — give a map's inverse (`AnyMap::inverse`) to deform the model by
+    /// the map itself.
+    FrepSampled {
+        /// The F-rep model.
+        model: ObjectId,
+        /// The map read as a pull-back, if any.
+        map: Option<ObjectId>,
+        /// The volume whose grid is sampled.
+        grid: ObjectId,
+    },
     /// The Jacobian determinant of map `map` at the voxel centres of volume `grid` (f32; ≤ 0
     /// marks folding).
     Jacobian {
@@ -108,6 +124,11 @@ impl Recipe {
             Recipe::DeformedMesh { mesh, map } => vec![*mesh, *map],
             Recipe::Isosurface { volume, .. } => vec![*volume],
             Recipe::Jacobian { map, grid } => vec![*map, *grid],
+            Recipe::FrepSampled { model, map, grid } => {
+                let mut v = vec![*model, *grid];
+                v.extend(*map);
+                v
+            }
         }
     }
 
@@ -118,6 +139,7 @@ impl Recipe {
             Recipe::Warp { map, .. }
             | Recipe::DeformedMesh { map, .. }
             | Recipe::Jacobian { map, .. } => Some(*map),
+            Recipe::FrepSampled { map, .. } => *map,
             Recipe::Isosurface { .. } => None,
         }
     }
@@ -126,7 +148,7 @@ impl Recipe {
     #[must_use]
     pub fn output_kind(&self) -> &'static str {
         match self {
-            Recipe::Warp { .. } | Recipe::Jacobian { .. } => "volume",
+            Recipe::Warp { .. } | Recipe::Jacobian { .. } | Recipe::FrepSampled { .. } => "volume",
             Recipe::DeformedMesh { .. } | Recipe::Isosurface { .. } => "mesh",
         }
     }
@@ -240,6 +262,7 @@ pub(crate) struct Inputs<'a> {
     pub volume: Option<&'a Arc<AnyVolume>>,
     pub mesh: Option<&'a Arc<Mesh>>,
     pub map: Option<&'a MapObject>,
+    pub frep: Option<&'a crate::FrepModel>,
 }
 
 /// What an update changed in a derived object: voxels (for volumes) and a physical box.
@@ -371,6 +394,33 @@ impl Derived {
                     object: id,
                     voxels: None,
                     bounds: union(bounds, old),
+                })
+            }
+            Recipe::FrepSampled { .. } => {
+                let model = inputs
+                    .frep
+                    .ok_or_else(|| SceneError::invalid("F-rep sampling without a model"))?;
+                let grid = *inputs
+                    .volume
+                    .ok_or_else(|| SceneError::invalid("F-rep sampling without a grid"))?
+                    .geometry();
+                let tape = Tape::new(model.shape());
+                let sampled = match inputs.map {
+                    Some(m) => frep_sample(
+                        &Pullback {
+                            field: &tape,
+                            inverse: m.map(),
+                        },
+                        &grid,
+                    )?,
+                    None => frep_sample(&tape, &grid)?,
+                };
+                self.output = Some(DerivedOutput::Volume(Arc::new(AnyVolume::from(sampled))));
+                let all = IndexBox::all(grid.dims);
+                Ok(Dirty {
+                    object: id,
+                    voxels: Some(all),
+                    bounds: physical_box(&grid, &all),
                 })
             }
             Recipe::Jacobian { .. } => {

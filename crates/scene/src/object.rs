@@ -141,6 +141,9 @@ impl HandleMap {
 }
 
 /// A map object: given whole, or built from handles.
+// A scene holds a handful of objects in an ordered map; a few hundred bytes per entry
+// cost nothing, while boxing would add an indirection to every map evaluation.
+#[allow(clippy::large_enum_variant)]
 #[derive(Debug, Clone)]
 pub enum MapObject {
     /// A map given whole: a lattice, an affine map, a NURBS geometry, a composition, …
@@ -161,6 +164,8 @@ impl MapObject {
 }
 
 /// Everything a scene holds.
+// Same reasoning as for `MapObject`: few entries, no boxing.
+#[allow(clippy::large_enum_variant)]
 #[derive(Debug, Clone)]
 pub enum Object {
     /// A sampled volume (any voxel type) with its geometry.

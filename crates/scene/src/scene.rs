@@ -296,6 +296,17 @@ impl Scene {
                 volume(*grid)?;
                 self.map_object(*map).map(|_| ())
             }
+            Recipe::FrepSampled { model, map, grid } => {
+                match &self.get(*model)?.object {
+                    Object::Frep(_) => {}
+                    other => return Err(self.wrong_kind(*model, "F-rep model", other.kind())),
+                }
+                volume(*grid)?;
+                match map {
+                    Some(m) => self.map_object(*m).map(|_| ()),
+                    None => Ok(()),
+                }
+            }
         }
     }
 
@@ -689,21 +700,34 @@ impl Scene {
                 volume: object(*source).and_then(Object::volume),
                 mesh: None,
                 map: self.map_object(*map).ok(),
+                frep: None,
             },
             Recipe::DeformedMesh { mesh, map } => Inputs {
                 volume: None,
                 mesh: object(*mesh).and_then(Object::mesh),
                 map: self.map_object(*map).ok(),
+                frep: None,
             },
             Recipe::Isosurface { volume, .. } => Inputs {
                 volume: object(*volume).and_then(Object::volume),
                 mesh: None,
                 map: None,
+                frep: None,
             },
             Recipe::Jacobian { map, grid } => Inputs {
                 volume: object(*grid).and_then(Object::volume),
                 mesh: None,
                 map: self.map_object(*map).ok(),
+                frep: None,
+            },
+            Recipe::FrepSampled { model, map, grid } => Inputs {
+                volume: object(*grid).and_then(Object::volume),
+                mesh: None,
+                map: map.and_then(|m| self.map_object(m).ok()),
+                frep: match object(*model) {
+                    Some(Object::Frep(f)) => Some(f),
+                    _ => None,
+                },
             },
         }
     }

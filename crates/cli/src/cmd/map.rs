@@ -114,8 +114,10 @@ pub fn run(cmd: &Command) -> anyhow::Result<()> {
         }
         Command::Invert(a) => {
             let map = read_map(&a.map).context("cannot read the map")?;
-            let mut options = InverseOptions::default();
-            options.tolerance = a.tolerance;
+            let options = InverseOptions {
+                tolerance: a.tolerance,
+                ..InverseOptions::default()
+            };
             let inv = map.inverse(options).context("cannot invert the map")?;
             write_map(&a.output, &inv).context("cannot write")?;
             say!("{}", inv.summary());

@@ -1,2 +1,0 @@
-//! Scene benchmarks (filled in below).
-fn main() {}
