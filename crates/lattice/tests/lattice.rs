@@ -8,8 +8,6 @@ use volmorph_lattice::{BSplineLattice, LatticeFrame};
 use volmorph_spline::KnotVector;
 use volmorph_volume::Geometry;
 
-/// Deterministic pseudo-random numbers in [0, 1) (64-bit LCG, top 53 bits).
-mod common;
 use volmorph_testkit::Rng;
 
 /// A rotation by `angle` about the normalised `axis` (orthonormal, right-handed).
