@@ -6,9 +6,8 @@ use proptest::prelude::*;
 use volmorph_deform::{Affine, Compose, DeformError, SpaceMap};
 use volmorph_lattice::{BSplineLattice, LatticeFrame};
 use volmorph_spline::KnotVector;
-use volmorph_volume::Geometry;
-
 use volmorph_testkit::Rng;
+use volmorph_volume::Geometry;
 
 /// A rotation by `angle` about the normalised `axis` (orthonormal, right-handed).
 fn rotation(axis: DVec3, angle: f64) -> DMat3 {

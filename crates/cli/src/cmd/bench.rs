@@ -167,65 +167,72 @@ pub struct SceneArgs {
 pub fn run(cmd: &Command) -> anyhow::Result<()> {
     let pb = progress::spinner("setting up");
     let mut progress = |msg: &str| pb.set_message(msg.to_owned());
-    let report = match cmd {
-        Command::Warp(a) => warp::run(
-            &warp::WarpConfig {
-                size: a.size,
-                lattice: a.lattice,
-                edit_size: a.edit_size,
-                repeat: a.repeat,
-            },
-            &mut progress,
+    let (report, json) = match cmd {
+        Command::Warp(a) => (
+            warp::run(
+                &warp::WarpConfig {
+                    size: a.size,
+                    lattice: a.lattice,
+                    edit_size: a.edit_size,
+                    repeat: a.repeat,
+                },
+                &mut progress,
+            ),
+            a.json,
         ),
-        Command::Isosurface(a) => isosurface::run(
-            &isosurface::IsosurfaceConfig {
-                size: a.size,
-                repeat: a.repeat,
-            },
-            &mut progress,
+        Command::Isosurface(a) => (
+            isosurface::run(
+                &isosurface::IsosurfaceConfig {
+                    size: a.size,
+                    repeat: a.repeat,
+                },
+                &mut progress,
+            ),
+            a.json,
         ),
-        Command::Ffd(a) => ffd::run(
-            &ffd::FfdConfig {
-                rings: a.rings,
-                vertex_rings: a.vertex_rings,
-                repeat: a.repeat,
-            },
-            &mut progress,
+        Command::Ffd(a) => (
+            ffd::run(
+                &ffd::FfdConfig {
+                    rings: a.rings,
+                    vertex_rings: a.vertex_rings,
+                    repeat: a.repeat,
+                },
+                &mut progress,
+            ),
+            a.json,
         ),
         Command::Frep(a) => {
             let (config, models) = frep_models(a)?;
-            frep::run(&config, models, &mut progress)
+            (frep::run(&config, models, &mut progress), a.json)
         }
-        Command::Handles(a) => handles::run(
-            &handles::HandlesConfig {
-                image_grid: a.image_grid,
-                handles: a.handles,
-                volume: a.volume,
-                grid: a.grid,
-                landmarks: a.landmarks,
-                repeat: a.repeat,
-            },
-            &mut progress,
+        Command::Handles(a) => (
+            handles::run(
+                &handles::HandlesConfig {
+                    image_grid: a.image_grid,
+                    handles: a.handles,
+                    volume: a.volume,
+                    grid: a.grid,
+                    landmarks: a.landmarks,
+                    repeat: a.repeat,
+                },
+                &mut progress,
+            ),
+            a.json,
         ),
-        Command::Scene(a) => scene::run(
-            &scene::SceneConfig {
-                size: a.size,
-                lattice: a.lattice,
-                repeat: a.repeat,
-            },
-            &mut progress,
+        Command::Scene(a) => (
+            scene::run(
+                &scene::SceneConfig {
+                    size: a.size,
+                    lattice: a.lattice,
+                    repeat: a.repeat,
+                },
+                &mut progress,
+            ),
+            a.json,
         ),
     };
     pb.finish_and_clear();
     let report = report.map_err(flags)?;
-    let json = match cmd {
-        Command::Warp(a) => a.json,
-        Command::Isosurface(a) => a.json,
-        Command::Ffd(a) => a.json,
-        Command::Frep(a) => a.json,
-        Command::Handles(a) => a.json,
-        Command::Scene(a) => a.json,
-    };
     print(&report, json);
     Ok(())
 }
