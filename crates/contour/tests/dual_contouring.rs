@@ -8,6 +8,7 @@ use volmorph_contour::{
     McOptions, Qef, dual_contouring, dual_contouring_any, marching_cubes,
 };
 use volmorph_mesh::{Mesh, ValidationReport};
+use volmorph_testkit::Rng;
 use volmorph_volume::phantom::{self, Phantom};
 use volmorph_volume::{AnyVolume, Geometry, Volume, Voxel};
 
@@ -195,19 +196,6 @@ fn rotated_box_keeps_its_sharp_edges_and_corners() {
     }
 }
 
-/// A small deterministic generator (64-bit LCG, top bits).
-struct Lcg(u64);
-
-impl Lcg {
-    fn next(&mut self) -> f64 {
-        self.0 = self
-            .0
-            .wrapping_mul(6_364_136_223_846_793_005)
-            .wrapping_add(1_442_695_040_888_963_407);
-        (self.0 >> 11) as f64 / (1u64 << 53) as f64
-    }
-}
-
 /// Whether some cell face has all four edges crossed (two inside corners diagonally
 /// opposite), the configuration where one vertex per cell cannot be edge-manifold.
 fn has_ambiguous_face<T: Voxel>(v: &Volume<T>, level: f64) -> bool {
@@ -243,7 +231,7 @@ fn has_ambiguous_face<T: Voxel>(v: &Volume<T>, level: f64) -> bool {
 
 #[test]
 fn random_smooth_fields_give_edge_manifold_consistently_oriented_meshes() {
-    let mut rng = Lcg(0x5eed);
+    let mut rng = Rng::new(0x5eed);
     let mut checked = 0;
     let fields = 40;
     for case in 0..fields {
@@ -251,8 +239,8 @@ fn random_smooth_fields_give_edge_manifold_consistently_oriented_meshes() {
         // A sum of four random Gaussian blobs, widths 2–4 voxels, minus a level.
         let blobs: Vec<(DVec3, f64, f64)> = (0..4)
             .map(|_| {
-                let c = DVec3::new(rng.next(), rng.next(), rng.next()) * 13.0;
-                (c, 2.0 + 2.0 * rng.next(), rng.next() - 0.3)
+                let c = rng.point_in(DVec3::ZERO, DVec3::splat(13.0));
+                (c, rng.range(2.0, 4.0), rng.range(-0.3, 0.7))
             })
             .collect();
         let geometry = Geometry::new([n, n, n]);

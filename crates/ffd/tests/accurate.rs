@@ -5,13 +5,14 @@ mod common;
 
 use std::sync::Arc;
 
-use common::{Lcg, cube, jiggle, sphere};
+use common::{cube, jiggle, sphere};
 use glam::DVec3;
 use volmorph_deform::SpaceMap;
 use volmorph_ffd::accurate::{AccuratePlan, TrimmedModel, accurate_ffd};
 use volmorph_ffd::frame::PlaneCase;
 use volmorph_lattice::BSplineLattice;
 use volmorph_mesh::Mesh;
+use volmorph_testkit::Rng;
 
 /// Largest distance between point-wise FFD and the trimmed surfaces at random points of
 /// every sub-polygon, relative to the model size; also checks vertex images and edge curves.
@@ -26,13 +27,13 @@ fn max_exactness_error(model: &TrimmedModel, lat: &BSplineLattice, per_polygon: 
             (l.min(*p), h.max(*p))
         });
     let size = (hi - lo).length();
-    let mut r = Lcg(99);
+    let mut r = Rng::new(99);
     let mut worst = 0.0_f64;
     for s in 0..sub.len() {
         let g = plan.sub_polygon_patch()[s] as usize;
         let ring = sub.polygon(s);
         for _ in 0..per_polygon {
-            let w: Vec<f64> = ring.iter().map(|_| r.next() + 1e-3).collect();
+            let w: Vec<f64> = ring.iter().map(|_| r.unit() + 1e-3).collect();
             let tot: f64 = w.iter().sum();
             let mut p: DVec3 = ring
                 .iter()
@@ -111,7 +112,7 @@ fn figure_7_cube_gives_36_sub_polygons_and_24_patches() {
 
 /// One triangle per Table 1 row, in general position inside the box.
 fn table_1_triangles() -> Mesh {
-    let mut r = Lcg(5);
+    let mut r = Rng::new(5);
     let normals = [
         DVec3::X,
         -DVec3::Y,
@@ -124,7 +125,7 @@ fn table_1_triangles() -> Mesh {
     let mut pos = Vec::new();
     let mut tris = Vec::new();
     for n in normals {
-        let c = DVec3::new(0.5, 0.5, 0.5) + (r.vec() - 0.5) * 0.2;
+        let c = DVec3::new(0.5, 0.5, 0.5) + r.point(0.1);
         let helper = if n.x.abs() < 0.9 { DVec3::X } else { DVec3::Y };
         let e1 = n.cross(helper).normalize();
         let e2 = n.cross(e1);

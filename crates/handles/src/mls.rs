@@ -1336,28 +1336,18 @@ mod tests {
     use super::*;
     use volmorph_deform::Affine;
     use volmorph_deform::map::central_jacobian;
-
-    fn lcg(seed: &mut u64) -> f64 {
-        *seed = seed
-            .wrapping_mul(6_364_136_223_846_793_005)
-            .wrapping_add(1_442_695_040_888_963_407);
-        ((*seed >> 11) as f64) / ((1u64 << 53) as f64)
-    }
+    use volmorph_testkit::Rng;
 
     pub(crate) fn random_handles(n: usize, seed: u64) -> Vec<DVec3> {
-        let mut s = seed;
+        let mut rng = Rng::new(seed);
         (0..n)
-            .map(|_| DVec3::new(lcg(&mut s), lcg(&mut s), lcg(&mut s)) * 40.0 - 10.0)
+            .map(|_| rng.point_in(DVec3::splat(-10.0), DVec3::splat(30.0)))
             .collect()
     }
 
     fn jitter(p: &[DVec3], amount: f64, seed: u64) -> Vec<DVec3> {
-        let mut s = seed;
-        p.iter()
-            .map(|&x| {
-                x + amount * DVec3::new(lcg(&mut s) - 0.5, lcg(&mut s) - 0.5, lcg(&mut s) - 0.5)
-            })
-            .collect()
+        let mut rng = Rng::new(seed);
+        p.iter().map(|&x| x + amount * rng.point(0.5)).collect()
     }
 
     fn close(a: DVec3, b: DVec3, tol: f64) -> bool {
@@ -1555,16 +1545,14 @@ mod tests {
     /// Random probes (some far, some within 1e-2..1e-4 of a handle) with their distance to the
     /// nearest handle.
     fn jacobian_probes(p: &[DVec3], seed: u64) -> Vec<(DVec3, f64)> {
-        let mut s = seed;
+        let mut rng = Rng::new(seed);
         let mut out = Vec::new();
         for k in 0..12 {
             let x = if k % 3 == 2 {
-                let i = (lcg(&mut s) * p.len() as f64) as usize % p.len();
-                let dir =
-                    DVec3::new(lcg(&mut s) - 0.5, lcg(&mut s) - 0.5, lcg(&mut s) - 0.5).normalize();
-                p[i] + dir * 10f64.powi(-2 - (k / 3) % 3)
+                let i = rng.index(p.len());
+                p[i] + rng.direction() * 10f64.powi(-2 - (k / 3) % 3)
             } else {
-                DVec3::new(lcg(&mut s), lcg(&mut s), lcg(&mut s)) * 50.0 - 15.0
+                rng.point_in(DVec3::splat(-15.0), DVec3::splat(35.0))
             };
             let d = p
                 .iter()
@@ -1576,24 +1564,13 @@ mod tests {
     }
 
     fn frame_pair(p: &[DVec3], q: &[DVec3], seed: u64) -> (Vec<Frame>, Vec<Frame>) {
-        let mut s = seed;
+        let mut rng = Rng::new(seed);
         let mut m = || {
+            let mut u = || rng.unit();
             DMat3::from_cols(
-                DVec3::new(
-                    1.0 + 0.3 * lcg(&mut s),
-                    0.2 * lcg(&mut s),
-                    -0.1 * lcg(&mut s),
-                ),
-                DVec3::new(
-                    0.1 * lcg(&mut s),
-                    0.9 + 0.3 * lcg(&mut s),
-                    0.2 * lcg(&mut s),
-                ),
-                DVec3::new(
-                    -0.2 * lcg(&mut s),
-                    0.1 * lcg(&mut s),
-                    1.1 + 0.2 * lcg(&mut s),
-                ),
+                DVec3::new(1.0 + 0.3 * u(), 0.2 * u(), -0.1 * u()),
+                DVec3::new(0.1 * u(), 0.9 + 0.3 * u(), 0.2 * u()),
+                DVec3::new(-0.2 * u(), 0.1 * u(), 1.1 + 0.2 * u()),
             )
         };
         let fs = p

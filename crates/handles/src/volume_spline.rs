@@ -1157,24 +1157,12 @@ impl LinearMap for ThinPlateMap {
 #[cfg(test)]
 mod tests {
     use super::*;
-
-    fn lcg(seed: &mut u64) -> f64 {
-        *seed = seed
-            .wrapping_mul(6_364_136_223_846_793_005)
-            .wrapping_add(1_442_695_040_888_963_407);
-        ((*seed >> 11) as f64) / ((1u64 << 53) as f64)
-    }
+    use volmorph_testkit::Rng;
 
     fn random_points<const D: usize>(n: usize, seed: u64) -> Vec<[f64; D]> {
-        let mut s = seed;
+        let mut rng = Rng::new(seed);
         (0..n)
-            .map(|_| {
-                let mut p = [0.0; D];
-                for v in &mut p {
-                    *v = 20.0 * lcg(&mut s) - 5.0;
-                }
-                p
-            })
+            .map(|_| std::array::from_fn(|_| rng.range(-5.0, 15.0)))
             .collect()
     }
 
@@ -1182,8 +1170,8 @@ mod tests {
     fn interpolates_scalar_and_vector_values_in_2d_and_3d() {
         let c3 = random_points::<3>(40, 1);
         let sys = VolumeSplineSystem::<3>::new(&c3, 0.0).unwrap();
-        let mut s = 9;
-        let vals: Vec<f64> = (0..40 * 2).map(|_| lcg(&mut s) - 0.5).collect();
+        let mut rng = Rng::new(9);
+        let vals: Vec<f64> = (0..40 * 2).map(|_| rng.range(-0.5, 0.5)).collect();
         let sp = sys.solve(&vals, 2).unwrap();
         for (i, c) in c3.iter().enumerate() {
             let mut u = [0.0; 2];

@@ -6,17 +6,14 @@ use volmorph_deform::map::central_jacobian;
 use volmorph_deform::{Affine, Identity};
 use volmorph_deform::{LiveGrid, SampledMap, SpaceMap};
 use volmorph_handles::{AffineMls, Frame, FrameMls, Weighting};
+use volmorph_testkit::Rng;
 use volmorph_volume::Geometry;
 
 fn handles(n: usize, seed: u64) -> Vec<DVec3> {
-    let mut s = seed;
-    let mut r = || {
-        s = s
-            .wrapping_mul(6_364_136_223_846_793_005)
-            .wrapping_add(1_442_695_040_888_963_407);
-        ((s >> 11) as f64) / ((1u64 << 53) as f64)
-    };
-    (0..n).map(|_| DVec3::new(r(), r(), r()) * 30.0).collect()
+    let mut rng = Rng::new(seed);
+    (0..n)
+        .map(|_| rng.point_in(DVec3::ZERO, DVec3::splat(30.0)))
+        .collect()
 }
 
 fn grid() -> Geometry {

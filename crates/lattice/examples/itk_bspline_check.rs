@@ -20,22 +20,7 @@ use glam::{DMat3, DQuat, DVec3};
 use volmorph_deform::SpaceMap;
 use volmorph_lattice::BSplineLattice;
 use volmorph_lattice::formats::itk_tfm::write_itk_tfm;
-
-/// xorshift64* generator: reproducible uniform numbers in `[0, 1)` without dependencies.
-struct Rng(u64);
-
-impl Rng {
-    fn next(&mut self) -> f64 {
-        self.0 ^= self.0 >> 12;
-        self.0 ^= self.0 << 25;
-        self.0 ^= self.0 >> 27;
-        (self.0.wrapping_mul(0x2545_F491_4F6C_DD1D) >> 11) as f64 / (1u64 << 53) as f64
-    }
-
-    fn range(&mut self, lo: f64, hi: f64) -> f64 {
-        lo + (hi - lo) * self.next()
-    }
-}
+use volmorph_testkit::Rng;
 
 fn main() -> Result<()> {
     let args: Vec<String> = std::env::args().collect();
@@ -52,7 +37,7 @@ fn main() -> Result<()> {
         .get(4)
         .map_or(Ok(200), |s| s.parse())
         .context("NPOINTS")?;
-    let mut rng = Rng(seed.wrapping_mul(0x9E37_79B9_7F4A_7C15) | 1);
+    let mut rng = Rng::new(seed);
 
     let rot = DQuat::from_euler(
         glam::EulerRot::ZYX,
@@ -61,7 +46,7 @@ fn main() -> Result<()> {
         rng.range(-1.0, 1.0),
     );
     let mut axes = DMat3::from_quat(rot);
-    if rng.next() < 0.5 {
+    if rng.chance(0.5) {
         // Left-handed frames occur too (flipped image axes).
         axes.z_axis = -axes.z_axis;
     }
@@ -75,11 +60,7 @@ fn main() -> Result<()> {
         rng.range(10.0, 80.0),
         rng.range(10.0, 80.0),
     );
-    let counts = [
-        4 + (rng.next() * 5.0) as usize,
-        4 + (rng.next() * 5.0) as usize,
-        4 + (rng.next() * 5.0) as usize,
-    ];
+    let counts = [4 + rng.index(5), 4 + rng.index(5), 4 + rng.index(5)];
     let mut lat = BSplineLattice::uniform_cubic_in_box(corner, axes, extent, counts)?;
     let cell = lat.frame().spacing().min_element();
     for k in 0..counts[2] {

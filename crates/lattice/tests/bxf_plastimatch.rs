@@ -10,7 +10,8 @@ use volmorph_lattice::formats::bxf::{bxf_to_string, parse_bxf, read_bxf, write_b
 use volmorph_lattice::formats::itk_tfm::{itk_tfm_to_string, parse_itk_tfm};
 
 mod common;
-use common::{Lcg, REF_DIRECTION, tmp};
+use common::{REF_DIRECTION, tmp};
+use volmorph_testkit::Rng;
 
 /// A parsed bxf header and its planar coefficients, evaluated the way plastimatch does.
 struct Plastimatch {
@@ -133,11 +134,11 @@ fn agrees_with_plastimatch_point_transform() {
     );
     let lat = parse_bxf(&text).unwrap();
     assert_eq!(lat.counts(), [8, 8, 7]);
-    let mut r = Lcg(9);
+    let mut r = Rng::new(9);
     let mut moved = 0;
     for _ in 0..400 {
         // Voxel coordinates around the ROI, some outside it.
-        let ijk = DVec3::new(-3.0, 0.0, -2.0) + DVec3::new(45.0, 28.0, 20.0) * r.next();
+        let ijk = DVec3::new(-3.0, 0.0, -2.0) + DVec3::new(45.0, 28.0, 20.0) * r.unit();
         let p = pm.origin + pm.dc * (pm.spacing * ijk);
         let want = pm.transform(p);
         let got = lat.apply(p);
@@ -192,7 +193,7 @@ fn one_coefficient_moves_one_control_point_along_its_axis() {
 }
 
 fn random_lattice(seed: u64) -> BSplineLattice {
-    let mut r = Lcg(seed);
+    let mut r = Rng::new(seed);
     let axes = DMat3::from_cols_array(&REF_DIRECTION).transpose();
     let mut lat = BSplineLattice::uniform_cubic_in_box(
         DVec3::new(-30.0, 12.0, 5.0),
@@ -204,7 +205,8 @@ fn random_lattice(seed: u64) -> BSplineLattice {
     for k in 0..5 {
         for j in 0..7 {
             for i in 0..6 {
-                lat.move_control_point([i, j, k], 3.0 * r.signed()).unwrap();
+                lat.move_control_point([i, j, k], 3.0 * r.point(1.0))
+                    .unwrap();
             }
         }
     }
@@ -245,9 +247,9 @@ fn itk_and_bxf_describe_the_same_map() {
     let lat = random_lattice(8);
     let via_itk = parse_itk_tfm(&itk_tfm_to_string(&lat).unwrap()).unwrap();
     let via_bxf = parse_bxf(&bxf_to_string(&lat).unwrap()).unwrap();
-    let mut r = Lcg(2);
+    let mut r = Rng::new(2);
     for _ in 0..300 {
-        let p = DVec3::new(-10.0, 20.0, 20.0) + 40.0 * r.signed();
+        let p = DVec3::new(-10.0, 20.0, 20.0) + 40.0 * r.point(1.0);
         let (a, b, c) = (lat.apply(p), via_itk.apply(p), via_bxf.apply(p));
         assert!((a - b).length() < 1e-11 && (a - c).length() < 1e-11);
     }

@@ -12,16 +12,16 @@ use volmorph_spline::KnotVector;
 use volmorph_volume::Geometry;
 
 mod common;
-use common::Lcg;
+use volmorph_testkit::Rng;
 
 /// Every control point moved by a random vector of `[−scale/2, scale/2)³`.
 fn displaced(mut lat: BSplineLattice, scale: f64, seed: u64) -> BSplineLattice {
-    let mut r = Lcg(seed);
+    let mut r = Rng::new(seed);
     let [nx, ny, nz] = lat.counts();
     for k in 0..nz {
         for j in 0..ny {
             for i in 0..nx {
-                lat.move_control_point([i, j, k], (r.vec() - 0.5) * scale)
+                lat.move_control_point([i, j, k], r.point(0.5) * scale)
                     .unwrap();
             }
         }
@@ -32,12 +32,12 @@ fn displaced(mut lat: BSplineLattice, scale: f64, seed: u64) -> BSplineLattice {
 /// Only control points at least three layers from every side moved (the map stays C² and
 /// the identity outside the box), by a random vector of `[−scale/2, scale/2)³`.
 fn displaced_inside(mut lat: BSplineLattice, scale: f64, seed: u64) -> BSplineLattice {
-    let mut r = Lcg(seed);
+    let mut r = Rng::new(seed);
     let [nx, ny, nz] = lat.counts();
     for k in 3..nz.saturating_sub(3) {
         for j in 3..ny.saturating_sub(3) {
             for i in 3..nx.saturating_sub(3) {
-                lat.move_control_point([i, j, k], (r.vec() - 0.5) * scale)
+                lat.move_control_point([i, j, k], r.point(0.5) * scale)
                     .unwrap();
             }
         }
@@ -88,11 +88,12 @@ fn injective_lattices() -> Vec<BSplineLattice> {
 /// Random points of the lattice's box shrunk by the fraction `margin` of its size on every
 /// side (grown for a negative margin).
 fn points_in_box(lat: &BSplineLattice, n: usize, margin: f64, seed: u64) -> Vec<DVec3> {
-    let mut r = Lcg(seed);
+    let mut r = Rng::new(seed);
     let d = lat.domain();
     (0..n)
         .map(|_| {
-            let t = DVec3::splat(margin) + r.vec() * (1.0 - 2.0 * margin);
+            let t =
+                DVec3::splat(margin) + r.point_in(DVec3::ZERO, DVec3::ONE) * (1.0 - 2.0 * margin);
             let u = DVec3::new(
                 d[0][0] + t.x * (d[0][1] - d[0][0]),
                 d[1][0] + t.y * (d[1][1] - d[1][0]),
@@ -163,9 +164,9 @@ fn affine_and_composed_maps_invert_exactly() {
         offset: DVec3::new(-4.0, 1.0, 7.5),
     };
     let inv = a.matrix.inverse();
-    let mut r = Lcg(99);
+    let mut r = Rng::new(99);
     for _ in 0..100 {
-        let y = r.signed() * 50.0;
+        let y = r.point(1.0) * 50.0;
         let p = invert_point(&a, y, None, &InverseOptions::default());
         assert!(p.converged() && p.iterations <= 1, "{p:?}");
         let want = inv * (y - a.offset);

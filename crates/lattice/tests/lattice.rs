@@ -6,11 +6,8 @@ use proptest::prelude::*;
 use volmorph_deform::{Affine, Compose, DeformError, SpaceMap};
 use volmorph_lattice::{BSplineLattice, LatticeFrame};
 use volmorph_spline::KnotVector;
+use volmorph_testkit::Rng;
 use volmorph_volume::Geometry;
-
-/// Deterministic pseudo-random numbers in [0, 1) (64-bit LCG, top 53 bits).
-mod common;
-use common::Lcg;
 
 /// A rotation by `angle` about the normalised `axis` (orthonormal, right-handed).
 fn rotation(axis: DVec3, angle: f64) -> DMat3 {
@@ -19,8 +16,10 @@ fn rotation(axis: DVec3, angle: f64) -> DMat3 {
 
 /// Random points of the box `corner + axes·(extent ⊙ t)`, `t ∈ [0, 1]³`, corners included.
 fn box_points(corner: DVec3, axes: DMat3, extent: DVec3, n: usize, seed: u64) -> Vec<DVec3> {
-    let mut r = Lcg(seed);
-    let mut pts: Vec<DVec3> = (0..n).map(|_| corner + axes * (extent * r.vec())).collect();
+    let mut r = Rng::new(seed);
+    let mut pts: Vec<DVec3> = (0..n)
+        .map(|_| corner + axes * (extent * r.point_in(DVec3::ZERO, DVec3::ONE)))
+        .collect();
     for c in 0..8 {
         let t = DVec3::new(
             f64::from(c & 1),
@@ -51,12 +50,12 @@ fn assert_identity(lat: &BSplineLattice, pts: &[DVec3]) {
 /// Interior of True's lattice perturbed at random (outer three layers left in place), plus a
 /// few border points moved.
 fn displaced(mut lat: BSplineLattice, scale: f64, seed: u64) -> BSplineLattice {
-    let mut r = Lcg(seed);
+    let mut r = Rng::new(seed);
     let [nx, ny, nz] = lat.counts();
     for k in 0..nz {
         for j in 0..ny {
             for i in 0..nx {
-                let d = (r.vec() - 0.5) * scale;
+                let d = r.point(0.5) * scale;
                 lat.move_control_point([i, j, k], d).unwrap();
             }
         }
@@ -180,10 +179,10 @@ fn moving_a_control_point_changes_only_its_support() {
     assert!((dd - DVec3::new(0.7, -1.1, 2.0)).length() < 1e-14);
     // Basis function i of knots −3 … n is supported on parameters [i − 3, i + 1].
     let support = |a: usize, u: f64| u > idx[a] as f64 - 3.0 && u < idx[a] as f64 + 1.0;
-    let mut r = Lcg(21);
+    let mut r = Rng::new(21);
     let (mut inside, mut outside) = (0, 0);
     for _ in 0..4000 {
-        let p = DVec3::new(6.0, 6.0, 12.0) * r.vec();
+        let p = DVec3::new(6.0, 6.0, 12.0) * r.point_in(DVec3::ZERO, DVec3::ONE);
         let u = base.frame().to_parameter(p);
         if support(0, u.x) && support(1, u.y) && support(2, u.z) {
             inside += 1;
@@ -632,13 +631,13 @@ fn grid_plans_are_reusable_across_control_point_edits() {
 fn continuous_across_the_box_surface_iff_outer_layers_stay() {
     let (lo, hi) = (DVec3::ZERO, DVec3::new(6.0, 4.0, 5.0));
     let mut lat = BSplineLattice::uniform_cubic_around(lo, hi, [9, 8, 9]).unwrap();
-    let mut r = Lcg(77);
+    let mut r = Rng::new(77);
     // Move only the control points off the three outermost layers on every side.
     let [nx, ny, nz] = lat.counts();
     for k in 3..nz - 3 {
         for j in 3..ny - 3 {
             for i in 3..nx - 3 {
-                lat.move_control_point([i, j, k], (r.vec() - 0.5) * 2.0)
+                lat.move_control_point([i, j, k], r.point(0.5) * 2.0)
                     .unwrap();
             }
         }
@@ -649,7 +648,7 @@ fn continuous_across_the_box_surface_iff_outer_layers_stay() {
     };
     let mut max_jump = 0.0_f64;
     for _ in 0..200 {
-        let t = r.vec() * (hi - lo);
+        let t = r.point_in(DVec3::ZERO, DVec3::ONE) * (hi - lo);
         for (p, n) in [
             (DVec3::new(0.0, t.y, t.z), DVec3::NEG_X),
             (DVec3::new(6.0, t.y, t.z), DVec3::X),
@@ -738,7 +737,7 @@ fn feng_initial_volumes_are_the_identity_with_eq2_spacing() {
 #[test]
 fn apply_batch_agrees_with_apply() {
     let (min, max) = (DVec3::new(-1.0, 0.5, 2.0), DVec3::new(3.0, 2.0, 5.0));
-    let mut r = Lcg(8);
+    let mut r = Rng::new(8);
     for (degrees, counts) in [
         ([2, 2, 2], [6, 8, 6]),
         ([1, 3, 2], [4, 5, 3]),
@@ -750,13 +749,13 @@ fn apply_batch_agrees_with_apply() {
         for k in 0..counts[2] {
             for j in 0..counts[1] {
                 for i in 0..counts[0] {
-                    lat.move_control_point([i, j, k], (r.vec() - 0.5) * 0.4)
+                    lat.move_control_point([i, j, k], r.point(0.5) * 0.4)
                         .unwrap();
                 }
             }
         }
         let mut pts: Vec<DVec3> = (0..5000)
-            .map(|_| min - 0.5 + (max - min + 1.0) * r.vec())
+            .map(|_| min - 0.5 + (max - min + 1.0) * r.point_in(DVec3::ZERO, DVec3::ONE))
             .collect();
         pts.extend([min, max, DVec3::new(max.x, min.y, max.z)]);
         let mut out = vec![DVec3::ZERO; pts.len()];
@@ -767,7 +766,9 @@ fn apply_batch_agrees_with_apply() {
         assert!(lat.apply_batch(&pts, &mut out[1..]).is_err());
     }
     let cubic = BSplineLattice::uniform_cubic_around(min, max, [7, 5, 6]).unwrap();
-    let pts: Vec<DVec3> = (0..500).map(|_| min + (max - min) * r.vec()).collect();
+    let pts: Vec<DVec3> = (0..500)
+        .map(|_| min + (max - min) * r.point_in(DVec3::ZERO, DVec3::ONE))
+        .collect();
     let mut out = vec![DVec3::ZERO; pts.len()];
     cubic.apply_batch(&pts, &mut out).unwrap();
     for (p, o) in pts.iter().zip(&out) {

@@ -12,7 +12,7 @@ use volmorph_lattice::{BSplineLattice, LatticeFrame};
 use volmorph_spline::KnotVector;
 
 mod common;
-use common::Lcg;
+use volmorph_testkit::Rng;
 
 /// Relative tolerance for "the dragged point lands on its target".
 const LAND_TOL: f64 = 1e-9;
@@ -25,11 +25,12 @@ fn cubic9() -> BSplineLattice {
 /// `cubic9` with its interior control points jiggled, so the map is not the identity.
 fn cubic9_deformed(seed: u64) -> BSplineLattice {
     let mut lat = cubic9();
-    let mut r = Lcg(seed);
+    let mut r = Rng::new(seed);
     for k in 3..6 {
         for j in 3..6 {
             for i in 3..6 {
-                lat.move_control_point([i, j, k], r.signed() * 2.0).unwrap();
+                lat.move_control_point([i, j, k], r.point(1.0) * 2.0)
+                    .unwrap();
             }
         }
     }
@@ -49,12 +50,13 @@ fn quadratic_nonuniform() -> BSplineLattice {
         knots,
     )
     .unwrap();
-    let mut r = Lcg(77);
+    let mut r = Rng::new(77);
     let c = lat.counts();
     for k in 1..c[2] - 1 {
         for j in 1..c[1] - 1 {
             for i in 1..c[0] - 1 {
-                lat.move_control_point([i, j, k], r.signed() * 0.5).unwrap();
+                lat.move_control_point([i, j, k], r.point(1.0) * 0.5)
+                    .unwrap();
             }
         }
     }
@@ -290,10 +292,10 @@ fn assert_least_norm(lat: &BSplineLattice, drags: &[Drag]) {
         );
     }
     // Null-space vectors v − Bᵀ(BBᵀ)⁻¹Bv of random v are orthogonal to the solution.
-    let mut r = Lcg(5);
+    let mut r = Rng::new(5);
     let n = cols.len();
     for _ in 0..5 {
-        let v: Vec<DVec3> = (0..n).map(|_| r.signed()).collect();
+        let v: Vec<DVec3> = (0..n).map(|_| r.point(1.0)).collect();
         let bv: Vec<DVec3> = (0..m)
             .map(|row| (0..n).map(|c| b[row][c] * v[c]).sum())
             .collect();
@@ -438,10 +440,10 @@ fn map_is_unchanged_outside_the_support() {
         }
     }
     sol.apply(&mut lat).unwrap();
-    let mut r = Lcg(9);
+    let mut r = Rng::new(9);
     let mut outside = 0;
     for _ in 0..4000 {
-        let x = r.vec() * 60.0;
+        let x = r.point_in(DVec3::ZERO, DVec3::ONE) * 60.0;
         let u = x / 10.0;
         if (0..3).any(|a| u[a] <= lo[a] || u[a] >= hi[a]) {
             outside += 1;
@@ -480,10 +482,10 @@ fn frozen_boundary_keeps_the_box_surface_fixed() {
     let mut l = lat.clone();
     drag_and_check(&mut l, &d, &opts);
     // The box surface stays where it was, so the map is continuous across it.
-    let mut r = Lcg(1);
+    let mut r = Rng::new(1);
     for _ in 0..200 {
-        let mut x = r.vec() * 60.0;
-        let face = (r.next() * 6.0) as usize;
+        let mut x = r.point_in(DVec3::ZERO, DVec3::ONE) * 60.0;
+        let face = (r.unit() * 6.0) as usize;
         x[face % 3] = if face < 3 { 0.0 } else { 60.0 };
         assert!((l.apply(x) - x).length() < 1e-12 * 60.0);
     }
@@ -598,12 +600,12 @@ fn undo_and_redo_restore_lattices_bit_for_bit() {
     let start = cubic9_deformed(13);
     let mut s = ManipulationSession::new(start.clone(), DragOptions::default()).unwrap();
     assert!(s.undo().is_none() && s.redo().is_none());
-    let mut r = Lcg(31);
+    let mut r = Rng::new(31);
     let mut states = vec![bits(&start)];
     let mut outs: Vec<Vec<ControlPointMove>> = Vec::new();
     for _ in 0..4 {
-        let p = DVec3::splat(15.0) + r.vec() * 30.0;
-        let t = p + r.signed() * 4.0;
+        let p = DVec3::splat(15.0) + r.point_in(DVec3::ZERO, DVec3::ONE) * 30.0;
+        let t = p + r.point(1.0) * 4.0;
         let out = s.drag(&[Drag::new(p, t)]).unwrap();
         assert_lands(s.lattice(), &[Drag::new(p, t)]);
         states.push(bits(s.lattice()));
@@ -676,18 +678,18 @@ fn many_drags_more_than_control_points_are_least_squares() {
     // still lands when the targets come from an actual lattice map.
     let lat = BSplineLattice::uniform_cubic_around(DVec3::ZERO, DVec3::splat(1.0), [4; 3]).unwrap();
     let mut goal = lat.clone();
-    let mut r = Lcg(17);
+    let mut r = Rng::new(17);
     for k in 0..4 {
         for j in 0..4 {
             for i in 0..4 {
-                goal.move_control_point([i, j, k], r.signed() * 0.02)
+                goal.move_control_point([i, j, k], r.point(1.0) * 0.02)
                     .unwrap();
             }
         }
     }
     let drags: Vec<Drag> = (0..80)
         .map(|_| {
-            let p = DVec3::splat(0.1) + r.vec() * 0.8;
+            let p = DVec3::splat(0.1) + r.point_in(DVec3::ZERO, DVec3::ONE) * 0.8;
             Drag::new(p, goal.apply(p))
         })
         .collect();

@@ -9,6 +9,7 @@ use volmorph_mesh::{
     DVec3, Location, Mesh, MeshError, MeshFormat, MeshWriteOptions, read, read_bytes,
     read_obj_bytes, read_off_bytes, read_ply_bytes, read_stl_bytes, to_bytes, write, write_with,
 };
+use volmorph_testkit::Rng;
 
 fn opts(binary: bool, big_endian: bool) -> MeshWriteOptions {
     MeshWriteOptions {
@@ -774,17 +775,6 @@ fn malformed_off() {
     ));
 }
 
-/// Deterministic xorshift generator for the mutation test.
-struct Rng(u64);
-impl Rng {
-    fn next(&mut self) -> u64 {
-        self.0 ^= self.0 << 13;
-        self.0 ^= self.0 >> 7;
-        self.0 ^= self.0 << 17;
-        self.0
-    }
-}
-
 #[test]
 fn truncated_and_mutated_inputs_never_panic() {
     let m = mixed();
@@ -796,17 +786,17 @@ fn truncated_and_mutated_inputs_never_panic() {
     }
     samples.push((MeshFormat::Ply, meshlab_ply()));
     samples.push((MeshFormat::Stl, solid_header_binary_stl()));
-    let mut rng = Rng(0x9e37_79b9_7f4a_7c15);
+    let mut rng = Rng::new(0x9e37_79b9_7f4a_7c15);
     for (format, bytes) in &samples {
         for cut in 0..bytes.len() {
             let _ = read_bytes(&bytes[..cut], *format);
         }
         for _ in 0..300 {
             let mut b = bytes.clone();
-            for _ in 0..1 + rng.next() % 4 {
-                let i = (rng.next() % b.len() as u64) as usize;
-                b[i] = match rng.next() % 4 {
-                    0 => rng.next() as u8,
+            for _ in 0..1 + rng.index(4) {
+                let i = rng.index(b.len());
+                b[i] = match rng.index(4) {
+                    0 => rng.next_u64() as u8,
                     1 => b'9',
                     2 => 0xff,
                     _ => b' ',

@@ -4,6 +4,7 @@ mod common;
 
 use common::*;
 use volmorph_mesh::{DVec3, Mesh, MeshError};
+use volmorph_testkit::Rng;
 
 fn close(a: DVec3, b: DVec3, tol: f64) -> bool {
     (a - b).abs().max_element() <= tol
@@ -271,9 +272,9 @@ fn merge_exact_duplicates_recovers_topology() {
 fn merge_with_tolerance() {
     let mut s = soup(&cube());
     // Jitter every corner by up to 1e-9.
-    for (k, p) in s.positions_mut().iter_mut().enumerate() {
-        let j = (k as f64 * 0.618_033_988_7).fract() - 0.5;
-        *p += DVec3::new(j, -j, 0.5 * j) * 1e-9;
+    let mut rng = Rng::new(5);
+    for p in s.positions_mut() {
+        *p += rng.point(1e-9);
     }
     let mut exact = s.clone();
     exact.merge_duplicate_vertices(0.0);

@@ -7,40 +7,23 @@ use volmorph_spline::{
     BSplineCurve, BasisWorkspace, KnotVector, TensorBSpline, basis_funs_and_derivs_into,
     basis_funs_into, interpolate_greville, uniform_cubic, uniform_cubic_derivative,
 };
-
-/// Deterministic pseudo-random numbers (SplitMix64) so one proptest seed drives many values.
-struct Rng(u64);
-impl Rng {
-    fn next_u64(&mut self) -> u64 {
-        self.0 = self.0.wrapping_add(0x9E37_79B9_7F4A_7C15);
-        let mut z = self.0;
-        z = (z ^ (z >> 30)).wrapping_mul(0xBF58_476D_1CE4_E5B9);
-        z = (z ^ (z >> 27)).wrapping_mul(0x94D0_49BB_1331_11EB);
-        z ^ (z >> 31)
-    }
-    /// Uniform in [lo, hi).
-    fn uniform(&mut self, lo: f64, hi: f64) -> f64 {
-        lo + (hi - lo) * ((self.next_u64() >> 11) as f64 / (1u64 << 53) as f64)
-    }
-    fn below(&mut self, n: usize) -> usize {
-        (self.next_u64() % n as u64) as usize
-    }
-}
+// One proptest seed drives many values through the seeded generator.
+use volmorph_testkit::Rng;
 
 /// A random valid knot vector of degree `p`: distinct values with random gaps, interior
 /// multiplicities in `1..=max_mult`, ends clamped or not.
 fn random_knots(rng: &mut Rng, p: usize, max_mult: usize, max_distinct: usize) -> KnotVector {
     loop {
-        let clamped = rng.below(2) == 0;
-        let distinct = 2 + rng.below(max_distinct.max(1));
+        let clamped = rng.index(2) == 0;
+        let distinct = 2 + rng.index(max_distinct.max(1));
         let mut knots = Vec::new();
-        let mut x = rng.uniform(-1.0, 1.0);
+        let mut x = rng.range(-1.0, 1.0);
         for i in 0..distinct {
-            x += rng.uniform(0.05, 1.5);
+            x += rng.range(0.05, 1.5);
             let m = if clamped && (i == 0 || i + 1 == distinct) {
                 p + 1
             } else {
-                1 + rng.below(max_mult.max(1))
+                1 + rng.index(max_mult.max(1))
             };
             knots.extend(std::iter::repeat_n(x, m));
         }
@@ -53,14 +36,14 @@ fn random_knots(rng: &mut Rng, p: usize, max_mult: usize, max_distinct: usize) -
 /// Random clamped knot vector whose interior multiplicities are at most `p` (the condition
 /// under which Greville collocation is non-singular).
 fn random_clamped(rng: &mut Rng, p: usize, max_interior: usize) -> KnotVector {
-    let a = rng.uniform(-1.0, 1.0);
-    let b = a + rng.uniform(0.5, 3.0);
-    let count = rng.below(max_interior + 1);
+    let a = rng.range(-1.0, 1.0);
+    let b = a + rng.range(0.5, 3.0);
+    let count = rng.index(max_interior + 1);
     let mut interior = Vec::new();
     for _ in 0..count {
-        let v = rng.uniform(a, b);
+        let v = rng.range(a, b);
         if v > a && v < b {
-            let m = 1 + rng.below(p.max(1));
+            let m = 1 + rng.index(p.max(1));
             interior.extend(std::iter::repeat_n(v, m));
         }
     }
@@ -75,9 +58,9 @@ fn random_spline<const N: usize>(
     rational: bool,
 ) -> TensorBSpline<N> {
     let n: usize = knots.iter().map(KnotVector::num_basis).product();
-    let pts: Vec<f64> = (0..n * dim).map(|_| rng.uniform(-1.0, 1.0)).collect();
+    let pts: Vec<f64> = (0..n * dim).map(|_| rng.range(-1.0, 1.0)).collect();
     if rational {
-        let w: Vec<f64> = (0..n).map(|_| rng.uniform(0.5, 2.0)).collect();
+        let w: Vec<f64> = (0..n).map(|_| rng.range(0.5, 2.0)).collect();
         TensorBSpline::new_rational(knots, dim, pts, w).unwrap()
     } else {
         TensorBSpline::new(knots, dim, pts).unwrap()
@@ -88,14 +71,14 @@ fn random_spline<const N: usize>(
 fn random_params<const N: usize>(rng: &mut Rng, knots: &[KnotVector; N]) -> [f64; N] {
     std::array::from_fn(|a| {
         let [lo, hi] = knots[a].domain();
-        match rng.below(8) {
+        match rng.index(8) {
             0 => lo,
             1 => hi,
             2 => {
                 let bp = knots[a].breakpoints();
-                bp[rng.below(bp.len())].0
+                bp[rng.index(bp.len())].0
             }
-            _ => rng.uniform(lo, hi),
+            _ => rng.range(lo, hi),
         }
     })
 }
@@ -113,12 +96,12 @@ fn random_insertions(rng: &mut Rng, kv: &KnotVector) -> Vec<f64> {
     let p = kv.degree();
     let [lo, hi] = kv.domain();
     let mut x = Vec::new();
-    for _ in 0..1 + rng.below(4) {
-        x.push(rng.uniform(lo, hi));
+    for _ in 0..1 + rng.index(4) {
+        x.push(rng.range(lo, hi));
     }
     for (v, m) in kv.breakpoints() {
-        if m < p + 1 && rng.below(2) == 0 {
-            let extra = 1 + rng.below(p + 1 - m);
+        if m < p + 1 && rng.index(2) == 0 {
+            let extra = 1 + rng.index(p + 1 - m);
             x.extend(std::iter::repeat_n(v, extra));
         }
     }
@@ -163,20 +146,20 @@ fn check_refinement_and_extraction<const N: usize>(
     }
     assert_same_function(rng, s, &r, 12)?;
     // Single Boehm insertion.
-    let axis = rng.below(N);
+    let axis = rng.index(N);
     let [lo, hi] = s.knots()[axis].domain();
-    let u = rng.uniform(lo, hi);
+    let u = rng.range(lo, hi);
     let one = s.insert_knot(axis, u, 1).unwrap();
     assert_same_function(rng, s, &one, 8)?;
     // Subdivision: both halves agree with the spline on their parts of the domain.
-    let axis = rng.below(N);
+    let axis = rng.index(N);
     let [lo, hi] = s.knots()[axis].domain();
-    let u = rng.uniform(lo + 0.01 * (hi - lo), hi - 0.01 * (hi - lo));
+    let u = rng.range(lo + 0.01 * (hi - lo), hi - 0.01 * (hi - lo));
     let (left, right) = s.split(axis, u).unwrap();
     let mut vh = vec![0.0; s.dim()];
     let mut vf = vec![0.0; s.dim()];
     for _ in 0..6 {
-        let half = if rng.below(2) == 0 { &left } else { &right };
+        let half = if rng.index(2) == 0 { &left } else { &right };
         let mut t = random_params(rng, half.knots());
         if std::ptr::eq(half, &left) && t[axis] == u {
             // The full spline evaluates the right piece at u; the left half its left piece.
@@ -202,7 +185,7 @@ fn check_refinement_and_extraction<const N: usize>(
         for _ in 0..3 {
             let t: [f64; N] = std::array::from_fn(|a| {
                 let [lo, hi] = piece.domain()[a];
-                lo + (hi - lo) * rng.uniform(0.0, 1.0)
+                lo + (hi - lo) * rng.range(0.0, 1.0)
             });
             piece.eval_into(t, &mut vp).unwrap();
             s.eval_into(t, &mut vs).unwrap();
@@ -227,9 +210,9 @@ fn check_gradient<const N: usize>(
         let mut widths = [0.0; N];
         let t: [f64; N] = std::array::from_fn(|a| {
             let spans: Vec<_> = s.knots()[a].spans().collect();
-            let sp = spans[rng.below(spans.len())];
+            let sp = spans[rng.index(spans.len())];
             widths[a] = sp.end - sp.start;
-            sp.start + (sp.end - sp.start) * rng.uniform(0.2, 0.8)
+            sp.start + (sp.end - sp.start) * rng.range(0.2, 0.8)
         });
         s.eval_with_gradient_into(t, &mut v, &mut g).unwrap();
         for a in 0..N {
@@ -290,7 +273,7 @@ proptest! {
 
     #[test]
     fn basis_is_a_partition_of_unity(seed in any::<u64>(), p in 0usize..=7) {
-        let mut rng = Rng(seed);
+        let mut rng = Rng::new(seed);
         let kv = random_knots(&mut rng, p, p + 1, 8);
         let mut n = [0.0; 8];
         let mut d = [0.0; 8];
@@ -336,18 +319,18 @@ proptest! {
 
     #[test]
     fn curves_refine_and_extract_exactly(seed in any::<u64>(), p in 0usize..=7, rational in any::<bool>()) {
-        let mut rng = Rng(seed);
+        let mut rng = Rng::new(seed);
         let kv = random_knots(&mut rng, p, p + 1, 6);
-        let dim = 1 + rng.below(3);
+        let dim = 1 + rng.index(3);
         let c = random_spline(&mut rng, [kv], dim, rational);
         check_refinement_and_extraction(&mut rng, &c)?;
     }
 
     #[test]
     fn surfaces_refine_and_extract_exactly(seed in any::<u64>(), rational in any::<bool>()) {
-        let mut rng = Rng(seed);
+        let mut rng = Rng::new(seed);
         let knots: [KnotVector; 2] = std::array::from_fn(|_| {
-            let p = rng.below(5);
+            let p = rng.index(5);
             random_knots(&mut rng, p, p + 1, 4)
         });
         let s = random_spline(&mut rng, knots, 3, rational);
@@ -356,31 +339,31 @@ proptest! {
 
     #[test]
     fn volumes_refine_and_extract_exactly(seed in any::<u64>(), rational in any::<bool>()) {
-        let mut rng = Rng(seed);
+        let mut rng = Rng::new(seed);
         let knots: [KnotVector; 3] = std::array::from_fn(|_| {
-            let p = rng.below(4);
+            let p = rng.index(4);
             random_knots(&mut rng, p, p + 1, 3)
         });
-        let dim = 1 + rng.below(3);
+        let dim = 1 + rng.index(3);
         let s = random_spline(&mut rng, knots, dim, rational);
         check_refinement_and_extraction(&mut rng, &s)?;
     }
 
     #[test]
     fn gradients_match_differences_and_derivative_nets(seed in any::<u64>(), rational in any::<bool>()) {
-        let mut rng = Rng(seed);
-        let p = rng.below(8);
+        let mut rng = Rng::new(seed);
+        let p = rng.index(8);
         let k1 = random_knots(&mut rng, p, p + 1, 5);
         let c = random_spline(&mut rng, [k1], 2, rational);
         check_gradient(&mut rng, &c)?;
         let ks: [KnotVector; 2] = std::array::from_fn(|_| {
-            let p = rng.below(5);
+            let p = rng.index(5);
             random_knots(&mut rng, p, p + 1, 4)
         });
         let s = random_spline(&mut rng, ks, 3, rational);
         check_gradient(&mut rng, &s)?;
         let kv3: [KnotVector; 3] = std::array::from_fn(|_| {
-            let p = rng.below(4);
+            let p = rng.index(4);
             random_knots(&mut rng, p, p + 1, 3)
         });
         let v = random_spline(&mut rng, kv3, 1, rational);
@@ -389,19 +372,19 @@ proptest! {
 
     #[test]
     fn interpolation_reproduces_data_and_polynomials(seed in any::<u64>()) {
-        let mut rng = Rng(seed);
+        let mut rng = Rng::new(seed);
         // Curve, any degree up to 7, two components.
-        let p = rng.below(8);
+        let p = rng.index(8);
         let kv = random_clamped(&mut rng, p, 6);
         let g = kv.greville();
-        let data: Vec<f64> = (0..2 * g.len()).map(|_| rng.uniform(-1.0, 1.0)).collect();
+        let data: Vec<f64> = (0..2 * g.len()).map(|_| rng.range(-1.0, 1.0)).collect();
         let c = interpolate_greville([kv.clone()], 2, &data).unwrap();
         for (j, &t) in g.iter().enumerate() {
             let v = c.eval([t]).unwrap();
             prop_assert!(max_abs_diff(&v, &data[2 * j..2 * j + 2]) <= 1e-10);
         }
         // Polynomial of degree p is reproduced everywhere.
-        let coef: Vec<f64> = (0..=p).map(|_| rng.uniform(-1.0, 1.0)).collect();
+        let coef: Vec<f64> = (0..=p).map(|_| rng.range(-1.0, 1.0)).collect();
         let poly = |t: f64| coef.iter().rev().fold(0.0, |acc, &a| acc * t + a);
         let pd: Vec<f64> = g.iter().map(|&t| poly(t)).collect();
         let pc = interpolate_greville([kv.clone()], 1, &pd).unwrap();
@@ -413,13 +396,13 @@ proptest! {
 
         // Volume: data reproduction at the Greville grid and trivariate polynomial reproduction.
         let kvs: [KnotVector; 3] = std::array::from_fn(|_| {
-            let p = rng.below(4);
+            let p = rng.index(4);
             random_clamped(&mut rng, p, 2)
         });
         let gs: [Vec<f64>; 3] = std::array::from_fn(|a| kvs[a].greville());
         let counts = [gs[0].len(), gs[1].len(), gs[2].len()];
         let n = counts[0] * counts[1] * counts[2];
-        let data: Vec<f64> = (0..2 * n).map(|_| rng.uniform(-1.0, 1.0)).collect();
+        let data: Vec<f64> = (0..2 * n).map(|_| rng.range(-1.0, 1.0)).collect();
         let v = interpolate_greville(kvs.clone(), 2, &data).unwrap();
         for k in 0..counts[2] {
             for j in 0..counts[1] {
@@ -431,9 +414,9 @@ proptest! {
             }
         }
         let degs = kvs.clone().map(|k| k.degree());
-        let cx: Vec<f64> = (0..=degs[0]).map(|_| rng.uniform(-1.0, 1.0)).collect();
-        let cy: Vec<f64> = (0..=degs[1]).map(|_| rng.uniform(-1.0, 1.0)).collect();
-        let cz: Vec<f64> = (0..=degs[2]).map(|_| rng.uniform(-1.0, 1.0)).collect();
+        let cx: Vec<f64> = (0..=degs[0]).map(|_| rng.range(-1.0, 1.0)).collect();
+        let cy: Vec<f64> = (0..=degs[1]).map(|_| rng.range(-1.0, 1.0)).collect();
+        let cz: Vec<f64> = (0..=degs[2]).map(|_| rng.range(-1.0, 1.0)).collect();
         let horner = |c: &[f64], t: f64| c.iter().rev().fold(0.0, |acc, &a| acc * t + a);
         let f = |x: f64, y: f64, z: f64| horner(&cx, x) * horner(&cy, y) + horner(&cz, z) * x.powi(degs[0].min(1) as i32);
         let mut pdata = Vec::with_capacity(n);
@@ -454,13 +437,13 @@ proptest! {
 
     #[test]
     fn single_span_extraction_is_the_bernstein_net(seed in any::<u64>()) {
-        let mut rng = Rng(seed);
+        let mut rng = Rng::new(seed);
         let knots: [KnotVector; 3] = std::array::from_fn(|_| {
-            let p = rng.below(5);
-            let a = rng.uniform(-2.0, 2.0);
-            KnotVector::bezier(p, [a, a + rng.uniform(0.1, 3.0)]).unwrap()
+            let p = rng.index(5);
+            let a = rng.range(-2.0, 2.0);
+            KnotVector::bezier(p, [a, a + rng.range(0.1, 3.0)]).unwrap()
         });
-        let rational = rng.below(2) == 0;
+        let rational = rng.index(2) == 0;
         let s = random_spline(&mut rng, knots, 2, rational);
         let pieces = s.bezier_pieces().unwrap();
         prop_assert_eq!(pieces.len(), 1);
@@ -474,9 +457,9 @@ proptest! {
 
     #[test]
     fn identity_lattice_is_the_identity(seed in any::<u64>()) {
-        let mut rng = Rng(seed);
+        let mut rng = Rng::new(seed);
         let knots: [KnotVector; 3] = std::array::from_fn(|_| {
-            let p = 1 + rng.below(4);
+            let p = 1 + rng.index(4);
             random_knots(&mut rng, p, p, 4)
         });
         let id = TensorBSpline::identity(knots.clone()).unwrap();
@@ -495,15 +478,15 @@ proptest! {
 
     #[test]
     fn reparametrization_composes_with_the_affine_map(seed in any::<u64>()) {
-        let mut rng = Rng(seed);
-        let p = rng.below(6);
+        let mut rng = Rng::new(seed);
+        let p = rng.index(6);
         let kv = random_knots(&mut rng, p, p + 1, 5);
-        let rational = rng.below(2) == 0;
+        let rational = rng.index(2) == 0;
         let c = random_spline(&mut rng, [kv.clone()], 2, rational);
         let r = c.reparametrized([[0.0, 1.0]]).unwrap();
         let [a, b] = kv.domain();
         for _ in 0..10 {
-            let s = rng.uniform(0.0, 1.0);
+            let s = rng.range(0.0, 1.0);
             let u = (a + s * (b - a)).min(b);
             let (x, y) = (r.eval([s]).unwrap(), c.eval([u]).unwrap());
             // Away from breakpoints the pieces agree; the affine map can move a parameter

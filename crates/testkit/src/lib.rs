@@ -4,7 +4,9 @@
 //! * [`conformance`] — the suite every space map runs ([`space_map_conformance!`]) and the
 //!   extra checks of maps linear in their parameters ([`linear_map_conformance!`]).
 //!
-//! This crate is a dev-dependency only; nothing in a library or front-end depends on it.
+//! This crate is a dev-dependency of the libraries' tests and benches, and a dependency of
+//! `volmorph-bench` only (the benchmark set-ups, whose random inputs it draws); no library
+//! depends on it.
 
 pub mod conformance;
 mod rng;

@@ -5,6 +5,7 @@ use std::hint::black_box;
 
 use criterion::{Criterion, Throughput, criterion_group, criterion_main};
 use volmorph_spline::{KnotVector, TensorBSpline};
+use volmorph_testkit::Rng;
 use volmorph_trivariate::{EvalMethod, VolumeEvaluator};
 
 fn volume() -> TensorBSpline<3> {
@@ -27,16 +28,11 @@ fn volume() -> TensorBSpline<3> {
     TensorBSpline::new_rational([kv.clone(), kv.clone(), kv], 3, pts, ws).expect("volume")
 }
 
+/// `n` parameter points uniform in the unit cube (seeded).
 fn params(n: usize) -> Vec<[f64; 3]> {
+    let mut rng = Rng::new(0x5eed);
     (0..n)
-        .map(|i| {
-            let f = i as f64;
-            [
-                (f * 0.618_033_988_7).fract(),
-                (f * 0.414_213_562_3).fract(),
-                (f * 0.732_050_807_5).fract(),
-            ]
-        })
+        .map(|_| [rng.unit(), rng.unit(), rng.unit()])
         .collect()
 }
 

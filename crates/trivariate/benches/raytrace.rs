@@ -7,6 +7,7 @@ use criterion::{Criterion, Throughput, criterion_group, criterion_main};
 use glam::DVec3;
 use volmorph_render::{Camera, Colormap, Projection};
 use volmorph_spline::{KnotVector, TensorBSpline};
+use volmorph_testkit::Rng;
 use volmorph_trivariate::{
     GRIN_ATTRIBUTE, GrinLensSpec, RayTracer, RenderOptions, TraceOptions, TransferFunction,
     VolumeRenderer, grin_lens,
@@ -32,17 +33,12 @@ fn curved() -> TensorBSpline<3> {
     TensorBSpline::new_rational([kv.clone(), kv.clone(), kv], 3, pts, ws).expect("volume")
 }
 
-/// `n` rays from `eye` towards points spread over the box `[lo, hi]`.
+/// `n` rays from `eye` towards points uniform in the box `[lo, hi]` (seeded).
 fn rays(eye: [f64; 3], lo: [f64; 3], hi: [f64; 3], n: usize) -> Vec<([f64; 3], [f64; 3])> {
+    let mut rng = Rng::new(0x5eed);
     (0..n)
-        .map(|i| {
-            let f = i as f64;
-            let t = [
-                (f * 0.618_033_988_7).fract(),
-                (f * 0.414_213_562_3).fract(),
-                (f * 0.732_050_807_5).fract(),
-            ];
-            let target: [f64; 3] = std::array::from_fn(|c| lo[c] + t[c] * (hi[c] - lo[c]));
+        .map(|_| {
+            let target: [f64; 3] = std::array::from_fn(|c| rng.range(lo[c], hi[c]));
             (eye, std::array::from_fn(|c| target[c] - eye[c]))
         })
         .collect()

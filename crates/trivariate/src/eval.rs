@@ -413,23 +413,17 @@ mod tests {
     use super::*;
     use proptest::prelude::*;
     use volmorph_spline::KnotVector;
+    use volmorph_testkit::Rng;
 
-    /// A random rational volume from a seed (deterministic LCG), with non-uniform clamped knots.
+    /// A random rational volume from a seed, with non-uniform clamped knots.
     pub(crate) fn random_volume(
         seed: u64,
         deg: [usize; 3],
         n: [usize; 3],
         dim: usize,
     ) -> TensorBSpline<3> {
-        let mut state = seed
-            .wrapping_mul(6364136223846793005)
-            .wrapping_add(1442695040888963407);
-        let mut next = move || {
-            state = state
-                .wrapping_mul(6364136223846793005)
-                .wrapping_add(1442695040888963407);
-            (state >> 11) as f64 / (1u64 << 53) as f64
-        };
+        let mut rng = Rng::new(seed);
+        let mut next = move || rng.unit();
         let knots: [KnotVector; 3] = std::array::from_fn(|a| {
             let m = n[a] - deg[a] - 1;
             let mut interior: Vec<f64> = (0..m).map(|_| 0.05 + 0.9 * next()).collect();
@@ -490,15 +484,10 @@ mod tests {
     fn batch_matches_pointwise() {
         let s = random_volume(7, [3, 2, 3], [8, 5, 6], 3);
         let e = VolumeEvaluator::new(&s);
-        let params: Vec<[f64; 3]> = (0..10_000)
-            .map(|i| {
-                let f = f64::from(i);
-                [
-                    (f * 0.618_034).fract(),
-                    (f * 0.414_214).fract(),
-                    (f * 0.732_051).fract(),
-                ]
-            })
+        // The parameter-space corner, then random parameters.
+        let mut rng = Rng::new(8);
+        let params: Vec<[f64; 3]> = std::iter::once([0.0; 3])
+            .chain((1..10_000).map(|_| [rng.unit(), rng.unit(), rng.unit()]))
             .collect();
         let mut vs = vec![0.0; params.len() * 3];
         let mut gs = vec![0.0; params.len() * 9];
@@ -532,13 +521,9 @@ mod tests {
                 let mut v1 = vec![0.0; dim];
                 let mut g1 = vec![0.0; 3 * dim];
                 let (mut v2, mut g2) = (v1.clone(), g1.clone());
+                let mut rng = Rng::new(seed + 10);
                 for i in 0..500u32 {
-                    let f = f64::from(i);
-                    let mut u = [
-                        (f * 0.618_034).fract(),
-                        (f * 0.414_214).fract(),
-                        (f * 0.732_051).fract(),
-                    ];
+                    let mut u = [rng.unit(), rng.unit(), rng.unit()];
                     if i % 50 == 0 {
                         u[(i / 50 % 3) as usize] = 1.0;
                     }

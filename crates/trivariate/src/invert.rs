@@ -208,6 +208,7 @@ mod tests {
     use super::*;
     use crate::{AggregateCurve, AggregateSurface, AggregateVolume, extrude, revolve};
     use volmorph_spline::KnotVector;
+    use volmorph_testkit::Rng;
 
     fn deformed_cube() -> TensorBSpline<3> {
         let kv = KnotVector::clamped_uniform(3, 5, [0.0, 1.0]).unwrap();
@@ -233,13 +234,14 @@ mod tests {
     fn newton_inverts_a_smooth_volume() {
         let s = deformed_cube();
         let opts = InversionOptions::default();
+        // The parameter-space corner, then random parameters.
+        let mut rng = Rng::new(3);
         for i in 0..50 {
-            let f = f64::from(i);
-            let u = [
-                (f * 0.618).fract(),
-                (f * 0.414).fract(),
-                (f * 0.732).fract(),
-            ];
+            let u = if i == 0 {
+                [0.0; 3]
+            } else {
+                [rng.unit(), rng.unit(), rng.unit()]
+            };
             let x = s.eval(u).unwrap();
             let got = invert(&s, [x[0], x[1], x[2]], None, &opts).unwrap();
             let back = s.eval(got).unwrap();

@@ -2,7 +2,9 @@
 
 #![allow(clippy::needless_range_loop)]
 
+use glam::DVec3;
 use volmorph_spline::{KnotVector, TensorBSpline};
+use volmorph_testkit::Rng;
 use volmorph_trivariate::{
     AggregateVolume, GRIN_ATTRIBUTE, GrinLensSpec, HitKind, OpticsOptions, PathMethod, RayTracer,
     RenderOptions, TraceOptions, TransferFunction, TransferPoint, TrivariateError, VolumeRenderer,
@@ -100,14 +102,12 @@ fn hits_lie_on_the_boundary_of_a_curved_rational_volume() {
     let tracer = RayTracer::from_geometry(&g, TraceOptions::default()).unwrap();
     let scale = tracer.diagonal();
     let mut total = 0;
+    let mut rng = Rng::new(40);
     for i in 0..40 {
-        let f = f64::from(i);
-        let target = [
-            0.5 + 3.0 * (f * 0.618).fract(),
-            0.5 + 3.0 * (f * 0.414).fract(),
-            0.5 + 3.0 * (f * 0.732).fract(),
-        ];
-        let o = [-3.0 + (f * 0.3).sin(), -2.5, 9.0 - (f * 0.7).cos()];
+        let target = rng
+            .point_in(DVec3::splat(0.5), DVec3::splat(3.5))
+            .to_array();
+        let o = [rng.range(-4.0, -2.0), -2.5, rng.range(8.0, 10.0)];
         let d = [target[0] - o[0], target[1] - o[1], target[2] - o[2]];
         let hits = tracer.intersect(o, d).unwrap();
         // The target is inside, so the ray enters and leaves: at least two hits.
@@ -144,14 +144,12 @@ fn a_ray_through_a_box_gets_exactly_entry_and_exit() {
     let g = box_geometry([2.0, 1.0, 1.5]);
     let tracer = RayTracer::from_geometry(&g, TraceOptions::default()).unwrap();
     assert_eq!(tracer.fold_leaf_count(), 0, "a box cannot fold");
+    let mut rng = Rng::new(30);
     for i in 0..30 {
-        let f = f64::from(i);
-        let target = [
-            0.1 + 1.8 * (f * 0.618).fract(),
-            0.1 + 0.8 * (f * 0.414).fract(),
-            0.1 + 1.3 * (f * 0.732).fract(),
-        ];
-        let o = [-1.0 - (f * 0.9).sin().abs(), 3.0 * (f * 0.2).cos(), -2.0];
+        let target = rng
+            .point_in(DVec3::splat(0.1), DVec3::new(1.9, 0.9, 1.4))
+            .to_array();
+        let o = [rng.range(-2.0, -1.0), rng.range(-3.0, 3.0), -2.0];
         let d = [target[0] - o[0], target[1] - o[1], target[2] - o[2]];
         let hits = tracer.intersect(o, d).unwrap();
         assert_eq!(hits.len(), 2, "ray {i}: {hits:?}");

@@ -5,6 +5,7 @@
 
 use std::io::Write;
 
+use volmorph_testkit::Rng;
 use volmorph_volume::{AnyVolume, DMat3, DVec3, VolumeError, VoxelType};
 use volmorph_volume_io::nifti::{read_bytes, read_frame_bytes};
 
@@ -730,22 +731,16 @@ fn mutated_files_never_panic() {
     permuting_sform(&mut h);
     let plain = h.file();
     let gz = gzip(&plain);
-    let mut state = 0x9e37_79b9_7f4a_7c15u64;
-    let mut next = move || {
-        state ^= state << 13;
-        state ^= state >> 7;
-        state ^= state << 17;
-        state
-    };
+    let mut rng = Rng::new(0x9e37_79b9_7f4a_7c15);
     for base in [&plain, &gz] {
         for _ in 0..3000 {
             let mut b = base.clone();
-            for _ in 0..1 + next() % 4 {
-                let i = (next() % b.len() as u64) as usize;
-                b[i] = next() as u8;
+            for _ in 0..1 + rng.index(4) {
+                let i = rng.index(b.len());
+                b[i] = rng.next_u64() as u8;
             }
-            if next() % 8 == 0 {
-                b.truncate((next() % b.len() as u64) as usize);
+            if rng.index(8) == 0 {
+                b.truncate(rng.index(b.len()));
             }
             let _ = read_bytes(&b);
         }

@@ -93,6 +93,10 @@ pub const ROUNDED_BOX_HALF_EXTENTS: DVec3 = DVec3::new(0.8, 0.6, 0.4);
 /// Radius of the rounded edges and corners of [`Phantom::RoundedBox`].
 pub const ROUNDED_BOX_RADIUS: f64 = 0.15;
 
+/// The centre of the spout's tip of [`Phantom::Teapot`] (model units): the point a drag
+/// grabs to lower the spout, as in True 1992, Fig. 10.
+pub const TEAPOT_SPOUT_TIP: DVec3 = teapot::SPOUT_TIP;
+
 /// One of volmorph's built-in solid models. See the [module docs](self) for the frame, the
 /// sign convention and the density mapping.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Hash)]

@@ -5,6 +5,7 @@ use glam::{DMat3, DVec3};
 use volmorph_deform::{DeformError, SpaceMap};
 use volmorph_lattice::BSplineLattice;
 use volmorph_spline::KnotVector;
+use volmorph_testkit::Rng;
 use volmorph_volume::{Geometry, Volume};
 use volmorph_warp::WarpError;
 use volmorph_warp::incremental::{IncrementalPushForward, UpdateReport};
@@ -26,32 +27,6 @@ fn move_cps(
 /// Agreement with the full push-forward, as a fraction of the source's value range (the
 /// full push-forward tallies in f32, about 1e-7 relative per term).
 const REL_TOL: f64 = 1e-5;
-
-/// A small deterministic generator (xorshift64*), so failures reproduce.
-struct Rng(u64);
-
-impl Rng {
-    fn next(&mut self) -> u64 {
-        self.0 ^= self.0 >> 12;
-        self.0 ^= self.0 << 25;
-        self.0 ^= self.0 >> 27;
-        self.0.wrapping_mul(0x2545_F491_4F6C_DD1D)
-    }
-    /// Uniform in `[lo, hi)`.
-    fn uniform(&mut self, lo: f64, hi: f64) -> f64 {
-        lo + (hi - lo) * ((self.next() >> 11) as f64 / (1u64 << 53) as f64)
-    }
-    fn below(&mut self, n: usize) -> usize {
-        (self.next() % n as u64) as usize
-    }
-    fn vec(&mut self, r: f64) -> DVec3 {
-        DVec3::new(
-            self.uniform(-r, r),
-            self.uniform(-r, r),
-            self.uniform(-r, r),
-        )
-    }
-}
 
 /// A structured f32 volume with a bright block and a ramp (value range 0..=130).
 fn source(g: Geometry) -> Volume<f32> {
@@ -123,9 +98,9 @@ fn random_moves(
         .map(|_| {
             let pick = |rng: &mut Rng, n: usize| {
                 if interior_only && n > 6 {
-                    3 + rng.below(n - 6)
+                    3 + rng.index(n - 6)
                 } else {
-                    rng.below(n)
+                    rng.index(n)
                 }
             };
             let idx = [
@@ -133,7 +108,7 @@ fn random_moves(
                 pick(rng, counts[1]),
                 pick(rng, counts[2]),
             ];
-            (idx, rng.vec(scale))
+            (idx, rng.point(scale))
         })
         .collect()
 }
@@ -152,10 +127,10 @@ fn run_sequence(
     let opts = AntialiasOptions::default();
     let mut e = IncrementalPushForward::new(src, lattice, output, &opts).unwrap();
     assert_matches_full(&e, src, &opts);
-    let mut rng = Rng(seed);
+    let mut rng = Rng::new(seed);
     let counts = e.map().counts();
     for step in 0..steps {
-        let count = if step % 2 == 0 { 1 } else { 2 + rng.below(4) };
+        let count = if step % 2 == 0 { 1 } else { 2 + rng.index(4) };
         let moves = random_moves(&mut rng, counts, count, scale, interior_only);
         let before = e.volume().clone();
         let report = move_cps(&mut e, &moves).unwrap();
@@ -263,7 +238,7 @@ fn move_and_move_back_restores_the_volume() {
     let mut e = IncrementalPushForward::new(&src, lat.clone(), &g, &opts).unwrap();
     let original = e.volume().clone();
     let stats = e.stats();
-    let mut rng = Rng(0x5eed_0005);
+    let mut rng = Rng::new(0x5eed_0005);
     let mut history = Vec::new();
     for _ in 0..5 {
         let moves = random_moves(&mut rng, [8, 8, 8], 3, 2.0, false);

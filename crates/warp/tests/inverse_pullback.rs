@@ -6,6 +6,7 @@
 use glam::{DMat3, DVec3};
 use volmorph_deform::{Affine, SpaceMap, invert_point};
 use volmorph_lattice::BSplineLattice;
+use volmorph_testkit::Rng;
 use volmorph_volume::sample::{Boundary, Interpolation, Sampler};
 use volmorph_volume::{Geometry, Volume};
 use volmorph_warp::WarpError;
@@ -151,18 +152,12 @@ fn moved_lattice(g: &Geometry, scale: f64) -> BSplineLattice {
     let mut lat =
         BSplineLattice::uniform_cubic_around(lo - DVec3::ONE, hi + DVec3::ONE, [10, 10, 10])
             .unwrap();
-    let mut s = 7u64;
-    let mut next = || {
-        s = s
-            .wrapping_mul(6_364_136_223_846_793_005)
-            .wrapping_add(1_442_695_040_888_963_407);
-        (s >> 11) as f64 / (1u64 << 53) as f64 - 0.5
-    };
+    let mut rng = Rng::new(7);
     for k in 3..7 {
         for j in 3..7 {
             for i in 3..7 {
-                let d = DVec3::new(next(), next(), next()) * scale;
-                lat.move_control_point([i, j, k], d).unwrap();
+                lat.move_control_point([i, j, k], rng.point(0.5) * scale)
+                    .unwrap();
             }
         }
     }

@@ -5,24 +5,13 @@
 use glam::{DMat3, DVec3};
 use volmorph_deform::{Affine, SpaceMap};
 use volmorph_lattice::BSplineLattice;
+use volmorph_testkit::Rng;
 use volmorph_volume::sample::{Boundary, Interpolation, Sampler};
 use volmorph_volume::{AnyVolume, Geometry, Volume, VoxelType};
 use volmorph_warp::WarpError;
 use volmorph_warp::pullback::{
     ResampleOptions, resample, resample_any, resample_any_to, resample_into,
 };
-
-/// Deterministic pseudo-random numbers in `[0, 1)` (64-bit LCG, top 53 bits).
-struct Lcg(u64);
-impl Lcg {
-    fn next(&mut self) -> f64 {
-        self.0 = self
-            .0
-            .wrapping_mul(6_364_136_223_846_793_005)
-            .wrapping_add(1_442_695_040_888_963_407);
-        (self.0 >> 11) as f64 / (1u64 << 53) as f64
-    }
-}
 
 fn input_geometry() -> Geometry {
     Geometry::new([13, 11, 9])
@@ -140,13 +129,13 @@ fn whole_voxel_translation_shifts_data() {
 /// Moved lattice over the input's region: a smooth, clearly non-affine map.
 fn moved_lattice(g: &Geometry, seed: u64, amplitude: f64) -> BSplineLattice {
     let mut lat = identity_lattice(g, [7, 7, 6]);
-    let mut rng = Lcg(seed);
+    let mut rng = Rng::new(seed);
     let counts = lat.counts();
     for k in 0..counts[2] {
         for j in 0..counts[1] {
             for i in 0..counts[0] {
-                let d = DVec3::new(rng.next() - 0.5, rng.next() - 0.5, rng.next() - 0.5);
-                lat.move_control_point([i, j, k], amplitude * d).unwrap();
+                lat.move_control_point([i, j, k], amplitude * rng.point(0.5))
+                    .unwrap();
             }
         }
     }

@@ -1,26 +1,10 @@
-//! Shared helpers of the integration tests: deterministic random numbers, test meshes and
-//! random lattices.
+//! Shared helpers of the integration tests: test meshes and random lattices.
 #![allow(dead_code)]
 
 use glam::DVec3;
 use volmorph_lattice::BSplineLattice;
 use volmorph_mesh::Mesh;
-
-/// Deterministic pseudo-random numbers in [0, 1) (64-bit LCG, top 53 bits).
-pub struct Lcg(pub u64);
-
-impl Lcg {
-    pub fn next(&mut self) -> f64 {
-        self.0 = self
-            .0
-            .wrapping_mul(6_364_136_223_846_793_005)
-            .wrapping_add(1_442_695_040_888_963_407);
-        (self.0 >> 11) as f64 / (1u64 << 53) as f64
-    }
-    pub fn vec(&mut self) -> DVec3 {
-        DVec3::new(self.next(), self.next(), self.next())
-    }
-}
+use volmorph_testkit::Rng;
 
 /// The unit cube `[0, 1]³` as 12 triangles, outward counter-clockwise.
 pub fn cube() -> Mesh {
@@ -56,12 +40,12 @@ pub fn sphere(n: u32, r: f64, c: DVec3) -> Mesh {
 
 /// Move every control point of `lat` by up to `amp` times the box size, pseudo-randomly.
 pub fn jiggle(lat: &mut BSplineLattice, amp: f64, seed: u64) {
-    let mut r = Lcg(seed);
+    let mut r = Rng::new(seed);
     let [nu, nv, nw] = lat.counts();
     for k in 0..nw {
         for j in 0..nv {
             for i in 0..nu {
-                let d = (r.vec() - 0.5) * 2.0 * amp;
+                let d = r.point(amp);
                 lat.move_control_point([i, j, k], d).unwrap();
             }
         }

@@ -3,6 +3,7 @@
 //! Every test binary compiles this module but uses only part of it.
 #![allow(dead_code)]
 
+use volmorph_testkit::Rng;
 use volmorph_volume::{
     AnyVolume, DMat3, DVec3, Geometry, Volume, VolumeError, VoxelType, with_voxel_type,
 };
@@ -13,17 +14,11 @@ pub type ReadBytes = fn(&[u8]) -> Result<(AnyVolume, Header), VolumeError>;
 
 /// Pseudo-random voxel bits (every bit pattern, including NaN payloads for floats).
 pub fn random_volume(vt: VoxelType, g: Geometry, seed: u64) -> AnyVolume {
-    let mut s = seed | 1;
-    let mut next = move || {
-        s ^= s << 13;
-        s ^= s >> 7;
-        s ^= s << 17;
-        (s >> 24) as u8
-    };
+    let mut rng = Rng::new(seed);
     with_voxel_type!(vt, T => {
         let mut v: Vec<T> = vec![T::default(); g.len()];
         for b in bytemuck::cast_slice_mut::<T, u8>(&mut v) {
-            *b = next();
+            *b = (rng.next_u64() >> 56) as u8;
         }
         AnyVolume::from(Volume::new(g, v).unwrap())
     })
@@ -121,58 +116,4 @@ pub fn assert_corpus_refused(dir: &str, read: ReadBytes) {
         n += 1;
     }
     assert!(n >= 6, "corpus missing: {}", dir.display());
-}
-
-/// SplitMix64: a tiny deterministic generator, so the tests need no extra dependency.
-pub struct SplitMix(pub u64);
-
-impl SplitMix {
-    /// The next 64 random bits.
-    pub fn next_u64(&mut self) -> u64 {
-        self.0 = self.0.wrapping_add(0x9E37_79B9_7F4A_7C15);
-        let mut z = self.0;
-        z = (z ^ (z >> 30)).wrapping_mul(0xBF58_476D_1CE4_E5B9);
-        z = (z ^ (z >> 27)).wrapping_mul(0x94D0_49BB_1331_11EB);
-        z ^ (z >> 31)
-    }
-    /// Uniform in [0, 1).
-    pub fn unit(&mut self) -> f64 {
-        (self.next_u64() >> 11) as f64 / (1u64 << 53) as f64
-    }
-    /// Uniform in [lo, hi).
-    pub fn range(&mut self, lo: f64, hi: f64) -> f64 {
-        lo + (hi - lo) * self.unit()
-    }
-    /// Uniform in the cube [-half, half)³.
-    pub fn point(&mut self, half: f64) -> DVec3 {
-        DVec3::new(
-            self.range(-half, half),
-            self.range(-half, half),
-            self.range(-half, half),
-        )
-    }
-    /// A unit vector, uniform on the sphere (rejection sampling in the unit ball).
-    pub fn direction(&mut self) -> DVec3 {
-        loop {
-            let v = self.point(1.0);
-            let l = v.length();
-            if l > 0.1 && l <= 1.0 {
-                return v / l;
-            }
-        }
-    }
-}
-
-/// Deterministic pseudo-random numbers in [0, 1) (64-bit LCG, high bits).
-pub struct Lcg(pub u64);
-
-impl Lcg {
-    /// The next number in [0, 1).
-    pub fn next(&mut self) -> f64 {
-        self.0 = self
-            .0
-            .wrapping_mul(6_364_136_223_846_793_005)
-            .wrapping_add(1_442_695_040_888_963_407);
-        (self.0 >> 11) as f64 / (1u64 << 53) as f64
-    }
 }
