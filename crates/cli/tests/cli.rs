@@ -534,9 +534,20 @@ fn mesh_render_draws_the_model_in_the_middle() {
     assert_ne!(img.get(32, 24), Some(white), "centre not drawn");
     assert_eq!(img.get(0, 0), Some(white), "corner drawn");
     // A malformed size is a usage error (clap's exit status 2), not a crash.
-    let bad = volmorph(&[&"mesh", &"render", &mesh, &"-o", &png, &"--size", &"64"]);
+    let bad = volmorph(&[&"mesh", &"render", &mesh, &"-o", &png, &"--size", &"64x"]);
     assert_eq!(bad.status.code(), Some(2));
     assert!(String::from_utf8_lossy(&bad.stderr).contains("WIDTHxHEIGHT"));
+    // Any direction about either up axis; a bad view names the view names.
+    ok(&[
+        &"mesh", &"render", &mesh, &"-o", &png, &"--size", &"40", &"--view", &"30,-20", &"--up",
+        &"y",
+    ]);
+    let img = volmorph_render::read_png(&png).unwrap();
+    assert_eq!((img.width(), img.height()), (40, 40));
+    assert_ne!(img.get(20, 20), Some(white), "centre not drawn");
+    let bad = volmorph(&[&"mesh", &"render", &mesh, &"-o", &png, &"--view", &"30"]);
+    assert_eq!(bad.status.code(), Some(1));
+    assert!(String::from_utf8_lossy(&bad.stderr).contains("iso"));
 }
 
 #[test]
