@@ -365,6 +365,44 @@ impl RgbaImage {
     }
 }
 
+/// Peak signal-to-noise ratio of `b` against `a`, in dB, over the R, G, B and A channels of
+/// the 8-bit pixels: `10·log10(255² / MSE)`; infinite for identical pictures.
+///
+/// ```
+/// use volmorph_render::{RgbaImage, psnr};
+/// let a = RgbaImage::new(4, 4, [100, 100, 100, 255]).unwrap();
+/// let mut b = a.clone();
+/// assert!(psnr(&a, &b).unwrap().is_infinite());
+/// b.put(0, 0, [110, 100, 100, 255]);
+/// // One channel of 64 off by 10: MSE = 100 / 64.
+/// let want = 10.0 * (255.0f64 * 255.0 * 64.0 / 100.0).log10();
+/// assert!((psnr(&a, &b).unwrap() - want).abs() < 1e-9);
+/// ```
+///
+/// # Errors
+/// [`RenderError::InvalidArgument`] when the sizes differ.
+pub fn psnr(a: &RgbaImage, b: &RgbaImage) -> Result<f64, RenderError> {
+    if (a.width, a.height) != (b.width, b.height) {
+        return Err(RenderError::invalid(format!(
+            "cannot compare a {}×{} picture with a {}×{} one",
+            a.width, a.height, b.width, b.height
+        )));
+    }
+    let sum: f64 = a
+        .pixels
+        .iter()
+        .zip(&b.pixels)
+        .flat_map(|(p, q)| (0..4).map(move |c| f64::from(p[c]) - f64::from(q[c])))
+        .map(|d| d * d)
+        .sum();
+    let mse = sum / (4 * a.pixels.len()) as f64;
+    Ok(if mse == 0.0 {
+        f64::INFINITY
+    } else {
+        10.0 * (255.0 * 255.0 / mse).log10()
+    })
+}
+
 /// A single-channel f32 picture that renderers accumulate into (ray-cast intensities,
 /// Jacobian determinants, slice samples) before mapping it to colour.
 ///

@@ -25,21 +25,27 @@
 mod camera;
 mod colormap;
 pub mod draw;
+pub mod dvr;
 mod error;
 mod geometry;
 mod image;
+pub mod octree;
 mod png_file;
 mod raster;
 pub mod shading;
 mod slice_picture;
+pub mod transfer;
 mod view;
 mod window;
 
 pub use camera::{BOX_FILL, Camera, FIT_MARGIN, Framing, Projection};
 pub use colormap::{Colormap, LUT_SIZE, Lut, ScalarStyle, render_scalar, render_scalar_with};
+pub use dvr::{ClipPlane, DvrOptions, DvrRenderer, DvrVolume, RenderMode};
 pub use error::RenderError;
 pub use geometry::{Aabb, Ray};
-pub use image::{MAX_IMAGE_PIXELS, RgbaImage, ScalarImage, blend_over, finite_range, luma709};
+pub use image::{
+    MAX_IMAGE_PIXELS, RgbaImage, ScalarImage, blend_over, finite_range, luma709, psnr,
+};
 pub use png_file::{
     decode_png, encode_png_rgba, read_png, write_png_grey8, write_png_grey16, write_png_rgb,
     write_png_rgba,
@@ -47,5 +53,6 @@ pub use png_file::{
 pub use raster::{MAX_SUPERSAMPLE, ShadeStyle, render_triangles};
 pub use shading::{Lighting, Shading};
 pub use slice_picture::{SliceStyle, render_slice};
+pub use transfer::{TransferFunction, TransferPreset};
 pub use view::{DEFAULT_FOV_Y, Orbit, UpAxis, view_camera};
 pub use window::{AUTO_WINDOW_PERCENTILES, Window};

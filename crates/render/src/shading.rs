@@ -103,12 +103,19 @@ impl Shading {
         self.validate()?;
         let l = self.light.normalize();
         let light = (camera.right() * l.x + camera.up() * l.y - camera.forward() * l.z).normalize();
+        // Integral exponents (the usual case) take repeated multiplication in the f32 path.
+        let shininess_int = (self.shininess.fract() == 0.0 && self.shininess <= 1024.0)
+            .then_some(self.shininess as i32);
         Ok(Lighting {
             light,
             light32: light.as_vec3(),
             ambient: self.ambient,
             specular: self.specular,
             shininess: self.shininess,
+            ambient32: self.ambient as f32,
+            specular32: self.specular as f32,
+            shininess32: self.shininess as f32,
+            shininess_int,
         })
     }
 }
@@ -122,6 +129,10 @@ pub struct Lighting {
     ambient: f64,
     specular: f64,
     shininess: f64,
+    ambient32: f32,
+    specular32: f32,
+    shininess32: f32,
+    shininess_int: Option<i32>,
 }
 
 impl Lighting {
@@ -162,28 +173,82 @@ impl Lighting {
         base.map(|c| (c * k + spec).min(1.0))
     }
 
-    /// Single-precision [`Lighting::factors`] for per-sample loops (direct volume rendering);
-    /// agrees with the f64 version to f32 rounding.
+    /// The lighting of one viewing direction `to_viewer` (unit, towards the eye) in single
+    /// precision, for per-sample loops along one ray (direct volume rendering): the half
+    /// vector is computed once.
     #[must_use]
-    #[inline]
-    pub fn factors_f32(&self, normal: Vec3, to_viewer: Vec3) -> (f32, f32) {
+    #[inline(always)]
+    pub fn for_view(&self, to_viewer: Vec3) -> ViewLighting {
+        ViewLighting {
+            light: self.light32,
+            half: (self.light32 + to_viewer).normalize_or(to_viewer),
+            to_viewer,
+            ambient: self.ambient32,
+            specular: self.specular32,
+            shininess: self.shininess32,
+            shininess_int: self.shininess_int,
+        }
+    }
+}
+
+/// [`Lighting`] for one viewing direction, single precision (see [`Lighting::for_view`]).
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct ViewLighting {
+    light: Vec3,
+    half: Vec3,
+    to_viewer: Vec3,
+    ambient: f32,
+    specular: f32,
+    shininess: f32,
+    shininess_int: Option<i32>,
+}
+
+impl ViewLighting {
+    /// [`Lighting::factors`] for normal `normal` (any length; zero or non-finite: fully lit,
+    /// no highlight); agrees with the f64 version to f32 rounding.
+    #[must_use]
+    #[inline(always)]
+    pub fn factors(&self, normal: Vec3) -> (f32, f32) {
         let len2 = normal.length_squared();
         if len2.is_nan() || len2 <= 0.0 || len2.is_infinite() {
             return (1.0, 0.0);
         }
-        let n = normal * len2.sqrt().recip();
-        let n = if n.dot(to_viewer) < 0.0 { -n } else { n };
-        let diffuse = n.dot(self.light32).max(0.0);
-        let ambient = self.ambient as f32;
-        let k = ambient + (1.0 - ambient) * diffuse;
+        // Normalise and turn towards the viewer in one factor.
+        let inv = len2.sqrt().recip();
+        let inv = if normal.dot(self.to_viewer) < 0.0 {
+            -inv
+        } else {
+            inv
+        };
+        let diffuse = (normal.dot(self.light) * inv).max(0.0);
+        let k = self.ambient + (1.0 - self.ambient) * diffuse;
         let spec = if diffuse > 0.0 && self.specular > 0.0 {
-            let h = (self.light32 + to_viewer).normalize_or(to_viewer);
-            (self.specular as f32) * n.dot(h).max(0.0).powf(self.shininess as f32)
+            let c = (normal.dot(self.half) * inv).max(0.0);
+            self.specular
+                * match self.shininess_int {
+                    Some(p) => pow_int(c, p),
+                    None => c.powf(self.shininess),
+                }
         } else {
             0.0
         };
         (k, spec)
     }
+}
+
+/// `x^p` for `p ≥ 0` by repeated squaring (inline, unlike the `powi` intrinsic's library
+/// call).
+#[inline(always)]
+fn pow_int(mut x: f32, mut p: i32) -> f32 {
+    let mut r = 1.0;
+    while p > 0 {
+        if p & 1 == 1 {
+            r *= x;
+        }
+        x *= x;
+        p >>= 1;
+    }
+    r
 }
 
 /// sRGB transfer function: coded value in `[0, 1]` → linear light (IEC 61966-2-1).
@@ -218,6 +283,20 @@ pub fn srgb8_to_linear(c: u8) -> f64 {
 #[must_use]
 pub fn linear_to_srgb8(c: f64) -> u8 {
     (linear_to_srgb(c) * 255.0).round() as u8
+}
+
+/// [`linear_to_srgb8`] by table lookup on the value rounded to 16 bits, for per-pixel loops:
+/// the same code except within 1/131 070 of a rounding boundary.
+#[must_use]
+#[inline]
+pub fn linear_to_srgb8_fast(c: f32) -> u8 {
+    static TABLE: std::sync::LazyLock<Vec<u8>> = std::sync::LazyLock::new(|| {
+        (0..=65_535u32)
+            .map(|i| linear_to_srgb8(f64::from(i) / 65_535.0))
+            .collect()
+    });
+    let i = (c.clamp(0.0, 1.0) * 65_535.0 + 0.5) as usize;
+    TABLE[i.min(65_535)]
 }
 
 /// Straight-alpha 8-bit sRGB pixel of a **premultiplied** linear colour `rgb` with opacity
@@ -319,11 +398,16 @@ mod tests {
         // Colour: base scaled, highlight added, clamped.
         let c = lit.shade([0.5, 1.0, 0.0], DVec3::Z, v);
         assert_eq!(c, [1.0, 1.0, 0.5]);
-        // f32 path agrees.
-        let (k32, s32) = lit.factors_f32(n.as_vec3(), v.as_vec3());
-        let (k64, s64) = lit.factors(n, v);
-        assert!((f64::from(k32) - k64).abs() < 1e-6 && (f64::from(s32) - s64).abs() < 1e-6);
-        assert_eq!(lit.factors_f32(Vec3::ZERO, Vec3::Z), (1.0, 0.0));
+        // The f32 path agrees, on both sides of the surface.
+        let view = lit.for_view(v.as_vec3());
+        for m in [n, -n, DVec3::new(0.3, -0.2, 0.9)] {
+            let (k32, s32) = view.factors(m.as_vec3());
+            let (k64, s64) = lit.factors(m, v);
+            assert!((f64::from(k32) - k64).abs() < 1e-6 && (f64::from(s32) - s64).abs() < 1e-6);
+        }
+        assert_eq!(view.factors(Vec3::ZERO), (1.0, 0.0));
+        assert_eq!(pow_int(0.5, 5), 0.03125);
+        assert_eq!(pow_int(3.0, 0), 1.0);
     }
 
     #[test]
@@ -357,6 +441,12 @@ mod tests {
         assert_eq!(linear_to_srgb8(f64::NAN), 0);
         assert_eq!(linear_to_srgb8(2.0), 255);
         assert!((srgb_to_linear(0.5) - 0.214_041).abs() < 1e-6);
+        for i in 0..=1000 {
+            let c = f64::from(i) / 1000.0;
+            assert!(linear_to_srgb8_fast(c as f32).abs_diff(linear_to_srgb8(c)) <= 1);
+        }
+        assert_eq!(linear_to_srgb8_fast(f32::NAN), 0);
+        assert_eq!(linear_to_srgb8_fast(3.0), 255);
     }
 
     #[test]
