@@ -239,16 +239,6 @@ impl DvrVolume {
         self.geometry.index_to_physical(index)
     }
 
-    /// World → index linear map.
-    pub(crate) fn to_index_matrix(&self) -> DMat3 {
-        self.to_index
-    }
-
-    /// Grid dimensions.
-    pub(crate) fn dims(&self) -> [usize; 3] {
-        self.dims
-    }
-
     /// Trilinear code at continuous index `u`, clamped to the grid box.
     #[inline(always)]
     pub(crate) fn sample(&self, u: Vec3) -> f32 {
@@ -630,6 +620,24 @@ impl<'a> DvrRenderer<'a> {
         Ok(img)
     }
 
+    /// Whether a region whose codes span `[mn, mx]` can show anything in this mode.
+    pub(crate) fn range_visible(&self, mn: u16, mx: u16) -> bool {
+        match self.options.mode {
+            RenderMode::Composite => {
+                let i = |q: u16| self.entry_index(f32::from(q));
+                self.lut.any_visible(i(mn), i(mx))
+            }
+            RenderMode::Isosurface { .. } => f32::from(mx) >= self.level_code,
+            RenderMode::MaximumIntensity => true,
+        }
+    }
+
+    /// Whether a sample in the volume cell at offset `cell` can be visible.
+    #[inline(always)]
+    pub(crate) fn cells_visible(&self, cell: usize) -> bool {
+        self.cells.get(cell)
+    }
+
     /// Table entry of a code.
     #[inline(always)]
     pub(crate) fn entry_index(&self, q: f32) -> usize {
@@ -720,10 +728,8 @@ impl<'a> DvrRenderer<'a> {
                 let q = vol.sample_cell(cell, f);
                 let stop = acc.add(
                     q,
-                    u,
-                    d,
                     || (t - self.step >= t0).then(|| vol.sample(o + d * (t - self.step))),
-                    |p| grad_to_world * vol.gradient(p),
+                    |s| grad_to_world * vol.gradient(u - d * (self.step * s)),
                 );
                 k += 1;
                 if stop {
@@ -961,18 +967,17 @@ impl<'r> Accumulator<'r> {
         }
     }
 
-    /// Add the sample of code `q` at index position `u` (the ray's index-space direction per
-    /// unit parameter is `d`). `previous` gives, for the isosurface only, the code of the
-    /// previous sample on the ray (if the ray had one); `grad_at(p)` is the world gradient at
-    /// index position `p`. Returns whether the ray is finished.
+    /// Add the sample of code `q`. `previous` gives, for the isosurface only, the code of the
+    /// previous sample on the ray (if the ray had one); `grad_back(s)` is the world gradient
+    /// at the point `s` steps back along the ray from this sample (`0 ≤ s < 1`; composite
+    /// shading uses `s = 0`, the isosurface the interpolated crossing). Returns whether the
+    /// ray is finished.
     #[inline(always)]
     pub(crate) fn add(
         &mut self,
         q: f32,
-        u: Vec3,
-        d: Vec3,
         previous: impl FnOnce() -> Option<f32>,
-        grad_at: impl Fn(Vec3) -> Vec3,
+        grad_back: impl Fn(f32) -> Vec3,
     ) -> bool {
         let r = self.renderer;
         match r.options.mode {
@@ -980,7 +985,7 @@ impl<'r> Accumulator<'r> {
                 let i = r.entry_index(q);
                 let a = r.alpha[i];
                 if a > 0.0 {
-                    let (k, s) = self.light(|| grad_at(u));
+                    let (k, s) = self.light(|| grad_back(0.0));
                     let c = (r.rgb[i] * k + Vec3::splat(s)).min(Vec3::ONE);
                     self.color += c * (self.trans * a);
                     self.trans *= 1.0 - a;
@@ -996,15 +1001,12 @@ impl<'r> Accumulator<'r> {
                 if q < r.level_code {
                     return false;
                 }
-                let p = match previous() {
-                    Some(p) if p < r.level_code => {
-                        let f = (r.level_code - p) / (q - p);
-                        u - d * (r.step * (1.0 - f))
-                    }
-                    _ => u,
+                let back = match previous() {
+                    Some(p) if p < r.level_code => 1.0 - (r.level_code - p) / (q - p),
+                    _ => 0.0,
                 };
                 let c = r.rgb[r.entry_index(r.level_code.max(0.0))];
-                let (k, s) = self.light(|| grad_at(p));
+                let (k, s) = self.light(|| grad_back(back));
                 self.hit = Some((c * k + Vec3::splat(s)).min(Vec3::ONE));
                 true
             }

@@ -514,3 +514,201 @@ fn value_coding_is_exact_for_ct_and_percentiles_come_from_the_histogram() {
     assert_eq!(df.value_range().0, 0.0);
     assert!((df.value_range().1 - 63.0 * 1234.567).abs() < 1e-2);
 }
+
+mod deformed {
+    use super::*;
+    use volmorph_deform::{Identity, SpaceMap};
+    use volmorph_render::DeformedView;
+
+    /// A smooth pull-back: a bend and a twist about the volume's centre.
+    struct Bend {
+        centre: DVec3,
+    }
+
+    impl SpaceMap for Bend {
+        fn apply(&self, p: DVec3) -> DVec3 {
+            let q = p - self.centre;
+            let a = 0.04 * q.z;
+            let (s, c) = a.sin_cos();
+            self.centre
+                + DVec3::new(
+                    c * q.x - s * q.y + 1.5 * (q.z / 6.0).sin(),
+                    s * q.x + c * q.y,
+                    q.z,
+                )
+        }
+    }
+
+    #[test]
+    fn identity_map_renders_the_undeformed_picture() {
+        let v = phantom();
+        let dv = DvrVolume::from_volume(&v).unwrap();
+        for mode in [
+            RenderMode::Composite,
+            RenderMode::MaximumIntensity,
+            RenderMode::Isosurface { level: 300.0 },
+        ] {
+            let r = DvrRenderer::new(
+                &dv,
+                DvrOptions {
+                    mode,
+                    step: Some(0.4),
+                    ..DvrOptions::new(bone())
+                },
+            )
+            .unwrap();
+            for nodes in [[2, 2, 2], [9, 7, 5]] {
+                let view = DeformedView::from_map(&dv, &Identity, nodes).unwrap();
+                for cam in cameras() {
+                    let plain = r.render(&cam).unwrap();
+                    let deformed = r.render_deformed(&view, &cam).unwrap();
+                    let diff = max_diff(&plain, &deformed);
+                    let same = plain
+                        .pixels()
+                        .iter()
+                        .zip(deformed.pixels())
+                        .filter(|(a, b)| a == b)
+                        .count();
+                    assert!(diff <= 1, "{mode:?} {nodes:?}: {diff} levels");
+                    assert!(
+                        same * 100 >= 99 * plain.pixels().len(),
+                        "{mode:?}: {same} equal pixels"
+                    );
+                }
+            }
+        }
+    }
+
+    #[test]
+    fn a_translation_shows_the_volume_moved_the_other_way() {
+        let v = phantom();
+        let dv = DvrVolume::from_volume(&v).unwrap();
+        let s = DVec3::new(1.5, -1.0, 0.7);
+        struct Shift(DVec3);
+        impl SpaceMap for Shift {
+            fn apply(&self, p: DVec3) -> DVec3 {
+                p + self.0
+            }
+        }
+        let view = DeformedView::from_map(&dv, &Shift(s), [5, 5, 5]).unwrap();
+        // The same content with its origin moved by −s.
+        let mut moved = v.clone();
+        let g = *v.geometry();
+        moved.set_geometry(g.with_origin(g.origin - s)).unwrap();
+        let dm = DvrVolume::from_volume(&moved).unwrap();
+        let opts = DvrOptions {
+            step: Some(0.4),
+            ..DvrOptions::new(bone())
+        };
+        let r = DvrRenderer::new(&dv, opts.clone()).unwrap();
+        let rm = DvrRenderer::new(&dm, opts).unwrap();
+        for cam in cameras() {
+            let a = r.render_deformed(&view, &cam).unwrap();
+            let b = rm.render(&cam).unwrap();
+            let db = psnr(&a, &b).unwrap();
+            assert!(db >= 40.0, "PSNR {db:.1}");
+            assert_ne!(
+                a,
+                r.render(&cam).unwrap(),
+                "the translation changes the picture"
+            );
+        }
+    }
+
+    #[test]
+    fn a_bent_volume_agrees_with_the_reference_through_the_exact_map() {
+        let v = phantom();
+        let dv = DvrVolume::from_volume(&v).unwrap();
+        let g = *v.geometry();
+        let (lo, hi) = g.physical_bounds();
+        let bend = Bend {
+            centre: 0.5 * (lo + hi),
+        };
+        let view = DeformedView::from_map(&dv, &bend, g.dims).unwrap();
+        let tf = bone();
+        let step = 0.4;
+        let r = DvrRenderer::new(
+            &dv,
+            DvrOptions {
+                step: Some(step),
+                ..DvrOptions::new(tf.clone())
+            },
+        )
+        .unwrap();
+        let a = g.index_to_physical_matrix();
+        let a_inv = a.inverse();
+        let shading = Shading::default();
+        for cam in cameras() {
+            let got = r.render_deformed(&view, &cam).unwrap();
+            let lit = shading.for_camera(&cam).unwrap();
+            let want = RgbaImage::from_fn(cam.width(), cam.height(), |x, y| {
+                let ray = cam.ray(x, y);
+                let o = g.physical_to_index(ray.origin);
+                let d = a_inv * ray.dir;
+                let (mut t0, mut t1) = (0.0f64, f64::INFINITY);
+                for ax in 0..3 {
+                    let n = (g.dims[ax] - 1) as f64;
+                    if d[ax] == 0.0 {
+                        if o[ax] < 0.0 || o[ax] > n {
+                            return [0, 0, 0, 255];
+                        }
+                        continue;
+                    }
+                    let (ta, tb) = (-o[ax] / d[ax], (n - o[ax]) / d[ax]);
+                    t0 = t0.max(ta.min(tb));
+                    t1 = t1.min(ta.max(tb));
+                }
+                let (mut color, mut trans) = ([0.0f64; 3], 1.0f64);
+                let mut k = (t0 / step).ceil();
+                while k * step < t1 {
+                    let x = ray.at(k * step);
+                    let u = g.physical_to_index(bend.apply(x));
+                    k += 1.0;
+                    let n = (0..3).all(|ax| u[ax] >= 0.0 && u[ax] <= (g.dims[ax] - 1) as f64);
+                    if !n {
+                        continue;
+                    }
+                    let (c, op) = tf.lookup(trilinear(&v, u));
+                    let alpha = corrected_opacity(op, step, tf.unit_distance());
+                    if alpha > 0.0 {
+                        let gu = DVec3::new(
+                            trilinear(&v, u + DVec3::X) - trilinear(&v, u - DVec3::X),
+                            trilinear(&v, u + DVec3::Y) - trilinear(&v, u - DVec3::Y),
+                            trilinear(&v, u + DVec3::Z) - trilinear(&v, u - DVec3::Z),
+                        ) * 0.5;
+                        // ∇ₓ V(A⁻¹(bend(x) − o)) = Jᵀ A⁻ᵀ ∇ᵤV.
+                        let grad = bend.jacobian(x).transpose() * (a_inv.transpose() * gu);
+                        let c = lit.shade(c, grad, -ray.dir);
+                        for ch in 0..3 {
+                            color[ch] += trans * alpha * c[ch];
+                        }
+                        trans *= 1.0 - alpha;
+                    }
+                }
+                [
+                    linear_to_srgb8(color[0]),
+                    linear_to_srgb8(color[1]),
+                    linear_to_srgb8(color[2]),
+                    255,
+                ]
+            })
+            .unwrap();
+            let db = psnr(&got, &want).unwrap();
+            assert!(db >= 35.0, "PSNR {db:.1}");
+            assert_ne!(got, r.render(&cam).unwrap(), "the bend changes the picture");
+        }
+    }
+
+    #[test]
+    fn a_view_for_another_volume_is_refused() {
+        let v = phantom();
+        let dv = DvrVolume::from_volume(&v).unwrap();
+        let other =
+            DvrVolume::from_volume(&Volume::<i16>::filled(Geometry::new([4, 4, 4]), 0).unwrap())
+                .unwrap();
+        let view = DeformedView::from_map(&other, &Identity, [3, 3, 3]).unwrap();
+        let r = DvrRenderer::new(&dv, DvrOptions::new(bone())).unwrap();
+        assert!(r.render_deformed(&view, &cameras()[0]).is_err());
+        assert!(DeformedView::from_map(&dv, &Identity, [1, 3, 3]).is_err());
+    }
+}
