@@ -24,6 +24,7 @@
 
 mod camera;
 mod colormap;
+pub mod cubecut;
 pub mod deformed;
 pub mod draw;
 pub mod dvr;
@@ -41,6 +42,7 @@ mod window;
 
 pub use camera::{BOX_FILL, Camera, FIT_MARGIN, Framing, Projection};
 pub use colormap::{Colormap, LUT_SIZE, Lut, ScalarStyle, render_scalar, render_scalar_with};
+pub use cubecut::{CutMethod, ProxyBox, ProxyGeometry, Slicing};
 pub use deformed::DeformedView;
 pub use dvr::{ClipPlane, DvrOptions, DvrRenderer, DvrVolume, RenderMode};
 pub use error::RenderError;
