@@ -115,6 +115,21 @@ impl DeformedView {
         map: &M,
         nodes: [usize; 3],
     ) -> Result<Self, RenderError> {
+        Self::from_map_over(volume, map, volume.geometry(), nodes)
+    }
+
+    /// Like [`DeformedView::from_map`], with the grid spanning the voxel centres of `region`
+    /// instead of the volume's (the displayed region, for example another volume's box: the
+    /// quality view shows a target volume pulled back over its source).
+    ///
+    /// # Errors
+    /// As [`DeformedView::from_map`].
+    pub fn from_map_over<M: SpaceMap + ?Sized>(
+        volume: &DvrVolume,
+        map: &M,
+        region: &Geometry,
+        nodes: [usize; 3],
+    ) -> Result<Self, RenderError> {
         if nodes.iter().any(|&n| n < 2) {
             return Err(RenderError::invalid(format!(
                 "a deformation grid needs at least 2 nodes per axis, got {nodes:?}"
@@ -123,7 +138,7 @@ impl DeformedView {
         let deform = |e: volmorph_deform::DeformError| {
             RenderError::invalid(format!("cannot sample the deformation: {e}"))
         };
-        let grid = SampledMap::covering(volume.geometry(), nodes).map_err(deform)?;
+        let grid = SampledMap::covering(region, nodes).map_err(deform)?;
         let sampled = SampledMap::from_map(map, grid).map_err(deform)?;
         Self::new(volume, &sampled)
     }
@@ -213,6 +228,25 @@ impl DeformedView {
 
     pub(crate) fn to_grid(&self) -> DMat3 {
         self.to_grid
+    }
+
+    /// The world positions of the eight nodes of grid cell `n` (low corner node `n`).
+    pub(crate) fn cell_world_corners(&self, n: usize) -> [glam::DVec3; 8] {
+        let [nx, ny, _] = self.grid.dims;
+        let (i, j, k) = (n % nx, n / nx % ny, n / (nx * ny));
+        std::array::from_fn(|c| {
+            let idx = glam::DVec3::new(
+                (i + (c & 1)) as f64,
+                (j + (c >> 1 & 1)) as f64,
+                (k + (c >> 2)) as f64,
+            );
+            self.grid.index_to_physical(idx)
+        })
+    }
+
+    /// The box of the map's volume indices over grid cell `n`.
+    pub(crate) fn cell_box(&self, n: usize) -> (Vec3, Vec3) {
+        self.cell_box[n]
     }
 
     /// Walk the samples `t = kΔ` of the ray (grid index space `o + t·d`) through the grid cells

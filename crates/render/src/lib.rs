@@ -33,6 +33,7 @@ mod geometry;
 mod image;
 pub mod octree;
 mod png_file;
+pub mod quality;
 mod raster;
 pub mod shading;
 mod slice_picture;
@@ -54,6 +55,7 @@ pub use png_file::{
     decode_png, encode_png_rgba, read_png, write_png_grey8, write_png_grey16, write_png_rgb,
     write_png_rgba,
 };
+pub use quality::{QualityOptions, render_quality};
 pub use raster::{MAX_SUPERSAMPLE, ShadeStyle, render_triangles};
 pub use shading::{Lighting, Shading};
 pub use slice_picture::{SliceStyle, render_slice};

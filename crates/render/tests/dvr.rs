@@ -712,3 +712,99 @@ mod deformed {
         assert!(DeformedView::from_map(&dv, &Identity, [1, 3, 3]).is_err());
     }
 }
+
+mod quality {
+    use super::*;
+    use volmorph_deform::Identity;
+    use volmorph_render::{DeformedView, QualityOptions, render_quality};
+
+    /// The phantom with an extra bright ball (a "target" brighter than the source there).
+    fn brighter() -> Volume<i16> {
+        let mut v = phantom();
+        let g = *v.geometry();
+        let c = g.index_to_physical(DVec3::new(8.0, 8.0, 6.0));
+        for k in 0..g.dims[2] {
+            for j in 0..g.dims[1] {
+                for i in 0..g.dims[0] {
+                    let p = g.index_to_physical(DVec3::new(i as f64, j as f64, k as f64));
+                    if (p - c).length() < 3.0 {
+                        *v.get_mut(i, j, k).unwrap() += 900;
+                    }
+                }
+            }
+        }
+        v
+    }
+
+    fn options() -> QualityOptions {
+        QualityOptions {
+            step: Some(0.4),
+            // One window for both, so that equal values give equal intensities.
+            source_window: Some(volmorph_render::Window::from_range(-1000.0, 2500.0).unwrap()),
+            target_window: Some(volmorph_render::Window::from_range(-1000.0, 2500.0).unwrap()),
+            ..QualityOptions::default()
+        }
+    }
+
+    #[test]
+    fn identical_volumes_are_green_and_differences_red_or_blue() {
+        let s = DvrVolume::from_volume(&phantom()).unwrap();
+        let t = DvrVolume::from_volume(&brighter()).unwrap();
+        let cam = cameras()[0];
+        let view_ss = DeformedView::from_map_over(&s, &Identity, s.geometry(), [5, 5, 5]).unwrap();
+        let same = render_quality(&s, &s, &view_ss, &cam, &options()).unwrap();
+        assert!(
+            same.pixels().iter().all(|p| p[0] <= 1 && p[2] <= 1),
+            "matching volumes show red or blue"
+        );
+        assert!(
+            same.pixels().iter().any(|p| p[1] > 30),
+            "matching volumes show no green"
+        );
+        // The target is brighter in a ball: blue there; swapped, red (symmetry).
+        let view_st = DeformedView::from_map_over(&t, &Identity, s.geometry(), [5, 5, 5]).unwrap();
+        let st = render_quality(&s, &t, &view_st, &cam, &options()).unwrap();
+        let view_ts = DeformedView::from_map_over(&s, &Identity, t.geometry(), [5, 5, 5]).unwrap();
+        let ts = render_quality(&t, &s, &view_ts, &cam, &options()).unwrap();
+        let bluest = st.pixels().iter().max_by_key(|p| p[2]).unwrap();
+        assert!(bluest[2] > 60, "no blue difference: {bluest:?}");
+        assert!(
+            st.pixels().iter().all(|p| p[0] <= 1),
+            "red where the source is never brighter"
+        );
+        for (a, b) in st.pixels().iter().zip(ts.pixels()) {
+            assert!(
+                a[0].abs_diff(b[2]) <= 1 && a[2].abs_diff(b[0]) <= 1 && a[1].abs_diff(b[1]) <= 1,
+                "{a:?} vs {b:?}"
+            );
+        }
+        // Culling and early termination move no channel by more than one level.
+        let slow = render_quality(
+            &s,
+            &t,
+            &view_st,
+            &cam,
+            &QualityOptions {
+                skip_empty_space: false,
+                early_termination: false,
+                ..options()
+            },
+        )
+        .unwrap();
+        assert!(max_diff(&slow, &st) <= 1);
+        // Bad options.
+        assert!(
+            render_quality(
+                &s,
+                &t,
+                &view_st,
+                &cam,
+                &QualityOptions {
+                    threshold: 1.0,
+                    ..options()
+                }
+            )
+            .is_err()
+        );
+    }
+}
