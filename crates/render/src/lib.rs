@@ -52,8 +52,8 @@ pub use image::{
     MAX_IMAGE_PIXELS, RgbaImage, ScalarImage, blend_over, finite_range, luma709, psnr,
 };
 pub use png_file::{
-    decode_png, encode_png_rgba, read_png, write_png_grey8, write_png_grey16, write_png_rgb,
-    write_png_rgba,
+    MAX_APNG_FRAMES, decode_png, encode_png_rgba, read_png, write_apng, write_png_grey8,
+    write_png_grey16, write_png_rgb, write_png_rgba,
 };
 pub use quality::{QualityOptions, render_quality};
 pub use raster::{MAX_SUPERSAMPLE, ShadeStyle, render_triangles};

@@ -880,7 +880,7 @@ mod tests {
         assert_eq!(tf.opacity_at(10.0), 0.75);
         assert_eq!(tf.opacity_at(f64::NAN), 0.0);
         let (c, a) = tf.lookup(2.5);
-        assert!((c[0] - srgb_to_linear(0.25)).abs() < 1e-15 && a == 0.25);
+        assert!((c[0] - srgb_to_linear(0.25)).abs() < 1e-15 && a == 0.75);
         assert_eq!(tf.unit_distance(), 2.0);
     }
 
