@@ -72,6 +72,8 @@ pub struct DvrVolume {
     /// World → continuous index, linear part (`(direction · diag(spacing))⁻¹`).
     to_index: DMat3,
     octree: MinMaxOctree,
+    /// Whether the source voxel type is an integer type.
+    integer: bool,
     /// Half central differences of the codes per voxel (one-sided at the faces), made on the
     /// first shaded picture.
     gradients: OnceLock<Vec<[i16; 3]>>,
@@ -150,6 +152,7 @@ impl DvrVolume {
             value_step,
             code_max,
             octree,
+            integer: !float,
             gradients: OnceLock::new(),
         })
     }
@@ -158,6 +161,13 @@ impl DvrVolume {
     #[must_use]
     pub fn geometry(&self) -> &Geometry {
         &self.geometry
+    }
+
+    /// Whether the source voxels were integers (their values are then coded exactly when they
+    /// span at most 65 536 values).
+    #[must_use]
+    pub fn is_integer(&self) -> bool {
+        self.integer
     }
 
     /// Smallest and largest finite voxel value.
@@ -567,6 +577,12 @@ impl<'a> DvrRenderer<'a> {
             cells,
             level_code,
         })
+    }
+
+    /// The transfer function.
+    #[must_use]
+    pub fn transfer(&self) -> &TransferFunction {
+        &self.options.transfer
     }
 
     /// The sampling step in world units.

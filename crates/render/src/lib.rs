@@ -32,6 +32,7 @@ mod error;
 mod geometry;
 mod image;
 pub mod octree;
+pub mod picture;
 mod png_file;
 pub mod quality;
 mod raster;
@@ -54,6 +55,9 @@ pub use image::{
 pub use png_file::{
     MAX_APNG_FRAMES, decode_png, encode_png_rgba, read_png, write_apng, write_png_grey8,
     write_png_grey16, write_png_rgb, write_png_rgba,
+};
+pub use picture::{
+    CameraKind, ComparePictures, PictureMode, PictureSpec, TransferChoice, VolumePictures,
 };
 pub use quality::{QualityOptions, render_quality};
 pub use raster::{MAX_SUPERSAMPLE, ShadeStyle, render_triangles};

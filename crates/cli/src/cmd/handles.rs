@@ -148,7 +148,7 @@ pub fn run(cmd: &Command) -> anyhow::Result<()> {
 }
 
 /// Read the handle set of `--handles` or `--from/--to`.
-fn read_handle_set(a: &MapArgs) -> anyhow::Result<HandleSet> {
+pub(crate) fn read_handle_set(a: &MapArgs) -> anyhow::Result<HandleSet> {
     match (&a.handles, &a.from, &a.to) {
         (Some(h), _, _) => {
             HandleSet::read(h).with_context(|| format!("cannot read handles {}", h.display()))
@@ -176,7 +176,7 @@ fn weighting(a: &MapArgs) -> anyhow::Result<Weighting> {
 }
 
 /// The map sending `sources` to `targets` (points or frames) by `a.method`.
-fn build_map(a: &MapArgs, set: &HandleSet, swap: bool) -> anyhow::Result<Box<dyn SpaceMap>> {
+pub(crate) fn build_map(a: &MapArgs, set: &HandleSet, swap: bool) -> anyhow::Result<Box<dyn SpaceMap>> {
     if set.dim != 3 {
         bail!(
             "3D deformations need 3D handles (the file has {}D coordinates)",
