@@ -1,8 +1,9 @@
 //! `volmorph render`: direct volume rendering of a volume, as deformed by a map, turntables,
 //! and McPhail's quality view of a source against a deformed target.
 //!
-//! The deformation is a pull-back, as `volmorph warp` uses it: `--map` takes a lattice file
-//! (`.json`, `.tfm`, `.bxf`), read as the map from displayed points to the volume's points;
+//! The deformation is a pull-back, as `volmorph warp` uses it: `--map` takes any map file
+//! (volmorph map JSON of any kind, ITK `.tfm`, `.bxf`), read as the map from displayed points
+//! to the volume's points;
 //! handle files (`--handles` or `--from/--to`) deform so that the source handles move to
 //! their targets (as `volmorph handles warp`). With `--compare SOURCE TARGET` the target is
 //! pulled back onto the source: `--map` from source points to target points, or the handles'
@@ -12,14 +13,14 @@ use std::path::{Path, PathBuf};
 use std::time::Instant;
 
 use anyhow::{Context, bail};
-use volmorph_deform::formats::read_lattice;
 use volmorph_deform::{Identity, SpaceMap};
+use volmorph_maps::{AnyMap, HandleDirection, handle_map, read_map};
 use volmorph_render::{
     CameraKind, ClipPlane, ComparePictures, DvrVolume, PictureMode, PictureSpec,
     QualityOptions, RgbaImage, TransferChoice, UpAxis, VolumePictures, write_apng,
     write_png_rgba,
 };
-use volmorph_volume::format;
+use volmorph_volume_io as format;
 
 use super::handles::{self, MapArgs};
 use crate::progress;
@@ -93,7 +94,7 @@ pub struct Args {
     /// removed half (world coordinates).
     #[arg(long, value_name = "X,Y,Z,NX,NY,NZ", allow_hyphen_values = true)]
     pub clip: Option<String>,
-    /// Lattice file (.json, .tfm, .bxf) used as the pull-back map.
+    /// Map file (volmorph map JSON of any kind, ITK .tfm, .bxf) used as the pull-back map.
     #[arg(long, conflicts_with_all = ["handles", "from"])]
     pub map: Option<PathBuf>,
     /// A handle deformation instead of --map.
@@ -158,18 +159,20 @@ fn clip(s: &str) -> anyhow::Result<ClipPlane> {
 
 /// The pull-back map of the arguments, if any. `forward` builds a handle map from sources to
 /// targets (the comparison); otherwise from targets to sources (the deformed picture).
-fn map(a: &Args, forward: bool) -> anyhow::Result<Option<Box<dyn SpaceMap>>> {
+fn map(a: &Args, forward: bool) -> anyhow::Result<Option<AnyMap>> {
     if let Some(p) = &a.map {
-        let lattice = read_lattice(p).with_context(|| format!("cannot read map {}", p.display()))?;
-        return Ok(Some(Box::new(lattice)));
+        return Ok(Some(read_map(p).context("cannot read the map")?));
     }
     if a.handles.handles.is_some() || a.handles.from.is_some() {
         let set = handles::read_handle_set(&a.handles)?;
-        set.validate().context("bad handles")?;
-        return Ok(Some(
-            handles::build_map(&a.handles, &set, !forward)
-                .context("cannot build the deformation")?,
-        ));
+        let direction = if forward {
+            HandleDirection::SourcesToTargets
+        } else {
+            HandleDirection::TargetsToSources
+        };
+        let m = handle_map(&set, a.handles.method.into(), &handles::options(&a.handles)?, direction)
+            .context("cannot build the deformation")?;
+        return Ok(Some(m));
     }
     Ok(None)
 }
@@ -216,7 +219,10 @@ pub fn run(a: &Args) -> anyhow::Result<()> {
     let (frames, summary) = if let Some(pair) = &a.compare {
         let (source, target) = (read(&pair[0])?, read(&pair[1])?);
         let m = map(a, true)?;
-        let m: &dyn SpaceMap = m.as_deref().unwrap_or(&Identity);
+        let m: &dyn SpaceMap = match &m {
+            Some(m) => m,
+            None => &Identity,
+        };
         pb.set_message("rendering");
         let pics = ComparePictures::new(&source, &target, m, spec, QualityOptions::default())?;
         let frames = timed(a.repeat, pics.frame_count(), |i| pics.frame(i))?;
@@ -227,7 +233,7 @@ pub fn run(a: &Args) -> anyhow::Result<()> {
         let volume = read(input)?;
         let m = map(a, false)?;
         pb.set_message("rendering");
-        let pics = VolumePictures::new(&volume, m.as_deref(), spec)?;
+        let pics = VolumePictures::new(&volume, m.as_ref().map(|m| m as &dyn SpaceMap), spec)?;
         if let Some(p) = &a.save_transfer {
             pics.renderer()
                 .transfer()
