@@ -59,7 +59,7 @@ pub use png_file::{
 pub use picture::{
     CameraKind, ComparePictures, PictureMode, PictureSpec, TransferChoice, VolumePictures,
 };
-pub use quality::{QualityOptions, render_quality};
+pub use quality::{QUALITY_UNITS_ACROSS, QualityOptions, render_quality};
 pub use raster::{MAX_SUPERSAMPLE, ShadeStyle, render_triangles};
 pub use shading::{Lighting, Shading};
 pub use slice_picture::{SliceStyle, render_slice};

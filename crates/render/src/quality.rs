@@ -39,6 +39,11 @@ use crate::shading::{linear_to_srgb8_fast, srgb8_to_linear};
 use crate::transfer::corrected_opacity;
 use crate::window::{AUTO_WINDOW_PERCENTILES, Window};
 
+/// Unit distances across the source's box diagonal when [`QualityOptions::unit_distance`] is
+/// `None`: a 256-unit diagonal, about 1.4 mm for a head CT (a 350 mm diagonal), the scale the
+/// default opacities were chosen at.
+pub const QUALITY_UNITS_ACROSS: f64 = 256.0;
+
 /// Options of [`render_quality`].
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct QualityOptions {
@@ -55,8 +60,10 @@ pub struct QualityOptions {
     pub difference_opacity: f64,
     /// Emission per unit distance of matched material.
     pub emission: f64,
-    /// Distance the two opacities above refer to, world units.
-    pub unit_distance: f64,
+    /// Distance the two opacities above refer to, world units; `None`: the diagonal of the
+    /// source's box over [`QUALITY_UNITS_ACROSS`], so the picture does not depend on the
+    /// volume's physical size (about 1.4 mm for a head CT).
+    pub unit_distance: Option<f64>,
     /// Colour behind the volumes (straight alpha, 8-bit sRGB).
     pub background: [u8; 4],
     /// Stop rays once opaque.
@@ -66,8 +73,9 @@ pub struct QualityOptions {
 }
 
 impl Default for QualityOptions {
-    /// Automatic windows, threshold 0.05, absorption 0.5 per millimetre per unit difference,
-    /// emission 0.01 per millimetre, on black.
+    /// Automatic windows, threshold 0.05, absorption 0.5 per unit distance per unit
+    /// difference, emission 0.01 per unit distance, the unit distance from the volume's size,
+    /// on black.
     fn default() -> Self {
         Self {
             step: None,
@@ -76,7 +84,7 @@ impl Default for QualityOptions {
             threshold: 0.05,
             difference_opacity: 0.5,
             emission: 0.01,
-            unit_distance: 1.0,
+            unit_distance: None,
             background: [0, 0, 0, 255],
             early_termination: true,
             skip_empty_space: true,
@@ -148,14 +156,18 @@ pub fn render_quality(
         && o.difference_opacity >= 0.0
         && o.difference_opacity.is_finite()
         && (0.0..=1.0).contains(&o.emission)
-        && positive(o.unit_distance))
+        && o.unit_distance.is_none_or(positive))
     {
         return Err(RenderError::invalid(format!(
             "quality view: threshold {} must be in [0, 1), difference opacity {} finite and ≥ 0, \
-             emission {} in [0, 1], unit distance {} positive",
+             emission {} in [0, 1], unit distance {:?} positive",
             o.threshold, o.difference_opacity, o.emission, o.unit_distance
         )));
     }
+    let unit_distance = o.unit_distance.unwrap_or_else(|| {
+        let (lo, hi) = source.geometry().physical_bounds();
+        (hi - lo).length().max(f64::MIN_POSITIVE) / QUALITY_UNITS_ACROSS
+    });
     let spacing = source.geometry().spacing;
     let step = o
         .step
@@ -167,7 +179,7 @@ pub fn render_quality(
     }
     let ws = CodeWindow::new(source, o.source_window, o.threshold)?;
     let wt = CodeWindow::new(target, o.target_window, o.threshold)?;
-    let emission = corrected_opacity(o.emission, step, o.unit_distance) as f32;
+    let emission = corrected_opacity(o.emission, step, unit_distance) as f32;
     let (w, h) = (camera.width(), camera.height());
     let mut img = RgbaImage::new(w, h, [0; 4])?;
     let bg = o.background;
@@ -232,7 +244,7 @@ pub fn render_quality(
             let g = is.min(it);
             let c = Vec3::new(is - g, g, it - g);
             let absorb = ((o.difference_opacity as f32) * (is - it).abs()).min(1.0);
-            let a = corrected_opacity(f64::from(absorb), f64::from(step), o.unit_distance) as f32;
+            let a = corrected_opacity(f64::from(absorb), f64::from(step), unit_distance) as f32;
             color += c * (trans * (a + emission).min(1.0));
             trans *= 1.0 - a;
             o.early_termination && trans < MIN_TRANSMITTANCE

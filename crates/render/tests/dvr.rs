@@ -746,6 +746,44 @@ mod quality {
         }
     }
 
+    /// Regression: the quality view's opacities were per millimetre, so a volume a few units
+    /// across (a phantom in unit coordinates) came out almost black. They now scale with the
+    /// volume: shrinking the geometry (and the step with it) keeps the picture.
+    #[test]
+    fn quality_view_of_a_small_volume_is_not_dim() {
+        let big = phantom();
+        let mut small = big.clone();
+        let g = *big.geometry();
+        let k = 0.05;
+        small
+            .set_geometry(g.with_spacing(g.spacing * k).with_origin(g.origin * k))
+            .unwrap();
+        let pictures = [(&big, 1.0), (&small, k)].map(|(v, scale)| {
+            let dv = DvrVolume::from_volume(v).unwrap();
+            let view = DeformedView::from_map_over(&dv, &Identity, dv.geometry(), [5, 5, 5]).unwrap();
+            let cam = Orbit::new(30.0, 20.0, UpAxis::Z)
+                .unwrap()
+                .camera(
+                    dv.geometry().physical_bounds(),
+                    Projection::Perspective {
+                        fov_y: DEFAULT_FOV_Y,
+                    },
+                    Framing::Sphere,
+                    48,
+                    48,
+                )
+                .unwrap();
+            let o = QualityOptions {
+                step: Some(0.4 * scale),
+                ..options()
+            };
+            render_quality(&dv, &dv, &view, &cam, &o).unwrap()
+        });
+        assert!(max_diff(&pictures[0], &pictures[1]) <= 1);
+        let greenest = pictures[1].pixels().iter().map(|p| p[1]).max().unwrap();
+        assert!(greenest > 60, "matched material glows dimly: {greenest}");
+    }
+
     #[test]
     fn identical_volumes_are_green_and_differences_red_or_blue() {
         let s = DvrVolume::from_volume(&phantom()).unwrap();
