@@ -2024,7 +2024,15 @@ fn render_draws_a_volume_deformed_turning_and_compared() {
     let tf = "0:0,0,0,0; 120:0,0,0,0; 128:0.9,0.8,0.7,0.8; 255:1,1,1,1";
     let plain = d.join("plain.png");
     let out = ok(&[
-        &"render", &vol, &"-o", &plain, &"--transfer", &tf, &"--size", &"48x40", &"--view",
+        &"render",
+        &vol,
+        &"-o",
+        &plain,
+        &"--transfer",
+        &tf,
+        &"--size",
+        &"48x40",
+        &"--view",
         &"30,20",
     ]);
     assert!(out.contains("rendered"), "{out}");
@@ -2032,7 +2040,10 @@ fn render_draws_a_volume_deformed_turning_and_compared() {
     assert_eq!((img.width(), img.height()), (48, 40));
     assert_eq!(img.get(0, 0), Some([0, 0, 0, 255]), "corner not background");
     // The 40³ teapot fills about a fifth of the framed box's width: some 80 pixels.
-    assert!(img.pixels().iter().filter(|p| p[0] > 60).count() > 40, "teapot not drawn");
+    assert!(
+        img.pixels().iter().filter(|p| p[0] > 60).count() > 40,
+        "teapot not drawn"
+    );
     // Deformed by handles (a shift of the spout region): a different picture.
     let handles = d.join("moves.json");
     std::fs::write(
@@ -2047,14 +2058,37 @@ fn render_draws_a_volume_deformed_turning_and_compared() {
     .unwrap();
     let bent = d.join("bent.png");
     ok(&[
-        &"render", &vol, &"-o", &bent, &"--transfer", &tf, &"--size", &"48x40", &"--view",
-        &"30,20", &"--handles", &handles, &"--method", &"affine", &"--grid", &"9",
+        &"render",
+        &vol,
+        &"-o",
+        &bent,
+        &"--transfer",
+        &tf,
+        &"--size",
+        &"48x40",
+        &"--view",
+        &"30,20",
+        &"--handles",
+        &handles,
+        &"--method",
+        &"affine",
+        &"--grid",
+        &"9",
     ]);
     assert_ne!(volmorph_render::read_png(&bent).unwrap(), img);
     // A turntable: frames and an animated PNG.
     let spin = d.join("spin");
     ok(&[
-        &"render", &vol, &"-o", &spin, &"--frames", &"3", &"--size", &"24", &"--mode", &"mip",
+        &"render",
+        &vol,
+        &"-o",
+        &spin,
+        &"--frames",
+        &"3",
+        &"--size",
+        &"24",
+        &"--mode",
+        &"mip",
     ]);
     for f in ["frame0000.png", "frame0002.png", "turntable.png"] {
         assert!(spin.join(f).is_file(), "{f} missing");
@@ -2063,15 +2097,36 @@ fn render_draws_a_volume_deformed_turning_and_compared() {
     assert!(apng.windows(4).any(|w| w == b"acTL"), "not animated");
     // The quality view of a volume against itself is green.
     let q = d.join("quality.png");
-    ok(&[&"render", &"--compare", &vol, &vol, &"-o", &q, &"--size", &"32"]);
+    ok(&[
+        &"render",
+        &"--compare",
+        &vol,
+        &vol,
+        &"-o",
+        &q,
+        &"--size",
+        &"32",
+    ]);
     let img = volmorph_render::read_png(&q).unwrap();
     assert!(img.pixels().iter().all(|p| p[0] <= 1 && p[2] <= 1));
     assert!(img.pixels().iter().any(|p| p[1] > 30));
     // An isosurface, the transfer function saved for other tools.
     let tfj = d.join("tf.json");
     ok(&[
-        &"render", &vol, &"-o", &d.join("iso.png"), &"--mode", &"iso", &"--level", &"127",
-        &"--size", &"24", &"--save-transfer", &tfj, &"--transfer", &"ct-bone",
+        &"render",
+        &vol,
+        &"-o",
+        &d.join("iso.png"),
+        &"--mode",
+        &"iso",
+        &"--level",
+        &"127",
+        &"--size",
+        &"24",
+        &"--save-transfer",
+        &tfj,
+        &"--transfer",
+        &"ct-bone",
     ]);
     let saved = volmorph_render::TransferFunction::read(&tfj).unwrap();
     assert_eq!(saved.name(), Some("ct-bone"));

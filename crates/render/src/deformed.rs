@@ -439,7 +439,8 @@ impl DvrRenderer<'_> {
             (t0, t1),
             self.step,
             |n| {
-                !(skip && !mip)
+                !skip
+                    || mip
                     || view.cell_visible(n, vol, memo, &|mn, mx| self.range_visible(mn, mx))
             },
             |c, u, t, jac| {

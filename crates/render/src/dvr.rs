@@ -117,7 +117,8 @@ impl DvrVolume {
                 || (f64::INFINITY, f64::NEG_INFINITY),
                 |(a, b), (c, d)| (a.min(c), b.max(d)),
             );
-        if !(lo <= hi) {
+        // The folds skip non-finite values, so lo > hi means none was finite.
+        if lo > hi {
             return Err(RenderError::invalid("no voxel value is finite"));
         }
         let float = matches!(T::TYPE, VoxelType::F32 | VoxelType::F64);

@@ -52,12 +52,12 @@ pub use geometry::{Aabb, Ray};
 pub use image::{
     MAX_IMAGE_PIXELS, RgbaImage, ScalarImage, blend_over, finite_range, luma709, psnr,
 };
+pub use picture::{
+    CameraKind, ComparePictures, PictureMode, PictureSpec, TransferChoice, VolumePictures,
+};
 pub use png_file::{
     MAX_APNG_FRAMES, decode_png, encode_png_rgba, read_png, write_apng, write_png_grey8,
     write_png_grey16, write_png_rgb, write_png_rgba,
-};
-pub use picture::{
-    CameraKind, ComparePictures, PictureMode, PictureSpec, TransferChoice, VolumePictures,
 };
 pub use quality::{QUALITY_UNITS_ACROSS, QualityOptions, render_quality};
 pub use raster::{MAX_SUPERSAMPLE, ShadeStyle, render_triangles};

@@ -388,10 +388,10 @@ mod tests {
             probes in proptest::collection::vec(proptest::array::uniform3(0.0f64..1.0), 40),
         ) {
             // Mostly-empty random data with visible values in [lo, lo + width].
-            let mut s = seed | 1;
+            let mut rng = volmorph_testkit::Rng::new(seed);
             let data = grid(dims, |_, _, _| {
-                s ^= s << 13; s ^= s >> 7; s ^= s << 17;
-                if s % sparsity == 0 { (s >> 20) as u16 % 256 } else { 0 }
+                let s = rng.next_u64();
+                if s.is_multiple_of(sparsity) { (s >> 20) as u16 % 256 } else { 0 }
             });
             let visible_value = |v: f64| v >= f64::from(lo) && v <= f64::from(lo) + f64::from(width);
             let t = MinMaxOctree::new(&data, dims, brick).unwrap();

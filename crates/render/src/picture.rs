@@ -77,11 +77,19 @@ impl TransferChoice {
         };
         match self {
             Self::Function(f) => Ok(f.clone()),
-            Self::Preset(p) => p.build(if p.is_absolute() { (0.0, 1.0) } else { robust()? }),
+            Self::Preset(p) => p.build(if p.is_absolute() {
+                (0.0, 1.0)
+            } else {
+                robust()?
+            }),
             Self::Auto => {
                 let (lo, hi) = volume.value_range();
                 let ct = volume.is_integer() && lo <= -900.0 && hi >= 1000.0;
-                let p = if ct { TransferPreset::CtBone } else { TransferPreset::Mri };
+                let p = if ct {
+                    TransferPreset::CtBone
+                } else {
+                    TransferPreset::Mri
+                };
                 Self::Preset(p).resolve(volume)
             }
         }
@@ -197,7 +205,13 @@ impl PictureSpec {
             },
             CameraKind::Orthographic => Projection::Orthographic { view_height: 1.0 },
         };
-        orbit.camera(bounds, projection, Framing::Sphere, self.size.0, self.size.1)
+        orbit.camera(
+            bounds,
+            projection,
+            Framing::Sphere,
+            self.size.0,
+            self.size.1,
+        )
     }
 }
 

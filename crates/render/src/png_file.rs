@@ -349,7 +349,7 @@ mod apng_tests {
         let bytes = std::fs::read(&path).unwrap();
         let has = |tag: &[u8]| bytes.windows(4).any(|w| w == tag);
         assert!(has(b"acTL") && has(b"fcTL") && has(b"fdAT"), "not an APNG");
-        let odd = vec![frames[0].clone(), RgbaImage::new(3, 3, [0; 4]).unwrap()];
+        let odd = [frames[0].clone(), RgbaImage::new(3, 3, [0; 4]).unwrap()];
         for (f, d) in [(&odd[..], 100), (&frames[..0], 100), (&frames[..], 0)] {
             let e = write_apng(&path, f, d).unwrap_err().to_string();
             assert!(e.contains("spin.png"), "{e}");

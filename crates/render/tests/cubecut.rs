@@ -77,21 +77,15 @@ fn distinct(pts: &[DVec3], tol: f64) -> Vec<DVec3> {
 }
 
 fn oblique_box(seed: u64) -> ProxyBox {
-    let r = |k: u64| {
-        ((seed
-            .wrapping_mul(6364136223846793005)
-            .wrapping_add(k * 1442695040888963407)
-            >> 33)
-            % 1000) as f64
-            / 1000.0
-    };
+    let mut rng = volmorph_testkit::Rng::new(seed);
+    let mut r = || rng.unit();
     let axes = DMat3::from_cols(
-        DVec3::new(3.0 + r(1), 0.4 * r(2), -0.3 * r(3)),
-        DVec3::new(-0.5 * r(4), 2.0 + r(5), 0.2 * r(6)),
-        DVec3::new(0.3 * r(7), -0.2 * r(8), 1.5 + r(9)),
+        DVec3::new(3.0 + r(), 0.4 * r(), -0.3 * r()),
+        DVec3::new(-0.5 * r(), 2.0 + r(), 0.2 * r()),
+        DVec3::new(0.3 * r(), -0.2 * r(), 1.5 + r()),
     );
     ProxyBox {
-        origin: DVec3::new(r(10) * 5.0 - 2.0, r(11) * 3.0, -r(12)),
+        origin: DVec3::new(r() * 5.0 - 2.0, r() * 3.0, -r()),
         axes,
         tex_origin: DVec3::splat(0.1),
         tex_size: DVec3::new(0.5, 0.25, 0.75),

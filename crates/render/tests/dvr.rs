@@ -760,7 +760,8 @@ mod quality {
             .unwrap();
         let pictures = [(&big, 1.0), (&small, k)].map(|(v, scale)| {
             let dv = DvrVolume::from_volume(v).unwrap();
-            let view = DeformedView::from_map_over(&dv, &Identity, dv.geometry(), [5, 5, 5]).unwrap();
+            let view =
+                DeformedView::from_map_over(&dv, &Identity, dv.geometry(), [5, 5, 5]).unwrap();
             let cam = Orbit::new(30.0, 20.0, UpAxis::Z)
                 .unwrap()
                 .camera(

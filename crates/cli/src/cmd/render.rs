@@ -16,9 +16,8 @@ use anyhow::{Context, bail};
 use volmorph_deform::{Identity, SpaceMap};
 use volmorph_maps::{AnyMap, HandleDirection, handle_map, read_map};
 use volmorph_render::{
-    CameraKind, ClipPlane, ComparePictures, DvrVolume, PictureMode, PictureSpec,
-    QualityOptions, RgbaImage, TransferChoice, UpAxis, VolumePictures, write_apng,
-    write_png_rgba,
+    CameraKind, ClipPlane, ComparePictures, DvrVolume, PictureMode, PictureSpec, QualityOptions,
+    RgbaImage, TransferChoice, UpAxis, VolumePictures, write_apng, write_png_rgba,
 };
 use volmorph_volume_io as format;
 
@@ -170,8 +169,13 @@ fn map(a: &Args, forward: bool) -> anyhow::Result<Option<AnyMap>> {
         } else {
             HandleDirection::TargetsToSources
         };
-        let m = handle_map(&set, a.handles.method.into(), &handles::options(&a.handles)?, direction)
-            .context("cannot build the deformation")?;
+        let m = handle_map(
+            &set,
+            a.handles.method.into(),
+            &handles::options(&a.handles)?,
+            direction,
+        )
+        .context("cannot build the deformation")?;
         return Ok(Some(m));
     }
     Ok(None)
@@ -245,7 +249,10 @@ pub fn run(a: &Args) -> anyhow::Result<()> {
         let what = format!(
             "{} ({}, step {:.3}, {visible} of {bricks} bricks visible{})",
             input.display(),
-            pics.renderer().transfer().name().unwrap_or("transfer function"),
+            pics.renderer()
+                .transfer()
+                .name()
+                .unwrap_or("transfer function"),
             pics.renderer().step(),
             if m.is_some() { ", deformed" } else { "" }
         );
