@@ -45,11 +45,20 @@ def volmorph_exe(root):
 
 
 def run_volmorph(exe, args):
-    out = subprocess.run([exe] + args, check=True, capture_output=True, text=True).stdout
+    out = subprocess.run([exe, "render"] + args, check=True, capture_output=True, text=True).stdout
     m = re.search(r"median ([0-9.]+) ms", out)
     if not m:
         sys.exit(f"unexpected volmorph output: {out}")
     return float(m.group(1)), out.strip()
+
+
+def physical_bounds(exe, volume):
+    """The volume's physical bounds as volmorph reads them (spacing and direction applied)."""
+    out = subprocess.run([exe, "info", volume], check=True, capture_output=True, text=True).stdout
+    m = re.search(r"bounds:\s*\(([^)]*)\)\s*\.\.\s*\(([^)]*)\)", out)
+    if not m:
+        sys.exit(f"unexpected volmorph info output: {out}")
+    return tuple([float(x) for x in g.split(",")] for g in m.groups())
 
 
 def handles_file(path, bounds, n=200, seed=20241201):
@@ -168,10 +177,10 @@ def main():
         step = float(re.search(r"step ([0-9.]+)", text).group(1))
         with open(tf_path) as f:
             tf = json.load(f)
-        theirs, _, bounds = vtk_render_times(a.volume, tf, step, a.size, a.repeat,
+        theirs, _, _ = vtk_render_times(a.volume, tf, step, a.size, a.repeat,
                                              os.path.join(out, "vtk.png"))
         h = os.path.join(out, "handles200.json")
-        handles_file(h, bounds)
+        handles_file(h, physical_bounds(exe, a.volume))
         deformed, text = run_volmorph(exe, [a.volume, "-o", os.path.join(out, "deformed.png"),
                                             "--handles", h, "--method", "affine",
                                             "--grid", "33"] + common)
