@@ -47,6 +47,45 @@ pub fn pair(s: &str) -> anyhow::Result<[f64; 2]> {
     Ok([a, b])
 }
 
+/// Largest picture side any command renders.
+pub const MAX_PICTURE_SIDE: u32 = 8192;
+
+/// Parse a picture size `WIDTHxHEIGHT` (e.g. `800x600`, `x` or `X`) or one number for a square.
+///
+/// # Errors
+/// If the text is not one or two whole numbers from 1 to [`MAX_PICTURE_SIDE`].
+pub fn size(s: &str) -> anyhow::Result<(u32, u32)> {
+    let (w, h) = s.split_once(['x', 'X']).unwrap_or((s, s));
+    let parse = |t: &str| -> anyhow::Result<u32> {
+        let v: u32 = t.trim().parse().with_context(|| {
+            format!("picture size `{s}` is not WIDTHxHEIGHT (e.g. 640x480) or one number")
+        })?;
+        anyhow::ensure!(
+            (1..=MAX_PICTURE_SIDE).contains(&v),
+            "picture size `{s}`: sides must be 1 to {MAX_PICTURE_SIDE}"
+        );
+        Ok(v)
+    };
+    Ok((parse(w)?, parse(h)?))
+}
+
+/// Parse an up axis, `y` or `z` (a clap value parser).
+///
+/// # Errors
+/// The message of the render crate for anything else.
+pub fn up_axis(s: &str) -> Result<volmorph_render::UpAxis, String> {
+    s.parse()
+        .map_err(|e: volmorph_render::RenderError| e.to_string())
+}
+
+/// Parse a view: `AZIMUTH,ELEVATION` in degrees or a view name, about the `up` axis.
+///
+/// # Errors
+/// If the text is neither (the message lists the names).
+pub fn view(s: &str, up: volmorph_render::UpAxis) -> anyhow::Result<volmorph_render::Orbit> {
+    Ok(volmorph_render::Orbit::parse(s, up)?)
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -58,5 +97,15 @@ mod tests {
         assert!(triple::<usize>("1,x,3").is_err());
         assert_eq!(pair("40,400").unwrap(), [40.0, 400.0]);
         assert!(pair("40").is_err());
+    }
+
+    #[test]
+    fn sizes_parse() {
+        assert_eq!(size("800x600").unwrap(), (800, 600));
+        assert_eq!(size("12X3").unwrap(), (12, 3));
+        assert_eq!(size("256").unwrap(), (256, 256));
+        for bad in ["0x5", "ax3", "-1x2", "3x", "9000x10", "x"] {
+            assert!(size(bad).is_err(), "{bad}");
+        }
     }
 }

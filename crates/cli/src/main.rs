@@ -122,6 +122,13 @@ enum Command {
     /// rendering, optical paths.
     #[command(subcommand)]
     Nurbs(cmd::nurbs::Command),
+    /// Direct volume rendering: composite, maximum-intensity or isosurface pictures of a
+    /// volume, optionally deformed by a map, turntables, and the quality view of a source
+    /// against a deformed target.
+    #[command(
+        after_help = "Examples:\n  volmorph render ct.nii.gz -o skull.png --transfer ct-bone --view anterior\n  volmorph render ct.nii.gz -o mip.png --mode mip --view 30,10 --size 800x600\n  volmorph render ct.nii.gz --handles moves.json --method affine -o bent.png\n  volmorph render ct.nii.gz --frames 36 -o spin/   (frame0000.png … and spin/turntable.png)\n  volmorph render --compare fixed.nii.gz moving.nii.gz --map registration.tfm -o quality.png"
+    )]
+    Render(cmd::render::Args),
     /// Time the warps and isosurface extractors on built-in inputs, against their targets.
     #[command(subcommand)]
     Bench(cmd::bench::Command),
@@ -157,6 +164,7 @@ fn main() -> ExitCode {
         Command::Handles(c) => cmd::handles::run(&c),
         Command::Mls2d(a) => cmd::handles::run_mls2d(&a),
         Command::Nurbs(c) => cmd::nurbs::run(&c),
+        Command::Render(a) => cmd::render::run(&a),
         Command::Bench(c) => cmd::bench::run(&c),
     };
     match result {

@@ -514,9 +514,20 @@ fn mesh_render_draws_the_model_in_the_middle() {
     assert_ne!(img.get(32, 24), Some(white), "centre not drawn");
     assert_eq!(img.get(0, 0), Some(white), "corner drawn");
     // A malformed size is a usage error (clap's exit status 2), not a crash.
-    let bad = volmorph(&[&"mesh", &"render", &mesh, &"-o", &png, &"--size", &"64"]);
+    let bad = volmorph(&[&"mesh", &"render", &mesh, &"-o", &png, &"--size", &"64x"]);
     assert_eq!(bad.status.code(), Some(2));
     assert!(String::from_utf8_lossy(&bad.stderr).contains("WIDTHxHEIGHT"));
+    // Any direction about either up axis; a bad view names the view names.
+    ok(&[
+        &"mesh", &"render", &mesh, &"-o", &png, &"--size", &"40", &"--view", &"30,-20", &"--up",
+        &"y",
+    ]);
+    let img = volmorph_render::read_png(&png).unwrap();
+    assert_eq!((img.width(), img.height()), (40, 40));
+    assert_ne!(img.get(20, 20), Some(white), "centre not drawn");
+    let bad = volmorph(&[&"mesh", &"render", &mesh, &"-o", &png, &"--view", &"30"]);
+    assert_eq!(bad.status.code(), Some(1));
+    assert!(String::from_utf8_lossy(&bad.stderr).contains("iso"));
 }
 
 #[test]
@@ -2011,4 +2022,130 @@ fn nurbs_example_and_render_write_a_picture() {
     ]);
     assert!(err.contains("missing.json"), "{err}");
     assert!(!bad.exists());
+}
+
+#[test]
+fn render_draws_a_volume_deformed_turning_and_compared() {
+    let dir = tempfile::tempdir().unwrap();
+    let d = dir.path();
+    let vol = d.join("teapot.nii.gz");
+    ok(&[&"phantom", &"teapot", &"-o", &vol, &"--size", &"40"]);
+    let tf = "0:0,0,0,0; 120:0,0,0,0; 128:0.9,0.8,0.7,0.8; 255:1,1,1,1";
+    let plain = d.join("plain.png");
+    let out = ok(&[
+        &"render",
+        &vol,
+        &"-o",
+        &plain,
+        &"--transfer",
+        &tf,
+        &"--size",
+        &"48x40",
+        &"--view",
+        &"30,20",
+    ]);
+    assert!(out.contains("rendered"), "{out}");
+    let img = volmorph_render::read_png(&plain).unwrap();
+    assert_eq!((img.width(), img.height()), (48, 40));
+    assert_eq!(img.get(0, 0), Some([0, 0, 0, 255]), "corner not background");
+    // The 40³ teapot fills about a fifth of the framed box's width: some 80 pixels.
+    assert!(
+        img.pixels().iter().filter(|p| p[0] > 60).count() > 40,
+        "teapot not drawn"
+    );
+    // Deformed by handles (a shift of the spout region): a different picture.
+    let handles = d.join("moves.json");
+    std::fs::write(
+        &handles,
+        r#"{"points": [
+            {"source": [0.7, 0.0, 0.2], "target": [0.7, 0.0, -0.1]},
+            {"source": [-0.6, 0.0, 0.0], "target": [-0.6, 0.0, 0.0]},
+            {"source": [0.0, 0.6, 0.0], "target": [0.0, 0.6, 0.0]},
+            {"source": [0.0, -0.6, 0.0], "target": [0.0, -0.6, 0.0]},
+            {"source": [0.0, 0.0, 0.6], "target": [0.0, 0.0, 0.6]}]}"#,
+    )
+    .unwrap();
+    let bent = d.join("bent.png");
+    ok(&[
+        &"render",
+        &vol,
+        &"-o",
+        &bent,
+        &"--transfer",
+        &tf,
+        &"--size",
+        &"48x40",
+        &"--view",
+        &"30,20",
+        &"--handles",
+        &handles,
+        &"--method",
+        &"affine",
+        &"--grid",
+        &"9",
+    ]);
+    assert_ne!(volmorph_render::read_png(&bent).unwrap(), img);
+    // A turntable: frames and an animated PNG.
+    let spin = d.join("spin");
+    ok(&[
+        &"render",
+        &vol,
+        &"-o",
+        &spin,
+        &"--frames",
+        &"3",
+        &"--size",
+        &"24",
+        &"--mode",
+        &"mip",
+    ]);
+    for f in ["frame0000.png", "frame0002.png", "turntable.png"] {
+        assert!(spin.join(f).is_file(), "{f} missing");
+    }
+    let apng = std::fs::read(spin.join("turntable.png")).unwrap();
+    assert!(apng.windows(4).any(|w| w == b"acTL"), "not animated");
+    // The quality view of a volume against itself is green.
+    let q = d.join("quality.png");
+    ok(&[
+        &"render",
+        &"--compare",
+        &vol,
+        &vol,
+        &"-o",
+        &q,
+        &"--size",
+        &"32",
+    ]);
+    let img = volmorph_render::read_png(&q).unwrap();
+    assert!(img.pixels().iter().all(|p| p[0] <= 1 && p[2] <= 1));
+    assert!(img.pixels().iter().any(|p| p[1] > 30));
+    // An isosurface, the transfer function saved for other tools.
+    let tfj = d.join("tf.json");
+    ok(&[
+        &"render",
+        &vol,
+        &"-o",
+        &d.join("iso.png"),
+        &"--mode",
+        &"iso",
+        &"--level",
+        &"127",
+        &"--size",
+        &"24",
+        &"--save-transfer",
+        &tfj,
+        &"--transfer",
+        &"ct-bone",
+    ]);
+    let saved = volmorph_render::TransferFunction::read(&tfj).unwrap();
+    assert_eq!(saved.name(), Some("ct-bone"));
+    // Bad input is a clear error.
+    let e = fails(&[&"render", &vol, &"-o", &d.join("x.jpg")]);
+    assert!(e.contains(".png"), "{e}");
+    let e = fails(&[&"render", &vol, &"-o", &plain, &"--transfer", &"bone"]);
+    assert!(e.contains("ct-bone"), "{e}");
+    let e = fails(&[&"render", &vol, &"-o", &plain, &"--clip", &"1,2,3"]);
+    assert!(e.contains("X,Y,Z,NX,NY,NZ"), "{e}");
+    let e = fails(&[&"render", &d.join("missing.nii"), &"-o", &plain]);
+    assert!(e.contains("missing.nii"), "{e}");
 }

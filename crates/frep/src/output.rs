@@ -15,15 +15,17 @@
 //! samples and bisection. A thin feature cannot be stepped over: it makes the enclosure of
 //! every segment containing it non-negative somewhere, so subdivision reaches it. Fields
 //! without a tape fall back to uniform stepping ([`RenderOptions::fallback_steps`]) and can
-//! miss features thinner than a step. Shading is Lambert plus Blinn–Phong with the
-//! outward normal `−∇f/|∇f|`.
+//! miss features thinner than a step. Shading is the project's one model,
+//! [`Shading`] (Blinn–Phong, light fixed to the camera, in linear light), with the outward
+//! normal `−∇f/|∇f|`.
 
 use std::path::{Path, PathBuf};
 
 use glam::DVec3;
 use rayon::prelude::*;
 use volmorph_contour::{DcOptions, IsoSurface, McOptions, dual_contouring, marching_cubes};
-use volmorph_render::{Aabb, Camera, Ray, RgbaImage, write_png_rgba};
+use volmorph_render::shading::{Lighting, linear_to_srgb8, srgb8_to_linear};
+use volmorph_render::{Aabb, Camera, Ray, RgbaImage, Shading, write_png_rgba};
 use volmorph_volume::Geometry;
 
 use crate::error::FrepError;
@@ -92,13 +94,8 @@ pub struct RenderOptions {
     pub color: [u8; 3],
     /// Background colour (straight alpha).
     pub background: [u8; 4],
-    /// Direction towards the light in camera coordinates (x right, y up, z towards the
-    /// viewer).
-    pub light: DVec3,
-    /// Fraction of the colour lit regardless of the light, in `[0, 1]`.
-    pub ambient: f64,
-    /// Strength of the Blinn–Phong highlight, in `[0, 1]`.
-    pub specular: f64,
+    /// Light and material ([`Shading`]: light in camera coordinates).
+    pub shading: Shading,
     /// Subdivision depth of the interval root search: leaf segments are
     /// `2^-max_depth` of the clipped ray (1–30).
     pub max_depth: u32,
@@ -113,9 +110,7 @@ impl Default for RenderOptions {
             bounds_max: DVec3::splat(1.6),
             color: [222, 184, 135],
             background: [255, 255, 255, 255],
-            light: DVec3::new(-0.4, 0.6, 1.0),
-            ambient: 0.2,
-            specular: 0.25,
+            shading: Shading::default(),
             max_depth: 14,
             fallback_steps: 1024,
         }
@@ -130,18 +125,7 @@ impl RenderOptions {
                 self.max_depth, self.fallback_steps
             )));
         }
-        if !((0.0..=1.0).contains(&self.ambient) && (0.0..=1.0).contains(&self.specular)) {
-            return Err(FrepError::InvalidArgument(format!(
-                "ambient and specular must be within [0, 1], got {} and {}",
-                self.ambient, self.specular
-            )));
-        }
-        if !(self.light.is_finite() && self.light.length_squared() > 0.0) {
-            return Err(FrepError::InvalidArgument(format!(
-                "light direction must be finite and non-zero, got {}",
-                self.light
-            )));
-        }
+        self.shading.validate()?;
         Ok(Aabb::new(self.bounds_min, self.bounds_max)?)
     }
 }
@@ -162,9 +146,8 @@ pub fn render(
     let bbox = options.validate()?;
     let (w, h) = (camera.width(), camera.height());
     let mut img = RgbaImage::new(w, h, options.background)?;
-    let light = (camera.right() * options.light.x + camera.up() * options.light.y
-        - camera.forward() * options.light.z)
-        .normalize();
+    let lighting = options.shading.for_camera(camera)?;
+    let color = options.color.map(srgb8_to_linear);
     img.pixels_mut()
         .par_chunks_mut(w as usize)
         .enumerate()
@@ -181,28 +164,24 @@ pub fn render(
                     None => march(field, &ray, t0, t1, options.fallback_steps),
                 };
                 if let Some(t) = hit {
-                    *px = shade(field, ray.at(t), ray.dir, light, options);
+                    *px = shade(field, ray.at(t), ray.dir, &lighting, color);
                 }
             }
         });
     Ok(img)
 }
 
-/// Colour of the surface point `p` seen along `dir`.
-fn shade(field: &dyn Field, p: DVec3, dir: DVec3, light: DVec3, o: &RenderOptions) -> [u8; 4] {
+/// Colour of the surface point `p` seen along `dir`, base colour `color` in linear light.
+fn shade(field: &dyn Field, p: DVec3, dir: DVec3, lighting: &Lighting, color: [f64; 3]) -> [u8; 4] {
     let (_, g) = field.gradient(p);
-    let mut n = (-g).try_normalize().unwrap_or(-dir);
-    if n.dot(dir) > 0.0 {
-        n = -n;
-    }
-    let diffuse = n.dot(light).max(0.0);
-    let half = (light - dir).try_normalize().unwrap_or(light);
-    let spec = n.dot(half).max(0.0).powi(32) * o.specular;
-    let k = o.ambient + (1.0 - o.ambient) * diffuse;
-    let c = o
-        .color
-        .map(|c| (f64::from(c) * k + 255.0 * spec).clamp(0.0, 255.0).round() as u8);
-    [c[0], c[1], c[2], 255]
+    let n = (-g).try_normalize().unwrap_or(-dir);
+    let c = lighting.shade(color, n, -dir);
+    [
+        linear_to_srgb8(c[0]),
+        linear_to_srgb8(c[1]),
+        linear_to_srgb8(c[2]),
+        255,
+    ]
 }
 
 /// First `t` in `[ta, tb]` where the solid starts along the ray.

@@ -57,8 +57,25 @@ impl Projection {
     }
 }
 
-/// Relative margin [`Camera::fit_bounds`] leaves around the framed box (5 %).
+/// Relative margin [`Framing::Sphere`] leaves around the bounding sphere (5 %).
 pub const FIT_MARGIN: f64 = 1.05;
+
+/// Fraction of the narrower half-extent of the picture that the corners of a box framed by
+/// [`Framing::Box`] reach: 85 %, the margin volmorph's mesh pictures have always had (room for
+/// antialiased silhouettes and a little air around the model).
+pub const BOX_FILL: f64 = 0.85;
+
+/// How [`Camera::frame`] fits a box into the picture.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
+pub enum Framing {
+    /// Fit the box's bounding sphere (margin [`FIT_MARGIN`]): the same scale from every
+    /// direction, so turntable frames line up.
+    #[default]
+    Sphere,
+    /// Fit the box's corners as seen from this direction ([`BOX_FILL`]): the tightest
+    /// picture of the box.
+    Box,
+}
 
 /// A camera with an orthonormal frame, a projection and an image size in pixels.
 ///
@@ -292,33 +309,41 @@ impl Camera {
     }
 
     /// A copy of this camera moved (and, for orthographic cameras, zoomed) so that the whole
-    /// box `[min, max]` is in view with a [`FIT_MARGIN`] margin, keeping the viewing
-    /// direction, up vector, field of view and image size.
+    /// box `[min, max]` is in view, keeping the viewing direction, up vector, field of view and
+    /// image size. The picture is centred on the box centre; `framing` says how tight:
     ///
-    /// Perspective: the eye backs off along `−forward` from the box centre until the box's
-    /// bounding sphere fits in the narrower of the two view angles. Orthographic: the view
-    /// height is set to the box's extent across the view (in both image directions), and the
-    /// eye is placed in front of the whole box. Every corner of the box then projects inside
-    /// the image at positive depth.
+    /// * [`Framing::Sphere`]: the box's bounding sphere fills the narrower view angle up to
+    ///   the [`FIT_MARGIN`] margin. The scale does not depend on the viewing direction, so the
+    ///   frames of a turntable line up.
+    /// * [`Framing::Box`]: the projected corners of the box reach [`BOX_FILL`] of the narrower
+    ///   half-extent of the picture. Perspective: the distance is solved in closed form from
+    ///   every corner's offset and depth (the tightest distance that keeps all of them in,
+    ///   and always outside the box). Orthographic: the view height follows the box's
+    ///   extent across the view.
+    ///
+    /// In both, every corner of the box then projects inside the image at positive depth,
+    /// and the eye is outside the box.
     ///
     /// ```
     /// use glam::DVec3;
-    /// use volmorph_render::{Aabb, Camera, Projection};
+    /// use volmorph_render::{Aabb, Camera, Framing, Projection};
     /// let cam = Camera::look_at(DVec3::new(1.0, 2.0, 3.0), DVec3::ZERO, DVec3::Z,
     ///                           Projection::Perspective { fov_y: 0.6 }, 320, 200).unwrap();
     /// let (min, max) = (DVec3::new(-10.0, 0.0, 5.0), DVec3::new(30.0, 8.0, 9.0));
-    /// let framed = cam.fit_bounds(min, max).unwrap();
-    /// for corner in Aabb::new(min, max).unwrap().corners() {
-    ///     let (x, y, depth) = framed.project(corner).unwrap();
-    ///     assert!((0.0..=320.0).contains(&x) && (0.0..=200.0).contains(&y) && depth > 0.0);
+    /// for framing in [Framing::Sphere, Framing::Box] {
+    ///     let framed = cam.frame(min, max, framing).unwrap();
+    ///     for corner in Aabb::new(min, max).unwrap().corners() {
+    ///         let (x, y, depth) = framed.project(corner).unwrap();
+    ///         assert!((0.0..=320.0).contains(&x) && (0.0..=200.0).contains(&y) && depth > 0.0);
+    ///     }
+    ///     assert_eq!(framed.forward(), cam.forward());
     /// }
-    /// assert_eq!(framed.forward(), cam.forward());
     /// ```
     ///
     /// # Errors
     /// [`RenderError::InvalidArgument`] when the corners are not finite, `min > max` on an
     /// axis, or the box is a single point (nothing to frame).
-    pub fn fit_bounds(&self, min: DVec3, max: DVec3) -> Result<Camera, RenderError> {
+    pub fn frame(&self, min: DVec3, max: DVec3, framing: Framing) -> Result<Camera, RenderError> {
         let bbox = Aabb::new(min, max)?;
         let center = bbox.center();
         let radius = 0.5 * bbox.size().length();
@@ -328,29 +353,49 @@ impl Camera {
             )));
         }
         let mut cam = *self;
-        match self.projection {
-            Projection::Perspective { .. } => {
+        // Offsets of the corners from the centre in the camera frame: (right, up, forward).
+        let offsets = bbox.corners().map(|c| {
+            let d = c - center;
+            (d.dot(self.right), d.dot(self.up), d.dot(self.forward))
+        });
+        match (self.projection, framing) {
+            (Projection::Perspective { .. }, Framing::Sphere) => {
                 let (hw, hh) = self.half_extents();
                 let half_angle = hw.atan().min(hh.atan());
                 let dist = FIT_MARGIN * radius / half_angle.sin();
                 cam.eye = center - dist * self.forward;
             }
-            Projection::Orthographic { .. } => {
-                let (ex, ey) = bbox
-                    .corners()
+            (Projection::Perspective { .. }, Framing::Box) => {
+                // Corner (a, b, z) at eye distance D projects to a / (D + z) · (1/hw) in NDC;
+                // it stays within BOX_FILL when D ≥ |a| / (BOX_FILL·hw) − z (same for b).
+                let (hw, hh) = self.half_extents();
+                let (kw, kh) = (BOX_FILL * hw, BOX_FILL * hh);
+                let mut dist = 0.0_f64;
+                let mut nearest = f64::NEG_INFINITY;
+                for (a, b, z) in offsets {
+                    dist = dist.max(a.abs() / kw - z).max(b.abs() / kh - z);
+                    nearest = nearest.max(-z);
+                }
+                // Keep the eye outside the box even when it is seen end-on.
+                let dist = dist.max(nearest + 1e-3 * radius);
+                cam.eye = center - dist * self.forward;
+            }
+            (Projection::Orthographic { .. }, _) => {
+                let (ex, ey) = offsets
                     .iter()
-                    .fold((0.0_f64, 0.0_f64), |(ex, ey), c| {
-                        let d = *c - center;
-                        (
-                            ex.max(d.dot(self.right).abs()),
-                            ey.max(d.dot(self.up).abs()),
-                        )
+                    .fold((0.0_f64, 0.0_f64), |(ex, ey), &(a, b, _)| {
+                        (ex.max(a.abs()), ey.max(b.abs()))
                     });
-                let half_h = ey.max(ex / self.aspect());
-                // A box seen end-on (all corners on the axis) still gets a visible slab.
-                let half_h = if half_h > 0.0 { half_h } else { radius };
+                let half_h = match framing {
+                    Framing::Sphere => radius * FIT_MARGIN * (1.0 / self.aspect()).max(1.0),
+                    Framing::Box => {
+                        let half_h = ey.max(ex / self.aspect());
+                        // A box seen end-on (all corners on the axis) still gets a visible slab.
+                        (if half_h > 0.0 { half_h } else { radius }) / BOX_FILL
+                    }
+                };
                 cam.set_projection(Projection::Orthographic {
-                    view_height: 2.0 * FIT_MARGIN * half_h,
+                    view_height: 2.0 * half_h,
                 });
                 cam.eye = center - 2.0 * radius * self.forward;
             }
@@ -514,11 +559,32 @@ mod tests {
     }
 
     #[test]
-    fn fit_bounds_refuses_bad_boxes() {
+    fn frame_refuses_bad_boxes() {
         let cam = cameras(4, 4)[0];
-        assert!(cam.fit_bounds(DVec3::ONE, DVec3::ZERO).is_err());
-        assert!(cam.fit_bounds(DVec3::ONE, DVec3::ONE).is_err());
-        assert!(cam.fit_bounds(DVec3::ZERO, DVec3::splat(f64::NAN)).is_err());
+        for f in [Framing::Sphere, Framing::Box] {
+            assert!(cam.frame(DVec3::ONE, DVec3::ZERO, f).is_err());
+            assert!(cam.frame(DVec3::ONE, DVec3::ONE, f).is_err());
+            assert!(cam.frame(DVec3::ZERO, DVec3::splat(f64::NAN), f).is_err());
+        }
+    }
+
+    #[test]
+    fn sphere_framing_has_the_same_scale_from_every_direction() {
+        let (lo, hi) = (DVec3::new(-1.0, -2.0, 0.0), DVec3::new(3.0, 1.0, 0.5));
+        let mut dists = Vec::new();
+        for dir in [
+            DVec3::X,
+            DVec3::new(1.0, 1.0, 0.3),
+            DVec3::new(-0.2, 1.0, -0.7),
+        ] {
+            let cam = Camera::look_at(DVec3::ZERO, dir, DVec3::Z, PERSP, 64, 48).unwrap();
+            let f = cam.frame(lo, hi, Framing::Sphere).unwrap();
+            dists.push((f.eye() - 0.5 * (lo + hi)).length());
+        }
+        assert!(
+            dists.iter().all(|d| (d - dists[0]).abs() < 1e-12),
+            "{dists:?}"
+        );
     }
 
     proptest! {
@@ -558,7 +624,7 @@ mod tests {
         }
 
         #[test]
-        fn fit_bounds_frames_every_corner(
+        fn frame_fits_every_corner(
             dir in proptest::array::uniform3(-1.0f64..1.0),
             lo in proptest::array::uniform3(-50.0f64..50.0),
             ext in proptest::array::uniform3(0.0f64..30.0),
@@ -566,8 +632,10 @@ mod tests {
             height in 1u32..300,
             fov in 0.05f64..3.0,
             ortho in any::<bool>(),
+            tight in any::<bool>(),
         ) {
             let dir = DVec3::from_array(dir);
+            let framing = if tight { Framing::Box } else { Framing::Sphere };
             prop_assume!(dir.length() > 0.1 && dir.normalize().cross(DVec3::Z).length() > 0.05);
             let projection = if ortho {
                 Projection::Orthographic { view_height: 1.0 }
@@ -579,7 +647,9 @@ mod tests {
             let lo = DVec3::from_array(lo);
             let hi = lo + DVec3::from_array(ext);
             prop_assume!(ext.iter().any(|&e| e > 1e-3));
-            let fitted = cam.fit_bounds(lo, hi).unwrap();
+            let fitted = cam.frame(lo, hi, framing).unwrap();
+            let bbox = Aabb::new(lo, hi).unwrap();
+            prop_assert!(!bbox.contains(fitted.eye()) || ortho, "eye inside the box");
             prop_assert!((fitted.forward() - cam.forward()).length() < 1e-15);
             let (w, h) = (f64::from(width), f64::from(height));
             let mut max_reach = 0.0_f64;
@@ -590,9 +660,13 @@ mod tests {
                     "corner {c} at ({x}, {y}) outside {w}×{h}");
                 max_reach = max_reach.max((2.0 * x / w - 1.0).abs()).max((2.0 * y / h - 1.0).abs());
             }
-            if ortho {
-                // Orthographic framing is tight up to the margin.
-                prop_assert!(max_reach > 1.0 / FIT_MARGIN - 1e-9, "reach {max_reach}");
+            if tight {
+                // Box framing is tight: some corner reaches the fill fraction (perspective:
+                // unless the eye had to back off to stay outside a box seen end-on).
+                prop_assert!(max_reach < BOX_FILL + 1e-9, "reach {max_reach}");
+                if ortho {
+                    prop_assert!(max_reach > BOX_FILL - 1e-9, "reach {max_reach}");
+                }
             }
         }
     }

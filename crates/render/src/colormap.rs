@@ -12,6 +12,7 @@ use rayon::prelude::*;
 
 use crate::error::RenderError;
 use crate::image::{RgbaImage, check_len, pixel_count};
+use crate::shading::{linear_to_srgb, srgb_to_linear};
 use crate::window::{Normalizer, Window};
 
 /// Number of entries in every colour-map lookup table.
@@ -486,25 +487,6 @@ fn mat_vec(m: &[[f64; 3]; 3], v: [f64; 3]) -> [f64; 3] {
     ]
 }
 
-/// sRGB transfer function, coded value in `[0, 1]` → linear light.
-pub(crate) fn srgb_decode(c: f64) -> f64 {
-    if c <= 0.04045 {
-        c / 12.92
-    } else {
-        ((c + 0.055) / 1.055).powf(2.4)
-    }
-}
-
-/// Inverse sRGB transfer function, linear light → coded value in `[0, 1]` (clamped).
-pub(crate) fn srgb_encode(c: f64) -> f64 {
-    let c = c.clamp(0.0, 1.0);
-    if c <= 0.003_130_8 {
-        12.92 * c
-    } else {
-        1.055 * c.powf(1.0 / 2.4) - 0.055
-    }
-}
-
 const LAB_DELTA: f64 = 6.0 / 29.0;
 
 fn lab_f(t: f64) -> f64 {
@@ -525,7 +507,7 @@ fn lab_f_inv(u: f64) -> f64 {
 
 /// sRGB in 0‥=255 → Msh `[M, s, h]`.
 fn msh_from_srgb(rgb: [f64; 3]) -> [f64; 3] {
-    let lin = rgb.map(|c| srgb_decode(c / 255.0));
+    let lin = rgb.map(|c| srgb_to_linear(c / 255.0));
     let xyz = mat_vec(&RGB_TO_XYZ, lin);
     let [fx, fy, fz] = [
         lab_f(xyz[0] / WHITE[0]),
@@ -551,7 +533,7 @@ fn srgb_from_msh([m, s, h]: [f64; 3]) -> [f64; 3] {
         WHITE[1] * lab_f_inv(fy),
         WHITE[2] * lab_f_inv(fy - b / 200.0),
     ];
-    mat_vec(&invert3(&RGB_TO_XYZ), xyz).map(|c| 255.0 * srgb_encode(c))
+    mat_vec(&invert3(&RGB_TO_XYZ), xyz).map(|c| 255.0 * linear_to_srgb(c))
 }
 
 /// Moreland's hue adjustment: the hue to give an unsaturated colour of magnitude `m_unsat`
@@ -602,7 +584,7 @@ mod tests {
 
     /// Relative luminance Y (linear-light, BT.709 primaries) of an 8-bit sRGB colour.
     fn luminance(c: [u8; 3]) -> f64 {
-        let lin = c.map(|v| srgb_decode(f64::from(v) / 255.0));
+        let lin = c.map(|v| srgb_to_linear(f64::from(v) / 255.0));
         0.2126 * lin[0] + 0.7152 * lin[1] + 0.0722 * lin[2]
     }
 

@@ -9,6 +9,9 @@
 //! non-finite coordinates draw nothing, so screen positions of projected points can be
 //! passed straight in.
 
+use glam::DVec3;
+
+use crate::Camera;
 use crate::image::RgbaImage;
 
 /// Shapes for [`draw_marker`].
@@ -77,6 +80,39 @@ pub fn draw_line(img: &mut RgbaImage, a: (f64, f64), b: (f64, f64), color: [u8; 
     walk_line(w, h, a, b, |x, y| {
         img.blend(x, y, color);
     });
+}
+
+/// Draw the twelve edges of the box `[lo, hi]` as seen by `camera` (segments with an end
+/// behind the camera are left out).
+///
+/// ```
+/// use glam::DVec3;
+/// use volmorph_render::{Camera, Projection, RgbaImage, draw::draw_box_edges};
+/// let cam = Camera::look_at(DVec3::new(0.0, 0.0, 5.0), DVec3::ZERO, DVec3::Y,
+///                           Projection::Orthographic { view_height: 4.0 }, 40, 40).unwrap();
+/// let mut img = RgbaImage::new(40, 40, [0, 0, 0, 255]).unwrap();
+/// draw_box_edges(&mut img, &cam, DVec3::splat(-1.0), DVec3::ONE, [255, 255, 255, 255]);
+/// assert_eq!(img.get(10, 20), Some([255, 255, 255, 255])); // left edge x = −1
+/// assert_eq!(img.get(20, 20), Some([0, 0, 0, 255])); // inside
+/// ```
+pub fn draw_box_edges(img: &mut RgbaImage, camera: &Camera, lo: DVec3, hi: DVec3, color: [u8; 4]) {
+    let corner = |i: usize| {
+        DVec3::new(
+            if i & 1 == 0 { lo.x } else { hi.x },
+            if i & 2 == 0 { lo.y } else { hi.y },
+            if i & 4 == 0 { lo.z } else { hi.z },
+        )
+    };
+    for i in 0..8usize {
+        for bit in [1usize, 2, 4] {
+            if i & bit == 0
+                && let (Some(a), Some(b)) =
+                    (camera.project(corner(i)), camera.project(corner(i | bit)))
+            {
+                draw_line(img, (a.0, a.1), (b.0, b.1), color);
+            }
+        }
+    }
 }
 
 /// Visit, once each and in order from `a` to `b`, the in-image pixels of the DDA walk of the

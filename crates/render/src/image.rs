@@ -305,6 +305,51 @@ impl RgbaImage {
         Ok(())
     }
 
+    /// This image magnified by factors `fx`, `fy` ≥ 1 along x and y with nearest-neighbour
+    /// sampling (crisp voxels, as slice viewers show them): the output is
+    /// `round(width·fx) × round(height·fy)` pixels, and output pixel `(x, y)` takes the input
+    /// pixel under its centre.
+    ///
+    /// ```
+    /// use volmorph_render::RgbaImage;
+    /// let img = RgbaImage::from_fn(2, 1, |x, _| [x as u8, 0, 0, 255]).unwrap();
+    /// let big = img.resize_nearest(3.0, 2.0).unwrap();
+    /// assert_eq!((big.width(), big.height()), (6, 2));
+    /// assert_eq!(big.get(2, 1), Some([0, 0, 0, 255]));
+    /// assert_eq!(big.get(3, 0), Some([1, 0, 0, 255]));
+    /// ```
+    ///
+    /// # Errors
+    /// [`RenderError::InvalidArgument`] for a factor below 1 or not finite;
+    /// [`RenderError::Size`] when the result exceeds [`MAX_IMAGE_PIXELS`] or 65535 pixels on
+    /// a side (more than any screen shows).
+    pub fn resize_nearest(&self, fx: f64, fy: f64) -> Result<Self, RenderError> {
+        if !(fx >= 1.0 && fy >= 1.0 && fx.is_finite() && fy.is_finite()) {
+            return Err(RenderError::invalid(format!(
+                "magnification {fx} × {fy} must be finite and at least 1"
+            )));
+        }
+        if fx == 1.0 && fy == 1.0 {
+            return Ok(self.clone());
+        }
+        let (iw, ih) = (self.width, self.height);
+        let w = (f64::from(iw) * fx).round();
+        let h = (f64::from(ih) * fy).round();
+        if !(w <= f64::from(u16::MAX) && h <= f64::from(u16::MAX)) {
+            return Err(RenderError::Size {
+                width: w as u64,
+                height: h as u64,
+                reason: "a magnified picture is limited to 65535 pixels on a side",
+            });
+        }
+        let (w, h) = ((w as u32).max(1), (h as u32).max(1));
+        Self::from_fn(w, h, |x, y| {
+            let sx = ((f64::from(x) + 0.5) / fx) as u32;
+            let sy = ((f64::from(y) + 0.5) / fy) as u32;
+            self.pixels[(sy.min(ih - 1) * iw + sx.min(iw - 1)) as usize]
+        })
+    }
+
     /// Opaque RGB pixels: the image composited over the opaque `background` colour, alpha
     /// dropped (for RGB PNG output).
     #[must_use]
@@ -318,6 +363,44 @@ impl RgbaImage {
             })
             .collect()
     }
+}
+
+/// Peak signal-to-noise ratio of `b` against `a`, in dB, over the R, G, B and A channels of
+/// the 8-bit pixels: `10·log10(255² / MSE)`; infinite for identical pictures.
+///
+/// ```
+/// use volmorph_render::{RgbaImage, psnr};
+/// let a = RgbaImage::new(4, 4, [100, 100, 100, 255]).unwrap();
+/// let mut b = a.clone();
+/// assert!(psnr(&a, &b).unwrap().is_infinite());
+/// b.put(0, 0, [110, 100, 100, 255]);
+/// // One channel of 64 off by 10: MSE = 100 / 64.
+/// let want = 10.0 * (255.0f64 * 255.0 * 64.0 / 100.0).log10();
+/// assert!((psnr(&a, &b).unwrap() - want).abs() < 1e-9);
+/// ```
+///
+/// # Errors
+/// [`RenderError::InvalidArgument`] when the sizes differ.
+pub fn psnr(a: &RgbaImage, b: &RgbaImage) -> Result<f64, RenderError> {
+    if (a.width, a.height) != (b.width, b.height) {
+        return Err(RenderError::invalid(format!(
+            "cannot compare a {}×{} picture with a {}×{} one",
+            a.width, a.height, b.width, b.height
+        )));
+    }
+    let sum: f64 = a
+        .pixels
+        .iter()
+        .zip(&b.pixels)
+        .flat_map(|(p, q)| (0..4).map(move |c| f64::from(p[c]) - f64::from(q[c])))
+        .map(|d| d * d)
+        .sum();
+    let mse = sum / (4 * a.pixels.len()) as f64;
+    Ok(if mse == 0.0 {
+        f64::INFINITY
+    } else {
+        10.0 * (255.0 * 255.0 / mse).log10()
+    })
 }
 
 /// A single-channel f32 picture that renderers accumulate into (ray-cast intensities,

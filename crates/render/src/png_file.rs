@@ -163,6 +163,69 @@ pub fn encode_png_rgba(img: &RgbaImage) -> Result<Vec<u8>, RenderError> {
     Ok(out)
 }
 
+/// Largest frame count of [`write_apng`].
+pub const MAX_APNG_FRAMES: usize = 10_000;
+
+/// Write `frames` (all the same size) as an animated PNG (APNG, 8-bit RGBA) that loops
+/// forever, showing each frame for `delay_ms` milliseconds. Browsers and most image viewers
+/// play it; others show the first frame.
+///
+/// # Errors
+/// [`RenderError::InvalidArgument`] for no frames, more than [`MAX_APNG_FRAMES`], frames of
+/// different sizes or a delay outside 1‥=65535 ms; [`RenderError::PngEncode`] or
+/// [`RenderError::Io`] when encoding or writing fails. Errors name `path`; on error no file
+/// is left there.
+pub fn write_apng(path: &Path, frames: &[RgbaImage], delay_ms: u32) -> Result<(), RenderError> {
+    let check = || -> Result<(), RenderError> {
+        let Some(first) = frames.first() else {
+            return Err(RenderError::invalid(
+                "an animation needs at least one frame",
+            ));
+        };
+        if frames.len() > MAX_APNG_FRAMES {
+            return Err(RenderError::invalid(format!(
+                "{} frames is more than an animation may hold ({MAX_APNG_FRAMES})",
+                frames.len()
+            )));
+        }
+        if let Some(f) = frames
+            .iter()
+            .find(|f| (f.width(), f.height()) != (first.width(), first.height()))
+        {
+            return Err(RenderError::invalid(format!(
+                "animation frames differ in size: {}×{} and {}×{}",
+                first.width(),
+                first.height(),
+                f.width(),
+                f.height()
+            )));
+        }
+        if !(1..=u32::from(u16::MAX)).contains(&delay_ms) {
+            return Err(RenderError::invalid(format!(
+                "frame delay {delay_ms} ms must be 1 to 65535"
+            )));
+        }
+        Ok(())
+    };
+    check().map_err(|e| e.at(path))?;
+    let (width, height) = (frames[0].width(), frames[0].height());
+    write_atomic(path, |w| -> Result<(), RenderError> {
+        let mut enc = png::Encoder::new(&mut *w, width, height);
+        enc.set_color(ColorType::Rgba);
+        enc.set_depth(BitDepth::Eight);
+        enc.set_compression(png::Compression::Fast);
+        enc.set_animated(frames.len() as u32, 0)?;
+        enc.set_frame_delay(delay_ms as u16, 1000)?;
+        let mut writer = enc.write_header()?;
+        for f in frames {
+            writer.write_image_data(f.as_bytes())?;
+        }
+        writer.finish()?;
+        Ok(())
+    })
+    .map_err(|e: RenderError| e.at(path))
+}
+
 /// Read a PNG file into 8-bit RGBA: any colour type (grey, grey+alpha, RGB, RGBA, palette),
 /// any bit depth (1–16), interlaced or not; gamma, colour-profile and sBIT chunks are
 /// ignored (samples are taken as stored). Grey becomes `[g, g, g, 255]`, palette entries are looked up, `tRNS`
@@ -267,6 +330,31 @@ fn decode<R: BufRead + Seek>(r: R) -> Result<RgbaImage, RenderError> {
         }
     }
     RgbaImage::from_pixels(width, height, pixels)
+}
+
+#[cfg(test)]
+mod apng_tests {
+    use super::*;
+
+    #[test]
+    fn animations_round_trip_their_first_frame_and_refuse_bad_input() {
+        let dir = tempfile::tempdir().unwrap();
+        let path = dir.path().join("spin.png");
+        let frames: Vec<RgbaImage> = (0..3u8)
+            .map(|i| RgbaImage::new(4, 3, [i * 80, 0, 255 - i * 80, 255]).unwrap())
+            .collect();
+        write_apng(&path, &frames, 100).unwrap();
+        // A plain PNG reader sees the first frame.
+        assert_eq!(read_png(&path).unwrap(), frames[0]);
+        let bytes = std::fs::read(&path).unwrap();
+        let has = |tag: &[u8]| bytes.windows(4).any(|w| w == tag);
+        assert!(has(b"acTL") && has(b"fcTL") && has(b"fdAT"), "not an APNG");
+        let odd = [frames[0].clone(), RgbaImage::new(3, 3, [0; 4]).unwrap()];
+        for (f, d) in [(&odd[..], 100), (&frames[..0], 100), (&frames[..], 0)] {
+            let e = write_apng(&path, f, d).unwrap_err().to_string();
+            assert!(e.contains("spin.png"), "{e}");
+        }
+    }
 }
 
 #[cfg(test)]

@@ -1,9 +1,10 @@
 //! Shaded pictures of triangle meshes by z-buffer rasterisation.
 //!
 //! [`render_triangles`] draws the triangles `positions[t[0]], positions[t[1]], positions[t[2]]`
-//! as seen by a [`Camera`], with a depth buffer, Lambert plus Blinn–Phong shading from a light
-//! fixed to the camera, and optional supersampling. It is the picture of an isosurface or a
-//! deformed mesh that the command-line tool writes next to the mesh files.
+//! as seen by a [`Camera`], with a depth buffer, the project's one shading model
+//! ([`Shading`]: Blinn–Phong from a light fixed to the camera) and optional supersampling.
+//! It is the picture of an isosurface or a deformed mesh that the command-line tool writes
+//! next to the mesh files.
 //!
 //! # Conventions
 //!
@@ -19,9 +20,10 @@
 //!   between the two).
 //! * Triangles with a vertex behind the camera (or with a non-finite vertex) are skipped:
 //!   there is no near-plane clipping, so frame the model in front of the camera
-//!   ([`Camera::fit_bounds`]).
-//! * Shading is computed in linear light and encoded to sRGB after the supersamples are
-//!   averaged.
+//!   ([`Camera::frame`]).
+//! * Shading is computed in linear light, with the direction to the viewer taken per sample
+//!   (exact highlights for perspective cameras), and encoded to sRGB after the supersamples
+//!   are averaged.
 //!
 //! Rasterisation runs in parallel over horizontal bands of the picture; each band walks only
 //! the triangles binned to it.
@@ -29,7 +31,7 @@
 use glam::DVec3;
 use rayon::prelude::*;
 
-use crate::colormap::{srgb_decode, srgb_encode};
+use crate::shading::{Lighting, Shading, linear_to_srgb8, srgb8_to_linear};
 use crate::{Camera, Projection, RenderError, RgbaImage};
 
 /// Picture rows (after supersampling) per parallel band.
@@ -47,13 +49,8 @@ pub struct ShadeStyle {
     pub back: [u8; 3],
     /// Colour of pixels no triangle covers (straight alpha).
     pub background: [u8; 4],
-    /// Direction *towards* the light in camera coordinates (x right, y up, z towards the
-    /// viewer); need not be normalised, must be non-zero.
-    pub light: DVec3,
-    /// Fraction of the colour lit regardless of the light, in `[0, 1]`.
-    pub ambient: f64,
-    /// Strength of the Blinn–Phong highlight, in `[0, 1]` (0: matte).
-    pub specular: f64,
+    /// Light and material of the shading model (light in camera coordinates).
+    pub shading: Shading,
     /// Samples per pixel along each axis, `1..=`[`MAX_SUPERSAMPLE`]; `2` gives 4× antialiasing.
     pub supersample: u32,
 }
@@ -66,9 +63,7 @@ impl Default for ShadeStyle {
             front: [222, 184, 135],
             back: [70, 110, 200],
             background: [255, 255, 255, 255],
-            light: DVec3::new(-0.4, 0.6, 1.0),
-            ambient: 0.2,
-            specular: 0.25,
+            shading: Shading::default(),
             supersample: 2,
         }
     }
@@ -76,24 +71,7 @@ impl Default for ShadeStyle {
 
 impl ShadeStyle {
     fn validate(&self) -> Result<(), RenderError> {
-        if !(self.light.is_finite() && self.light.length_squared() > 0.0) {
-            return Err(RenderError::invalid(format!(
-                "light direction {} must be finite and non-zero",
-                self.light
-            )));
-        }
-        if !(0.0..=1.0).contains(&self.ambient) {
-            return Err(RenderError::invalid(format!(
-                "ambient {} must lie in [0, 1]",
-                self.ambient
-            )));
-        }
-        if !(0.0..=1.0).contains(&self.specular) {
-            return Err(RenderError::invalid(format!(
-                "specular {} must lie in [0, 1]",
-                self.specular
-            )));
-        }
+        self.shading.validate()?;
         if !(1..=MAX_SUPERSAMPLE).contains(&self.supersample) {
             return Err(RenderError::invalid(format!(
                 "supersample {} must lie in 1..={MAX_SUPERSAMPLE}",
@@ -127,11 +105,11 @@ struct Projected {
 ///   [`ShadeStyle::front`], back faces [`ShadeStyle::back`].
 /// * A pixel sample inside or on all three edges is covered, so triangles sharing an edge
 ///   leave no crack; a depth buffer keeps the nearest surface.
-/// * Shading is Lambert plus Blinn–Phong from a light fixed to the camera, computed in linear
-///   light, with the shading normal (interpolated from `normals`, else the face normal)
-///   turned towards the viewer.
+/// * Shading is the project's [`Shading`] model (light fixed to the camera, linear light),
+///   with the shading normal (interpolated from `normals`, else the face normal) turned
+///   towards the viewer.
 /// * Triangles with a vertex behind the camera or not finite are skipped (no near-plane
-///   clipping: frame the model with [`Camera::fit_bounds`]).
+///   clipping: frame the model with [`Camera::frame`]).
 ///
 /// `normals`, if given, holds one shading normal per vertex (same length as `positions`; need
 /// not be unit length).
@@ -236,12 +214,12 @@ pub fn render_triangles(
         }
     }
 
-    let shader = Shader::new(&cam, style);
+    let shader = Shader::new(&cam, style)?;
     let background = style.background;
     let bg_linear = [
-        srgb_decode(f64::from(background[0]) / 255.0),
-        srgb_decode(f64::from(background[1]) / 255.0),
-        srgb_decode(f64::from(background[2]) / 255.0),
+        srgb8_to_linear(background[0]),
+        srgb8_to_linear(background[1]),
+        srgb8_to_linear(background[2]),
     ];
     // Per sample: linear colour and coverage (alpha 0 = background).
     let mut samples = vec![[0.0f32; 4]; swu * shu];
@@ -295,19 +273,14 @@ pub fn render_triangles(
                 let alpha = f64::from(background[3]) / 255.0;
                 let a = cover * inv + (1.0 - cover * inv) * alpha;
                 *px = [
-                    encode(acc[0] * inv),
-                    encode(acc[1] * inv),
-                    encode(acc[2] * inv),
+                    linear_to_srgb8(acc[0] * inv),
+                    linear_to_srgb8(acc[1] * inv),
+                    linear_to_srgb8(acc[2] * inv),
                     (a * 255.0).round() as u8,
                 ];
             }
         });
     Ok(out)
-}
-
-/// Linear light in `[0, 1]` → 8-bit sRGB.
-fn encode(c: f64) -> u8 {
-    (srgb_encode(c) * 255.0).round() as u8
 }
 
 /// Doubled signed area of `(a, b, p)` in picture coordinates (y down).
@@ -323,52 +296,32 @@ fn pixel_span(lo: f64, hi: f64, n: usize) -> Option<(usize, usize)> {
     (a <= b).then_some((a as usize, b as usize))
 }
 
-/// Lighting in world coordinates.
+/// The shading model resolved for the picture's camera, and the face colours in linear light.
 struct Shader {
-    light: DVec3,
-    half: DVec3,
-    to_viewer: DVec3,
+    lighting: Lighting,
+    camera: Camera,
     front: [f64; 3],
     back: [f64; 3],
-    ambient: f64,
-    specular: f64,
 }
 
 impl Shader {
-    fn new(cam: &Camera, style: &ShadeStyle) -> Self {
-        let l = style.light.normalize();
-        let to_viewer = -cam.forward();
-        let light = (cam.right() * l.x + cam.up() * l.y + to_viewer * l.z).normalize();
-        let lin = |c: [u8; 3]| c.map(|v| srgb_decode(f64::from(v) / 255.0));
-        Self {
-            light,
-            half: (light + to_viewer).normalize_or(to_viewer),
-            to_viewer,
+    fn new(cam: &Camera, style: &ShadeStyle) -> Result<Self, RenderError> {
+        let lin = |c: [u8; 3]| c.map(srgb8_to_linear);
+        Ok(Self {
+            lighting: style.shading.for_camera(cam)?,
+            camera: *cam,
             front: lin(style.front),
             back: lin(style.back),
-            ambient: style.ambient,
-            specular: style.specular,
-        }
+        })
     }
 
-    /// Linear colour of a surface point with normal `n`, facing the viewer or not.
-    fn shade(&self, n: DVec3, front: bool) -> [f32; 4] {
-        // Turn the shading normal towards the viewer: the visible side is what is lit.
-        let n = if n.dot(self.to_viewer) < 0.0 { -n } else { n };
-        let diffuse = n.dot(self.light).max(0.0);
-        let k = self.ambient + (1.0 - self.ambient) * diffuse;
-        let spec = if diffuse > 0.0 {
-            self.specular * n.dot(self.half).max(0.0).powi(32)
-        } else {
-            0.0
-        };
+    /// Linear colour of the surface seen at sample `(x, y)` of the picture with normal `n`,
+    /// front-facing or not.
+    fn shade(&self, x: f64, y: f64, n: DVec3, front: bool) -> [f32; 4] {
+        let to_viewer = -self.camera.ray_at(x, y).dir;
         let base = if front { self.front } else { self.back };
-        [
-            (base[0] * k + spec).min(1.0) as f32,
-            (base[1] * k + spec).min(1.0) as f32,
-            (base[2] * k + spec).min(1.0) as f32,
-            1.0,
-        ]
+        let c = self.lighting.shade(base, n, to_viewer);
+        [c[0] as f32, c[1] as f32, c[2] as f32, 1.0]
     }
 }
 
@@ -429,8 +382,8 @@ fn raster_triangle(
                 Some([n0, n1, n2]) => (m0 * n0 + m1 * n1 + m2 * n2).normalize_or(face_normal),
                 None => face_normal,
             }
-            .normalize_or(shader.to_viewer);
-            band[slot] = shader.shade(n, front);
+            .normalize_or(-shader.camera.forward());
+            band[slot] = shader.shade(p.0, p.1, n, front);
         }
     }
 }
@@ -454,7 +407,10 @@ mod tests {
     fn style1() -> ShadeStyle {
         ShadeStyle {
             supersample: 1,
-            specular: 0.0,
+            shading: Shading {
+                specular: 0.0,
+                ..Shading::default()
+            },
             ..ShadeStyle::default()
         }
     }
@@ -637,11 +593,17 @@ mod tests {
                 ..style
             },
             ShadeStyle {
-                light: DVec3::ZERO,
+                shading: Shading {
+                    light: DVec3::ZERO,
+                    ..style.shading
+                },
                 ..style
             },
             ShadeStyle {
-                ambient: f64::NAN,
+                shading: Shading {
+                    ambient: f64::NAN,
+                    ..style.shading
+                },
                 ..style
             },
         ] {

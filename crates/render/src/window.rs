@@ -2,6 +2,10 @@
 
 use crate::error::RenderError;
 
+/// Percentiles of [`Window::auto`]: 0.5 and 99.5, the robust range radiology viewers default
+/// to (it clips the brightest and darkest 0.5 % of voxels, typically metal and air).
+pub const AUTO_WINDOW_PERCENTILES: (f64, f64) = (0.5, 99.5);
+
 /// A linear intensity window ("window/level" as radiology viewers use it): values at or below
 /// `center − width/2` map to 0, values at or above `center + width/2` map to 1, and values in
 /// between map linearly, so `center` maps to ½.
@@ -99,6 +103,26 @@ impl Window {
         let a = percentile_of(&mut finite, lo);
         let b = percentile_of(&mut finite, hi);
         Self::from_range(a, b.max(a))
+    }
+
+    /// The automatic display window of volmorph's pictures: the
+    /// [`AUTO_WINDOW_PERCENTILES`] range of the finite values (see
+    /// [`Window::from_percentiles`]), robust to a few extreme voxels (metal in a CT, a hot
+    /// pixel), collapsing to a threshold when that range is flat.
+    ///
+    /// ```
+    /// use volmorph_render::Window;
+    /// let mut v: Vec<f32> = (0..1000).map(|i| i as f32).collect();
+    /// v[999] = 1e9; // one outlier does not stretch the window
+    /// let w = Window::auto(&v).unwrap();
+    /// assert!(w.upper() < 1000.0 && w.lower() < 5.0);
+    /// ```
+    ///
+    /// # Errors
+    /// [`RenderError::InvalidArgument`] when no value is finite.
+    pub fn auto(values: &[f32]) -> Result<Self, RenderError> {
+        let (lo, hi) = AUTO_WINDOW_PERCENTILES;
+        Self::from_percentiles(values, lo, hi)
     }
 
     /// Centre of the window (maps to ½).

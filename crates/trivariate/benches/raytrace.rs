@@ -5,7 +5,7 @@ use std::hint::black_box;
 
 use criterion::{Criterion, Throughput, criterion_group, criterion_main};
 use glam::DVec3;
-use volmorph_render::{Camera, Colormap, Projection};
+use volmorph_render::{Colormap, DEFAULT_FOV_Y, Framing, Projection, view_camera};
 use volmorph_spline::{KnotVector, TensorBSpline};
 use volmorph_testkit::Rng;
 use volmorph_trivariate::{
@@ -80,16 +80,16 @@ fn render(c: &mut Criterion) {
     let r = VolumeRenderer::new(&lens, &tracer, GRIN_ATTRIBUTE, tf, opts).expect("renderer");
     let (lo, hi) = tracer.bounds();
     let (lo, hi) = (DVec3::from_array(lo), DVec3::from_array(hi));
-    let center = 0.5 * (lo + hi);
-    let cam = Camera::look_at(
-        center + DVec3::new(1.0, 0.6, 0.5),
-        center,
+    let cam = view_camera(
+        DVec3::new(1.0, 0.6, 0.5),
         DVec3::Z,
-        Projection::Perspective { fov_y: 0.6 },
-        256,
-        256,
+        (lo, hi),
+        Projection::Perspective {
+            fov_y: DEFAULT_FOV_Y,
+        },
+        Framing::Sphere,
+        (256, 256),
     )
-    .and_then(|c| c.fit_bounds(lo, hi))
     .expect("camera");
     let mut g = c.benchmark_group("render");
     g.sample_size(10);

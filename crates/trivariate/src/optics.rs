@@ -192,14 +192,20 @@ fn index_and_gradient(
     let mut val = [0.0];
     let mut g = [0.0; 3];
     ev.eval_into(EvalMethod::default(), u, &mut val, &mut g)?;
+    Ok((val[0], physical_gradient(jac, g)))
+}
+
+/// Physical gradient `∇ₓa` of an attribute from its parametric gradient `g = ∇ᵤa` and the
+/// geometry's Jacobian `jac` (column-major, `jac[3a + c] = ∂P_c/∂u_a`), by the chain rule
+/// `JPᵀ ∇ₓa = ∇ᵤa` (eq. 10); zero where the Jacobian is singular.
+pub(crate) fn physical_gradient(jac: &[f64; 9], g: [f64; 3]) -> [f64; 3] {
     // JPᵀ has rows P_u, P_v, P_w.
     let m = [
         [jac[0], jac[1], jac[2]],
         [jac[3], jac[4], jac[5]],
         [jac[6], jac[7], jac[8]],
     ];
-    let grad = solve3_rows(m, g).unwrap_or([0.0; 3]);
-    Ok((val[0], grad))
+    solve3_rows(m, g).unwrap_or([0.0; 3])
 }
 
 /// Trace one ray from `origin` along `dir` through the index attribute `attribute` of

@@ -23,12 +23,23 @@
 //!    `C_acc += T·α·C`, `T ← T·(1 − α)` with `T` (the paper's `α_acc`) starting at 1; the walk
 //!    stops early when `T` falls below [`RenderOptions::min_transmittance`].
 //!
+//! 5. With [`RenderOptions::shading`] set, the colour `C` of each sample is lit by the
+//!    project's one shading model ([`Shading`]: Blinn–Phong, light fixed to the camera) with
+//!    the normal `−∇ₓa`, the attribute's physical gradient (eq. 10: `JPᵀ ∇ₓa = ∇ᵤa`), so
+//!    surfaces of rising attribute face the regions of lower value. [`VolumeRenderer::render_ray`]
+//!    has no camera and is never shaded.
+//!
+//! Colours are linear RGB throughout: transfer-function colours are linear, compositing is in
+//! linear light, and [`VolumeRenderer::render_image`] encodes pixels to sRGB.
 //! [`RayColor::opacity`] is `1 − T`; [`RayColor::color`] is `C_acc` (premultiplied by opacity).
 
+use glam::DVec3;
 use rayon::prelude::*;
-use volmorph_render::{Camera, Colormap, RgbaImage};
+use volmorph_render::shading::{Lighting, premultiplied_to_pixel, srgb8_to_linear};
+use volmorph_render::{Camera, Colormap, RgbaImage, Shading};
 
 use crate::eval::{EvalMethod, VolumeEvaluator};
+use crate::optics::physical_gradient;
 use crate::raytrace::{BoundaryHit, RayTracer, check_ray};
 use crate::{AggregateVolume, TrivariateError};
 use volmorph_spline::TensorBSpline;
@@ -115,8 +126,9 @@ impl TransferFunction {
         Self::new(pts)
     }
 
-    /// A ramp over `[lo, hi]`: colours from `colormap` at 9 points, opacity per unit length
-    /// rising linearly from 0 at `lo` to `max_opacity` at `hi`.
+    /// A ramp over `[lo, hi]`: colours from `colormap` at 9 points (decoded from sRGB to
+    /// linear), opacity per unit length rising linearly from 0 at `lo` to `max_opacity` at
+    /// `hi`.
     ///
     /// # Errors
     /// [`TrivariateError::InvalidArgument`] unless `lo < hi` are finite and
@@ -139,7 +151,7 @@ impl TransferFunction {
                 let c = colormap.map(f as f32);
                 TransferPoint {
                     value: lo + f * (hi - lo),
-                    color: c.map(|x| f64::from(x) / 255.0),
+                    color: c.map(srgb8_to_linear),
                     opacity: f * max_opacity,
                 }
             })
@@ -188,11 +200,14 @@ pub struct RenderOptions {
     pub min_transmittance: f64,
     /// Most samples per ray (bounds the work of a degenerate input).
     pub max_samples: usize,
+    /// Gradient shading of [`VolumeRenderer::render_image`] (see the [module docs](self));
+    /// `None`: colours as the transfer function gives them.
+    pub shading: Option<Shading>,
 }
 
 impl RenderOptions {
     /// Defaults for a model of diagonal `diagonal`: `Δt = diagonal/256`, component 0,
-    /// `min_transmittance = 1/512`, 1 000 000 samples.
+    /// `min_transmittance = 1/512`, 1 000 000 samples, no shading.
     #[must_use]
     pub fn for_diagonal(diagonal: f64) -> Self {
         Self {
@@ -200,6 +215,7 @@ impl RenderOptions {
             component: 0,
             min_transmittance: 1.0 / 512.0,
             max_samples: 1_000_000,
+            shading: None,
         }
     }
 }
@@ -351,13 +367,26 @@ impl<'a> VolumeRenderer<'a> {
         })
     }
 
-    /// Composite the ray `origin + t·dir` (see the [module docs](self)).
+    /// Composite the ray `origin + t·dir` (see the [module docs](self)), unshaded.
     ///
     /// # Errors
     /// [`TrivariateError::InvalidArgument`] for a non-finite origin or a zero or non-finite
     /// direction; evaluation errors otherwise.
     pub fn render_ray(&self, origin: [f64; 3], dir: [f64; 3]) -> Result<RayColor, TrivariateError> {
+        self.walk(origin, dir, None)
+    }
+
+    /// Composite the ray `origin + t·dir`, lit by `lighting` when given.
+    fn walk(
+        &self,
+        origin: [f64; 3],
+        dir: [f64; 3],
+        lighting: Option<&Lighting>,
+    ) -> Result<RayColor, TrivariateError> {
         let d = check_ray(origin, dir)?;
+        let geometry = VolumeEvaluator::new(self.tracer.geometry());
+        let mut point = [0.0; 3];
+        let mut jac = [0.0; 9];
         let hits = self.tracer.intersect(origin, d)?;
         let at = |t: f64| -> [f64; 3] { std::array::from_fn(|c| origin[c] + t * d[c]) };
         let ev = VolumeEvaluator::new(self.attribute);
@@ -397,12 +426,26 @@ impl<'a> VolumeRenderer<'a> {
                     ev.eval_into(EvalMethod::default(), u, &mut val, &mut grad)?;
                     val[self.options.component]
                 };
-                let (c, a1) = self.transfer.lookup(a);
+                let (mut c, a1) = self.transfer.lookup(a);
                 let alpha = if a1 >= 1.0 {
                     if len > 0.0 { 1.0 } else { 0.0 }
                 } else {
                     1.0 - (1.0 - a1).powf(len.max(0.0))
                 };
+                if let Some(light) = lighting
+                    && alpha > 0.0
+                {
+                    let gu = std::array::from_fn(|ax| {
+                        if dim > 16 {
+                            big_grad[ax * dim + self.options.component]
+                        } else {
+                            grad[ax * dim + self.options.component]
+                        }
+                    });
+                    geometry.eval_into(EvalMethod::default(), u, &mut point, &mut jac)?;
+                    let n = -DVec3::from_array(physical_gradient(&jac, gu));
+                    c = light.shade(c, n, -DVec3::from_array(d));
+                }
                 for (acc, ck) in out.color.iter_mut().zip(c) {
                     *acc += trans * alpha * ck;
                 }
@@ -428,12 +471,13 @@ impl<'a> VolumeRenderer<'a> {
         Ok(out)
     }
 
-    /// Render `camera`'s view: one ray per pixel centre, rows in parallel (rayon). Pixels are
-    /// `C_acc` as 8-bit sRGB-coded colour with alpha `1 − T` (straight alpha: colour divided
-    /// by opacity).
+    /// Render `camera`'s view: one ray per pixel centre, rows in parallel (rayon), shaded when
+    /// [`RenderOptions::shading`] is set. Pixels are `C_acc` encoded to 8-bit sRGB with alpha
+    /// `1 − T` (straight alpha: colour divided by opacity).
     ///
     /// # Errors
-    /// The first ray's error; image allocation errors as [`TrivariateError::InvalidArgument`].
+    /// The first ray's error; image allocation errors and invalid shading parameters as
+    /// [`TrivariateError::InvalidArgument`].
     pub fn render_image(&self, camera: &Camera) -> Result<RgbaImage, TrivariateError> {
         self.render_image_with(camera, &volmorph_io::NoProgress)
     }
@@ -449,6 +493,13 @@ impl<'a> VolumeRenderer<'a> {
         camera: &Camera,
         progress: &dyn volmorph_io::Progress,
     ) -> Result<RgbaImage, TrivariateError> {
+        let lighting = match &self.options.shading {
+            Some(s) => Some(
+                s.for_camera(camera)
+                    .map_err(|e| TrivariateError::InvalidArgument(e.to_string()))?,
+            ),
+            None => None,
+        };
         let (w, h) = (camera.width(), camera.height());
         progress.start("volume rendering", u64::from(h));
         let mut img = RgbaImage::new(w, h, [0, 0, 0, 0])
@@ -462,8 +513,9 @@ impl<'a> VolumeRenderer<'a> {
                 for (x, px) in row.iter_mut().enumerate() {
                     let x = u32::try_from(x).unwrap_or(u32::MAX);
                     let ray = camera.ray(x, y);
-                    let c = self.render_ray(ray.origin.to_array(), ray.dir.to_array())?;
-                    *px = to_pixel(&c);
+                    let c =
+                        self.walk(ray.origin.to_array(), ray.dir.to_array(), lighting.as_ref())?;
+                    *px = premultiplied_to_pixel(c.color, c.opacity);
                 }
                 progress.advance(1);
                 progress
@@ -472,19 +524,4 @@ impl<'a> VolumeRenderer<'a> {
             })?;
         Ok(img)
     }
-}
-
-/// Straight-alpha 8-bit pixel of a premultiplied ray colour.
-fn to_pixel(c: &RayColor) -> [u8; 4] {
-    #[allow(clippy::cast_possible_truncation, clippy::cast_sign_loss)]
-    let q = |v: f64| (v.clamp(0.0, 1.0) * 255.0).round() as u8;
-    if c.opacity <= 0.0 {
-        return [0, 0, 0, 0];
-    }
-    [
-        q(c.color[0] / c.opacity),
-        q(c.color[1] / c.opacity),
-        q(c.color[2] / c.opacity),
-        q(c.opacity),
-    ]
 }

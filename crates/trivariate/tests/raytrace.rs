@@ -515,3 +515,62 @@ fn grin_lens_focal_length_matches_paraxial_optics() {
         assert!(vr < 0.0 && bfd_literal > bfd, "{bfd_literal} vs {bfd}");
     }
 }
+
+#[test]
+fn shading_lights_the_attribute_gradient_with_the_camera_light() {
+    use volmorph_render::shading::{linear_to_srgb8, srgb8_to_linear};
+    use volmorph_render::{Camera, Projection, Shading};
+    // Attribute a = 2x on the box [0, 1]³ (gradient along +x, normal −x); camera on +x
+    // looking down −x, so the normal (turned to the viewer) points at the camera.
+    let g = box_geometry([1.0, 1.0, 1.0]);
+    let tracer = RayTracer::from_geometry(&g, TraceOptions::default()).unwrap();
+    let k1 = KnotVector::bezier(1, [0.0, 1.0]).unwrap();
+    let k0 = KnotVector::bezier(0, [0.0, 1.0]).unwrap();
+    let attr = TensorBSpline::new([k1, k0.clone(), k0], 1, vec![0.0, 2.0]).unwrap();
+    let v = AggregateVolume::new(g)
+        .unwrap()
+        .with_attribute("a", attr)
+        .unwrap();
+    let tf = TransferFunction::parse("0:0.6,0.6,0.6,1; 2:0.6,0.6,0.6,1").unwrap();
+    let cam = Camera::look_at(
+        [3.0, 0.5, 0.5].into(),
+        [0.5, 0.5, 0.5].into(),
+        [0.0, 0.0, 1.0].into(),
+        Projection::Orthographic { view_height: 0.5 },
+        5,
+        5,
+    )
+    .unwrap();
+    let render = |shading: Option<Shading>| {
+        let opts = RenderOptions {
+            shading,
+            ..RenderOptions::for_diagonal(1.0)
+        };
+        VolumeRenderer::new(&v, &tracer, "a", tf.clone(), opts)
+            .unwrap()
+            .render_image(&cam)
+            .unwrap()
+            .get(2, 2)
+            .unwrap()
+    };
+    let plain = render(None);
+    assert_eq!(plain[3], 255);
+    assert_eq!(plain[0], linear_to_srgb8(0.6));
+    // Light head-on (camera z): full diffuse, no highlight → the plain colour.
+    let head_on = Shading {
+        light: [0.0, 0.0, 1.0].into(),
+        ambient: 0.3,
+        specular: 0.0,
+        ..Shading::default()
+    };
+    assert_eq!(render(Some(head_on)), plain);
+    // Light from the picture's right, perpendicular to the normal: ambient only.
+    let grazing = Shading {
+        light: [1.0, 0.0, 0.0].into(),
+        ..head_on
+    };
+    let c = render(Some(grazing));
+    let want = linear_to_srgb8(0.3 * 0.6);
+    assert!(c[0].abs_diff(want) <= 1, "{c:?} vs {want}");
+    assert!(srgb8_to_linear(c[0]) < 0.5 * srgb8_to_linear(plain[0]));
+}

@@ -15,7 +15,7 @@ use volmorph_frep::output::{
 use volmorph_frep::reconstruct::{SectionBlend, SectionStack, femur_sections};
 use volmorph_frep::{CompileOptions, Field, Shape, Tape, compile_source};
 use volmorph_mesh::{self as meshio, MeshWriteOptions};
-use volmorph_render::{Camera, Projection, write_png_rgba};
+use volmorph_render::{Camera, DEFAULT_FOV_Y, Framing, Projection, UpAxis, write_png_rgba};
 use volmorph_volume::AnyVolume;
 use volmorph_volume_io as format;
 
@@ -23,9 +23,6 @@ use crate::progress;
 
 /// Largest grid size per axis accepted (a 2048³ f32 volume is 32 GiB).
 const MAX_GRID: usize = 2048;
-
-/// Largest picture side accepted.
-const MAX_PIXELS_SIDE: u32 = 8192;
 
 /// Largest animation length.
 const MAX_FRAMES: usize = 10_000;
@@ -138,10 +135,13 @@ pub struct View {
     /// Picture size `WxH` (or one number for a square).
     #[arg(long, default_value = "512x512")]
     pub size: String,
-    /// Viewing direction `azimuth,elevation` in degrees (z up; the camera looks at the
-    /// box's centre).
+    /// Viewing direction `azimuth,elevation` in degrees (z up: azimuth 0 looks from +x, 90
+    /// from +y), or a view name (front, side, top, iso); the camera looks at the box's centre.
     #[arg(long, default_value = "35,25", allow_hyphen_values = true)]
     pub view: String,
+    /// The axis that is up in the picture: z or y.
+    #[arg(long, default_value = "z", value_parser = crate::args::up_axis)]
+    pub up: UpAxis,
 }
 
 /// Arguments of `volmorph frep render`.
@@ -461,38 +461,12 @@ fn sections_cmd(a: &SectionsArgs) -> anyhow::Result<()> {
 }
 
 fn camera(view: &View, b: (DVec3, DVec3)) -> anyhow::Result<Camera> {
-    let (w, h) = match view.size.split_once('x') {
-        Some((w, h)) => (w.trim().parse::<u32>(), h.trim().parse::<u32>()),
-        None => (
-            view.size.trim().parse::<u32>(),
-            view.size.trim().parse::<u32>(),
-        ),
+    let (w, h) = crate::args::size(&view.size).context("--size")?;
+    let orbit = crate::args::view(&view.view, view.up).context("--view")?;
+    let perspective = Projection::Perspective {
+        fov_y: DEFAULT_FOV_Y,
     };
-    let (Ok(w), Ok(h)) = (w, h) else {
-        bail!("--size {}: expected WxH, e.g. 640x480", view.size);
-    };
-    if !(1..=MAX_PIXELS_SIDE).contains(&w) || !(1..=MAX_PIXELS_SIDE).contains(&h) {
-        bail!("--size {}: sides must be 1 to {MAX_PIXELS_SIDE}", view.size);
-    }
-    let [az, el] = crate::args::pair(&view.view).context("--view")?;
-    if !(az.is_finite() && el.is_finite() && el.abs() < 89.9) {
-        bail!(
-            "--view {}: elevation must be within (−90, 90) degrees",
-            view.view
-        );
-    }
-    let (az, el) = (az.to_radians(), el.to_radians());
-    let dir = DVec3::new(el.cos() * az.cos(), el.cos() * az.sin(), el.sin());
-    let center = 0.5 * (b.0 + b.1);
-    let cam = Camera::look_at(
-        center + dir,
-        center,
-        DVec3::Z,
-        Projection::Perspective { fov_y: 0.6 },
-        w,
-        h,
-    )?;
-    Ok(cam.fit_bounds(b.0, b.1)?)
+    Ok(orbit.camera(b, perspective, Framing::Sphere, w, h)?)
 }
 
 fn render_cmd(a: &RenderArgs) -> anyhow::Result<()> {

@@ -162,7 +162,7 @@ pub fn run(cmd: &Command) -> anyhow::Result<()> {
 }
 
 /// Read the handle set of `--handles` or `--from/--to`.
-fn read_handle_set(a: &MapArgs) -> anyhow::Result<HandleSet> {
+pub(crate) fn read_handle_set(a: &MapArgs) -> anyhow::Result<HandleSet> {
     let set = match (&a.handles, &a.from, &a.to) {
         (Some(h), _, _) => HandleSet::read(h)
             .with_context(|| format!("cannot read the handles {}", h.display()))?,
@@ -179,7 +179,7 @@ fn read_handle_set(a: &MapArgs) -> anyhow::Result<HandleSet> {
     Ok(set)
 }
 
-fn options(a: &MapArgs) -> anyhow::Result<HandleOptions> {
+pub(crate) fn options(a: &MapArgs) -> anyhow::Result<HandleOptions> {
     Ok(HandleOptions {
         weighting: match a.weight {
             WeightKind::InverseDistance => Weighting::InverseDistance { alpha: a.alpha },

@@ -5,7 +5,9 @@ use std::path::PathBuf;
 use anyhow::Context;
 use volmorph_mesh::{self as mesh, MeshWriteOptions};
 
-use super::picture::{self, View};
+use volmorph_render::UpAxis;
+
+use super::picture;
 use crate::progress;
 
 /// Mesh subcommands.
@@ -21,7 +23,7 @@ pub enum Command {
     Convert(ConvertArgs),
     /// Write a shaded PNG picture of a mesh.
     #[command(
-        after_help = "Examples:\n  volmorph mesh render teapot.ply -o teapot.png --view iso\n  volmorph mesh render bunny.obj -o bunny.png --size 1024x768 --view front"
+        after_help = "Examples:\n  volmorph mesh render teapot.ply -o teapot.png --view iso\n  volmorph mesh render bunny.obj -o bunny.png --size 1024x768 --view 30,20 --up y\n\nViews: AZIMUTH,ELEVATION in degrees about the up axis (z up: azimuth 0 looks from +x, 90\nfrom +y; y up: 0 from +z, 90 from +x), or front, side, top, iso."
     )]
     Render(RenderArgs),
 }
@@ -34,9 +36,13 @@ pub struct RenderArgs {
     /// Output picture (.png).
     #[arg(short, long)]
     pub output: PathBuf,
-    /// Viewing direction (z is up).
-    #[arg(long, value_enum, default_value_t = View::Iso)]
-    pub view: View,
+    /// Viewing direction: AZIMUTH,ELEVATION in degrees, or front, side, top, iso.
+    #[arg(long, default_value = "iso", allow_hyphen_values = true)]
+    pub view: String,
+    /// The axis that is up in the picture: z (CAD, volmorph's models) or y (most modelling
+    /// tools).
+    #[arg(long, default_value = "z", value_parser = crate::args::up_axis)]
+    pub up: UpAxis,
     /// Picture size in pixels, WIDTHxHEIGHT.
     #[arg(long, default_value = "800x600", value_parser = picture::size)]
     pub size: (u32, u32),
@@ -112,7 +118,8 @@ fn render(a: &RenderArgs) -> anyhow::Result<()> {
     let m = mesh::read(&a.input).context("cannot read mesh")?;
     pb.set_message("drawing");
     let what = a.input.display().to_string();
-    let cam = picture::camera(a.view, picture::bounds(&m, &what)?, a.size)?;
+    let orbit = crate::args::view(&a.view, a.up).context("--view")?;
+    let cam = picture::orbit_camera(&orbit, picture::bounds(&m, &what)?, a.size)?;
     picture::write_mesh_png(&a.output, &m, None, &cam)?;
     pb.finish_and_clear();
     Ok(())

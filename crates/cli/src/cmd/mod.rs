@@ -16,5 +16,6 @@ pub mod nurbs;
 pub mod nurbs_trace;
 pub mod phantom;
 pub mod picture;
+pub mod render;
 pub mod slice;
 pub mod warp;

@@ -5,7 +5,11 @@ use std::path::PathBuf;
 
 use anyhow::{Context, bail};
 use glam::DVec3;
-use volmorph_render::{Camera, Colormap, Projection, RgbaImage, write_png_rgba};
+use volmorph_render::draw::draw_box_edges;
+use volmorph_render::{
+    Colormap, DEFAULT_FOV_Y, Framing, Projection, RgbaImage, Shading, UpAxis, view_camera,
+    write_png_rgba,
+};
 use volmorph_trivariate::{
     AggregateVolume, GRIN_ATTRIBUTE, GrinLensSpec, OpticalPath, OpticsOptions, RayTracer,
     RenderOptions, TraceOptions, TransferFunction, VolumeRenderer, draw_paths, grin_lens,
@@ -13,9 +17,6 @@ use volmorph_trivariate::{
 };
 
 use crate::progress;
-
-/// Largest picture side accepted.
-const MAX_PIXELS_SIDE: u32 = 8192;
 
 /// Most rays `trace-optics` accepts.
 const MAX_RAYS: usize = 100_000;
@@ -33,10 +34,18 @@ pub struct RenderArgs {
     /// with opacity rising to 0.9.
     #[arg(long)]
     pub transfer: Option<String>,
-    /// Viewing direction `azimuth,elevation` in degrees (z up; the camera looks at the model's
-    /// centre).
+    /// Viewing direction `azimuth,elevation` in degrees (z up: azimuth 0 looks from +x, 90
+    /// from +y), or a view name (front, side, top, iso); the camera looks at the model's
+    /// centre.
     #[arg(long, default_value = "35,25", allow_hyphen_values = true)]
     pub view: String,
+    /// The axis that is up in the picture: z or y.
+    #[arg(long, default_value = "z", value_parser = crate::args::up_axis)]
+    pub up: UpAxis,
+    /// Light the attribute's gradient with the shading model (Blinn–Phong, light from the
+    /// upper left of the camera).
+    #[arg(long)]
+    pub shade: bool,
     /// Picture size `WxH` (or one number for a square).
     #[arg(long, default_value = "256x256")]
     pub size: String,
@@ -87,20 +96,6 @@ pub struct ExampleArgs {
     pub output: PathBuf,
 }
 
-fn size(s: &str) -> anyhow::Result<(u32, u32)> {
-    let (w, h) = match s.split_once('x') {
-        Some((w, h)) => (w.trim().parse::<u32>(), h.trim().parse::<u32>()),
-        None => (s.trim().parse::<u32>(), s.trim().parse::<u32>()),
-    };
-    let (Ok(w), Ok(h)) = (w, h) else {
-        bail!("--size {s}: expected WxH, e.g. 640x480");
-    };
-    if !(1..=MAX_PIXELS_SIDE).contains(&w) || !(1..=MAX_PIXELS_SIDE).contains(&h) {
-        bail!("--size {s}: sides must be 1 to {MAX_PIXELS_SIDE}");
-    }
-    Ok((w, h))
-}
-
 fn load(path: &std::path::Path) -> anyhow::Result<AggregateVolume> {
     load_volume(path).with_context(|| format!("cannot read model {}", path.display()))
 }
@@ -134,7 +129,7 @@ fn attribute_range(v: &AggregateVolume, name: &str) -> anyhow::Result<(f64, f64)
 /// Unreadable model, unknown attribute, bad transfer function, view or size, or an unwritable
 /// output.
 pub fn run_render(a: &RenderArgs) -> anyhow::Result<()> {
-    let (w, h) = size(&a.size)?;
+    let (w, h) = crate::args::size(&a.size).context("--size")?;
     let model = load(&a.model)?;
     let (lo, hi) = attribute_range(&model, &a.attribute)?;
     let transfer = match &a.transfer {
@@ -149,27 +144,15 @@ pub fn run_render(a: &RenderArgs) -> anyhow::Result<()> {
         }
         options.step = step;
     }
-    let renderer = VolumeRenderer::new(&model, &tracer, &a.attribute, transfer, options)?;
-    let [az, el] = crate::args::pair(&a.view).context("--view")?;
-    if !(az.is_finite() && el.is_finite() && el.abs() < 89.9) {
-        bail!(
-            "--view {}: elevation must be within (−90, 90) degrees",
-            a.view
-        );
+    if a.shade {
+        options.shading = Some(Shading::default());
     }
-    let (az, el) = (az.to_radians(), el.to_radians());
-    let dir = DVec3::new(el.cos() * az.cos(), el.cos() * az.sin(), el.sin());
-    let (b0, b1) = bounds(&tracer);
-    let center = 0.5 * (b0 + b1);
-    let cam = Camera::look_at(
-        center + dir,
-        center,
-        DVec3::Z,
-        Projection::Perspective { fov_y: 0.6 },
-        w,
-        h,
-    )?
-    .fit_bounds(b0, b1)?;
+    let renderer = VolumeRenderer::new(&model, &tracer, &a.attribute, transfer, options)?;
+    let orbit = crate::args::view(&a.view, a.up).context("--view")?;
+    let perspective = Projection::Perspective {
+        fov_y: DEFAULT_FOV_Y,
+    };
+    let cam = orbit.camera(bounds(&tracer), perspective, Framing::Sphere, w, h)?;
     let pb = progress::spinner(format!("ray tracing {}", a.model.display()));
     let t0 = std::time::Instant::now();
     let img = renderer.render_image(&cam).context("cannot render")?;
@@ -197,7 +180,7 @@ pub fn run_trace_optics(a: &TraceOpticsArgs) -> anyhow::Result<()> {
     if a.rays == 0 || a.rays > MAX_RAYS {
         bail!("--rays {}: must be 1 to {MAX_RAYS}", a.rays);
     }
-    let (w, h) = size(&a.size)?;
+    let (w, h) = crate::args::size(&a.size).context("--size")?;
     let spec = GrinLensSpec::default();
     let (model, example) = match (&a.model, a.example.as_deref()) {
         (Some(_), Some(_)) => bail!("give either a model file or --example, not both"),
@@ -276,18 +259,10 @@ pub fn run_trace_optics(a: &TraceOpticsArgs) -> anyhow::Result<()> {
         dir.any_orthonormal_vector()
     };
     let look = dir.cross(spread).normalize_or(DVec3::Y);
-    let center = 0.5 * (lo + hi);
-    let cam = Camera::look_at(
-        center + look,
-        center,
-        spread,
-        Projection::Orthographic { view_height: 1.0 },
-        w,
-        h,
-    )?
-    .fit_bounds(lo, hi)?;
+    let ortho = Projection::Orthographic { view_height: 1.0 };
+    let cam = view_camera(look, spread, (lo, hi), ortho, Framing::Box, (w, h))?;
     let mut img = RgbaImage::new(w, h, [255, 255, 255, 255])?;
-    outline_box(&mut img, &cam, b0, b1);
+    draw_box_edges(&mut img, &cam, b0, b1, [150, 150, 150, 255]);
     draw_paths(&mut img, &cam, &paths, [200, 30, 30, 255]);
     write_png_rgba(&a.output, &img)
         .with_context(|| format!("cannot write {}", a.output.display()))?;
@@ -341,32 +316,6 @@ pub fn run_trace_optics(a: &TraceOpticsArgs) -> anyhow::Result<()> {
         }
     }
     Ok(())
-}
-
-/// Draw the edges of the box `[lo, hi]` in grey.
-fn outline_box(img: &mut RgbaImage, cam: &Camera, lo: DVec3, hi: DVec3) {
-    let c = |i: usize| {
-        DVec3::new(
-            if i & 1 == 0 { lo.x } else { hi.x },
-            if i & 2 == 0 { lo.y } else { hi.y },
-            if i & 4 == 0 { lo.z } else { hi.z },
-        )
-    };
-    for i in 0..8usize {
-        for bit in [1usize, 2, 4] {
-            if i & bit == 0 {
-                let (a, b) = (cam.project(c(i)), cam.project(c(i | bit)));
-                if let (Some(a), Some(b)) = (a, b) {
-                    volmorph_render::draw::draw_line(
-                        img,
-                        (a.0, a.1),
-                        (b.0, b.1),
-                        [150, 150, 150, 255],
-                    );
-                }
-            }
-        }
-    }
 }
 
 /// `volmorph nurbs example`.

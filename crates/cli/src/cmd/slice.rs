@@ -2,8 +2,8 @@
 
 use std::path::{Path, PathBuf};
 
-use anyhow::{Context, bail};
-use volmorph_render::{Colormap, RgbaImage, Window, render_scalar, write_png_rgba};
+use anyhow::Context;
+use volmorph_render::{Colormap, SliceStyle, Window, render_slice, write_png_rgba};
 use volmorph_volume::AnyVolume;
 use volmorph_volume::slice::{self, Axis, Slice, SlicePosition};
 use volmorph_volume_io as format;
@@ -69,7 +69,13 @@ pub fn run(args: &Args) -> anyhow::Result<()> {
     };
     let s = slice::extract(&vol, args.axis, pos)
         .with_context(|| format!("cannot take the slice of {}", args.input.display()))?;
-    let img = picture(&s, window, colormap, args.physical_aspect, args.scale)?;
+    let style = SliceStyle {
+        window,
+        colormap,
+        physical_aspect: args.physical_aspect,
+        scale: args.scale,
+    };
+    let img = render_slice(&s, &style)?;
     write_png_rgba(&args.output, &img).context("cannot write")?;
     Ok(())
 }
@@ -85,63 +91,19 @@ pub fn middle(vol: &AnyVolume, axis: Axis) -> f64 {
     ((n - 1) / 2) as f64
 }
 
-/// Colour a slice: window (default: 0.5–99.5 percentiles of its finite values, or their
-/// range when that is flat), optional physical aspect and integer magnification.
-///
-/// # Errors
-/// When the slice has no finite value to window, or the picture would be too large.
-pub fn picture(
-    s: &Slice,
-    window: Option<Window>,
-    colormap: Colormap,
-    physical_aspect: bool,
-    scale: u32,
-) -> anyhow::Result<RgbaImage> {
-    let window = match window {
-        Some(w) => w,
-        None => Window::from_percentiles(&s.values, 0.5, 99.5)
-            .context("the slice has no finite values to choose a window from")?,
-    };
-    let (w, h) = (u32::try_from(s.width)?, u32::try_from(s.height)?);
-    let img = render_scalar(&s.values, w, h, &window, colormap)?;
-    let (sx, sy) = if physical_aspect {
-        let [px, py] = s.pixel_spacing;
-        let m = px.min(py);
-        (px / m, py / m)
-    } else {
-        (1.0, 1.0)
-    };
-    let f = f64::from(scale);
-    resize_nearest(&img, sx * f, sy * f)
-}
-
-/// Nearest-neighbour resize by factors `fx`, `fy` ≥ 1.
-fn resize_nearest(img: &RgbaImage, fx: f64, fy: f64) -> anyhow::Result<RgbaImage> {
-    if fx == 1.0 && fy == 1.0 {
-        return Ok(img.clone());
-    }
-    let (iw, ih) = (img.width(), img.height());
-    let w = (f64::from(iw) * fx).round();
-    let h = (f64::from(ih) * fy).round();
-    if !(w <= f64::from(u16::MAX) && h <= f64::from(u16::MAX)) {
-        bail!("picture of {w} x {h} pixels is too large; lower --scale");
-    }
-    let (w, h) = ((w as u32).max(1), (h as u32).max(1));
-    Ok(RgbaImage::from_fn(w, h, |x, y| {
-        let sx = ((f64::from(x) + 0.5) / fx) as u32;
-        let sy = ((f64::from(y) + 0.5) / fy) as u32;
-        img.get(sx.min(iw - 1), sy.min(ih - 1)).unwrap_or([0; 4])
-    })?)
-}
-
 /// Write the picture of `s` to `path` at twice its size with the physical aspect ratio
-/// (used by the demo).
+/// and the automatic window unless `window` is given (used by the demo).
 pub fn write_picture(
     path: &Path,
     s: &Slice,
     window: Option<Window>,
     colormap: Colormap,
 ) -> anyhow::Result<()> {
-    let img = picture(s, window, colormap, true, 2)?;
-    write_png_rgba(path, &img).context("cannot write")
+    let style = SliceStyle {
+        window,
+        colormap,
+        physical_aspect: true,
+        scale: 2,
+    };
+    write_png_rgba(path, &render_slice(s, &style)?).context("cannot write")
 }
