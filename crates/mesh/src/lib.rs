@@ -52,6 +52,7 @@ pub use format::{
 pub use format::{
     obj::read_obj_bytes, off::read_off_bytes, ply::read_ply_bytes, stl::read_stl_bytes,
 };
+pub use hash::{FastMap, MixHasher};
 pub use mesh::{Faces, MAX_ELEMENTS, Mesh};
 pub use validate::{DEGENERATE_RELATIVE_AREA, Issue, MAX_EXAMPLES, ValidationReport};
 
