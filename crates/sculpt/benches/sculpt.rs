@@ -1,0 +1,2 @@
+//! Sculpting benchmarks (filled in below).
+fn main() {}
