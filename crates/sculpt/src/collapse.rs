@@ -180,59 +180,56 @@ impl LocalMesh {
         Ok(())
     }
 
-    /// Whether the triangles around `v` form one fan (a single cycle of link edges).
-    fn single_fan(&self, v: u32) -> bool {
-        let mut next: FastMap<u32, u32> = FastMap::default();
-        let mut count = 0;
+    /// The link edges `(a, b)` of `v`'s triangles (`(v, a, b)` counter-clockwise).
+    fn link_edges(&self, v: u32, out: &mut Vec<(u32, u32)>) {
+        out.clear();
         for t in self.live_star(v) {
             let tri = self.tris[t as usize];
             let k = tri.iter().position(|&x| x == v).unwrap_or(0);
-            let (a, b) = (tri[(k + 1) % 3], tri[(k + 2) % 3]);
-            if next.insert(a, b).is_some() {
-                return false;
-            }
-            count += 1;
+            out.push((tri[(k + 1) % 3], tri[(k + 2) % 3]));
         }
-        let Some((&start, _)) = next.iter().next() else {
-            return true;
-        };
+    }
+
+    /// Whether the triangles around `v` form one fan (a single cycle of link edges).
+    fn single_fan(&self, v: u32) -> bool {
+        let mut edges = Vec::with_capacity(16);
+        self.link_edges(v, &mut edges);
+        self.cycle_of(&edges).is_some()
+    }
+
+    /// The link vertices in cyclic order when the link edges form one cycle.
+    fn cycle_of(&self, edges: &[(u32, u32)]) -> Option<Vec<u32>> {
+        let n = edges.len();
+        if n == 0 {
+            return Some(Vec::new());
+        }
+        // Each link vertex must start exactly one edge.
+        for (i, e) in edges.iter().enumerate() {
+            if edges[i + 1..].iter().any(|f| f.0 == e.0) {
+                return None;
+            }
+        }
+        let start = edges.iter().map(|e| e.0).min()?;
+        let mut cycle = Vec::with_capacity(n);
         let mut x = start;
-        let mut steps = 0;
         loop {
-            x = match next.get(&x) {
-                Some(&y) => y,
-                None => return false,
-            };
-            steps += 1;
+            cycle.push(x);
+            x = edges.iter().find(|e| e.0 == x)?.1;
             if x == start {
                 break;
             }
-            if steps > count {
-                return false;
+            if cycle.len() > n {
+                return None;
             }
         }
-        steps == count
+        (cycle.len() == n).then_some(cycle)
     }
 
     /// The link of `v` in cyclic order, when its triangles form one fan.
     fn link_cycle(&self, v: u32) -> Option<Vec<u32>> {
-        let mut next: FastMap<u32, u32> = FastMap::default();
-        for t in self.live_star(v) {
-            let tri = self.tris[t as usize];
-            let k = tri.iter().position(|&x| x == v)?;
-            next.insert(tri[(k + 1) % 3], tri[(k + 2) % 3]);
-        }
-        let (&start, _) = next.iter().min_by_key(|(k, _)| **k)?;
-        let mut cycle = vec![start];
-        let mut x = next[&start];
-        while x != start {
-            cycle.push(x);
-            x = *next.get(&x)?;
-            if cycle.len() > next.len() {
-                return None;
-            }
-        }
-        (cycle.len() == next.len()).then_some(cycle)
+        let mut edges = Vec::with_capacity(16);
+        self.link_edges(v, &mut edges);
+        self.cycle_of(&edges)
     }
 
     /// Collapse `v` into `w` if that keeps a closed manifold and turns no triangle over.

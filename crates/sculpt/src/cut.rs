@@ -816,9 +816,14 @@ impl Cutter<'_> {
                 }
             }
         }
-        // Endpoint signs of every ∂B edge with crossings.
+        // Endpoint signs of every ∂B edge with crossings. Crossings at one position (sheets
+        // of the mesh touching there) are ordered leaving before entering, so touching
+        // solids stay apart as they are in the mesh.
         for (&key, list) in &mut self.out.edge_points {
-            list.sort_by(|x, y| x.0.total_cmp(&y.0));
+            list.sort_by(|x, y| {
+                let side = |id: u32| solid_plus.get(&id).copied().unwrap_or(false);
+                x.0.total_cmp(&y.0).then(side(x.1).cmp(&side(y.1)))
+            });
             let axis = (key >> 60) as usize;
             let p0 = [
                 (key & 0xF_FFFF) as usize,
