@@ -106,11 +106,16 @@ def hausdorff(a, b):
 
 
 def without_debris(mesh, origin, spacing):
-    """`mesh` without its connected pieces that hold no point of the grid (`origin`,
-    `spacing`), and the largest extent of each of those pieces (in spacings)."""
+    """`mesh` without its specks: connected pieces at most three cells across that hold no
+    point of the grid (`origin`, `spacing`); and the largest extent of each speck (in
+    spacings)."""
     parts = mesh.split(only_watertight=False)
     keep, debris = [], []
     for p in parts:
+        # Only specks can miss every grid point; anything larger is a real feature.
+        if p.extents.max() >= 3 * spacing:
+            keep.append(p)
+            continue
         lo = np.ceil((p.bounds[0] - origin) / spacing)
         hi = np.floor((p.bounds[1] - origin) / spacing)
         holds = False

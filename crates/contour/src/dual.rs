@@ -173,9 +173,10 @@ const NONE: u32 = u32::MAX;
 /// thousand times the mesh validator's degeneracy bound.
 const FLAT: f64 = 1e3 * volmorph_mesh::DEGENERATE_RELATIVE_AREA;
 
-/// Twice the area of triangle `abc` over the square of its longest edge (0 when flat or
-/// when all its vertices coincide).
-fn flatness(a: DVec3, b: DVec3, c: DVec3) -> f64 {
+/// Twice the area of triangle `abc` over the square of its longest edge: a shape measure
+/// from 0 (flat, or all vertices coinciding) to √3/2 (equilateral).
+#[must_use]
+pub fn flatness(a: DVec3, b: DVec3, c: DVec3) -> f64 {
     let longest = a
         .distance_squared(b)
         .max(b.distance_squared(c))
@@ -233,10 +234,10 @@ impl VertexRule {
     #[must_use]
     pub fn place(&self, qef: &Qef, normals: &[DVec3]) -> Option<(DVec3, bool)> {
         let mass = qef.mass_point()?;
-        if self.is_sharp(normals) {
-            if let Some(s) = qef.solve(self.threshold) {
-                return Some((s.position, s.rank >= 2));
-            }
+        if self.is_sharp(normals)
+            && let Some(s) = qef.solve(self.threshold)
+        {
+            return Some((s.position, s.rank >= 2));
         }
         Some((mass, false))
     }

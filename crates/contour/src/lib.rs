@@ -74,7 +74,7 @@ mod table;
 
 pub use dual::{
     DEFAULT_FEATURE_ANGLE, DcOptions, QuadDiagonal, VertexRule, clamp_to_cell, dual_contouring,
-    dual_contouring_any, quad_diagonal,
+    dual_contouring_any, flatness, quad_diagonal,
 };
 pub use qef::{DEFAULT_SINGULAR_THRESHOLD, Qef, QefSolution, symmetric_eigen};
 

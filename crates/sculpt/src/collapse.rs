@@ -18,7 +18,7 @@
 //! modified: they only take part in the checks.
 
 use glam::DVec3;
-use volmorph_contour::{QuadDiagonal, quad_diagonal};
+use volmorph_contour::{QuadDiagonal, flatness as shape, quad_diagonal};
 use volmorph_mesh::FastMap;
 
 use crate::cells::{Contour, LV};
@@ -28,7 +28,8 @@ use crate::cells::{Contour, LV};
 /// contour of a tri-dexel produces on purpose.
 const MIN_SHAPE: f64 = 1e-9;
 
-/// Shape ([`shape`]) below which a triangle counts as a needle whose normal means nothing.
+/// Shape ([`volmorph_contour::flatness`]) below which a triangle counts as a needle whose
+/// normal means nothing.
 const NEEDLE_SHAPE: f64 = 1e-6;
 
 /// A cut point closer than this fraction of the merging reach to a neighbour is merged into
@@ -51,18 +52,6 @@ pub(crate) struct LocalMesh {
 
 fn normal(a: DVec3, b: DVec3, c: DVec3) -> DVec3 {
     (b - a).cross(c - a)
-}
-
-fn shape(a: DVec3, b: DVec3, c: DVec3) -> f64 {
-    let longest = a
-        .distance_squared(b)
-        .max(b.distance_squared(c))
-        .max(c.distance_squared(a));
-    if longest > 0.0 {
-        normal(a, b, c).length() / longest
-    } else {
-        0.0
-    }
 }
 
 impl LocalMesh {
@@ -353,15 +342,15 @@ impl LocalMesh {
                 };
                 let mut targets = Vec::new();
                 // A neighbour practically on top of the point first (a needle otherwise).
-                if let Some(&w) = self.nearest(v, |_| true).first() {
-                    if self.pos[w as usize].distance(self.pos[v as usize]) <= NEEDLE * reach {
-                        targets.push(w);
-                    }
+                if let Some(&w) = self.nearest(v, |_| true).first()
+                    && self.pos[w as usize].distance(self.pos[v as usize]) <= NEEDLE * reach
+                {
+                    targets.push(w);
                 }
-                if let Some(o) = contour.points[p as usize].outside {
-                    if let Some(w) = self.get(LV::Doc(o)) {
-                        targets.push(w);
-                    }
+                if let Some(o) = contour.points[p as usize].outside
+                    && let Some(w) = self.get(LV::Doc(o))
+                {
+                    targets.push(w);
                 }
                 targets.extend(self.nearest(v, |k| matches!(k, LV::Doc(_))));
                 targets.extend(self.nearest(v, |k| matches!(k, LV::Comp(_))));

@@ -185,7 +185,7 @@ impl Cutter<'_> {
     /// Strictly on the inner side of plane `p`.
     fn inner(&self, p: u8, x: DVec3) -> bool {
         let a = (p / 2) as usize;
-        if p % 2 == 0 {
+        if p.is_multiple_of(2) {
             x[a] > self.planes[p as usize]
         } else {
             x[a] < self.planes[p as usize]
@@ -355,7 +355,7 @@ impl Cutter<'_> {
     /// point lying on plane `p` and on grid line `(axis_line = index)`.
     fn plane_index(&self, p: u8) -> usize {
         let a = (p / 2) as usize;
-        if p % 2 == 0 {
+        if p.is_multiple_of(2) {
             self.inp.cells.lo[a]
         } else {
             self.inp.cells.hi[a]

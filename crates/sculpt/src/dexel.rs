@@ -51,15 +51,7 @@ impl TriDexel {
     pub fn from_soup(soup: &TriangleSoup, grid: Grid) -> Result<Self, SculptError> {
         let mut dexel = Self::empty(grid)?;
         for axis in 0..3 {
-            let (b, c) = transverse(axis);
-            let d = grid.dims();
-            let rect = RayRect {
-                u0: 0,
-                u1: d[b] - 1,
-                v0: 0,
-                v1: d[c] - 1,
-            };
-            let block = peel_axis(soup, &grid, axis, rect, "base")?;
+            let block = peel_axis(soup, &grid, axis, RayRect::all(&grid, axis), "base")?;
             dexel.rays[axis]
                 .par_iter_mut()
                 .enumerate()
@@ -257,39 +249,33 @@ impl BitVolume {
         &self.region
     }
 
+    /// Word index and bit of absolute grid point `p`, if it is in the box.
+    #[inline]
+    fn locate(&self, p: [usize; 3]) -> Option<(usize, u32)> {
+        if !self.region.contains(p) {
+            return None;
+        }
+        let e = self.region.extent();
+        let [x, y, z] = std::array::from_fn(|a| p[a] - self.region.lo[a]);
+        Some(((y + e[1] * z) * self.row_words + x / 64, (x % 64) as u32))
+    }
+
     /// Value at absolute grid point `p` (false outside the box).
     #[inline]
     #[must_use]
     pub fn get(&self, p: [usize; 3]) -> bool {
-        if !self.region.contains(p) {
-            return false;
-        }
-        let e = self.region.extent();
-        let (x, y, z) = (
-            p[0] - self.region.lo[0],
-            p[1] - self.region.lo[1],
-            p[2] - self.region.lo[2],
-        );
-        let w = (y + e[1] * z) * self.row_words + x / 64;
-        (self.words[w] >> (x % 64)) & 1 == 1
+        self.locate(p)
+            .is_some_and(|(w, bit)| (self.words[w] >> bit) & 1 == 1)
     }
 
     /// Set the value at absolute grid point `p` (ignored outside the box).
     pub fn set(&mut self, p: [usize; 3], value: bool) {
-        if !self.region.contains(p) {
-            return;
-        }
-        let e = self.region.extent();
-        let (x, y, z) = (
-            p[0] - self.region.lo[0],
-            p[1] - self.region.lo[1],
-            p[2] - self.region.lo[2],
-        );
-        let w = (y + e[1] * z) * self.row_words + x / 64;
-        if value {
-            self.words[w] |= 1 << (x % 64);
-        } else {
-            self.words[w] &= !(1 << (x % 64));
+        if let Some((w, bit)) = self.locate(p) {
+            if value {
+                self.words[w] |= 1 << bit;
+            } else {
+                self.words[w] &= !(1 << bit);
+            }
         }
     }
 

@@ -19,7 +19,7 @@ use crate::smooth::{SmoothRegion, smooth_rays};
 use crate::stitch::{Patch, stitch};
 use crate::store::MeshStore;
 use crate::tool::{Pose, Tool, closed_soup, raster_tool, resample_stroke};
-use crate::view::FrozenView;
+use crate::view::{FrozenView, PixelChange};
 
 /// Default number of cells between the changed dexels and the faces of the re-contoured box:
 /// one ring of cells whose vertices depend on the changed data, and one more so that the
@@ -150,7 +150,7 @@ pub struct EditRecord {
     before: u64,
     after: u64,
     rays: Vec<RayChange>,
-    view: Vec<(u32, Vec<Crossing>, Vec<Crossing>)>,
+    view: Vec<PixelChange>,
     mesh: Option<MeshChange>,
     changed: Option<ChangedRegion>,
     stats: EditStats,
@@ -423,14 +423,7 @@ impl SculptDocument {
                                 if old.is_empty() {
                                     return None;
                                 }
-                                let mut new = Vec::with_capacity(old.len());
-                                combine(old, tool_ray, *op, &mut new);
-                                (new != *old).then(|| RayChange {
-                                    axis: axis as u8,
-                                    index: r as u32,
-                                    old: old.clone(),
-                                    new,
-                                })
+                                painted(axis, r, old, tool_ray, *op)
                             })
                             .collect(),
                         (_, None) => Vec::new(),
@@ -446,15 +439,7 @@ impl SculptDocument {
                                         return None;
                                     }
                                     let r = grid.ray_index(axis, u, v);
-                                    let old = &rays[r];
-                                    let mut new = Vec::with_capacity(old.len() + 2);
-                                    combine(old, tool_ray, *op, &mut new);
-                                    (new != *old).then(|| RayChange {
-                                        axis: axis as u8,
-                                        index: r as u32,
-                                        old: old.clone(),
-                                        new,
-                                    })
+                                    painted(axis, r, &rays[r], tool_ray, *op)
                                 })
                                 .collect()
                         }
@@ -587,15 +572,14 @@ impl SculptDocument {
                 reason: "the document is not in the state this edit started from".into(),
             });
         }
-        if let Some(m) = &record.mesh {
-            if self.store.positions.len() != m.vertex_base
-                || self.store.triangles.len() != m.triangle_base
-            {
-                return Err(SculptError::RecordMismatch {
-                    record: record.before,
-                    reason: "the mesh storage has another size".into(),
-                });
-            }
+        if let Some(m) = &record.mesh
+            && (self.store.positions.len() != m.vertex_base
+                || self.store.triangles.len() != m.triangle_base)
+        {
+            return Err(SculptError::RecordMismatch {
+                record: record.before,
+                reason: "the mesh storage has another size".into(),
+            });
         }
         self.set_rays(&record.rays, true);
         if let Some(m) = &record.mesh {
@@ -625,7 +609,7 @@ impl SculptDocument {
         }
     }
 
-    fn apply_view(&mut self, changes: &[(u32, Vec<Crossing>, Vec<Crossing>)], new: bool) {
+    fn apply_view(&mut self, changes: &[PixelChange], new: bool) {
         if let Some(view) = &mut self.view {
             view.set(changes, new);
         }
@@ -648,6 +632,24 @@ impl SculptDocument {
         }
         change
     }
+}
+
+/// Ray `r` along `axis` painted with `tool` by `op`, if that changes it.
+fn painted(
+    axis: usize,
+    r: usize,
+    old: &[Crossing],
+    tool: &[Crossing],
+    op: Op,
+) -> Option<RayChange> {
+    let mut new = Vec::with_capacity(old.len() + 2);
+    combine(old, tool, op, &mut new);
+    (new != old).then(|| RayChange {
+        axis: axis as u8,
+        index: r as u32,
+        old: old.to_vec(),
+        new,
+    })
 }
 
 /// The grid points whose data differ between the old and new rays.

@@ -12,10 +12,10 @@ pub const MIN_GRID_POINTS: usize = 3;
 /// coordinates are quantised to 2⁻²⁴ of a spacing in 64-bit integers).
 pub const MAX_GRID_POINTS: usize = 1 << 16;
 
-/// Fraction of a cell added to the margin of [`Grid::around`]: an irrational-looking
+/// Fraction of a cell added to the margin of [`Grid::around`] (1 − 1/√2): an irrational
 /// fraction, so that the faces of the box the grid is built around (and faces of a mesh
 /// aligned with them) fall between grid planes rather than on them.
-pub const GRID_OFFSET: f64 = 0.318_309_886;
+pub const GRID_OFFSET: f64 = 1.0 - std::f64::consts::FRAC_1_SQRT_2;
 
 /// A uniform grid of sample points with **cubic** cells: point `(i, j, k)` is at
 /// `origin + spacing · (i, j, k)` (physical units, axis-aligned).
@@ -92,7 +92,7 @@ impl Grid {
         }
         let margin = margin + GRID_OFFSET;
         let cells = n as f64 - 1.0 - 2.0 * margin;
-        if !(cells >= 1.0) || n > MAX_GRID_POINTS {
+        if cells.is_nan() || cells < 1.0 || n > MAX_GRID_POINTS {
             return Err(SculptError::InvalidGrid(format!(
                 "{n} points cannot hold a margin of {margin} cells on both sides"
             )));

@@ -95,7 +95,7 @@ pub fn combine(base: &[Crossing], tool: &[Crossing], op: Op, out: &mut Vec<Cross
 /// entering and leaving starting with an entering one, and an even count.
 #[must_use]
 pub fn is_clean(ray: &[Crossing]) -> bool {
-    ray.len() % 2 == 0
+    ray.len().is_multiple_of(2)
         && ray
             .iter()
             .enumerate()

@@ -94,26 +94,26 @@ pub fn run_job(base: &Mesh, job: &Job<'_>) -> Result<JobReport, SculptError> {
         reason: "it has no triangles".into(),
     })?;
     // A union may grow the solid: cover the tool's sweep (its posed bounding boxes).
-    if let (Some(edit), Some(tool)) = (&job.tool, &tool) {
-        if edit.op == Op::Add {
-            let poses = poses_of(edit);
-            for p in &poses {
-                p.validate()?;
+    if let (Some(edit), Some(tool)) = (&job.tool, &tool)
+        && edit.op == Op::Add
+    {
+        let poses = poses_of(edit);
+        for p in &poses {
+            p.validate()?;
+        }
+        for p in &poses {
+            if let Some((a, b)) = tool.posed(p).bounds() {
+                lo = lo.min(a);
+                hi = hi.max(b);
             }
-            for p in &poses {
-                if let Some((a, b)) = tool.posed(p).bounds() {
-                    lo = lo.min(a);
-                    hi = hi.max(b);
-                }
-            }
-            // Resampled dabs lie between consecutive poses; their boxes are covered by the
-            // union above grown by the tool's radius.
-            if poses.len() > 1 {
-                let r = tool.radius() * poses.iter().map(|p| p.scale).fold(0.0, f64::max);
-                for w in poses.windows(2) {
-                    lo = lo.min(w[0].translation.min(w[1].translation) - DVec3::splat(r));
-                    hi = hi.max(w[0].translation.max(w[1].translation) + DVec3::splat(r));
-                }
+        }
+        // Resampled dabs lie between consecutive poses; their boxes are covered by the
+        // union above grown by the tool's radius.
+        if poses.len() > 1 {
+            let r = tool.radius() * poses.iter().map(|p| p.scale).fold(0.0, f64::max);
+            for w in poses.windows(2) {
+                lo = lo.min(w[0].translation.min(w[1].translation) - DVec3::splat(r));
+                hi = hi.max(w[0].translation.max(w[1].translation) + DVec3::splat(r));
             }
         }
     }

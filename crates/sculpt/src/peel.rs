@@ -96,6 +96,18 @@ pub(crate) struct RayRect {
 }
 
 impl RayRect {
+    /// Every ray of `grid` along `axis`.
+    pub(crate) fn all(grid: &Grid, axis: usize) -> Self {
+        let (b, c) = transverse(axis);
+        let d = grid.dims();
+        Self {
+            u0: 0,
+            u1: d[b] - 1,
+            v0: 0,
+            v1: d[c] - 1,
+        }
+    }
+
     pub(crate) fn width(&self) -> usize {
         self.u1 - self.u0 + 1
     }
@@ -443,14 +455,7 @@ pub fn depth_peel_axis(
     if axis > 2 {
         return Err(SculptError::option("axis", axis, "0, 1 or 2"));
     }
-    let (b, c) = transverse(axis);
-    let d = grid.dims();
-    let rect = RayRect {
-        u0: 0,
-        u1: d[b] - 1,
-        v0: 0,
-        v1: d[c] - 1,
-    };
+    let rect = RayRect::all(grid, axis);
     Ok(DepthPeelImage::from_block(peel_axis(
         soup, grid, axis, rect, "peeled",
     )?))
@@ -739,7 +744,7 @@ pub(crate) fn peel_view(
                 proj,
                 depth: plane,
                 normal,
-                entering: !proj.counter_clockwise() == view.front_clockwise,
+                entering: proj.counter_clockwise() != view.front_clockwise,
                 u,
                 v,
             });

@@ -254,13 +254,13 @@ pub(crate) fn smooth_rays(
                 let mut state = false;
                 let push = |new: &mut Vec<Crossing>, c: Crossing, state: &mut bool| {
                     if c.entering != *state {
-                        if let Some(last) = new.last() {
-                            if last.depth >= c.depth {
-                                // Coincident with the previous crossing: they cancel.
-                                new.pop();
-                                *state = !*state;
-                                return;
-                            }
+                        if let Some(last) = new.last()
+                            && last.depth >= c.depth
+                        {
+                            // Coincident with the previous crossing: they cancel.
+                            new.pop();
+                            *state = !*state;
+                            return;
                         }
                         new.push(c);
                         *state = c.entering;

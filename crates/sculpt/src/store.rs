@@ -89,13 +89,18 @@ impl MeshStore {
         (a.min(b).min(c), a.max(b).max(c))
     }
 
-    pub fn push_triangle(&mut self, t: [u32; 3]) {
-        let id = self.triangles.len() as u32;
+    /// The buckets triangle `t`'s bounding box overlaps.
+    fn buckets_of(&self, t: [u32; 3]) -> Vec<usize> {
         let (lo, hi) = self.bounds(t);
         let (a, b) = self.buckets.range(lo, hi);
         let mut cells = Vec::new();
         self.buckets.for_each(a, b, |c| cells.push(c));
-        for c in cells {
+        cells
+    }
+
+    pub fn push_triangle(&mut self, t: [u32; 3]) {
+        let id = self.triangles.len() as u32;
+        for c in self.buckets_of(t) {
             self.buckets.lists[c].push(id);
         }
         self.triangles.push(t);
@@ -109,11 +114,7 @@ impl MeshStore {
         };
         self.alive.pop();
         let id = self.triangles.len() as u32;
-        let (lo, hi) = self.bounds(t);
-        let (a, b) = self.buckets.range(lo, hi);
-        let mut cells = Vec::new();
-        self.buckets.for_each(a, b, |c| cells.push(c));
-        for c in cells {
+        for c in self.buckets_of(t) {
             let list = &mut self.buckets.lists[c];
             if list.last() == Some(&id) {
                 list.pop();

@@ -9,7 +9,7 @@ use crate::exact::{Projected, quantize, ray_fixed};
 use crate::grid::{Grid, transverse};
 use crate::interval::{Op, combine};
 use crate::peel::{
-    Crossing, RayBlock, RayRect, TriangleSoup, affine_depth, pack_normal, peel_axis,
+    Crossing, RayBlock, RayRect, TriangleSoup, affine_depth, clean_into, pack_normal, peel_axis,
 };
 
 /// Relative tolerance of the convexity test: a vertex may lie this far above the plane of a
@@ -127,6 +127,21 @@ impl Tool {
     #[must_use]
     pub fn radius(&self) -> f64 {
         self.radius
+    }
+
+    /// The tool's triangles placed at every pose, as one soup (its solid is the union of the
+    /// dabs).
+    #[must_use]
+    pub fn posed_union(&self, poses: &[Pose]) -> TriangleSoup {
+        let mut soup = TriangleSoup::default();
+        for pose in poses {
+            let posed = self.posed(pose);
+            let base = soup.positions.len() as u32;
+            soup.positions.extend_from_slice(&posed.positions);
+            soup.triangles
+                .extend(posed.triangles.iter().map(|t| t.map(|i| i + base)));
+        }
+        soup
     }
 
     /// The tool's triangles placed by `pose`.
@@ -345,7 +360,7 @@ fn rect_for(grid: &Grid, axis: usize, lo: DVec3, hi: DVec3) -> Option<RayRect> {
     let range = |k: usize| -> Option<(usize, usize)> {
         let a = qlo[k].ceil().max(1.0);
         let z = qhi[k].floor().min((d[k] - 2) as f64);
-        (a <= z).then(|| (a as usize, z as usize))
+        (a <= z).then_some((a as usize, z as usize))
     };
     let (u, v) = (range(b)?, range(c)?);
     Some(RayRect {
@@ -357,20 +372,13 @@ fn rect_for(grid: &Grid, axis: usize, lo: DVec3, hi: DVec3) -> Option<RayRect> {
 }
 
 /// Peel the tool placed at every pose (the union of the dabs) along the three axes of
-/// `grid`. A single dab of a convex tool takes the two-layer path.
+/// `grid`. Dabs of a convex tool take the two-layer path, then merge by their union.
 pub(crate) fn raster_tool(
     tool: &Tool,
     poses: &[Pose],
     grid: &Grid,
 ) -> Result<ToolRaster, SculptError> {
-    let mut soup = TriangleSoup::default();
-    for pose in poses {
-        let posed = tool.posed(pose);
-        let base = soup.positions.len() as u32;
-        soup.positions.extend_from_slice(&posed.positions);
-        soup.triangles
-            .extend(posed.triangles.iter().map(|t| t.map(|i| i + base)));
-    }
+    let soup = tool.posed_union(poses);
     let Some((lo, hi)) = soup.bounds() else {
         return Ok(ToolRaster {
             blocks: [None, None, None],
@@ -398,8 +406,8 @@ pub(crate) fn raster_tool(
         let Some(rect) = rect_for(grid, axis, lo, hi) else {
             continue;
         };
-        let mut block = if poses.len() == 1 && tool.is_convex() {
-            two_layer(&soup, grid, axis, rect)?
+        let mut block = if tool.is_convex() {
+            convex_dabs(tool, poses, grid, axis, rect)?
         } else {
             peel_axis(&soup, grid, axis, rect, "tool")?
         };
@@ -409,6 +417,60 @@ pub(crate) fn raster_tool(
         *slot = Some(block);
     }
     Ok(ToolRaster { blocks, clipped })
+}
+
+/// The union of the two-layer peels of a convex tool at every pose, on the rays of `rect`.
+fn convex_dabs(
+    tool: &Tool,
+    poses: &[Pose],
+    grid: &Grid,
+    axis: usize,
+    rect: RayRect,
+) -> Result<RayBlock, SculptError> {
+    if let [pose] = poses {
+        return two_layer(&tool.posed(pose), grid, axis, rect);
+    }
+    let width = rect.width();
+    let mut raw: Vec<(u32, Crossing)> = Vec::new();
+    for pose in poses {
+        let soup = tool.posed(pose);
+        let Some((lo, hi)) = soup.bounds() else {
+            continue;
+        };
+        let Some(r) = rect_for(grid, axis, lo, hi) else {
+            continue;
+        };
+        let dab = two_layer(&soup, grid, axis, r)?;
+        for k in 0..r.len() {
+            let (u, v) = (r.u0 + k % r.width(), r.v0 + k / r.width());
+            let local = ((u - rect.u0) + width * (v - rect.v0)) as u32;
+            for c in dab.ray(u, v) {
+                raw.push((local, *c));
+            }
+        }
+    }
+    raw.par_sort_unstable_by(|a, b| {
+        a.0.cmp(&b.0)
+            .then(a.1.depth.total_cmp(&b.1.depth))
+            .then(b.1.entering.cmp(&a.1.entering))
+    });
+    let mut offsets = Vec::with_capacity(rect.len() + 1);
+    let mut crossings = Vec::with_capacity(raw.len());
+    let mut k = 0;
+    for r in 0..rect.len() {
+        offsets.push(crossings.len() as u32);
+        let start = k;
+        while k < raw.len() && raw[k].0 as usize == r {
+            k += 1;
+        }
+        clean_into(raw[start..k].iter().map(|x| x.1), 0, &mut crossings);
+    }
+    offsets.push(crossings.len() as u32);
+    Ok(RayBlock {
+        rect,
+        offsets,
+        crossings,
+    })
 }
 
 /// Intersect every ray of `block` with the depth interval `[lo, hi]` along `axis`.
@@ -544,4 +606,82 @@ fn two_layer(
         offsets,
         crossings,
     })
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use volmorph_mesh::shapes::{cuboid, icosphere};
+
+    /// The two-layer peel of a convex tool gives exactly the crossings of the general peel.
+    #[test]
+    fn two_layer_path_equals_the_general_peel() {
+        let grid = Grid::new(DVec3::splat(-1.0), 0.05, [41, 41, 41]).unwrap();
+        for mesh in [
+            icosphere(3, 0.6, DVec3::new(0.05, -0.1, 0.02)).unwrap(),
+            cuboid(DVec3::new(-0.5, -0.25, -0.35), DVec3::new(0.45, 0.5, 0.25)).unwrap(),
+        ] {
+            let tool = Tool::new(&mesh).unwrap();
+            assert!(tool.is_convex());
+            let pose = Pose {
+                translation: DVec3::new(0.02, 0.01, -0.03),
+                rotation: DQuat::from_axis_angle(DVec3::new(1.0, 2.0, 0.5).normalize(), 0.7),
+                scale: 1.1,
+            };
+            let soup = tool.posed(&pose);
+            let (lo, hi) = soup.bounds().unwrap();
+            for axis in 0..3 {
+                let rect = rect_for(&grid, axis, lo, hi).unwrap();
+                let fast = two_layer(&soup, &grid, axis, rect).unwrap();
+                let general = peel_axis(&soup, &grid, axis, rect, "tool").unwrap();
+                assert_eq!(fast, general, "axis {axis}");
+                assert!(fast.crossings.len() > 100);
+            }
+        }
+    }
+
+    /// A stroke of a convex tool (two-layer dabs merged by union) peels to the same solid as
+    /// the general peel of all the dabs together.
+    #[test]
+    fn convex_strokes_equal_the_general_peel_of_the_dabs() {
+        let grid = Grid::new(DVec3::splat(-1.0), 0.05, [41, 41, 41]).unwrap();
+        let tool = Tool::new(&icosphere(3, 0.3, DVec3::ZERO).unwrap()).unwrap();
+        let poses: Vec<Pose> = (0..7)
+            .map(|k| {
+                Pose::at(DVec3::new(
+                    -0.5 + 0.15 * k as f64,
+                    0.1 * (k as f64).sin(),
+                    0.0,
+                ))
+            })
+            .collect();
+        let soup = tool.posed_union(&poses);
+        let (lo, hi) = soup.bounds().unwrap();
+        for axis in 0..3 {
+            let rect = rect_for(&grid, axis, lo, hi).unwrap();
+            let fast = convex_dabs(&tool, &poses, &grid, axis, rect).unwrap();
+            let general = peel_axis(&soup, &grid, axis, rect, "tool").unwrap();
+            assert_eq!(fast, general, "axis {axis}");
+        }
+    }
+
+    #[test]
+    fn strokes_are_resampled_to_the_step() {
+        let a = Pose::at(DVec3::ZERO);
+        let b = Pose::at(DVec3::new(1.0, 0.0, 0.0));
+        let c = Pose {
+            rotation: DQuat::from_rotation_z(1.0),
+            ..b
+        };
+        let poses = resample_stroke(&[a, b, c], 0.5, 0.1, 1000).unwrap();
+        // 10 steps along the segment, then the rotation moves points 0.5 · 1 rad: 5 steps.
+        assert_eq!(poses.len(), 1 + 10 + 5);
+        for w in poses.windows(2) {
+            assert!(w[0].translation.distance(w[1].translation) <= 0.1 + 1e-12);
+        }
+        assert_eq!(poses.last(), Some(&c));
+        assert!(resample_stroke(&[a, b], 0.5, 0.001, 100).is_err());
+        assert!(resample_stroke(&[], 0.5, 0.1, 100).is_err());
+        assert!(resample_stroke(&[a, b], 0.5, 0.0, 100).is_err());
+    }
 }

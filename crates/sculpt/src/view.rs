@@ -11,6 +11,9 @@ use crate::interval::{Op, combine};
 use crate::peel::{Crossing, PerspectiveView, RayRect, TriangleSoup, peel_view};
 use crate::tool::{Pose, Tool};
 
+/// A pixel's index with its crossings before and after an edit.
+pub(crate) type PixelChange = (u32, Vec<Crossing>, Vec<Crossing>);
+
 /// A perspective view and the depth-peel image of the sculpted solid seen through it.
 #[derive(Debug, Clone, PartialEq)]
 pub struct FrozenView {
@@ -84,15 +87,8 @@ impl FrozenView {
         tool: &Tool,
         poses: &[Pose],
         op: Op,
-    ) -> Result<Vec<(u32, Vec<Crossing>, Vec<Crossing>)>, SculptError> {
-        let mut soup = TriangleSoup::default();
-        for pose in poses {
-            let posed = tool.posed(pose);
-            let base = soup.positions.len() as u32;
-            soup.positions.extend_from_slice(&posed.positions);
-            soup.triangles
-                .extend(posed.triangles.iter().map(|t| t.map(|i| i + base)));
-        }
+    ) -> Result<Vec<PixelChange>, SculptError> {
+        let soup = tool.posed_union(poses);
         let (w, h) = (self.view.width(), self.view.height());
         // Pixels the tool can cover: its vertices' screen box, or everything when a vertex
         // is behind the near plane.
@@ -120,7 +116,7 @@ impl FrozenView {
             let v0 = lo.1.ceil().max(0.0);
             let u1 = hi.0.floor().min((w - 1) as f64);
             let v1 = hi.1.floor().min((h - 1) as f64);
-            (u0 <= u1 && v0 <= v1).then(|| RayRect {
+            (u0 <= u1 && v0 <= v1).then_some(RayRect {
                 u0: u0 as usize,
                 u1: u1 as usize,
                 v0: v0 as usize,
@@ -159,7 +155,7 @@ impl FrozenView {
     }
 
     /// Set the pixels of `changes` to their new (or old) crossings.
-    pub(crate) fn set(&mut self, changes: &[(u32, Vec<Crossing>, Vec<Crossing>)], new: bool) {
+    pub(crate) fn set(&mut self, changes: &[PixelChange], new: bool) {
         if changes.is_empty() {
             return;
         }
@@ -185,11 +181,11 @@ impl FrozenView {
         let mut dmax = f64::NEG_INFINITY;
         for v in 0..h {
             for u in 0..w {
-                if let Some(c) = self.first_hit(u, v) {
-                    if c.depth.is_finite() {
-                        dmin = dmin.min(c.depth);
-                        dmax = dmax.max(c.depth);
-                    }
+                if let Some(c) = self.first_hit(u, v)
+                    && c.depth.is_finite()
+                {
+                    dmin = dmin.min(c.depth);
+                    dmax = dmax.max(c.depth);
                 }
             }
         }
