@@ -634,7 +634,7 @@ fn drag_lands_the_point_and_writes_the_lattice() {
         &lat,
     ]);
     assert!(text.contains("moved"), "{text}");
-    let lattice = volmorph_deform::formats::read_lattice(&lat).unwrap();
+    let lattice = volmorph_lattice::formats::read_lattice(&lat).unwrap();
     let landed = lattice.apply(glam::DVec3::new(0.2, 0.1, 0.3));
     assert!(
         (landed - glam::DVec3::new(0.35, 0.1, 0.1)).length() < 1e-9,
@@ -661,7 +661,7 @@ fn drag_lands_the_point_and_writes_the_lattice() {
         &"--method",
         &"inverse-linear",
     ]);
-    let lattice = volmorph_deform::formats::read_lattice(&back).unwrap();
+    let lattice = volmorph_lattice::formats::read_lattice(&back).unwrap();
     let landed = lattice.apply(glam::DVec3::new(0.2, 0.1, 0.3));
     assert!(
         (landed - glam::DVec3::new(0.2, 0.1, 0.3)).length() < 1e-9,

@@ -101,7 +101,10 @@ pub trait SpaceMap: Send + Sync {
 }
 
 /// Check an output buffer length against the number of inputs.
-pub(crate) fn check_len(expected: usize, got: usize) -> Result<(), DeformError> {
+///
+/// # Errors
+/// [`DeformError::BufferLength`] if they differ.
+pub fn check_len(expected: usize, got: usize) -> Result<(), DeformError> {
     if expected == got {
         Ok(())
     } else {
@@ -110,7 +113,11 @@ pub(crate) fn check_len(expected: usize, got: usize) -> Result<(), DeformError> 
 }
 
 /// Validate `grid` and `out` for a grid evaluation; returns `(nx, ny, nz)`.
-pub(crate) fn check_grid(grid: &Geometry, out: &[DVec3]) -> Result<[usize; 3], DeformError> {
+///
+/// # Errors
+/// [`DeformError::Grid`] for an invalid geometry, [`DeformError::BufferLength`] if `out` is
+/// not one point per voxel.
+pub fn check_grid(grid: &Geometry, out: &[DVec3]) -> Result<[usize; 3], DeformError> {
     grid.validate()?;
     check_len(grid.len(), out.len())?;
     Ok(grid.dims)
@@ -173,6 +180,25 @@ pub fn central_jacobian<M: SpaceMap + ?Sized>(map: &M, p: DVec3) -> DMat3 {
     let h = CENTRAL_DIFFERENCE_STEP * p.abs().max_element().max(1.0);
     let col = |e: DVec3| (map.apply(p + h * e) - map.apply(p - h * e)) / (2.0 * h);
     DMat3::from_cols(col(DVec3::X), col(DVec3::Y), col(DVec3::Z))
+}
+
+/// Check that every component of every vector of `v` is finite.
+///
+/// # Errors
+/// [`DeformError::NonFinite`] naming `"{what} {i}, component {a}"` for the first that is
+/// not.
+pub fn check_finite(what: &str, v: &[DVec3]) -> Result<(), DeformError> {
+    for (i, p) in v.iter().enumerate() {
+        for a in 0..3 {
+            if !p[a].is_finite() {
+                return Err(DeformError::NonFinite {
+                    what: format!("{what} {i}, component {a}"),
+                    value: p[a],
+                });
+            }
+        }
+    }
+    Ok(())
 }
 
 /// Fill a grid's Jacobian buffer with one constant matrix (maps with a constant Jacobian).

@@ -7,10 +7,11 @@ use std::sync::Arc;
 
 use criterion::{Criterion, criterion_group, criterion_main};
 use glam::DVec3;
-use volmorph_deform::{BSplineLattice, SpaceMap};
+use volmorph_deform::SpaceMap;
 use volmorph_ffd::accurate::AccuratePlan;
 use volmorph_ffd::baseline::vertex_ffd;
 use volmorph_ffd::shapes::uv_sphere;
+use volmorph_lattice::BSplineLattice;
 use volmorph_mesh::Mesh;
 
 fn moved_lattice(mesh: &Mesh, counts: [usize; 3]) -> BSplineLattice {

@@ -36,7 +36,8 @@ use std::time::{Duration, Instant};
 
 use glam::DVec3;
 use rayon::prelude::*;
-use volmorph_deform::{BSplineLattice, LatticeFrame, SpaceMap};
+use volmorph_deform::SpaceMap;
+use volmorph_lattice::{BSplineLattice, LatticeFrame};
 use volmorph_mesh::Mesh;
 use volmorph_spline::{KnotVector, MAX_DEGREE, basis_funs_into, bernstein_into};
 

@@ -241,7 +241,7 @@ pub fn adaptive_ffd(
 #[cfg(test)]
 mod tests {
     use super::*;
-    use volmorph_deform::BSplineLattice;
+    use volmorph_lattice::BSplineLattice;
 
     fn quad() -> Mesh {
         Mesh::from_polygons(

@@ -15,12 +15,12 @@
 //! * [`tessellate`] — watertight tessellation to a chordal tolerance.
 //! * [`shapes`] — generated models for tests and benchmarks.
 //!
-//! The initial lattices of §3.1 are [`volmorph_deform::BSplineLattice::feng_uniform_around`]
-//! and [`volmorph_deform::BSplineLattice::feng_end_interpolating_around`].
+//! The initial lattices of §3.1 are [`volmorph_lattice::BSplineLattice::feng_uniform_around`]
+//! and [`volmorph_lattice::BSplineLattice::feng_end_interpolating_around`].
 //!
 //! ```
 //! use std::sync::Arc;
-//! use volmorph_deform::BSplineLattice;
+//! use volmorph_lattice::BSplineLattice;
 //! use volmorph_ffd::accurate::AccuratePlan;
 //! use volmorph_mesh::{DVec3, Mesh};
 //! // One square, a degree-2 lattice of 4×4×4 control points around it.

@@ -7,9 +7,10 @@ use std::sync::Arc;
 
 use common::{Lcg, cube, jiggle, sphere};
 use glam::DVec3;
-use volmorph_deform::{BSplineLattice, SpaceMap};
+use volmorph_deform::SpaceMap;
 use volmorph_ffd::accurate::{AccuratePlan, TrimmedModel, accurate_ffd};
 use volmorph_ffd::frame::PlaneCase;
+use volmorph_lattice::BSplineLattice;
 use volmorph_mesh::Mesh;
 
 /// Largest distance between point-wise FFD and the trimmed surfaces at random points of

@@ -7,9 +7,9 @@ use std::collections::HashMap;
 
 use glam::DVec3;
 use proptest::prelude::*;
-use volmorph_deform::BSplineLattice;
 use volmorph_ffd::accurate::AccuratePlan;
 use volmorph_ffd::polygon::newell;
+use volmorph_lattice::BSplineLattice;
 use volmorph_mesh::Mesh;
 
 /// A random closed-ish patchwork: a height field grid over [0,1]² with coordinates snapped to

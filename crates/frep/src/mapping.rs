@@ -33,7 +33,7 @@
 
 use glam::{DMat3, DVec3};
 use volmorph_deform::SpaceMap;
-use volmorph_deform::volume_spline::{VolumeSpline, VolumeSplineSystem};
+use volmorph_handles::volume_spline::{VolumeSpline, VolumeSplineSystem};
 
 use crate::error::FrepError;
 use crate::field::Field;
@@ -424,7 +424,7 @@ pub struct SplineDisplacement {
 impl SplineDisplacement {
     /// Interpolate the displacements `displacements[i]` at `centres[i]` (physical units), with
     /// smoothing `smoothing ≥ 0` (0 interpolates; see
-    /// [`volmorph_deform::volume_spline`] for its normalisation).
+    /// [`volmorph_handles::volume_spline`] for its normalisation).
     ///
     /// # Errors
     /// [`FrepError::InvalidArgument`] when the two lists differ in length or a displacement is

@@ -19,7 +19,7 @@
 //! surface of the initial function), so a slab distance can be intersected with them.
 
 use glam::{DVec2, DVec3};
-use volmorph_deform::volume_spline::{VolumeSpline, VolumeSplineSystem};
+use volmorph_handles::volume_spline::{VolumeSpline, VolumeSplineSystem};
 
 use crate::error::FrepError;
 use crate::field::Field;

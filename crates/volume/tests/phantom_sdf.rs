@@ -2,9 +2,7 @@
 //! 1-Lipschitz bounds for all, the margin to the grid boundary, bounding boxes and the parts
 //! of the composite models.
 
-mod common;
-
-use common::SplitMix as Rng;
+use volmorph_testkit::Rng;
 
 use volmorph_volume::DVec3;
 use volmorph_volume::phantom::{
@@ -30,7 +28,7 @@ fn sample_points(ph: Phantom, rng: &mut Rng, n: usize) -> Vec<DVec3> {
 
 #[test]
 fn sphere_is_exact_distance() {
-    let mut rng = Rng(1);
+    let mut rng = Rng::new(1);
     let (mut inside, mut outside) = (0, 0);
     for p in sample_points(Phantom::Sphere, &mut rng, 5000) {
         // Distance to the nearest surface point R·p/|p|.
@@ -52,7 +50,7 @@ fn sphere_is_exact_distance() {
 
 #[test]
 fn torus_is_exact_distance() {
-    let mut rng = Rng(2);
+    let mut rng = Rng::new(2);
     let (mut inside, mut outside) = (0, 0);
     for p in sample_points(Phantom::Torus, &mut rng, 5000) {
         // Nearest point of the core circle, then the tube around it.
@@ -78,7 +76,7 @@ fn torus_is_exact_distance() {
 #[test]
 fn rounded_box_is_exact_distance() {
     let core = ROUNDED_BOX_HALF_EXTENTS - DVec3::splat(ROUNDED_BOX_RADIUS);
-    let mut rng = Rng(3);
+    let mut rng = Rng::new(3);
     let (mut inside, mut outside) = (0, 0);
     for p in sample_points(Phantom::RoundedBox, &mut rng, 5000) {
         // The rounded box is the core box grown by the radius: outside the core, distance to
@@ -119,7 +117,7 @@ fn exactness_flags() {
 
 #[test]
 fn every_sdf_is_1_lipschitz() {
-    let mut rng = Rng(4);
+    let mut rng = Rng::new(4);
     for ph in Phantom::ALL {
         let mut max_ratio: f64 = 0.0;
         for i in 0..40_000 {
@@ -148,7 +146,7 @@ fn every_sdf_is_1_lipschitz() {
 
 #[test]
 fn every_phantom_is_inside_the_margin_and_positive_on_the_grid_boundary() {
-    let mut rng = Rng(5);
+    let mut rng = Rng::new(5);
     let n = 41;
     for ph in Phantom::ALL {
         let mut min_inside = f64::INFINITY;

@@ -1,9 +1,7 @@
 //! The sampled phantoms: grid geometry, signed-distance and density volumes, the density ramp
 //! and its isosurface, determinism and error handling.
 
-mod common;
-
-use common::SplitMix as Rng;
+use volmorph_testkit::Rng;
 
 use volmorph_volume::phantom::{self, GRID_EXTENT, ISO_VALUE, Phantom, RAMP_VOXELS};
 use volmorph_volume::{DVec3, Geometry, Volume, VolumeError};
@@ -258,7 +256,7 @@ fn max_crossing_error(ph: Phantom, dims: [usize; 3], lines: usize, rng: &mut Rng
 
 #[test]
 fn density_isosurface_matches_the_sdf_zero_set() {
-    let mut rng = Rng(11);
+    let mut rng = Rng::new(11);
     for ph in Phantom::ALL {
         // True's model size, and a finer non-cubic grid.
         for dims in [[30, 30, 30], [48, 37, 55]] {

@@ -1,9 +1,7 @@
 //! Properties of the volume samplers: interpolation at voxel centres, polynomial
 //! reproduction, physical sampling, boundary policies and batch sampling.
 
-mod common;
-
-use common::Lcg;
+use volmorph_testkit::Rng;
 
 use volmorph_volume::sample::{
     Boundary, CUBIC_BSPLINE_POLE, Interpolation, Sampler, cubic_bspline_prefilter,
@@ -26,9 +24,9 @@ fn oblique(dims: [usize; 3]) -> Geometry {
 }
 
 fn random_volume(dims: [usize; 3], seed: u64) -> Volume<f32> {
-    let mut rng = Lcg(seed);
+    let mut rng = Rng::new(seed);
     let data = (0..dims[0] * dims[1] * dims[2])
-        .map(|_| (rng.next() * 200.0 - 50.0) as f32)
+        .map(|_| (rng.unit() * 200.0 - 50.0) as f32)
         .collect();
     Volume::new(oblique(dims), data).unwrap()
 }
@@ -70,9 +68,9 @@ fn every_kernel_reproduces_voxel_values() {
 #[test]
 fn cubic_on_f64_and_integer_volumes_interpolates() {
     let dims = [12, 10, 9];
-    let mut rng = Lcg(5);
+    let mut rng = Rng::new(5);
     let f = Volume::from_fn(Geometry::new(dims), |_, _, _| 0.0).unwrap();
-    let data: Vec<f64> = f.data().iter().map(|_| rng.next() * 1e6 - 3e5).collect();
+    let data: Vec<f64> = f.data().iter().map(|_| rng.unit() * 1e6 - 3e5).collect();
     let f = Volume::new(Geometry::new(dims), data).unwrap();
     let s = Sampler::new(&f, Interpolation::CubicBSpline, Boundary::Clamp).unwrap();
     let u = Volume::from_fn(Geometry::new(dims), |i, j, k| {
@@ -95,9 +93,9 @@ fn cubic_on_f64_and_integer_volumes_interpolates() {
 #[test]
 fn prefilter_line_interpolates_for_every_length() {
     // Exercises both the exact (n ≤ 28) and the truncated (n > 28) initial values.
-    let mut rng = Lcg(3);
+    let mut rng = Rng::new(3);
     for n in 1..70 {
-        let s: Vec<f64> = (0..n).map(|_| rng.next() * 10.0 - 5.0).collect();
+        let s: Vec<f64> = (0..n).map(|_| rng.unit() * 10.0 - 5.0).collect();
         let mut c = s.clone();
         cubic_bspline_prefilter(&mut c);
         let at = |m: isize| -> f64 {
@@ -126,11 +124,11 @@ fn trilinear_reproduces_affine_functions() {
     let dims = [8, 6, 5];
     let f = |p: DVec3| 3.5 - 1.25 * p.x + 0.75 * p.y + 2.0 * p.z;
     let v = Volume::from_fn(oblique(dims), |i, j, k| f(idx(i, j, k))).unwrap();
-    let mut rng = Lcg(9);
+    let mut rng = Rng::new(9);
     for boundary in BOUNDARIES {
         let s = Sampler::new(&v, Interpolation::Linear, boundary).unwrap();
         for _ in 0..500 {
-            let p = DVec3::new(rng.next() * 7.0, rng.next() * 5.0, rng.next() * 4.0);
+            let p = DVec3::new(rng.unit() * 7.0, rng.unit() * 5.0, rng.unit() * 4.0);
             assert!(
                 (s.sample_index(p) - f(p)).abs() < 1e-12,
                 "{boundary:?} at {p}"
@@ -159,14 +157,14 @@ fn cubic_reproduces_quadratics_in_the_interior() {
         hi - lo
     };
     let s = Sampler::new(&v, Interpolation::CubicBSpline, Boundary::Mirror).unwrap();
-    let mut rng = Lcg(21);
+    let mut rng = Rng::new(21);
     let margin = 7.0;
     let mut worst = 0f64;
     for _ in 0..2000 {
         let p = DVec3::new(
-            margin + rng.next() * (23.0 - 2.0 * margin),
-            margin + rng.next() * (21.0 - 2.0 * margin),
-            margin + rng.next() * (19.0 - 2.0 * margin),
+            margin + rng.unit() * (23.0 - 2.0 * margin),
+            margin + rng.unit() * (21.0 - 2.0 * margin),
+            margin + rng.unit() * (19.0 - 2.0 * margin),
         );
         worst = worst.max((s.sample_index(p) - f(p)).abs());
     }
@@ -180,14 +178,14 @@ fn physical_sampling_equals_index_sampling() {
     let dims = [10, 9, 8];
     let v = random_volume(dims, 17);
     let g = *v.geometry();
-    let mut rng = Lcg(4);
+    let mut rng = Rng::new(4);
     for kernel in KERNELS {
         let s = Sampler::new(&v, kernel, Boundary::Constant(0.0)).unwrap();
         for _ in 0..300 {
             let i = DVec3::new(
-                rng.next() * 11.0 - 1.0,
-                rng.next() * 10.0 - 1.0,
-                rng.next() * 9.0 - 1.0,
+                rng.unit() * 11.0 - 1.0,
+                rng.unit() * 10.0 - 1.0,
+                rng.unit() * 9.0 - 1.0,
             );
             let p = g.index_to_physical(i);
             let back = g.physical_to_index(p);
@@ -248,9 +246,9 @@ fn cubic_matches_a_naive_tensor_spline() {
     // then the spline Σ c[mirror(m)] β³(x − m) summed term by term.
     let dims = [6, 5, 4];
     let v = Volume::new(Geometry::new(dims), {
-        let mut rng = Lcg(99);
+        let mut rng = Rng::new(99);
         (0..120)
-            .map(|_| rng.next() * 8.0 - 2.0)
+            .map(|_| rng.unit() * 8.0 - 2.0)
             .collect::<Vec<f64>>()
     })
     .unwrap();
@@ -287,12 +285,12 @@ fn cubic_matches_a_naive_tensor_spline() {
         (if r > last { 2 * last - r } else { r }) as usize
     };
     let s = Sampler::new(&v, Interpolation::CubicBSpline, Boundary::Mirror).unwrap();
-    let mut rng = Lcg(7);
+    let mut rng = Rng::new(7);
     for _ in 0..200 {
         let p = DVec3::new(
-            rng.next() * 9.0 - 2.0,
-            rng.next() * 8.0 - 2.0,
-            rng.next() * 7.0 - 2.0,
+            rng.unit() * 9.0 - 2.0,
+            rng.unit() * 8.0 - 2.0,
+            rng.unit() * 7.0 - 2.0,
         );
         let mut want = 0.0;
         for mk in (p.z.floor() as i64 - 2)..=(p.z.floor() as i64 + 2) {
@@ -364,11 +362,11 @@ fn clamp_boundary_continues_edges() {
 fn mirror_boundary_reflects_about_end_centres() {
     let dims = [6, 5, 4];
     let v = random_volume(dims, 31);
-    let mut rng = Lcg(8);
+    let mut rng = Rng::new(8);
     for kernel in KERNELS {
         let s = Sampler::new(&v, kernel, Boundary::Mirror).unwrap();
         for _ in 0..200 {
-            let p = DVec3::new(rng.next() * 5.0, rng.next() * 4.0, rng.next() * 3.0);
+            let p = DVec3::new(rng.unit() * 5.0, rng.unit() * 4.0, rng.unit() * 3.0);
             let base = s.sample_index(p);
             if kernel == Interpolation::Nearest
                 && p.to_array().iter().any(|c| (c.fract() - 0.5).abs() < 1e-9)
@@ -408,13 +406,13 @@ fn batch_matches_single_queries() {
     let dims = [9, 8, 7];
     let v = random_volume(dims, 41);
     let any = AnyVolume::from(v.clone());
-    let mut rng = Lcg(12);
+    let mut rng = Rng::new(12);
     let points: Vec<DVec3> = (0..10_000)
         .map(|_| {
             v.geometry().index_to_physical(DVec3::new(
-                rng.next() * 10.0 - 1.0,
-                rng.next() * 9.0 - 1.0,
-                rng.next() * 8.0 - 1.0,
+                rng.unit() * 10.0 - 1.0,
+                rng.unit() * 9.0 - 1.0,
+                rng.unit() * 8.0 - 1.0,
             ))
         })
         .collect();
@@ -454,9 +452,9 @@ fn accessors_report_configuration() {
 fn cubic_prefilter_with_many_column_tiles_interpolates() {
     // An xy-plane of 40·30 = 1200 voxels is filtered along k in several column tiles.
     let dims = [40, 30, 5];
-    let mut rng = Lcg(55);
+    let mut rng = Rng::new(55);
     let data: Vec<f64> = (0..dims[0] * dims[1] * dims[2])
-        .map(|_| rng.next() * 100.0)
+        .map(|_| rng.unit() * 100.0)
         .collect();
     let v = Volume::new(Geometry::new(dims), data).unwrap();
     let s = Sampler::new(&v, Interpolation::CubicBSpline, Boundary::Clamp).unwrap();
@@ -511,7 +509,7 @@ fn edge_coordinates(n: usize) -> Vec<f64> {
 /// exact grid and edge coordinates, and on axes too short for any interior.
 #[test]
 fn fast_paths_equal_the_general_path_bit_for_bit() {
-    let mut rng = Lcg(77);
+    let mut rng = Rng::new(77);
     for dims in [[9, 8, 7], [5, 4, 3], [1, 6, 2]] {
         let base = random_volume(dims, 5);
         let volumes = [
@@ -527,9 +525,9 @@ fn fast_paths_equal_the_general_path_bit_for_bit() {
         let mut indices: Vec<DVec3> = (0..3000)
             .map(|_| {
                 DVec3::new(
-                    rng.next() * (dims[0] + 4) as f64 - 2.0,
-                    rng.next() * (dims[1] + 4) as f64 - 2.0,
-                    rng.next() * (dims[2] + 4) as f64 - 2.0,
+                    rng.unit() * (dims[0] + 4) as f64 - 2.0,
+                    rng.unit() * (dims[1] + 4) as f64 - 2.0,
+                    rng.unit() * (dims[2] + 4) as f64 - 2.0,
                 )
             })
             .collect();
@@ -542,7 +540,7 @@ fn fast_paths_equal_the_general_path_bit_for_bit() {
             for (b, &y) in ey.iter().enumerate() {
                 // Every x and y edge value against a z cycling through the z edge values.
                 indices.push(DVec3::new(x, y, ez[(a + b) % ez.len()]));
-                indices.push(DVec3::new(x, rng.next() * dims[1] as f64, y.min(1.0)));
+                indices.push(DVec3::new(x, rng.unit() * dims[1] as f64, y.min(1.0)));
             }
         }
         for vol in &volumes {

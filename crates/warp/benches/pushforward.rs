@@ -4,7 +4,7 @@
 
 use criterion::{Criterion, criterion_group, criterion_main};
 use glam::DVec3;
-use volmorph_deform::BSplineLattice;
+use volmorph_lattice::BSplineLattice;
 use volmorph_volume::{Geometry, Volume};
 use volmorph_warp::pushforward::{
     AntialiasOptions, FaceCentres, push_forward_antialiased, push_forward_nearest,

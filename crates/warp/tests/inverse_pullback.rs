@@ -4,7 +4,8 @@
 //! slab-wise Jacobian determinant map against pointwise determinants.
 
 use glam::{DMat3, DVec3};
-use volmorph_deform::{Affine, BSplineLattice, SpaceMap, invert_point};
+use volmorph_deform::{Affine, SpaceMap, invert_point};
+use volmorph_lattice::BSplineLattice;
 use volmorph_volume::sample::{Boundary, Interpolation, Sampler};
 use volmorph_volume::{Geometry, Volume};
 use volmorph_warp::WarpError;

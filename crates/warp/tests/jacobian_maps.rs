@@ -1,7 +1,8 @@
 //! Jacobian determinant maps against closed forms, folding detection and error handling.
 
 use glam::{DMat3, DVec3};
-use volmorph_deform::{Affine, BSplineLattice, Identity, SpaceMap};
+use volmorph_deform::{Affine, Identity, SpaceMap};
+use volmorph_lattice::BSplineLattice;
 use volmorph_volume::Geometry;
 use volmorph_warp::WarpError;
 use volmorph_warp::jacobian::{FoldingReport, jacobian_determinant, jacobian_determinant_into};

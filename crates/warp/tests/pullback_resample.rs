@@ -3,7 +3,8 @@
 //! pointwise definition, and bad arguments are errors.
 
 use glam::{DMat3, DVec3};
-use volmorph_deform::{Affine, BSplineLattice, SpaceMap};
+use volmorph_deform::{Affine, SpaceMap};
+use volmorph_lattice::BSplineLattice;
 use volmorph_volume::sample::{Boundary, Interpolation, Sampler};
 use volmorph_volume::{AnyVolume, Geometry, Volume, VoxelType};
 use volmorph_warp::WarpError;

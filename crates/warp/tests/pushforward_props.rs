@@ -2,7 +2,8 @@
 //! antialiasing).
 
 use glam::{DMat3, DVec3};
-use volmorph_deform::{Affine, BSplineLattice, DeformError, Identity, SpaceMap};
+use volmorph_deform::{Affine, DeformError, Identity, SpaceMap};
+use volmorph_lattice::BSplineLattice;
 use volmorph_volume::{Geometry, Volume};
 use volmorph_warp::WarpError;
 use volmorph_warp::pushforward::{

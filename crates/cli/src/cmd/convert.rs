@@ -3,9 +3,9 @@
 use std::path::PathBuf;
 
 use anyhow::{Context, bail};
-use volmorph_volume::format::{self, WriteOptions, raw::RawSpec};
 use volmorph_volume::stats::Statistics;
 use volmorph_volume::{AnyVolume, DVec3, VoxelType};
+use volmorph_volume_io::{self as format, WriteOptions, raw::RawSpec};
 
 use crate::{args, progress};
 

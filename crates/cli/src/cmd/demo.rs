@@ -22,14 +22,14 @@ use clap::ValueEnum as _;
 use glam::DVec3;
 use volmorph_contour::{IsoSurface, McOptions, marching_cubes};
 use volmorph_deform::SpaceMap;
-use volmorph_deform::formats::write_lattice;
-use volmorph_deform::manipulate::{Drag, DragOptions, ManipulationSession};
+use volmorph_lattice::formats::write_lattice;
+use volmorph_lattice::manipulate::{Drag, DragOptions, ManipulationSession};
 use volmorph_mesh as mesh;
 use volmorph_render::{Colormap, Window};
-use volmorph_volume::format;
 use volmorph_volume::phantom::{self, Phantom};
 use volmorph_volume::slice::{self, Axis, SlicePosition};
 use volmorph_volume::{AnyVolume, Volume};
+use volmorph_volume_io as format;
 use volmorph_warp::incremental::IncrementalPushForward;
 use volmorph_warp::jacobian::{FoldingReport, jacobian_determinant};
 use volmorph_warp::pushforward::{AntialiasOptions, push_forward_antialiased_f32};
@@ -127,7 +127,7 @@ fn warp_demo(args: &Args, index: &mut String, timings: &mut Timings) -> anyhow::
         phantom::density(Phantom::Teapot, [n; 3])
     })?;
     let grid = *source.geometry();
-    let lattice = super::lattice::lattice_around(&grid, LATTICE_COUNTS)?;
+    let lattice = volmorph_lattice::BSplineLattice::identity_on_voxels(&grid, LATTICE_COUNTS)?;
 
     pb.set_message("initial push-forward");
     let options = AntialiasOptions::default();
@@ -142,7 +142,7 @@ fn warp_demo(args: &Args, index: &mut String, timings: &mut Timings) -> anyhow::
     let after_lattice = session.lattice().clone();
     pb.set_message("incremental update");
     let report = timings.time("incremental update of the push-forward", || {
-        engine.set_lattice(after_lattice.clone())
+        engine.set_map(after_lattice.clone())
     })?;
 
     // The incremental result must equal a full push-forward with the final lattice.
@@ -198,7 +198,7 @@ fn warp_demo(args: &Args, index: &mut String, timings: &mut Timings) -> anyhow::
     pb.set_message("undo and redo");
     let undo_diff = timings.time("undo + incremental update", || -> anyhow::Result<f64> {
         session.undo().context("nothing to undo")?;
-        engine.set_lattice(session.lattice().clone())?;
+        engine.set_map(session.lattice().clone())?;
         Ok(max_abs_diff(
             engine.volume().data(),
             &source
@@ -210,7 +210,7 @@ fn warp_demo(args: &Args, index: &mut String, timings: &mut Timings) -> anyhow::
     })?;
     timings.time("redo + incremental update", || -> anyhow::Result<()> {
         session.redo().context("nothing to redo")?;
-        engine.set_lattice(session.lattice().clone())?;
+        engine.set_map(session.lattice().clone())?;
         Ok(())
     })?;
 

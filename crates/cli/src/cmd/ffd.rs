@@ -7,9 +7,9 @@ use std::sync::Arc;
 use std::time::Instant;
 
 use anyhow::{Context, bail};
-use volmorph_deform::formats::read_lattice;
 use volmorph_ffd::accurate::AccuratePlan;
 use volmorph_ffd::{baseline, step, tessellate};
+use volmorph_lattice::formats::read_lattice;
 use volmorph_mesh as mesh;
 
 use crate::progress;

@@ -16,7 +16,8 @@ use volmorph_frep::reconstruct::{SectionBlend, SectionStack, femur_sections};
 use volmorph_frep::{CompileOptions, Field, Shape, Tape, compile_source};
 use volmorph_mesh::{self as meshio, MeshWriteOptions};
 use volmorph_render::{Camera, Projection, write_png_rgba};
-use volmorph_volume::{AnyVolume, format};
+use volmorph_volume::AnyVolume;
+use volmorph_volume_io as format;
 
 use crate::progress;
 

@@ -4,8 +4,8 @@ use std::fmt::Write as _;
 use std::path::PathBuf;
 
 use anyhow::Context;
-use volmorph_volume::format::{self, VolumeFile};
 use volmorph_volume::stats::Statistics;
+use volmorph_volume_io::{self as format, VolumeFile};
 
 use crate::progress;
 

@@ -6,7 +6,7 @@ use std::path::PathBuf;
 use anyhow::Context;
 use volmorph_contour::{DcOptions, McOptions, dual_contouring_any, marching_cubes_any};
 use volmorph_mesh::{self as mesh, MeshWriteOptions};
-use volmorph_volume::format;
+use volmorph_volume_io as format;
 
 use crate::progress;
 

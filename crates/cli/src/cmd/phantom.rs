@@ -4,8 +4,8 @@ use std::path::PathBuf;
 
 use anyhow::{Context, bail};
 use volmorph_volume::AnyVolume;
-use volmorph_volume::format;
 use volmorph_volume::phantom::{self, Phantom};
+use volmorph_volume_io as format;
 
 use crate::{args, progress};
 

@@ -5,8 +5,8 @@ use std::path::{Path, PathBuf};
 use anyhow::{Context, bail};
 use volmorph_render::{Colormap, RgbaImage, Window, render_scalar, write_png_rgba};
 use volmorph_volume::AnyVolume;
-use volmorph_volume::format;
 use volmorph_volume::slice::{self, Axis, Slice, SlicePosition};
+use volmorph_volume_io as format;
 
 use crate::args;
 

@@ -3,7 +3,7 @@
 #![allow(dead_code)]
 
 use glam::DVec3;
-use volmorph_deform::BSplineLattice;
+use volmorph_lattice::BSplineLattice;
 use volmorph_mesh::Mesh;
 
 /// Deterministic pseudo-random numbers in [0, 1) (64-bit LCG, top 53 bits).
