@@ -37,7 +37,7 @@ use volmorph_mesh::FastMap;
 
 use crate::cut::{BKind, Cut, edge_key, point_key, square_key};
 use crate::dexel::{BitVolume, TriDexel};
-use crate::grid::{IndexBox, transverse};
+use crate::grid::{PointBox, transverse};
 
 /// A surface point of the local contour: a crossing on a grid edge or a cut point.
 #[derive(Debug, Clone, Copy)]
@@ -95,7 +95,7 @@ struct CellLoop {
 
 struct Ctx<'a> {
     dexel: &'a TriDexel,
-    b: IndexBox,
+    b: PointBox,
     cut: &'a Cut,
     signs: &'a BitVolume,
     interior: &'a FastMap<u64, u32>,
@@ -325,7 +325,7 @@ fn edge_crossing(dexel: &TriDexel, axis: usize, p: [usize; 3], inside_lo: bool) 
 }
 
 /// Signs of the box's grid points: the majority vote inside, the cut loops' signs on ∂B.
-pub(crate) fn box_signs(dexel: &TriDexel, b: &IndexBox, cut: &Cut) -> BitVolume {
+pub(crate) fn box_signs(dexel: &TriDexel, b: &PointBox, cut: &Cut) -> BitVolume {
     let mut signs = dexel.classify(b);
     for (&key, &value) in &cut.signs {
         signs.set(crate::cut::unkey(key), value);
@@ -336,7 +336,7 @@ pub(crate) fn box_signs(dexel: &TriDexel, b: &IndexBox, cut: &Cut) -> BitVolume 
 /// Contour the cells of box `b` and join them to the cut loops of `cut`.
 pub(crate) fn contour(
     dexel: &TriDexel,
-    b: &IndexBox,
+    b: &PointBox,
     cut: &Cut,
     signs: &BitVolume,
     rule: &VertexRule,

@@ -31,7 +31,7 @@
 use glam::DVec3;
 use volmorph_mesh::FastMap;
 
-use crate::grid::{Grid, IndexBox};
+use crate::grid::{Grid, PointBox};
 
 /// Key of a grid point (20 bits per index; grids have at most 2¹⁶ points per axis).
 #[inline]
@@ -110,7 +110,7 @@ pub(crate) struct Cut {
 pub(crate) struct CutInput<'a> {
     pub grid: &'a Grid,
     /// B as grid points `lo ..= hi`.
-    pub cells: IndexBox,
+    pub cells: PointBox,
     pub positions: &'a [DVec3],
     pub triangles: &'a [[u32; 3]],
     /// Triangles that may meet B.

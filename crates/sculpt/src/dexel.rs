@@ -5,7 +5,7 @@
 use rayon::prelude::*;
 
 use crate::SculptError;
-use crate::grid::{Grid, IndexBox, transverse};
+use crate::grid::{Grid, PointBox, transverse};
 use crate::interval::inside_at;
 use crate::peel::{Crossing, RayRect, TriangleSoup, peel_axis};
 
@@ -149,7 +149,7 @@ impl TriDexel {
 
     /// Majority-voted classification of every grid point of `region`.
     #[must_use]
-    pub fn classify(&self, region: &IndexBox) -> BitVolume {
+    pub fn classify(&self, region: &PointBox) -> BitVolume {
         let views = [0, 1, 2].map(|a| self.view_bits(a, region));
         let mut out = BitVolume::new(*region);
         out.words.par_iter_mut().enumerate().for_each(|(w, word)| {
@@ -161,7 +161,7 @@ impl TriDexel {
 
     /// What the view along `axis` says about every grid point of `region`.
     #[must_use]
-    pub fn view_bits(&self, axis: usize, region: &IndexBox) -> BitVolume {
+    pub fn view_bits(&self, axis: usize, region: &PointBox) -> BitVolume {
         let mut out = BitVolume::new(*region);
         let (b, c) = transverse(axis);
         let g = &self.grid;
@@ -221,11 +221,11 @@ pub(crate) fn fill_intervals(
     }
 }
 
-/// A packed boolean per grid point of an [`IndexBox`], rows along x padded to whole 64-bit
+/// A packed boolean per grid point of an [`PointBox`], rows along x padded to whole 64-bit
 /// words.
 #[derive(Debug, Clone, PartialEq, Eq)]
 pub struct BitVolume {
-    region: IndexBox,
+    region: PointBox,
     row_words: usize,
     words: Vec<u64>,
 }
@@ -233,7 +233,7 @@ pub struct BitVolume {
 impl BitVolume {
     /// All false.
     #[must_use]
-    pub fn new(region: IndexBox) -> Self {
+    pub fn new(region: PointBox) -> Self {
         let e = region.extent();
         let row_words = e[0].div_ceil(64);
         Self {
@@ -245,7 +245,7 @@ impl BitVolume {
 
     /// The box covered.
     #[must_use]
-    pub fn region(&self) -> &IndexBox {
+    pub fn region(&self) -> &PointBox {
         &self.region
     }
 

@@ -12,7 +12,7 @@ use volmorph_mesh::Mesh;
 
 use crate::SculptError;
 use crate::dexel::TriDexel;
-use crate::grid::{Grid, IndexBox, transverse};
+use crate::grid::{Grid, PointBox, transverse};
 use crate::interval::{Op, combine};
 use crate::peel::{Crossing, TriangleSoup};
 use crate::smooth::{SmoothRegion, smooth_rays};
@@ -76,9 +76,9 @@ pub enum Edit {
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct ChangedRegion {
     /// Grid points whose dexel data changed (their classification, crossings or normals).
-    pub dexels: IndexBox,
+    pub dexels: PointBox,
     /// Grid points of the box that was re-contoured and stitched.
-    pub recontoured: IndexBox,
+    pub recontoured: PointBox,
     /// Physical bounding box of everything that changed: the changed dexels and the removed
     /// and added triangles.
     pub min: DVec3,
@@ -653,8 +653,8 @@ fn painted(
 }
 
 /// The grid points whose data differ between the old and new rays.
-fn changed_box(grid: &Grid, changes: &[RayChange]) -> Option<IndexBox> {
-    let mut out: Option<IndexBox> = None;
+fn changed_box(grid: &Grid, changes: &[RayChange]) -> Option<PointBox> {
+    let mut out: Option<PointBox> = None;
     for c in changes {
         let axis = c.axis as usize;
         let (b, cc) = transverse(axis);
@@ -691,7 +691,7 @@ fn changed_box(grid: &Grid, changes: &[RayChange]) -> Option<IndexBox> {
         p1[b] = ib;
         p0[cc] = ic;
         p1[cc] = ic;
-        let bx = IndexBox { lo: p0, hi: p1 };
+        let bx = PointBox { lo: p0, hi: p1 };
         out = Some(out.map_or(bx, |o| o.union(&bx)));
     }
     out

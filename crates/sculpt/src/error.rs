@@ -48,6 +48,9 @@ pub enum SculptError {
     /// unchanged).
     #[error("cannot stitch the re-contoured region into the mesh: {0}")]
     Stitch(String),
+    /// A stroke file or text is malformed (the message names the file, pose and field).
+    #[error("stroke {0}")]
+    Stroke(String),
     /// Contouring options are out of range.
     #[error(transparent)]
     Contour(#[from] ContourError),

@@ -173,8 +173,8 @@ impl Grid {
 
     /// Every grid point, as an index box.
     #[must_use]
-    pub fn full_box(&self) -> IndexBox {
-        IndexBox {
+    pub fn full_box(&self) -> PointBox {
+        PointBox {
             lo: [0; 3],
             hi: [self.dims[0] - 1, self.dims[1] - 1, self.dims[2] - 1],
         }
@@ -222,7 +222,7 @@ impl Grid {
     /// The index box of grid points inside the physical box `[min, max]` (closed), or `None`
     /// when no grid point is inside it.
     #[must_use]
-    pub fn index_box_inside(&self, min: DVec3, max: DVec3) -> Option<IndexBox> {
+    pub fn index_box_inside(&self, min: DVec3, max: DVec3) -> Option<PointBox> {
         let mut lo = [0; 3];
         let mut hi = [0; 3];
         for a in 0..3 {
@@ -238,12 +238,12 @@ impl Grid {
             lo[a] = l;
             hi[a] = h;
         }
-        Some(IndexBox { lo, hi })
+        Some(PointBox { lo, hi })
     }
 
     /// The smallest index box whose physical box contains `[min, max]`, clamped to the grid.
     #[must_use]
-    pub fn index_box_covering(&self, min: DVec3, max: DVec3) -> IndexBox {
+    pub fn index_box_covering(&self, min: DVec3, max: DVec3) -> PointBox {
         let mut lo = [0; 3];
         let mut hi = [0; 3];
         for a in 0..3 {
@@ -255,12 +255,12 @@ impl Grid {
             };
             hi[a] = hi[a].max(lo[a]);
         }
-        IndexBox { lo, hi }
+        PointBox { lo, hi }
     }
 
     /// Physical box of an index box.
     #[must_use]
-    pub fn physical(&self, b: &IndexBox) -> (DVec3, DVec3) {
+    pub fn physical(&self, b: &PointBox) -> (DVec3, DVec3) {
         (self.point(b.lo), self.point(b.hi))
     }
 }
@@ -275,14 +275,14 @@ pub fn transverse(axis: usize) -> (usize, usize) {
 
 /// A box of grid points, `lo ..= hi` along every axis (so its cells are `lo .. hi`).
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Hash)]
-pub struct IndexBox {
+pub struct PointBox {
     /// Lowest grid index per axis.
     pub lo: [usize; 3],
     /// Highest grid index per axis (inclusive).
     pub hi: [usize; 3],
 }
 
-impl IndexBox {
+impl PointBox {
     /// The box of one grid point.
     #[must_use]
     pub fn point(p: [usize; 3]) -> Self {

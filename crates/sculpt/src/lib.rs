@@ -97,6 +97,7 @@ mod peel;
 mod smooth;
 mod stitch;
 mod store;
+mod stroke;
 mod tool;
 mod view;
 
@@ -107,7 +108,7 @@ pub use document::{
 };
 pub use error::SculptError;
 pub use exact::FRACTION_BITS;
-pub use grid::{GRID_OFFSET, Grid, IndexBox, MAX_GRID_POINTS, MIN_GRID_POINTS, transverse};
+pub use grid::{GRID_OFFSET, Grid, MAX_GRID_POINTS, MIN_GRID_POINTS, PointBox, transverse};
 pub use interval::{Op, combine, inside_at, is_clean};
 pub use job::{DEFAULT_GRID_POINTS, JOB_MARGIN, Job, JobReport, ToolEdit, run_job};
 pub use peel::{
@@ -115,5 +116,6 @@ pub use peel::{
     depth_peel_perspective,
 };
 pub use smooth::{MAX_KERNEL, SmoothRegion};
+pub use stroke::{MAX_STROKE_BYTES, Stroke};
 pub use tool::{CONVEXITY_TOLERANCE, Pose, Tool, closed_soup, resample_stroke};
 pub use view::FrozenView;

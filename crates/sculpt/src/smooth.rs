@@ -26,7 +26,7 @@ use rayon::prelude::*;
 
 use crate::SculptError;
 use crate::dexel::TriDexel;
-use crate::grid::{IndexBox, transverse};
+use crate::grid::{PointBox, transverse};
 use crate::interval::inside_at;
 use crate::peel::{Crossing, pack_normal};
 
@@ -48,13 +48,13 @@ pub struct SmoothRegion {
 
 /// Dense `f64` values over an index box.
 struct Field {
-    b: IndexBox,
+    b: PointBox,
     e: [usize; 3],
     v: Vec<f64>,
 }
 
 impl Field {
-    fn new(b: IndexBox, value: f64) -> Self {
+    fn new(b: PointBox, value: f64) -> Self {
         let e = b.extent();
         Self {
             b,
@@ -93,7 +93,7 @@ pub(crate) fn smooth_rays(
         ));
     }
     let d = g.dims();
-    let interior = IndexBox {
+    let interior = PointBox {
         lo: [1; 3],
         hi: [d[0] - 2, d[1] - 2, d[2] - 2],
     };
@@ -101,7 +101,7 @@ pub(crate) fn smooth_rays(
     if !user.intersects(&interior) {
         return Ok(Vec::new());
     }
-    let clamp = |b: IndexBox| IndexBox {
+    let clamp = |b: PointBox| PointBox {
         lo: std::array::from_fn(|a| b.lo[a].max(interior.lo[a])),
         hi: std::array::from_fn(|a| b.hi[a].min(interior.hi[a])),
     };
@@ -110,7 +110,7 @@ pub(crate) fn smooth_rays(
     // Partial volumes are needed over the blend box plus the kernel and the widening of the
     // replaced stretches; cells over one more point.
     let work = clamp(blend.dilated(k + 2, &g));
-    let cells = IndexBox {
+    let cells = PointBox {
         lo: work.lo.map(|x| x - 1),
         hi: work.hi,
     };

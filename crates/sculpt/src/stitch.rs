@@ -11,7 +11,7 @@ use crate::cells::{self, LV};
 use crate::collapse::LocalMesh;
 use crate::cut::{self, CutInput, SV};
 use crate::dexel::TriDexel;
-use crate::grid::IndexBox;
+use crate::grid::PointBox;
 use crate::store::MeshStore;
 
 /// Translations tried for the cut combinatorics, in cells (no lattice direction, distinct
@@ -39,7 +39,7 @@ pub(crate) struct StitchTimes {
 #[derive(Debug, Clone, PartialEq)]
 pub(crate) struct Patch {
     /// The box actually re-contoured (grid points `lo ..= hi`).
-    pub cells: IndexBox,
+    pub cells: PointBox,
     /// Old triangles removed, ascending.
     pub removed: Vec<u32>,
     /// New vertices, appended after the existing ones.
@@ -57,7 +57,7 @@ pub(crate) struct Patch {
 pub(crate) fn stitch(
     dexel: &TriDexel,
     store: &MeshStore,
-    cells: IndexBox,
+    cells: PointBox,
     rule: &VertexRule,
 ) -> Result<Patch, SculptError> {
     let grid = dexel.grid();
@@ -99,7 +99,7 @@ const MAX_FACE_MOVES: usize = 3;
 /// while an old vertex lies on its plane within its rectangle. Meshes made on the same grid
 /// (a box on grid planes, an earlier seam) otherwise put whole faces of the old mesh on a
 /// face of the box, which the cut resolves consistently but with sliver triangles.
-fn avoid_vertices(store: &MeshStore, cells: IndexBox, grid: &crate::grid::Grid) -> IndexBox {
+fn avoid_vertices(store: &MeshStore, cells: PointBox, grid: &crate::grid::Grid) -> PointBox {
     let mut b = cells;
     let tol = 1e-9 * grid.spacing();
     let d = grid.dims();
@@ -143,7 +143,7 @@ fn avoid_vertices(store: &MeshStore, cells: IndexBox, grid: &crate::grid::Grid) 
 fn attempt(
     dexel: &TriDexel,
     store: &MeshStore,
-    b: IndexBox,
+    b: PointBox,
     rule: &VertexRule,
     shift: DVec3,
     times: &mut StitchTimes,

@@ -165,21 +165,28 @@ impl MeshStore {
 
     /// The living triangles as a compact mesh (unreferenced vertices dropped, order kept).
     pub fn to_mesh(&self) -> Result<Mesh, SculptError> {
+        // Vertices keep their storage order (an unedited document gives back its mesh
+        // exactly); unreferenced ones are dropped.
         let mut map = vec![u32::MAX; self.positions.len()];
-        let mut positions = Vec::new();
-        let mut tris = Vec::new();
-        for (t, tri) in self.triangles.iter().enumerate() {
-            if !self.alive[t] {
-                continue;
+        for (tri, _) in self.triangles.iter().zip(&self.alive).filter(|(_, a)| **a) {
+            for &v in tri {
+                map[v as usize] = 0;
             }
-            tris.push(tri.map(|v| {
-                if map[v as usize] == u32::MAX {
-                    map[v as usize] = positions.len() as u32;
-                    positions.push(self.positions[v as usize]);
-                }
-                map[v as usize]
-            }));
         }
+        let mut positions = Vec::new();
+        for (m, p) in map.iter_mut().zip(&self.positions) {
+            if *m == 0 {
+                *m = positions.len() as u32;
+                positions.push(*p);
+            }
+        }
+        let tris: Vec<[u32; 3]> = self
+            .triangles
+            .iter()
+            .zip(&self.alive)
+            .filter(|(_, a)| **a)
+            .map(|(t, _)| t.map(|v| map[v as usize]))
+            .collect();
         Ok(Mesh::from_triangles(positions, &tris)?)
     }
 }
