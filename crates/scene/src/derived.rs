@@ -556,16 +556,23 @@ impl Derived {
             let ks: Vec<usize> = changes.iter().map(|c| c.0).collect();
             if let Influence::Within(_) = live.influence(&ks) {
                 let (lo, hi) = live.influence(&ks).bounds().unwrap_or_default();
+                // Gather the vertices inside the influence, map them with the same batch
+                // evaluation a full update uses (so both agree bit for bit), scatter back.
                 let src = mesh.positions();
+                let (index, points): (Vec<usize>, Vec<DVec3>) = src
+                    .iter()
+                    .enumerate()
+                    .filter(|(_, p)| p.cmpge(lo).all() && p.cmple(hi).all())
+                    .map(|(i, p)| (i, *p))
+                    .unzip();
+                let mut mapped = vec![DVec3::ZERO; points.len()];
+                map.apply_batch(&points, &mut mapped)?;
                 let out = Arc::make_mut(out);
                 let mut dirty: Option<(DVec3, DVec3)> = None;
-                for (i, p) in src.iter().enumerate() {
-                    if p.cmpge(lo).all() && p.cmple(hi).all() {
-                        let old = out.positions()[i];
-                        let new = map.apply(*p);
-                        out.positions_mut()[i] = new;
-                        dirty = union(dirty, Some((old.min(new), old.max(new))));
-                    }
+                for (&i, &new) in index.iter().zip(&mapped) {
+                    let old = out.positions()[i];
+                    out.positions_mut()[i] = new;
+                    dirty = union(dirty, Some((old.min(new), old.max(new))));
                 }
                 return Ok(Dirty {
                     object: id,

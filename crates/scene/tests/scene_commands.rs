@@ -22,17 +22,18 @@ fn add(scene: &mut Scene, name: &str, object: NewObject) -> ObjectId {
         .added[0]
 }
 
-/// A 32³ teapot, its identity 7³ lattice and the antialiased push-forward through it.
+/// A 48³ teapot, its identity 11³ lattice (cells of about 6 voxels) and the antialiased
+/// push-forward through it.
 fn teapot_scene() -> (Scene, Geometry, ObjectId, ObjectId, ObjectId) {
     let mut scene = Scene::new();
-    let vol = phantom::density(Phantom::Teapot, [32; 3]).unwrap();
+    let vol = phantom::density(Phantom::Teapot, [48; 3]).unwrap();
     let grid = *vol.geometry();
     let v = add(
         &mut scene,
         "teapot",
         NewObject::Volume(AnyVolume::from(vol)),
     );
-    let lattice = BSplineLattice::identity_on_voxels(&grid, [7, 7, 7]).unwrap();
+    let lattice = BSplineLattice::identity_on_voxels(&grid, [11, 11, 11]).unwrap();
     let l = add(
         &mut scene,
         "lattice",

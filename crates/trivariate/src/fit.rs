@@ -215,10 +215,17 @@ pub fn fit_sampled_volume(
         )));
     }
     for a in 0..3 {
-        if counts[a] < order || counts[a] > dims[a] {
+        if counts[a] > dims[a] {
             return Err(TrivariateError::InvalidArgument(format!(
-                "axis {a}: {} control points, need between the order {order} and the {} samples",
+                "axis {a}: {} control points exceed the {} samples (a fit needs at most one \
+                 control point per sample)",
                 counts[a], dims[a]
+            )));
+        }
+        if counts[a] < order {
+            return Err(TrivariateError::InvalidArgument(format!(
+                "axis {a}: too few control points ({}) for the order {order}",
+                counts[a]
             )));
         }
     }

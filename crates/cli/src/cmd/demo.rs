@@ -1,13 +1,16 @@
 //! `volmorph demo`: the main job on built-in data.
 //!
-//! 1. **Volume warping by direct manipulation** (True 1992 §5–§7, Figs. 9–10): the built-in
-//!    teapot as a u8 density volume, a 9 × 9 × 9 uniform cubic B-spline lattice placed around
-//!    it as the identity (Fig. 8), and a drag that lowers the spout, moving only the control
-//!    points within a tool radius of it (Hsu's least-norm control-point solve). The warp is
-//!    updated incrementally (True's main loop: only the influenced regions are pushed
-//!    forward again and the output they reach recomputed) and checked against a full antialiased push-forward; the drag is then
-//!    undone and redone. Before/after volumes, lattices, marching-cubes meshes and shaded
-//!    pictures go to the output folder, and the time of every step is printed.
+//! 1. **Volume warping by direct manipulation** (True 1992 §5–§7, Figs. 9–10), as one
+//!    `volmorph_scene` session: the built-in teapot as a u8 density volume, a 9 × 9 × 9 uniform
+//!    cubic B-spline lattice placed around it as the identity (Fig. 8), and a drag command that
+//!    lowers the spout, moving only the control points within a tool radius of it (Hsu's
+//!    least-norm control-point solve). The scene updates the warped volume incrementally
+//!    (True's main loop: only the influenced regions are pushed forward again and the output
+//!    they reach recomputed), and with it the isosurface and Jacobian derived from it; the
+//!    result is checked against a full antialiased push-forward, and the drag is undone and
+//!    redone. The scene exports before/after volumes, lattices and marching-cubes meshes and
+//!    saves itself as a project; shaded pictures go beside them, and the time of every step is
+//!    printed.
 //! 2. **The model gallery** (`models/`): every built-in model as a u8 density volume (object
 //!    at isovalue 127) and an f32 signed-distance volume, with pictures of the middle slices.
 //!
@@ -17,22 +20,23 @@ use std::fmt::Write as _;
 use std::path::{Path, PathBuf};
 use std::time::Instant;
 
-use anyhow::Context;
+use std::sync::Arc;
+
+use anyhow::{Context, bail};
 use clap::ValueEnum as _;
 use glam::DVec3;
-use volmorph_contour::{IsoSurface, McOptions, marching_cubes};
 use volmorph_deform::SpaceMap;
-use volmorph_lattice::formats::write_lattice;
-use volmorph_lattice::manipulate::{Drag, DragOptions, ManipulationSession};
-use volmorph_mesh as mesh;
+use volmorph_lattice::manipulate::DragOptions;
+use volmorph_maps::AnyMap;
+use volmorph_mesh::Mesh;
 use volmorph_render::{Colormap, Window};
+use volmorph_scene::{Command, NewObject, ObjectId, Recipe, Scene, SurfaceMethod};
 use volmorph_volume::phantom::{self, Phantom};
 use volmorph_volume::slice::{self, Axis, SlicePosition};
 use volmorph_volume::{AnyVolume, Volume};
 use volmorph_volume_io as format;
-use volmorph_warp::incremental::IncrementalPushForward;
-use volmorph_warp::jacobian::{FoldingReport, jacobian_determinant};
-use volmorph_warp::pushforward::{AntialiasOptions, push_forward_antialiased_f32};
+use volmorph_warp::apply::{WarpMethod, WarpOptions, warp_volume};
+use volmorph_warp::jacobian::FoldingReport;
 
 use super::phantom::{Kind, make};
 use super::picture::{self, View};
@@ -108,7 +112,7 @@ impl std::fmt::Display for Timings {
     fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
         writeln!(f, "timings (wall clock):")?;
         for (name, s) in &self.0 {
-            writeln!(f, "  {name:<48} {:>9.1} ms", s * 1e3)?;
+            writeln!(f, "  {name:<60} {:>9.1} ms", s * 1e3)?;
         }
         Ok(())
     }
@@ -120,7 +124,8 @@ fn warp_demo(args: &Args, index: &mut String, timings: &mut Timings) -> anyhow::
     let _ = writeln!(
         index,
         "volmorph demo: the teapot at {n}^3 voxels over the model frame [-1.1, 1.1]^3, its spout \
-         lowered by a drag through a 9x9x9 cubic B-spline lattice (True 1992, Fig. 10)\n"
+         lowered by a drag through a 9x9x9 cubic B-spline lattice (True 1992, Fig. 10), run as \
+         one scene session (the engine behind every front-end)\n"
     );
     let pb = progress::spinner("building the teapot");
     let source: Volume<u8> = timings.time("teapot density volume", || {
@@ -129,52 +134,115 @@ fn warp_demo(args: &Args, index: &mut String, timings: &mut Timings) -> anyhow::
     let grid = *source.geometry();
     let lattice = volmorph_lattice::BSplineLattice::identity_on_voxels(&grid, LATTICE_COUNTS)?;
 
+    // The scene: the teapot, its lattice, and what is derived from them — the warped volume
+    // (kept up to date incrementally), the isosurfaces before and after, and the Jacobian.
+    let mut scene = Scene::new();
+    let add = |scene: &mut Scene, name: &str, object| -> anyhow::Result<ObjectId> {
+        let change = scene.apply(Command::Add {
+            name: name.into(),
+            object,
+        })?;
+        if let Some((_, e)) = change.errors.first() {
+            bail!("cannot compute {name}: {e}");
+        }
+        Ok(change.added[0])
+    };
+    let t = add(
+        &mut scene,
+        "teapot",
+        NewObject::Volume(source.clone().into()),
+    )?;
+    let l = add(
+        &mut scene,
+        "lattice",
+        NewObject::Map(AnyMap::Lattice(lattice)),
+    )?;
     pb.set_message("initial push-forward");
-    let options = AntialiasOptions::default();
-    let mut engine = timings.time("initial antialiased push-forward (identity)", || {
-        IncrementalPushForward::new(&source, lattice.clone(), &grid, &options)
+    let warped = timings.time("initial antialiased push-forward (identity)", || {
+        add(
+            &mut scene,
+            "teapot warped",
+            NewObject::Derived(Recipe::Warp {
+                source: t,
+                map: l,
+                method: WarpMethod::PushforwardAntialiased,
+                background: 0.0,
+                sampled_nodes: None,
+                swap_handles: false,
+            }),
+        )
     })?;
+    pb.set_message("isosurfaces and Jacobian");
+    let iso = |volume| {
+        NewObject::Derived(Recipe::Isosurface {
+            volume,
+            level: LEVEL,
+            inside_below: false,
+            method: SurfaceMethod::MarchingCubes,
+        })
+    };
+    let before = timings.time("marching cubes, before", || {
+        add(&mut scene, "surface before", iso(t))
+    })?;
+    let after = add(&mut scene, "surface after", iso(warped))?;
+    let jacobian = add(
+        &mut scene,
+        "Jacobian",
+        NewObject::Derived(Recipe::Jacobian { map: l, grid: t }),
+    )?;
 
-    pb.set_message("solving the drag");
-    let mut session = ManipulationSession::new(lattice, DragOptions::with_radius(TOOL_RADIUS))?;
-    let drags = [Drag::new(SPOUT_TIP, SPOUT_TARGET)];
-    let outcome = timings.time("drag solve (least-norm)", || session.drag(&drags))?;
-    let after_lattice = session.lattice().clone();
-    pb.set_message("incremental update");
-    let report = timings.time("incremental update of the push-forward", || {
-        engine.set_map(after_lattice.clone())
-    })?;
+    pb.set_message("dragging the spout");
+    let change = timings.time(
+        "drag: least-norm solve, incremental warp, surface, Jacobian",
+        || {
+            scene.apply(Command::DragPoints {
+                map: l,
+                grabbed: vec![SPOUT_TIP],
+                targets: vec![SPOUT_TARGET],
+                options: DragOptions::with_radius(TOOL_RADIUS),
+            })
+        },
+    )?;
+    if let Some((id, e)) = change.errors.first() {
+        bail!("cannot update {id}: {e}");
+    }
+    let moved = change.drag.map_or(0, |d| d.moved);
+    let redone = change
+        .dirty_of(warped)
+        .and_then(|d| d.voxels)
+        .map_or(0, |b| b.len());
+    let after_lattice = scene.map(l)?.clone();
 
     // The incremental result must equal a full push-forward with the final lattice.
     pb.set_message("full push-forward for comparison");
+    let input = AnyVolume::from(source.clone());
     let full = timings.time("full antialiased push-forward (for comparison)", || {
-        push_forward_antialiased_f32(&source, &after_lattice, &grid, &options)
+        warp_volume(
+            &input,
+            &after_lattice,
+            &grid,
+            WarpMethod::PushforwardAntialiased,
+            &WarpOptions::default(),
+        )
     })?;
-    let diff = max_abs_diff(engine.volume().data(), full.volume.data());
-
-    pb.set_message("Jacobian");
-    let det = timings.time("Jacobian determinant map", || {
-        jacobian_determinant(&after_lattice, &grid)
-    })?;
-    let folding = FoldingReport::of(det.data());
-
-    pb.set_message("isosurfaces");
-    let mc = McOptions::default();
-    let before = timings.time("marching cubes, before", || {
-        marching_cubes(&source, LEVEL, &mc)
-    })?;
-    let after = timings.time("marching cubes, after", || {
-        marching_cubes(engine.volume(), LEVEL, &mc)
-    })?;
+    let diff = max_abs_diff(&*scene_volume(&scene, warped)?, &full.volume)?;
+    let folding = {
+        let det = scene_volume(&scene, jacobian)?;
+        match &*det {
+            AnyVolume::F32(v) => FoldingReport::of(v.data()),
+            other => bail!("the Jacobian is {}, not f32", other.voxel_type()),
+        }
+    };
 
     pb.set_message("pictures");
+    let before_mesh = scene_mesh(&scene, before)?;
+    let after_mesh = scene_mesh(&scene, after)?;
     // One frame for both pictures, so before and after line up.
     let both = volmorph_render::Aabb::from_points(
-        before
-            .mesh
+        before_mesh
             .positions()
             .iter()
-            .chain(after.mesh.positions())
+            .chain(after_mesh.positions())
             .copied(),
     )
     .context("the teapot's isosurface is empty")?;
@@ -187,54 +255,53 @@ fn warp_demo(args: &Args, index: &mut String, timings: &mut Timings) -> anyhow::
                 .context("every view has a name")?
                 .get_name()
                 .to_string();
-            write_surface_png(out, &format!("teapot_before_{name}"), &before, &cam)?;
-            write_surface_png(out, &format!("teapot_after_{name}"), &after, &cam)?;
+            for (stem, mesh) in [("before", &before_mesh), ("after", &after_mesh)] {
+                let png = out.join(format!("teapot_{stem}_{name}.png"));
+                picture::write_mesh_png(&png, mesh, None, &cam)?;
+            }
         }
         Ok(())
     })?;
 
     // Undo restores the identity lattice and the original push-forward; redo brings the drag
-    // back — both through the incremental engine.
+    // back — both through the scene's incremental updates.
     pb.set_message("undo and redo");
-    let undo_diff = timings.time("undo + incremental update", || -> anyhow::Result<f64> {
-        session.undo().context("nothing to undo")?;
-        engine.set_map(session.lattice().clone())?;
-        Ok(max_abs_diff(
-            engine.volume().data(),
-            &source
-                .data()
-                .iter()
-                .map(|&v| f32::from(v))
-                .collect::<Vec<_>>(),
-        ))
+    let undo_diff = timings.time("undo (scene command)", || -> anyhow::Result<f64> {
+        scene.undo()?.context("nothing to undo")?;
+        max_abs_diff(&*scene_volume(&scene, warped)?, &input)
     })?;
-    timings.time("redo + incremental update", || -> anyhow::Result<()> {
-        session.redo().context("nothing to redo")?;
-        engine.set_map(session.lattice().clone())?;
+    timings.time("redo (scene command)", || -> anyhow::Result<()> {
+        scene.redo()?.context("nothing to redo")?;
         Ok(())
     })?;
+    let redo_diff = max_abs_diff(&*scene_volume(&scene, warped)?, &full.volume)?;
 
     pb.set_message("writing");
     timings.time(
-        "writing volumes, meshes and lattices",
+        "writing volumes, meshes, lattices and the project",
         || -> anyhow::Result<()> {
-            format::write(&out.join("teapot.nii.gz"), &AnyVolume::from(source.clone()))?;
-            format::write(
-                &out.join("teapot_warped.nii.gz"),
-                &AnyVolume::from(engine.volume().clone()),
-            )?;
-            format::write(&out.join("teapot_jacobian.nii.gz"), &AnyVolume::from(det))?;
-            write_lattice(&out.join("lattice_after.json"), session.lattice())?;
-            write_lattice(&out.join("lattice_after.tfm"), session.lattice())?;
-            let opts = mesh::MeshWriteOptions::default();
-            mesh::write_with(&out.join("teapot_before.ply"), &before.mesh, &opts)?;
-            mesh::write_with(&out.join("teapot_after.ply"), &after.mesh, &opts)?;
+            for (id, file) in [
+                (t, "teapot.nii.gz"),
+                (warped, "teapot_warped.nii.gz"),
+                (jacobian, "teapot_jacobian.nii.gz"),
+                (l, "lattice_after.json"),
+                (l, "lattice_after.tfm"),
+                (before, "teapot_before.ply"),
+                (after, "teapot_after.ply"),
+            ] {
+                scene
+                    .export(id, &out.join(file))
+                    .with_context(|| format!("cannot write {file}"))?;
+            }
+            scene
+                .save(&out.join("teapot.vmproj"))
+                .context("cannot save the project")?;
             Ok(())
         },
     )?;
     pb.finish_and_clear();
 
-    let landed = session.lattice().apply(SPOUT_TIP);
+    let landed = after_lattice.apply(SPOUT_TIP);
     say!(
         "teapot {n}^3: spout tip {} dragged to {} (lands {:.1e} away)",
         fmt(SPOUT_TIP),
@@ -242,18 +309,17 @@ fn warp_demo(args: &Args, index: &mut String, timings: &mut Timings) -> anyhow::
         (landed - SPOUT_TARGET).length(),
     );
     say!(
-        "  {} control points moved; incremental update redid {} of {} source voxels",
-        outcome.moves.len(),
-        report.redone,
+        "  {moved} control points moved; the scene redrew {redone} of {} voxels",
         grid.len()
     );
     say!("  incremental result vs full push-forward: max |difference| {diff:.2e} (of 255)");
     say!("  undo restores the original: max |difference| {undo_diff:.2e}");
+    say!("  redo equals the full push-forward: max |difference| {redo_diff:.2e}");
     say!("  Jacobian of the new lattice: {folding}");
     say!(
         "  isosurface at {LEVEL}: {} triangles before, {} after",
-        before.mesh.face_count(),
-        after.mesh.face_count()
+        before_mesh.face_count(),
+        after_mesh.face_count()
     );
 
     for (file, what) in [
@@ -263,7 +329,7 @@ fn warp_demo(args: &Args, index: &mut String, timings: &mut Timings) -> anyhow::
         ),
         (
             "teapot_warped.nii.gz",
-            "the teapot after the drag (f32, antialiased push-forward)",
+            "the teapot after the drag (antialiased push-forward, u8 like the input)",
         ),
         (
             "teapot_jacobian.nii.gz",
@@ -292,6 +358,10 @@ fn warp_demo(args: &Args, index: &mut String, timings: &mut Timings) -> anyhow::
         ),
         ("teapot_before_iso.png", "three-quarter view, before"),
         ("teapot_after_iso.png", "three-quarter view, after"),
+        (
+            "teapot.vmproj",
+            "the scene as a project (open it again with the library, studio or Python)",
+        ),
     ] {
         let _ = writeln!(index, "{file:<28} {what}");
     }
@@ -299,26 +369,41 @@ fn warp_demo(args: &Args, index: &mut String, timings: &mut Timings) -> anyhow::
     Ok(())
 }
 
-/// Write the shaded picture of `surface` as `out/stem.png`.
-fn write_surface_png(
-    out: &Path,
-    stem: &str,
-    surface: &IsoSurface,
-    cam: &volmorph_render::Camera,
-) -> anyhow::Result<()> {
-    picture::write_mesh_png(
-        &out.join(format!("{stem}.png")),
-        &surface.mesh,
-        Some(&surface.normals),
-        cam,
-    )
+/// The volume scene object `id` holds, as f32 values.
+fn scene_volume(scene: &Scene, id: ObjectId) -> anyhow::Result<Arc<AnyVolume>> {
+    scene
+        .get(id)?
+        .object
+        .volume()
+        .cloned()
+        .with_context(|| format!("scene object {id} holds no volume"))
 }
 
-fn max_abs_diff(a: &[f32], b: &[f32]) -> f64 {
-    a.iter()
-        .zip(b)
-        .map(|(&x, &y)| f64::from((x - y).abs()))
-        .fold(0.0, f64::max)
+/// The mesh scene object `id` holds.
+fn scene_mesh(scene: &Scene, id: ObjectId) -> anyhow::Result<Arc<Mesh>> {
+    scene
+        .get(id)?
+        .object
+        .mesh()
+        .cloned()
+        .with_context(|| format!("scene object {id} holds no mesh"))
+}
+
+/// Largest |a − b| over the voxels of two volumes of the same size (any voxel types).
+fn max_abs_diff(a: &AnyVolume, b: &AnyVolume) -> anyhow::Result<f64> {
+    let (a, b) = (a.to_typed::<f64>(), b.to_typed::<f64>());
+    if a.geometry().dims != b.geometry().dims {
+        bail!(
+            "{:?} voxels against {:?}",
+            a.geometry().dims,
+            b.geometry().dims
+        );
+    }
+    Ok(a.data()
+        .iter()
+        .zip(b.data())
+        .map(|(&x, &y)| (x - y).abs())
+        .fold(0.0, f64::max))
 }
 
 fn fmt(p: DVec3) -> String {
