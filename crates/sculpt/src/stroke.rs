@@ -194,7 +194,7 @@ fn pose(o: &Map<String, Value>) -> Result<Pose, String> {
             _ => {
                 let [w, x, y, z] = numbers::<4>(v, "rotate")?;
                 let q = DQuat::from_xyzw(x, y, z, w);
-                if !(q.length() > 0.0) {
+                if q.length_squared() <= 0.0 {
                     return Err("\"rotate\" must be a non-zero quaternion [w, x, y, z]".into());
                 }
                 q.normalize()
