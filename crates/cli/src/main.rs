@@ -129,6 +129,12 @@ enum Command {
         after_help = "Examples:\n  volmorph render ct.nii.gz -o skull.png --transfer ct-bone --view anterior\n  volmorph render ct.nii.gz -o mip.png --mode mip --view 30,10 --size 800x600\n  volmorph render ct.nii.gz --handles moves.json --method affine -o bent.png\n  volmorph render ct.nii.gz --frames 36 -o spin/   (frame0000.png … and spin/turntable.png)\n  volmorph render --compare fixed.nii.gz moving.nii.gz --map registration.tfm -o quality.png"
     )]
     Render(cmd::render::Args),
+    /// Sculpt a closed mesh with a closed tool mesh (add, subtract, intersect; one dab or a
+    /// painting stroke) and smooth a region, re-contouring only what changed (depth-peel CSG).
+    #[command(
+        after_help = "Examples:\n  volmorph sculpt bunny.obj --tool sphere.obj --op subtract -o carved.ply\n  volmorph sculpt dragon.ply --tool brush.stl --op add --stroke stroke.json --grid 384 -o painted.obj\n  volmorph sculpt part.stl --tool box.obj --op intersect --smooth 0,0,0,10,10,10 --smooth-kernel 3 -o part_cut.stl\n\nStroke file: {\"step\": 0.01, \"poses\": [{\"translate\": [x, y, z], \"rotate\": [w, x, y, z] or {\"axis\": [x, y, z], \"degrees\": a}, \"scale\": s}, ...]}\n(the tool's own coordinates are moved by scale, then rotation, then translation; dabs are inserted so no point moves more than `step`, by default one grid spacing)."
+    )]
+    Sculpt(cmd::sculpt::Args),
     /// Time the warps and isosurface extractors on built-in inputs, against their targets.
     #[command(subcommand)]
     Bench(cmd::bench::Command),
@@ -165,6 +171,7 @@ fn main() -> ExitCode {
         Command::Mls2d(a) => cmd::handles::run_mls2d(&a),
         Command::Nurbs(c) => cmd::nurbs::run(&c),
         Command::Render(a) => cmd::render::run(&a),
+        Command::Sculpt(a) => cmd::sculpt::run(&a),
         Command::Bench(c) => cmd::bench::run(&c),
     };
     match result {

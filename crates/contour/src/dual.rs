@@ -143,13 +143,12 @@ pub fn dual_contouring<T: Voxel>(
     level: f64,
     options: &DcOptions,
 ) -> Result<IsoSurface, ContourError> {
-    options.validate()?;
+    let rule = VertexRule::new(options)?;
     let (field, flip) = Field::new(volume, level, options.inside_below)?;
     let dc = Dual {
         field,
         m_inv: volume.geometry().index_to_physical_matrix().inverse(),
-        cos_feature: options.feature_angle.cos(),
-        threshold: options.singular_threshold,
+        rule,
         flip,
     };
     dc.extract()
@@ -174,9 +173,10 @@ const NONE: u32 = u32::MAX;
 /// thousand times the mesh validator's degeneracy bound.
 const FLAT: f64 = 1e3 * volmorph_mesh::DEGENERATE_RELATIVE_AREA;
 
-/// Twice the area of triangle `abc` over the square of its longest edge (0 when flat or
-/// when all its vertices coincide).
-fn flatness(a: DVec3, b: DVec3, c: DVec3) -> f64 {
+/// Twice the area of triangle `abc` over the square of its longest edge: a shape measure
+/// from 0 (flat, or all vertices coinciding) to √3/2 (equilateral).
+#[must_use]
+pub fn flatness(a: DVec3, b: DVec3, c: DVec3) -> f64 {
     let longest = a
         .distance_squared(b)
         .max(b.distance_squared(c))
@@ -188,13 +188,124 @@ fn flatness(a: DVec3, b: DVec3, c: DVec3) -> f64 {
     }
 }
 
+/// The rule dual contouring uses to place a cell's vertex from the cell's Hermite data
+/// (crossing points and unit outward normals), shared by [`dual_contouring`] and by callers
+/// that contour their own Hermite data (local re-contouring of sculpted regions):
+///
+/// * if all the normals are within [`DcOptions::feature_angle`] of one another (a smooth
+///   cell), the vertex is the **mass point** of the crossings;
+/// * otherwise (a sharp edge or corner) it is the minimiser of the cell's [`Qef`], with
+///   singular values below [`DcOptions::singular_threshold`]` × σ_max` truncated.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct VertexRule {
+    cos_feature: f64,
+    threshold: f64,
+}
+
+impl VertexRule {
+    /// The rule of `options` (its `inside_below` is not used).
+    ///
+    /// # Errors
+    /// [`ContourError::InvalidOption`] for a feature angle or threshold out of range.
+    pub fn new(options: &DcOptions) -> Result<Self, ContourError> {
+        options.validate()?;
+        Ok(Self {
+            cos_feature: options.feature_angle.cos(),
+            threshold: options.singular_threshold,
+        })
+    }
+
+    /// `true` when two of `normals` (unit vectors; zero vectors are ignored) make an angle
+    /// larger than the feature angle, i.e. the cell holds a sharp edge or corner.
+    #[must_use]
+    pub fn is_sharp(&self, normals: &[DVec3]) -> bool {
+        normals.iter().enumerate().any(|(i, a)| {
+            *a != DVec3::ZERO
+                && normals[i + 1..]
+                    .iter()
+                    .any(|b| *b != DVec3::ZERO && a.dot(*b) < self.cos_feature)
+        })
+    }
+
+    /// The vertex of a cell whose crossings were added to `qef` with the given `normals`,
+    /// in the coordinates of the added points, and whether it lies on a sharp feature (a QEF
+    /// solution of rank ≥ 2). Not clamped to the cell: see [`clamp_to_cell`]. `None` when no
+    /// point was added.
+    #[must_use]
+    pub fn place(&self, qef: &Qef, normals: &[DVec3]) -> Option<(DVec3, bool)> {
+        let mass = qef.mass_point()?;
+        if self.is_sharp(normals)
+            && let Some(s) = qef.solve(self.threshold)
+        {
+            return Some((s.position, s.rank >= 2));
+        }
+        Some((mass, false))
+    }
+}
+
+/// `position` clamped into the cell whose lowest corner is at `corner` and whose edges are
+/// the columns of `m` (index step → physical step; `m_inv` is its inverse): its index
+/// coordinates relative to the corner are clamped to `[EDGE_MARGIN, 1 − EDGE_MARGIN]`, so
+/// vertices of different cells never coincide. A position already inside is returned
+/// unchanged, bit for bit.
+#[must_use]
+pub fn clamp_to_cell(position: DVec3, corner: DVec3, m: DMat3, m_inv: DMat3) -> DVec3 {
+    let local = m_inv * (position - corner);
+    let clamped = local.clamp(DVec3::splat(EDGE_MARGIN), DVec3::splat(1.0 - EDGE_MARGIN));
+    if clamped == local {
+        position
+    } else {
+        corner + m * clamped
+    }
+}
+
+/// Which diagonal splits a dual-contouring quad into two triangles (see [`quad_diagonal`]).
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum QuadDiagonal {
+    /// Triangles `(0, 1, 2)` and `(0, 2, 3)`.
+    D02,
+    /// Triangles `(0, 1, 3)` and `(1, 2, 3)`.
+    D13,
+}
+
+/// The diagonal dual contouring splits the quad `positions` (in boundary order) along:
+/// the one joining two **feature vertices** (`features`: QEF solutions on a sharp edge or
+/// corner) when exactly one diagonal does, so the mesh follows the feature line, otherwise
+/// the **shorter** one; but never one giving a flat triangle when the other split avoids it.
+#[must_use]
+pub fn quad_diagonal(positions: [DVec3; 4], features: [bool; 4]) -> QuadDiagonal {
+    let at = |i: usize| positions[i];
+    let on = |i: usize| features[i];
+    let (along02, along13) = (on(0) && on(2), on(1) && on(3));
+    let preferred02 = if along02 == along13 {
+        at(0).distance_squared(at(2)) <= at(1).distance_squared(at(3))
+    } else {
+        along02
+    };
+    // Never a flat triangle when the other split avoids it (three vertices on one feature
+    // line).
+    let (q02, q13) = (
+        flatness(at(0), at(1), at(2)).min(flatness(at(0), at(2), at(3))),
+        flatness(at(0), at(1), at(3)).min(flatness(at(1), at(2), at(3))),
+    );
+    let split02 = match preferred02 {
+        true if q02 <= FLAT && q13 > q02 => false,
+        false if q13 <= FLAT && q02 > q13 => true,
+        p => p,
+    };
+    if split02 {
+        QuadDiagonal::D02
+    } else {
+        QuadDiagonal::D13
+    }
+}
+
 /// The field and the per-run constants.
 struct Dual<'a, T> {
     field: Field<'a, T>,
     /// Physical step → index step.
     m_inv: DMat3,
-    cos_feature: f64,
-    threshold: f64,
+    rule: VertexRule,
     flip: bool,
 }
 
@@ -293,26 +404,10 @@ impl<T: Voxel> Dual<'_, T> {
             }
         }
         let normals = &normals[..count];
-        let sharp = normals.iter().enumerate().any(|(i, a)| {
-            normals[i + 1..]
-                .iter()
-                .any(|b| a.dot(*b) < self.cos_feature)
-        });
-        // A crossed cell has at least three crossings, so both are `Some`.
-        let mass = qef.mass_point().unwrap_or(reference);
-        let (position, feature) = match qef.solve(self.threshold) {
-            Some(s) if sharp => (s.position, s.rank >= 2),
-            _ => (mass, false),
-        };
-        let local = self.m_inv * (position - reference);
-        let clamped = local.clamp(DVec3::splat(EDGE_MARGIN), DVec3::splat(1.0 - EDGE_MARGIN));
-        let position = if clamped == local {
-            position
-        } else {
-            reference + f.m * clamped
-        };
+        // A crossed cell has at least three crossings, so the QEF has points.
+        let (position, feature) = self.rule.place(&qef, normals).unwrap_or((reference, false));
         (
-            position,
+            clamp_to_cell(position, reference, f.m, self.m_inv),
             sum.try_normalize().unwrap_or(DVec3::ZERO),
             feature,
         )
@@ -345,25 +440,10 @@ impl<T: Voxel> Dual<'_, T> {
             } else {
                 [quad[3], quad[2], quad[1], quad[0]]
             };
-            let at = |i: usize| positions[q[i] as usize];
-            let on = |i: usize| features[q[i] as usize];
-            let (along02, along13) = (on(0) && on(2), on(1) && on(3));
-            let preferred02 = if along02 == along13 {
-                at(0).distance_squared(at(2)) <= at(1).distance_squared(at(3))
-            } else {
-                along02
-            };
-            // Never a flat triangle when the other split avoids it (three vertices on one
-            // feature line).
-            let (q02, q13) = (
-                flatness(at(0), at(1), at(2)).min(flatness(at(0), at(2), at(3))),
-                flatness(at(0), at(1), at(3)).min(flatness(at(1), at(2), at(3))),
-            );
-            let split02 = match preferred02 {
-                true if q02 <= FLAT && q13 > q02 => false,
-                false if q13 <= FLAT && q02 > q13 => true,
-                p => p,
-            };
+            let split02 = quad_diagonal(
+                q.map(|v| positions[v as usize]),
+                q.map(|v| features[v as usize]),
+            ) == QuadDiagonal::D02;
             if split02 {
                 out.push([q[0], q[1], q[2]]);
                 out.push([q[0], q[2], q[3]]);

@@ -72,7 +72,10 @@ mod marching;
 mod qef;
 mod table;
 
-pub use dual::{DEFAULT_FEATURE_ANGLE, DcOptions, dual_contouring, dual_contouring_any};
+pub use dual::{
+    DEFAULT_FEATURE_ANGLE, DcOptions, QuadDiagonal, VertexRule, clamp_to_cell, dual_contouring,
+    dual_contouring_any, flatness, quad_diagonal,
+};
 pub use qef::{DEFAULT_SINGULAR_THRESHOLD, Qef, QefSolution, symmetric_eigen};
 
 pub use error::ContourError;

@@ -73,6 +73,9 @@ pub enum MeshError {
     /// non-ASCII or whitespace-containing name, or a name used twice or by a standard property).
     #[error("invalid PLY property: {0}")]
     InvalidProperty(String),
+    /// A shape parameter is out of range (a primitive's size, radius or resolution).
+    #[error("invalid shape: {0}")]
+    InvalidShape(String),
     /// A valid request volmorph does not handle (unknown extension, binary OFF, …).
     #[error("unsupported: {0}")]
     Unsupported(String),

@@ -1,6 +1,7 @@
-//! A small, fast hasher for the exact-position keys used when merging vertices.
+//! A small, fast hasher for integer and exact-position keys (merging vertices, mesh edges,
+//! grid cells).
 //!
-//! Keys are bit patterns of coordinates, which are not attacker-chosen hash-flooding vectors
+//! Keys are bit patterns of coordinates or indices, which are not attacker-chosen hash-flooding vectors
 //! in a way that matters here (a hostile file can at worst make one read slower), so the
 //! default SipHash is replaced by a multiply–xorshift mix that is several times faster.
 
@@ -9,14 +10,14 @@ use std::hash::{BuildHasherDefault, Hash, Hasher};
 
 use glam::DVec3;
 
-/// `HashMap` with [`MixHasher`].
-pub(crate) type FastMap<K, V> = HashMap<K, V, BuildHasherDefault<MixHasher>>;
+/// `HashMap` with [`MixHasher`], for keys that are indices or coordinate bit patterns.
+pub type FastMap<K, V> = HashMap<K, V, BuildHasherDefault<MixHasher>>;
 
 /// Hasher folding 64-bit words with a strong finaliser (MurmurHash3's `fmix64`), so keys
 /// that differ only in high bits (typical of floating-point patterns) still spread over the
 /// low bits hash tables index with.
-#[derive(Default, Clone, Copy)]
-pub(crate) struct MixHasher(u64);
+#[derive(Debug, Default, Clone, Copy)]
+pub struct MixHasher(u64);
 
 #[inline]
 fn fmix64(mut k: u64) -> u64 {

@@ -7,6 +7,7 @@
 //! * [`Mesh::validate`] → [`ValidationReport`] — non-finite coordinates, bad indices,
 //!   degenerate faces, non-manifold and inconsistently oriented edges, boundaries, Euler
 //!   characteristic; readable through `Display`.
+//! * [`shapes`] — closed primitives (geodesic sphere, box, torus) for tools and tests.
 //! * [`format`](mod@format) — [`read`], [`write()`] and [`write_with`] choose the format by extension
 //!   ([`MeshFormat::from_path`]) and accept gzip-compressed input; each format module also
 //!   works on byte slices.
@@ -43,6 +44,7 @@ mod error;
 pub mod format;
 mod hash;
 mod mesh;
+pub mod shapes;
 mod validate;
 
 pub use error::{Location, MeshError};
@@ -52,6 +54,7 @@ pub use format::{
 pub use format::{
     obj::read_obj_bytes, off::read_off_bytes, ply::read_ply_bytes, stl::read_stl_bytes,
 };
+pub use hash::{FastMap, MixHasher};
 pub use mesh::{Faces, MAX_ELEMENTS, Mesh};
 pub use validate::{DEGENERATE_RELATIVE_AREA, Issue, MAX_EXAMPLES, ValidationReport};
 

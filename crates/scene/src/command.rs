@@ -7,6 +7,7 @@ use volmorph_handles::HandleSet;
 use volmorph_lattice::DragOptions;
 use volmorph_maps::{AnyMap, HandleMethod, HandleOptions};
 use volmorph_mesh::Mesh;
+use volmorph_sculpt::{Grid, SculptOptions};
 use volmorph_trivariate::AggregateVolume;
 use volmorph_volume::AnyVolume;
 
@@ -42,6 +43,17 @@ pub enum NewObject {
     },
     /// A result computed from other objects.
     Derived(Recipe),
+    /// A closed mesh to sculpt on a tri-dexel grid (McPhail ch. 3). The mesh must lie strictly
+    /// inside the grid's box (`volmorph_sculpt::Grid::around` builds one with room to spare);
+    /// an `add` can only grow the solid inside the grid.
+    Sculpt {
+        /// The closed, consistently oriented mesh.
+        mesh: Mesh,
+        /// The sculpting grid (fixed for the object's life).
+        grid: Grid,
+        /// Contouring and re-contouring options.
+        options: SculptOptions,
+    },
 }
 
 /// A change to a scene. Every command is applied through [`Scene::apply`](crate::Scene::apply),
@@ -132,6 +144,19 @@ pub enum Command {
         method: HandleMethod,
         /// The new options.
         options: HandleOptions,
+    },
+    /// Sculpt a sculpt object: a Boolean with a tool mesh (a dab or a painting stroke) or a
+    /// partial-volume smoothing. Only the cells around what changed are re-contoured and
+    /// stitched in; the [`Change`] names the object as modified with a [`Dirty`] whose
+    /// `voxels` are the sculpting grid's points whose dexel data changed and whose `bounds`
+    /// hold them and every removed or added triangle. Undo and redo restore the document bit
+    /// for bit (from the edit's record, without sculpting again). An edit that changes nothing
+    /// reports no dirty region.
+    Sculpt {
+        /// The sculpt object.
+        id: ObjectId,
+        /// The edit.
+        edit: volmorph_sculpt::Edit,
     },
     /// Change the recipe of a derived object (a warp method, an iso level, …).
     SetRecipe {

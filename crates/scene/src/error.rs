@@ -60,6 +60,9 @@ pub enum SceneError {
     /// A trivariate model failed.
     #[error(transparent)]
     Trivariate(#[from] volmorph_trivariate::TrivariateError),
+    /// A sculpting edit failed (the sculpt object is unchanged).
+    #[error(transparent)]
+    Sculpt(#[from] volmorph_sculpt::SculptError),
     /// Reading or writing a file failed.
     #[error(transparent)]
     Io(#[from] volmorph_io::IoError),

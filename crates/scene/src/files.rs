@@ -132,7 +132,9 @@ impl Scene {
                 let v = entry.object.volume().ok_or(SceneError::NoObject(id))?;
                 volmorph_volume_io::write(path, v)?;
             }
-            Object::Mesh(_) | Object::Derived(_) if entry.object.mesh().is_some() => {
+            Object::Mesh(_) | Object::Sculpt(_) | Object::Derived(_)
+                if entry.object.mesh().is_some() =>
+            {
                 let m = entry.object.mesh().ok_or(SceneError::NoObject(id))?;
                 volmorph_mesh::write(path, m)?;
             }

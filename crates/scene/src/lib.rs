@@ -9,6 +9,9 @@
 //!   history ([`Scene::undo`], [`Scene::redo`]) and returns a [`Change`]: the objects added,
 //!   removed and modified, and per changed derived object the dirty region as a voxel box and a
 //!   physical box ([`Dirty`]), so a viewer redraws only that.
+//! * Meshes can be sculpted ([`NewObject::Sculpt`], [`Command::Sculpt`]): Booleans with tool
+//!   meshes, painting strokes and smoothing on a tri-dexel, re-contoured only around each
+//!   edit, undone and redone exactly from the edit's record.
 //! * Derived objects follow their inputs through the engines' incremental paths: a drag or a
 //!   control-point move of a lattice (or a target move of affine/frame MLS or a thin-plate
 //!   spline) updates an antialiased push-forward only where the moved parameters act, and a
@@ -70,5 +73,5 @@ mod scene;
 pub use command::{Change, Command, DragSummary, NewObject};
 pub use derived::{Derived, DerivedOutput, Dirty, Recipe, SurfaceMethod};
 pub use error::SceneError;
-pub use object::{Entry, FrepModel, HandleMap, MapObject, Object, ObjectId};
+pub use object::{Entry, FrepModel, HandleMap, MapObject, Object, ObjectId, SculptObject};
 pub use scene::{DEFAULT_UNDO_LIMIT, Scene};

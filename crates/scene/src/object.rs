@@ -2,12 +2,13 @@
 
 use std::collections::BTreeMap;
 use std::fmt;
-use std::sync::Arc;
+use std::sync::{Arc, OnceLock};
 
 use volmorph_frep::{CompileOptions, Shape};
 use volmorph_handles::HandleSet;
 use volmorph_maps::{AnyMap, HandleDirection, HandleMethod, HandleOptions, handle_map};
 use volmorph_mesh::Mesh;
+use volmorph_sculpt::SculptDocument;
 use volmorph_trivariate::AggregateVolume;
 use volmorph_volume::AnyVolume;
 
@@ -163,6 +164,47 @@ impl MapObject {
     }
 }
 
+/// A mesh being sculpted (McPhail ch. 3): its [`SculptDocument`] (tri-dexel on a fixed grid,
+/// mesh storage) and the current mesh, collected when first asked for after an edit.
+#[derive(Debug, Clone)]
+pub struct SculptObject {
+    document: SculptDocument,
+    mesh: OnceLock<Option<Arc<Mesh>>>,
+}
+
+impl SculptObject {
+    /// Wrap a sculpting document.
+    #[must_use]
+    pub fn new(document: SculptDocument) -> Self {
+        Self {
+            document,
+            mesh: OnceLock::new(),
+        }
+    }
+
+    /// The document.
+    #[must_use]
+    pub fn document(&self) -> &SculptDocument {
+        &self.document
+    }
+
+    /// The document for an edit; the collected mesh is dropped (it is collected again on
+    /// the next [`SculptObject::mesh`]).
+    pub(crate) fn document_mut(&mut self) -> &mut SculptDocument {
+        self.mesh = OnceLock::new();
+        &mut self.document
+    }
+
+    /// The current mesh (the document's living triangles, storage order), collected once per
+    /// edit; `None` only if it exceeds 32-bit indices.
+    #[must_use]
+    pub fn mesh(&self) -> Option<&Arc<Mesh>> {
+        self.mesh
+            .get_or_init(|| self.document.mesh().ok().map(Arc::new))
+            .as_ref()
+    }
+}
+
 /// Everything a scene holds.
 // Same reasoning as for `MapObject`: few entries, no boxing.
 #[allow(clippy::large_enum_variant)]
@@ -180,10 +222,12 @@ pub enum Object {
     Map(MapObject),
     /// A result computed from other objects, kept up to date.
     Derived(Derived),
+    /// A mesh being sculpted.
+    Sculpt(SculptObject),
 }
 
 impl Object {
-    /// The kind's name (`volume`, `mesh`, `frep`, `nurbs`, `map`, `derived`).
+    /// The kind's name (`volume`, `mesh`, `frep`, `nurbs`, `map`, `derived`, `sculpt`).
     #[must_use]
     pub fn kind(&self) -> &'static str {
         match self {
@@ -193,6 +237,7 @@ impl Object {
             Object::Nurbs(_) => "nurbs",
             Object::Map(_) => "map",
             Object::Derived(_) => "derived",
+            Object::Sculpt(_) => "sculpt",
         }
     }
 
@@ -206,12 +251,14 @@ impl Object {
         }
     }
 
-    /// The mesh this object is or holds (a mesh, or a derived mesh once computed).
+    /// The mesh this object is or holds (a mesh, a derived mesh once computed, or the
+    /// current mesh of a sculpting document).
     #[must_use]
     pub fn mesh(&self) -> Option<&Arc<Mesh>> {
         match self {
             Object::Mesh(m) => Some(m),
             Object::Derived(d) => d.mesh(),
+            Object::Sculpt(s) => s.mesh(),
             _ => None,
         }
     }

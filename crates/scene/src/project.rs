@@ -34,6 +34,10 @@
 //! exactly what was saved; a derived object saved without a result is computed on loading.
 //! Data file paths are relative to the manifest's folder and must stay inside it: absolute
 //! paths, `..` and symbolic links that leave the folder are refused.
+//!
+//! A sculpt object is saved as its current mesh, its grid and its options; loading builds
+//! the tri-dexel again from that mesh (so the mesh is restored exactly, the dexels as the
+//! mesh's depth peel, and sculpting continues from there).
 
 use std::collections::BTreeMap;
 use std::path::{Component, Path, PathBuf};
@@ -43,9 +47,10 @@ use serde::{Deserialize, Serialize};
 use serde_json::Value;
 use volmorph_handles::{HandleSet, Weighting};
 use volmorph_maps::{AnyMap, HandleMethod, HandleOptions};
+use volmorph_sculpt::{Grid as SculptGrid, SculptDocument, SculptOptions};
 
 use crate::derived::{Derived, DerivedOutput, Recipe};
-use crate::object::{Entry, FrepModel, HandleMap, MapObject, Object, ObjectId};
+use crate::object::{Entry, FrepModel, HandleMap, MapObject, Object, ObjectId, SculptObject};
 use crate::{Scene, SceneError};
 
 /// Value of the manifest's `format` field.
@@ -85,6 +90,57 @@ struct ObjectJson {
     params: Option<BTreeMap<usize, f64>>,
     #[serde(default, skip_serializing_if = "Option::is_none")]
     recipe: Option<Recipe>,
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    sculpt: Option<SculptJson>,
+}
+
+/// The grid and options of a sculpt object.
+#[derive(Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+struct SculptJson {
+    origin: [f64; 3],
+    spacing: f64,
+    dims: [usize; 3],
+    margin: usize,
+    max_dabs: usize,
+    feature_angle: f64,
+    singular_threshold: f64,
+}
+
+impl From<&SculptDocument> for SculptJson {
+    fn from(d: &SculptDocument) -> Self {
+        let g = d.grid();
+        let o = d.options();
+        Self {
+            origin: g.origin().to_array(),
+            spacing: g.spacing(),
+            dims: g.dims(),
+            margin: o.margin,
+            max_dabs: o.max_dabs,
+            feature_angle: o.dc.feature_angle,
+            singular_threshold: o.dc.singular_threshold,
+        }
+    }
+}
+
+impl SculptJson {
+    fn grid_and_options(&self) -> Result<(SculptGrid, SculptOptions), SceneError> {
+        let grid = SculptGrid::new(
+            glam::DVec3::from_array(self.origin),
+            self.spacing,
+            self.dims,
+        )?;
+        let options = SculptOptions {
+            dc: volmorph_contour::DcOptions {
+                feature_angle: self.feature_angle,
+                singular_threshold: self.singular_threshold,
+                ..volmorph_contour::DcOptions::default()
+            },
+            margin: self.margin,
+            max_dabs: self.max_dabs,
+        };
+        Ok((grid, options))
+    }
 }
 
 #[derive(Serialize, Deserialize)]
@@ -224,6 +280,7 @@ impl Scene {
                 source: None,
                 params: None,
                 recipe: None,
+                sculpt: None,
             };
             match &entry.object {
                 Object::Volume(v) => {
@@ -257,6 +314,15 @@ impl Scene {
                     );
                     o.method = Some(h.method());
                     o.options = Some(h.options().into());
+                }
+                Object::Sculpt(sc) => {
+                    let m = sc.mesh().ok_or_else(|| {
+                        project_err(path, format!("sculpt object {id}: its mesh is too large"))
+                    })?;
+                    let name = format!("{}.ply", id.0);
+                    volmorph_mesh::write(&folder.join(&name), m)?;
+                    o.file = Some(rel(&name));
+                    o.sculpt = Some(SculptJson::from(sc.document()));
                 }
                 Object::Derived(d) => {
                     o.recipe = Some(d.recipe().clone());
@@ -336,6 +402,17 @@ impl Scene {
             let object = match o.kind.as_str() {
                 "volume" => Object::Volume(Arc::new(volmorph_volume_io::read(&file()?)?)),
                 "mesh" => Object::Mesh(Arc::new(volmorph_mesh::read(&file()?)?)),
+                "sculpt" => {
+                    let (grid, options) = o
+                        .sculpt
+                        .as_ref()
+                        .ok_or_else(|| project_err(path, format!("object {id}: no \"sculpt\"")))?
+                        .grid_and_options()?;
+                    let mesh = volmorph_mesh::read(&file()?)?;
+                    Object::Sculpt(SculptObject::new(SculptDocument::new(
+                        &mesh, grid, options,
+                    )?))
+                }
                 "nurbs" => Object::Nurbs(Arc::new(volmorph_trivariate::load_volume(&file()?)?)),
                 "frep" => Object::Frep(FrepModel::new(
                     o.source.as_deref().unwrap_or(""),

@@ -11,8 +11,9 @@ use volmorph_volume::IndexBox;
 
 use crate::SceneError;
 use crate::command::{Change, Command, NewObject};
+use crate::derived::Dirty;
 use crate::derived::{Derived, Hint, Inputs};
-use crate::object::{Entry, FrepModel, HandleMap, MapObject, Object, ObjectId};
+use crate::object::{Entry, FrepModel, HandleMap, MapObject, Object, ObjectId, SculptObject};
 
 /// Default number of commands [`Scene::undo`] can take back.
 pub const DEFAULT_UNDO_LIMIT: usize = 256;
@@ -31,6 +32,19 @@ pub(crate) enum Edit {
         id: ObjectId,
         changes: Vec<(usize, DVec3)>,
     },
+    /// Sculpt the sculpt object `id`.
+    Sculpt { id: ObjectId, step: SculptStep },
+}
+
+/// One step of a sculpt object's history.
+#[derive(Debug, Clone)]
+pub(crate) enum SculptStep {
+    /// Perform an edit (inverse: undo its record).
+    Apply(volmorph_sculpt::Edit),
+    /// Take a record back (inverse: redo it).
+    Undo(Arc<volmorph_sculpt::EditRecord>),
+    /// Perform a record again (inverse: undo it).
+    Redo(Arc<volmorph_sculpt::EditRecord>),
 }
 
 /// A command as applied: its edits and the edits that take it back.
@@ -192,11 +206,14 @@ impl Scene {
     /// # Errors
     /// As [`Scene::apply`] (an undo that fails leaves the scene and both histories unchanged).
     pub fn undo(&mut self) -> Result<Option<Change>, SceneError> {
-        let Some(record) = self.undo.pop() else {
+        let Some(mut record) = self.undo.pop() else {
             return Ok(None);
         };
         match self.run(record.inverse.clone()) {
-            Ok((_, change)) => {
+            Ok((forward, change)) => {
+                // The inverse of the inverse performs the command again from what was kept
+                // (a sculpt edit's record) instead of recomputing it.
+                record.forward = forward;
                 self.redo.push(record);
                 Ok(Some(change))
             }
@@ -212,11 +229,12 @@ impl Scene {
     /// # Errors
     /// As [`Scene::undo`].
     pub fn redo(&mut self) -> Result<Option<Change>, SceneError> {
-        let Some(record) = self.redo.pop() else {
+        let Some(mut record) = self.redo.pop() else {
             return Ok(None);
         };
         match self.run(record.forward.clone()) {
-            Ok((_, change)) => {
+            Ok((inverse, change)) => {
+                record.inverse = inverse;
                 self.undo.push(record);
                 Ok(Some(change))
             }
@@ -250,6 +268,13 @@ impl Scene {
                 self.check_recipe(&recipe)?;
                 Object::Derived(Derived::new(recipe))
             }
+            NewObject::Sculpt {
+                mesh,
+                grid,
+                options,
+            } => Object::Sculpt(SculptObject::new(volmorph_sculpt::SculptDocument::new(
+                &mesh, grid, options,
+            )?)),
         };
         Ok(Entry { name, object })
     }
@@ -268,7 +293,7 @@ impl Scene {
         let mesh = |id: ObjectId| -> Result<(), SceneError> {
             let o = &self.get(id)?.object;
             match o {
-                Object::Mesh(_) => Ok(()),
+                Object::Mesh(_) | Object::Sculpt(_) => Ok(()),
                 Object::Derived(d) if d.recipe().output_kind() == "mesh" => Ok(()),
                 other => Err(self.wrong_kind(id, "mesh", other.kind())),
             }
@@ -441,6 +466,16 @@ impl Scene {
                 let set = self.handle_map(map)?.set().clone();
                 self.handle_edit(map, set, method, options)?
             }
+            Command::Sculpt { id, edit } => {
+                let entry = self.get(id)?;
+                let Object::Sculpt(_) = &entry.object else {
+                    return Err(self.wrong_kind(id, "sculpt object", entry.object.kind()));
+                };
+                vec![Edit::Sculpt {
+                    id,
+                    step: SculptStep::Apply(edit),
+                }]
+            }
             Command::SetRecipe { id, recipe } => {
                 let entry = self.get(id)?;
                 let Object::Derived(_) = &entry.object else {
@@ -566,6 +601,56 @@ impl Scene {
                 effects.insert(id, effect);
                 Ok(Edit::Parameters { id, changes: old })
             }
+            Edit::Sculpt { id, step } => {
+                let Some(Entry {
+                    object: Object::Sculpt(s),
+                    ..
+                }) = self.objects.get_mut(&id)
+                else {
+                    return Err(SceneError::invalid(format!(
+                        "object {id} is not a sculpt object"
+                    )));
+                };
+                let (record, inverse) = match step {
+                    SculptStep::Apply(edit) => {
+                        let r = Arc::new(s.document_mut().apply(&edit)?);
+                        (r.clone(), SculptStep::Undo(r))
+                    }
+                    SculptStep::Undo(r) => {
+                        s.document_mut().undo(&r)?;
+                        (r.clone(), SculptStep::Redo(r))
+                    }
+                    SculptStep::Redo(r) => {
+                        s.document_mut().redo(&r)?;
+                        (r.clone(), SculptStep::Undo(r))
+                    }
+                };
+                if let Some(c) = record.changed() {
+                    let p = c.dexels;
+                    change.modified.push(id);
+                    change.dirty.push(Dirty {
+                        object: id,
+                        voxels: Some(IndexBox {
+                            start: p.lo,
+                            end: p.hi.map(|h| h + 1),
+                        }),
+                        bounds: Some((c.min, c.max)),
+                    });
+                    effects.insert(id, Effect::Full);
+                }
+                Ok(Edit::Sculpt { id, step: inverse })
+            }
+        }
+    }
+
+    /// The sculpting document of sculpt object `id`.
+    ///
+    /// # Errors
+    /// [`SceneError::NoObject`], [`SceneError::WrongKind`].
+    pub fn sculpt(&self, id: ObjectId) -> Result<&volmorph_sculpt::SculptDocument, SceneError> {
+        match &self.get(id)?.object {
+            Object::Sculpt(s) => Ok(s.document()),
+            other => Err(self.wrong_kind(id, "sculpt object", other.kind())),
         }
     }
 

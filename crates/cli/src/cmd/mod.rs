@@ -17,5 +17,6 @@ pub mod nurbs_trace;
 pub mod phantom;
 pub mod picture;
 pub mod render;
+pub mod sculpt;
 pub mod slice;
 pub mod warp;
