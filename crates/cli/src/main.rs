@@ -108,6 +108,11 @@ enum Command {
     /// rendering, optical paths.
     #[command(subcommand)]
     Nurbs(cmd::nurbs::Command),
+    /// Register two scans: handles, correspondences, deformation, quality, lungs, ventilation.
+    #[command(
+        after_help = "Examples:\n  volmorph register inhale.nii.gz exhale.nii.gz -o out --handles 300 --radius 10 --method frames --dense --landmarks lm_in.txt,lm_ex.txt\n  volmorph register select inhale.nii.gz -o handles.txt"
+    )]
+    Register(cmd::register::Command),
     /// Time the warps and isosurface extractors on built-in inputs, against their targets.
     #[command(subcommand)]
     Bench(cmd::bench::Command),
@@ -132,6 +137,7 @@ fn main() -> ExitCode {
         Command::Handles(c) => cmd::handles::run(&c),
         Command::Mls2d(a) => cmd::handles::run_mls2d(&a),
         Command::Nurbs(c) => cmd::nurbs::run(&c),
+        Command::Register(c) => cmd::register::run(&c),
         Command::Bench(c) => cmd::bench::run(&c),
     };
     match result {

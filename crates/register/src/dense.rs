@@ -1,22 +1,32 @@
-//! Dense refinement: a cubic B-spline lattice `φ: fixed → moving` optimised on an intensity
-//! metric, as elastix and NiftyReg do, initialised from the handle solution.
+//! Dense refinement: the initial map (the handle solution) corrected by a cubic B-spline
+//! displacement optimised on an intensity metric, as elastix and NiftyReg do:
+//!
+//! ```text
+//! φ(x) = h(x) + (L(x) − x)
+//! ```
+//!
+//! with `h` the initial map and `L` a lattice that starts as the identity ([`Refined`] is this
+//! sum as a map). The handle solution is kept exactly; the lattice adds what the intensities
+//! show beyond it.
 //!
 //! # Objective
 //!
 //! ```text
-//! C(P) = D(F, M∘φ) + λ_b h² BE(φ)/V + λ_f mean_s max(0, ε − det Dφ(s))²
+//! C(P) = D(F, M∘φ) + λ_b h² BE(L)/V + λ_f mean_s max(0, ε − det Dφ(s))²
 //!        + λ_h Σ_i c_i |φ(p_i) − q_i|² / (s̄² Σ_i c_i)
 //! ```
 //!
-//! * `D` is the metric over the fixed samples whose image lies in the moving image: the mean
+//! * `D` is the metric over the fixed samples (a sample mapped outside the moving image takes
+//!   the edge value there, with no gradient): the mean
 //!   squared difference divided by the fixed variance ([`Metric::Mse`]), `−NCC`
 //!   ([`Metric::Ncc`]) or `−MI` with Mattes' Parzen histogram ([`Metric::MutualInformation`],
 //!   [`crate::metrics::JointHistogram`]);
-//! * `BE` is the bending energy `∫ Σ_ab |∂²φ/∂x_a∂x_b|²` over the lattice box of volume `V`,
+//! * `BE` is the bending energy `∫ Σ_ab |∂²L/∂x_a∂x_b|²` of the correction over the lattice box
+//!   of volume `V`,
 //!   computed exactly as a quadratic form of the control points (Kronecker products of the
 //!   1-D Gram matrices of the B-splines and their derivatives, by 4-point Gauss quadrature per
 //!   span), made dimensionless by the control spacing `h`;
-//! * the folding penalty keeps `det Dφ ≥ ε` at two points per lattice cell and axis;
+//! * the folding penalty keeps `det Dφ ≥ ε` at the centre of every lattice cell;
 //! * the handle correspondences `p_i → q_i` stay as soft constraints weighted by their
 //!   confidence `c_i` (`s̄` = mean voxel spacing, so `λ_h` is the cost of one voxel of error).
 //!
@@ -30,11 +40,11 @@
 //!
 //! # Multi-resolution
 //!
-//! Image pyramids of both scans and a lattice whose cells halve from level to level: the
-//! coarsest lattice is fitted to the initial map by least squares, and each finer lattice is
-//! the exact B-spline subdivision of the previous one (every cell split in two along each axis,
-//! masks `(1, 6, 1)/8` and `(1, 1)/2`), so nothing is lost between levels. At each level the
-//! metric is evaluated on the level's voxel grid, strided to at most `max_samples` samples.
+//! Image pyramids of both scans and a lattice whose cells halve from level to level: each
+//! finer lattice is the exact B-spline subdivision of the previous one ([`subdivide`]: every
+//! cell split in two along each axis, masks `(1, 6, 1)/8` and `(1, 1)/2`), so nothing is lost
+//! between levels and coarse images only move coarse control points. At each level the metric
+//! is evaluated on the level's voxel grid, strided to at most `max_samples` samples.
 
 use glam::{DMat3, DVec3};
 use rayon::prelude::*;
@@ -61,10 +71,11 @@ const CHUNK: usize = 8192;
 pub enum Metric {
     /// Mean squared difference (same modality, same intensity scale).
     Mse,
-    /// Normalised cross-correlation (intensities related linearly).
-    Ncc,
-    /// Mattes mutual information (any monotone or statistical relation; elastix's default).
+    /// Normalised cross-correlation (intensities related linearly; the default for CT pairs).
     #[default]
+    Ncc,
+    /// Mattes mutual information (any statistical relation: other modalities, changed
+    /// contrast; elastix's default).
     MutualInformation,
 }
 
@@ -96,14 +107,14 @@ pub struct DenseOptions {
 impl Default for DenseOptions {
     fn default() -> Self {
         Self {
-            metric: Metric::MutualInformation,
+            metric: Metric::Ncc,
             grid_spacing: 10.0,
             levels: 3,
             iterations: 60,
-            bending: 0.005,
+            bending: 0.05,
             folding: 1.0,
             fold_threshold: 0.1,
-            landmarks: 0.05,
+            landmarks: 1.0,
             bins: crate::metrics::DEFAULT_BINS,
             max_samples: 400_000,
         }
@@ -132,10 +143,38 @@ pub struct DenseLevel {
 /// Result of [`refine`].
 #[derive(Debug, Clone)]
 pub struct DenseResult {
-    /// The optimised map `fixed → moving`.
-    pub lattice: BSplineLattice,
+    /// The correction lattice `L` (the identity where nothing was corrected).
+    pub correction: BSplineLattice,
     /// Per level, coarsest first.
     pub levels: Vec<DenseLevel>,
+}
+
+/// An initial map plus a lattice correction, `φ(x) = base(x) + L(x) − x` (see the
+/// [module docs](self)); `Dφ = D base + D L − I`.
+#[derive(Debug, Clone)]
+pub struct Refined<M> {
+    /// The initial map.
+    pub base: M,
+    /// The correction lattice.
+    pub correction: BSplineLattice,
+}
+
+impl<M: SpaceMap> SpaceMap for Refined<M> {
+    fn apply(&self, p: DVec3) -> DVec3 {
+        self.base.apply(p) + self.correction.apply(p) - p
+    }
+    fn jacobian(&self, p: DVec3) -> DMat3 {
+        self.base.jacobian(p) + self.correction.jacobian(p) - DMat3::IDENTITY
+    }
+    fn apply_grid(&self, grid: &Geometry, out: &mut [DVec3]) -> Result<(), volmorph_deform::DeformError> {
+        self.base.apply_grid(grid, out)?;
+        let mut c = vec![DVec3::ZERO; out.len()];
+        self.correction.apply_grid(grid, &mut c)?;
+        out.par_iter_mut().zip(c.par_iter()).enumerate().for_each(|(n, (o, l))| {
+            *o += *l - crate::image::voxel_position(grid, n);
+        });
+        Ok(())
+    }
 }
 
 /// A uniform cubic lattice with `regions` cells per axis on the voxel-centre box of `g`, the
@@ -373,8 +412,12 @@ struct LevelProblem<'a> {
     samples: Samples,
     moving: LinearImage<'a>,
     identity: Vec<DVec3>,
+    /// `h(x) − x` at every sample.
+    base: Vec<DVec3>,
     bending: Bending,
-    fold_points: Vec<volmorph_lattice::grid::PointBasis>,
+    /// Basis at the fold points and `D h − I` there.
+    fold_points: Vec<(volmorph_lattice::grid::PointBasis, DMat3)>,
+    /// Basis at `p_i`, the target `q_i − (h(p_i) − p_i)`, the confidence.
     landmark_points: Vec<(volmorph_lattice::grid::PointBasis, DVec3, f64)>,
     options: DenseOptions,
     fixed_var: f64,
@@ -399,8 +442,11 @@ impl LevelProblem<'_> {
         if self.plan.apply(&self.lat, &mut phi).is_err() {
             return f64::INFINITY;
         }
+        phi.par_iter_mut().zip(self.base.par_iter()).for_each(|(p, b)| *p += *b);
         let mask = self.samples.mask.as_deref();
-        // (m, ∇m) per sample; NaN m for samples outside the moving image or the mask.
+        // (m, ∇m) per sample; NaN m for samples outside the mask. A sample mapped outside the
+        // moving image keeps the edge value with a zero gradient rather than being dropped, so
+        // the optimiser gains nothing by pushing awkward samples out of the image.
         let sampled: Vec<(f32, DVec3)> = phi
             .par_iter()
             .enumerate()
@@ -408,7 +454,9 @@ impl LevelProblem<'_> {
                 if mask.is_some_and(|m| m[i] == 0) {
                     return (f32::NAN, DVec3::ZERO);
                 }
-                self.moving.sample(p).unwrap_or((f32::NAN, DVec3::ZERO))
+                self.moving
+                    .sample(p)
+                    .unwrap_or_else(|| (self.moving.value_clamped(p), DVec3::ZERO))
             })
             .collect();
         let f = &self.samples.fixed;
@@ -546,8 +594,8 @@ impl LevelProblem<'_> {
         if self.options.folding > 0.0 && !self.fold_points.is_empty() {
             let w = self.options.folding / self.fold_points.len() as f64;
             let eps = self.options.fold_threshold;
-            for b in &self.fold_points {
-                let mut j = DMat3::ZERO;
+            for (b, dh) in &self.fold_points {
+                let mut j = *dh;
                 let mut phys = [[DVec3::ZERO; 4]; 4 * 4];
                 for c in 0..4 {
                     for bb in 0..4 {
@@ -617,8 +665,12 @@ fn flatten(p: &[DVec3]) -> Vec<f64> {
 }
 
 /// Least-squares fit of `lat`'s control points to `target` sampled on `grid` (L-BFGS on
-/// `Σ |φ(x) − target(x)|²`, started from `target` at the control points).
-fn fit_to_map(
+/// `Σ |φ(x) − target(x)|²`, started from `target` at the control points): the lattice closest
+/// to any map, e.g. to hand a handle or refined map to ITK as a `BSplineTransform`.
+///
+/// # Errors
+/// [`RegisterError::Map`] if `grid` is not aligned with the lattice or the map fails on it.
+pub fn fit_to_map(
     lat: &BSplineLattice,
     grid: &Geometry,
     target: &dyn SpaceMap,
@@ -660,8 +712,9 @@ fn fit_to_map(
     Ok(BSplineLattice::from_parts(frame, knots, &pts)?)
 }
 
-/// Refine `initial` (a map `fixed → moving`, e.g. the handle solution) into a B-spline lattice
-/// on the metric (see the [module docs](self)). `constraints` are kept as soft constraints
+/// Refine `initial` (a map `fixed → moving`, e.g. the handle solution) by a B-spline correction
+/// on the metric (see the [module docs](self)); the refined map is
+/// `Refined { base: initial, correction }`. `constraints` are kept as soft constraints
 /// (their used ones, weighted by confidence); `mask` (on the fixed grid, non-zero = used)
 /// limits the metric's samples.
 ///
@@ -702,9 +755,9 @@ pub fn refine(
         (g0.dims[1] - 1) as f64 * g0.spacing.y,
         (g0.dims[2] - 1) as f64 * g0.spacing.z,
     );
-    let coarse_factor = f64::from(1u32 << (options.levels - 1));
+    let coarse = f64::from(1u32 << (options.levels - 1));
     let regions: [usize; 3] =
-        std::array::from_fn(|a| ((extent[a] / (spacing * coarse_factor)).ceil() as usize).max(1));
+        std::array::from_fn(|a| ((extent[a] / (spacing * coarse)).ceil() as usize).max(1));
     let fp = pyramid(fixed, options.levels, crate::matching::PYRAMID_MIN_DIMS);
     let mp = pyramid(moving, options.levels, crate::matching::PYRAMID_MIN_DIMS);
     let moving_range = {
@@ -716,30 +769,40 @@ pub fn refine(
     let voxel_spacing = g0.spacing.element_sum() / 3.0;
     for level in (0..fp.len()).rev() {
         let samples = samples_of(&fp[level], mask, options.max_samples);
-        if level == fp.len() - 1 {
-            lat = fit_to_map(&lat, &samples.grid, initial)?;
-        } else {
+        if level != fp.len() - 1 {
             lat = subdivide(&lat)?;
         }
         let plan = LatticeGridPlan::new(&lat, &samples.grid, GridPath::Separable)?;
+        let mut base = vec![DVec3::ZERO; samples.grid.len()];
+        initial.apply_grid(&samples.grid, &mut base)?;
+        base.par_iter_mut().enumerate().for_each(|(n, b)| {
+            *b -= crate::image::voxel_position(&samples.grid, n);
+        });
         let identity = lattice_on(&g0, lat.counts().map(|n| n - 3))?.control_points();
         let counts = lat.counts();
         let frame = *lat.frame();
-        let mut fold_points = Vec::new();
-        for k in 0..2 * (counts[2] - 3) {
-            for j in 0..2 * (counts[1] - 3) {
-                for i in 0..2 * (counts[0] - 3) {
-                    let u = DVec3::new(i as f64, j as f64, k as f64) * 0.5 + DVec3::splat(0.25);
-                    if let Some(b) = lat.point_basis(frame.to_physical(u)) {
-                        fold_points.push(b);
-                    }
+        let mut centres = Vec::new();
+        for k in 0..counts[2] - 3 {
+            for j in 0..counts[1] - 3 {
+                for i in 0..counts[0] - 3 {
+                    centres.push(frame.to_physical(DVec3::new(i as f64, j as f64, k as f64) + 0.5));
                 }
             }
         }
+        let fold_points: Vec<_> = centres
+            .par_iter()
+            .filter_map(|&x| {
+                lat.point_basis(x)
+                    .map(|b| (b, initial.jacobian(x) - DMat3::IDENTITY))
+            })
+            .collect();
         let landmark_points = constraints
             .iter()
             .filter(|c| c.status.is_used() && c.confidence > 0.0)
-            .filter_map(|c| lat.point_basis(c.source).map(|b| (b, c.target, c.confidence)))
+            .filter_map(|c| {
+                let offset = initial.apply(c.source) - c.source;
+                lat.point_basis(c.source).map(|b| (b, c.target - offset, c.confidence))
+            })
             .collect();
         let (fixed_range, fixed_var) = {
             let used: Vec<f64> = samples
@@ -772,6 +835,7 @@ pub fn refine(
             samples,
             moving: LinearImage::new(&mp[level.min(mp.len() - 1)]),
             identity,
+            base,
             fold_points,
             landmark_points,
             options: *options,
@@ -803,7 +867,7 @@ pub fn refine(
         });
     }
     Ok(DenseResult {
-        lattice: lat,
+        correction: lat,
         levels: reports,
     })
 }

@@ -103,6 +103,19 @@ impl<'a> LinearImage<'a> {
         Some(y0 + w * (y1 - y0))
     }
 
+    /// Value at `p` with the point clamped onto the box of voxel centres (the edge values
+    /// continue outside).
+    #[inline]
+    #[must_use]
+    pub fn value_clamped(&self, p: DVec3) -> f32 {
+        let mut idx = self.index_of(p);
+        for a in 0..3 {
+            let hi = (self.dims[a] - 1) as f64;
+            idx[a] = if idx[a].is_nan() { 0.0 } else { idx[a].clamp(0.0, hi) };
+        }
+        self.value_at_index(idx).unwrap_or(0.0)
+    }
+
     /// Value and physical gradient of the trilinear interpolant at `p`, `None` outside.
     #[inline]
     #[must_use]

@@ -34,10 +34,14 @@ pub mod lungs;
 pub mod dense;
 pub mod matching;
 pub mod metrics;
-mod noise;
+pub(crate) mod noise;
 pub mod optimize;
 pub mod phantom;
+pub mod pipeline;
+pub mod quality;
 pub mod select;
 pub mod solve;
+pub mod steps;
+pub mod ventilation;
 
 pub use error::RegisterError;

@@ -97,7 +97,7 @@ impl Default for LungPhantomOptions {
             dims: [96, 80, 72],
             spacing: DVec3::new(3.0, 3.0, 3.5),
             noise: 15.0,
-            amplitude: 12.0,
+            amplitude: 18.0,
             seed: 1,
             generations: 6,
         }

@@ -15,5 +15,6 @@ pub mod nurbs;
 pub mod nurbs_trace;
 pub mod phantom;
 pub mod picture;
+pub mod register;
 pub mod slice;
 pub mod warp;
