@@ -40,7 +40,14 @@ fn live(c: &mut Criterion) {
         })
         .collect();
     for method in [Method::Mls, Method::Frames] {
-        let map = handle_map(&corr, &SolveOptions { method, ..SolveOptions::default() }).unwrap();
+        let map = handle_map(
+            &corr,
+            &SolveOptions {
+                method,
+                ..SolveOptions::default()
+            },
+        )
+        .unwrap();
         let mut preview = LivePreview::new(map, &grid, [THESIS_GRID_NODES; 3]).unwrap();
         preview.select(100).unwrap();
         let base = corr[100].target;
@@ -48,7 +55,9 @@ fn live(c: &mut Criterion) {
         c.bench_function(&format!("live/correct_343_{}", method.name()), |b| {
             b.iter(|| {
                 t += 0.01;
-                preview.correct(100, base + DVec3::new(t.sin(), t.cos(), 0.0)).unwrap();
+                preview
+                    .correct(100, base + DVec3::new(t.sin(), t.cos(), 0.0))
+                    .unwrap();
             });
         });
     }
@@ -59,19 +68,40 @@ fn matching_and_dense(c: &mut Criterion) {
     let h = select_handles(
         &p.inhale,
         None,
-        &SelectOptions { count: 64, radius: 12.0, ..SelectOptions::default() },
+        &SelectOptions {
+            count: 64,
+            radius: 12.0,
+            ..SelectOptions::default()
+        },
     )
     .unwrap();
     let src: Vec<DVec3> = h.iter().map(|h| h.position).collect();
-    let o = MatchOptions { levels: 1, ..MatchOptions::default() };
+    let o = MatchOptions {
+        levels: 1,
+        ..MatchOptions::default()
+    };
     let mut g = c.benchmark_group("slow");
     g.sample_size(10);
     g.bench_function("match/ncc_64_handles", |b| {
         b.iter(|| match_handles(&p.inhale, &p.exhale, &src, None, &o).unwrap());
     });
-    let d = DenseOptions { levels: 2, iterations: 15, ..DenseOptions::default() };
+    let d = DenseOptions {
+        levels: 2,
+        iterations: 15,
+        ..DenseOptions::default()
+    };
     g.bench_function("dense/refine", |b| {
-        b.iter(|| refine(&p.inhale, &p.exhale, &volmorph_deform::Identity, &[], None, &d).unwrap());
+        b.iter(|| {
+            refine(
+                &p.inhale,
+                &p.exhale,
+                &volmorph_deform::Identity,
+                &[],
+                None,
+                &d,
+            )
+            .unwrap()
+        });
     });
     g.finish();
 }

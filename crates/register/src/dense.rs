@@ -116,7 +116,7 @@ impl Default for DenseOptions {
             fold_threshold: 0.1,
             landmarks: 1.0,
             bins: crate::metrics::DEFAULT_BINS,
-            max_samples: 400_000,
+            max_samples: 150_000,
         }
     }
 }
@@ -166,13 +166,20 @@ impl<M: SpaceMap> SpaceMap for Refined<M> {
     fn jacobian(&self, p: DVec3) -> DMat3 {
         self.base.jacobian(p) + self.correction.jacobian(p) - DMat3::IDENTITY
     }
-    fn apply_grid(&self, grid: &Geometry, out: &mut [DVec3]) -> Result<(), volmorph_deform::DeformError> {
+    fn apply_grid(
+        &self,
+        grid: &Geometry,
+        out: &mut [DVec3],
+    ) -> Result<(), volmorph_deform::DeformError> {
         self.base.apply_grid(grid, out)?;
         let mut c = vec![DVec3::ZERO; out.len()];
         self.correction.apply_grid(grid, &mut c)?;
-        out.par_iter_mut().zip(c.par_iter()).enumerate().for_each(|(n, (o, l))| {
-            *o += *l - crate::image::voxel_position(grid, n);
-        });
+        out.par_iter_mut()
+            .zip(c.par_iter())
+            .enumerate()
+            .for_each(|(n, (o, l))| {
+                *o += *l - crate::image::voxel_position(grid, n);
+            });
         Ok(())
     }
 }
@@ -205,11 +212,12 @@ pub fn lattice_on(g: &Geometry, regions: [usize; 3]) -> Result<BSplineLattice, R
 pub fn subdivide(lat: &BSplineLattice) -> Result<BSplineLattice, RegisterError> {
     let counts = lat.counts();
     let f = lat.frame();
-    let extent = f.spacing() * DVec3::new(
-        (counts[0] - 3) as f64,
-        (counts[1] - 3) as f64,
-        (counts[2] - 3) as f64,
-    );
+    let extent = f.spacing()
+        * DVec3::new(
+            (counts[0] - 3) as f64,
+            (counts[1] - 3) as f64,
+            (counts[2] - 3) as f64,
+        );
     let corner = f.to_physical(DVec3::ZERO);
     let fine = BSplineLattice::uniform_cubic_in_box(
         corner,
@@ -250,7 +258,11 @@ pub fn subdivide(lat: &BSplineLattice) -> Result<BSplineLattice, RegisterError> 
         pts = out;
         dims = nd;
     }
-    Ok(BSplineLattice::from_parts(*fine.frame(), fine.knots().clone(), &pts)?)
+    Ok(BSplineLattice::from_parts(
+        *fine.frame(),
+        fine.knots().clone(),
+        &pts,
+    )?)
 }
 
 /// Separable bending-energy operator of a uniform cubic lattice (see the [module docs](self)).
@@ -364,7 +376,14 @@ struct Samples {
 fn samples_of(level: &Volume<f32>, mask: Option<&Volume<u8>>, max: usize) -> Samples {
     let g = *level.geometry();
     let mut stride = 1usize;
-    while g.dims.iter().map(|&n| n.div_ceil(stride)).product::<usize>() > max && stride < 64 {
+    while g
+        .dims
+        .iter()
+        .map(|&n| n.div_ceil(stride))
+        .product::<usize>()
+        > max
+        && stride < 64
+    {
         stride += 1;
     }
     let dims = g.dims.map(|n| n.div_ceil(stride));
@@ -442,7 +461,9 @@ impl LevelProblem<'_> {
         if self.plan.apply(&self.lat, &mut phi).is_err() {
             return f64::INFINITY;
         }
-        phi.par_iter_mut().zip(self.base.par_iter()).for_each(|(p, b)| *p += *b);
+        phi.par_iter_mut()
+            .zip(self.base.par_iter())
+            .for_each(|(p, b)| *p += *b);
         let mask = self.samples.mask.as_deref();
         // (m, ∇m) per sample; NaN m for samples outside the mask. A sample mapped outside the
         // moving image keeps the edge value with a zero gradient rather than being dropped, so
@@ -581,7 +602,11 @@ impl LevelProblem<'_> {
         }
         let pts: Vec<DVec3> = x.chunks_exact(3).map(DVec3::from_slice).collect();
         if self.options.bending > 0.0 {
-            let d: Vec<DVec3> = pts.iter().zip(&self.identity).map(|(p, i)| *p - *i).collect();
+            let d: Vec<DVec3> = pts
+                .iter()
+                .zip(&self.identity)
+                .map(|(p, i)| *p - *i)
+                .collect();
             let (e, ge) = self.bending.energy(&d);
             let w = self.options.bending * self.mean_spacing * self.mean_spacing / self.volume;
             cost += w * e;
@@ -678,7 +703,11 @@ pub fn fit_to_map(
     let plan = LatticeGridPlan::new(lat, grid, GridPath::Separable)?;
     let mut want = vec![DVec3::ZERO; grid.len()];
     target.apply_grid(grid, &mut want)?;
-    let start: Vec<DVec3> = lat.control_points().iter().map(|&p| target.apply(p)).collect();
+    let start: Vec<DVec3> = lat
+        .control_points()
+        .iter()
+        .map(|&p| target.apply(p))
+        .collect();
     let mut x = flatten(&start);
     let (frame, knots, counts) = (*lat.frame(), lat.knots().clone(), lat.counts());
     let n = grid.len() as f64;
@@ -697,8 +726,17 @@ pub fn fit_to_map(
         if plan.apply(&l, &mut phi).is_err() {
             return f64::INFINITY;
         }
-        let r: Vec<DVec3> = phi.iter().zip(&want).map(|(a, b)| (*a - *b) * (2.0 / n)).collect();
-        let cost = phi.iter().zip(&want).map(|(a, b)| (*a - *b).length_squared()).sum::<f64>() / n;
+        let r: Vec<DVec3> = phi
+            .iter()
+            .zip(&want)
+            .map(|(a, b)| (*a - *b) * (2.0 / n))
+            .collect();
+        let cost = phi
+            .iter()
+            .zip(&want)
+            .map(|(a, b)| (*a - *b).length_squared())
+            .sum::<f64>()
+            / n;
         let mut gr = vec![DVec3::ZERO; pts.len()];
         if plan.apply_adjoint(counts, &r, &mut gr).is_err() {
             return f64::INFINITY;
@@ -739,7 +777,10 @@ pub fn refine(
     non_negative("landmarks", options.landmarks)?;
     non_negative("fold_threshold", options.fold_threshold)?;
     if options.max_samples < 1000 {
-        return Err(RegisterError::option("max_samples", "must be at least 1000"));
+        return Err(RegisterError::option(
+            "max_samples",
+            "must be at least 1000",
+        ));
     }
     if let Some(m) = mask {
         same_grid(fixed.geometry(), m.geometry(), "mask")?;
@@ -762,7 +803,11 @@ pub fn refine(
     let mp = pyramid(moving, options.levels, crate::matching::PYRAMID_MIN_DIMS);
     let moving_range = {
         let (lo, hi) = value_range(moving.data(), None);
-        if hi > lo { (lo, hi) } else { (lo - 0.5, lo + 0.5) }
+        if hi > lo {
+            (lo, hi)
+        } else {
+            (lo - 0.5, lo + 0.5)
+        }
     };
     let mut lat = lattice_on(&g0, regions)?;
     let mut reports = Vec::new();
@@ -801,7 +846,8 @@ pub fn refine(
             .filter(|c| c.status.is_used() && c.confidence > 0.0)
             .filter_map(|c| {
                 let offset = initial.apply(c.source) - c.source;
-                lat.point_basis(c.source).map(|b| (b, c.target - offset, c.confidence))
+                lat.point_basis(c.source)
+                    .map(|b| (b, c.target - offset, c.confidence))
             })
             .collect();
         let (fixed_range, fixed_var) = {

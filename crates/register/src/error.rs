@@ -62,7 +62,10 @@ pub(crate) fn positive(what: &'static str, v: f64) -> Result<f64, RegisterError>
     if v.is_finite() && v > 0.0 {
         Ok(v)
     } else {
-        Err(RegisterError::option(what, format!("must be finite and > 0, got {v}")))
+        Err(RegisterError::option(
+            what,
+            format!("must be finite and > 0, got {v}"),
+        ))
     }
 }
 
@@ -71,6 +74,9 @@ pub(crate) fn non_negative(what: &'static str, v: f64) -> Result<f64, RegisterEr
     if v.is_finite() && v >= 0.0 {
         Ok(v)
     } else {
-        Err(RegisterError::option(what, format!("must be finite and ≥ 0, got {v}")))
+        Err(RegisterError::option(
+            what,
+            format!("must be finite and ≥ 0, got {v}"),
+        ))
     }
 }

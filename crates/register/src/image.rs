@@ -111,7 +111,11 @@ impl<'a> LinearImage<'a> {
         let mut idx = self.index_of(p);
         for a in 0..3 {
             let hi = (self.dims[a] - 1) as f64;
-            idx[a] = if idx[a].is_nan() { 0.0 } else { idx[a].clamp(0.0, hi) };
+            idx[a] = if idx[a].is_nan() {
+                0.0
+            } else {
+                idx[a].clamp(0.0, hi)
+            };
         }
         self.value_at_index(idx).unwrap_or(0.0)
     }
@@ -174,17 +178,19 @@ fn filter_axis(src: &Volume<f32>, axis: usize, k: [f32; 3]) -> Volume<f32> {
     let n = g.dims[axis];
     let d = src.data();
     let mut out = vec![0.0f32; d.len()];
-    out.par_chunks_mut(nx * ny).enumerate().for_each(|(z, slab)| {
-        for y in 0..ny {
-            for x in 0..nx {
-                let o = x + nx * (y + ny * z);
-                let pos = [x, y, z][axis];
-                let lo = if pos == 0 { o } else { o - stride };
-                let hi = if pos + 1 >= n { o } else { o + stride };
-                slab[x + nx * y] = k[0] * d[lo] + k[1] * d[o] + k[2] * d[hi];
+    out.par_chunks_mut(nx * ny)
+        .enumerate()
+        .for_each(|(z, slab)| {
+            for y in 0..ny {
+                for x in 0..nx {
+                    let o = x + nx * (y + ny * z);
+                    let pos = [x, y, z][axis];
+                    let lo = if pos == 0 { o } else { o - stride };
+                    let hi = if pos + 1 >= n { o } else { o + stride };
+                    slab[x + nx * y] = k[0] * d[lo] + k[1] * d[o] + k[2] * d[hi];
+                }
             }
-        }
-    });
+        });
     let _ = nz;
     Volume::new(g, out).expect("same geometry and length")
 }
@@ -357,8 +363,14 @@ mod tests {
             // Physical gradient: d/dx = 2 / 0.5, d/dy = 3 / 2, d/dz = 5 / 1.5.
             assert!((grad - DVec3::new(4.0, 1.5, 5.0 / 1.5)).length() < 1e-9);
         }
-        assert!(s.sample(g.index_to_physical(DVec3::new(-0.1, 0.0, 0.0))).is_none());
-        assert!(s.value(g.index_to_physical(DVec3::new(5.0, 4.0, 3.0))).is_some());
+        assert!(
+            s.sample(g.index_to_physical(DVec3::new(-0.1, 0.0, 0.0)))
+                .is_none()
+        );
+        assert!(
+            s.value(g.index_to_physical(DVec3::new(5.0, 4.0, 3.0)))
+                .is_some()
+        );
     }
 
     #[test]

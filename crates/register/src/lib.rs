@@ -27,11 +27,11 @@
 //!   deformations of any volume.
 //! * [`pipeline`] — the whole registration and each step as one call, with their outputs.
 
+pub mod dense;
 mod error;
 pub mod image;
 pub mod live;
 pub mod lungs;
-pub mod dense;
 pub mod matching;
 pub mod metrics;
 pub(crate) mod noise;

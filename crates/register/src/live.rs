@@ -23,7 +23,10 @@ pub const THESIS_GRID_NODES: usize = 32;
 enum Engine {
     Mls(HandleGrid<AffineMls>),
     Frames(HandleGrid<FrameMls>),
-    Tps { map: ThinPlateMap, sampled: SampledMap },
+    Tps {
+        map: ThinPlateMap,
+        sampled: SampledMap,
+    },
 }
 
 /// A handle map kept on a coarse grid for live correction (see the [module docs](self)).

@@ -96,7 +96,11 @@ const N6: [[i64; 3]; 6] = [
 
 fn neighbours6(n: usize, dims: [usize; 3]) -> impl Iterator<Item = usize> {
     let [nx, ny, nz] = dims;
-    let (i, j, k) = ((n % nx) as i64, (n / nx % ny) as i64, (n / (nx * ny)) as i64);
+    let (i, j, k) = (
+        (n % nx) as i64,
+        (n / nx % ny) as i64,
+        (n / (nx * ny)) as i64,
+    );
     N6.iter().filter_map(move |d| {
         let (a, b, c) = (i + d[0], j + d[1], k + d[2]);
         (a >= 0 && b >= 0 && c >= 0 && a < nx as i64 && b < ny as i64 && c < nz as i64)
@@ -214,7 +218,8 @@ pub fn segment_lungs(ct: &Volume<f32>, o: &LungOptions) -> Result<LungSegmentati
                 for i in 0..nx {
                     let n = i + nx * (j + ny * k);
                     if low[n] != 0 && d[n] < thr {
-                        let dc = (i as f64 - nx as f64 / 2.0).powi(2) + (j as f64 - ny as f64 / 2.0).powi(2);
+                        let dc = (i as f64 - nx as f64 / 2.0).powi(2)
+                            + (j as f64 - ny as f64 / 2.0).powi(2);
                         if best.is_none_or(|b| dc < b.0) {
                             best = Some((dc, n));
                         }
@@ -278,7 +283,10 @@ pub fn segment_lungs(ct: &Volume<f32>, o: &LungOptions) -> Result<LungSegmentati
         ));
     }
     let mean_x = |v: &Vec<usize>| {
-        v.iter().map(|&n| crate::image::voxel_position(&g, n).x).sum::<f64>() / v.len() as f64
+        v.iter()
+            .map(|&n| crate::image::voxel_position(&g, n).x)
+            .sum::<f64>()
+            / v.len() as f64
     };
     if mean_x(&lungs[0]) > mean_x(&lungs[1]) {
         lungs.swap(0, 1);
@@ -354,7 +362,12 @@ fn fill_section_holes(mask: &mut [u8], dims: [usize; 3]) {
         }
         while let Some(p) = queue.pop_front() {
             let (i, j) = (p % nx, p / nx);
-            for (a, b) in [(i.wrapping_sub(1), j), (i + 1, j), (i, j.wrapping_sub(1)), (i, j + 1)] {
+            for (a, b) in [
+                (i.wrapping_sub(1), j),
+                (i + 1, j),
+                (i, j.wrapping_sub(1)),
+                (i, j + 1),
+            ] {
                 if a < nx && b < ny && !reached[a + nx * b] && s[a + nx * b] == 0 {
                     reached[a + nx * b] = true;
                     queue.push_back(a + nx * b);
@@ -428,7 +441,15 @@ fn quadratic_fit_filters() -> Vec<[f64; 125]> {
         for y in -2i32..=2 {
             for x in -2i32..=2 {
                 let (x, y, z) = (f64::from(x), f64::from(y), f64::from(z));
-                rows.push([1.0, x * x, 2.0 * x * y, 2.0 * x * z, y * y, 2.0 * y * z, z * z]);
+                rows.push([
+                    1.0,
+                    x * x,
+                    2.0 * x * y,
+                    2.0 * x * z,
+                    y * y,
+                    2.0 * y * z,
+                    z * z,
+                ]);
             }
         }
     }
@@ -468,46 +489,49 @@ pub fn enhance_lobe_boundaries(
     let d = ct.data();
     let m = lungs.data();
     let mut out = vec![0.0f32; d.len()];
-    out.par_chunks_mut(nx * ny).enumerate().for_each(|(k, slab)| {
-        if k < 2 || k + 2 >= nz {
-            return;
-        }
-        for j in 2..ny.saturating_sub(2) {
-            for i in 2..nx.saturating_sub(2) {
-                let n = i + nx * (j + ny * k);
-                if m[n] == 0 {
-                    continue;
-                }
-                let mut coef = [0.0f64; 7];
-                let mut t = 0;
-                for z in 0..5 {
-                    for y in 0..5 {
-                        let row = (i - 2) + nx * ((j + y - 2) + ny * (k + z - 2));
-                        for x in 0..5 {
-                            let v = f64::from(d[row + x]);
-                            for c in 0..7 {
-                                coef[c] += filters[c][t] * v;
+    out.par_chunks_mut(nx * ny)
+        .enumerate()
+        .for_each(|(k, slab)| {
+            if k < 2 || k + 2 >= nz {
+                return;
+            }
+            for j in 2..ny.saturating_sub(2) {
+                for i in 2..nx.saturating_sub(2) {
+                    let n = i + nx * (j + ny * k);
+                    if m[n] == 0 {
+                        continue;
+                    }
+                    let mut coef = [0.0f64; 7];
+                    let mut t = 0;
+                    for z in 0..5 {
+                        for y in 0..5 {
+                            let row = (i - 2) + nx * ((j + y - 2) + ny * (k + z - 2));
+                            for x in 0..5 {
+                                let v = f64::from(d[row + x]);
+                                for c in 0..7 {
+                                    coef[c] += filters[c][t] * v;
+                                }
+                                t += 1;
                             }
-                            t += 1;
                         }
                     }
-                }
-                let a = (coef[0] - o.hu_zero) / o.hu_span;
-                if !(a > o.range[0] && a < o.range[1]) {
-                    continue;
-                }
-                let ev = symmetric_eigenvalues(coef[1], coef[2], coef[3], coef[4], coef[5], coef[6]);
-                let dom = ev
-                    .iter()
-                    .copied()
-                    .max_by(|x, y| x.abs().total_cmp(&y.abs()))
-                    .unwrap_or(0.0);
-                if dom < 0.0 {
-                    slab[i + nx * j] = (-dom) as f32;
+                    let a = (coef[0] - o.hu_zero) / o.hu_span;
+                    if !(a > o.range[0] && a < o.range[1]) {
+                        continue;
+                    }
+                    let ev =
+                        symmetric_eigenvalues(coef[1], coef[2], coef[3], coef[4], coef[5], coef[6]);
+                    let dom = ev
+                        .iter()
+                        .copied()
+                        .max_by(|x, y| x.abs().total_cmp(&y.abs()))
+                        .unwrap_or(0.0);
+                    if dom < 0.0 {
+                        slab[i + nx * j] = (-dom) as f32;
+                    }
                 }
             }
-        }
-    });
+        });
     Ok(Volume::new(g, out)?)
 }
 
@@ -649,7 +673,11 @@ fn dijkstra(
                 if !allowed[q] {
                     continue;
                 }
-                let step = if di != 0 && dj != 0 { std::f64::consts::SQRT_2 } else { 1.0 };
+                let step = if di != 0 && dj != 0 {
+                    std::f64::consts::SQRT_2
+                } else {
+                    1.0
+                };
                 let nd = d + step * 0.5 * (cost[p] + cost[q]);
                 if nd < dist[q] {
                     dist[q] = nd;
@@ -685,7 +713,12 @@ fn section_components(pix: &[bool], nx: usize, ny: usize) -> (Vec<u32>, usize) {
         queue.push_back(s);
         while let Some(p) = queue.pop_front() {
             let (i, j) = (p % nx, p / nx);
-            for (a, b) in [(i.wrapping_sub(1), j), (i + 1, j), (i, j.wrapping_sub(1)), (i, j + 1)] {
+            for (a, b) in [
+                (i.wrapping_sub(1), j),
+                (i + 1, j),
+                (i, j.wrapping_sub(1)),
+                (i, j + 1),
+            ] {
                 if a < nx && b < ny && pix[a + nx * b] && lab[a + nx * b] == 0 {
                     lab[a + nx * b] = count as u32;
                     queue.push_back(a + nx * b);
@@ -729,7 +762,10 @@ pub fn trace_lobes(
         }
     }
     let sec = nx * ny;
-    let y_of = |p: usize| g.index_to_physical(DVec3::new((p % nx) as f64, (p / nx) as f64, 0.0)).y;
+    let y_of = |p: usize| {
+        g.index_to_physical(DVec3::new((p % nx) as f64, (p / nx) as f64, 0.0))
+            .y
+    };
     // Per section: curves (fissure index → pixels) computed in parallel.
     let per_section: Vec<Vec<(usize, Vec<usize>)>> = (0..nz)
         .into_par_iter()
@@ -765,12 +801,16 @@ pub fn trace_lobes(
                     .collect();
                 let snap = |pt: [f64; 2]| {
                     boundary.iter().copied().min_by(|&a, &b| {
-                        let da = ((a % nx) as f64 - pt[0]).powi(2) + ((a / nx) as f64 - pt[1]).powi(2);
-                        let db = ((b % nx) as f64 - pt[0]).powi(2) + ((b / nx) as f64 - pt[1]).powi(2);
+                        let da =
+                            ((a % nx) as f64 - pt[0]).powi(2) + ((a / nx) as f64 - pt[1]).powi(2);
+                        let db =
+                            ((b % nx) as f64 - pt[0]).powi(2) + ((b / nx) as f64 - pt[1]).powi(2);
                         da.total_cmp(&db)
                     })
                 };
-                let (Some(a), Some(b)) = (snap(key.from), snap(key.to)) else { continue };
+                let (Some(a), Some(b)) = (snap(key.from), snap(key.to)) else {
+                    continue;
+                };
                 let emax = (0..sec)
                     .filter(|&p| allowed[p])
                     .map(|p| f64::from(e[k * sec + p]))
@@ -833,16 +873,20 @@ pub fn trace_lobes(
                         [a] => *a,
                         [] => 0,
                     };
-                    (*kind, lab.iter().map(|&l| l != 0 && l as usize == post).collect())
+                    (
+                        *kind,
+                        lab.iter().map(|&l| l != 0 && l as usize == post).collect(),
+                    )
                 })
                 .collect();
             let (regions, n) = section_components(&cut, nx, ny);
             for r in 1..=n {
                 let pix: Vec<usize> = (0..sec).filter(|&p| regions[p] == r as u32).collect();
                 let side = |kind: FissureKind| -> Option<bool> {
-                    posterior.iter().find(|(k2, _)| *k2 == kind).map(|(_, post)| {
-                        2 * pix.iter().filter(|&&p| post[p]).count() > pix.len()
-                    })
+                    posterior
+                        .iter()
+                        .find(|(k2, _)| *k2 == kind)
+                        .map(|(_, post)| 2 * pix.iter().filter(|&&p| post[p]).count() > pix.len())
                 };
                 let (label, allowed): (Option<u8>, Vec<u8>) = if lung == RIGHT_LUNG {
                     match side(FissureKind::RightOblique) {
@@ -932,7 +976,12 @@ pub fn trace_lobes(
                         continue;
                     }
                     let (i, j) = (p % nx, p / nx);
-                    for (a, b) in [(i.wrapping_sub(1), j), (i + 1, j), (i, j.wrapping_sub(1)), (i, j + 1)] {
+                    for (a, b) in [
+                        (i.wrapping_sub(1), j),
+                        (i + 1, j),
+                        (i, j.wrapping_sub(1)),
+                        (i, j + 1),
+                    ] {
                         if a < nx && b < ny && labels[k * sec + a + nx * b] != lobe::NONE {
                             labels[n] = labels[k * sec + a + nx * b];
                             break;
@@ -976,7 +1025,9 @@ mod tests {
         let ev = symmetric_eigenvalues(2.0, 1.0, 0.0, 2.0, 0.0, 5.0);
         let mut v = ev.to_vec();
         v.sort_by(f64::total_cmp);
-        assert!((v[0] - 1.0).abs() < 1e-12 && (v[1] - 3.0).abs() < 1e-12 && (v[2] - 5.0).abs() < 1e-12);
+        assert!(
+            (v[0] - 1.0).abs() < 1e-12 && (v[1] - 3.0).abs() < 1e-12 && (v[2] - 5.0).abs() < 1e-12
+        );
         let d = symmetric_eigenvalues(-1.0, 0.0, 0.0, 4.0, 0.0, 2.0);
         assert!(d.contains(&-1.0) && d.contains(&4.0));
     }

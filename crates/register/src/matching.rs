@@ -164,7 +164,10 @@ impl MatchOptions {
             return Err(RegisterError::option("window", "must be 1…32 grid steps"));
         }
         if self.search > 64 {
-            return Err(RegisterError::option("search", "must be at most 64 grid steps"));
+            return Err(RegisterError::option(
+                "search",
+                "must be at most 64 grid steps",
+            ));
         }
         if self.levels == 0 || self.levels > 8 {
             return Err(RegisterError::option("levels", "must be 1…8"));
@@ -283,8 +286,14 @@ fn ncc_map(
             }
         }
     }
-    let finite: Vec<f32> = block.iter().map(|v| if v.is_nan() { 0.0 } else { *v }).collect();
-    let nan_count: Vec<f32> = block.iter().map(|v| if v.is_nan() { 1.0 } else { 0.0 }).collect();
+    let finite: Vec<f32> = block
+        .iter()
+        .map(|v| if v.is_nan() { 0.0 } else { *v })
+        .collect();
+    let nan_count: Vec<f32> = block
+        .iter()
+        .map(|v| if v.is_nan() { 1.0 } else { 0.0 })
+        .collect();
     let (s1, s2) = prefix_sums(&finite, nb);
     let (nan_sum, _) = prefix_sums(&nan_count, nb);
     let nw = 2 * w + 1;
@@ -402,7 +411,11 @@ fn best_in_map(
     } else {
         (1.0 - peak).max(0.0)
     };
-    Some(([at[0] as i64 - si, at[1] as i64 - si, at[2] as i64 - si], peak, distinct))
+    Some((
+        [at[0] as i64 - si, at[1] as i64 - si, at[2] as i64 - si],
+        peak,
+        distinct,
+    ))
 }
 
 /// Gauss–Newton sub-voxel refinement of `q` (see the [module docs](self)); `None` if it
@@ -479,7 +492,10 @@ fn refine_subvoxel(
 }
 
 /// Solve an `N×N` system by Gaussian elimination with partial pivoting (`None` if singular).
-pub(crate) fn solve_small<const N: usize>(mut a: [[f64; N]; N], mut b: [f64; N]) -> Option<[f64; N]> {
+pub(crate) fn solve_small<const N: usize>(
+    mut a: [[f64; N]; N],
+    mut b: [f64; N],
+) -> Option<[f64; N]> {
     let scale = a.iter().flatten().fold(0.0f64, |m, v| m.max(v.abs()));
     if scale == 0.0 || !scale.is_finite() {
         return None;
@@ -535,8 +551,7 @@ fn match_one(
     let mut result = None;
     for _ in 0..o.iterations.max(1) {
         let map = ncc_map(m, &src, q, step, o.window, o.search);
-        let Some((d, peak, distinct)) = best_in_map(&map, o.search, q, p, step, o.penalty)
-        else {
+        let Some((d, peak, distinct)) = best_in_map(&map, o.search, q, p, step, o.penalty) else {
             break;
         };
         q += step * DVec3::new(d[0] as f64, d[1] as f64, d[2] as f64);
@@ -664,7 +679,9 @@ pub fn reject_inconsistent(corr: &mut [Correspondence], options: &MatchOptions) 
     for _round in 0..2 {
         let sources: Vec<DVec3> = corr.iter().map(|c| c.source).collect();
         let targets: Vec<DVec3> = corr.iter().map(|c| c.target).collect();
-        let used: Vec<usize> = (0..corr.len()).filter(|&i| corr[i].status.is_used()).collect();
+        let used: Vec<usize> = (0..corr.len())
+            .filter(|&i| corr[i].status.is_used())
+            .collect();
         if used.len() < 5 {
             return;
         }
@@ -677,7 +694,11 @@ pub fn reject_inconsistent(corr: &mut [Correspondence], options: &MatchOptions) 
                 (i, r)
             })
             .collect();
-        let mut rs: Vec<f64> = residuals.iter().map(|r| r.1).filter(|r| r.is_finite()).collect();
+        let mut rs: Vec<f64> = residuals
+            .iter()
+            .map(|r| r.1)
+            .filter(|r| r.is_finite())
+            .collect();
         let spread = 1.4826 * median(&mut rs);
         let limit = (options.outlier_factor * spread).max(options.outlier_floor);
         let mut changed = false;
@@ -699,7 +720,9 @@ pub fn reject_inconsistent(corr: &mut [Correspondence], options: &MatchOptions) 
 pub fn fit_frames(corr: &mut [Correspondence], neighbours: usize) {
     let sources: Vec<DVec3> = corr.iter().map(|c| c.source).collect();
     let targets: Vec<DVec3> = corr.iter().map(|c| c.target).collect();
-    let used: Vec<usize> = (0..corr.len()).filter(|&i| corr[i].status.is_used()).collect();
+    let used: Vec<usize> = (0..corr.len())
+        .filter(|&i| corr[i].status.is_used())
+        .collect();
     let axes: Vec<DMat3> = (0..corr.len())
         .into_par_iter()
         .map(|i| {
@@ -709,7 +732,11 @@ pub fn fit_frames(corr: &mut [Correspondence], neighbours: usize) {
         })
         .collect();
     for (c, a) in corr.iter_mut().zip(axes) {
-        c.axes = if a.determinant() > 0.0 { a } else { DMat3::IDENTITY };
+        c.axes = if a.determinant() > 0.0 {
+            a
+        } else {
+            DMat3::IDENTITY
+        };
     }
 }
 
@@ -781,7 +808,9 @@ pub fn match_handles(
         // Next level starts from the matches; unused handles from their neighbours.
         let src: Vec<DVec3> = corr.iter().map(|c| c.source).collect();
         let tgt: Vec<DVec3> = corr.iter().map(|c| c.target).collect();
-        let used: Vec<usize> = (0..corr.len()).filter(|&i| corr[i].status.is_used()).collect();
+        let used: Vec<usize> = (0..corr.len())
+            .filter(|&i| corr[i].status.is_used())
+            .collect();
         targets = (0..corr.len())
             .into_par_iter()
             .map(|i| {
@@ -816,13 +845,19 @@ mod tests {
             DVec3::new(1.0, 1.0, 5.0),
             DVec3::new(-2.0, 3.0, 2.0),
         ];
-        let pairs: Vec<_> = pts.iter().map(|&p| (p, l * p + t, 1.0 + p.x.abs())).collect();
+        let pairs: Vec<_> = pts
+            .iter()
+            .map(|&p| (p, l * p + t, 1.0 + p.x.abs()))
+            .collect();
         let centre = DVec3::new(0.5, 0.5, 0.5);
         let (c, fit) = local_affine(&pairs, centre).unwrap();
         assert!((c - (l * centre + t)).length() < 1e-9);
         assert!(fit.abs_diff_eq(l, 1e-9));
         // Coplanar points do not determine L.
-        let flat: Vec<_> = pts.iter().map(|&p| (DVec3::new(p.x, p.y, 0.0), p, 1.0)).collect();
+        let flat: Vec<_> = pts
+            .iter()
+            .map(|&p| (DVec3::new(p.x, p.y, 0.0), p, 1.0))
+            .collect();
         assert!(local_affine(&flat, centre).is_none());
     }
 

@@ -196,7 +196,11 @@ impl JointHistogram {
         let mut t = vec![0.0; self.counts.len()];
         for (row_t, row) in t.chunks_exact_mut(w).zip(self.counts.chunks_exact(w)) {
             for ((o, &c), &m) in row_t.iter_mut().zip(row).zip(&pm) {
-                *o = if c > 0.0 && m > 0.0 { (c / m).ln() } else { 0.0 };
+                *o = if c > 0.0 && m > 0.0 {
+                    (c / m).ln()
+                } else {
+                    0.0
+                };
             }
         }
         t
@@ -293,7 +297,13 @@ pub fn compare(
     };
     let fr = value_range(a.data(), md);
     let mr = value_range(b.data(), md);
-    let widen = |(lo, hi): (f64, f64)| if hi > lo { (lo, hi) } else { (lo - 0.5, lo + 0.5) };
+    let widen = |(lo, hi): (f64, f64)| {
+        if hi > lo {
+            (lo, hi)
+        } else {
+            (lo - 0.5, lo + 0.5)
+        }
+    };
     let mut h = JointHistogram::new(DEFAULT_BINS, widen(fr), widen(mr))?;
     for (i, (&x, &y)) in a.data().iter().zip(b.data()).enumerate() {
         if ok(i) && x.is_finite() && y.is_finite() {
@@ -327,7 +337,11 @@ mod tests {
     #[test]
     fn mi_derivative_matches_finite_difference() {
         let f: Vec<f64> = (0..400).map(|i| ((i * 37) % 101) as f64).collect();
-        let m: Vec<f64> = f.iter().enumerate().map(|(i, &x)| 0.5 * x + ((i * 13) % 7) as f64).collect();
+        let m: Vec<f64> = f
+            .iter()
+            .enumerate()
+            .map(|(i, &x)| 0.5 * x + ((i * 13) % 7) as f64)
+            .collect();
         let build = |m: &[f64]| {
             let mut h = JointHistogram::new(16, (0.0, 100.0), (-5.0, 60.0)).unwrap();
             for (&x, &y) in f.iter().zip(m) {
@@ -344,7 +358,8 @@ mod tests {
             mp[idx] += eps;
             let mut mm = m.clone();
             mm[idx] -= eps;
-            let fd = (build(&mp).mutual_information() - build(&mm).mutual_information()) / (2.0 * eps);
+            let fd =
+                (build(&mp).mutual_information() - build(&mm).mutual_information()) / (2.0 * eps);
             assert!((d - fd).abs() < 1e-6 * (1.0 + fd.abs()), "{d} vs {fd}");
         }
         // Identical images have the largest MI of the three couplings here.

@@ -74,7 +74,11 @@ where
             (Some(s), Some(y)) => dot(s, y) / dot(y, y),
             _ => {
                 let gmax = g.iter().fold(0.0f64, |m, v| m.max(v.abs()));
-                if gmax > 0.0 { options.first_step / gmax } else { 0.0 }
+                if gmax > 0.0 {
+                    options.first_step / gmax
+                } else {
+                    0.0
+                }
             }
         };
         for v in &mut q {
@@ -115,7 +119,11 @@ where
                 break;
             }
             let denom = 2.0 * (ft - fx - slope * t);
-            let t_q = if ft.is_finite() && denom > 0.0 { -slope * t * t / denom } else { 0.5 * t };
+            let t_q = if ft.is_finite() && denom > 0.0 {
+                -slope * t * t / denom
+            } else {
+                0.5 * t
+            };
             t = t_q.clamp(0.1 * t, 0.5 * t);
         }
         let Some(ft) = accepted else {

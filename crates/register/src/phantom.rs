@@ -361,7 +361,10 @@ pub struct LungPhantom {
 /// [`RegisterError::Warp`] if the exhale resampling fails.
 pub fn lung_phantom(o: &LungPhantomOptions) -> Result<LungPhantom, RegisterError> {
     if o.dims.iter().any(|&n| !(32..=1024).contains(&n)) {
-        return Err(RegisterError::option("dims", "every axis needs 32…1024 voxels"));
+        return Err(RegisterError::option(
+            "dims",
+            "every axis needs 32…1024 voxels",
+        ));
     }
     crate::error::positive("spacing", o.spacing.min_element())?;
     crate::error::non_negative("noise", o.noise)?;
@@ -412,7 +415,8 @@ pub fn lung_phantom(o: &LungPhantomOptions) -> Result<LungPhantom, RegisterError
                         v = HU_PARENCHYMA;
                         let d = anat.fissure_distance(p, s);
                         let sigma = 0.5 * h;
-                        v += (HU_FISSURE - HU_PARENCHYMA) * (-(d * d) / (2.0 * sigma * sigma)).exp() as f32;
+                        v += (HU_FISSURE - HU_PARENCHYMA)
+                            * (-(d * d) / (2.0 * sigma * sigma)).exp() as f32;
                         lslab[i + o.dims[0] * j] = anat.lobe_of(p);
                     }
                     slab[i + o.dims[0] * j] = v;
@@ -423,9 +427,21 @@ pub fn lung_phantom(o: &LungPhantomOptions) -> Result<LungPhantom, RegisterError
     let mut rng = Stream::new(o.seed);
     let top = DVec3::new(0.0, anat.carina.y, g.physical_bounds().1.z + 2.0 * h);
     let main = [
-        Segment { a: top, b: anat.carina, r: anat.trachea_r },
-        Segment { a: anat.carina, b: anat.hilum[0], r: 0.7 * anat.trachea_r },
-        Segment { a: anat.carina, b: anat.hilum[1], r: 0.7 * anat.trachea_r },
+        Segment {
+            a: top,
+            b: anat.carina,
+            r: anat.trachea_r,
+        },
+        Segment {
+            a: anat.carina,
+            b: anat.hilum[0],
+            r: 0.7 * anat.trachea_r,
+        },
+        Segment {
+            a: anat.carina,
+            b: anat.hilum[1],
+            r: 0.7 * anat.trachea_r,
+        },
     ];
     draw_tubes(&mut clean, &g, &main, 0.3 * anat.trachea_r, HU_SOFT);
     draw_tubes(&mut clean, &g, &main, 0.0, HU_AIR);
@@ -648,13 +664,18 @@ pub fn known_deformation(
         ));
         let bias_axis = DVec3::new(rng.range(-1.0, 1.0), rng.range(-1.0, 1.0), 0.5).normalize();
         let len = ext.length();
-        moving.data_mut().par_iter_mut().enumerate().for_each(|(n, v)| {
-            let p = crate::image::voxel_position(&g, n);
-            let t = ((f64::from(*v) - lo) / range).clamp(0.0, 1.0);
-            let gamma = t.powf(0.8);
-            let bias = 1.0 + 0.15 * ((p - centre).dot(bias_axis) / len * std::f64::consts::PI).sin();
-            *v = (lo + range * (0.05 + 0.9 * gamma) * bias) as f32;
-        });
+        moving
+            .data_mut()
+            .par_iter_mut()
+            .enumerate()
+            .for_each(|(n, v)| {
+                let p = crate::image::voxel_position(&g, n);
+                let t = ((f64::from(*v) - lo) / range).clamp(0.0, 1.0);
+                let gamma = t.powf(0.8);
+                let bias =
+                    1.0 + 0.15 * ((p - centre).dot(bias_axis) / len * std::f64::consts::PI).sin();
+                *v = (lo + range * (0.05 + 0.9 * gamma) * bias) as f32;
+            });
     }
     Ok((lat, moving))
 }
@@ -671,6 +692,11 @@ pub fn true_lobe_volume_change(p: &LungPhantom) -> Result<[f64; 6], RegisterErro
         sum[l as usize] += f64::from(d);
         count[l as usize] += 1;
     }
-    Ok(std::array::from_fn(|l| if count[l] > 0 { sum[l] / count[l] as f64 } else { f64::NAN }))
+    Ok(std::array::from_fn(|l| {
+        if count[l] > 0 {
+            sum[l] / count[l] as f64
+        } else {
+            f64::NAN
+        }
+    }))
 }
-

@@ -15,6 +15,10 @@
 //! | `displacement.mha` | `φ(x) − x` on the fixed grid as a 3-component MetaImage (ITK's displacement field) |
 //! | `warped.<ext>` | the moving scan resampled on the fixed grid through the map |
 //! | `jacobian.<ext>` | `det Dφ` on the fixed grid |
+//!
+//! The three voxel outputs use the map sampled at every other voxel and interpolated
+//! trilinearly (McPhail's §5.5.2 sampled deformation; exact at the samples), the TRE the exact
+//! map.
 //! | `overlay_{before,after}_{x,y,z}.png` | Algorithm 5.1 mid-sections, before and after |
 //! | `report.json`, `summary.txt` | metrics before/after, fold report, TRE, timings, options |
 
@@ -25,7 +29,7 @@ use std::time::Instant;
 use glam::{DMat3, DVec3};
 use serde::Serialize;
 use serde_json::json;
-use volmorph_deform::{Identity, SpaceMap};
+use volmorph_deform::{Identity, SampledMap, SpaceMap};
 use volmorph_handles::HandleSet;
 use volmorph_handles::mls::Frame;
 use volmorph_lattice::BSplineLattice;
@@ -161,7 +165,52 @@ pub fn warp_moving(
     fixed: &Geometry,
     fill: f64,
 ) -> Result<Volume<f32>, RegisterError> {
-    Ok(resample(moving, map, fixed, &ResampleOptions::new(Interpolation::Linear, fill))?)
+    Ok(resample(
+        moving,
+        map,
+        fixed,
+        &ResampleOptions::new(Interpolation::Linear, fill),
+    )?)
+}
+
+/// TRE at landmark files before (identity) and after `map`.
+///
+/// # Errors
+/// Reading errors naming the file, [`RegisterError::Mismatch`] for lists of different lengths.
+pub fn landmark_tre(
+    l: &LandmarkFiles,
+    fixed: &Geometry,
+    moving: &Geometry,
+    map: &dyn SpaceMap,
+) -> Result<(TreStats, TreStats), RegisterError> {
+    let a = read_landmarks(&l.fixed, l.units, fixed)?;
+    let b = read_landmarks(&l.moving, l.units, moving)?;
+    Ok((tre(&Identity, &a, &b)?, tre(map, &a, &b)?))
+}
+
+/// Algorithm 5.1 mid-sections along x, y and z, before and after, as
+/// `overlay_{before,after}_{x,y,z}.png` in `dir`; returns the file names.
+///
+/// # Errors
+/// [`RegisterError::Mismatch`] for images on other grids, [`RegisterError::Render`] naming a
+/// file that cannot be written.
+pub fn write_overlays(
+    dir: &Path,
+    fixed: &Volume<f32>,
+    before: &Volume<f32>,
+    after: &Volume<f32>,
+) -> Result<Vec<String>, RegisterError> {
+    let o = OverlayOptions::for_image(fixed);
+    let mut files = Vec::new();
+    for (when, img) in [("before", before), ("after", after)] {
+        for (axis, name) in ["x", "y", "z"].iter().enumerate() {
+            let f = format!("overlay_{when}_{name}.png");
+            let pic = slice_overlay(fixed, img, axis, fixed.dims()[axis] / 2, &o)?;
+            volmorph_render::write_png_rgba(&dir.join(&f), &pic)?;
+            files.push(f);
+        }
+    }
+    Ok(files)
 }
 
 /// Landmark pairs for the TRE.
@@ -252,7 +301,10 @@ pub fn read_mask(path: &Path) -> Result<Volume<u8>, RegisterError> {
 
 /// Extension of a volume path (`.nii.gz` kept whole), for outputs in the same format.
 fn volume_ext(path: &Path) -> String {
-    let name = path.file_name().map(|n| n.to_string_lossy().to_lowercase()).unwrap_or_default();
+    let name = path
+        .file_name()
+        .map(|n| n.to_string_lossy().to_lowercase())
+        .unwrap_or_default();
     for e in [".nii.gz", ".nii", ".mha", ".mhd", ".nrrd", ".vtk"] {
         if name.ends_with(e) {
             return if e == ".mhd" { ".mha".into() } else { e.into() };
@@ -276,7 +328,12 @@ pub fn write_displacement_field(
     let mut phi = vec![DVec3::ZERO; len];
     map.apply_grid(grid, &mut phi)?;
     let d = grid.direction;
-    let j = |v: &[f64]| v.iter().map(|x| format!("{x}")).collect::<Vec<_>>().join(" ");
+    let j = |v: &[f64]| {
+        v.iter()
+            .map(|x| format!("{x}"))
+            .collect::<Vec<_>>()
+            .join(" ")
+    };
     let header = format!(
         "ObjectType = Image\nNDims = 3\nBinaryData = True\nBinaryDataByteOrderMSB = False\n\
          CompressedData = False\nTransformMatrix = {}\nOffset = {}\nCenterOfRotation = 0 0 0\n\
@@ -330,7 +387,11 @@ pub fn correspondences_json(corr: &[Correspondence]) -> String {
 }
 
 fn finite(v: f64) -> serde_json::Value {
-    if v.is_finite() { json!(v) } else { serde_json::Value::Null }
+    if v.is_finite() {
+        json!(v)
+    } else {
+        serde_json::Value::Null
+    }
 }
 
 /// Read what [`correspondences_json`] writes.
@@ -348,16 +409,23 @@ pub fn read_correspondences(path: &Path) -> Result<Vec<Correspondence>, Register
     if v.get("kind").and_then(|k| k.as_str()) != Some("correspondences") {
         return Err(err("\"kind\" must be \"correspondences\"".into()));
     }
-    let items = v.get("items").and_then(|i| i.as_array()).ok_or_else(|| err("no \"items\" list".into()))?;
-    let vec3 = |x: Option<&serde_json::Value>, what: &str, n: usize| -> Result<DVec3, RegisterError> {
-        let a = x.and_then(|a| a.as_array()).ok_or_else(|| err(format!("item {n}: no {what}")))?;
-        let f: Vec<f64> = a.iter().filter_map(serde_json::Value::as_f64).collect();
-        if f.len() != 3 || f.iter().any(|v| !v.is_finite()) {
-            return Err(err(format!("item {n}: {what} needs 3 finite numbers")));
-        }
-        Ok(DVec3::new(f[0], f[1], f[2]))
-    };
-    let num = |x: Option<&serde_json::Value>| x.and_then(serde_json::Value::as_f64).unwrap_or(f64::NAN);
+    let items = v
+        .get("items")
+        .and_then(|i| i.as_array())
+        .ok_or_else(|| err("no \"items\" list".into()))?;
+    let vec3 =
+        |x: Option<&serde_json::Value>, what: &str, n: usize| -> Result<DVec3, RegisterError> {
+            let a = x
+                .and_then(|a| a.as_array())
+                .ok_or_else(|| err(format!("item {n}: no {what}")))?;
+            let f: Vec<f64> = a.iter().filter_map(serde_json::Value::as_f64).collect();
+            if f.len() != 3 || f.iter().any(|v| !v.is_finite()) {
+                return Err(err(format!("item {n}: {what} needs 3 finite numbers")));
+            }
+            Ok(DVec3::new(f[0], f[1], f[2]))
+        };
+    let num =
+        |x: Option<&serde_json::Value>| x.and_then(serde_json::Value::as_f64).unwrap_or(f64::NAN);
     items
         .iter()
         .enumerate()
@@ -370,10 +438,9 @@ pub fn read_correspondences(path: &Path) -> Result<Vec<Correspondence>, Register
                 ),
                 _ => DMat3::IDENTITY,
             };
-            let status: MatchStatus = serde_json::from_value(
-                it.get("status").cloned().unwrap_or(json!("accepted")),
-            )
-            .map_err(|e| err(format!("item {n}: status: {e}")))?;
+            let status: MatchStatus =
+                serde_json::from_value(it.get("status").cloned().unwrap_or(json!("accepted")))
+                    .map_err(|e| err(format!("item {n}: status: {e}")))?;
             Ok(Correspondence {
                 source: vec3(it.get("source"), "source", n)?,
                 target: vec3(it.get("target"), "target", n)?,
@@ -428,7 +495,8 @@ pub fn lattice_for_export(
 ) -> Result<(BSplineLattice, f64), RegisterError> {
     let spacing = crate::error::positive("export spacing", spacing)?;
     let regions: [usize; 3] = std::array::from_fn(|a| {
-        ((fixed.dims[a].saturating_sub(1) as f64 * fixed.spacing[a] / spacing).ceil() as usize).max(1)
+        ((fixed.dims[a].saturating_sub(1) as f64 * fixed.spacing[a] / spacing).ceil() as usize)
+            .max(1)
     });
     let lat = lattice_on(fixed, regions)?;
     // Fit on a grid of four samples per control spacing (at most 96 per axis).
@@ -439,12 +507,18 @@ pub fn lattice_for_export(
     let mut b = vec![DVec3::ZERO; grid.len()];
     fitted.apply_grid(&grid, &mut a)?;
     map.apply_grid(&grid, &mut b)?;
-    let err = a.iter().zip(&b).map(|(x, y)| (*x - *y).length()).fold(0.0, f64::max);
+    let err = a
+        .iter()
+        .zip(&b)
+        .map(|(x, y)| (*x - *y).length())
+        .fold(0.0, f64::max);
     Ok((fitted, err))
 }
 
 /// Write every output of a registration into `dir` (see the [module docs](self)) and return
-/// the file names. `ext` is the volume extension (e.g. `.nii.gz`).
+/// the file names. `ext` is the volume extension (e.g. `.nii.gz`); the displacement field is
+/// written from `output_map` (the map itself, or a sampled version of it for speed), the ITK
+/// lattice is fitted to the exact map.
 ///
 /// # Errors
 /// [`RegisterError::Io`] / [`RegisterError::Volume`] / [`RegisterError::Render`] naming the file
@@ -458,11 +532,13 @@ pub fn write_outputs(
     warped: &Volume<f32>,
     jacobian: &Volume<f32>,
     reg: &Registration,
+    output_map: &dyn SpaceMap,
     report_json: &str,
     summary: &str,
     export_spacing: f64,
 ) -> Result<Vec<String>, RegisterError> {
-    std::fs::create_dir_all(dir).map_err(|e| RegisterError::Io(volmorph_io::IoError::os(dir, e)))?;
+    std::fs::create_dir_all(dir)
+        .map_err(|e| RegisterError::Io(volmorph_io::IoError::os(dir, e)))?;
     let mut files = Vec::new();
     let path = |name: &str| dir.join(name);
     let text = |name: &str, body: &str| -> Result<(), RegisterError> {
@@ -473,29 +549,25 @@ pub fn write_outputs(
     };
     handle_set(&reg.correspondences, reg.handle_map.method()).write_json(&path("handles.json"))?;
     files.push("handles.json".to_string());
-    text("correspondences.json", &correspondences_json(&reg.correspondences))?;
+    text(
+        "correspondences.json",
+        &correspondences_json(&reg.correspondences),
+    )?;
     files.push("correspondences.json".into());
     let (lat, _fit_error) = lattice_for_export(reg.map(), fixed.geometry(), export_spacing)?;
     volmorph_lattice::formats::write_lattice(&path("map.tfm"), &lat)?;
     volmorph_lattice::formats::write_lattice(&path("map_lattice.json"), &lat)?;
     files.push("map.tfm".into());
     files.push("map_lattice.json".into());
-    write_displacement_field(&path("displacement.mha"), reg.map(), fixed.geometry())?;
+    write_displacement_field(&path("displacement.mha"), output_map, fixed.geometry())?;
     files.push("displacement.mha".into());
     for (name, v) in [("warped", warped), ("jacobian", jacobian)] {
         let f = format!("{name}{ext}");
-        volmorph_volume_io::write(&path(&f), &AnyVolume::from(v.clone())).map_err(|e| e.at(&path(&f)))?;
+        volmorph_volume_io::write(&path(&f), &AnyVolume::from(v.clone()))
+            .map_err(|e| e.at(&path(&f)))?;
         files.push(f);
     }
-    let o = OverlayOptions::for_image(fixed);
-    for (when, img) in [("before", moving_identity), ("after", warped)] {
-        for (axis, name) in ["x", "y", "z"].iter().enumerate() {
-            let f = format!("overlay_{when}_{name}.png");
-            let pic = slice_overlay(fixed, img, axis, fixed.dims()[axis] / 2, &o)?;
-            volmorph_render::write_png_rgba(&path(&f), &pic)?;
-            files.push(f);
-        }
-    }
+    files.extend(write_overlays(dir, fixed, moving_identity, warped)?);
     text("report.json", report_json)?;
     text("summary.txt", summary)?;
     files.push("report.json".into());
@@ -521,7 +593,16 @@ pub fn register_files(
     let mask = mask_path.map(read_mask).transpose()?;
     let reg = register(&fixed, &moving, mask.as_ref(), o)?;
     let spacing = o.dense.map_or(10.0, |d| d.grid_spacing);
-    finish(fixed_path, &fixed, &moving, mask.as_ref(), landmarks, out_dir, &reg, spacing)
+    finish(
+        fixed_path,
+        &fixed,
+        &moving,
+        mask.as_ref(),
+        landmarks,
+        out_dir,
+        &reg,
+        spacing,
+    )
 }
 
 /// Build the map from a correspondence file (the `solve` step), optionally refine it densely,
@@ -567,7 +648,16 @@ pub fn solve_files(
     }
     .with_dense(dense_result);
     let spacing = dense.map_or(10.0, |d| d.grid_spacing);
-    finish(fixed_path, &fixed, &moving, mask.as_ref(), landmarks, out_dir, &reg, spacing)
+    finish(
+        fixed_path,
+        &fixed,
+        &moving,
+        mask.as_ref(),
+        landmarks,
+        out_dir,
+        &reg,
+        spacing,
+    )
 }
 
 /// Measure a registration and write its outputs.
@@ -585,23 +675,32 @@ fn finish(
     let fill = crate::metrics::value_range(moving.data(), None).0;
     let fill = if fill.is_finite() { fill } else { 0.0 };
     let g = *fixed.geometry();
+    // Dense outputs through the map sampled every other voxel (trilinear in between): the
+    // exact map costs one handle sum per voxel, the sampled one a trilinear lookup.
+    let sampled = SampledMap::from_map(
+        reg.map(),
+        SampledMap::covering(&g, g.dims.map(|n| n.div_ceil(2).max(2)))?,
+    )?;
     let identity = warp_moving(moving, &Identity, &g, fill)?;
-    let warped = warp_moving(moving, reg.map(), &g, fill)?;
+    let warped = warp_moving(moving, &sampled, &g, fill)?;
     let before = compare(fixed, &identity, mask)?;
     let after = compare(fixed, &warped, mask)?;
-    let (jac, fold) = crate::quality::jacobian_report(reg.map(), &g)?;
+    let (jac, fold) = crate::quality::jacobian_report(&sampled, &g)?;
     let (tre_before, tre_after) = match landmarks {
         Some(l) => {
-            let a = read_landmarks(&l.fixed, l.units, &g)?;
-            let b = read_landmarks(&l.moving, l.units, moving.geometry())?;
-            (Some(tre(&Identity, &a, &b)?), Some(tre(reg.map(), &a, &b)?))
+            let (b, a) = landmark_tre(l, &g, moving.geometry(), reg.map())?;
+            (Some(b), Some(a))
         }
         None => (None, None),
     };
     let count = |s: MatchStatus| reg.correspondences.iter().filter(|c| c.status == s).count();
     let mut report = RegisterReport {
         handles: reg.correspondences.len(),
-        used: reg.correspondences.iter().filter(|c| c.status.is_used()).count(),
+        used: reg
+            .correspondences
+            .iter()
+            .filter(|c| c.status.is_used())
+            .count(),
         rejected: [
             count(MatchStatus::LowCorrelation),
             count(MatchStatus::Inconsistent),
@@ -628,6 +727,7 @@ fn finish(
         &warped,
         &jac,
         reg,
+        &sampled,
         &serde_json::to_string_pretty(&report).unwrap_or_default(),
         &summary,
         export_spacing,

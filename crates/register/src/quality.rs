@@ -214,7 +214,11 @@ pub fn subcube_comparison(
             }
         }
     }
-    let (fa, fb, fc) = (Volume::new(geom, a)?, Volume::new(geom, b)?, Volume::new(geom, c)?);
+    let (fa, fb, fc) = (
+        Volume::new(geom, a)?,
+        Volume::new(geom, b)?,
+        Volume::new(geom, c)?,
+    );
     let ncc_mapped = crate::metrics::compare(&fa, &fb, None)?.ncc;
     let ncc_shifted = crate::metrics::compare(&fa, &fc, None)?.ncc;
     let overlay = overlay_volume(&fa, &fb, o)?;

@@ -123,7 +123,11 @@ pub fn select_handles(
         (g.direction.z_axis * g.spacing.z).length(),
     );
     let m: [usize; 3] = std::array::from_fn(|a| (margin / step[a]).ceil() as usize);
-    let peak = e.par_iter().copied().fold(|| 0.0f32, f32::max).reduce(|| 0.0, f32::max);
+    let peak = e
+        .par_iter()
+        .copied()
+        .fold(|| 0.0f32, f32::max)
+        .reduce(|| 0.0, f32::max);
     let floor = (f64::from(peak) * min_rel) as f32;
     let inside = |i: usize, n: usize, m: usize| i >= m && i + m < n;
     let mut candidates: Vec<(f32, u32)> = e
@@ -217,6 +221,16 @@ mod tests {
         let hm = select_handles(&v, Some(&mask), &opts).unwrap();
         assert!(hm.iter().all(|x| x.index.iter().all(|&i| i < 10)));
         assert!(select_handles(&v, None, &SelectOptions { count: 0, ..opts }).is_err());
-        assert!(select_handles(&v, None, &SelectOptions { radius: -1.0, ..opts }).is_err());
+        assert!(
+            select_handles(
+                &v,
+                None,
+                &SelectOptions {
+                    radius: -1.0,
+                    ..opts
+                }
+            )
+            .is_err()
+        );
     }
 }

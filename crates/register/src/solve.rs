@@ -154,9 +154,11 @@ pub fn handle_map(
         )));
     }
     Ok(match options.method {
-        Method::Tps => {
-            HandleMap::Tps(ThinPlateMap::new(&s, &t, non_negative("smoothing", options.smoothing)?)?)
-        }
+        Method::Tps => HandleMap::Tps(ThinPlateMap::new(
+            &s,
+            &t,
+            non_negative("smoothing", options.smoothing)?,
+        )?),
         Method::Mls => HandleMap::Mls(AffineMls::new(
             &s,
             &t,

@@ -23,10 +23,10 @@ use crate::phantom::{
     KnownDeformationOptions, LungPhantomOptions, known_deformation, lobe, lung_phantom,
 };
 use crate::pipeline::{
-    FoldSummary, LandmarkFiles, correspondences_json, read_correspondences, read_mask, read_scan,
-    warp_moving,
+    FoldSummary, LandmarkFiles, correspondences_json, landmark_tre, read_correspondences,
+    read_mask, read_scan, warp_moving, write_overlays,
 };
-use crate::quality::{OverlayOptions, TreStats, read_landmarks, slice_overlay, tre};
+use crate::quality::TreStats;
 use crate::select::{SelectOptions, select_handles};
 use crate::solve::{SolveOptions, handle_map};
 use crate::ventilation::{LobeVentilation, ventilation};
@@ -75,7 +75,13 @@ pub fn select_files(
     let m = mask.map(read_mask).transpose()?;
     let h = select_handles(&f, m.as_ref(), o)?;
     let pts: Vec<DVec3> = h.iter().map(|h| h.position).collect();
-    write_text(out, &points_text("volmorph handles: x y z (physical, mm), strongest first", &pts))?;
+    write_text(
+        out,
+        &points_text(
+            "volmorph handles: x y z (physical, mm), strongest first",
+            &pts,
+        ),
+    )?;
     Ok(h.len())
 }
 
@@ -114,7 +120,11 @@ pub fn match_files(
     let corr = match_handles(&f, &m, &pts, None, o)?;
     write_text(out, &correspondences_json(&corr))?;
     let n = |s: MatchStatus| corr.iter().filter(|c| c.status == s).count();
-    let acc: Vec<f64> = corr.iter().filter(|c| c.status.is_used()).map(|c| c.ncc).collect();
+    let acc: Vec<f64> = corr
+        .iter()
+        .filter(|c| c.status.is_used())
+        .map(|c| c.ncc)
+        .collect();
     Ok(MatchSummary {
         handles: corr.len(),
         accepted: acc.len(),
@@ -208,22 +218,10 @@ pub fn quality_files(
     let (jac, fold) = crate::quality::jacobian_report(&*phi, &g)?;
     write_volume(&out_dir.join("jacobian.nii.gz"), &jac)?;
     write_volume(&out_dir.join("warped.nii.gz"), &warped)?;
-    let o = OverlayOptions::for_image(&f);
-    for (when, img) in [("before", &id), ("after", &warped)] {
-        for (axis, name) in ["x", "y", "z"].iter().enumerate() {
-            let p = out_dir.join(format!("overlay_{when}_{name}.png"));
-            let pic = slice_overlay(&f, img, axis, f.dims()[axis] / 2, &o)?;
-            volmorph_render::write_png_rgba(&p, &pic)?;
-        }
-    }
-    let t = match landmarks {
-        Some(l) => {
-            let a = read_landmarks(&l.fixed, l.units, &g)?;
-            let b = read_landmarks(&l.moving, l.units, m.geometry())?;
-            Some((tre(&Identity, &a, &b)?, tre(&*phi, &a, &b)?))
-        }
-        None => None,
-    };
+    write_overlays(out_dir, &f, &id, &warped)?;
+    let t = landmarks
+        .map(|l| landmark_tre(l, &g, m.geometry(), &*phi))
+        .transpose()?;
     let r = QualityReport {
         before: compare(&f, &id, None)?,
         after: compare(&f, &warped, None)?,
@@ -277,7 +275,10 @@ pub fn segment_lungs_files(
         let e = enhance_lobe_boundaries(&v, &seg.mask, &EnhanceOptions::default())?;
         let model = trace_lobes(&seg.mask, &e, &s)?;
         let sibling = |suffix: &str| {
-            let name = out.file_name().map(|n| n.to_string_lossy().into_owned()).unwrap_or_default();
+            let name = out
+                .file_name()
+                .map(|n| n.to_string_lossy().into_owned())
+                .unwrap_or_default();
             let (stem, ext) = match name.find('.') {
                 Some(i) => (name[..i].to_string(), name[i..].to_string()),
                 None => (name.clone(), ".nii.gz".to_string()),
@@ -287,7 +288,9 @@ pub fn segment_lungs_files(
         write_volume(&sibling("enhanced"), &e)?;
         write_volume(&sibling("lobes"), &model.lobes)?;
         let l = model.lobes.data();
-        rep.lobe_voxels = Some(std::array::from_fn(|i| l.iter().filter(|&&x| x == i as u8 + 1).count()));
+        rep.lobe_voxels = Some(std::array::from_fn(|i| {
+            l.iter().filter(|&&x| x == i as u8 + 1).count()
+        }));
         if let Some(r) = reference {
             let truth = read_scan(r)?.map(|x| x.round().clamp(0.0, 255.0) as u8);
             crate::image::same_grid(v.geometry(), truth.geometry(), "reference lobes")?;
@@ -338,14 +341,26 @@ pub fn write_phantom(dir: &Path, o: &LungPhantomOptions) -> Result<usize, Regist
     write_volume(&dir.join("inhale.nii.gz"), &p.inhale)?;
     write_volume(&dir.join("exhale.nii.gz"), &p.exhale)?;
     write_volume(&dir.join("lobes.nii.gz"), &p.lobes)?;
-    write_text(&dir.join("landmarks_inhale.txt"), &points_text("inhale landmarks (vessel bifurcations), mm", &p.landmarks_inhale))?;
-    write_text(&dir.join("landmarks_exhale.txt"), &points_text("the same landmarks at exhale, mm", &p.landmarks_exhale))?;
+    write_text(
+        &dir.join("landmarks_inhale.txt"),
+        &points_text(
+            "inhale landmarks (vessel bifurcations), mm",
+            &p.landmarks_inhale,
+        ),
+    )?;
+    write_text(
+        &dir.join("landmarks_exhale.txt"),
+        &points_text("the same landmarks at exhale, mm", &p.landmarks_exhale),
+    )?;
     write_text(&dir.join("lobe_script.json"), &p.lobe_script.to_json())?;
     let change = crate::phantom::true_lobe_volume_change(&p)?;
     let named: serde_json::Map<String, serde_json::Value> = (1..=5)
         .map(|l| (lobe::NAMES[l].to_string(), serde_json::json!(change[l])))
         .collect();
-    write_text(&dir.join("true_volume_change.json"), &serde_json::to_string_pretty(&named).unwrap_or_default())?;
+    write_text(
+        &dir.join("true_volume_change.json"),
+        &serde_json::to_string_pretty(&named).unwrap_or_default(),
+    )?;
     Ok(p.landmarks_inhale.len())
 }
 
@@ -383,14 +398,21 @@ pub fn write_known_pair(
         let idx: [usize; 3] = std::array::from_fn(|a| {
             let m = g.dims[a];
             let lo = m / 8;
-            lo + (crate::noise::uniform(o.seed ^ 0xABCD, 3 * n + a as u64) * (m - 2 * lo) as f64) as usize
+            lo + (crate::noise::uniform(o.seed ^ 0xABCD, 3 * n + a as u64) * (m - 2 * lo) as f64)
+                as usize
         });
         if v[[idx[0], idx[1], idx[2]]] >= thr {
             pts.push(g.index_to_physical(DVec3::new(idx[0] as f64, idx[1] as f64, idx[2] as f64)));
         }
     }
     let moved: Vec<DVec3> = pts.iter().map(|&p| lat.apply(p)).collect();
-    write_text(&dir.join("landmarks_fixed.txt"), &points_text("fixed landmarks, mm", &pts))?;
-    write_text(&dir.join("landmarks_moving.txt"), &points_text("moving landmarks (truth field), mm", &moved))?;
+    write_text(
+        &dir.join("landmarks_fixed.txt"),
+        &points_text("fixed landmarks, mm", &pts),
+    )?;
+    write_text(
+        &dir.join("landmarks_moving.txt"),
+        &points_text("moving landmarks (truth field), mm", &moved),
+    )?;
     Ok(())
 }

@@ -38,14 +38,22 @@ pub struct Distribution {
 impl Distribution {
     fn of(mut v: Vec<f64>) -> Self {
         if v.is_empty() {
-            return Self { mean: f64::NAN, sd: f64::NAN, percentiles: [f64::NAN; 5] };
+            return Self {
+                mean: f64::NAN,
+                sd: f64::NAN,
+                percentiles: [f64::NAN; 5],
+            };
         }
         let n = v.len() as f64;
         let mean = v.iter().sum::<f64>() / n;
         let sd = (v.iter().map(|x| (x - mean).powi(2)).sum::<f64>() / n).sqrt();
         v.sort_by(f64::total_cmp);
         let q = |p: f64| v[((p * (v.len() - 1) as f64).round() as usize).min(v.len() - 1)];
-        Self { mean, sd, percentiles: [q(0.05), q(0.25), q(0.5), q(0.75), q(0.95)] }
+        Self {
+            mean,
+            sd,
+            percentiles: [q(0.05), q(0.25), q(0.5), q(0.75), q(0.95)],
+        }
     }
 }
 
@@ -126,7 +134,8 @@ pub fn ventilation(
         let j: Vec<f64> = idx.iter().map(|&n| f64::from(jac.data()[n])).collect();
         let mut histogram = vec![0usize; HISTOGRAM_BINS];
         for &v in &j {
-            let b = ((v / 2.0 * HISTOGRAM_BINS as f64).floor().max(0.0) as usize).min(HISTOGRAM_BINS - 1);
+            let b = ((v / 2.0 * HISTOGRAM_BINS as f64).floor().max(0.0) as usize)
+                .min(HISTOGRAM_BINS - 1);
             histogram[b] += 1;
         }
         let r: Vec<f64> = idx

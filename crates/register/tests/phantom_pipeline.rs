@@ -47,17 +47,30 @@ fn options() -> RegisterOptions {
 #[test]
 fn pipeline_recovers_the_phantom_motion_and_lobe_volume_change() {
     let p = phantom();
-    assert!(p.landmarks_inhale.len() >= 30, "{} landmarks", p.landmarks_inhale.len());
+    assert!(
+        p.landmarks_inhale.len() >= 30,
+        "{} landmarks",
+        p.landmarks_inhale.len()
+    );
     let before = tre(&Identity, &p.landmarks_inhale, &p.landmarks_exhale).unwrap();
     let r = register(&p.inhale, &p.exhale, None, &options()).unwrap();
     let handles_only = tre(&r.handle_map, &p.landmarks_inhale, &p.landmarks_exhale).unwrap();
     let after = tre(r.map(), &p.landmarks_inhale, &p.landmarks_exhale).unwrap();
-    eprintln!("before {before}\nhandles {handles_only}\nafter {after}\n{:?}", r.timings);
+    eprintln!(
+        "before {before}\nhandles {handles_only}\nafter {after}\n{:?}",
+        r.timings
+    );
     assert!(before.mean > 4.0, "{before}");
     assert!(handles_only.mean < PHANTOM_TRE_MM, "{handles_only}");
     assert!(after.mean < PHANTOM_TRE_MM, "{after}");
     assert!(after.max < 4.0, "{after}");
-    assert!(r.correspondences.iter().filter(|c| c.status.is_used()).count() > 150);
+    assert!(
+        r.correspondences
+            .iter()
+            .filter(|c| c.status.is_used())
+            .count()
+            > 150
+    );
 
     // Jacobian per lobe of the registered map against the phantom's known volume change.
     let truth = true_lobe_volume_change(&p).unwrap();
@@ -67,10 +80,22 @@ fn pipeline_recovers_the_phantom_motion_and_lobe_volume_change() {
     for l in &v.regions {
         let t = truth[l.label as usize];
         let rel = (l.jacobian.mean - t).abs() / t;
-        eprintln!("{}: jac {:.4} vs true {:.4} ({:.2}%), HU ratio {:.4}", l.name, l.jacobian.mean, t, 100.0 * rel, l.hu_volume_ratio.mean);
+        eprintln!(
+            "{}: jac {:.4} vs true {:.4} ({:.2}%), HU ratio {:.4}",
+            l.name,
+            l.jacobian.mean,
+            t,
+            100.0 * rel,
+            l.hu_volume_ratio.mean
+        );
         assert!(rel < 0.02, "{}: {} vs {}", l.name, l.jacobian.mean, t);
         // The HU estimate tracks the volume change (mass conservation in the phantom).
-        assert!((l.hu_volume_ratio.mean - t).abs() < 0.05, "{}: HU ratio {}", l.name, l.hu_volume_ratio.mean);
+        assert!(
+            (l.hu_volume_ratio.mean - t).abs() < 0.05,
+            "{}: HU ratio {}",
+            l.name,
+            l.hu_volume_ratio.mean
+        );
     }
 }
 
@@ -82,7 +107,10 @@ fn true_map_gives_the_known_volume_change_exactly() {
     let v = ventilation(&p.motion, &p.inhale, &warped, &p.lobes, 2).unwrap();
     for l in &v.regions {
         assert!((l.jacobian.mean - truth[l.label as usize]).abs() < 1e-9);
-        assert!(l.jacobian.percentiles[0] <= l.jacobian.mean && l.jacobian.mean <= l.jacobian.percentiles[4]);
+        assert!(
+            l.jacobian.percentiles[0] <= l.jacobian.mean
+                && l.jacobian.mean <= l.jacobian.percentiles[4]
+        );
         assert_eq!(l.histogram.iter().sum::<usize>(), l.voxels);
     }
     // The base deflates more than the apex: lower lobes lose more volume than upper ones.

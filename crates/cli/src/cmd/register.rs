@@ -32,29 +32,45 @@ pub struct Command {
 #[derive(Debug, clap::Subcommand)]
 pub enum Step {
     /// Select handles on the edge-enhanced fixed scan (thesis §5.3.1); writes x y z per line.
-    #[command(after_help = "Example:\n  volmorph register select inhale.nii.gz -o handles.txt --handles 300 --radius 10 --mask lungs.nii.gz")]
+    #[command(
+        after_help = "Example:\n  volmorph register select inhale.nii.gz -o handles.txt --handles 300 --radius 10 --mask lungs.nii.gz"
+    )]
     Select(SelectArgs),
     /// Match handles in the moving scan by NCC (thesis §5.3.2); writes correspondences JSON.
-    #[command(after_help = "Example:\n  volmorph register match inhale.nii.gz exhale.nii.gz --handles handles.txt -o correspondences.json")]
+    #[command(
+        after_help = "Example:\n  volmorph register match inhale.nii.gz exhale.nii.gz --handles handles.txt -o correspondences.json"
+    )]
     Match(MatchArgs),
     /// Build the map from correspondences (tps, mls, frames), optionally refine it densely,
     /// and write the outputs of a registration.
-    #[command(after_help = "Example:\n  volmorph register solve inhale.nii.gz exhale.nii.gz --correspondences correspondences.json --method frames --dense -o out")]
+    #[command(
+        after_help = "Example:\n  volmorph register solve inhale.nii.gz exhale.nii.gz --correspondences correspondences.json --method frames --dense -o out"
+    )]
     Solve(SolveArgs),
     /// Overlays, Jacobian fold report, global metrics and TRE of a map.
-    #[command(after_help = "Example:\n  volmorph register quality inhale.nii.gz exhale.nii.gz --map out/map.tfm --landmarks lm_in.txt,lm_ex.txt -o quality")]
+    #[command(
+        after_help = "Example:\n  volmorph register quality inhale.nii.gz exhale.nii.gz --map out/map.tfm --landmarks lm_in.txt,lm_ex.txt -o quality"
+    )]
     Quality(QualityArgs),
     /// Lung mask (thesis §5.6.1) and, with a script of fissure end points, the lobes (§5.6.2–3).
-    #[command(after_help = "Example:\n  volmorph register segment-lungs inhale.nii.gz -o lungs.nii.gz --lobes lobe_script.json --reference lobes.nii.gz")]
+    #[command(
+        after_help = "Example:\n  volmorph register segment-lungs inhale.nii.gz -o lungs.nii.gz --lobes lobe_script.json --reference lobes.nii.gz"
+    )]
     SegmentLungs(LungArgs),
     /// Ventilation per lobe from the Jacobian (thesis §5.7) and from the HU values.
-    #[command(after_help = "Example:\n  volmorph register ventilation inhale.nii.gz exhale.nii.gz --map out/map.tfm --labels lungs_lobes.nii.gz -o vent")]
+    #[command(
+        after_help = "Example:\n  volmorph register ventilation inhale.nii.gz exhale.nii.gz --map out/map.tfm --labels lungs_lobes.nii.gz -o vent"
+    )]
     Ventilation(VentilationArgs),
     /// Write the breathing lung phantom (inhale, exhale, lobes, landmarks, lobe script).
-    #[command(after_help = "Example:\n  volmorph register phantom -o phantom --dims 128,112,96 --spacing 2.5,2.5,3 --amplitude 15")]
+    #[command(
+        after_help = "Example:\n  volmorph register phantom -o phantom --dims 128,112,96 --spacing 2.5,2.5,3 --amplitude 15"
+    )]
     Phantom(PhantomArgs),
     /// Deform a volume by a known random smooth B-spline field (a pair with known truth).
-    #[command(after_help = "Example:\n  volmorph register known-pair cranium_ct.nii.gz -o pair --magnitude 6 --seed 3")]
+    #[command(
+        after_help = "Example:\n  volmorph register known-pair cranium_ct.nii.gz -o pair --magnitude 6 --seed 3"
+    )]
     KnownPair(KnownPairArgs),
 }
 
@@ -115,13 +131,8 @@ pub struct MapOptions {
 impl MapOptions {
     fn solve(&self) -> SolveOptions {
         SolveOptions {
-            method: match self.method {
-                MethodArg::Tps => Method::Tps,
-                MethodArg::Mls => Method::Mls,
-                MethodArg::Frames => Method::Frames,
-            },
             smoothing: self.smoothing,
-            ..SolveOptions::default()
+            ..Self::solve_for(self.method)
         }
     }
 
@@ -155,14 +166,20 @@ pub struct LandmarkArgs {
 
 impl LandmarkArgs {
     fn files(&self) -> anyhow::Result<Option<LandmarkFiles>> {
-        let Some(s) = &self.landmarks else { return Ok(None) };
+        let Some(s) = &self.landmarks else {
+            return Ok(None);
+        };
         let (a, b) = s
             .split_once(',')
             .with_context(|| format!("--landmarks wants FIXED,MOVING, got {s:?}"))?;
         Ok(Some(LandmarkFiles {
             fixed: PathBuf::from(a),
             moving: PathBuf::from(b),
-            units: if self.dirlab { LandmarkUnits::DirLabVoxels } else { LandmarkUnits::Physical },
+            units: if self.dirlab {
+                LandmarkUnits::DirLabVoxels
+            } else {
+                LandmarkUnits::Physical
+            },
         }))
     }
 }
@@ -383,31 +400,65 @@ pub fn run(c: &Command) -> anyhow::Result<()> {
     match &c.step {
         None => {
             let a = &c.run;
-            let (f, m, out) = (need(&a.fixed, "FIXED")?, need(&a.moving, "MOVING")?, need(&a.output, "-o OUT_DIR")?);
+            let (f, m, out) = (
+                need(&a.fixed, "FIXED")?,
+                need(&a.moving, "MOVING")?,
+                need(&a.output, "-o OUT_DIR")?,
+            );
             let o = RegisterOptions {
-                select: SelectOptions { count: a.handles, radius: a.radius, ..SelectOptions::default() },
+                select: SelectOptions {
+                    count: a.handles,
+                    radius: a.radius,
+                    ..SelectOptions::default()
+                },
                 matching: MatchOptions::default(),
                 solve: a.map.solve(),
                 dense: a.map.dense(),
             };
             let pb = progress::spinner(format!("registering {} to {}", m.display(), f.display()));
-            let r = register_files(f, m, a.mask.as_deref(), a.landmarks.files()?.as_ref(), out, &o)
-                .context("registration failed")?;
+            let r = register_files(
+                f,
+                m,
+                a.mask.as_deref(),
+                a.landmarks.files()?.as_ref(),
+                out,
+                &o,
+            )
+            .context("registration failed")?;
             pb.finish_and_clear();
-            say!("{}", std::fs::read_to_string(out.join("summary.txt")).unwrap_or_default().trim_end());
+            say!(
+                "{}",
+                std::fs::read_to_string(out.join("summary.txt"))
+                    .unwrap_or_default()
+                    .trim_end()
+            );
             say!("wrote {} files to {}", r.files.len(), out.display());
         }
         Some(Step::Select(a)) => {
-            let o = SelectOptions { count: a.handles, radius: a.radius, ..SelectOptions::default() };
+            let o = SelectOptions {
+                count: a.handles,
+                radius: a.radius,
+                ..SelectOptions::default()
+            };
             let n = steps::select_files(&a.fixed, a.mask.as_deref(), &a.output, &o)?;
             say!("{n} handles written to {}", a.output.display());
         }
         Some(Step::Match(a)) => {
-            let o = MatchOptions { levels: a.levels, window: a.window, search: a.search, ..MatchOptions::default() };
+            let o = MatchOptions {
+                levels: a.levels,
+                window: a.window,
+                search: a.search,
+                ..MatchOptions::default()
+            };
             let s = steps::match_files(&a.fixed, &a.moving, &a.handles, &a.output, &o)?;
             say!(
                 "{} handles: {} accepted (mean NCC {:.3}), {} low correlation, {} inconsistent, {} outside",
-                s.handles, s.accepted, s.mean_ncc, s.low_correlation, s.inconsistent, s.outside
+                s.handles,
+                s.accepted,
+                s.mean_ncc,
+                s.low_correlation,
+                s.inconsistent,
+                s.outside
             );
         }
         Some(Step::Solve(a)) => {
@@ -421,36 +472,96 @@ pub fn run(c: &Command) -> anyhow::Result<()> {
                 &a.map.solve(),
                 a.map.dense().as_ref(),
             )?;
-            say!("{}", std::fs::read_to_string(a.output.join("summary.txt")).unwrap_or_default().trim_end());
+            say!(
+                "{}",
+                std::fs::read_to_string(a.output.join("summary.txt"))
+                    .unwrap_or_default()
+                    .trim_end()
+            );
             say!("wrote {} files to {}", r.files.len(), a.output.display());
         }
         Some(Step::Quality(a)) => {
             let solve = MapOptions::solve_for(a.method);
-            let r = steps::quality_files(&a.fixed, &a.moving, &a.map, &solve, a.landmarks.files()?.as_ref(), &a.output)?;
-            say!("before: NCC {:.4}, MSD {:.2}, MI {:.4}", r.before.ncc, r.before.msd, r.before.mi);
-            say!("after:  NCC {:.4}, MSD {:.2}, MI {:.4}", r.after.ncc, r.after.msd, r.after.mi);
-            say!("J: min {:.3}, max {:.3}, mean {:.3}; {} of {} voxels fold", r.folding.min, r.folding.max, r.folding.mean, r.folding.folded, r.folding.count);
+            let r = steps::quality_files(
+                &a.fixed,
+                &a.moving,
+                &a.map,
+                &solve,
+                a.landmarks.files()?.as_ref(),
+                &a.output,
+            )?;
+            say!(
+                "before: NCC {:.4}, MSD {:.2}, MI {:.4}",
+                r.before.ncc,
+                r.before.msd,
+                r.before.mi
+            );
+            say!(
+                "after:  NCC {:.4}, MSD {:.2}, MI {:.4}",
+                r.after.ncc,
+                r.after.msd,
+                r.after.mi
+            );
+            say!(
+                "J: min {:.3}, max {:.3}, mean {:.3}; {} of {} voxels fold",
+                r.folding.min,
+                r.folding.max,
+                r.folding.mean,
+                r.folding.folded,
+                r.folding.count
+            );
             if let Some((b, t)) = &r.tre {
                 say!("before: {b}\nafter:  {t}");
             }
         }
         Some(Step::SegmentLungs(a)) => {
-            let o = LungOptions { threshold: a.threshold, majority_rounds: a.rounds, ..LungOptions::default() };
-            let r = steps::segment_lungs_files(&a.ct, &a.output, a.lobes.as_deref(), a.reference.as_deref(), &o)?;
-            say!("right lung {} voxels, left lung {} voxels, airway {} voxels removed", r.lung_voxels[0], r.lung_voxels[1], r.airway_voxels);
+            let o = LungOptions {
+                threshold: a.threshold,
+                majority_rounds: a.rounds,
+                ..LungOptions::default()
+            };
+            let r = steps::segment_lungs_files(
+                &a.ct,
+                &a.output,
+                a.lobes.as_deref(),
+                a.reference.as_deref(),
+                &o,
+            )?;
+            say!(
+                "right lung {} voxels, left lung {} voxels, airway {} voxels removed",
+                r.lung_voxels[0],
+                r.lung_voxels[1],
+                r.airway_voxels
+            );
             if let Some(v) = r.lobe_voxels {
                 say!("lobes (RUL RML RLL LUL LLL): {v:?} voxels");
             }
             if let Some(d) = r.dice {
-                say!("Dice (RUL RML RLL LUL LLL): {:.3} {:.3} {:.3} {:.3} {:.3}", d[0], d[1], d[2], d[3], d[4]);
+                say!(
+                    "Dice (RUL RML RLL LUL LLL): {:.3} {:.3} {:.3} {:.3} {:.3}",
+                    d[0],
+                    d[1],
+                    d[2],
+                    d[3],
+                    d[4]
+                );
             }
         }
         Some(Step::Ventilation(a)) => {
             let solve = MapOptions::solve_for(a.method);
-            let r = steps::ventilation_files(&a.inhale, &a.exhale, &a.map, &a.labels, &solve, &a.output)?;
+            let r = steps::ventilation_files(
+                &a.inhale, &a.exhale, &a.map, &a.labels, &solve, &a.output,
+            )?;
             say!("region   voxels   mean jac   sd     HU volume ratio");
             for l in r {
-                say!("{:<8} {:>7}  {:>8.4}  {:>6.4}  {:>8.4}", l.name, l.voxels, l.jacobian.mean, l.jacobian.sd, l.hu_volume_ratio.mean);
+                say!(
+                    "{:<8} {:>7}  {:>8.4}  {:>6.4}  {:>8.4}",
+                    l.name,
+                    l.voxels,
+                    l.jacobian.mean,
+                    l.jacobian.sd,
+                    l.hu_volume_ratio.mean
+                );
             }
         }
         Some(Step::Phantom(a)) => {
@@ -463,7 +574,10 @@ pub fn run(c: &Command) -> anyhow::Result<()> {
                 ..LungPhantomOptions::default()
             };
             let n = steps::write_phantom(&a.output, &o)?;
-            say!("phantom with {n} landmark pairs written to {}", a.output.display());
+            say!(
+                "phantom with {n} landmark pairs written to {}",
+                a.output.display()
+            );
         }
         Some(Step::KnownPair(a)) => {
             let o = KnownDeformationOptions {
@@ -489,5 +603,172 @@ impl MapOptions {
             },
             ..SolveOptions::default()
         }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use clap::Parser;
+
+    #[derive(Debug, clap::Parser)]
+    struct Cli {
+        #[command(flatten)]
+        c: Command,
+    }
+
+    fn run_args(args: &[&str]) -> anyhow::Result<()> {
+        let mut v = vec!["register"];
+        v.extend_from_slice(args);
+        run(&Cli::try_parse_from(v)?.c)
+    }
+
+    /// Every step on a small phantom, through the command line's own parsing.
+    #[test]
+    fn every_step_runs_on_a_small_phantom() {
+        let dir = tempfile::tempdir().unwrap();
+        let d = |n: &str| dir.path().join(n).to_string_lossy().into_owned();
+        run_args(&[
+            "phantom",
+            "-o",
+            &d("ph"),
+            "--dims",
+            "56,48,40",
+            "--spacing",
+            "5,5,5.5",
+        ])
+        .unwrap();
+        let (inh, exh) = (d("ph/inhale.nii.gz"), d("ph/exhale.nii.gz"));
+        let lm = format!(
+            "{},{}",
+            d("ph/landmarks_inhale.txt"),
+            d("ph/landmarks_exhale.txt")
+        );
+        run_args(&[
+            "select",
+            &inh,
+            "-o",
+            &d("h.txt"),
+            "--handles",
+            "80",
+            "--radius",
+            "12",
+        ])
+        .unwrap();
+        run_args(&[
+            "match",
+            &inh,
+            &exh,
+            "--handles",
+            &d("h.txt"),
+            "-o",
+            &d("c.json"),
+            "--levels",
+            "2",
+        ])
+        .unwrap();
+        run_args(&[
+            "solve",
+            &inh,
+            &exh,
+            "--correspondences",
+            &d("c.json"),
+            "--method",
+            "frames",
+            "-o",
+            &d("solved"),
+            "--landmarks",
+            &lm,
+        ])
+        .unwrap();
+        for f in [
+            "map.tfm",
+            "handles.json",
+            "displacement.mha",
+            "warped.nii.gz",
+            "jacobian.nii.gz",
+            "overlay_after_z.png",
+            "report.json",
+            "summary.txt",
+        ] {
+            assert!(dir.path().join("solved").join(f).exists(), "{f}");
+        }
+        run_args(&[
+            "quality",
+            &inh,
+            &exh,
+            "--map",
+            &d("solved/map.tfm"),
+            "-o",
+            &d("q"),
+            "--landmarks",
+            &lm,
+        ])
+        .unwrap();
+        assert!(dir.path().join("q/quality.json").exists());
+        run_args(&[
+            "segment-lungs",
+            &inh,
+            "-o",
+            &d("lungs.nii.gz"),
+            "--lobes",
+            &d("ph/lobe_script.json"),
+            "--reference",
+            &d("ph/lobes.nii.gz"),
+        ])
+        .unwrap();
+        run_args(&[
+            "ventilation",
+            &inh,
+            &exh,
+            "--map",
+            &d("c.json"),
+            "--labels",
+            &d("lungs_lobes.nii.gz"),
+            "-o",
+            &d("v"),
+        ])
+        .unwrap();
+        assert!(dir.path().join("v/ventilation.json").exists());
+        run_args(&[
+            &inh,
+            &exh,
+            "-o",
+            &d("all"),
+            "--handles",
+            "80",
+            "--radius",
+            "12",
+            "--landmarks",
+            &lm,
+        ])
+        .unwrap();
+        assert!(dir.path().join("all/report.json").exists());
+        run_args(&[
+            "known-pair",
+            &inh,
+            "-o",
+            &d("kp"),
+            "--magnitude",
+            "4",
+            "--landmarks",
+            "20",
+        ])
+        .unwrap();
+        assert!(dir.path().join("kp/truth.tfm").exists());
+        // Errors name what is missing or wrong.
+        let e = run_args(&[&inh]).unwrap_err().to_string();
+        assert!(e.contains("MOVING"), "{e}");
+        let e = run_args(&[
+            "match",
+            &inh,
+            &exh,
+            "--handles",
+            &d("missing.txt"),
+            "-o",
+            &d("x.json"),
+        ])
+        .unwrap_err();
+        assert!(format!("{e:#}").contains("missing.txt"), "{e:#}");
     }
 }

@@ -192,9 +192,12 @@ mod tests {
     use volmorph_volume::Geometry;
 
     fn moved_lattice(rng: &mut Rng) -> BSplineLattice {
-        let mut lat =
-            BSplineLattice::uniform_cubic_around(DVec3::ZERO, DVec3::new(11.0, 9.0, 7.0), [7, 6, 5])
-                .unwrap();
+        let mut lat = BSplineLattice::uniform_cubic_around(
+            DVec3::ZERO,
+            DVec3::new(11.0, 9.0, 7.0),
+            [7, 6, 5],
+        )
+        .unwrap();
         for k in 0..5 {
             for j in 0..6 {
                 for i in 0..7 {
@@ -234,7 +237,10 @@ mod tests {
             }
         }
         let rhs: f64 = ctrl.iter().zip(&adj).map(|(p, a)| p.dot(*a)).sum();
-        assert!((lhs - rhs).abs() < 1e-9 * lhs.abs().max(1.0), "{lhs} vs {rhs}");
+        assert!(
+            (lhs - rhs).abs() < 1e-9 * lhs.abs().max(1.0),
+            "{lhs} vs {rhs}"
+        );
         // Wrong sizes are errors.
         assert!(plan.apply_adjoint([7, 6, 4], &g, &mut adj).is_err());
         assert!(plan.apply_adjoint(lat.counts(), &g[1..], &mut adj).is_err());
