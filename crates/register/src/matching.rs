@@ -507,12 +507,14 @@ pub(crate) fn solve_small<const N: usize>(
         }
         a.swap(c, piv);
         b.swap(c, piv);
-        for r in c + 1..N {
-            let f = a[r][c] / a[c][c];
-            for k in c..N {
-                a[r][k] -= f * a[c][k];
+        let (top, bottom) = a.split_at_mut(c + 1);
+        let pivot = &top[c];
+        for (row, br) in bottom.iter_mut().zip(c + 1..N) {
+            let f = row[c] / pivot[c];
+            for (x, y) in row[c..].iter_mut().zip(&pivot[c..]) {
+                *x -= f * y;
             }
-            b[r] -= f * b[c];
+            b[br] -= f * b[c];
         }
     }
     let mut x = [0.0; N];

@@ -133,8 +133,8 @@ impl JointHistogram {
         let k0 = c.floor() as usize - 1;
         let w = self.width();
         let row = &mut self.counts[i * w..(i + 1) * w];
-        for k in k0..k0 + 4 {
-            row[k] += cubic_bspline(k as f64 - c);
+        for (k, v) in row.iter_mut().enumerate().skip(k0).take(4) {
+            *v += cubic_bspline(k as f64 - c);
         }
         self.total += 1.0;
     }
@@ -217,8 +217,8 @@ impl JointHistogram {
         let w = self.width();
         let row = &table[i * w..(i + 1) * w];
         let mut s = 0.0;
-        for k in k0..k0 + 4 {
-            s += cubic_bspline_derivative(k as f64 - c) * row[k];
+        for (k, v) in row.iter().enumerate().skip(k0).take(4) {
+            s += cubic_bspline_derivative(k as f64 - c) * v;
         }
         -s / (self.total * self.m_step)
     }

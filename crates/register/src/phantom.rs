@@ -258,6 +258,7 @@ struct Segment {
 
 /// Grow a branching tree from `root` along `dir`; returns segments and bifurcation points
 /// (with the parent radius).
+#[allow(clippy::too_many_arguments)]
 fn grow_tree(
     anat: &Anatomy,
     lung: usize,

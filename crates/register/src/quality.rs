@@ -154,8 +154,7 @@ pub fn slice_overlay(
         idx[b] = h - 1 - y as usize;
         let n = g.offset(idx[0], idx[1], idx[2]);
         let c = overlay_colour(f64::from(fixed.data()[n]), f64::from(warped.data()[n]), o);
-        let u = to_u8([c[0], c[1], c[2], 1.0]);
-        u
+        to_u8([c[0], c[1], c[2], 1.0])
     })?)
 }
 
