@@ -25,7 +25,7 @@ Every map goes from fixed to moving (ITK's convention), so TRE_i = |T(x_i) - y_i
 landmark x_i and moving landmark y_i, all in physical LPS millimetres.
 
 Usage: scripts/register_peer_check.py [--volmorph target/release/volmorph] [--data DIR]
-       [--work DIR] [--pairs phantom,cranium-4,...] [--json OUT.json]
+       [--work DIR] [--pairs phantom,cranium-4,...] [--skip elastix,simpleitk] [--json OUT.json]
 Exits 0 with a SKIP message when itk-elastix or SimpleITK is not importable or the volmorph
 binary is missing (`cargo build --release -p volmorph-cli`).
 """
@@ -171,6 +171,7 @@ def main():
     ap.add_argument("--work", help="folder for the pairs and outputs (default: a temporary one)")
     ap.add_argument("--pairs", default="phantom,cranium-4,cranium-8,mni-4,mni-8,mni-inter")
     ap.add_argument("--json", help="write the table as JSON")
+    ap.add_argument("--skip", default="", help="peers to leave out, e.g. simpleitk")
     a = ap.parse_args()
     if not os.path.exists(a.volmorph):
         print(f"SKIP: no volmorph binary at {a.volmorph} (cargo build --release -p volmorph-cli)")
@@ -179,15 +180,25 @@ def main():
     os.makedirs(work, exist_ok=True)
     rows = []
     for name, fixed, moving, lf, lm in make_pairs(a.volmorph, a.data, work, a.pairs.split(",")):
-        v, vt, before = run_volmorph(a.volmorph, fixed, moving, lf, lm, os.path.join(work, name, "volmorph"))
-        e, et = run_elastix(fixed, moving, lf, lm)
-        s, st = run_simpleitk(fixed, moving, lf, lm)
-        rows.append({"pair": name, "before": before, "volmorph": [v, vt], "elastix": [e, et], "simpleitk": [s, st]})
-        print(f"\n{name}: TRE before {before:.2f} mm")
+        print(f"\n{name}:")
         print(f"  {'tool':<10} {'mean':>6} {'sd':>6} {'p95':>6} {'max':>6} {'time s':>8}")
-        for tool, (t, w) in (("volmorph", (v, vt)), ("elastix", (e, et)), ("SimpleITK", (s, st))):
+        row = {"pair": name}
+
+        def show(tool, t, w):
+            row[tool] = [t, w]
             print(f"  {tool:<10} {t['mean']:6.2f} {t['sd']:6.2f} {t['p95']:6.2f} {t['max']:6.2f} {w:8.1f}")
-        sys.stdout.flush()
+            sys.stdout.flush()
+
+        v, vt, before = run_volmorph(a.volmorph, fixed, moving, lf, lm, os.path.join(work, name, "volmorph"))
+        row["before"] = before
+        print(f"  {'before':<10} {before:6.2f}")
+        show("volmorph", v, vt)
+        for tool, fn in (("elastix", run_elastix), ("SimpleITK", run_simpleitk)):
+            if tool.lower() in a.skip.lower().split(","):
+                continue
+            t, w = fn(fixed, moving, lf, lm)
+            show(tool, t, w)
+        rows.append(row)
     if a.json:
         with open(a.json, "w") as f:
             json.dump(rows, f, indent=2)
