@@ -101,21 +101,25 @@ def field_at(field, points):
     return np.array(out)
 
 
-def run_elastix(fixed, moving, lf, lm):
+def run_elastix(fixed, moving, lf, lm, out):
+    """elastix and transformix write their files (deformationField.nii, logs) into `out`."""
+    os.makedirs(out, exist_ok=True)
     f = itk.imread(fixed, itk.F)
     m = itk.imread(moving, itk.F)
     po = itk.ParameterObject.New()
     po.AddParameterMap(po.GetDefaultParameterMap("bspline"))
     t0 = time.perf_counter()
-    _, tp = itk.elastix_registration_method(f, m, parameter_object=po, log_to_console=False)
+    _, tp = itk.elastix_registration_method(
+        f, m, parameter_object=po, log_to_console=False, output_directory=out
+    )
     wall = time.perf_counter() - t0
-    field = itk.transformix_deformation_field(m, tp)
+    field = itk.transformix_deformation_field(m, tp, output_directory=out)
     a, b = read_points(lf), read_points(lm)
     mapped = a + field_at(field, a)
     return stats(np.linalg.norm(mapped - b, axis=1)), wall
 
 
-def run_simpleitk(fixed, moving, lf, lm):
+def run_simpleitk(fixed, moving, lf, lm, out):
     f = sitk.ReadImage(fixed, sitk.sitkFloat32)
     m = sitk.ReadImage(moving, sitk.sitkFloat32)
     t0 = time.perf_counter()
@@ -173,11 +177,16 @@ def main():
     ap.add_argument("--json", help="write the table as JSON")
     ap.add_argument("--skip", default="", help="peers to leave out, e.g. simpleitk")
     a = ap.parse_args()
+    a.volmorph, a.data = os.path.abspath(a.volmorph), os.path.abspath(a.data)
     if not os.path.exists(a.volmorph):
         print(f"SKIP: no volmorph binary at {a.volmorph} (cargo build --release -p volmorph-cli)")
         return 0
-    work = a.work or tempfile.mkdtemp(prefix="volmorph-peer-")
+    work = os.path.abspath(a.work or tempfile.mkdtemp(prefix="volmorph-peer-"))
     os.makedirs(work, exist_ok=True)
+    # Peers that write beside the current folder (elastix, transformix) write into the work
+    # folder, never into the checkout.
+    os.chdir(work)
+    print(f"pairs and outputs in {work}")
     rows = []
     for name, fixed, moving, lf, lm in make_pairs(a.volmorph, a.data, work, a.pairs.split(",")):
         print(f"\n{name}:")
@@ -196,7 +205,7 @@ def main():
         for tool, fn in (("elastix", run_elastix), ("SimpleITK", run_simpleitk)):
             if tool.lower() in a.skip.lower().split(","):
                 continue
-            t, w = fn(fixed, moving, lf, lm)
+            t, w = fn(fixed, moving, lf, lm, os.path.join(work, name, tool.lower()))
             show(tool, t, w)
         rows.append(row)
     if a.json:
