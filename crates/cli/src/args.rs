@@ -23,6 +23,15 @@ where
         .map_err(|_| anyhow::anyhow!("expected three values in {s:?}"))
 }
 
+/// Parse a physical point `"x,y,z"` with finite coordinates.
+pub fn point(s: &str) -> anyhow::Result<glam::DVec3> {
+    let p = glam::DVec3::from_array(triple::<f64>(s)?);
+    if !p.is_finite() {
+        bail!("point {s:?} is not finite");
+    }
+    Ok(p)
+}
+
 /// Parse `"a,b"` into two `f64`.
 pub fn pair(s: &str) -> anyhow::Result<[f64; 2]> {
     let parts: Vec<&str> = s.split(',').map(str::trim).collect();

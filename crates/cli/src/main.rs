@@ -64,9 +64,10 @@ enum Command {
         after_help = "Examples:\n  volmorph isosurface teapot.nii.gz --level 127 -o teapot.ply\n  volmorph isosurface torus_sdf.nii.gz --level 0 --inside-below -o torus.stl"
     )]
     Isosurface(cmd::isosurface::Args),
-    /// Warp a volume through a B-spline lattice.
+    /// Warp a volume through any map (lattice, handle map, NURBS geometry, composition, ITK
+    /// transform).
     #[command(
-        after_help = "Examples:\n  volmorph warp ct.nii.gz --lattice moved.json -o warped.nii.gz --method pullback-cubic\n  volmorph warp model.nii.gz --lattice ffd.json -o deformed.nii.gz --method inverse-linear --nonconverged-mask failed.nii.gz"
+        after_help = "Examples:\n  volmorph warp ct.nii.gz --map moved.json -o warped.nii.gz --method pullback-cubic\n  volmorph warp model.nii.gz --map ffd.json -o deformed.nii.gz --method inverse-linear --nonconverged-mask failed.nii.gz\n  volmorph warp ct.nii.gz --map registration.tfm -o resampled.nii.gz"
     )]
     Warp(cmd::warp::Args),
     /// Drag points of a volume to new places; the lattice follows by least-norm control-point
@@ -75,9 +76,9 @@ enum Command {
         after_help = "Examples:\n  volmorph drag teapot.nii.gz --from 0.76,0,0.25 --to 0.86,0,-0.02 --radius 0.75 -o lowered.nii.gz --lattice-out lowered.json\n  volmorph drag ct.nii.gz --lattice current.tfm --from 10,-4,30 --to 12,-4,26 --from 0,0,0 --to 0,0,0 -o ct_dragged.nii.gz --method inverse-linear"
     )]
     Drag(cmd::drag::Args),
-    /// Jacobian determinant map of a lattice on a volume's grid, with a folding summary.
+    /// Jacobian determinant map of any map on a volume's grid, with a folding summary.
     #[command(
-        after_help = "Example:\n  volmorph jacobian --lattice moved.tfm --grid ct.nii.gz -o jacobian.nii.gz"
+        after_help = "Example:\n  volmorph jacobian --map moved.tfm --grid ct.nii.gz -o jacobian.nii.gz"
     )]
     Jacobian(cmd::warp::JacobianArgs),
     /// Free-form deformation of a polygon mesh: vertices only, after uniform or adaptive
@@ -89,6 +90,9 @@ enum Command {
     /// B-spline lattice (space map) tasks.
     #[command(subcommand)]
     Lattice(cmd::lattice::Command),
+    /// Map files of any kind: apply to points, inspect, compose, invert.
+    #[command(subcommand)]
+    Map(cmd::map::Command),
     /// Handle-driven deformations (moving least squares, thin-plate splines) of volumes and
     /// meshes.
     #[command(subcommand)]
@@ -134,6 +138,7 @@ fn main() -> ExitCode {
         Command::Jacobian(a) => cmd::warp::run_jacobian(&a),
         Command::Mesh(c) => cmd::mesh::run(&c),
         Command::Frep(c) => cmd::frep::run(&c),
+        Command::Map(c) => cmd::map::run(&c),
         Command::Handles(c) => cmd::handles::run(&c),
         Command::Mls2d(a) => cmd::handles::run_mls2d(&a),
         Command::Nurbs(c) => cmd::nurbs::run(&c),

@@ -558,3 +558,72 @@ mod tests {
         );
     }
 }
+
+/// The numerical inverse of a map as a map: `Inverse(φ).apply(y) = φ⁻¹(y)` by
+/// [`invert_point`] (damped Newton from the first-order guess).
+///
+/// Where no preimage is found (the iteration does not converge: `y` outside the image of `φ`,
+/// or at a fold) the result is NaN in every component, so a warp through it treats the point
+/// as unmapped instead of showing a wrong one. The Jacobian is `Dφ(x)⁻¹` at the preimage `x`
+/// (NaN where `Dφ` is singular or no preimage was found).
+///
+/// ```
+/// use glam::{DMat3, DVec3};
+/// use volmorph_deform::inverse::Inverse;
+/// use volmorph_deform::{Affine, InverseOptions, SpaceMap};
+/// let a = Affine { matrix: DMat3::from_diagonal(DVec3::new(2.0, 1.0, 0.5)), offset: DVec3::X };
+/// let inv = Inverse::new(a, InverseOptions::default());
+/// let y = DVec3::new(3.0, 2.0, 1.0);
+/// assert!((a.apply(inv.apply(y)) - y).length() < 1e-12);
+/// assert!((inv.jacobian(y) - a.matrix.inverse()).abs_diff_eq(DMat3::ZERO, 1e-12));
+/// ```
+#[derive(Debug, Clone, PartialEq)]
+pub struct Inverse<M> {
+    map: M,
+    options: InverseOptions,
+}
+
+impl<M: SpaceMap> Inverse<M> {
+    /// The inverse of `map`, solved with `options`.
+    pub fn new(map: M, options: InverseOptions) -> Self {
+        Self { map, options }
+    }
+
+    /// The map being inverted.
+    pub fn map(&self) -> &M {
+        &self.map
+    }
+
+    /// The Newton options.
+    pub fn options(&self) -> &InverseOptions {
+        &self.options
+    }
+
+    /// The preimage of `y`, `None` if the iteration did not converge.
+    fn preimage(&self, y: DVec3) -> Option<DVec3> {
+        let r = invert_point(&self.map, y, None, &self.options);
+        (r.status == InverseStatus::Converged).then_some(r.point)
+    }
+}
+
+impl<M: SpaceMap> SpaceMap for Inverse<M> {
+    fn apply(&self, y: DVec3) -> DVec3 {
+        self.preimage(y).unwrap_or(DVec3::NAN)
+    }
+
+    fn jacobian(&self, y: DVec3) -> DMat3 {
+        self.apply_with_jacobian(y).1
+    }
+
+    fn apply_with_jacobian(&self, y: DVec3) -> (DVec3, DMat3) {
+        let nan = DMat3::from_cols(DVec3::NAN, DVec3::NAN, DVec3::NAN);
+        let Some(x) = self.preimage(y) else {
+            return (DVec3::NAN, nan);
+        };
+        let j = self.map.jacobian(x);
+        if j.determinant() == 0.0 {
+            return (x, nan);
+        }
+        (x, j.inverse())
+    }
+}

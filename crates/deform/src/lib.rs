@@ -9,9 +9,12 @@
 //!   applies `b` first).
 //! * [`inverse`] — point inversion `φ(x) = y` by damped Newton iteration ([`invert_point`]),
 //!   which turns a push-forward map into the pull-back a renderer needs.
-//! * [`realtime`] — any map sampled on a coarse grid ([`SampledMap`]), and maps that are affine
-//!   in their parameters ([`LinearHandleMap`]) kept on such a grid and updated by one
-//!   multiply-add per node when a parameter moves ([`HandleGrid`]).
+//! * [`sampled`] — any map sampled on a coarse grid and interpolated trilinearly
+//!   ([`SampledMap`], McPhail §5.5.2).
+//! * [`live`] — maps linear in their parameters ([`LinearMap`]: lattices, affine and frame MLS,
+//!   thin-plate splines), where a parameter's [`Influence`] bounds what moving it changes, and
+//!   such a map kept on a coarse grid and updated by one multiply-add per node when a parameter
+//!   moves ([`LiveGrid`], McPhail §5.5.4).
 //!
 //! The maps themselves live in the crates above this one: B-spline / NURBS / Bézier lattices
 //! in `volmorph-lattice`, handle-driven maps (moving least squares, thin-plate and volume
@@ -33,10 +36,12 @@
 
 mod error;
 pub mod inverse;
+pub mod live;
 pub mod map;
-pub mod realtime;
+pub mod sampled;
 
 pub use error::DeformError;
 pub use inverse::{InverseOptions, InverseStatus, PointInverse, invert_point};
+pub use live::{Influence, LinearMap, LiveGrid};
 pub use map::{Affine, Compose, Identity, SpaceMap};
-pub use realtime::{HandleGrid, LinearHandleMap, SampledMap};
+pub use sampled::SampledMap;

@@ -5,7 +5,7 @@
 
 use criterion::{BatchSize, Criterion, criterion_group, criterion_main};
 use glam::{DVec2, DVec3};
-use volmorph_deform::{HandleGrid, SpaceMap};
+use volmorph_deform::{LiveGrid, SpaceMap};
 use volmorph_handles::mls2d::{Mls2dHandles, Mls2dKind, image_grid};
 use volmorph_handles::volume_spline::VolumeSplineSystem;
 use volmorph_handles::{
@@ -88,14 +88,14 @@ fn bench_3d(c: &mut Criterion) {
     let mut g = c.benchmark_group("mls3d_affine_200_handles_32cubed");
     g.sample_size(10);
     g.bench_function("setup", |b| {
-        b.iter(|| HandleGrid::new(map.clone(), grid).expect("grid"));
+        b.iter(|| LiveGrid::new(map.clone(), grid).expect("grid"));
     });
-    let mut hg = HandleGrid::new(map.clone(), grid).expect("grid");
+    let mut hg = LiveGrid::new(map.clone(), grid).expect("grid");
     let mut step = 0.0;
     g.bench_function("move_one_handle", |b| {
         b.iter(|| {
             step += 0.01;
-            hg.move_target(17, dst[17] + DVec3::new(step, 0.0, 0.0))
+            hg.move_parameter(17, dst[17] + DVec3::new(step, 0.0, 0.0))
                 .expect("move");
         });
     });

@@ -80,6 +80,30 @@ impl BumpMap {
         Self::new(handle, inner, outer, Affine::translation(target - handle))
     }
 
+    /// The centre of the bump (physical units).
+    #[must_use]
+    pub fn center(&self) -> DVec3 {
+        self.center
+    }
+
+    /// Radius within which the transform applies fully (`r1`).
+    #[must_use]
+    pub fn inner(&self) -> f64 {
+        self.inner
+    }
+
+    /// Radius at which the map has faded to the identity (`r0`).
+    #[must_use]
+    pub fn outer(&self) -> f64 {
+        self.outer
+    }
+
+    /// The affine transform applied at the centre.
+    #[must_use]
+    pub fn transform(&self) -> Affine {
+        self.transform
+    }
+
     /// The bump weight at distance `d` from the centre and its derivative `d bump / d d`.
     #[must_use]
     pub fn weight(&self, d: f64) -> (f64, f64) {

@@ -419,6 +419,58 @@ pub fn read_point_list(path: &Path) -> Result<Vec<DVec3>, DeformError> {
     }
 }
 
+/// Write a point list, the format following the extension: `.fcsv` (3D Slicer markups, with
+/// `# CoordinateSystem = LPS`, so the points are stored as given), `.csv` (`x,y,z` per line) or
+/// `.txt`/`.xyz`/`.pts` (`x y z` per line). Numbers are written with every digit needed to
+/// read the same `f64` back. Written atomically.
+///
+/// # Errors
+/// [`DeformError::Unsupported`] for another extension, [`DeformError::NonFinite`] for a NaN
+/// or infinite point, [`DeformError::Io`] if writing fails.
+pub fn write_point_list(path: &Path, points: &[DVec3]) -> Result<(), DeformError> {
+    volmorph_deform::map::check_finite("point", points)?;
+    let f = |v: f64| volmorph_io::fmt_f64(v);
+    let mut text = String::with_capacity(points.len() * 64 + 128);
+    match extension(path).as_str() {
+        "fcsv" => {
+            text.push_str("# Markups fiducial file version = 4.11\n# CoordinateSystem = LPS\n");
+            text.push_str(
+                "# columns = id,x,y,z,ow,ox,oy,oz,vis,sel,lock,label,desc,associatedNodeID\n",
+            );
+            for (i, p) in points.iter().enumerate() {
+                text.push_str(&format!(
+                    "{},{},{},{},0,0,0,1,1,1,0,F-{},,\n",
+                    i + 1,
+                    f(p.x),
+                    f(p.y),
+                    f(p.z),
+                    i + 1
+                ));
+            }
+        }
+        "csv" => {
+            for p in points {
+                text.push_str(&format!("{},{},{}\n", f(p.x), f(p.y), f(p.z)));
+            }
+        }
+        "txt" | "xyz" | "pts" => {
+            for p in points {
+                text.push_str(&format!("{} {} {}\n", f(p.x), f(p.y), f(p.z)));
+            }
+        }
+        other => {
+            return Err(DeformError::Unsupported(format!(
+                "{}: unknown point list extension \"{other}\" (use .fcsv, .csv or .txt)",
+                path.display()
+            )));
+        }
+    }
+    volmorph_io::write_atomic(path, |w| {
+        use std::io::Write;
+        w.write_all(text.as_bytes()).map_err(|e| io_err(path, e))
+    })
+}
+
 /// Content of a plain-text handle file.
 #[derive(Debug, Clone, PartialEq)]
 pub enum TextHandles {

@@ -11,8 +11,8 @@
 //!
 //! Every map here is a [`volmorph_deform::SpaceMap`] sending each source handle to its target
 //! (push-forward); errors are [`volmorph_deform::DeformError`]. The maps that are affine in
-//! their targets (affine MLS, frame MLS) implement [`volmorph_deform::LinearHandleMap`], so a
-//! [`volmorph_deform::HandleGrid`] updates them in real time.
+//! their targets (affine MLS, frame MLS, thin-plate splines) implement
+//! [`volmorph_deform::LinearMap`], so a [`volmorph_deform::LiveGrid`] updates them in real time.
 
 pub mod bump;
 pub mod handles;

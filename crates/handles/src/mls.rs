@@ -14,7 +14,7 @@
 //! over a class of linear maps `L`:
 //!
 //! * [`AffineMls`] — any 3×3 matrix: `L = (Σ w q̂ p̂ᵀ)(Σ w p̂ p̂ᵀ)⁻¹`. `f` is *affine in the
-//!   targets*, `f(v) = Σ_j α_j(v) q_j` (§5.4.2), which [`crate::realtime::HandleGrid`] exploits.
+//!   targets*, `f(v) = Σ_j α_j(v) q_j` (§5.4.2), which [`volmorph_deform::LiveGrid`] exploits.
 //! * [`SimilarityMls`] — `L = sR` (rotation times a uniform scale). In 3D this is not a
 //!   quadratic problem (thesis §4.6); the rotation is the one of the rigid problem (Theorem 4.1
 //!   holds in any dimension) and is found with Horn's closed form: the unit quaternion is the
@@ -71,7 +71,7 @@
 
 use glam::{DMat3, DQuat, DVec3};
 
-use volmorph_deform::LinearHandleMap;
+use volmorph_deform::LinearMap;
 use volmorph_deform::{DeformError, SpaceMap};
 
 /// A weighted second-moment matrix `P = Σ w p̂ p̂ᵀ` whose determinant is at most this times
@@ -433,13 +433,27 @@ pub(crate) fn set_targets(dst: &mut [DVec3], targets: &[DVec3]) -> Result<(), De
     Ok(())
 }
 
-impl LinearHandleMap for AffineMls {
-    fn target_vectors(&self) -> Vec<DVec3> {
+/// Parameters: the target handles `q_j`, in the order given (`f(v) = Σ_j α_j(v) q_j`, base 0
+/// except in the degenerate fallback).
+impl LinearMap for AffineMls {
+    fn parameter_count(&self) -> usize {
+        self.targets.len()
+    }
+
+    fn parameters(&self) -> Vec<DVec3> {
         self.targets.clone()
     }
 
-    fn set_target_vectors(&mut self, targets: &[DVec3]) -> Result<(), DeformError> {
+    fn set_parameters(&mut self, targets: &[DVec3]) -> Result<(), DeformError> {
         self.set_targets(targets)
+    }
+
+    fn dense_coefficients_are_cheap(&self) -> bool {
+        true
+    }
+
+    fn same_structure(&self, other: &Self) -> bool {
+        self.sources == other.sources && self.weighting == other.weighting
     }
 
     fn coefficients_into(&self, v: DVec3, out: &mut [f64]) -> DVec3 {
@@ -874,6 +888,12 @@ macro_rules! procrustes_map {
                 &self.0.targets
             }
 
+            /// The weighting of the handles.
+            #[must_use]
+            pub fn weighting(&self) -> Weighting {
+                self.0.weighting
+            }
+
             /// Replace the targets.
             ///
             /// # Errors
@@ -948,7 +968,7 @@ impl Frame {
 ///
 /// The map is affine in the target origins and axes: with target vectors ordered
 /// `[q_0 … q_{N−1}, g_00, g_01, g_02, g_10, …]` (origins, then each frame's three axes),
-/// `f(v) = Σ_k c_k(v) t_k`, which [`crate::realtime::HandleGrid`] exploits.
+/// `f(v) = Σ_k c_k(v) t_k`, which [`volmorph_deform::LiveGrid`] exploits.
 #[derive(Debug, Clone, PartialEq)]
 pub struct FrameMls {
     weighting: Weighting,
@@ -1019,6 +1039,18 @@ impl FrameMls {
     #[must_use]
     pub fn targets(&self) -> &[Frame] {
         &self.targets
+    }
+
+    /// The weighting of the frame origins.
+    #[must_use]
+    pub fn weighting(&self) -> Weighting {
+        self.weighting
+    }
+
+    /// The weight `β` of the axis constraints.
+    #[must_use]
+    pub fn beta(&self) -> f64 {
+        self.beta
     }
 
     /// Replace the target frames.
@@ -1182,12 +1214,28 @@ enum FrameNode {
     },
 }
 
-impl LinearHandleMap for FrameMls {
-    fn target_vectors(&self) -> Vec<DVec3> {
+/// Parameters: the `n` target frame origins, then the three axis vectors of each target frame
+/// (`4n` vectors: origins `0..n`, axes of frame `j` at `n + 3j ..= n + 3j + 2`).
+impl LinearMap for FrameMls {
+    fn parameter_count(&self) -> usize {
+        4 * self.targets.len()
+    }
+
+    fn parameters(&self) -> Vec<DVec3> {
         frames_to_vectors(&self.targets)
     }
 
-    fn set_target_vectors(&mut self, t: &[DVec3]) -> Result<(), DeformError> {
+    fn dense_coefficients_are_cheap(&self) -> bool {
+        true
+    }
+
+    fn same_structure(&self, other: &Self) -> bool {
+        self.sources == other.sources
+            && self.weighting == other.weighting
+            && self.beta == other.beta
+    }
+
+    fn set_parameters(&mut self, t: &[DVec3]) -> Result<(), DeformError> {
         let n = self.sources.len();
         if t.len() != 4 * n {
             return Err(DeformError::InvalidHandles(format!(
@@ -1476,7 +1524,7 @@ mod tests {
             })
             .collect();
         let fm = FrameMls::new(&fs, &ft, 2.0, Weighting::default()).unwrap();
-        let t = fm.target_vectors();
+        let t = fm.parameters();
         for x in probes() {
             let mut c = vec![0.0; t.len()];
             let base = fm.coefficients_into(x, &mut c);

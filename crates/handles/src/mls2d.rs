@@ -968,3 +968,71 @@ mod tests {
         assert!(f.is_finite());
     }
 }
+
+/// A picture deformed by [`warp_picture`].
+#[derive(Debug, Clone, PartialEq)]
+pub struct PictureWarp {
+    /// The deformed pixels, same size as the input, row-major from the top; pixels no quad
+    /// covers are transparent.
+    pub pixels: Vec<[u8; 4]>,
+    /// Vertices per axis of the deformed grid.
+    pub grid: (usize, usize),
+    /// Fraction of the grid's quads that fold back (Jacobian ≤ 0).
+    pub fold_fraction: f64,
+}
+
+/// Deform a `width × height` RGBA picture by 2D moving least squares through the point and
+/// segment handles of `set` (pixel coordinates, x right, y down; sources go to targets): the
+/// map of `kind` is evaluated on a grid of at most `grid × grid` vertices (no more than the
+/// picture has pixels) and its quads are filled bilinearly (Schaefer et al.'s image warping).
+///
+/// # Errors
+/// [`DeformError::InvalidHandles`] for 3D handles, `grid < 2`, or handles the method cannot
+/// use; [`DeformError::BufferLength`] if `pixels` is not `width × height`.
+pub fn warp_picture(
+    width: u32,
+    height: u32,
+    pixels: &[[u8; 4]],
+    set: &crate::HandleSet,
+    kind: Mls2dKind,
+    alpha: f64,
+    grid: usize,
+) -> Result<PictureWarp, DeformError> {
+    if set.dim != 2 {
+        return Err(DeformError::InvalidHandles(
+            "picture deformation needs 2D handles (pixel coordinates [x, y]); the set has 3D \
+             coordinates"
+                .into(),
+        ));
+    }
+    if grid < 2 {
+        return Err(DeformError::InvalidHandles(format!(
+            "the deformed grid needs at least 2 vertices per axis, got {grid}"
+        )));
+    }
+    let v2 = |p: glam::DVec3| DVec2::new(p.x, p.y);
+    let points: Vec<DVec2> = set.points.iter().map(|p| v2(p.0)).collect();
+    let segments: Vec<[DVec2; 2]> = set
+        .segments
+        .iter()
+        .map(|s| [v2(s.0[0]), v2(s.0[1])])
+        .collect();
+    let mut targets: Vec<DVec2> = set.points.iter().map(|p| v2(p.1)).collect();
+    targets.extend(set.segments.iter().flat_map(|s| [v2(s.1[0]), v2(s.1[1])]));
+    let handles = Mls2dHandles::new(&points, &segments, alpha)?;
+    let (nx, ny) = (
+        grid.min(width.max(2) as usize),
+        grid.min(height.max(2) as usize),
+    );
+    let verts = image_grid(width, height, nx, ny)?;
+    let plan = handles.plan(&verts, kind)?;
+    let mut deformed = vec![DVec2::ZERO; verts.len()];
+    plan.deform(&targets, &mut deformed)?;
+    let fold_fraction = fold_fraction(nx, ny, &deformed);
+    let pixels = warp_rgba(width, height, pixels, nx, ny, &deformed, [0; 4])?;
+    Ok(PictureWarp {
+        pixels,
+        grid: (nx, ny),
+        fold_fraction,
+    })
+}

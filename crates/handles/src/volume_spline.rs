@@ -70,7 +70,7 @@ use multiversion::multiversion;
 use rayon::prelude::*;
 use volmorph_volume::Geometry;
 
-use volmorph_deform::{DeformError, SpaceMap};
+use volmorph_deform::{DeformError, LinearMap, SpaceMap};
 
 /// Smallest distance between two centres, relative to the radius of the centre set, below
 /// which they count as coincident. Two centres closer than this make two rows of the system
@@ -464,6 +464,27 @@ impl<const D: usize> VolumeSplineSystem<D> {
         };
         system.check_factorisation(&a)?;
         Ok(system)
+    }
+
+    /// The cardinal functions at `x`: `out[k] = c_k(x)` (only `min(out.len(), N)` written),
+    /// the value at `x` of the spline that takes the value 1 at centre `k` and 0 at every other
+    /// centre. Every spline `U` of this system is `U(x) = Σ_k c_k(x) v_k` for its centre values
+    /// `v_k`. Cost `O(N²)` (one solve with the stored factorisation, which is symmetric).
+    pub fn cardinal_into(&self, x: [f64; D], out: &mut [f64]) {
+        let n = self.centres.len();
+        let xn = self.frame.map(x);
+        let mut rhs = Mat::<f64>::zeros(n + D + 1, 1);
+        for (i, c) in self.frame.centres.iter().enumerate() {
+            rhs[(i, 0)] = green::<D>(dist(&xn, c));
+        }
+        rhs[(n, 0)] = 1.0;
+        for a in 0..D {
+            rhs[(n + 1 + a, 0)] = xn[a];
+        }
+        self.factor.solve_in_place(rhs.as_mut());
+        for (k, o) in out.iter_mut().take(n).enumerate() {
+            *o = rhs[(k, 0)];
+        }
     }
 
     /// Solve once for a right-hand side with a fixed, deterministic pattern and verify the
@@ -1048,6 +1069,67 @@ impl SpaceMap for ThinPlateMap {
             .enumerate()
             .for_each(|(k, slab)| displace_slab(&self.spline, grid, k, slab));
         Ok(())
+    }
+}
+
+/// Parameters: the target handles `q_k`, in the order of the sources. The map is
+/// `f(x) = x + Σ_k c_k(x) (q_k − p_k)` with the cardinal functions `c_k` of the system
+/// ([`VolumeSplineSystem::cardinal_into`]), so the base is `x − Σ_k c_k(x) p_k` (zero for an
+/// interpolating spline, which reproduces linear functions) and a column is one scalar solve
+/// plus one evaluation per point.
+impl LinearMap for ThinPlateMap {
+    fn parameter_count(&self) -> usize {
+        self.targets.len()
+    }
+
+    fn parameters(&self) -> Vec<DVec3> {
+        self.targets.clone()
+    }
+
+    fn set_parameters(&mut self, values: &[DVec3]) -> Result<(), DeformError> {
+        self.set_targets(values)
+    }
+
+    fn coefficients_into(&self, v: DVec3, out: &mut [f64]) -> DVec3 {
+        let n = self.sources.len();
+        let mut c = vec![0.0; n];
+        self.system.cardinal_into(v.to_array(), &mut c);
+        let m = out.len().min(n);
+        out[..m].copy_from_slice(&c[..m]);
+        v - c
+            .iter()
+            .zip(&self.sources)
+            .map(|(&ck, p)| ck * *p)
+            .sum::<DVec3>()
+    }
+
+    fn coefficient_column(
+        &self,
+        k: usize,
+        points: &[DVec3],
+        out: &mut [f64],
+    ) -> Result<(), DeformError> {
+        volmorph_deform::live::check_parameter(k, self.sources.len())?;
+        volmorph_deform::map::check_len(points.len(), out.len())?;
+        let mut unit = vec![0.0; self.sources.len()];
+        unit[k] = 1.0;
+        let cardinal = self.system.solve(&unit, 1)?;
+        out.par_chunks_mut(256)
+            .zip(points.par_chunks(256))
+            .for_each(|(o, p)| {
+                for (o, p) in o.iter_mut().zip(p) {
+                    let mut v = [0.0];
+                    cardinal.eval(p.to_array(), &mut v);
+                    *o = v[0];
+                }
+            });
+        Ok(())
+    }
+
+    fn same_structure(&self, other: &Self) -> bool {
+        Arc::ptr_eq(&self.system, &other.system)
+            || (self.sources == other.sources
+                && self.system.smoothing() == other.system.smoothing())
     }
 }
 

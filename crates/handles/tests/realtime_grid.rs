@@ -4,7 +4,7 @@
 use glam::{DMat3, DVec3};
 use volmorph_deform::map::central_jacobian;
 use volmorph_deform::{Affine, Identity};
-use volmorph_deform::{HandleGrid, SampledMap, SpaceMap};
+use volmorph_deform::{LiveGrid, SampledMap, SpaceMap};
 use volmorph_handles::{AffineMls, Frame, FrameMls, Weighting};
 use volmorph_volume::Geometry;
 
@@ -89,13 +89,13 @@ fn sampled_map_reproduces_affine_maps_inside_and_extends_outside() {
 fn incremental_updates_equal_recomputation() {
     let p = handles(12, 2);
     let q: Vec<DVec3> = p.iter().map(|x| *x + DVec3::new(1.0, -0.5, 0.25)).collect();
-    let mut hg = HandleGrid::new(
+    let mut hg = LiveGrid::new(
         AffineMls::new(&p, &q, Weighting::default()).unwrap(),
         grid(),
     )
     .unwrap();
     // A plain move of handle 3, then a drag of handle 5 in several steps.
-    hg.move_target(3, q[3] + DVec3::new(2.0, 1.0, -3.0))
+    hg.move_parameter(3, q[3] + DVec3::new(2.0, 1.0, -3.0))
         .unwrap();
     hg.select(5).unwrap();
     for step in 1..=4 {
@@ -109,26 +109,26 @@ fn incremental_updates_equal_recomputation() {
     }
     // set_targets resamples from the coefficients.
     let q2: Vec<DVec3> = p.iter().map(|x| *x * 1.01).collect();
-    hg.set_targets(&q2).unwrap();
+    hg.set_parameters(&q2).unwrap();
     let fresh = SampledMap::from_map(hg.map(), grid()).unwrap();
     for (a, b) in hg.sampled().positions().iter().zip(fresh.positions()) {
         assert!((*a - *b).length() < 1e-11 * scale);
     }
-    assert!(hg.move_target(99, DVec3::ZERO).is_err());
-    assert!(hg.move_target(0, DVec3::NAN).is_err());
+    assert!(hg.move_parameter(99, DVec3::ZERO).is_err());
+    assert!(hg.move_parameter(0, DVec3::NAN).is_err());
     assert!(hg.select(12).is_err());
 
     // Frames: origins and axes are both targets.
     let fs: Vec<Frame> = p.iter().map(|&o| Frame::at(o)).collect();
-    let mut fg = HandleGrid::new(
+    let mut fg = LiveGrid::new(
         FrameMls::new(&fs, &fs, 1.0, Weighting::default()).unwrap(),
         grid(),
     )
     .unwrap();
     let n = p.len();
-    fg.move_target(n + 3 * 2 + 1, DVec3::new(0.3, 1.2, 0.0))
+    fg.move_parameter(n + 3 * 2 + 1, DVec3::new(0.3, 1.2, 0.0))
         .unwrap(); // frame 2, y axis
-    fg.move_target(4, p[4] + DVec3::Z).unwrap();
+    fg.move_parameter(4, p[4] + DVec3::Z).unwrap();
     let fresh = SampledMap::from_map(fg.map(), grid()).unwrap();
     for (a, b) in fg.sampled().positions().iter().zip(fresh.positions()) {
         assert!((*a - *b).length() < 1e-11 * scale);

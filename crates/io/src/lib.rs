@@ -168,6 +168,27 @@ pub fn checked_len(dims: &[usize], elem_size: usize) -> Result<usize, IoError> {
     }
 }
 
+/// Format an `f64` so that parsing it back gives the same bits, in a form C++ streams and
+/// `scanf` also read: integers below 10¹⁵ without a fraction (`2`, `-0` keeps its sign),
+/// everything else in Rust's shortest round-trip form (`0.1`, `1e-7`, `1e300`), never a
+/// 300-digit expansion. Every text format volmorph writes (NRRD, MetaImage, VTK headers,
+/// ITK transforms, plastimatch files) formats numbers with it.
+#[must_use]
+pub fn fmt_f64(v: f64) -> String {
+    if v == v.trunc() && v.abs() < 1e15 {
+        if v == 0.0 {
+            return if v.is_sign_negative() {
+                "-0".into()
+            } else {
+                "0".into()
+            };
+        }
+        format!("{v}")
+    } else {
+        format!("{v:?}")
+    }
+}
+
 /// Bounds-checked little/big-endian reader over a byte slice.
 #[derive(Debug, Clone)]
 pub struct ByteReader<'a> {

@@ -185,6 +185,20 @@ pub struct BSplineLattice {
     spline: BSplineVolume,
 }
 
+/// Padding of a flat axis in [`BSplineLattice::feng_around_model`], relative to the model's
+/// largest extent: enough for a non-degenerate lattice, small enough not to change the
+/// deformation of the model's plane noticeably.
+pub const FLAT_AXIS_PADDING: f64 = 1e-3;
+
+/// The form of Feng et al.'s initial volume.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum FengForm {
+    /// Clamped knots, outermost control points on the box faces (§3.1.3).
+    EndInterpolating,
+    /// Uniform unclamped knots with the scaling step (§3.1.2).
+    Uniform,
+}
+
 /// Validate a box given by corner and extent.
 fn check_extent(corner: DVec3, extent: DVec3) -> Result<(), DeformError> {
     for a in 0..3 {
@@ -456,6 +470,77 @@ impl BSplineLattice {
         }
         let spline = TensorBSpline::new(knots, 3, coefs)?;
         Ok(Self { frame, spline })
+    }
+
+    /// Feng et al.'s initial volume (§3.1) of `form` around the box `lo ..= hi` of a model
+    /// (e.g. a mesh's bounding box), with degrees `degrees` and `counts` control points per
+    /// axis. An axis along which the box is flat (a planar mesh) is padded symmetrically by
+    /// [`FLAT_AXIS_PADDING`] of the largest extent (1 model unit if every extent is 0), so the
+    /// lattice has a volume.
+    ///
+    /// # Errors
+    /// [`DeformError::NonFinite`] for a non-finite box, and the errors of
+    /// [`BSplineLattice::feng_end_interpolating_around`] / [`BSplineLattice::feng_uniform_around`].
+    pub fn feng_around_model(
+        lo: DVec3,
+        hi: DVec3,
+        degrees: [usize; 3],
+        counts: [usize; 3],
+        form: FengForm,
+    ) -> Result<Self, DeformError> {
+        for (what, p) in [("model box minimum", lo), ("model box maximum", hi)] {
+            for a in 0..3 {
+                if !p[a].is_finite() {
+                    return Err(DeformError::NonFinite {
+                        what: format!("{what}, component {a}"),
+                        value: p[a],
+                    });
+                }
+            }
+        }
+        let (mut lo, mut hi) = (lo, hi);
+        let ext = hi - lo;
+        let pad = FLAT_AXIS_PADDING * ext.max_element();
+        let pad = if pad > 0.0 { pad } else { 1.0 };
+        for a in 0..3 {
+            if ext[a] <= 0.0 {
+                lo[a] -= 0.5 * pad;
+                hi[a] += 0.5 * pad;
+            }
+        }
+        match form {
+            FengForm::EndInterpolating => {
+                Self::feng_end_interpolating_around(lo, hi, degrees, counts)
+            }
+            FengForm::Uniform => Self::feng_uniform_around(lo, hi, degrees, counts),
+        }
+    }
+
+    /// The identity uniform cubic lattice with `counts` control points per axis on the box of
+    /// voxel centres of `grid`, in the grid's own direction frame (True 1992 Fig. 8: the box
+    /// from the first to the last voxel centre, so every voxel centre is inside).
+    ///
+    /// # Errors
+    /// [`DeformError::DegenerateBox`] if the grid is a single voxel thick along an axis,
+    /// [`DeformError::InvalidFrame`] if its direction is not orthonormal, and the errors of
+    /// [`BSplineLattice::uniform_cubic_in_box`] (fewer than 4 control points per axis).
+    pub fn identity_on_voxels(grid: &Geometry, counts: [usize; 3]) -> Result<Self, DeformError> {
+        let extent = grid.spacing
+            * DVec3::new(
+                grid.dims[0].saturating_sub(1) as f64,
+                grid.dims[1].saturating_sub(1) as f64,
+                grid.dims[2].saturating_sub(1) as f64,
+            );
+        for a in 0..3 {
+            if extent[a].is_nan() || extent[a] <= 0.0 {
+                return Err(DeformError::DegenerateBox {
+                    axis: a,
+                    min: 0.0,
+                    max: extent[a],
+                });
+            }
+        }
+        Self::uniform_cubic_in_box(grid.origin, grid.direction, extent, counts)
     }
 
     /// The parameter frame.

@@ -10,6 +10,8 @@
 //!   Jacobian path on voxel grids.
 //! * [`formats`] — cubic lattices as ITK `BSplineTransform` files (`.tfm`) and plastimatch
 //!   `.bxf` files, with the displacement-coefficient conventions of each.
+//! * [`live`] — a lattice as a [`volmorph_deform::LinearMap`]: linear in its control points,
+//!   with the local [`volmorph_deform::Influence`] of each.
 //! * [`manipulate`] — direct manipulation (True 1992 §6, after Hsu): drag points of the model
 //!   and move the control points by the least-norm amounts that land them exactly, with a tool
 //!   radius, a frozen-boundary option and an undo/redo [`manipulate::ManipulationSession`].
@@ -39,9 +41,11 @@ pub mod grid;
 pub mod jacobian;
 pub mod json;
 pub mod lattice;
+pub mod live;
 pub mod manipulate;
 
-pub use lattice::{BSplineLattice, LatticeFrame};
+pub use lattice::{BSplineLattice, FengForm, LatticeFrame};
 pub use manipulate::{
-    Drag, DragError, DragOptions, DragSolution, ManipulationSession, solve_drags,
+    Drag, DragError, DragOptions, DragSolution, ManipulationSession, drags_from_deformed,
+    solve_drags,
 };

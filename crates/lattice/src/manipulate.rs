@@ -265,9 +265,73 @@ pub enum DragError {
         /// Control points per axis of the lattice it was applied to.
         got: [usize; 3],
     },
+    /// A grabbed point of the deformed model has no preimage the Newton iteration can find
+    /// (it is not on the deformed model's space, or sits on a fold).
+    #[error(
+        "drag {drag}: point {point:.4} is not on the deformed model's space: the lattice cannot \
+         be inverted there ({status:?}, residual {residual:.3e})"
+    )]
+    NotInvertible {
+        /// Index of the drag in the list.
+        drag: usize,
+        /// The grabbed point (physical, deformed space).
+        point: DVec3,
+        /// How the inversion ended.
+        status: volmorph_deform::InverseStatus,
+        /// The remaining residual `|φ(x) − point|`.
+        residual: f64,
+    },
     /// A lattice operation failed (e.g. a moved control point overflowed).
     #[error(transparent)]
     Lattice(#[from] DeformError),
+}
+
+/// Drags of points grabbed on the **deformed** model: `grabbed[m]` is a point as the user sees
+/// it (deformed by `lattice`), `targets[m]` where it must go. The material point of each is
+/// `lattice⁻¹(grabbed[m])`, found by Newton iteration
+/// ([`volmorph_deform::invert_point`]), so a second drag of an already deformed model grabs
+/// the material under the cursor.
+///
+/// # Errors
+/// [`DragError::NoDrags`] for empty or mismatched lists is not raised here (zip semantics):
+/// callers check lengths; [`DragError::NonFinite`] for a NaN point,
+/// [`DragError::NotInvertible`] where no preimage is found.
+pub fn drags_from_deformed(
+    lattice: &BSplineLattice,
+    grabbed: &[DVec3],
+    targets: &[DVec3],
+) -> Result<Vec<Drag>, DragError> {
+    grabbed
+        .iter()
+        .zip(targets)
+        .enumerate()
+        .map(|(m, (&y, &target))| {
+            for (what, value) in [("grabbed point", y), ("target", target)] {
+                if !value.is_finite() {
+                    return Err(DragError::NonFinite {
+                        drag: m,
+                        what,
+                        value,
+                    });
+                }
+            }
+            let inv = volmorph_deform::invert_point(
+                lattice,
+                y,
+                None,
+                &volmorph_deform::InverseOptions::default(),
+            );
+            if !inv.converged() {
+                return Err(DragError::NotInvertible {
+                    drag: m,
+                    point: y,
+                    status: inv.status,
+                    residual: inv.residual,
+                });
+            }
+            Ok(Drag::new(inv.point, target))
+        })
+        .collect()
 }
 
 /// The least-norm control-point displacements for a set of drags; see the

@@ -11,12 +11,13 @@
 
 use criterion::{Criterion, criterion_group, criterion_main};
 use glam::DVec3;
+use volmorph_maps::HandleMethod;
 use volmorph_register::dense::{DenseOptions, refine};
 use volmorph_register::live::{LivePreview, THESIS_GRID_NODES};
 use volmorph_register::matching::{Correspondence, MatchOptions, MatchStatus, match_handles};
 use volmorph_register::phantom::{LungPhantomOptions, lung_phantom};
 use volmorph_register::select::{SelectOptions, select_handles};
-use volmorph_register::solve::{Method, SolveOptions, handle_map};
+use volmorph_register::solve::{SolveOptions, handle_map};
 use volmorph_testkit::Rng;
 use volmorph_volume::Geometry;
 
@@ -39,7 +40,11 @@ fn live(c: &mut Criterion) {
             }
         })
         .collect();
-    for method in [Method::Mls, Method::Frames] {
+    for method in [
+        HandleMethod::Affine,
+        HandleMethod::Frames,
+        HandleMethod::Tps,
+    ] {
         let map = handle_map(
             &corr,
             &SolveOptions {
@@ -48,7 +53,7 @@ fn live(c: &mut Criterion) {
             },
         )
         .unwrap();
-        let mut preview = LivePreview::new(map, &grid, [THESIS_GRID_NODES; 3]).unwrap();
+        let mut preview = LivePreview::new(&map, &grid, [THESIS_GRID_NODES; 3]).unwrap();
         preview.select(100).unwrap();
         let base = corr[100].target;
         let mut t = 0.0f64;

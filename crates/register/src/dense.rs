@@ -79,6 +79,23 @@ pub enum Metric {
     MutualInformation,
 }
 
+impl std::str::FromStr for Metric {
+    type Err = RegisterError;
+
+    /// `mse`, `ncc` or `mi` (also `mutual-information`).
+    fn from_str(s: &str) -> Result<Self, Self::Err> {
+        match s.to_ascii_lowercase().as_str() {
+            "mse" => Ok(Metric::Mse),
+            "ncc" => Ok(Metric::Ncc),
+            "mi" | "mutual-information" => Ok(Metric::MutualInformation),
+            _ => Err(RegisterError::option(
+                "metric",
+                format!("unknown metric {s:?}; use mse, ncc or mi"),
+            )),
+        }
+    }
+}
+
 /// Options of [`refine`].
 #[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
 pub struct DenseOptions {

@@ -36,6 +36,9 @@ pub enum RegisterError {
     /// A map could not be built or evaluated.
     #[error(transparent)]
     Map(#[from] DeformError),
+    /// A map file could not be read or written, or a map could not be built by name.
+    #[error(transparent)]
+    Maps(#[from] volmorph_maps::MapError),
     /// Applying a map to a volume failed.
     #[error(transparent)]
     Warp(#[from] WarpError),

@@ -237,6 +237,17 @@ pub struct ImageMetrics {
     pub mi: f64,
 }
 
+impl std::fmt::Display for ImageMetrics {
+    /// `NCC …, MSD …, MI …`.
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        write!(
+            f,
+            "NCC {:.4}, MSD {:.2}, MI {:.4}",
+            self.ncc, self.msd, self.mi
+        )
+    }
+}
+
 /// `(min, max)` of the finite values of `v` where `mask` allows.
 #[must_use]
 pub fn value_range(v: &[f32], mask: Option<&[u8]>) -> (f64, f64) {

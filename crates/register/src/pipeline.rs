@@ -10,8 +10,10 @@
 //! | --- | --- |
 //! | `handles.json` | the used correspondences as a volmorph handle file (frames for `--method frames`) |
 //! | `correspondences.json` | every handle with its match, NCC, distinctness, confidence, residual, status |
-//! | `map.tfm` | the map as an ITK `BSplineTransform` (the dense lattice, or a lattice fitted to the handle map) |
-//! | `map_lattice.json` | the same lattice as volmorph lattice JSON |
+//! | `handle_map.json` | the handle map, exact, as volmorph map JSON |
+//! | `correction.json` | with `--dense`: the correction lattice `L` (map JSON); the exact map is `h + L − id` |
+//! | `map.json` | the result as one map JSON: the handle map, or (refined) the lattice of `map.tfm` |
+//! | `map.tfm` | a cubic B-spline lattice fitted to the map as an ITK `BSplineTransform` (fit error in the report) |
 //! | `displacement.mha` | `φ(x) − x` on the fixed grid as a 3-component MetaImage (ITK's displacement field) |
 //! | `warped.<ext>` | the moving scan resampled on the fixed grid through the map |
 //! | `jacobian.<ext>` | `det Dφ` on the fixed grid |
@@ -30,9 +32,8 @@ use glam::{DMat3, DVec3};
 use serde::Serialize;
 use serde_json::json;
 use volmorph_deform::{Identity, SampledMap, SpaceMap};
-use volmorph_handles::HandleSet;
-use volmorph_handles::mls::Frame;
 use volmorph_lattice::BSplineLattice;
+use volmorph_maps::{AnyMap, HandleMethod, write_map};
 use volmorph_volume::sample::Interpolation;
 use volmorph_volume::{AnyVolume, Geometry, Volume};
 use volmorph_warp::jacobian::FoldingReport;
@@ -44,7 +45,7 @@ use crate::matching::{Correspondence, MatchOptions, MatchStatus, match_handles};
 use crate::metrics::{ImageMetrics, compare};
 use crate::quality::{LandmarkUnits, OverlayOptions, TreStats, read_landmarks, slice_overlay, tre};
 use crate::select::{Handle, SelectOptions, select_handles};
-use crate::solve::{HandleMap, Method, SolveOptions, handle_map};
+use crate::solve::{SolveOptions, handle_map, handle_set};
 
 /// Options of the whole registration.
 #[derive(Debug, Clone, Copy, PartialEq, Default)]
@@ -81,10 +82,12 @@ pub struct Registration {
     pub handles: Vec<Handle>,
     /// Their correspondences.
     pub correspondences: Vec<Correspondence>,
+    /// The method of the handle map.
+    pub method: HandleMethod,
     /// The handle map.
-    pub handle_map: HandleMap,
+    pub handle_map: AnyMap,
     /// The handle map refined densely, if run.
-    pub refined: Option<Refined<HandleMap>>,
+    pub refined: Option<Refined<AnyMap>>,
     /// Levels of the dense refinement.
     pub dense_levels: Vec<crate::dense::DenseLevel>,
     /// Step times.
@@ -141,6 +144,7 @@ pub fn register(
     Ok(Registration {
         handles,
         correspondences,
+        method: o.solve.method,
         handle_map: hm,
         refined: None,
         dense_levels: Vec::new(),
@@ -224,6 +228,27 @@ pub struct LandmarkFiles {
     pub units: LandmarkUnits,
 }
 
+impl LandmarkFiles {
+    /// Landmark pairs from `"FIXED,MOVING"` (two point lists paired by order, as on the command
+    /// line).
+    ///
+    /// # Errors
+    /// [`RegisterError::Parse`] if `spec` is not two paths separated by a comma.
+    pub fn parse(spec: &str, units: LandmarkUnits) -> Result<Self, RegisterError> {
+        match spec.split_once(',') {
+            Some((a, b)) if !a.is_empty() && !b.is_empty() => Ok(Self {
+                fixed: PathBuf::from(a),
+                moving: PathBuf::from(b),
+                units,
+            }),
+            _ => Err(RegisterError::Parse {
+                file: "landmarks".into(),
+                message: format!("want FIXED,MOVING (two files), got {spec:?}"),
+            }),
+        }
+    }
+}
+
 /// What [`register_files`] reports.
 #[derive(Debug, Clone, Serialize)]
 pub struct RegisterReport {
@@ -250,6 +275,9 @@ pub struct RegisterReport {
     pub timings: Timings,
     /// Dense refinement levels.
     pub dense_levels: Vec<crate::dense::DenseLevel>,
+    /// Largest distance between the exact map and the lattice written to `map.tfm` at the
+    /// fitting samples, mm.
+    pub export_fit_error: f64,
     /// Files written.
     pub files: Vec<String>,
 }
@@ -458,30 +486,6 @@ pub fn read_correspondences(path: &Path) -> Result<Vec<Correspondence>, Register
         .collect()
 }
 
-/// The used correspondences as a volmorph handle set (points; frames for the frame method).
-#[must_use]
-pub fn handle_set(corr: &[Correspondence], method: Method) -> HandleSet {
-    let used = corr.iter().filter(|c| c.status.is_used());
-    let mut set = HandleSet {
-        dim: 3,
-        ..HandleSet::default()
-    };
-    for c in used {
-        if method == Method::Frames {
-            set.frames.push((
-                Frame::at(c.source),
-                Frame {
-                    origin: c.target,
-                    axes: c.axes,
-                },
-            ));
-        } else {
-            set.points.push((c.source, c.target));
-        }
-    }
-    set
-}
-
 /// A lattice for ITK: a cubic B-spline lattice of `spacing` mm on `fixed`'s voxel-centre box
 /// fitted to `map` by least squares ([`fit_to_map`]), and the largest distance between the two
 /// at the fixed voxels used for the fit, mm.
@@ -515,14 +519,61 @@ pub fn lattice_for_export(
     Ok((fitted, err))
 }
 
-/// Write every output of a registration into `dir` (see the [module docs](self)) and return
-/// the file names. `ext` is the volume extension (e.g. `.nii.gz`); the displacement field is
-/// written from `output_map` (the map itself, or a sampled version of it for speed), the ITK
-/// lattice is fitted to the exact map.
+/// Write the map of a registration into `dir` — the one place that decides how a result map is
+/// stored — and return the file names:
+///
+/// * `handles.json` — the used correspondences as a volmorph handle file (frames for the frame
+///   method), `correspondences.json` — every handle with its match and scores;
+/// * `handle_map.json` — the handle map, exact, as volmorph map JSON (`volmorph_maps`);
+/// * `correction.json` — for a refined map, the correction lattice `L` (map JSON), so that the
+///   exact result is `φ(x) = h(x) + L(x) − x` ([`Refined`]);
+/// * `map.json` — the result as one map: the handle map itself when not refined, otherwise
+///   `export` (a cubic B-spline lattice fitted to `φ`, [`lattice_for_export`]);
+/// * `map.tfm` — `export` as an ITK `BSplineTransform` (what ITK, elastix's transformix and
+///   3D Slicer read).
 ///
 /// # Errors
-/// [`RegisterError::Io`] / [`RegisterError::Volume`] / [`RegisterError::Render`] naming the file
-/// that could not be written.
+/// [`RegisterError::Io`] / [`RegisterError::Maps`] naming the file that could not be written.
+pub fn write_map_files(
+    dir: &Path,
+    reg: &Registration,
+    export: &BSplineLattice,
+) -> Result<Vec<String>, RegisterError> {
+    let path = |name: &str| dir.join(name);
+    handle_set(&reg.correspondences, reg.method).write_json(&path("handles.json"))?;
+    crate::steps::write_text(
+        &path("correspondences.json"),
+        &correspondences_json(&reg.correspondences),
+    )?;
+    write_map(&path("handle_map.json"), &reg.handle_map)?;
+    let mut files: Vec<String> = ["handles.json", "correspondences.json", "handle_map.json"]
+        .map(String::from)
+        .into();
+    let export = AnyMap::Lattice(export.clone());
+    match &reg.refined {
+        Some(r) => {
+            write_map(
+                &path("correction.json"),
+                &AnyMap::Lattice(r.correction.clone()),
+            )?;
+            write_map(&path("map.json"), &export)?;
+            files.push("correction.json".into());
+        }
+        None => write_map(&path("map.json"), &reg.handle_map)?,
+    }
+    write_map(&path("map.tfm"), &export)?;
+    files.extend(["map.json".into(), "map.tfm".into()]);
+    Ok(files)
+}
+
+/// Write every output of a registration into `dir` (see the [module docs](self)) and return
+/// the file names. `ext` is the volume extension (e.g. `.nii.gz`); the displacement field is
+/// written from `output_map` (the map itself, or a sampled version of it for speed); the map
+/// files as [`write_map_files`] does.
+///
+/// # Errors
+/// [`RegisterError::Io`] / [`RegisterError::Volume`] / [`RegisterError::Render`] /
+/// [`RegisterError::Maps`] naming the file that could not be written.
 #[allow(clippy::too_many_arguments)]
 pub fn write_outputs(
     dir: &Path,
@@ -533,32 +584,14 @@ pub fn write_outputs(
     jacobian: &Volume<f32>,
     reg: &Registration,
     output_map: &dyn SpaceMap,
+    export: &BSplineLattice,
     report_json: &str,
     summary: &str,
-    export_spacing: f64,
 ) -> Result<Vec<String>, RegisterError> {
     std::fs::create_dir_all(dir)
         .map_err(|e| RegisterError::Io(volmorph_io::IoError::os(dir, e)))?;
-    let mut files = Vec::new();
     let path = |name: &str| dir.join(name);
-    let text = |name: &str, body: &str| -> Result<(), RegisterError> {
-        volmorph_io::write_atomic::<RegisterError, _>(&dir.join(name), |w| {
-            w.write_all(body.as_bytes())
-                .map_err(|e| RegisterError::Io(volmorph_io::IoError::os(&dir.join(name), e)))
-        })
-    };
-    handle_set(&reg.correspondences, reg.handle_map.method()).write_json(&path("handles.json"))?;
-    files.push("handles.json".to_string());
-    text(
-        "correspondences.json",
-        &correspondences_json(&reg.correspondences),
-    )?;
-    files.push("correspondences.json".into());
-    let (lat, _fit_error) = lattice_for_export(reg.map(), fixed.geometry(), export_spacing)?;
-    volmorph_lattice::formats::write_lattice(&path("map.tfm"), &lat)?;
-    volmorph_lattice::formats::write_lattice(&path("map_lattice.json"), &lat)?;
-    files.push("map.tfm".into());
-    files.push("map_lattice.json".into());
+    let mut files = write_map_files(dir, reg, export)?;
     write_displacement_field(&path("displacement.mha"), output_map, fixed.geometry())?;
     files.push("displacement.mha".into());
     for (name, v) in [("warped", warped), ("jacobian", jacobian)] {
@@ -568,8 +601,8 @@ pub fn write_outputs(
         files.push(f);
     }
     files.extend(write_overlays(dir, fixed, moving_identity, warped)?);
-    text("report.json", report_json)?;
-    text("summary.txt", summary)?;
+    crate::steps::write_text(&path("report.json"), report_json)?;
+    crate::steps::write_text(&path("summary.txt"), summary)?;
     files.push("report.json".into());
     files.push("summary.txt".into());
     Ok(files)
@@ -636,6 +669,7 @@ pub fn solve_files(
     let reg = Registration {
         handles: Vec::new(),
         correspondences: corr,
+        method: solve.method,
         handle_map: hm,
         refined: None,
         dense_levels: Vec::new(),
@@ -693,6 +727,7 @@ fn finish(
         }
         None => (None, None),
     };
+    let (export, export_fit_error) = lattice_for_export(reg.map(), &g, export_spacing)?;
     let count = |s: MatchStatus| reg.correspondences.iter().filter(|c| c.status == s).count();
     let mut report = RegisterReport {
         handles: reg.correspondences.len(),
@@ -706,7 +741,7 @@ fn finish(
             count(MatchStatus::Inconsistent),
             count(MatchStatus::Outside),
         ],
-        method: reg.handle_map.method().name().into(),
+        method: reg.method.name().into(),
         before,
         after,
         folding: fold.into(),
@@ -714,9 +749,10 @@ fn finish(
         tre_after,
         timings: reg.timings,
         dense_levels: reg.dense_levels.clone(),
+        export_fit_error,
         files: Vec::new(),
     };
-    let summary = summary_text(&report, &fold);
+    let summary = format!("{report}\n");
     let ext = volume_ext(fixed_path);
     report.files = vec!["report.json".into(), "summary.txt".into()];
     let files = write_outputs(
@@ -728,33 +764,44 @@ fn finish(
         &jac,
         reg,
         &sampled,
+        &export,
         &serde_json::to_string_pretty(&report).unwrap_or_default(),
         &summary,
-        export_spacing,
     )?;
     report.files = files;
     Ok(report)
 }
 
-/// The human summary of a report.
-#[must_use]
-pub fn summary_text(r: &RegisterReport, fold: &FoldingReport) -> String {
-    let mut s = String::new();
-    s += &format!(
-        "handles: {} selected, {} used ({} low correlation, {} inconsistent, {} outside); map: {}\n",
-        r.handles, r.used, r.rejected[0], r.rejected[1], r.rejected[2], r.method
-    );
-    s += &format!(
-        "before: NCC {:.4}, MSD {:.2}, MI {:.4}\nafter:  NCC {:.4}, MSD {:.2}, MI {:.4}\n",
-        r.before.ncc, r.before.msd, r.before.mi, r.after.ncc, r.after.msd, r.after.mi
-    );
-    s += &format!("{fold}\n");
-    if let (Some(b), Some(a)) = (&r.tre_before, &r.tre_after) {
-        s += &format!("before: {b}\nafter:  {a}\n");
+impl std::fmt::Display for FoldSummary {
+    /// One line: `J: min …, max …, mean …; F of N voxels fold (J ≤ 0)`.
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        write!(
+            f,
+            "J: min {:.3}, max {:.3}, mean {:.3}; {} of {} voxels fold (J ≤ 0)",
+            self.min, self.max, self.mean, self.folded, self.count
+        )
     }
-    s += &format!(
-        "time: select {:.2} s, match {:.2} s, solve {:.2} s, dense {:.2} s, total {:.2} s\n",
-        r.timings.select, r.timings.matching, r.timings.solve, r.timings.dense, r.timings.total
-    );
-    s
+}
+
+impl std::fmt::Display for RegisterReport {
+    /// The human summary (`summary.txt`): handles, metrics before/after, fold report, TRE,
+    /// step times; one item per line.
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        let r = self;
+        writeln!(
+            f,
+            "handles: {} selected, {} used ({} low correlation, {} inconsistent, {} outside); map: {}",
+            r.handles, r.used, r.rejected[0], r.rejected[1], r.rejected[2], r.method
+        )?;
+        writeln!(f, "before: {}\nafter:  {}", r.before, r.after)?;
+        writeln!(f, "{}", r.folding)?;
+        if let (Some(b), Some(a)) = (&r.tre_before, &r.tre_after) {
+            writeln!(f, "before: {b}\nafter:  {a}")?;
+        }
+        write!(
+            f,
+            "time: select {:.2} s, match {:.2} s, solve {:.2} s, dense {:.2} s, total {:.2} s",
+            r.timings.select, r.timings.matching, r.timings.solve, r.timings.dense, r.timings.total
+        )
+    }
 }

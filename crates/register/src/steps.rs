@@ -10,6 +10,7 @@ use glam::DVec3;
 use serde::Serialize;
 use volmorph_deform::{Identity, SpaceMap};
 use volmorph_handles::HandleSet;
+use volmorph_maps::AnyMap;
 use volmorph_volume::{AnyVolume, Volume};
 
 use crate::RegisterError;
@@ -102,6 +103,22 @@ pub struct MatchSummary {
     pub mean_ncc: f64,
 }
 
+impl std::fmt::Display for MatchSummary {
+    /// One line of counts and the mean NCC.
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        write!(
+            f,
+            "{} handles: {} accepted (mean NCC {:.3}), {} low correlation, {} inconsistent, {} outside",
+            self.handles,
+            self.accepted,
+            self.mean_ncc,
+            self.low_correlation,
+            self.inconsistent,
+            self.outside
+        )
+    }
+}
+
 /// `match`: correspondences of the handles in `handles` (point list) written as
 /// `correspondences.json`-style JSON to `out`.
 ///
@@ -135,49 +152,38 @@ pub fn match_files(
     })
 }
 
-/// Load a map `fixed → moving` from a file: a lattice (`.tfm`, `.txt`, `.bxf`, lattice JSON), a
-/// correspondence JSON or a volmorph handle JSON (both built with `solve`).
+/// Load a map `fixed → moving` from a file: any map file of `volmorph-maps` (map JSON, which
+/// includes lattice JSON; ITK `.tfm`/`.txt`; `.bxf`; [`volmorph_maps::read_map`]), or a
+/// correspondence JSON (from `match`) or a volmorph handle file, both built into the handle map
+/// of `solve` (the fixed points are the sources).
 ///
 /// # Errors
-/// [`RegisterError::Parse`] for an unknown kind, and the readers' and solvers' errors.
-pub fn load_map(path: &Path, solve: &SolveOptions) -> Result<Box<dyn SpaceMap>, RegisterError> {
-    let name = path.to_string_lossy().to_lowercase();
-    if !name.ends_with(".json") {
-        return Ok(Box::new(volmorph_lattice::formats::read_lattice(path)?));
-    }
-    let text = std::fs::read_to_string(path).map_err(|e| io_err(path, e))?;
-    let kind = serde_json::from_str::<serde_json::Value>(&text)
-        .ok()
-        .and_then(|v| v.get("kind").and_then(|k| k.as_str()).map(str::to_string));
+/// [`RegisterError::Maps`] naming the file for a map file it cannot read, and the solver's
+/// errors.
+pub fn load_map(path: &Path, solve: &SolveOptions) -> Result<AnyMap, RegisterError> {
+    let kind = if path
+        .extension()
+        .is_some_and(|e| e.eq_ignore_ascii_case("json"))
+    {
+        let text = std::fs::read_to_string(path).map_err(|e| io_err(path, e))?;
+        serde_json::from_str::<serde_json::Value>(&text)
+            .ok()
+            .and_then(|v| v.get("kind").and_then(|k| k.as_str()).map(str::to_string))
+    } else {
+        None
+    };
     match kind.as_deref() {
-        Some(volmorph_lattice::json::LATTICE_JSON_KIND) => {
-            Ok(Box::new(volmorph_lattice::formats::read_lattice(path)?))
+        Some("correspondences") => handle_map(&read_correspondences(path)?, solve),
+        Some("handles") => {
+            let set = HandleSet::read(path)?;
+            Ok(volmorph_maps::handle_map(
+                &set,
+                solve.method,
+                &solve.handle,
+                volmorph_maps::HandleDirection::SourcesToTargets,
+            )?)
         }
-        Some("correspondences") => Ok(Box::new(handle_map(&read_correspondences(path)?, solve)?)),
-        Some("handles") | None => {
-            let set = HandleSet::from_json(&text)?;
-            let corr: Vec<_> = set
-                .points
-                .iter()
-                .map(|&(s, t)| (s, t, glam::DMat3::IDENTITY))
-                .chain(set.frames.iter().map(|(s, t)| (s.origin, t.origin, t.axes)))
-                .map(|(s, t, a)| crate::matching::Correspondence {
-                    source: s,
-                    target: t,
-                    ncc: f64::NAN,
-                    distinctness: f64::NAN,
-                    confidence: 1.0,
-                    residual: f64::NAN,
-                    axes: a,
-                    status: MatchStatus::Manual,
-                })
-                .collect();
-            Ok(Box::new(handle_map(&corr, solve)?))
-        }
-        Some(other) => Err(RegisterError::Parse {
-            file: path.display().to_string(),
-            message: format!("unknown map kind \"{other}\""),
-        }),
+        _ => Ok(volmorph_maps::read_map(path)?),
     }
 }
 
@@ -192,6 +198,21 @@ pub struct QualityReport {
     pub folding: FoldSummary,
     /// TRE before and after, if landmarks were given.
     pub tre: Option<(TreStats, TreStats)>,
+}
+
+impl std::fmt::Display for QualityReport {
+    /// Metrics before and after, the fold report and the TRE, one item per line.
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        write!(
+            f,
+            "before: {}\nafter:  {}\n{}",
+            self.before, self.after, self.folding
+        )?;
+        if let Some((b, a)) = &self.tre {
+            write!(f, "\nbefore: {b}\nafter:  {a}")?;
+        }
+        Ok(())
+    }
 }
 
 /// `quality`: overlays (before/after mid-sections), Jacobian map and fold report, global metrics
@@ -214,13 +235,13 @@ pub fn quality_files(
     let g = *f.geometry();
     let fill = crate::metrics::value_range(m.data(), None).0;
     let id = warp_moving(&m, &Identity, &g, fill)?;
-    let warped = warp_moving(&m, &*phi, &g, fill)?;
-    let (jac, fold) = crate::quality::jacobian_report(&*phi, &g)?;
+    let warped = warp_moving(&m, &phi, &g, fill)?;
+    let (jac, fold) = crate::quality::jacobian_report(&phi, &g)?;
     write_volume(&out_dir.join("jacobian.nii.gz"), &jac)?;
     write_volume(&out_dir.join("warped.nii.gz"), &warped)?;
     write_overlays(out_dir, &f, &id, &warped)?;
     let t = landmarks
-        .map(|l| landmark_tre(l, &g, m.geometry(), &*phi))
+        .map(|l| landmark_tre(l, &g, m.geometry(), &phi))
         .transpose()?;
     let r = QualityReport {
         before: compare(&f, &id, None)?,
@@ -246,6 +267,28 @@ pub struct LungReport {
     pub lobe_voxels: Option<[usize; 5]>,
     /// Dice per lobe against a reference labelling, if given.
     pub dice: Option<[f64; 5]>,
+}
+
+impl std::fmt::Display for LungReport {
+    /// Voxel counts of the lungs and airways, of the lobes and their Dice if traced.
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        write!(
+            f,
+            "right lung {} voxels, left lung {} voxels, airway {} voxels removed",
+            self.lung_voxels[0], self.lung_voxels[1], self.airway_voxels
+        )?;
+        if let Some(v) = self.lobe_voxels {
+            write!(f, "\nlobes (RUL RML RLL LUL LLL): {v:?} voxels")?;
+        }
+        if let Some(d) = self.dice {
+            write!(
+                f,
+                "\nDice (RUL RML RLL LUL LLL): {:.3} {:.3} {:.3} {:.3} {:.3}",
+                d[0], d[1], d[2], d[3], d[4]
+            )?;
+        }
+        Ok(())
+    }
 }
 
 /// `segment-lungs`: the lung mask of `ct` (labels 1 right, 2 left) to `out`; with a lobe script,
@@ -300,6 +343,29 @@ pub fn segment_lungs_files(
     Ok(rep)
 }
 
+/// What `ventilation` measured, per region.
+#[derive(Debug, Clone, Serialize)]
+#[serde(transparent)]
+pub struct VentilationReport {
+    /// Per label present, in label order.
+    pub regions: Vec<LobeVentilation>,
+}
+
+impl std::fmt::Display for VentilationReport {
+    /// A table: region, voxels, mean and sd of `jac`, mean HU volume ratio.
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        write!(f, "region   voxels   mean jac   sd     HU volume ratio")?;
+        for l in &self.regions {
+            write!(
+                f,
+                "\n{:<8} {:>7}  {:>8.4}  {:>6.4}  {:>8.4}",
+                l.name, l.voxels, l.jacobian.mean, l.jacobian.sd, l.hu_volume_ratio.mean
+            )?;
+        }
+        Ok(())
+    }
+}
+
 /// `ventilation`: `jac` and the HU-based volume ratio per lobe of `labels` (inhale grid) for the
 /// map inhale → exhale; maps written into `out_dir` with `ventilation.json`.
 ///
@@ -312,21 +378,22 @@ pub fn ventilation_files(
     labels: &Path,
     solve: &SolveOptions,
     out_dir: &Path,
-) -> Result<Vec<LobeVentilation>, RegisterError> {
+) -> Result<VentilationReport, RegisterError> {
     let i = read_scan(inhale)?;
     let e = read_scan(exhale)?;
     let l = read_scan(labels)?.map(|x| x.round().clamp(0.0, 255.0) as u8);
     let phi = load_map(map, solve)?;
-    let warped = warp_moving(&e, &*phi, i.geometry(), -1000.0)?;
-    let v = ventilation(&*phi, &i, &warped, &l, 2)?;
+    let warped = warp_moving(&e, &phi, i.geometry(), -1000.0)?;
+    let v = ventilation(&phi, &i, &warped, &l, 2)?;
     std::fs::create_dir_all(out_dir).map_err(|e| io_err(out_dir, e))?;
     write_volume(&out_dir.join("jacobian.nii.gz"), &v.jacobian)?;
     write_volume(&out_dir.join("hu_volume_ratio.nii.gz"), &v.hu_ratio)?;
+    let r = VentilationReport { regions: v.regions };
     write_text(
         &out_dir.join("ventilation.json"),
-        &serde_json::to_string_pretty(&v.regions).unwrap_or_default(),
+        &serde_json::to_string_pretty(&r).unwrap_or_default(),
     )?;
-    Ok(v.regions)
+    Ok(r)
 }
 
 /// `phantom`: write the lung phantom into `dir`: `inhale.nii.gz`, `exhale.nii.gz`,
@@ -382,7 +449,7 @@ pub fn write_known_pair(
     std::fs::create_dir_all(dir).map_err(|e| io_err(dir, e))?;
     write_volume(&dir.join("fixed.nii.gz"), &v)?;
     write_volume(&dir.join("moving.nii.gz"), &moving)?;
-    volmorph_lattice::formats::write_lattice(&dir.join("truth.tfm"), &lat)?;
+    volmorph_maps::write_map(&dir.join("truth.tfm"), &AnyMap::Lattice(lat.clone()))?;
     // Landmarks: random voxels above the 40th intensity percentile, away from the border.
     let mut sorted: Vec<f32> = v.data().iter().copied().filter(|x| x.is_finite()).collect();
     let k = (sorted.len() * 2 / 5).min(sorted.len().saturating_sub(1));

@@ -2,11 +2,13 @@
 //! the live correction equals a full rebuild, the written files read back.
 
 use glam::{DMat3, DVec3};
+use volmorph_deform::SpaceMap;
+use volmorph_maps::HandleMethod;
 use volmorph_register::live::LivePreview;
 use volmorph_register::matching::{Correspondence, MatchOptions, MatchStatus, match_handles};
 use volmorph_register::pipeline::{correspondences_json, read_correspondences};
 use volmorph_register::select::{SelectOptions, select_handles};
-use volmorph_register::solve::{Method, SolveOptions, handle_map};
+use volmorph_register::solve::{SolveOptions, handle_map};
 use volmorph_testkit::Rng;
 use volmorph_volume::{Geometry, Volume};
 
@@ -115,18 +117,22 @@ fn live_correction_equals_a_rebuild_and_the_exact_map_at_nodes() {
             }
         })
         .collect();
-    for method in [Method::Mls, Method::Frames, Method::Tps] {
+    for method in [
+        HandleMethod::Affine,
+        HandleMethod::Frames,
+        HandleMethod::Tps,
+    ] {
         let o = SolveOptions {
             method,
             ..SolveOptions::default()
         };
-        let mut live = LivePreview::new(handle_map(&corr, &o).unwrap(), &g, [9, 9, 7]).unwrap();
+        let mut live = LivePreview::new(&handle_map(&corr, &o).unwrap(), &g, [9, 9, 7]).unwrap();
         live.select(7).unwrap();
         let new_target = corr[7].target + DVec3::new(1.5, -0.5, 1.0);
         live.correct(7, new_target).unwrap();
         let mut moved = corr.clone();
         moved[7].target = new_target;
-        let rebuilt = LivePreview::new(handle_map(&moved, &o).unwrap(), &g, [9, 9, 7]).unwrap();
+        let rebuilt = LivePreview::new(&handle_map(&moved, &o).unwrap(), &g, [9, 9, 7]).unwrap();
         for (a, b) in live
             .sampled()
             .positions()

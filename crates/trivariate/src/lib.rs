@@ -17,6 +17,8 @@
 //! * [`isosurface`](mod@isosurface) — crack-free polygonisation of isosurfaces ([`isosurface()`])
 //!   and planar slices ([`slice()`]) with per-vertex parameters and attribute values, written as
 //!   coloured PLY or OBJ.
+//! * [`GeometryMap`] — the geometry as a [`volmorph_deform::SpaceMap`] on a placement box,
+//!   so volumes, meshes and F-rep shapes can be deformed by a NURBS solid ([`space_map`]).
 //! * [`RayTracer`] — ray–boundary intersection (faces and `det J = 0`, Theorem 1, with
 //!   [`cone`] culling) and parameter tracking along rays (§5.2, [`raytrace`]).
 //! * [`VolumeRenderer`] — front-to-back volume rendering of an attribute through
@@ -41,6 +43,7 @@ pub mod isosurface;
 pub mod modeling;
 pub mod optics;
 pub mod raytrace;
+pub mod space_map;
 pub mod volrender;
 
 pub use aggregate::{
@@ -59,4 +62,5 @@ pub use optics::{
     write_paths_obj,
 };
 pub use raytrace::{BoundaryHit, HitKind, RayTracer, TraceOptions, Tracked};
+pub use space_map::GeometryMap;
 pub use volrender::{RayColor, RenderOptions, TransferFunction, TransferPoint, VolumeRenderer};

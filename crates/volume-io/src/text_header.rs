@@ -202,23 +202,7 @@ pub(crate) fn parse_i64(fmt: &'static str, what: &str, s: &str) -> Result<i64, V
         .map_err(|_| VolumeError::format(fmt, format!("{what}: `{}` is not an integer", s.trim())))
 }
 
-/// Format an `f64` so that parsing it back gives the same bits: integers print without a
-/// fraction (`2`), everything else in Rust's shortest round-trip form (`0.1`, `1e-7`).
-pub(crate) fn fmt_f64(v: f64) -> String {
-    if v == v.trunc() && v.abs() < 1e15 {
-        if v == 0.0 {
-            // Keep the sign of -0 so it round-trips bit-exactly.
-            return if v.is_sign_negative() {
-                "-0".into()
-            } else {
-                "0".into()
-            };
-        }
-        format!("{v}")
-    } else {
-        format!("{v:?}")
-    }
-}
+pub(crate) use volmorph_io::fmt_f64;
 
 /// Complete a direction matrix from its first `k` columns (`k` = 1 or 2, the image's
 /// spatial axes). Columns lying in the xy plane are padded with the identity (`+z`), as ITK

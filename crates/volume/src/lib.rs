@@ -30,6 +30,7 @@
 
 mod error;
 mod geometry;
+mod index_box;
 pub mod phantom;
 pub mod sample;
 pub mod slice;
@@ -39,6 +40,7 @@ mod voxel;
 
 pub use error::VolumeError;
 pub use geometry::Geometry;
+pub use index_box::IndexBox;
 pub use volume::{AnyVolume, Volume};
 pub use voxel::{Voxel, VoxelType};
 

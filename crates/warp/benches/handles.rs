@@ -4,7 +4,7 @@
 
 use criterion::{Criterion, criterion_group, criterion_main};
 use glam::DVec3;
-use volmorph_deform::{HandleGrid, SampledMap};
+use volmorph_deform::{LiveGrid, SampledMap};
 use volmorph_handles::{AffineMls, Weighting};
 use volmorph_volume::sample::Interpolation;
 use volmorph_volume::{Geometry, Volume};
@@ -45,7 +45,7 @@ fn bench(c: &mut Criterion) {
     // Pull-back: the map from targets to sources.
     let map = AffineMls::new(&dst, &src, Weighting::default()).expect("mls");
     let coarse = SampledMap::covering(&g, [32, 32, 32]).expect("grid");
-    let hg = HandleGrid::new(map.clone(), coarse).expect("handle grid");
+    let hg = LiveGrid::new(map.clone(), coarse).expect("handle grid");
     let opts = ResampleOptions::new(Interpolation::Linear, 0.0);
     let mut group = c.benchmark_group("handles_256x256x112");
     group.sample_size(10);
@@ -53,7 +53,7 @@ fn bench(c: &mut Criterion) {
         b.iter(|| resample::<f32, f32, _>(&input, hg.sampled(), &g, &opts).expect("resample"));
     });
     group.bench_function("handle_grid_setup_200", |b| {
-        b.iter(|| HandleGrid::new(map.clone(), coarse).expect("grid"));
+        b.iter(|| LiveGrid::new(map.clone(), coarse).expect("grid"));
     });
     group.finish();
 }

@@ -44,17 +44,18 @@ pub enum WarpError {
     /// A background (fill) value is NaN or infinite.
     #[error("background value {0} is not finite")]
     Background(f64),
-    /// Moving or setting control points of a lattice failed (index out of range, NaN or
-    /// infinite position).
-    #[error("cannot move the control points: {0}")]
-    ControlPoint(#[source] DeformError),
-    /// A lattice handed to an incremental engine has other knots or another frame than the
-    /// engine's lattice (only control points may change between updates).
+    /// Setting parameters of a live-edited map failed (index out of range, NaN or infinite
+    /// value).
+    #[error("cannot set the map's parameters: {0}")]
+    Parameters(#[source] DeformError),
+    /// A map handed to an incremental engine has another structure than the engine's map
+    /// (other knots or frame of a lattice, other sources of a handle map): only parameter
+    /// values may change between updates.
     #[error(
-        "the new lattice has other knots or another frame than the current one; only control \
-         points may change"
+        "the new map has another structure than the current one (knots, frame or source \
+         handles); only parameter values may change"
     )]
-    LatticeMismatch,
+    StructureMismatch,
     /// An option combination the operation does not support.
     #[error("unsupported: {0}")]
     Unsupported(&'static str),

@@ -1,27 +1,30 @@
-//! Incremental antialiased push-forward through an editable B-spline lattice (True 1992 §5.3
-//! "the main loop", §5.4).
+//! Incremental antialiased push-forward through a map edited live: a B-spline lattice (True
+//! 1992 §5.3 "the main loop", §5.4) or any other [`LinearMap`] (handle maps).
+
 //!
 //! **Direction.** As in [`crate::pushforward`]: every *source* voxel is pushed forward to
-//! where the lattice sends it, and its box-filtered value is spread over the *output* voxels
+//! where the map sends it, and its box-filtered value is spread over the *output* voxels
 //! its proxy box overlaps.
 //!
 //! [`IncrementalPushForward`] keeps the images of the voxel centres (True's "deformation
 //! mapping array", with the one-voxel margin that averaged face centres need) and the
-//! current output, so that moving control points only redoes what they influence, as in
-//! True's main loop:
+//! current output, so that moving parameters (control points, handle targets) only redoes
+//! what they influence, as in True's main loop:
 //!
-//! 1. **Influenced region.** Control point `i` of an axis of degree `p` blends the knot spans
-//!    `i ..= i + p` (span index `s` = `[u_s, u_{s+1})`, blended by control points
-//!    `s − p ..= s`; in True's region numbering, regions `i − 3 ..= i`). The bounding box of
-//!    the non-empty spans of all moved points (read from the knot vector of each axis, so
-//!    any degree and any knots) is the parameter box where the map can change; outside it,
-//!    and outside the lattice box (where the map is the identity), it cannot. The box is
-//!    turned into the box of voxel centres (margin included) whose parameters lie in it,
-//!    widened by [`PARAMETER_MARGIN`] voxels against rounding.
+//! 1. **Influenced region.** The map says where the moved parameters can change it
+//!    ([`LinearMap::influence`]). For a lattice, control point `i` of an axis of degree `p`
+//!    blends the knot spans `i ..= i + p` (span index `s` = `[u_s, u_{s+1})`, blended by
+//!    control points `s − p ..= s`; in True's region numbering, regions `i − 3 ..= i`); the
+//!    bounding box of the non-empty spans of all moved points (read from the knot vector of
+//!    each axis, so any degree and any knots) is the parameter box where the map can change,
+//!    and its image under the lattice frame is the influence; outside it, and outside the
+//!    lattice box (where the map is the identity), nothing changes. Handle maps influence
+//!    everything. The region is turned into the box of voxel centres (margin included) it
+//!    contains, widened by [`PARAMETER_MARGIN`] voxels against rounding.
 //! 2. **Redone voxels.** A source voxel's proxy box depends on its own centre image and its
 //!    six neighbours' (face centres are averages), so the voxels whose boxes change are the
 //!    influenced centres dilated by one voxel, clipped to the source.
-//! 3. **Remap.** The influenced centre images are re-evaluated with the new lattice through
+//! 3. **Remap.** The influenced centre images are re-evaluated with the new map through
 //!    [`SpaceMap::apply_grid`] on the sub-grid they form (the evaluation a full push-forward
 //!    uses) and stored, in one pass that also bounds the redone voxels' old and new boxes.
 //!    Every output voxel those boxes overlap may change; no other can.
@@ -42,11 +45,11 @@
 //! Every output voxel sums its contributions in one fixed order (source voxels in index
 //! order), whatever region is recomputed and however the work is split over threads, so
 //! results are bit for bit the same for any number of threads, and after any sequence of
-//! edits the volume is the one a new engine built with the current lattice holds, up to
+//! edits the volume is the one a new engine built with the current map holds, up to
 //! the rounding of centre images evaluated on a sub-grid instead of the whole grid (about
 //! 1e-14 relative). It equals
 //! [`push_forward_antialiased_f32`](crate::pushforward::push_forward_antialiased_f32) with
-//! the current lattice and the same options up to the `f32` accumulation of the latter
+//! the current map and the same options up to the `f32` accumulation of the latter
 //! (about 1e-6 relative; the engine sums in `f64`).
 //!
 //! # Memory
@@ -72,6 +75,7 @@
 //!
 //! ```
 //! use glam::DVec3;
+//! use volmorph_deform::LinearMap;
 //! use volmorph_lattice::BSplineLattice;
 //! use volmorph_volume::{Geometry, Volume};
 //! use volmorph_warp::incremental::IncrementalPushForward;
@@ -83,9 +87,12 @@
 //! let lattice = BSplineLattice::uniform_cubic_around(lo, hi, [7, 7, 7])?;
 //! let opts = AntialiasOptions::default();
 //! let mut engine = IncrementalPushForward::new(&v, lattice, &g, &opts)?;
-//! let report = engine.move_control_points(&[([2, 2, 2], DVec3::new(1.5, -0.5, 0.25))])?;
+//! // Move control point [2, 2, 2] (parameter 2 + 7·(2 + 7·2)) by (1.5, −0.5, 0.25).
+//! let k = engine.map().parameter_of([2, 2, 2])?;
+//! let p = engine.map().control_point([2, 2, 2])? + DVec3::new(1.5, -0.5, 0.25);
+//! let report = engine.set_parameters(&[(k, p)])?;
 //! assert!(report.redone > 0 && report.redone < v.len());
-//! let full = push_forward_antialiased_f32(&v, engine.lattice(), &g, &opts)?;
+//! let full = push_forward_antialiased_f32(&v, engine.map(), &g, &opts)?;
 //! for (a, b) in engine.volume().data().iter().zip(full.volume.data()) {
 //!     assert!((a - b).abs() <= 1e-5 * 10.0);
 //! }
@@ -98,9 +105,8 @@ use std::sync::atomic::Ordering::Relaxed;
 
 use glam::DVec3;
 use rayon::prelude::*;
-use volmorph_deform::SpaceMap;
-use volmorph_lattice::BSplineLattice;
-use volmorph_volume::{Geometry, Volume, Voxel};
+use volmorph_deform::live::{Influence, LinearMap, changed_parameters};
+use volmorph_volume::{Geometry, IndexBox, Volume, Voxel};
 
 use crate::WarpError;
 use crate::pushforward::{
@@ -115,52 +121,10 @@ use crate::tally::{Region, Voxels, reaches_grid, row, splat, vmax, vmin};
 /// time, a voxel missed would be wrong, so the margin is generous.
 pub const PARAMETER_MARGIN: f64 = 1e-6;
 
-/// A box of voxel indices `start[a] .. end[a]` per axis (half-open; empty if any
-/// `start[a] >= end[a]`).
-#[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
-pub struct IndexBox {
-    /// First index per axis (x, y, z).
-    pub start: [usize; 3],
-    /// One past the last index per axis.
-    pub end: [usize; 3],
-}
-
-impl IndexBox {
-    /// Number of voxels in the box.
-    #[must_use]
-    pub fn len(&self) -> usize {
-        (0..3)
-            .map(|a| self.end[a].saturating_sub(self.start[a]))
-            .product()
-    }
-
-    /// `true` if the box holds no voxel.
-    #[must_use]
-    pub fn is_empty(&self) -> bool {
-        self.len() == 0
-    }
-
-    /// `true` if voxel `[i, j, k]` lies in the box.
-    #[must_use]
-    pub fn contains(&self, index: [usize; 3]) -> bool {
-        (0..3).all(|a| index[a] >= self.start[a] && index[a] < self.end[a])
-    }
-
-    fn of(r: &Region) -> Self {
-        if r.is_empty() {
-            return Self::default();
-        }
-        Self {
-            start: r.lo,
-            end: [0, 1, 2].map(|a| r.lo[a] + r.dims[a]),
-        }
-    }
-}
-
 /// What an update of an [`IncrementalPushForward`] did. Counts only, no timings.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
 pub struct UpdateReport {
-    /// Control points whose position changed.
+    /// Parameters (control points, handle targets) whose value changed.
     pub moved: usize,
     /// Voxel centres whose images were re-evaluated (including the one-voxel margin around
     /// the source that averaged face centres use).
@@ -172,9 +136,9 @@ pub struct UpdateReport {
     /// The output voxels recomputed: every one whose value may have changed (output
     /// indices; empty if none).
     pub output_box: IndexBox,
-    /// The redone voxels under the old lattice.
+    /// The redone voxels under the old map.
     pub before: PushForwardStats,
-    /// The redone voxels under the new lattice. The engine's [`stats`] change by
+    /// The redone voxels under the new map. The engine's [`stats`] change by
     /// `after − before`.
     ///
     /// [`stats`]: IncrementalPushForward::stats
@@ -193,29 +157,32 @@ const BLOCK: [usize; 3] = [16, 1, 1];
 /// reach would visit most blocks twice.
 const MIN_SLAB_PLANES: usize = 8;
 
-/// What a source voxel's proxy box does under the current lattice (one byte per voxel).
+/// What a source voxel's proxy box does under the current map (one byte per voxel).
 const MAPPED: u8 = 0;
 /// See [`MAPPED`]: the box overlaps no output voxel.
 const OUTSIDE: u8 = 1;
 /// See [`MAPPED`]: a face-centre image is NaN or infinite.
 const NON_FINITE: u8 = 2;
 
-/// The antialiased push-forward of a source volume through a [`BSplineLattice`], kept up to
-/// date under control-point moves by recomputing only the output region they can change
-/// (see the [module docs](self) for the algorithm, its exactness and its memory use).
+/// The antialiased push-forward of a source volume through a [`LinearMap`] (a lattice, affine
+/// or frame MLS, a thin-plate spline), kept up to date under parameter moves by recomputing
+/// only the output region they can change: the voxels the moved parameters'
+/// [`Influence`] reaches (see the [module docs](self) for the algorithm, its exactness and its
+/// memory use). A lattice's control point influences the image of its support box; a handle
+/// map's target influences everything, so there an update is a full recompute.
 ///
 /// The result always equals
 /// [`push_forward_antialiased_f32`](crate::pushforward::push_forward_antialiased_f32) of the
-/// source with [`lattice`](Self::lattice) on the output geometry with the engine's options
+/// source with [`map`](Self::map) on the output geometry with the engine's options
 /// (to the `f32` rounding of the latter), and [`stats`](Self::stats) equals its
 /// [`PushForwardStats`]. It is moreover, up to the rounding of re-evaluated centre images,
-/// the volume a new engine built with the current lattice holds, whatever the edits that
+/// the volume a new engine built with the current map holds, whatever the edits that
 /// led to it, and bit for bit the same for any number of threads.
 #[derive(Debug)]
-pub struct IncrementalPushForward {
+pub struct IncrementalPushForward<M> {
     source: Geometry,
     values: Vec<f32>,
-    lattice: BSplineLattice,
+    map: M,
     output: Geometry,
     to_index: ToIndex,
     background: f64,
@@ -367,8 +334,19 @@ impl Segments {
     }
 }
 
-impl IncrementalPushForward {
-    /// Push `source` (values converted to `f32`) forward through `lattice` onto `output` with
+/// The [`IndexBox`] of a region (empty for an empty region).
+fn index_box_of(r: &Region) -> IndexBox {
+    if r.is_empty() {
+        return IndexBox::default();
+    }
+    IndexBox {
+        start: r.lo,
+        end: [0, 1, 2].map(|a| r.lo[a] + r.dims[a]),
+    }
+}
+
+impl<M: LinearMap + Clone> IncrementalPushForward<M> {
+    /// Push `source` (values converted to `f32`) forward through `map` onto `output` with
     /// True's box-filter antialiasing, keeping the state for incremental updates.
     ///
     /// `options.face_centres` must be [`FaceCentres::AveragedCentres`] (True's method, the
@@ -378,11 +356,11 @@ impl IncrementalPushForward {
     /// # Errors
     /// [`WarpError::Geometry`] for an invalid `output`, [`WarpError::Background`] for a
     /// non-finite background, [`WarpError::Unsupported`] for
-    /// [`FaceCentres::Mapped`], [`WarpError::MapOnGrid`] if the lattice fails on the
+    /// [`FaceCentres::Mapped`], [`WarpError::MapOnGrid`] if the map fails on the
     /// voxel-centre grid, [`WarpError::Allocation`] if a buffer cannot be allocated.
     pub fn new<T: Voxel>(
         source: &Volume<T>,
-        lattice: BSplineLattice,
+        map: M,
         output: &Geometry,
         options: &AntialiasOptions,
     ) -> Result<Self, WarpError> {
@@ -414,8 +392,7 @@ impl IncrementalPushForward {
         let to_index = ToIndex::new(output);
         let mut centres = try_filled(clen, DVec3::ZERO, "voxel-centre images")?;
         let grid = offset_grid(&g, DVec3::splat(-1.0), cdims);
-        lattice
-            .apply_grid(&grid, &mut centres)
+        map.apply_grid(&grid, &mut centres)
             .map_err(|source| WarpError::MapOnGrid {
                 grid: "voxel-centre",
                 source,
@@ -437,7 +414,7 @@ impl IncrementalPushForward {
         let mut engine = Self {
             source: g,
             values,
-            lattice,
+            map,
             output: *output,
             to_index,
             background: options.background,
@@ -473,10 +450,10 @@ impl IncrementalPushForward {
         &self.volume
     }
 
-    /// The lattice the current volume is the push-forward through.
+    /// The map the current volume is the push-forward through.
     #[must_use]
-    pub fn lattice(&self) -> &BSplineLattice {
-        &self.lattice
+    pub fn map(&self) -> &M {
+        &self.map
     }
 
     /// The source geometry.
@@ -497,7 +474,7 @@ impl IncrementalPushForward {
         self.background
     }
 
-    /// What happens to the source voxels under the current lattice (equal to the
+    /// What happens to the source voxels under the current map (equal to the
     /// [`PushForwardStats`] of a full push-forward).
     #[must_use]
     pub fn stats(&self) -> PushForwardStats {
@@ -510,70 +487,59 @@ impl IncrementalPushForward {
         self.volume
     }
 
-    /// Displace control points: `(index, delta)` moves control point `index` (lattice
-    /// indices `[i, j, k]`) by `delta` (physical units), in order (an index may repeat), then
-    /// updates the push-forward incrementally (see the [module docs](self)).
+    /// Set parameters: `(k, value)` gives parameter `k` (see [`LinearMap`]; for a lattice,
+    /// control point `i + nu·(j + nv·k)`) the new value `value` (physical units), in order (a
+    /// `k` may repeat), then updates the push-forward incrementally (see the
+    /// [module docs](self)).
     ///
     /// # Errors
-    /// [`WarpError::ControlPoint`] if an index is out of range or a new position is NaN or
-    /// infinite; [`WarpError::MapOnGrid`] if the new lattice fails on the voxel-centre grid;
+    /// [`WarpError::Parameters`] if an index is out of range or a new value is NaN or
+    /// infinite; [`WarpError::MapOnGrid`] if the new map fails on the voxel-centre grid;
     /// [`WarpError::Allocation`] if the re-evaluated centre images cannot be stored. On error
     /// the engine is unchanged.
-    pub fn move_control_points(
+    pub fn set_parameters(
         &mut self,
-        moves: &[([usize; 3], DVec3)],
+        changes: &[(usize, DVec3)],
     ) -> Result<UpdateReport, WarpError> {
-        let mut lattice = self.lattice.clone();
-        for &(index, delta) in moves {
-            lattice
-                .move_control_point(index, delta)
-                .map_err(WarpError::ControlPoint)?;
-        }
-        self.set_lattice(lattice)
+        let mut map = self.map.clone();
+        map.set_some_parameters(changes)
+            .map_err(WarpError::Parameters)?;
+        let (old, new) = (self.map.parameters(), map.parameters());
+        let mut moved: Vec<usize> = changes
+            .iter()
+            .map(|c| c.0)
+            .filter(|&k| old.get(k) != new.get(k))
+            .collect();
+        moved.sort_unstable();
+        moved.dedup();
+        self.update(map, &moved)
     }
 
-    /// Replace the lattice by `lattice`, which must have the same knots and frame: the
-    /// control points that differ are found and the push-forward is updated incrementally.
+    /// Replace the map by `map`, which must have the same structure
+    /// ([`LinearMap::same_structure`]: same knots and frame, same source handles): the
+    /// parameters that differ are found and the push-forward is updated incrementally.
     ///
     /// # Errors
-    /// [`WarpError::LatticeMismatch`] if the knots or the frame differ;
+    /// [`WarpError::StructureMismatch`] if the structure differs;
     /// [`WarpError::MapOnGrid`] and [`WarpError::Allocation`] as
-    /// [`move_control_points`](Self::move_control_points). On error the engine is unchanged.
-    pub fn set_lattice(&mut self, lattice: BSplineLattice) -> Result<UpdateReport, WarpError> {
-        if lattice.knots() != self.lattice.knots() || lattice.frame() != self.lattice.frame() {
-            return Err(WarpError::LatticeMismatch);
+    /// [`set_parameters`](Self::set_parameters). On error the engine is unchanged.
+    pub fn set_map(&mut self, map: M) -> Result<UpdateReport, WarpError> {
+        if !map.same_structure(&self.map) {
+            return Err(WarpError::StructureMismatch);
         }
-        let [cx, cy, _] = lattice.counts();
-        let moved: Vec<[usize; 3]> = lattice
-            .spline()
-            .homogeneous_coefficients()
-            .chunks_exact(3)
-            .zip(
-                self.lattice
-                    .spline()
-                    .homogeneous_coefficients()
-                    .chunks_exact(3),
-            )
-            .enumerate()
-            .filter(|(_, (a, b))| a != b)
-            .map(|(n, _)| [n % cx, (n / cx) % cy, n / (cx * cy)])
-            .collect();
-        self.update(lattice, &moved)
+        let moved = changed_parameters(&self.map.parameters(), &map.parameters());
+        self.update(map, &moved)
     }
 
-    /// Update from the current lattice to `lattice`, whose control points `moved` differ.
-    fn update(
-        &mut self,
-        lattice: BSplineLattice,
-        moved: &[[usize; 3]],
-    ) -> Result<UpdateReport, WarpError> {
+    /// Update from the current map to `map`, whose parameters `moved` differ.
+    fn update(&mut self, map: M, moved: &[usize]) -> Result<UpdateReport, WarpError> {
         let mut report = UpdateReport {
             moved: moved.len(),
             ..UpdateReport::default()
         };
-        let influenced = self.influenced_centres(&lattice, moved);
+        let influenced = self.influenced_centres(&map, moved);
         if influenced.is_empty() {
-            self.lattice = lattice;
+            self.map = map;
             return Ok(report);
         }
         // Source voxels reading an influenced centre (their own or a neighbour's).
@@ -598,8 +564,7 @@ impl IncrementalPushForward {
         let len = influenced.len();
         reserve(&mut self.fresh, len, "voxel-centre images")?;
         self.fresh.resize(len, DVec3::ZERO);
-        lattice
-            .apply_grid(&sub, &mut self.fresh[..len])
+        map.apply_grid(&sub, &mut self.fresh[..len])
             .map_err(|source| WarpError::MapOnGrid {
                 grid: "voxel-centre",
                 source,
@@ -633,7 +598,7 @@ impl IncrementalPushForward {
         self.reset_statuses(&redo, self.insane == 0);
         self.recompute(&touched, &redo);
         let after = self.count(&redo);
-        self.lattice = lattice;
+        self.map = map;
         self.stats = PushForwardStats {
             mapped: self.stats.mapped.saturating_sub(before.mapped) + after.mapped,
             non_finite: self.stats.non_finite.saturating_sub(before.non_finite) + after.non_finite,
@@ -641,47 +606,37 @@ impl IncrementalPushForward {
         };
         report.remapped = len;
         report.redone = redo.len();
-        report.source_box = IndexBox::of(&redo);
-        report.output_box = IndexBox::of(&touched);
+        report.source_box = index_box_of(&redo);
+        report.output_box = index_box_of(&touched);
         report.before = before;
         report.after = after;
         Ok(report)
     }
 
     /// The box, in margin coordinates (source index + 1, `0 ..= n + 1` per axis), of the
-    /// voxel centres whose images can change when control points `moved` change.
-    fn influenced_centres(&self, lattice: &BSplineLattice, moved: &[[usize; 3]]) -> Region {
-        let knots = lattice.knots();
-        let mut plo = [f64::INFINITY; 3];
-        let mut phi = [f64::NEG_INFINITY; 3];
-        for index in moved {
-            for a in 0..3 {
-                let p = knots[a].degree();
-                for span in knots[a].spans() {
-                    if span.index >= index[a] && span.index <= index[a] + p {
-                        plo[a] = plo[a].min(span.start);
-                        phi[a] = phi[a].max(span.end);
-                    }
-                }
+    /// voxel centres whose images can change when parameters `moved` of `map` change: those in
+    /// the parameters' [`Influence`].
+    fn influenced_centres(&self, map: &M, moved: &[usize]) -> Region {
+        let (lo, hi) = match map.influence(moved) {
+            Influence::Nowhere => return Region::default(),
+            Influence::Everywhere => {
+                return Region {
+                    lo: [0; 3],
+                    dims: self.source.dims.map(|n| n + 2),
+                };
             }
-        }
-        if (0..3).any(|a| plo[a].partial_cmp(&phi[a]).is_none_or(|o| o.is_gt())) {
-            return Region::default();
-        }
-        // Source continuous indices of the parameter box's corners.
-        let frame = lattice.frame();
-        let mut lo = DVec3::INFINITY;
-        let mut hi = DVec3::NEG_INFINITY;
-        for c in 0..8 {
-            let u = DVec3::new(
-                if c & 1 == 0 { plo[0] } else { phi[0] },
-                if c & 2 == 0 { plo[1] } else { phi[1] },
-                if c & 4 == 0 { plo[2] } else { phi[2] },
-            );
-            let x = self.source.physical_to_index(frame.to_physical(u));
-            lo = lo.min(x);
-            hi = hi.max(x);
-        }
+            Influence::Within(corners) => {
+                // Source continuous indices of the region's corners.
+                let mut lo = DVec3::INFINITY;
+                let mut hi = DVec3::NEG_INFINITY;
+                for c in corners {
+                    let x = self.source.physical_to_index(c);
+                    lo = lo.min(x);
+                    hi = hi.max(x);
+                }
+                (lo, hi)
+            }
+        };
         let mut r = Region::default();
         for a in 0..3 {
             let n = self.source.dims[a] as f64;

@@ -226,6 +226,31 @@ impl FoldingReport {
         Ok(Self::of(jacobian_determinant(map, grid)?.data()))
     }
 
+    /// Summary of `map` on an `n³` grid spanning the box `lo ..= hi` (axis-aligned; an axis
+    /// along which the box is flat gets a tiny extent, so the grid stays valid), e.g. the
+    /// bounding box of a mesh a map deforms.
+    ///
+    /// # Errors
+    /// [`WarpError::InvalidOption`] for `n < 2` or a non-finite box; as [`jacobian_determinant`].
+    pub fn over_box<M: SpaceMap + ?Sized>(
+        map: &M,
+        lo: glam::DVec3,
+        hi: glam::DVec3,
+        n: usize,
+    ) -> Result<Self, WarpError> {
+        if n < 2 || !(lo.is_finite() && hi.is_finite()) {
+            return Err(WarpError::InvalidOption(format!(
+                "a fold report needs at least 2 nodes per axis over a finite box (got {n} over \
+                 {lo} ..= {hi})"
+            )));
+        }
+        let ext = (hi - lo).max(glam::DVec3::splat(1e-9 * (hi - lo).max_element().max(1.0)));
+        let g = Geometry::new([n; 3])
+            .with_origin(lo)
+            .with_spacing(ext / (n - 1) as f64);
+        Self::of_map(map, &g)
+    }
+
     /// `true` if any voxel folds (`J ≤ 0`) or has a non-finite determinant.
     #[must_use]
     pub fn folds(&self) -> bool {

@@ -2,17 +2,21 @@
 //!
 //! Every operation names its direction (see DESIGN.md, "Direction of a map"):
 //!
+//! * [`apply`] — one entry point, [`apply::warp_volume`], for every method below, named by
+//!   direction ([`apply::WarpMethod`]).
 //! * [`pullback`] — *pull-back resampling*: output voxel `x` takes the input's value at
 //!   `map(x)` (ITK's resampling convention).
 //! * [`pushforward`] — *push-forward*: every input voxel is sent to `map(x)` in the output
 //!   (free-form deformation of the model, True 1992 §5.3–§5.4).
-//! * [`incremental`] — the antialiased push-forward kept up to date under control-point
-//!   moves by redoing only the influenced region (True 1992 §5.3, the main loop).
+//! * [`incremental`] — the antialiased push-forward kept up to date under parameter moves of
+//!   any map linear in its parameters (lattices, affine and frame MLS, thin-plate splines) by
+//!   redoing only the influenced region (True 1992 §5.3, the main loop).
 //! * [`inverse`] — *pull-back through the inverse of a push-forward map*: output voxel `y`
 //!   takes the input's value at `map⁻¹(y)` (Newton inversion per voxel), rendering the model
 //!   deformed by a free-form deformation without push-forward's holes and aliasing.
 //! * [`jacobian`] — determinant maps of a map on a grid, and folding statistics.
 
+pub mod apply;
 mod error;
 pub mod incremental;
 pub mod inverse;

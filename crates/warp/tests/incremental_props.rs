@@ -10,6 +10,19 @@ use volmorph_warp::WarpError;
 use volmorph_warp::incremental::{IncrementalPushForward, UpdateReport};
 use volmorph_warp::pushforward::{AntialiasOptions, FaceCentres, push_forward_antialiased_f32};
 
+/// Displace control points of the engine's lattice (`(index, delta)` pairs) through the
+/// generic parameter interface.
+fn move_cps(
+    e: &mut IncrementalPushForward<BSplineLattice>,
+    moves: &[([usize; 3], DVec3)],
+) -> Result<volmorph_warp::incremental::UpdateReport, volmorph_warp::WarpError> {
+    let changes = e
+        .map()
+        .changes_for_displacements(moves)
+        .map_err(volmorph_warp::WarpError::Parameters)?;
+    e.set_parameters(&changes)
+}
+
 /// Agreement with the full push-forward, as a fraction of the source's value range (the
 /// full push-forward tallies in f32, about 1e-7 relative per term).
 const REL_TOL: f64 = 1e-5;
@@ -62,8 +75,12 @@ fn range(v: &Volume<f32>) -> f64 {
 }
 
 /// The engine agrees with a full push-forward through its current lattice.
-fn assert_matches_full(e: &IncrementalPushForward, src: &Volume<f32>, opts: &AntialiasOptions) {
-    let full = push_forward_antialiased_f32(src, e.lattice(), e.output_geometry(), opts).unwrap();
+fn assert_matches_full(
+    e: &IncrementalPushForward<BSplineLattice>,
+    src: &Volume<f32>,
+    opts: &AntialiasOptions,
+) {
+    let full = push_forward_antialiased_f32(src, e.map(), e.output_geometry(), opts).unwrap();
     let tol = REL_TOL * range(src);
     let mut worst = 0.0f64;
     for (a, b) in e.volume().data().iter().zip(full.volume.data()) {
@@ -75,12 +92,12 @@ fn assert_matches_full(e: &IncrementalPushForward, src: &Volume<f32>, opts: &Ant
 
 /// The engine holds bit for bit what a new engine built with its current lattice holds.
 fn assert_equals_fresh_engine(
-    e: &IncrementalPushForward,
+    e: &IncrementalPushForward<BSplineLattice>,
     src: &Volume<f32>,
     opts: &AntialiasOptions,
 ) {
     let fresh =
-        IncrementalPushForward::new(src, e.lattice().clone(), e.output_geometry(), opts).unwrap();
+        IncrementalPushForward::new(src, e.map().clone(), e.output_geometry(), opts).unwrap();
     let worst = e
         .volume()
         .data()
@@ -136,12 +153,12 @@ fn run_sequence(
     let mut e = IncrementalPushForward::new(src, lattice, output, &opts).unwrap();
     assert_matches_full(&e, src, &opts);
     let mut rng = Rng(seed);
-    let counts = e.lattice().counts();
+    let counts = e.map().counts();
     for step in 0..steps {
         let count = if step % 2 == 0 { 1 } else { 2 + rng.below(4) };
         let moves = random_moves(&mut rng, counts, count, scale, interior_only);
         let before = e.volume().clone();
-        let report = e.move_control_points(&moves).unwrap();
+        let report = move_cps(&mut e, &moves).unwrap();
         assert_matches_full(&e, src, &opts);
         assert_equals_fresh_engine(&e, src, &opts);
         assert_eq!(report.redone, report.source_box.len());
@@ -250,20 +267,15 @@ fn move_and_move_back_restores_the_volume() {
     let mut history = Vec::new();
     for _ in 0..5 {
         let moves = random_moves(&mut rng, [8, 8, 8], 3, 2.0, false);
-        e.move_control_points(&moves).unwrap();
+        move_cps(&mut e, &moves).unwrap();
         history.push(moves);
     }
     for moves in history.iter().rev() {
         let back: Vec<_> = moves.iter().rev().map(|&(i, d)| (i, -d)).collect();
-        e.move_control_points(&back).unwrap();
+        move_cps(&mut e, &back).unwrap();
     }
     // Control points are back to their places (up to f64 rounding of the round trip).
-    for (a, b) in e
-        .lattice()
-        .control_points()
-        .iter()
-        .zip(lat.control_points())
-    {
+    for (a, b) in e.map().control_points().iter().zip(lat.control_points()) {
         assert!((*a - b).length() <= 1e-12 * b.length().max(1.0));
     }
     let tol = (REL_TOL * range(&src)) as f32;
@@ -272,7 +284,7 @@ fn move_and_move_back_restores_the_volume() {
     }
     assert_eq!(e.stats(), stats);
     // Setting the original lattice back restores it too.
-    e.set_lattice(lat).unwrap();
+    e.set_map(lat).unwrap();
     for (a, b) in e.volume().data().iter().zip(original.data()) {
         assert!((a - b).abs() <= tol, "{a} vs {b}");
     }
@@ -287,12 +299,14 @@ fn zero_move_changes_nothing() {
     let mut e =
         IncrementalPushForward::new(&src, lat.clone(), &g, &AntialiasOptions::default()).unwrap();
     let before = e.volume().clone();
-    let report = e
-        .move_control_points(&[([2, 3, 2], DVec3::ZERO), ([1, 1, 1], DVec3::ZERO)])
-        .unwrap();
+    let report = move_cps(
+        &mut e,
+        &[([2, 3, 2], DVec3::ZERO), ([1, 1, 1], DVec3::ZERO)],
+    )
+    .unwrap();
     assert_eq!(report, UpdateReport::default());
     assert_eq!(e.volume(), &before);
-    let report = e.set_lattice(lat).unwrap();
+    let report = e.set_map(lat).unwrap();
     assert_eq!(report.moved, 0);
     assert_eq!(e.volume(), &before);
 }
@@ -315,14 +329,12 @@ fn moves_near_or_beyond_the_source_touch_only_what_they_reach() {
     .unwrap();
     let mut e = IncrementalPushForward::new(&src, lat, &g, &opts).unwrap();
     let before = e.volume().clone();
-    let r = e
-        .move_control_points(&[([2, 1, 1], DVec3::new(0.3, 0.2, 0.0))])
-        .unwrap();
+    let r = move_cps(&mut e, &[([2, 1, 1], DVec3::new(0.3, 0.2, 0.0))]).unwrap();
     assert_eq!(r.moved, 1);
     assert_eq!((r.redone, r.remapped), (0, 0));
     assert!(r.source_box.is_empty() && r.output_box.is_empty());
     assert_eq!(e.volume(), &before);
-    let moved = e.lattice().control_point([2, 1, 1]).unwrap();
+    let moved = e.map().control_point([2, 1, 1]).unwrap();
     assert!(
         (moved - DVec3::new(25.3, 4.9, 4.75)).length() < 1e-12,
         "{moved}"
@@ -338,9 +350,7 @@ fn moves_near_or_beyond_the_source_touch_only_what_they_reach() {
     .unwrap();
     let mut e = IncrementalPushForward::new(&src, lat, &g, &opts).unwrap();
     let before = e.volume().clone();
-    let r = e
-        .move_control_points(&[([3, 1, 1], DVec3::new(0.3, 0.0, 0.0))])
-        .unwrap();
+    let r = move_cps(&mut e, &[([3, 1, 1], DVec3::new(0.3, 0.0, 0.0))]).unwrap();
     assert_eq!(r.source_box.start[0], 8, "{r:?}");
     assert_eq!(r.source_box.end[0], 10, "{r:?}");
     assert_matches_full(&e, &src, &opts);
@@ -359,8 +369,7 @@ fn background_matches_full_push_forward() {
     };
     let mut e = IncrementalPushForward::new(&src, lat, &g, &opts).unwrap();
     assert_matches_full(&e, &src, &opts);
-    e.move_control_points(&[([3, 3, 3], DVec3::new(2.0, -1.0, 0.5))])
-        .unwrap();
+    move_cps(&mut e, &[([3, 3, 3], DVec3::new(2.0, -1.0, 0.5))]).unwrap();
     assert_matches_full(&e, &src, &opts);
     assert_eq!(e.background(), -7.5);
 }
@@ -374,9 +383,7 @@ fn single_interior_move_redoes_only_its_region() {
     // [1, 5]), centres x in [4.83, 24.17]: indices 5..=24, dilated 4..=25.
     let lat = BSplineLattice::uniform_cubic_around(lo, hi, [9, 9, 9]).unwrap();
     let mut e = IncrementalPushForward::new(&src, lat, &g, &AntialiasOptions::default()).unwrap();
-    let r = e
-        .move_control_points(&[([4, 4, 4], DVec3::new(1.0, 0.5, -0.5))])
-        .unwrap();
+    let r = move_cps(&mut e, &[([4, 4, 4], DVec3::new(1.0, 0.5, -0.5))]).unwrap();
     assert_eq!(r.source_box.start, [4, 4, 4]);
     assert_eq!(r.source_box.end, [26, 26, 26]);
     assert_eq!(r.redone, 22 * 22 * 22);
@@ -401,10 +408,13 @@ fn results_do_not_depend_on_thread_count() {
             let mut e =
                 IncrementalPushForward::new(&src, lat.clone(), &g, &AntialiasOptions::default())
                     .unwrap();
-            e.move_control_points(&[
-                ([4, 4, 5], DVec3::new(2.0, 1.0, -1.0)),
-                ([3, 5, 4], DVec3::new(-1.0, 0.5, 1.5)),
-            ])
+            move_cps(
+                &mut e,
+                &[
+                    ([4, 4, 5], DVec3::new(2.0, 1.0, -1.0)),
+                    ([3, 5, 4], DVec3::new(-1.0, 0.5, 1.5)),
+                ],
+            )
             .unwrap();
             e.into_volume()
         })
@@ -430,57 +440,60 @@ fn bad_edits_are_errors_and_leave_the_state_unchanged() {
     let lat = BSplineLattice::uniform_cubic_around(lo, hi, [6, 6, 6]).unwrap();
     let opts = AntialiasOptions::default();
     let mut e = IncrementalPushForward::new(&src, lat.clone(), &g, &opts).unwrap();
-    e.move_control_points(&[([2, 2, 2], DVec3::new(0.7, 0.0, 0.0))])
-        .unwrap();
+    move_cps(&mut e, &[([2, 2, 2], DVec3::new(0.7, 0.0, 0.0))]).unwrap();
     let volume = e.volume().clone();
-    let lattice = e.lattice().clone();
+    let lattice = e.map().clone();
     let stats = e.stats();
-    let unchanged = |e: &IncrementalPushForward| {
+    let unchanged = |e: &IncrementalPushForward<BSplineLattice>| {
         assert_eq!(e.volume(), &volume);
-        assert_eq!(e.lattice(), &lattice);
+        assert_eq!(e.map(), &lattice);
         assert_eq!(e.stats(), stats);
     };
     // NaN after a valid move in the same batch: nothing is applied.
-    let err = e
-        .move_control_points(&[
+    let err = move_cps(
+        &mut e,
+        &[
             ([3, 3, 3], DVec3::new(1.0, 0.0, 0.0)),
             ([2, 3, 2], DVec3::new(f64::NAN, 0.0, 0.0)),
-        ])
-        .unwrap_err();
+        ],
+    )
+    .unwrap_err();
     assert!(
-        matches!(err, WarpError::ControlPoint(DeformError::NonFinite { .. })),
+        matches!(err, WarpError::Parameters(DeformError::NonFinite { .. })),
         "{err:?}"
     );
     assert!(err.to_string().contains("not finite"), "{err}");
     unchanged(&e);
-    let err = e.move_control_points(&[([6, 0, 0], DVec3::X)]).unwrap_err();
+    let err = move_cps(&mut e, &[([6, 0, 0], DVec3::X)]).unwrap_err();
     assert!(
         matches!(
             err,
-            WarpError::ControlPoint(DeformError::IndexOutOfRange { .. })
+            WarpError::Parameters(DeformError::IndexOutOfRange { .. })
         ),
         "{err:?}"
     );
     unchanged(&e);
     // Overflow to infinity is caught too.
-    let err = e
-        .move_control_points(&[
+    let err = move_cps(
+        &mut e,
+        &[
             ([1, 1, 1], DVec3::splat(f64::MAX)),
             ([1, 1, 1], DVec3::splat(f64::MAX)),
-        ])
-        .unwrap_err();
-    assert!(matches!(err, WarpError::ControlPoint(_)), "{err:?}");
+        ],
+    )
+    .unwrap_err();
+    assert!(matches!(err, WarpError::Parameters(_)), "{err:?}");
     unchanged(&e);
     // Other knots or another frame.
     let other = BSplineLattice::uniform_cubic_around(lo, hi, [7, 6, 6]).unwrap();
     assert!(matches!(
-        e.set_lattice(other),
-        Err(WarpError::LatticeMismatch)
+        e.set_map(other),
+        Err(WarpError::StructureMismatch)
     ));
     let shifted = BSplineLattice::uniform_cubic_around(lo + 0.5, hi, [6, 6, 6]).unwrap();
     assert!(matches!(
-        e.set_lattice(shifted),
-        Err(WarpError::LatticeMismatch)
+        e.set_map(shifted),
+        Err(WarpError::StructureMismatch)
     ));
     unchanged(&e);
     // Construction errors.
@@ -536,14 +549,12 @@ fn overflowing_moves_are_counted_as_non_finite_and_undone() {
     let start = e.volume().clone();
     // Near the largest finite value: the images are finite, their output indices are not.
     let huge = DVec3::new(1.5e308, 0.0, 0.0);
-    let r = e
-        .move_control_points(&[([3, 3, 3], huge), ([4, 3, 3], huge)])
-        .unwrap();
+    let r = move_cps(&mut e, &[([3, 3, 3], huge), ([4, 3, 3], huge)]).unwrap();
     assert!(r.after.non_finite > 0, "{r:?}");
     assert_matches_full(&e, &src, &opts);
     assert_equals_fresh_engine(&e, &src, &opts);
     // Subtracting `huge` again would not restore the positions' low bits: set them.
-    e.set_lattice(lat).unwrap();
+    e.set_map(lat).unwrap();
     assert_matches_full(&e, &src, &opts);
     assert_equals_fresh_engine(&e, &src, &opts);
     let back = e

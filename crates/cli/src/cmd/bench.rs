@@ -24,7 +24,6 @@ use volmorph_warp::pushforward::{
     AntialiasOptions, push_forward_antialiased, push_forward_nearest,
 };
 
-use crate::cmd::lattice::lattice_around;
 use crate::progress;
 
 /// Size at which the targets are stated.
@@ -332,7 +331,7 @@ impl Lcg {
 /// every control point off the outer layer moved by a random vector (fixed seed) whose
 /// components are uniform in `[−½, ½]` region along each axis (length at most ≈0.87 region).
 fn moved_lattice(g: &Geometry, counts: usize) -> anyhow::Result<BSplineLattice> {
-    let mut lat = lattice_around(g, [counts; 3])?;
+    let mut lat = volmorph_lattice::BSplineLattice::identity_on_voxels(g, [counts; 3])?;
     let extent = g.spacing
         * DVec3::new(
             g.dims[0].saturating_sub(1) as f64,
@@ -447,7 +446,7 @@ fn edit_items(a: &WarpArgs, items: &mut Vec<Item>) -> anyhow::Result<()> {
     let target = |t: f64| (a.edit_size == EDIT_TARGET_SIZE).then_some(t);
     let density = phantom::density(Phantom::Teapot, [a.edit_size; 3])?;
     let grid = *density.geometry();
-    let base = lattice_around(&grid, [a.lattice; 3])?;
+    let base = volmorph_lattice::BSplineLattice::identity_on_voxels(&grid, [a.lattice; 3])?;
     let c = a.lattice / 2;
     let centre = base.control_point([c, c, c])?;
     let region = (base.control_point([c + 1, c, c])? - centre).length();
@@ -457,7 +456,10 @@ fn edit_items(a: &WarpArgs, items: &mut Vec<Item>) -> anyhow::Result<()> {
     let mut sign = -1.0;
     let (times, _) = time(a.repeat, || {
         sign = -sign;
-        Ok(engine.move_control_points(&[([c, c, c], step * sign)])?)
+        let changes = engine
+            .map()
+            .changes_for_displacements(&[([c, c, c], step * sign)])?;
+        Ok(engine.set_parameters(&changes)?)
     })?;
     items.push(Item {
         name: "incremental update, 1 control pt",
@@ -467,16 +469,16 @@ fn edit_items(a: &WarpArgs, items: &mut Vec<Item>) -> anyhow::Result<()> {
     });
     // Each run starts from the undeformed lattice (restored, untimed, by undo) and times the
     // drag: the least-norm solve and the incremental update.
-    engine.set_lattice(base.clone())?;
+    engine.set_map(base.clone())?;
     let mut session = ManipulationSession::new(base, DragOptions::with_radius(0.5 * region))?;
     let mut times = Vec::with_capacity(a.repeat);
     for _ in 0..a.repeat {
         let start = Instant::now();
         session.drag(&[Drag::new(centre, centre + step)])?;
-        engine.set_lattice(session.lattice().clone())?;
+        engine.set_map(session.lattice().clone())?;
         times.push(start.elapsed());
         session.undo();
-        engine.set_lattice(session.lattice().clone())?;
+        engine.set_map(session.lattice().clone())?;
     }
     times.sort();
     items.push(Item {
@@ -545,7 +547,7 @@ fn jittered(r: &mut Lcg, points: &[DVec3], amount: DVec3) -> Vec<DVec3> {
 
 fn handles(a: &HandlesArgs) -> anyhow::Result<()> {
     use glam::DVec2;
-    use volmorph_deform::{HandleGrid, SampledMap, SpaceMap};
+    use volmorph_deform::{LiveGrid, SampledMap, SpaceMap};
     use volmorph_handles::mls2d::{Mls2dHandles, Mls2dKind, image_grid};
     use volmorph_handles::volume_spline::VolumeSplineSystem;
     use volmorph_handles::{AffineMls, ThinPlateMap, Weighting};
@@ -635,7 +637,7 @@ fn handles(a: &HandlesArgs) -> anyhow::Result<()> {
     // Pull-back: the map from targets to sources.
     let map = AffineMls::new(&dst, &src, Weighting::default())?;
     let coarse = SampledMap::covering(&g, [a.grid; 3])?;
-    let (times, mut hg) = time(a.repeat, || Ok(HandleGrid::new(map.clone(), coarse)?))?;
+    let (times, mut hg) = time(a.repeat, || Ok(LiveGrid::new(map.clone(), coarse)?))?;
     items.push(Item {
         name: "3D affine MLS: set-up",
         times,
@@ -645,7 +647,7 @@ fn handles(a: &HandlesArgs) -> anyhow::Result<()> {
     let mut sign = -1.0;
     let (times, ()) = time(a.repeat, || {
         sign = -sign;
-        Ok(hg.move_target(0, src[0] + sign * DVec3::new(1.5, -1.0, 0.5))?)
+        Ok(hg.move_parameter(0, src[0] + sign * DVec3::new(1.5, -1.0, 0.5))?)
     })?;
     items.push(Item {
         name: "3D affine MLS: move one handle",

@@ -127,7 +127,7 @@ fn warp_demo(args: &Args, index: &mut String, timings: &mut Timings) -> anyhow::
         phantom::density(Phantom::Teapot, [n; 3])
     })?;
     let grid = *source.geometry();
-    let lattice = super::lattice::lattice_around(&grid, LATTICE_COUNTS)?;
+    let lattice = volmorph_lattice::BSplineLattice::identity_on_voxels(&grid, LATTICE_COUNTS)?;
 
     pb.set_message("initial push-forward");
     let options = AntialiasOptions::default();
@@ -142,7 +142,7 @@ fn warp_demo(args: &Args, index: &mut String, timings: &mut Timings) -> anyhow::
     let after_lattice = session.lattice().clone();
     pb.set_message("incremental update");
     let report = timings.time("incremental update of the push-forward", || {
-        engine.set_lattice(after_lattice.clone())
+        engine.set_map(after_lattice.clone())
     })?;
 
     // The incremental result must equal a full push-forward with the final lattice.
@@ -198,7 +198,7 @@ fn warp_demo(args: &Args, index: &mut String, timings: &mut Timings) -> anyhow::
     pb.set_message("undo and redo");
     let undo_diff = timings.time("undo + incremental update", || -> anyhow::Result<f64> {
         session.undo().context("nothing to undo")?;
-        engine.set_lattice(session.lattice().clone())?;
+        engine.set_map(session.lattice().clone())?;
         Ok(max_abs_diff(
             engine.volume().data(),
             &source
@@ -210,7 +210,7 @@ fn warp_demo(args: &Args, index: &mut String, timings: &mut Timings) -> anyhow::
     })?;
     timings.time("redo + incremental update", || -> anyhow::Result<()> {
         session.redo().context("nothing to redo")?;
-        engine.set_lattice(session.lattice().clone())?;
+        engine.set_map(session.lattice().clone())?;
         Ok(())
     })?;
 

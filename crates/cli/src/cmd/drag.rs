@@ -1,6 +1,7 @@
-//! `volmorph drag`: direct manipulation of a volume (True 1992 §6, after Hsu): drag points of
-//! the model to new places; the lattice's control points move by the least-norm amounts that
-//! put the dragged points exactly where asked, and the volume is warped through the result.
+//! `volmorph drag`: direct manipulation of a volume (True 1992 §6, after Hsu), as one scene
+//! session: the volume, its lattice and the warped result are scene objects, the drag is the
+//! scene's drag command (least-norm control-point moves, incremental warp update), and the
+//! outputs are the scene's exports — exactly what the studio and Python do.
 
 use std::path::PathBuf;
 use std::time::Instant;
@@ -8,15 +9,13 @@ use std::time::Instant;
 use anyhow::{Context, bail};
 use glam::DVec3;
 use volmorph_deform::SpaceMap;
-use volmorph_deform::inverse::{InverseOptions, invert_point};
-use volmorph_lattice::BSplineLattice;
-use volmorph_lattice::formats::{read_lattice, write_lattice};
-use volmorph_lattice::manipulate::{Drag, DragOptions, solve_drags};
-use volmorph_volume_io as format;
-use volmorph_warp::jacobian::{FoldingReport, jacobian_determinant};
+use volmorph_lattice::{BSplineLattice, DragOptions};
+use volmorph_maps::{AnyMap, read_map};
+use volmorph_scene::{Command, NewObject, Recipe, Scene, files};
+use volmorph_warp::apply::WarpMethod;
+use volmorph_warp::jacobian::FoldingReport;
 
-use super::lattice::lattice_around;
-use super::warp::{Method, warp};
+use super::warp::{METHOD_HELP, method};
 use crate::{args, progress};
 
 /// Arguments of `volmorph drag`.
@@ -26,10 +25,10 @@ pub struct Args {
     pub input: PathBuf,
     /// A point of the model as currently deformed (physical coordinates "x,y,z"); repeat
     /// `--from`/`--to` pairs to drag several points at once.
-    #[arg(long = "from", required = true, value_parser = point, allow_hyphen_values = true)]
+    #[arg(long = "from", required = true, value_parser = args::point, allow_hyphen_values = true)]
     pub from: Vec<DVec3>,
     /// Where that point must go ("x,y,z"), one per `--from`.
-    #[arg(long = "to", required = true, value_parser = point, allow_hyphen_values = true)]
+    #[arg(long = "to", required = true, value_parser = args::point, allow_hyphen_values = true)]
     pub to: Vec<DVec3>,
     /// Tool radius (physical units): only control points within this distance of a dragged
     /// point move. Without it, every control point that influences the point may move.
@@ -39,32 +38,23 @@ pub struct Args {
     /// stays continuous across the box surface (needs the dragged points away from it).
     #[arg(long)]
     pub freeze_boundary: bool,
-    /// The current deformation of the input (.json, .tfm, .bxf), used as a push-forward map.
-    /// Default: the identity lattice of `--counts` control points around the input.
+    /// The current deformation of the input (a lattice: .json, .tfm, .bxf), used as a
+    /// push-forward map. Default: the identity lattice of `--counts` control points around the
+    /// input.
     #[arg(long, conflicts_with = "counts")]
     pub lattice: Option<PathBuf>,
     /// Control points per axis "NX,NY,NZ" of the default identity lattice.
-    #[arg(long, default_value = "9,9,9")]
-    pub counts: String,
+    #[arg(long, default_value = "9,9,9", value_parser = args::triple::<usize>)]
+    pub counts: [usize; 3],
     /// Output volume: the input deformed by the new lattice, on the input's grid.
     #[arg(short, long)]
     pub output: PathBuf,
     /// Where to write the new lattice (.json, .tfm, .bxf).
     #[arg(long)]
     pub lattice_out: Option<PathBuf>,
-    /// How the model is deformed into the output (a push-forward, or the pull-back through
-    /// the lattice's inverse).
-    #[arg(long, value_enum, default_value_t = Method::PushforwardAntialiased)]
-    pub method: Method,
-}
-
-/// Parse a physical point "x,y,z" with finite coordinates.
-fn point(s: &str) -> anyhow::Result<DVec3> {
-    let p = DVec3::from_array(args::triple::<f64>(s)?);
-    if !p.is_finite() {
-        bail!("point {s:?} is not finite");
-    }
-    Ok(p)
+    #[doc = "How the model is deformed (see --help)."]
+    #[arg(long, default_value = "pushforward-antialiased", value_parser = method, long_help = METHOD_HELP)]
+    pub method: WarpMethod,
 }
 
 /// Run `volmorph drag`.
@@ -76,98 +66,106 @@ pub fn run(a: &Args) -> anyhow::Result<()> {
             a.to.len()
         );
     }
-    if a.method.is_pullback() {
+    if !a.method.deforms_model() {
         bail!(
-            "--method {:?} resamples through the lattice itself; a drag deforms the model, so use a push-forward or an inverse method",
+            "--method {} resamples through the lattice itself; a drag deforms the model, so use a \
+             push-forward or an inverse method",
             a.method
         );
     }
     let pb = progress::spinner(format!("reading {}", a.input.display()));
-    let vol = format::read(&a.input).context("cannot read volume")?;
-    let mut lattice = match &a.lattice {
-        Some(path) => read_lattice(path).context("cannot read lattice")?,
-        None => lattice_around(vol.geometry(), args::triple::<usize>(&a.counts)?)?,
+    let mut scene = Scene::new();
+    let volume = files::read_object(&a.input)
+        .with_context(|| format!("cannot read the volume {}", a.input.display()))?;
+    let NewObject::Volume(vol) = volume else {
+        bail!("{} is not a volume", a.input.display());
     };
-    pb.set_message("solving the drag");
-    let t0 = Instant::now();
-    let drags = material_points(&lattice, &a.from, &a.to)?;
-    let options = DragOptions {
-        radius: a.radius,
-        freeze_boundary: a.freeze_boundary,
+    let grid = *vol.geometry();
+    let lattice = match &a.lattice {
+        Some(path) => match read_map(path).context("cannot read the lattice")? {
+            AnyMap::Lattice(l) => l,
+            other => bail!(
+                "{}: a drag needs a B-spline lattice, the file holds a {} map",
+                path.display(),
+                other.kind()
+            ),
+        },
+        None => BSplineLattice::identity_on_voxels(&grid, a.counts)
+            .context("cannot place the identity lattice")?,
     };
-    let solution = solve_drags(&lattice, &drags, &options).context("cannot solve the drag")?;
-    solution
-        .apply(&mut lattice)
-        .context("cannot move the control points")?;
-    let solve_time = t0.elapsed();
-    pb.set_message("warping");
-    let t1 = Instant::now();
-    let (out, _) = warp(&vol, &lattice, a.method, 0.0, false, &pb)
-        .with_context(|| format!("cannot warp {}", a.input.display()))?;
-    let warp_time = t1.elapsed();
-    let det = jacobian_determinant(&lattice, vol.geometry())?;
-    let folding = FoldingReport::of(det.data());
+    let add = |name: &str, object| Command::Add {
+        name: name.into(),
+        object,
+    };
+    let v = scene.apply(add("input", NewObject::Volume(vol)))?.added[0];
+    let l = scene
+        .apply(add("lattice", NewObject::Map(AnyMap::Lattice(lattice))))?
+        .added[0];
+    pb.set_message("initial warp");
+    let recipe = Recipe::Warp {
+        source: v,
+        map: l,
+        method: a.method,
+        background: 0.0,
+        sampled_nodes: None,
+        swap_handles: false,
+    };
+    let w = scene.apply(add("output", NewObject::Derived(recipe)))?;
+    if let Some((_, e)) = w.errors.first() {
+        bail!("cannot warp {}: {e}", a.input.display());
+    }
+    let w = w.added[0];
+    pb.set_message("dragging");
+    let t = Instant::now();
+    let change = scene
+        .apply(Command::DragPoints {
+            map: l,
+            grabbed: a.from.clone(),
+            targets: a.to.clone(),
+            options: DragOptions {
+                radius: a.radius,
+                freeze_boundary: a.freeze_boundary,
+            },
+        })
+        .context("cannot solve the drag")?;
+    let elapsed = t.elapsed();
+    if let Some((_, e)) = change.errors.first() {
+        bail!("cannot warp {}: {e}", a.input.display());
+    }
     pb.set_message(format!("writing {}", a.output.display()));
-    format::write(&a.output, &out).context("cannot write")?;
+    scene.export(w, &a.output).context("cannot write")?;
     if let Some(path) = &a.lattice_out {
-        write_lattice(path, &lattice).context("cannot write")?;
+        scene.export(l, path).context("cannot write the lattice")?;
     }
     pb.finish_and_clear();
 
-    for (d, (from, to)) in drags.iter().zip(a.from.iter().zip(&a.to)) {
-        let landed = lattice.apply(d.material);
+    let map = scene.map(l)?;
+    for (from, to) in a.from.iter().zip(&a.to) {
+        say!("dragged {} -> {}", fmt(*from), fmt(*to));
+    }
+    if let Some(d) = change.drag {
         say!(
-            "dragged {} -> {}: now at {} (off by {:.3e})",
-            fmt(*from),
-            fmt(*to),
-            fmt(landed),
-            (landed - *to).length()
+            "moved {} control points (rank {} of {} drags, largest miss {:.3e}); drag and \
+             warp update {:.1} ms",
+            d.moved,
+            d.rank,
+            d.drags,
+            d.max_residual,
+            elapsed.as_secs_f64() * 1e3
         );
+        if d.rank < d.drags {
+            eprintln!(
+                "volmorph: warning: the drags conflict (rank {} < {}); they are met in the \
+                 least-squares sense, largest miss {:.3e}",
+                d.rank, d.drags, d.max_residual
+            );
+        }
     }
-    say!(
-        "moved {} control points (rank {} of {} drags), solve {:.2} ms, warp {:.1} ms",
-        solution.displacements().len(),
-        solution.rank(),
-        solution.drag_count(),
-        solve_time.as_secs_f64() * 1e3,
-        warp_time.as_secs_f64() * 1e3
-    );
-    if !solution.is_full_rank() {
-        eprintln!(
-            "volmorph: warning: the drags conflict (rank {} < {}); they are met in the least-squares sense, largest miss {:.3e}",
-            solution.rank(),
-            solution.drag_count(),
-            solution.max_residual()
-        );
-    }
+    let folding = FoldingReport::of_map(map as &dyn SpaceMap, &grid)?;
     if folding.count_nonpositive > 0 {
         eprintln!("volmorph: warning: the new lattice folds space: {folding}");
     }
     Ok(())
-}
-
-/// The material points (on the undeformed model) of the dragged points `from`, which are
-/// points of the model as deformed by `lattice`: `lattice⁻¹(from)` by Newton iteration.
-fn material_points(
-    lattice: &BSplineLattice,
-    from: &[DVec3],
-    to: &[DVec3],
-) -> anyhow::Result<Vec<Drag>> {
-    from.iter()
-        .zip(to)
-        .map(|(&y, &target)| {
-            let inv = invert_point(lattice, y, None, &InverseOptions::default());
-            if !inv.converged() {
-                bail!(
-                    "point {} is not on the deformed model's space: the lattice cannot be inverted there ({:?}, residual {:.3e})",
-                    fmt(y),
-                    inv.status,
-                    inv.residual
-                );
-            }
-            Ok(Drag::new(inv.point, target))
-        })
-        .collect()
 }
 
 fn fmt(p: DVec3) -> String {

@@ -11,23 +11,20 @@
 //! map built from the swapped handles (target → source), so the content found at each source
 //! handle appears at its target, and the output keeps the input's grid.
 
-use std::path::{Path, PathBuf};
+use std::path::PathBuf;
 
 use anyhow::{Context, bail};
-use glam::DVec2;
 use volmorph_deform::{SampledMap, SpaceMap};
-use volmorph_handles::handles::{HandleSet, read_point_list};
-use volmorph_handles::mls2d::{Mls2dHandles, Mls2dKind, fold_fraction, image_grid, warp_rgba};
-use volmorph_handles::{
-    AffineMls, Frame, FrameMls, RigidMls, SimilarityMls, ThinPlateMap, Weighting,
-};
+use volmorph_handles::Weighting;
+use volmorph_handles::handles::{HandleSet, read_point_list, write_point_list};
+use volmorph_handles::mls2d::{Mls2dKind, warp_picture};
+use volmorph_maps::{HandleDirection, HandleMethod, HandleOptions, handle_map};
 use volmorph_render::RgbaImage;
 use volmorph_render::{read_png, write_png_rgba};
-use volmorph_volume::Geometry;
-use volmorph_volume::sample::Interpolation;
+use volmorph_scene::files::{FileKind, kind_of};
 use volmorph_volume_io as format;
+use volmorph_warp::apply::{WarpMethod, WarpOptions, warp_volume};
 use volmorph_warp::jacobian::FoldingReport;
-use volmorph_warp::pullback::{ResampleOptions, resample_any};
 
 use crate::progress;
 
@@ -140,6 +137,18 @@ pub struct WarpArgs {
     pub output: PathBuf,
 }
 
+impl From<Method> for HandleMethod {
+    fn from(m: Method) -> Self {
+        match m {
+            Method::Affine => HandleMethod::Affine,
+            Method::Similarity => HandleMethod::Similarity,
+            Method::Rigid => HandleMethod::Rigid,
+            Method::Tps => HandleMethod::Tps,
+            Method::Frames => HandleMethod::Frames,
+        }
+    }
+}
+
 /// Run a handles subcommand.
 pub fn run(cmd: &Command) -> anyhow::Result<()> {
     match cmd {
@@ -150,109 +159,55 @@ pub fn run(cmd: &Command) -> anyhow::Result<()> {
 
 /// Read the handle set of `--handles` or `--from/--to`.
 fn read_handle_set(a: &MapArgs) -> anyhow::Result<HandleSet> {
-    match (&a.handles, &a.from, &a.to) {
-        (Some(h), _, _) => {
-            HandleSet::read(h).with_context(|| format!("cannot read handles {}", h.display()))
-        }
+    let set = match (&a.handles, &a.from, &a.to) {
+        (Some(h), _, _) => HandleSet::read(h)
+            .with_context(|| format!("cannot read the handles {}", h.display()))?,
         (None, Some(f), Some(t)) => {
             let s = read_point_list(f)
-                .with_context(|| format!("cannot read source points {}", f.display()))?;
+                .with_context(|| format!("cannot read the source points {}", f.display()))?;
             let d = read_point_list(t)
-                .with_context(|| format!("cannot read target points {}", t.display()))?;
-            Ok(HandleSet::from_lists(&s, &d)?)
+                .with_context(|| format!("cannot read the target points {}", t.display()))?;
+            HandleSet::from_lists(&s, &d)?
         }
         _ => bail!("give the handles with --handles FILE or --from SOURCES --to TARGETS"),
-    }
+    };
+    set.validate().context("bad handles")?;
+    Ok(set)
 }
 
-fn weighting(a: &MapArgs) -> anyhow::Result<Weighting> {
-    Ok(match a.weight {
-        WeightKind::InverseDistance => Weighting::InverseDistance { alpha: a.alpha },
-        WeightKind::Gaussian => Weighting::Gaussian {
-            sigma: a
-                .sigma
-                .context("--weight gaussian needs --sigma (physical width)")?,
+fn options(a: &MapArgs) -> anyhow::Result<HandleOptions> {
+    Ok(HandleOptions {
+        weighting: match a.weight {
+            WeightKind::InverseDistance => Weighting::InverseDistance { alpha: a.alpha },
+            WeightKind::Gaussian => Weighting::Gaussian {
+                sigma: a
+                    .sigma
+                    .context("--weight gaussian needs --sigma (physical width)")?,
+            },
         },
+        beta: a.beta,
+        smoothing: a.smoothing,
     })
 }
 
-/// The map sending `sources` to `targets` (points or frames) by `a.method`.
-fn build_map(a: &MapArgs, set: &HandleSet, swap: bool) -> anyhow::Result<Box<dyn SpaceMap>> {
-    if set.dim != 3 {
-        bail!(
-            "3D deformations need 3D handles (the file has {}D coordinates)",
-            set.dim
-        );
-    }
-    let (mut s, mut t) = (set.sources(), set.targets());
-    if swap {
-        std::mem::swap(&mut s, &mut t);
-    }
-    let w = weighting(a)?;
-    let need_points = |name: &str| -> anyhow::Result<()> {
-        if set.points.is_empty() {
-            bail!("--method {name} needs point handles (the file has none)");
-        }
-        Ok(())
-    };
-    let map: Box<dyn SpaceMap> = match a.method {
-        Method::Affine => {
-            need_points("affine")?;
-            Box::new(AffineMls::new(&s, &t, w)?)
-        }
-        Method::Similarity => {
-            need_points("similarity")?;
-            Box::new(SimilarityMls::new(&s, &t, w)?)
-        }
-        Method::Rigid => {
-            need_points("rigid")?;
-            Box::new(RigidMls::new(&s, &t, w)?)
-        }
-        Method::Tps => {
-            need_points("tps")?;
-            Box::new(ThinPlateMap::new(&s, &t, a.smoothing)?)
-        }
-        Method::Frames => {
-            if set.frames.is_empty() {
-                bail!("--method frames needs frame handles (a JSON \"frames\" list)");
-            }
-            let (mut fs, mut ft): (Vec<Frame>, Vec<Frame>) = set.frames.iter().copied().unzip();
-            if swap {
-                std::mem::swap(&mut fs, &mut ft);
-            }
-            Box::new(FrameMls::new(&fs, &ft, a.beta, w)?)
-        }
-    };
-    Ok(map)
-}
-
-fn is_mesh(path: &Path) -> bool {
-    let name = path
-        .file_name()
-        .and_then(|n| n.to_str())
-        .unwrap_or("")
-        .to_ascii_lowercase();
-    let name = name.strip_suffix(".gz").unwrap_or(&name);
-    [".obj", ".stl", ".ply", ".off"]
-        .iter()
-        .any(|e| name.ends_with(e))
-}
-
 fn warp(a: &WarpArgs) -> anyhow::Result<()> {
-    if a.grid < 2 {
-        bail!("--grid must be at least 2 nodes per axis, got {}", a.grid);
-    }
     let set = read_handle_set(&a.map)?;
-    set.validate().context("bad handles")?;
+    let opts = options(&a.map)?;
     let pb = progress::spinner(format!("reading {}", a.input.display()));
-    if is_mesh(&a.input) {
-        let mut m = volmorph_mesh::read(&a.input).context("cannot read mesh")?;
-        let map = build_map(&a.map, &set, false).context("cannot build the deformation")?;
+    if kind_of(&a.input)? == FileKind::Mesh {
+        let mut m = volmorph_mesh::read(&a.input).context("cannot read the mesh")?;
+        let map = handle_map(
+            &set,
+            a.map.method.into(),
+            &opts,
+            HandleDirection::SourcesToTargets,
+        )
+        .context("cannot build the deformation")?;
         pb.set_message("moving vertices");
         let pts = m.positions().to_vec();
         map.apply_batch(&pts, m.positions_mut())?;
         let fold = match m.bounding_box() {
-            Some((lo, hi)) => Some(fold_report(&*map, lo, hi, a.grid)?),
+            Some((lo, hi)) => Some(FoldingReport::over_box(&map, lo, hi, a.grid)?),
             None => None,
         };
         pb.set_message(format!("writing {}", a.output.display()));
@@ -264,23 +219,29 @@ fn warp(a: &WarpArgs) -> anyhow::Result<()> {
         }
         return Ok(());
     }
-    let vol = format::read(&a.input).context("cannot read volume")?;
+    let vol = format::read(&a.input).context("cannot read the volume")?;
     let grid = *vol.geometry();
-    // Pull-back: the map from target space to source space.
-    let map = build_map(&a.map, &set, true)
-        .context("cannot build the pull-back deformation (targets → sources)")?;
-    let coarse = SampledMap::covering(&grid, coarse_dims(&grid, a.grid))?;
-    let options = ResampleOptions::new(Interpolation::Linear, a.default);
+    // Pull-back: the map from target space to source space, so the content at each source
+    // appears at its target.
+    let map = handle_map(
+        &set,
+        a.map.method.into(),
+        &opts,
+        HandleDirection::TargetsToSources,
+    )
+    .context("cannot build the pull-back deformation (targets → sources)")?;
     pb.set_message("warping");
-    let out = if a.exact {
-        resample_any(&vol, &*map, &grid, &options)?
-    } else {
-        let sampled = SampledMap::from_map(&*map, coarse)?;
-        resample_any(&vol, &sampled, &grid, &options)?
+    let options = WarpOptions {
+        background: a.default,
+        mask: false,
+        sampled_nodes: (!a.exact).then_some(a.grid),
     };
-    let report = FoldingReport::of_map(&*map, &coarse)?;
+    let out = warp_volume(&vol, &map, &grid, WarpMethod::PullbackLinear, &options)
+        .with_context(|| format!("cannot warp {}", a.input.display()))?;
+    let coarse = SampledMap::covering(&grid, grid.dims.map(|d| a.grid.min(d).max(1)))?;
+    let report = FoldingReport::of_map(&map, &coarse)?;
     pb.set_message(format!("writing {}", a.output.display()));
-    format::write(&a.output, &out).context("cannot write")?;
+    format::write(&a.output, &out.volume).context("cannot write")?;
     pb.finish_and_clear();
     say!(
         "warped {} by {} handles ({})",
@@ -298,44 +259,21 @@ fn warp(a: &WarpArgs) -> anyhow::Result<()> {
 
 fn apply(a: &ApplyArgs) -> anyhow::Result<()> {
     let set = read_handle_set(&a.map)?;
-    set.validate().context("bad handles")?;
     let pts = read_point_list(&a.input)
-        .with_context(|| format!("cannot read points {}", a.input.display()))?;
-    let map = build_map(&a.map, &set, false).context("cannot build the deformation")?;
+        .with_context(|| format!("cannot read the points {}", a.input.display()))?;
+    let map = handle_map(
+        &set,
+        a.map.method.into(),
+        &options(&a.map)?,
+        HandleDirection::SourcesToTargets,
+    )
+    .context("cannot build the deformation")?;
     let mut out = vec![glam::DVec3::ZERO; pts.len()];
     map.apply_batch(&pts, &mut out)?;
-    let mut text = String::with_capacity(out.len() * 64);
-    for p in &out {
-        text.push_str(&format!("{:?} {:?} {:?}\n", p.x, p.y, p.z));
-    }
-    volmorph_io::write_atomic(&a.output, |w| {
-        use std::io::Write;
-        w.write_all(text.as_bytes())
-            .map_err(|e| volmorph_io::IoError::os(&a.output, e))
-    })
-    .context("cannot write")?;
+    write_point_list(&a.output, &out)
+        .with_context(|| format!("cannot write {}", a.output.display()))?;
     say!("mapped {} points by {} handles", out.len(), set.len());
     Ok(())
-}
-
-/// Nodes per axis of the coarse grid: `n`, but no more than the volume has voxels (and at
-/// least 1 where the volume is flat).
-fn coarse_dims(grid: &Geometry, n: usize) -> [usize; 3] {
-    grid.dims.map(|d| n.min(d).max(1))
-}
-
-/// Folding summary of `map` on an `n³` grid spanning the box `lo..hi` (padded when flat).
-fn fold_report(
-    map: &dyn SpaceMap,
-    lo: glam::DVec3,
-    hi: glam::DVec3,
-    n: usize,
-) -> anyhow::Result<FoldingReport> {
-    let ext = (hi - lo).max(glam::DVec3::splat(1e-9));
-    let g = Geometry::new([n; 3])
-        .with_origin(lo)
-        .with_spacing(ext / (n - 1) as f64);
-    Ok(FoldingReport::of_map(map, &g)?)
 }
 
 /// Arguments of `volmorph mls2d`.
@@ -373,50 +311,26 @@ pub enum Kind2d {
 
 /// Run `volmorph mls2d`.
 pub fn run_mls2d(a: &Mls2dArgs) -> anyhow::Result<()> {
-    if a.grid < 2 {
-        bail!(
-            "--grid must be at least 2 vertices per axis, got {}",
-            a.grid
-        );
-    }
     let set = HandleSet::read(&a.handles)
-        .with_context(|| format!("cannot read handles {}", a.handles.display()))?;
-    if set.dim != 2 {
-        bail!("mls2d needs 2D handles (pixel coordinates [x, y]); the file has 3D coordinates");
-    }
-    let img = read_png(&a.input).context("cannot read picture")?;
-    let (w, h) = (img.width(), img.height());
-    let v2 = |p: glam::DVec3| DVec2::new(p.x, p.y);
-    let points: Vec<DVec2> = set.points.iter().map(|p| v2(p.0)).collect();
-    let segments: Vec<[DVec2; 2]> = set
-        .segments
-        .iter()
-        .map(|s| [v2(s.0[0]), v2(s.0[1])])
-        .collect();
-    let mut targets: Vec<DVec2> = set.points.iter().map(|p| v2(p.1)).collect();
-    targets.extend(set.segments.iter().flat_map(|s| [v2(s.1[0]), v2(s.1[1])]));
-    let handles = Mls2dHandles::new(&points, &segments, a.alpha).context("bad handles")?;
+        .with_context(|| format!("cannot read the handles {}", a.handles.display()))?;
+    let img = read_png(&a.input).context("cannot read the picture")?;
     let kind = match a.method {
         Kind2d::Affine => Mls2dKind::Affine,
         Kind2d::Similarity => Mls2dKind::Similarity,
         Kind2d::Rigid => Mls2dKind::Rigid,
     };
-    let (nx, ny) = (a.grid.min(w.max(2) as usize), a.grid.min(h.max(2) as usize));
-    let verts = image_grid(w, h, nx, ny)?;
-    let plan = handles.plan(&verts, kind)?;
-    let mut deformed = vec![DVec2::ZERO; verts.len()];
-    plan.deform(&targets, &mut deformed)?;
-    let folds = fold_fraction(nx, ny, &deformed);
-    let px = warp_rgba(w, h, img.pixels(), nx, ny, &deformed, [0; 4])?;
-    let out = RgbaImage::from_pixels(w, h, px)?;
-    write_png_rgba(&a.output, &out).context("cannot write picture")?;
+    let (w, h) = (img.width(), img.height());
+    let out = warp_picture(w, h, img.pixels(), &set, kind, a.alpha, a.grid)
+        .context("cannot deform the picture")?;
+    write_png_rgba(&a.output, &RgbaImage::from_pixels(w, h, out.pixels)?)
+        .context("cannot write the picture")?;
     say!(
-        "deformed {}×{} picture by {} handles on a {nx}×{ny} grid; {:.3}% of the grid folds \
+        "deformed {w}×{h} picture by {} handles on a {}×{} grid; {:.3}% of the grid folds \
          (Jacobian <= 0)",
-        w,
-        h,
         set.len(),
-        100.0 * folds
+        out.grid.0,
+        out.grid.1,
+        100.0 * out.fold_fraction
     );
     Ok(())
 }

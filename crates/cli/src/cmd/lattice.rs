@@ -3,8 +3,8 @@
 use std::path::PathBuf;
 
 use anyhow::{Context, bail};
-use volmorph_lattice::BSplineLattice;
 use volmorph_lattice::formats::{read_lattice, write_lattice};
+use volmorph_lattice::{BSplineLattice, FengForm};
 use volmorph_volume_io as format;
 
 use crate::args;
@@ -42,18 +42,18 @@ pub struct InitArgs {
     #[arg(required_unless_present = "mesh", conflicts_with = "mesh")]
     pub input: Option<PathBuf>,
     /// Control points per axis "NX,NY,NZ" of the volume lattice (each at least 4).
-    #[arg(long, default_value = "9,9,9")]
-    pub counts: String,
+    #[arg(long, default_value = "9,9,9", value_parser = args::triple::<usize>)]
+    pub counts: [usize; 3],
     /// Mesh whose axis-aligned bounding box the lattice covers (Feng et al. 2002 §3.1); an
     /// axis along which the mesh is flat is padded by 1e-3 of the largest extent.
     #[arg(long)]
     pub mesh: Option<PathBuf>,
     /// Degrees "KU,KV,KW" of the mesh lattice (each at least 1).
-    #[arg(long, default_value = "2,2,2", requires = "mesh")]
-    pub degree: String,
+    #[arg(long, default_value = "2,2,2", requires = "mesh", value_parser = args::triple::<usize>)]
+    pub degree: [usize; 3],
     /// Control points per axis "NU,NV,NW" of the mesh lattice (each at least degree + 1).
-    #[arg(long, default_value = "4,4,4", requires = "mesh")]
-    pub size: String,
+    #[arg(long, default_value = "4,4,4", requires = "mesh", value_parser = args::triple::<usize>)]
+    pub size: [usize; 3],
     /// Form of the mesh lattice: the end-interpolating volume (§3.1.3, knots clamped by knot
     /// insertion) or the uniform volume it comes from (§3.1.2).
     #[arg(long, value_enum, default_value_t = Form::EndInterpolating, requires = "mesh")]
@@ -82,11 +82,10 @@ pub fn run(cmd: &Command) -> anyhow::Result<()> {
 }
 
 fn convert(a: &ConvertArgs) -> anyhow::Result<()> {
-    let lattice = read_lattice(&a.input)
-        .with_context(|| format!("cannot read lattice {}", a.input.display()))?;
+    let lattice = read_lattice(&a.input).context("cannot read the lattice")?;
     write_lattice(&a.output, &lattice).context("cannot write")?;
     let [cx, cy, cz] = lattice.counts();
-    println!(
+    say!(
         "lattice of {cx}x{cy}x{cz} control points written to {}",
         a.output.display()
     );
@@ -94,88 +93,33 @@ fn convert(a: &ConvertArgs) -> anyhow::Result<()> {
 }
 
 fn init(a: &InitArgs) -> anyhow::Result<()> {
-    if let Some(m) = &a.mesh {
-        return init_mesh(a, m);
-    }
-    let Some(input) = &a.input else {
-        bail!("give a volume or --mesh MESH");
-    };
-    let vol = format::read(input).context("cannot read volume")?;
-    let counts = args::triple::<usize>(&a.counts)?;
-    let lattice = lattice_around(vol.geometry(), counts)?;
-    write_lattice(&a.output, &lattice).context("cannot write")?;
-    say!(
-        "identity lattice of {}x{}x{} control points around {}",
-        counts[0],
-        counts[1],
-        counts[2],
-        input.display()
-    );
-    Ok(())
-}
-
-fn init_mesh(a: &InitArgs, path: &std::path::Path) -> anyhow::Result<()> {
-    let m = volmorph_mesh::read(path)
-        .with_context(|| format!("cannot read mesh {}", path.display()))?;
-    let degrees = args::triple::<usize>(&a.degree).context("--degree")?;
-    let counts = args::triple::<usize>(&a.size).context("--size")?;
-    let (mut lo, mut hi) = m
-        .bounding_box()
-        .with_context(|| format!("{} has no vertices", path.display()))?;
-    if !(lo.is_finite() && hi.is_finite()) {
-        bail!("{} has non-finite vertex coordinates", path.display());
-    }
-    let ext = hi - lo;
-    let pad = 1e-3 * ext.max_element();
-    let pad = if pad > 0.0 { pad } else { 1.0 };
-    for ax in 0..3 {
-        if ext[ax] <= 0.0 {
-            lo[ax] -= 0.5 * pad;
-            hi[ax] += 0.5 * pad;
-        }
-    }
-    let lattice = match a.form {
-        Form::EndInterpolating => {
-            BSplineLattice::feng_end_interpolating_around(lo, hi, degrees, counts)?
-        }
-        Form::Uniform => BSplineLattice::feng_uniform_around(lo, hi, degrees, counts)?,
+    let (lattice, what) = if let Some(path) = &a.mesh {
+        let m = volmorph_mesh::read(path).context("cannot read the mesh")?;
+        let (lo, hi) = m
+            .bounding_box()
+            .with_context(|| format!("{} has no vertices", path.display()))?;
+        let form = match a.form {
+            Form::EndInterpolating => FengForm::EndInterpolating,
+            Form::Uniform => FengForm::Uniform,
+        };
+        let l = BSplineLattice::feng_around_model(lo, hi, a.degree, a.size, form)
+            .with_context(|| format!("cannot place a lattice around {}", path.display()))?;
+        let [dx, dy, dz] = a.degree;
+        (
+            l,
+            format!("of degree {dx}x{dy}x{dz} around {}", path.display()),
+        )
+    } else {
+        let Some(input) = &a.input else {
+            bail!("give a volume or --mesh MESH");
+        };
+        let vol = format::read(input).context("cannot read the volume")?;
+        let l = BSplineLattice::identity_on_voxels(vol.geometry(), a.counts)
+            .with_context(|| format!("cannot place a lattice around {}", input.display()))?;
+        (l, format!("around {}", input.display()))
     };
     write_lattice(&a.output, &lattice).context("cannot write")?;
-    say!(
-        "identity lattice of degree {}x{}x{} with {}x{}x{} control points around {}",
-        degrees[0],
-        degrees[1],
-        degrees[2],
-        counts[0],
-        counts[1],
-        counts[2],
-        path.display()
-    );
+    let [cx, cy, cz] = lattice.counts();
+    say!("identity lattice {what} with {cx}x{cy}x{cz} control points");
     Ok(())
-}
-
-/// The identity uniform cubic lattice on the voxel-centre box of `g`, in the volume's own
-/// (orthonormal) direction frame.
-///
-/// # Errors
-/// When the volume's direction is not orthonormal or the counts are below 4.
-pub fn lattice_around(
-    g: &volmorph_volume::Geometry,
-    counts: [usize; 3],
-) -> anyhow::Result<BSplineLattice> {
-    let extent = g.spacing
-        * volmorph_volume::DVec3::new(
-            g.dims[0].saturating_sub(1) as f64,
-            g.dims[1].saturating_sub(1) as f64,
-            g.dims[2].saturating_sub(1) as f64,
-        );
-    if extent.min_element() <= 0.0 {
-        bail!("a lattice needs a volume at least 2 voxels thick on every axis");
-    }
-    Ok(BSplineLattice::uniform_cubic_in_box(
-        g.origin,
-        g.direction,
-        extent,
-        counts,
-    )?)
 }

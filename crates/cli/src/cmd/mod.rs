@@ -10,6 +10,7 @@ pub mod handles;
 pub mod info;
 pub mod isosurface;
 pub mod lattice;
+pub mod map;
 pub mod mesh;
 pub mod nurbs;
 pub mod nurbs_trace;

@@ -6,10 +6,10 @@ use std::path::{Path, PathBuf};
 
 use anyhow::{Context, bail};
 use volmorph_render::Colormap;
-use volmorph_spline::{KnotVector, TensorBSpline};
 use volmorph_trivariate::{
-    Aggregate, AggregateVolume, Coloring, PolygonizeOptions, ZeroSetMesh, fit, isosurface,
-    load_volume, save, slice,
+    AggregateVolume, Coloring, PolygonizeOptions, ZeroSetMesh,
+    fit::{SampledFitKind, fit_sampled_volume},
+    isosurface, load_volume, save, slice,
 };
 use volmorph_volume_io as format;
 
@@ -204,78 +204,21 @@ fn numbers<const N: usize>(s: &str, what: &str) -> anyhow::Result<[f64; N]> {
 
 fn fit_cmd(args: &FitArgs) -> anyhow::Result<()> {
     let pb = progress::spinner(format!("reading {}", args.input.display()));
-    let vol = format::read(&args.input).context("cannot read volume")?;
-    let typed = vol.to_typed::<f64>();
-    let g = typed.geometry();
-    let dims = g.dims;
-    if dims.iter().any(|&d| d < 2) {
-        bail!("the volume needs at least 2 samples per axis to fit, has {dims:?}");
-    }
-    if args.order < 2 {
-        bail!("--order must be at least 2 (linear), got {}", args.order);
-    }
-    let degree = args.order - 1;
+    let vol = format::read(&args.input).context("cannot read the volume")?;
+    let dims = vol.geometry().dims;
     let n = match &args.control_points {
         Some(s) => counts(s)?,
         None => dims,
     };
-    for a in 0..3 {
-        if n[a] < args.order {
-            bail!(
-                "axis {a}: {} control points are too few for order {} (need at least the order)",
-                n[a],
-                args.order
-            );
-        }
-        if n[a] > dims[a] {
-            bail!(
-                "axis {a}: {} control points exceed the {} samples",
-                n[a],
-                dims[a]
-            );
-        }
-    }
-    // Geometry: the trilinear map of the box of voxel centres.
-    let lin = KnotVector::clamped_uniform(1, 2, [0.0, 1.0])?;
-    let mut pts = Vec::with_capacity(24);
-    for k in 0..2 {
-        for j in 0..2 {
-            for i in 0..2 {
-                let idx = volmorph_mesh::DVec3::new(
-                    (i * (dims[0] - 1)) as f64,
-                    (j * (dims[1] - 1)) as f64,
-                    (k * (dims[2] - 1)) as f64,
-                );
-                pts.extend(g.index_to_physical(idx).to_array());
-            }
-        }
-    }
-    let geometry = TensorBSpline::new([lin.clone(), lin.clone(), lin], 3, pts)?;
-    let knots: [KnotVector; 3] = [
-        KnotVector::clamped_uniform(degree, n[0], [0.0, 1.0])?,
-        KnotVector::clamped_uniform(degree, n[1], [0.0, 1.0])?,
-        KnotVector::clamped_uniform(degree, n[2], [0.0, 1.0])?,
-    ];
     pb.set_message("fitting");
-    let data = typed.data();
-    // Sample (i, j, k) sits at the voxel centre, i.e. at parameters (i, j, k)/(dims − 1) of
-    // the trilinear geometry; fitting at exactly those sites keeps every sample at its own
-    // position. With as many control points as samples the square system is interpolation
-    // (the Schoenberg–Whitney conditions hold for uniform sites and clamped uniform knots).
-    let sites: [Vec<f64>; 3] = std::array::from_fn(|a| {
-        (0..dims[a])
-            .map(|i| i as f64 / (dims[a] - 1) as f64)
-            .collect()
-    });
-    let attr = fit::least_squares(knots, [&sites[0], &sites[1], &sites[2]], 1, data)?;
-    let how = if n == dims {
-        "interpolation at the voxel centres"
-    } else {
-        "least squares over the voxel centres"
-    };
-    let model = Aggregate::new(geometry)?.with_attribute(args.name.clone(), attr)?;
-    save(&args.output, &model).context("cannot write the model")?;
+    let fit = fit_sampled_volume(&vol.to_typed::<f64>(), args.order, n, &args.name)
+        .with_context(|| format!("cannot fit {}", args.input.display()))?;
+    save(&args.output, &fit.model).context("cannot write the model")?;
     pb.finish_and_clear();
+    let how = match fit.kind {
+        SampledFitKind::Interpolation => "interpolation at the Greville abscissae",
+        SampledFitKind::LeastSquares => "least squares over the voxel centres",
+    };
     say!(
         "fitted {:?} samples with {}x{}x{} control points of order {} ({how}) -> {}",
         dims,

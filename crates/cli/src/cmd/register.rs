@@ -4,6 +4,7 @@
 use std::path::{Path, PathBuf};
 
 use anyhow::Context;
+use volmorph_maps::HandleOptions;
 use volmorph_register::dense::{DenseOptions, Metric};
 use volmorph_register::lungs::LungOptions;
 use volmorph_register::matching::MatchOptions;
@@ -11,9 +12,10 @@ use volmorph_register::phantom::{KnownDeformationOptions, LungPhantomOptions};
 use volmorph_register::pipeline::{LandmarkFiles, RegisterOptions, register_files, solve_files};
 use volmorph_register::quality::LandmarkUnits;
 use volmorph_register::select::SelectOptions;
-use volmorph_register::solve::{Method, SolveOptions};
+use volmorph_register::solve::SolveOptions;
 use volmorph_register::steps;
 
+use crate::cmd::handles::Method;
 use crate::{args, progress};
 
 /// `volmorph register`: the whole registration, or one step of it.
@@ -74,43 +76,21 @@ pub enum Step {
     KnownPair(KnownPairArgs),
 }
 
-/// Deformation method.
-#[derive(Debug, Clone, Copy, PartialEq, Eq, clap::ValueEnum)]
-pub enum MethodArg {
-    /// Thin-plate spline.
-    Tps,
-    /// Affine moving least squares.
-    Mls,
-    /// Frame-based moving least squares.
-    Frames,
-}
-
-/// Dense metric.
-#[derive(Debug, Clone, Copy, PartialEq, Eq, clap::ValueEnum)]
-pub enum MetricArg {
-    /// Mean squared difference.
-    Mse,
-    /// Normalised cross-correlation.
-    Ncc,
-    /// Mattes mutual information.
-    Mi,
-}
-
 /// Options of the handle map and the dense refinement.
 #[derive(Debug, clap::Args)]
 pub struct MapOptions {
-    /// Deformation through the handles.
-    #[arg(long, value_enum, default_value_t = MethodArg::Tps)]
-    pub method: MethodArg,
+    /// Deformation through the handles (MLS: affine, similarity, rigid).
+    #[arg(long, value_enum, default_value_t = Method::Tps)]
+    pub method: Method,
     /// Thin-plate smoothing (0 interpolates).
     #[arg(long, default_value_t = 0.0)]
     pub smoothing: f64,
     /// Refine densely with a B-spline lattice on an intensity metric.
     #[arg(long)]
     pub dense: bool,
-    /// Metric of the dense refinement.
-    #[arg(long, value_enum, default_value_t = MetricArg::Ncc)]
-    pub metric: MetricArg,
+    /// Metric of the dense refinement: mse, ncc or mi (Mattes mutual information).
+    #[arg(long, default_value = "ncc", value_parser = str::parse::<Metric>)]
+    pub metric: Metric,
     /// Control-point spacing of the finest lattice, mm.
     #[arg(long, default_value_t = 10.0)]
     pub grid_spacing: f64,
@@ -131,18 +111,17 @@ pub struct MapOptions {
 impl MapOptions {
     fn solve(&self) -> SolveOptions {
         SolveOptions {
-            smoothing: self.smoothing,
-            ..Self::solve_for(self.method)
+            method: self.method.into(),
+            handle: HandleOptions {
+                smoothing: self.smoothing,
+                ..HandleOptions::default()
+            },
         }
     }
 
     fn dense(&self) -> Option<DenseOptions> {
         self.dense.then(|| DenseOptions {
-            metric: match self.metric {
-                MetricArg::Mse => Metric::Mse,
-                MetricArg::Ncc => Metric::Ncc,
-                MetricArg::Mi => Metric::MutualInformation,
-            },
+            metric: self.metric,
             grid_spacing: self.grid_spacing,
             levels: self.levels,
             iterations: self.iterations,
@@ -166,21 +145,16 @@ pub struct LandmarkArgs {
 
 impl LandmarkArgs {
     fn files(&self) -> anyhow::Result<Option<LandmarkFiles>> {
-        let Some(s) = &self.landmarks else {
-            return Ok(None);
+        let units = if self.dirlab {
+            LandmarkUnits::DirLabVoxels
+        } else {
+            LandmarkUnits::Physical
         };
-        let (a, b) = s
-            .split_once(',')
-            .with_context(|| format!("--landmarks wants FIXED,MOVING, got {s:?}"))?;
-        Ok(Some(LandmarkFiles {
-            fixed: PathBuf::from(a),
-            moving: PathBuf::from(b),
-            units: if self.dirlab {
-                LandmarkUnits::DirLabVoxels
-            } else {
-                LandmarkUnits::Physical
-            },
-        }))
+        Ok(self
+            .landmarks
+            .as_deref()
+            .map(|s| LandmarkFiles::parse(s, units))
+            .transpose()?)
     }
 }
 
@@ -289,8 +263,8 @@ pub struct QualityArgs {
     #[arg(long)]
     pub map: PathBuf,
     /// Method for a correspondence or handle map.
-    #[arg(long, value_enum, default_value_t = MethodArg::Tps)]
-    pub method: MethodArg,
+    #[arg(long, value_enum, default_value_t = Method::Tps)]
+    pub method: Method,
     /// Output folder.
     #[arg(short, long)]
     pub output: PathBuf,
@@ -332,8 +306,8 @@ pub struct VentilationArgs {
     #[arg(long)]
     pub map: PathBuf,
     /// Method for a correspondence or handle map.
-    #[arg(long, value_enum, default_value_t = MethodArg::Tps)]
-    pub method: MethodArg,
+    #[arg(long, value_enum, default_value_t = Method::Tps)]
+    pub method: Method,
     /// Lobe or lung labels on the inhale grid.
     #[arg(long)]
     pub labels: PathBuf,
@@ -406,40 +380,20 @@ pub fn run(c: &Command) -> anyhow::Result<()> {
                 need(&a.output, "-o OUT_DIR")?,
             );
             let o = RegisterOptions {
-                select: SelectOptions {
-                    count: a.handles,
-                    radius: a.radius,
-                    ..SelectOptions::default()
-                },
+                select: select_options(a.handles, a.radius),
                 matching: MatchOptions::default(),
                 solve: a.map.solve(),
                 dense: a.map.dense(),
             };
             let pb = progress::spinner(format!("registering {} to {}", m.display(), f.display()));
-            let r = register_files(
-                f,
-                m,
-                a.mask.as_deref(),
-                a.landmarks.files()?.as_ref(),
-                out,
-                &o,
-            )
-            .context("registration failed")?;
+            let landmarks = a.landmarks.files()?;
+            let r = register_files(f, m, a.mask.as_deref(), landmarks.as_ref(), out, &o)
+                .context("registration failed")?;
             pb.finish_and_clear();
-            say!(
-                "{}",
-                std::fs::read_to_string(out.join("summary.txt"))
-                    .unwrap_or_default()
-                    .trim_end()
-            );
-            say!("wrote {} files to {}", r.files.len(), out.display());
+            say!("{r}\nwrote {} files to {}", r.files.len(), out.display());
         }
         Some(Step::Select(a)) => {
-            let o = SelectOptions {
-                count: a.handles,
-                radius: a.radius,
-                ..SelectOptions::default()
-            };
+            let o = select_options(a.handles, a.radius);
             let n = steps::select_files(&a.fixed, a.mask.as_deref(), &a.output, &o)?;
             say!("{n} handles written to {}", a.output.display());
         }
@@ -451,15 +405,7 @@ pub fn run(c: &Command) -> anyhow::Result<()> {
                 ..MatchOptions::default()
             };
             let s = steps::match_files(&a.fixed, &a.moving, &a.handles, &a.output, &o)?;
-            say!(
-                "{} handles: {} accepted (mean NCC {:.3}), {} low correlation, {} inconsistent, {} outside",
-                s.handles,
-                s.accepted,
-                s.mean_ncc,
-                s.low_correlation,
-                s.inconsistent,
-                s.outside
-            );
+            say!("{s}");
         }
         Some(Step::Solve(a)) => {
             let r = solve_files(
@@ -473,46 +419,21 @@ pub fn run(c: &Command) -> anyhow::Result<()> {
                 a.map.dense().as_ref(),
             )?;
             say!(
-                "{}",
-                std::fs::read_to_string(a.output.join("summary.txt"))
-                    .unwrap_or_default()
-                    .trim_end()
+                "{r}\nwrote {} files to {}",
+                r.files.len(),
+                a.output.display()
             );
-            say!("wrote {} files to {}", r.files.len(), a.output.display());
         }
         Some(Step::Quality(a)) => {
-            let solve = MapOptions::solve_for(a.method);
             let r = steps::quality_files(
                 &a.fixed,
                 &a.moving,
                 &a.map,
-                &solve,
+                &solve_options(a.method),
                 a.landmarks.files()?.as_ref(),
                 &a.output,
             )?;
-            say!(
-                "before: NCC {:.4}, MSD {:.2}, MI {:.4}",
-                r.before.ncc,
-                r.before.msd,
-                r.before.mi
-            );
-            say!(
-                "after:  NCC {:.4}, MSD {:.2}, MI {:.4}",
-                r.after.ncc,
-                r.after.msd,
-                r.after.mi
-            );
-            say!(
-                "J: min {:.3}, max {:.3}, mean {:.3}; {} of {} voxels fold",
-                r.folding.min,
-                r.folding.max,
-                r.folding.mean,
-                r.folding.folded,
-                r.folding.count
-            );
-            if let Some((b, t)) = &r.tre {
-                say!("before: {b}\nafter:  {t}");
-            }
+            say!("{r}");
         }
         Some(Step::SegmentLungs(a)) => {
             let o = LungOptions {
@@ -527,42 +448,18 @@ pub fn run(c: &Command) -> anyhow::Result<()> {
                 a.reference.as_deref(),
                 &o,
             )?;
-            say!(
-                "right lung {} voxels, left lung {} voxels, airway {} voxels removed",
-                r.lung_voxels[0],
-                r.lung_voxels[1],
-                r.airway_voxels
-            );
-            if let Some(v) = r.lobe_voxels {
-                say!("lobes (RUL RML RLL LUL LLL): {v:?} voxels");
-            }
-            if let Some(d) = r.dice {
-                say!(
-                    "Dice (RUL RML RLL LUL LLL): {:.3} {:.3} {:.3} {:.3} {:.3}",
-                    d[0],
-                    d[1],
-                    d[2],
-                    d[3],
-                    d[4]
-                );
-            }
+            say!("{r}");
         }
         Some(Step::Ventilation(a)) => {
-            let solve = MapOptions::solve_for(a.method);
             let r = steps::ventilation_files(
-                &a.inhale, &a.exhale, &a.map, &a.labels, &solve, &a.output,
+                &a.inhale,
+                &a.exhale,
+                &a.map,
+                &a.labels,
+                &solve_options(a.method),
+                &a.output,
             )?;
-            say!("region   voxels   mean jac   sd     HU volume ratio");
-            for l in r {
-                say!(
-                    "{:<8} {:>7}  {:>8.4}  {:>6.4}  {:>8.4}",
-                    l.name,
-                    l.voxels,
-                    l.jacobian.mean,
-                    l.jacobian.sd,
-                    l.hu_volume_ratio.mean
-                );
-            }
+            say!("{r}");
         }
         Some(Step::Phantom(a)) => {
             let o = LungPhantomOptions {
@@ -593,182 +490,17 @@ pub fn run(c: &Command) -> anyhow::Result<()> {
     Ok(())
 }
 
-impl MapOptions {
-    fn solve_for(m: MethodArg) -> SolveOptions {
-        SolveOptions {
-            method: match m {
-                MethodArg::Tps => Method::Tps,
-                MethodArg::Mls => Method::Mls,
-                MethodArg::Frames => Method::Frames,
-            },
-            ..SolveOptions::default()
-        }
+fn select_options(count: usize, radius: f64) -> SelectOptions {
+    SelectOptions {
+        count,
+        radius,
+        ..SelectOptions::default()
     }
 }
 
-#[cfg(test)]
-mod tests {
-    use super::*;
-    use clap::Parser;
-
-    #[derive(Debug, clap::Parser)]
-    struct Cli {
-        #[command(flatten)]
-        c: Command,
-    }
-
-    fn run_args(args: &[&str]) -> anyhow::Result<()> {
-        let mut v = vec!["register"];
-        v.extend_from_slice(args);
-        run(&Cli::try_parse_from(v)?.c)
-    }
-
-    /// Every step on a small phantom, through the command line's own parsing.
-    #[test]
-    fn every_step_runs_on_a_small_phantom() {
-        let dir = tempfile::tempdir().unwrap();
-        let d = |n: &str| dir.path().join(n).to_string_lossy().into_owned();
-        run_args(&[
-            "phantom",
-            "-o",
-            &d("ph"),
-            "--dims",
-            "56,48,40",
-            "--spacing",
-            "5,5,5.5",
-        ])
-        .unwrap();
-        let (inh, exh) = (d("ph/inhale.nii.gz"), d("ph/exhale.nii.gz"));
-        let lm = format!(
-            "{},{}",
-            d("ph/landmarks_inhale.txt"),
-            d("ph/landmarks_exhale.txt")
-        );
-        run_args(&[
-            "select",
-            &inh,
-            "-o",
-            &d("h.txt"),
-            "--handles",
-            "80",
-            "--radius",
-            "12",
-        ])
-        .unwrap();
-        run_args(&[
-            "match",
-            &inh,
-            &exh,
-            "--handles",
-            &d("h.txt"),
-            "-o",
-            &d("c.json"),
-            "--levels",
-            "2",
-        ])
-        .unwrap();
-        run_args(&[
-            "solve",
-            &inh,
-            &exh,
-            "--correspondences",
-            &d("c.json"),
-            "--method",
-            "frames",
-            "-o",
-            &d("solved"),
-            "--landmarks",
-            &lm,
-        ])
-        .unwrap();
-        for f in [
-            "map.tfm",
-            "handles.json",
-            "displacement.mha",
-            "warped.nii.gz",
-            "jacobian.nii.gz",
-            "overlay_after_z.png",
-            "report.json",
-            "summary.txt",
-        ] {
-            assert!(dir.path().join("solved").join(f).exists(), "{f}");
-        }
-        run_args(&[
-            "quality",
-            &inh,
-            &exh,
-            "--map",
-            &d("solved/map.tfm"),
-            "-o",
-            &d("q"),
-            "--landmarks",
-            &lm,
-        ])
-        .unwrap();
-        assert!(dir.path().join("q/quality.json").exists());
-        run_args(&[
-            "segment-lungs",
-            &inh,
-            "-o",
-            &d("lungs.nii.gz"),
-            "--lobes",
-            &d("ph/lobe_script.json"),
-            "--reference",
-            &d("ph/lobes.nii.gz"),
-        ])
-        .unwrap();
-        run_args(&[
-            "ventilation",
-            &inh,
-            &exh,
-            "--map",
-            &d("c.json"),
-            "--labels",
-            &d("lungs_lobes.nii.gz"),
-            "-o",
-            &d("v"),
-        ])
-        .unwrap();
-        assert!(dir.path().join("v/ventilation.json").exists());
-        run_args(&[
-            &inh,
-            &exh,
-            "-o",
-            &d("all"),
-            "--handles",
-            "80",
-            "--radius",
-            "12",
-            "--landmarks",
-            &lm,
-        ])
-        .unwrap();
-        assert!(dir.path().join("all/report.json").exists());
-        run_args(&[
-            "known-pair",
-            &inh,
-            "-o",
-            &d("kp"),
-            "--magnitude",
-            "4",
-            "--landmarks",
-            "20",
-        ])
-        .unwrap();
-        assert!(dir.path().join("kp/truth.tfm").exists());
-        // Errors name what is missing or wrong.
-        let e = run_args(&[&inh]).unwrap_err().to_string();
-        assert!(e.contains("MOVING"), "{e}");
-        let e = run_args(&[
-            "match",
-            &inh,
-            &exh,
-            "--handles",
-            &d("missing.txt"),
-            "-o",
-            &d("x.json"),
-        ])
-        .unwrap_err();
-        assert!(format!("{e:#}").contains("missing.txt"), "{e:#}");
+fn solve_options(method: Method) -> SolveOptions {
+    SolveOptions {
+        method: method.into(),
+        ..SolveOptions::default()
     }
 }

@@ -250,17 +250,7 @@ fn gram_deviation(d: DMat3) -> f64 {
         )
 }
 
-/// Shortest text that reads back to the same `f64` (integers without a fraction, very small or
-/// large magnitudes in exponent form, which C++ streams and `scanf` both read).
-pub(crate) fn fmt_f64(v: f64) -> String {
-    if v == 0.0 {
-        "0".to_owned()
-    } else if v.fract() == 0.0 && v.abs() < 1e15 {
-        format!("{}", v as i64)
-    } else {
-        format!("{v:?}")
-    }
-}
+pub(crate) use volmorph_io::fmt_f64;
 
 /// Parse one number token.
 pub(crate) fn parse_f64(tok: &str, format: &'static str, line: usize) -> Result<f64, DeformError> {

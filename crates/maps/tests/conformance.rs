@@ -1,0 +1,413 @@
+//! The SpaceMap conformance suite for every kind of map (through [`AnyMap`], which keeps each
+//! kind's own evaluation paths and is what map files read back into), the LinearMap checks for
+//! every kind linear in its parameters (through [`LiveMap`]), and the incremental
+//! push-forward equal to the full one for each of those.
+//!
+//! The identity kind is exercised as the identity instance of the composition.
+
+use glam::{DMat3, DVec3};
+use volmorph_deform::inverse::Inverse;
+use volmorph_deform::{Affine, InverseOptions, SampledMap};
+use volmorph_handles::{
+    AffineMls, BumpMap, Frame, FrameMls, RigidMls, SimilarityMls, ThinPlateMap, Weighting,
+};
+use volmorph_lattice::BSplineLattice;
+use volmorph_maps::{AnyMap, LiveMap};
+use volmorph_spline::{BSplineVolume, KnotVector};
+use volmorph_testkit::{Conformance, Rng, linear_map_conformance, space_map_conformance};
+use volmorph_trivariate::GeometryMap;
+use volmorph_volume::Geometry;
+
+const LO: DVec3 = DVec3::splat(-10.0);
+const HI: DVec3 = DVec3::splat(10.0);
+
+fn round_trip(m: &AnyMap) -> AnyMap {
+    AnyMap::from_json(&m.to_json().expect("to json")).expect("from json")
+}
+
+fn live_round_trip(m: &LiveMap) -> LiveMap {
+    round_trip(&AnyMap::from(m.clone()))
+        .to_live()
+        .expect("still live")
+}
+
+fn suite(make: fn() -> AnyMap, identity: fn() -> AnyMap, tol: f64) -> Conformance<AnyMap> {
+    Conformance {
+        make,
+        identity,
+        domain: (LO, HI),
+        jacobian_tolerance: tol,
+        round_trip,
+    }
+}
+
+fn live_suite(make: fn() -> LiveMap, identity: fn() -> LiveMap) -> Conformance<LiveMap> {
+    Conformance {
+        make,
+        identity,
+        domain: (LO, HI),
+        jacobian_tolerance: 1e-5,
+        round_trip: live_round_trip,
+    }
+}
+
+/// A lattice around the domain (slightly larger, so the domain is inside the box), oblique
+/// when `oblique`, with every control point moved randomly by up to `amount`.
+fn lattice(moved: f64, oblique: bool) -> BSplineLattice {
+    let axes = if oblique {
+        DMat3::from_rotation_y(0.3) * DMat3::from_rotation_z(-0.2)
+    } else {
+        DMat3::IDENTITY
+    };
+    let centre = 0.5 * (LO + HI);
+    let ext = (HI - LO) * 1.8;
+    let corner = centre - axes * (0.5 * ext);
+    let mut l = BSplineLattice::uniform_cubic_in_box(corner, axes, ext, [7, 6, 8]).unwrap();
+    let mut r = Rng::new(11);
+    let [nx, ny, nz] = l.counts();
+    for k in 0..nz {
+        for j in 0..ny {
+            for i in 0..nx {
+                l.move_control_point([i, j, k], moved * r.point(1.0))
+                    .unwrap();
+            }
+        }
+    }
+    l
+}
+
+fn feng(moved: f64) -> BSplineLattice {
+    let mut l =
+        BSplineLattice::feng_end_interpolating_around(LO * 1.2, HI * 1.2, [2, 3, 2], [5, 6, 4])
+            .unwrap();
+    let mut r = Rng::new(12);
+    let [nx, ny, nz] = l.counts();
+    for k in 1..nz - 1 {
+        for j in 1..ny - 1 {
+            for i in 1..nx - 1 {
+                l.move_control_point([i, j, k], moved * r.point(1.0))
+                    .unwrap();
+            }
+        }
+    }
+    l
+}
+
+fn handles(n: usize, seed: u64) -> (Vec<DVec3>, Vec<DVec3>) {
+    let mut r = Rng::new(seed);
+    let s: Vec<DVec3> = (0..n).map(|_| r.point(12.0)).collect();
+    let t: Vec<DVec3> = s.iter().map(|p| *p + 1.5 * r.point(1.0)).collect();
+    (s, t)
+}
+
+fn frames(identity: bool) -> (Vec<Frame>, Vec<Frame>) {
+    let mut r = Rng::new(13);
+    let s: Vec<Frame> = (0..6)
+        .map(|_| Frame {
+            origin: r.point(12.0),
+            axes: DMat3::IDENTITY
+                + 0.1 * DMat3::from_cols(r.point(1.0), r.point(1.0), r.point(1.0)),
+        })
+        .collect();
+    let t = if identity {
+        s.clone()
+    } else {
+        s.iter()
+            .map(|f| Frame {
+                origin: f.origin + r.point(1.5),
+                axes: DMat3::from_rotation_z(0.2 * r.unit()) * f.axes,
+            })
+            .collect()
+    };
+    (s, t)
+}
+
+fn affine(identity: bool) -> Affine {
+    if identity {
+        return Affine {
+            matrix: DMat3::IDENTITY,
+            offset: DVec3::ZERO,
+        };
+    }
+    Affine {
+        matrix: DMat3::from_cols(
+            DVec3::new(1.1, 0.1, -0.05),
+            DVec3::new(0.05, 0.95, 0.1),
+            DVec3::new(-0.1, 0.02, 1.2),
+        ),
+        offset: DVec3::new(1.0, -2.0, 0.5),
+    }
+}
+
+/// A tricubic geometry on [0, 1]³ placed on the box `1.5·(LO, HI)`, with its control points
+/// at the box images of the Greville abscissae (the identity placement), the interior ones then
+/// moved by up to `moved` (physical units).
+fn geometry(moved: f64) -> GeometryMap {
+    let (lo, hi) = (LO * 1.5, HI * 1.5);
+    let k = KnotVector::clamped_uniform(3, 6, [0.0, 1.0]).unwrap();
+    let mut g = BSplineVolume::identity([k.clone(), k.clone(), k]).unwrap();
+    let mut r = Rng::new(14);
+    for kk in 0..6 {
+        for j in 0..6 {
+            for i in 0..6 {
+                let mut u = [0.0; 3];
+                g.control_point_into([i, j, kk], &mut u).unwrap();
+                let interior = [i, j, kk].iter().all(|&n| (1..5).contains(&n));
+                let d = if interior {
+                    moved * r.point(1.0)
+                } else {
+                    DVec3::ZERO
+                };
+                let p = lo + DVec3::from_array(u) * (hi - lo) + d;
+                g.set_control_point([i, j, kk], &p.to_array()).unwrap();
+            }
+        }
+    }
+    GeometryMap::new(g, lo, hi).unwrap()
+}
+
+fn sampled(identity: bool) -> SampledMap {
+    let grid = Geometry::new([12, 11, 10])
+        .with_origin(LO * 1.3)
+        .with_spacing((HI - LO) * 1.3 / DVec3::new(11.0, 10.0, 9.0));
+    let l = lattice(if identity { 0.0 } else { 1.5 }, false);
+    SampledMap::from_map(&l, grid).unwrap()
+}
+
+fn tps(identity: bool) -> ThinPlateMap {
+    let (s, t) = handles(20, 15);
+    ThinPlateMap::new(&s, if identity { &s } else { &t }, 0.0).unwrap()
+}
+
+space_map_conformance!(
+    affine_map,
+    suite(
+        || AnyMap::Affine(affine(false)),
+        || AnyMap::Affine(affine(true)),
+        1e-7
+    )
+);
+space_map_conformance!(
+    lattice_cubic,
+    suite(
+        || AnyMap::Lattice(lattice(1.5, false)),
+        || AnyMap::Lattice(lattice(0.0, false)),
+        1e-6
+    )
+);
+space_map_conformance!(
+    lattice_cubic_oblique,
+    suite(
+        || AnyMap::Lattice(lattice(1.5, true)),
+        || AnyMap::Lattice(lattice(0.0, true)),
+        1e-6
+    )
+);
+space_map_conformance!(
+    lattice_feng_mixed_degree,
+    suite(
+        || AnyMap::Lattice(feng(1.0)),
+        || AnyMap::Lattice(feng(0.0)),
+        1e-6
+    )
+);
+space_map_conformance!(
+    mls_affine,
+    suite(
+        || {
+            let (s, t) = handles(12, 1);
+            AnyMap::AffineMls(AffineMls::new(&s, &t, Weighting::default()).unwrap())
+        },
+        || {
+            let (s, _) = handles(12, 1);
+            AnyMap::AffineMls(AffineMls::new(&s, &s, Weighting::default()).unwrap())
+        },
+        1e-5
+    )
+);
+space_map_conformance!(
+    mls_similarity,
+    suite(
+        || {
+            let (s, t) = handles(12, 2);
+            AnyMap::SimilarityMls(SimilarityMls::new(&s, &t, Weighting::default()).unwrap())
+        },
+        || {
+            let (s, _) = handles(12, 2);
+            AnyMap::SimilarityMls(SimilarityMls::new(&s, &s, Weighting::default()).unwrap())
+        },
+        1e-5
+    )
+);
+space_map_conformance!(
+    mls_rigid_gaussian,
+    suite(
+        || {
+            let (s, t) = handles(12, 3);
+            AnyMap::RigidMls(RigidMls::new(&s, &t, Weighting::Gaussian { sigma: 6.0 }).unwrap())
+        },
+        || {
+            let (s, _) = handles(12, 3);
+            AnyMap::RigidMls(RigidMls::new(&s, &s, Weighting::Gaussian { sigma: 6.0 }).unwrap())
+        },
+        1e-5
+    )
+);
+space_map_conformance!(
+    mls_frames,
+    suite(
+        || {
+            let (s, t) = frames(false);
+            AnyMap::FrameMls(FrameMls::new(&s, &t, 1.0, Weighting::default()).unwrap())
+        },
+        || {
+            let (s, t) = frames(true);
+            AnyMap::FrameMls(FrameMls::new(&s, &t, 1.0, Weighting::default()).unwrap())
+        },
+        1e-5
+    )
+);
+space_map_conformance!(
+    thin_plate,
+    suite(
+        || AnyMap::ThinPlate(tps(false)),
+        || AnyMap::ThinPlate(tps(true)),
+        1e-5
+    )
+);
+space_map_conformance!(
+    bump,
+    suite(
+        || AnyMap::Bump(BumpMap::new(DVec3::new(1.0, -1.0, 0.5), 3.0, 9.0, affine(false)).unwrap()),
+        || AnyMap::Bump(BumpMap::new(DVec3::new(1.0, -1.0, 0.5), 3.0, 9.0, affine(true)).unwrap()),
+        1e-6
+    )
+);
+space_map_conformance!(
+    nurbs_geometry,
+    suite(
+        || AnyMap::Geometry(geometry(1.2)),
+        || AnyMap::Geometry(geometry(0.0)),
+        1e-6
+    )
+);
+space_map_conformance!(
+    sampled_map,
+    suite(
+        || AnyMap::Sampled(sampled(false)),
+        || AnyMap::Sampled(sampled(true)),
+        1e-6
+    )
+);
+space_map_conformance!(
+    composition,
+    suite(
+        || {
+            AnyMap::Lattice(lattice(1.0, false))
+                .then(AnyMap::Affine(affine(false)))
+                .then(AnyMap::ThinPlate(tps(false)))
+        },
+        || AnyMap::Compose(vec![AnyMap::Identity, AnyMap::Lattice(lattice(0.0, true))]),
+        1e-5
+    )
+);
+space_map_conformance!(
+    numerical_inverse,
+    suite(
+        || AnyMap::Inverse(Box::new(Inverse::new(
+            AnyMap::Lattice(lattice(0.8, false)),
+            InverseOptions::default()
+        ))),
+        || AnyMap::Inverse(Box::new(Inverse::new(
+            AnyMap::Lattice(lattice(0.0, true)),
+            InverseOptions::default()
+        ))),
+        1e-5
+    )
+);
+
+linear_map_conformance!(
+    live_lattice,
+    live_suite(
+        || LiveMap::Lattice(lattice(1.5, true)),
+        || LiveMap::Lattice(lattice(0.0, true))
+    )
+);
+linear_map_conformance!(
+    live_mls_affine,
+    live_suite(
+        || {
+            let (s, t) = handles(12, 1);
+            LiveMap::AffineMls(AffineMls::new(&s, &t, Weighting::default()).unwrap())
+        },
+        || {
+            let (s, _) = handles(12, 1);
+            LiveMap::AffineMls(AffineMls::new(&s, &s, Weighting::default()).unwrap())
+        }
+    )
+);
+linear_map_conformance!(
+    live_mls_frames,
+    live_suite(
+        || {
+            let (s, t) = frames(false);
+            LiveMap::FrameMls(FrameMls::new(&s, &t, 1.0, Weighting::default()).unwrap())
+        },
+        || {
+            let (s, t) = frames(true);
+            LiveMap::FrameMls(FrameMls::new(&s, &t, 1.0, Weighting::default()).unwrap())
+        }
+    )
+);
+linear_map_conformance!(
+    live_thin_plate,
+    live_suite(
+        || LiveMap::ThinPlate(tps(false)),
+        || LiveMap::ThinPlate(tps(true))
+    )
+);
+
+/// The incremental push-forward through each live kind, after parameter moves, equals the
+/// full push-forward through the moved map (the volume-level live edit).
+#[test]
+fn incremental_push_forward_equals_full_for_every_live_kind() {
+    use volmorph_deform::LinearMap;
+    use volmorph_volume::Volume;
+    use volmorph_warp::incremental::IncrementalPushForward;
+    use volmorph_warp::pushforward::{AntialiasOptions, push_forward_antialiased_f32};
+
+    let g = Geometry::new([20, 18, 16])
+        .with_origin(DVec3::splat(-9.5))
+        .with_spacing(DVec3::new(1.0, 1.1, 1.2));
+    let src = Volume::from_fn(g, |i, j, k| ((i * 7 + j * 3 + k * 5) % 13) as f32).unwrap();
+    let opts = AntialiasOptions::default();
+    let kinds: Vec<(&str, LiveMap)> = vec![
+        ("lattice", LiveMap::Lattice(lattice(0.5, true))),
+        ("affine MLS", {
+            let (s, t) = handles(12, 1);
+            LiveMap::AffineMls(AffineMls::new(&s, &t, Weighting::default()).unwrap())
+        }),
+        ("frame MLS", {
+            let (s, t) = frames(false);
+            LiveMap::FrameMls(FrameMls::new(&s, &t, 1.0, Weighting::default()).unwrap())
+        }),
+        ("thin-plate", LiveMap::ThinPlate(tps(false))),
+    ];
+    for (name, map) in kinds {
+        let mut e = IncrementalPushForward::new(&src, map.clone(), &g, &opts).unwrap();
+        let k = map.parameter_count();
+        let mut r = Rng::new(21);
+        for j in [k / 2, k / 3] {
+            let t = map.parameters()[j] + 0.8 * r.direction();
+            e.set_parameters(&[(j, t)]).unwrap();
+        }
+        let full = push_forward_antialiased_f32(&src, e.map(), &g, &opts).unwrap();
+        for (n, (a, b)) in e.volume().data().iter().zip(full.volume.data()).enumerate() {
+            assert!(
+                (a - b).abs() <= 1e-4,
+                "{name}: voxel {n}: incremental {a} vs full {b}"
+            );
+        }
+        assert_eq!(e.stats(), full.stats, "{name}");
+    }
+}

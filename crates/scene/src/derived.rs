@@ -1,0 +1,598 @@
+//! Derived objects: results computed from other objects and kept up to date — warped volumes,
+//! deformed meshes, isosurfaces and Jacobian maps — through the engines' incremental paths
+//! where one applies, and by full recomputation otherwise. Both give the same result (to the
+//! rounding the engines document).
+
+use std::sync::Arc;
+
+use glam::DVec3;
+use serde::{Deserialize, Serialize};
+use volmorph_contour::{DcOptions, McOptions, dual_contouring_any, marching_cubes_any};
+use volmorph_deform::SpaceMap;
+use volmorph_deform::live::{Influence, LinearMap};
+use volmorph_frep::Tape;
+use volmorph_frep::grid::sample as frep_sample;
+use volmorph_frep::mapping::Pullback;
+use volmorph_maps::{AnyMap, LiveMap};
+use volmorph_mesh::Mesh;
+use volmorph_volume::{AnyVolume, Geometry, IndexBox, Volume, Voxel, with_volume};
+use volmorph_warp::apply::{WarpMethod, WarpOptions, warp_volume};
+use volmorph_warp::incremental::IncrementalPushForward;
+use volmorph_warp::jacobian::jacobian_determinant;
+use volmorph_warp::pushforward::AntialiasOptions;
+
+use crate::{MapObject, ObjectId, SceneError};
+
+/// How an isosurface is extracted.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(rename_all = "kebab-case")]
+pub enum SurfaceMethod {
+    /// Marching cubes: crack-free, closed where the level set is.
+    MarchingCubes,
+    /// Dual contouring: sharp features kept.
+    DualContouring,
+}
+
+/// What a derived object is computed from, and how.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(tag = "recipe", rename_all = "kebab-case", deny_unknown_fields)]
+pub enum Recipe {
+    /// The volume `source` warped through map `map` by `method` onto the source's own grid.
+    ///
+    /// For a handle map with `swap_handles`, the map used is the one built from the swapped
+    /// handles (targets to sources) and the method must be a pull-back: the content at each
+    /// source appears at its target, the model moving the way the handles say (McPhail's
+    /// backward mapping, as `volmorph handles warp` does). Otherwise the map is used as given,
+    /// in the direction the method names.
+    Warp {
+        /// The volume warped.
+        source: ObjectId,
+        /// The map object.
+        map: ObjectId,
+        /// How the map is applied.
+        #[serde(with = "method_name")]
+        method: WarpMethod,
+        /// Value of voxels nothing reaches.
+        background: f64,
+        /// Evaluate the map on an `n³` grid and interpolate (see
+        /// [`WarpOptions::sampled_nodes`]).
+        sampled_nodes: Option<usize>,
+        /// For handle maps: pull back through the swapped handles.
+        swap_handles: bool,
+    },
+    /// The vertices of mesh `mesh` pushed forward through map `map` (faces kept).
+    DeformedMesh {
+        /// The mesh deformed.
+        mesh: ObjectId,
+        /// The map object.
+        map: ObjectId,
+    },
+    /// The level set `level` of volume `volume` (a volume or a derived volume).
+    Isosurface {
+        /// The volume.
+        volume: ObjectId,
+        /// The level.
+        level: f64,
+        /// The solid is where the value is at most the level (distances) instead of at least.
+        inside_below: bool,
+        /// Extraction method.
+        method: SurfaceMethod,
+    },
+    /// The F-rep model `model` sampled at the voxel centres of volume `grid` (f32, solid where
+    /// ≥ 0), optionally through map `map` read as a pull-back: the value at `x` is
+    /// `f(map(x))` (Savchenko–Pasko Eq. 15 with `map` = φ⁻¹), so the model appears deformed by
+    /// the inverse of `map` — give a map's inverse (`AnyMap::inverse`) to deform the model by
+    /// the map itself.
+    FrepSampled {
+        /// The F-rep model.
+        model: ObjectId,
+        /// The map read as a pull-back, if any.
+        map: Option<ObjectId>,
+        /// The volume whose grid is sampled.
+        grid: ObjectId,
+    },
+    /// The Jacobian determinant of map `map` at the voxel centres of volume `grid` (f32; ≤ 0
+    /// marks folding).
+    Jacobian {
+        /// The map object.
+        map: ObjectId,
+        /// The volume whose grid is sampled.
+        grid: ObjectId,
+    },
+}
+
+mod method_name {
+    use serde::{Deserialize, Deserializer, Serializer};
+    use volmorph_warp::apply::WarpMethod;
+
+    pub fn serialize<S: Serializer>(m: &WarpMethod, s: S) -> Result<S::Ok, S::Error> {
+        s.serialize_str(m.name())
+    }
+
+    pub fn deserialize<'de, D: Deserializer<'de>>(d: D) -> Result<WarpMethod, D::Error> {
+        let name = String::deserialize(d)?;
+        name.parse().map_err(serde::de::Error::custom)
+    }
+}
+
+impl Recipe {
+    /// The objects this recipe reads.
+    #[must_use]
+    pub fn inputs(&self) -> Vec<ObjectId> {
+        match self {
+            Recipe::Warp { source, map, .. } => vec![*source, *map],
+            Recipe::DeformedMesh { mesh, map } => vec![*mesh, *map],
+            Recipe::Isosurface { volume, .. } => vec![*volume],
+            Recipe::Jacobian { map, grid } => vec![*map, *grid],
+            Recipe::FrepSampled { model, map, grid } => {
+                let mut v = vec![*model, *grid];
+                v.extend(*map);
+                v
+            }
+        }
+    }
+
+    /// The map object this recipe reads, if any.
+    #[must_use]
+    pub fn map(&self) -> Option<ObjectId> {
+        match self {
+            Recipe::Warp { map, .. }
+            | Recipe::DeformedMesh { map, .. }
+            | Recipe::Jacobian { map, .. } => Some(*map),
+            Recipe::FrepSampled { map, .. } => *map,
+            Recipe::Isosurface { .. } => None,
+        }
+    }
+
+    /// The kind of result (`volume` or `mesh`).
+    #[must_use]
+    pub fn output_kind(&self) -> &'static str {
+        match self {
+            Recipe::Warp { .. } | Recipe::Jacobian { .. } | Recipe::FrepSampled { .. } => "volume",
+            Recipe::DeformedMesh { .. } | Recipe::Isosurface { .. } => "mesh",
+        }
+    }
+}
+
+/// The computed result of a derived object.
+#[derive(Debug, Clone)]
+pub enum DerivedOutput {
+    /// A volume.
+    Volume(Arc<AnyVolume>),
+    /// A mesh.
+    Mesh(Arc<Mesh>),
+}
+
+/// A derived object: its recipe, its current result, and the engine that updates it
+/// incrementally where one applies.
+#[derive(Debug)]
+pub struct Derived {
+    recipe: Recipe,
+    output: Option<DerivedOutput>,
+    engine: Option<Box<IncrementalPushForward<LiveMap>>>,
+    error: Option<String>,
+}
+
+/// A copy shares the result (copy on write) and leaves out the incremental engine, which the
+/// copy rebuilds on its first update.
+impl Clone for Derived {
+    fn clone(&self) -> Self {
+        Self {
+            recipe: self.recipe.clone(),
+            output: self.output.clone(),
+            engine: None,
+            error: self.error.clone(),
+        }
+    }
+}
+
+impl Derived {
+    /// A derived object not computed yet.
+    #[must_use]
+    pub fn new(recipe: Recipe) -> Self {
+        Self {
+            recipe,
+            output: None,
+            engine: None,
+            error: None,
+        }
+    }
+
+    /// A derived object with a known result (read from a project's cache).
+    #[must_use]
+    pub fn with_output(recipe: Recipe, output: DerivedOutput) -> Self {
+        Self {
+            recipe,
+            output: Some(output),
+            engine: None,
+            error: None,
+        }
+    }
+
+    /// The recipe.
+    #[must_use]
+    pub fn recipe(&self) -> &Recipe {
+        &self.recipe
+    }
+
+    /// The current result, if computed.
+    #[must_use]
+    pub fn output(&self) -> Option<&DerivedOutput> {
+        self.output.as_ref()
+    }
+
+    /// The result as a volume.
+    #[must_use]
+    pub fn volume(&self) -> Option<&Arc<AnyVolume>> {
+        match &self.output {
+            Some(DerivedOutput::Volume(v)) => Some(v),
+            _ => None,
+        }
+    }
+
+    /// The result as a mesh.
+    #[must_use]
+    pub fn mesh(&self) -> Option<&Arc<Mesh>> {
+        match &self.output {
+            Some(DerivedOutput::Mesh(m)) => Some(m),
+            _ => None,
+        }
+    }
+
+    /// The error of the last computation, if it failed (the previous result is kept).
+    #[must_use]
+    pub fn error(&self) -> Option<&str> {
+        self.error.as_deref()
+    }
+}
+
+/// What changed in the inputs of a derived object since its last computation.
+#[derive(Debug, Clone)]
+pub(crate) enum Hint {
+    /// Anything may have changed: recompute.
+    Full,
+    /// Only parameters of the recipe's map changed: `(parameter, new value)`.
+    Parameters(Vec<(usize, DVec3)>),
+    /// Only the voxels in this box of the recipe's input volume changed.
+    Region(IndexBox),
+}
+
+/// The inputs of a recipe, resolved.
+pub(crate) struct Inputs<'a> {
+    pub volume: Option<&'a Arc<AnyVolume>>,
+    pub mesh: Option<&'a Arc<Mesh>>,
+    pub map: Option<&'a MapObject>,
+    pub frep: Option<&'a crate::FrepModel>,
+}
+
+/// What an update changed in a derived object: voxels (for volumes) and a physical box.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Dirty {
+    /// The derived object.
+    pub object: ObjectId,
+    /// For volumes: the box of voxels that may have changed.
+    pub voxels: Option<IndexBox>,
+    /// The physical box `(lo, hi)` that may have changed (`None` when nothing changed).
+    pub bounds: Option<(DVec3, DVec3)>,
+}
+
+/// The physical bounding box of the voxel centres of `b` in `g`, widened by half a voxel.
+pub(crate) fn physical_box(g: &Geometry, b: &IndexBox) -> Option<(DVec3, DVec3)> {
+    if b.is_empty() {
+        return None;
+    }
+    let lo = DVec3::new(b.start[0] as f64, b.start[1] as f64, b.start[2] as f64) - 0.5;
+    let hi = DVec3::new(b.end[0] as f64, b.end[1] as f64, b.end[2] as f64) - 0.5;
+    let mut out = (DVec3::INFINITY, DVec3::NEG_INFINITY);
+    for c in 0..8 {
+        let idx = DVec3::new(
+            if c & 1 == 0 { lo.x } else { hi.x },
+            if c & 2 == 0 { lo.y } else { hi.y },
+            if c & 4 == 0 { lo.z } else { hi.z },
+        );
+        let p = g.index_to_physical(idx);
+        out = (out.0.min(p), out.1.max(p));
+    }
+    Some(out)
+}
+
+/// Copy the engine's `f32` result in box `b` into `out` (the source's voxel type), rounding as
+/// the full push-forward does.
+fn copy_box<T: Voxel>(engine: &Volume<f32>, out: &mut Volume<T>, b: &IndexBox) {
+    let [nx, ny, _] = out.geometry().dims;
+    let src = engine.data();
+    let dst = out.data_mut();
+    for k in b.start[2]..b.end[2] {
+        for j in b.start[1]..b.end[1] {
+            let row = nx * (j + ny * k);
+            for i in b.start[0]..b.end[0] {
+                dst[row + i] = T::from_f64(f64::from(src[row + i]));
+            }
+        }
+    }
+}
+
+impl Derived {
+    /// Bring the result up to date after the change `hint` of its inputs; returns what
+    /// changed. On error the previous result is kept and the error recorded.
+    pub(crate) fn update(&mut self, id: ObjectId, inputs: &Inputs<'_>, hint: &Hint) -> Dirty {
+        match self.compute(id, inputs, hint) {
+            Ok(d) => {
+                self.error = None;
+                d
+            }
+            Err(e) => {
+                self.error = Some(e.to_string());
+                Dirty {
+                    object: id,
+                    voxels: None,
+                    bounds: None,
+                }
+            }
+        }
+    }
+
+    fn compute(
+        &mut self,
+        id: ObjectId,
+        inputs: &Inputs<'_>,
+        hint: &Hint,
+    ) -> Result<Dirty, SceneError> {
+        match self.recipe.clone() {
+            Recipe::Warp {
+                method,
+                background,
+                sampled_nodes,
+                swap_handles,
+                ..
+            } => self.warp(
+                id,
+                inputs,
+                hint,
+                method,
+                background,
+                sampled_nodes,
+                swap_handles,
+            ),
+            Recipe::DeformedMesh { .. } => self.deform_mesh(id, inputs, hint),
+            Recipe::Isosurface {
+                level,
+                inside_below,
+                method,
+                ..
+            } => {
+                if let Hint::Region(b) = hint
+                    && b.is_empty()
+                    && self.output.is_some()
+                {
+                    return Ok(Dirty {
+                        object: id,
+                        voxels: None,
+                        bounds: None,
+                    });
+                }
+                let vol = inputs
+                    .volume
+                    .ok_or_else(|| SceneError::invalid("isosurface without a volume"))?;
+                let surface = match method {
+                    SurfaceMethod::MarchingCubes => {
+                        marching_cubes_any(vol, level, &McOptions { inside_below })?
+                    }
+                    SurfaceMethod::DualContouring => dual_contouring_any(
+                        vol,
+                        level,
+                        &DcOptions {
+                            inside_below,
+                            ..DcOptions::default()
+                        },
+                    )?,
+                };
+                let bounds = surface.mesh.bounding_box();
+                let old = self.mesh().and_then(|m| m.bounding_box());
+                self.output = Some(DerivedOutput::Mesh(Arc::new(surface.mesh)));
+                Ok(Dirty {
+                    object: id,
+                    voxels: None,
+                    bounds: union(bounds, old),
+                })
+            }
+            Recipe::FrepSampled { .. } => {
+                let model = inputs
+                    .frep
+                    .ok_or_else(|| SceneError::invalid("F-rep sampling without a model"))?;
+                let grid = *inputs
+                    .volume
+                    .ok_or_else(|| SceneError::invalid("F-rep sampling without a grid"))?
+                    .geometry();
+                let tape = Tape::new(model.shape());
+                let sampled = match inputs.map {
+                    Some(m) => frep_sample(
+                        &Pullback {
+                            field: &tape,
+                            inverse: m.map(),
+                        },
+                        &grid,
+                    )?,
+                    None => frep_sample(&tape, &grid)?,
+                };
+                self.output = Some(DerivedOutput::Volume(Arc::new(AnyVolume::from(sampled))));
+                let all = IndexBox::all(grid.dims);
+                Ok(Dirty {
+                    object: id,
+                    voxels: Some(all),
+                    bounds: physical_box(&grid, &all),
+                })
+            }
+            Recipe::Jacobian { .. } => {
+                let map = inputs
+                    .map
+                    .ok_or_else(|| SceneError::invalid("Jacobian without a map"))?;
+                let grid = *inputs
+                    .volume
+                    .ok_or_else(|| SceneError::invalid("Jacobian without a grid"))?
+                    .geometry();
+                let det = jacobian_determinant(map.map(), &grid)?;
+                self.output = Some(DerivedOutput::Volume(Arc::new(AnyVolume::from(det))));
+                let all = IndexBox::all(grid.dims);
+                Ok(Dirty {
+                    object: id,
+                    voxels: Some(all),
+                    bounds: physical_box(&grid, &all),
+                })
+            }
+        }
+    }
+
+    #[allow(clippy::too_many_arguments)]
+    fn warp(
+        &mut self,
+        id: ObjectId,
+        inputs: &Inputs<'_>,
+        hint: &Hint,
+        method: WarpMethod,
+        background: f64,
+        sampled_nodes: Option<usize>,
+        swap_handles: bool,
+    ) -> Result<Dirty, SceneError> {
+        let source = inputs
+            .volume
+            .ok_or_else(|| SceneError::invalid("warp without a volume"))?;
+        let map_object = inputs
+            .map
+            .ok_or_else(|| SceneError::invalid("warp without a map"))?;
+        let grid = *source.geometry();
+        // The incremental path: an antialiased push-forward through a map linear in its
+        // parameters, evaluated exactly.
+        let live = match (map_object, swap_handles) {
+            (_, true) => None,
+            (m, false) => m.map().to_live(),
+        };
+        if let (Some(live), WarpMethod::PushforwardAntialiased, None) =
+            (&live, method, sampled_nodes)
+        {
+            if let (Hint::Parameters(changes), Some(engine), Some(DerivedOutput::Volume(out))) =
+                (hint, &mut self.engine, &mut self.output)
+            {
+                let report = engine.set_parameters(changes)?;
+                let b = report.output_box;
+                let out = Arc::make_mut(out);
+                with_volume!(out, v => copy_box(engine.volume(), v, &b));
+                return Ok(Dirty {
+                    object: id,
+                    voxels: Some(b),
+                    bounds: physical_box(&grid, &b),
+                });
+            }
+            let options = AntialiasOptions {
+                background,
+                ..AntialiasOptions::default()
+            };
+            let engine = with_volume!(&**source, v => {
+                IncrementalPushForward::new(v, live.clone(), &grid, &options)?
+            });
+            let mut out = (**source).clone();
+            let all = IndexBox::all(grid.dims);
+            with_volume!(&mut out, v => copy_box(engine.volume(), v, &all));
+            self.engine = Some(Box::new(engine));
+            self.output = Some(DerivedOutput::Volume(Arc::new(out)));
+            return Ok(Dirty {
+                object: id,
+                voxels: Some(all),
+                bounds: physical_box(&grid, &all),
+            });
+        }
+        self.engine = None;
+        let backward;
+        let map: &AnyMap = match (map_object, swap_handles) {
+            (MapObject::Handles(h), true) => {
+                if !method.is_pullback() {
+                    return Err(SceneError::invalid(format!(
+                        "swapped handles give a pull-back map; {method} is not a pull-back"
+                    )));
+                }
+                backward = h.backward()?;
+                &backward
+            }
+            (MapObject::Fixed(_), true) => {
+                return Err(SceneError::invalid(
+                    "only a handle map can be applied with swapped handles",
+                ));
+            }
+            (m, false) => m.map(),
+        };
+        let options = WarpOptions {
+            background,
+            mask: false,
+            sampled_nodes,
+        };
+        let out = warp_volume(source, map, &grid, method, &options)?;
+        self.output = Some(DerivedOutput::Volume(Arc::new(out.volume)));
+        let all = IndexBox::all(grid.dims);
+        Ok(Dirty {
+            object: id,
+            voxels: Some(all),
+            bounds: physical_box(&grid, &all),
+        })
+    }
+
+    fn deform_mesh(
+        &mut self,
+        id: ObjectId,
+        inputs: &Inputs<'_>,
+        hint: &Hint,
+    ) -> Result<Dirty, SceneError> {
+        let mesh = inputs
+            .mesh
+            .ok_or_else(|| SceneError::invalid("deformed mesh without a mesh"))?;
+        let map = inputs
+            .map
+            .ok_or_else(|| SceneError::invalid("deformed mesh without a map"))?
+            .map();
+        // Parameter moves of a map with local influence: only the vertices in the influence.
+        if let (Hint::Parameters(changes), Some(DerivedOutput::Mesh(out)), Some(live)) =
+            (hint, &mut self.output, map.to_live())
+            && out.vertex_count() == mesh.vertex_count()
+        {
+            let ks: Vec<usize> = changes.iter().map(|c| c.0).collect();
+            if let Influence::Within(_) = live.influence(&ks) {
+                let (lo, hi) = live.influence(&ks).bounds().unwrap_or_default();
+                let src = mesh.positions();
+                let out = Arc::make_mut(out);
+                let mut dirty: Option<(DVec3, DVec3)> = None;
+                for (i, p) in src.iter().enumerate() {
+                    if p.cmpge(lo).all() && p.cmple(hi).all() {
+                        let old = out.positions()[i];
+                        let new = map.apply(*p);
+                        out.positions_mut()[i] = new;
+                        dirty = union(dirty, Some((old.min(new), old.max(new))));
+                    }
+                }
+                return Ok(Dirty {
+                    object: id,
+                    voxels: None,
+                    bounds: dirty,
+                });
+            }
+        }
+        let mut out = (**mesh).clone();
+        map.apply_batch(mesh.positions(), out.positions_mut())?;
+        let bounds = union(
+            out.bounding_box(),
+            self.mesh().and_then(|m| m.bounding_box()),
+        );
+        self.output = Some(DerivedOutput::Mesh(Arc::new(out)));
+        Ok(Dirty {
+            object: id,
+            voxels: None,
+            bounds,
+        })
+    }
+}
+
+fn union(a: Option<(DVec3, DVec3)>, b: Option<(DVec3, DVec3)>) -> Option<(DVec3, DVec3)> {
+    match (a, b) {
+        (Some(a), Some(b)) => Some((a.0.min(b.0), a.1.max(b.1))),
+        (a, None) => a,
+        (None, b) => b,
+    }
+}

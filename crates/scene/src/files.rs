@@ -1,0 +1,167 @@
+//! Objects from files and to files: what kind of object a file holds (by extension, and for
+//! `.json` by its content), reading it, and writing any object in any format volmorph writes.
+
+use std::path::Path;
+
+use volmorph_handles::HandleSet;
+use volmorph_maps::{HandleMethod, HandleOptions, MapFormat, read_map, write_map};
+use volmorph_mesh::MeshFormat;
+
+use crate::command::NewObject;
+use crate::object::{Object, ObjectId};
+use crate::{Scene, SceneError};
+
+/// Largest `.hf` or `.json` file inspected or read whole (64 MiB).
+pub const MAX_TEXT_FILE_BYTES: u64 = 64 << 20;
+
+/// What a file holds.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum FileKind {
+    /// A volume (NIfTI, MetaImage, NRRD, VTK, raw).
+    Volume,
+    /// A polygon mesh (OBJ, STL, PLY, OFF, optionally gzipped).
+    Mesh,
+    /// A map (map JSON, lattice JSON, ITK `.tfm`, plastimatch `.bxf`).
+    Map,
+    /// Handles (handle JSON pairs, six-column text).
+    Handles,
+    /// An F-rep model (HyperFun `.hf`).
+    Frep,
+    /// A trivariate NURBS model (volmorph trivariate JSON).
+    Nurbs,
+}
+
+fn read_small_text(path: &Path) -> Result<String, SceneError> {
+    let meta = std::fs::metadata(path).map_err(|e| volmorph_io::IoError::os(path, e))?;
+    if meta.len() > MAX_TEXT_FILE_BYTES {
+        return Err(SceneError::invalid(format!(
+            "{}: {} bytes is more than a text model may have ({MAX_TEXT_FILE_BYTES})",
+            path.display(),
+            meta.len()
+        )));
+    }
+    std::fs::read_to_string(path).map_err(|e| SceneError::Io(volmorph_io::IoError::os(path, e)))
+}
+
+/// The kind of object `path` holds: by extension, and for `.json` by the document's
+/// `"format"` / `"kind"` fields.
+///
+/// # Errors
+/// [`SceneError::Invalid`] for an extension volmorph does not read, naming the known ones;
+/// I/O errors when a `.json` file must be inspected.
+pub fn kind_of(path: &Path) -> Result<FileKind, SceneError> {
+    if MeshFormat::from_path(path).is_ok() {
+        return Ok(FileKind::Mesh);
+    }
+    let ext = path
+        .extension()
+        .map(|e| e.to_string_lossy().to_ascii_lowercase())
+        .unwrap_or_default();
+    match ext.as_str() {
+        "hf" => return Ok(FileKind::Frep),
+        "tfm" | "bxf" => return Ok(FileKind::Map),
+        "json" => {
+            let text = read_small_text(path)?;
+            let v: serde_json::Value = serde_json::from_str(&text)
+                .map_err(|e| SceneError::invalid(format!("{}: not JSON: {e}", path.display())))?;
+            return Ok(
+                if v.get("format").and_then(|f| f.as_str())
+                    == Some(volmorph_trivariate::format::FORMAT_NAME)
+                {
+                    FileKind::Nurbs
+                } else if v.get("kind").is_some() {
+                    FileKind::Map
+                } else {
+                    FileKind::Handles
+                },
+            );
+        }
+        "txt" | "xyz" | "pts" | "csv" | "fcsv" => return Ok(FileKind::Handles),
+        _ => {}
+    }
+    if volmorph_volume_io::Format::from_path(path).is_ok() {
+        return Ok(FileKind::Volume);
+    }
+    Err(SceneError::invalid(format!(
+        "{}: cannot tell what the file holds from its extension (volumes: .nii .nii.gz .mha \
+         .mhd .nrrd .nhdr .vtk; meshes: .obj .stl .ply .off [.gz]; maps: .json .tfm .bxf; \
+         handles: .json .txt; F-rep: .hf; NURBS: .json)",
+        path.display()
+    )))
+}
+
+/// Read the object `path` holds ([`kind_of`]). A handle file gives a handle map with the rigid
+/// MLS method and default options.
+///
+/// # Errors
+/// The reader's error, naming the file.
+pub fn read_object(path: &Path) -> Result<NewObject, SceneError> {
+    Ok(match kind_of(path)? {
+        FileKind::Volume => NewObject::Volume(volmorph_volume_io::read(path)?),
+        FileKind::Mesh => NewObject::Mesh(volmorph_mesh::read(path)?),
+        FileKind::Map => NewObject::Map(read_map(path)?),
+        FileKind::Handles => NewObject::Handles {
+            set: HandleSet::read(path)?,
+            method: HandleMethod::Rigid,
+            options: HandleOptions::default(),
+        },
+        FileKind::Frep => NewObject::Frep {
+            source: read_small_text(path)?,
+            params: Default::default(),
+        },
+        FileKind::Nurbs => NewObject::Nurbs(volmorph_trivariate::load_volume(path)?),
+    })
+}
+
+impl Scene {
+    /// Write object `id` to `path` in the format its extension names: volumes in any volume
+    /// format, meshes in any mesh format, maps as map JSON / ITK `.tfm` / `.bxf`, handle maps
+    /// as handle JSON (`.json`) or as their map (`.tfm`), F-rep models as `.hf`, NURBS models as
+    /// trivariate JSON; derived objects as their result. Written atomically.
+    ///
+    /// # Errors
+    /// [`SceneError::NoObject`]; [`SceneError::Invalid`] for a derived object not computed or
+    /// a format that cannot hold the object; the writer's errors.
+    pub fn export(&self, id: ObjectId, path: &Path) -> Result<(), SceneError> {
+        let entry = self.get(id)?;
+        match &entry.object {
+            Object::Volume(_) | Object::Derived(_) if entry.object.volume().is_some() => {
+                let v = entry.object.volume().ok_or(SceneError::NoObject(id))?;
+                volmorph_volume_io::write(path, v)?;
+            }
+            Object::Mesh(_) | Object::Derived(_) if entry.object.mesh().is_some() => {
+                let m = entry.object.mesh().ok_or(SceneError::NoObject(id))?;
+                volmorph_mesh::write(path, m)?;
+            }
+            Object::Derived(d) => {
+                return Err(SceneError::invalid(format!(
+                    "object {id} ({:?}) has no result to write{}",
+                    entry.name,
+                    d.error().map(|e| format!(": {e}")).unwrap_or_default()
+                )));
+            }
+            Object::Map(crate::MapObject::Handles(h))
+                if MapFormat::of(path).ok() == Some(MapFormat::Json) =>
+            {
+                h.set().write_json(path)?;
+            }
+            Object::Map(m) => write_map(path, m.map())?,
+            Object::Frep(f) => write_text(path, f.source())?,
+            Object::Nurbs(a) => volmorph_trivariate::save(path, a)?,
+            _ => {
+                return Err(SceneError::invalid(format!(
+                    "object {id} cannot be written"
+                )));
+            }
+        }
+        Ok(())
+    }
+}
+
+pub(crate) fn write_text(path: &Path, text: &str) -> Result<(), SceneError> {
+    volmorph_io::write_atomic(path, |w| {
+        use std::io::Write;
+        w.write_all(text.as_bytes())
+            .map_err(|e| SceneError::Io(volmorph_io::IoError::os(path, e)))
+    })
+}

@@ -1,0 +1,227 @@
+//! The objects a scene holds.
+
+use std::collections::BTreeMap;
+use std::fmt;
+use std::sync::Arc;
+
+use volmorph_frep::{CompileOptions, Shape};
+use volmorph_handles::HandleSet;
+use volmorph_maps::{AnyMap, HandleDirection, HandleMethod, HandleOptions, handle_map};
+use volmorph_mesh::Mesh;
+use volmorph_trivariate::AggregateVolume;
+use volmorph_volume::AnyVolume;
+
+use crate::SceneError;
+use crate::derived::Derived;
+
+/// A stable object id: never reused within a scene, kept by project files.
+#[derive(
+    Debug, Clone, Copy, PartialEq, Eq, Hash, PartialOrd, Ord, serde::Serialize, serde::Deserialize,
+)]
+pub struct ObjectId(pub u64);
+
+impl fmt::Display for ObjectId {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        write!(f, "#{}", self.0)
+    }
+}
+
+/// An F-rep model: HyperFun source text and the values of its parameter array, compiled.
+#[derive(Debug, Clone)]
+pub struct FrepModel {
+    source: String,
+    params: BTreeMap<usize, f64>,
+    shape: Shape,
+}
+
+impl FrepModel {
+    /// Compile `source` with parameters `params` (`a[k]` by 1-based `k`; missing ones are 0).
+    ///
+    /// # Errors
+    /// [`SceneError::Frep`] with the line and column of a syntax or compile error.
+    pub fn new(source: &str, params: BTreeMap<usize, f64>) -> Result<Self, SceneError> {
+        let options = CompileOptions {
+            params: params.iter().map(|(k, v)| (*k, *v)).collect(),
+            object: None,
+        };
+        let shape = volmorph_frep::compile_source(source, &options)?;
+        Ok(Self {
+            source: source.to_owned(),
+            params,
+            shape,
+        })
+    }
+
+    /// The source text.
+    #[must_use]
+    pub fn source(&self) -> &str {
+        &self.source
+    }
+
+    /// The parameter values.
+    #[must_use]
+    pub fn params(&self) -> &BTreeMap<usize, f64> {
+        &self.params
+    }
+
+    /// The compiled shape (solid where `f ≥ 0`).
+    #[must_use]
+    pub fn shape(&self) -> &Shape {
+        &self.shape
+    }
+}
+
+/// A map built from handles: the set, the method and its options. The map itself (sources go
+/// to targets) is rebuilt when any of them changes.
+#[derive(Debug, Clone)]
+pub struct HandleMap {
+    set: HandleSet,
+    method: HandleMethod,
+    options: HandleOptions,
+    forward: AnyMap,
+}
+
+impl HandleMap {
+    /// Build the map of `set` by `method`.
+    ///
+    /// # Errors
+    /// The map's construction errors (too few, coincident or coplanar handles, …).
+    pub fn new(
+        set: HandleSet,
+        method: HandleMethod,
+        options: HandleOptions,
+    ) -> Result<Self, SceneError> {
+        set.validate()?;
+        let forward = handle_map(&set, method, &options, HandleDirection::SourcesToTargets)?;
+        Ok(Self {
+            set,
+            method,
+            options,
+            forward,
+        })
+    }
+
+    /// The handles.
+    #[must_use]
+    pub fn set(&self) -> &HandleSet {
+        &self.set
+    }
+
+    /// The method.
+    #[must_use]
+    pub fn method(&self) -> HandleMethod {
+        self.method
+    }
+
+    /// The options.
+    #[must_use]
+    pub fn options(&self) -> &HandleOptions {
+        &self.options
+    }
+
+    /// The map sending sources to targets.
+    #[must_use]
+    pub fn forward(&self) -> &AnyMap {
+        &self.forward
+    }
+
+    /// The map sending targets to sources (the pull-back that shows each source's content at
+    /// its target).
+    ///
+    /// # Errors
+    /// As [`HandleMap::new`].
+    pub fn backward(&self) -> Result<AnyMap, SceneError> {
+        Ok(handle_map(
+            &self.set,
+            self.method,
+            &self.options,
+            HandleDirection::TargetsToSources,
+        )?)
+    }
+}
+
+/// A map object: given whole, or built from handles.
+// A scene holds a handful of objects in an ordered map; a few hundred bytes per entry
+// cost nothing, while boxing would add an indirection to every map evaluation.
+#[allow(clippy::large_enum_variant)]
+#[derive(Debug, Clone)]
+pub enum MapObject {
+    /// A map given whole: a lattice, an affine map, a NURBS geometry, a composition, …
+    Fixed(AnyMap),
+    /// A map built from handles (MLS, frames, thin-plate splines).
+    Handles(HandleMap),
+}
+
+impl MapObject {
+    /// The map (for handles: sources to targets).
+    #[must_use]
+    pub fn map(&self) -> &AnyMap {
+        match self {
+            MapObject::Fixed(m) => m,
+            MapObject::Handles(h) => h.forward(),
+        }
+    }
+}
+
+/// Everything a scene holds.
+// Same reasoning as for `MapObject`: few entries, no boxing.
+#[allow(clippy::large_enum_variant)]
+#[derive(Debug, Clone)]
+pub enum Object {
+    /// A sampled volume (any voxel type) with its geometry.
+    Volume(Arc<AnyVolume>),
+    /// A polygon mesh.
+    Mesh(Arc<Mesh>),
+    /// An F-rep model.
+    Frep(FrepModel),
+    /// A trivariate NURBS volume with attributes.
+    Nurbs(Arc<AggregateVolume>),
+    /// A space map.
+    Map(MapObject),
+    /// A result computed from other objects, kept up to date.
+    Derived(Derived),
+}
+
+impl Object {
+    /// The kind's name (`volume`, `mesh`, `frep`, `nurbs`, `map`, `derived`).
+    #[must_use]
+    pub fn kind(&self) -> &'static str {
+        match self {
+            Object::Volume(_) => "volume",
+            Object::Mesh(_) => "mesh",
+            Object::Frep(_) => "frep",
+            Object::Nurbs(_) => "nurbs",
+            Object::Map(_) => "map",
+            Object::Derived(_) => "derived",
+        }
+    }
+
+    /// The volume this object is or holds (a volume, or a derived volume once computed).
+    #[must_use]
+    pub fn volume(&self) -> Option<&Arc<AnyVolume>> {
+        match self {
+            Object::Volume(v) => Some(v),
+            Object::Derived(d) => d.volume(),
+            _ => None,
+        }
+    }
+
+    /// The mesh this object is or holds (a mesh, or a derived mesh once computed).
+    #[must_use]
+    pub fn mesh(&self) -> Option<&Arc<Mesh>> {
+        match self {
+            Object::Mesh(m) => Some(m),
+            Object::Derived(d) => d.mesh(),
+            _ => None,
+        }
+    }
+}
+
+/// A named object.
+#[derive(Debug, Clone)]
+pub struct Entry {
+    /// The user's name for it.
+    pub name: String,
+    /// The object.
+    pub object: Object,
+}

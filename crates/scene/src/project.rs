@@ -1,0 +1,379 @@
+//! Project files: a scene saved as a versioned JSON manifest with its data files beside it, and
+//! loaded back to the same state.
+//!
+//! ```text
+//! scene.vmproj            the manifest (JSON, written last, atomically)
+//! scene.vmproj.data/      one file per object that has bulk data: <id>.mha (volumes, exact
+//!                         geometry), <id>.ply (meshes, binary double), <id>.json (NURBS)
+//! ```
+//!
+//! ```json
+//! {
+//!   "format": "volmorph-scene", "version": 1, "next_id": 4,
+//!   "objects": [
+//!     {"id": 1, "name": "teapot", "kind": "volume", "file": "scene.vmproj.data/1.mha"},
+//!     {"id": 2, "name": "lattice", "kind": "map", "map": { …map JSON… }},
+//!     {"id": 3, "name": "handles", "kind": "handles", "handles": { …handle JSON… },
+//!      "method": "rigid", "options": {"weighting": {"type": "inverse-distance", "alpha": 1},
+//!      "beta": 1, "smoothing": 0}},
+//!     {"id": 4, "name": "warped", "kind": "derived", "recipe": { … },
+//!      "file": "scene.vmproj.data/4.mha"}
+//!   ]
+//! }
+//! ```
+//!
+//! Maps, handles, F-rep sources and recipes are stored in the manifest itself, numbers in their
+//! shortest exact form. Derived results are stored too (as a cache), so a loaded scene shows
+//! exactly what was saved; a derived object saved without a result is computed on loading.
+//! Data file paths are relative to the manifest's folder and must stay inside it: absolute
+//! paths, `..` and symbolic links that leave the folder are refused.
+
+use std::collections::BTreeMap;
+use std::path::{Component, Path, PathBuf};
+use std::sync::Arc;
+
+use serde::{Deserialize, Serialize};
+use serde_json::Value;
+use volmorph_handles::{HandleSet, Weighting};
+use volmorph_maps::{AnyMap, HandleMethod, HandleOptions};
+
+use crate::derived::{Derived, DerivedOutput, Recipe};
+use crate::object::{Entry, FrepModel, HandleMap, MapObject, Object, ObjectId};
+use crate::{Scene, SceneError};
+
+/// Value of the manifest's `format` field.
+pub const PROJECT_FORMAT: &str = "volmorph-scene";
+
+/// Version of the manifest written, and the only one read.
+pub const PROJECT_VERSION: u32 = 1;
+
+#[derive(Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+struct Manifest {
+    format: String,
+    version: u32,
+    next_id: u64,
+    objects: Vec<ObjectJson>,
+}
+
+#[derive(Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+struct ObjectJson {
+    id: ObjectId,
+    name: String,
+    kind: String,
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    file: Option<String>,
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    map: Option<Value>,
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    handles: Option<Value>,
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    method: Option<HandleMethod>,
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    options: Option<OptionsJson>,
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    source: Option<String>,
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    params: Option<BTreeMap<usize, f64>>,
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    recipe: Option<Recipe>,
+}
+
+#[derive(Serialize, Deserialize)]
+#[serde(tag = "type", rename_all = "kebab-case", deny_unknown_fields)]
+enum WeightingJson {
+    InverseDistance { alpha: f64 },
+    Gaussian { sigma: f64 },
+}
+
+#[derive(Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+struct OptionsJson {
+    weighting: WeightingJson,
+    beta: f64,
+    smoothing: f64,
+}
+
+impl From<&HandleOptions> for OptionsJson {
+    fn from(o: &HandleOptions) -> Self {
+        Self {
+            weighting: match o.weighting {
+                Weighting::InverseDistance { alpha } => WeightingJson::InverseDistance { alpha },
+                Weighting::Gaussian { sigma } => WeightingJson::Gaussian { sigma },
+            },
+            beta: o.beta,
+            smoothing: o.smoothing,
+        }
+    }
+}
+
+impl From<OptionsJson> for HandleOptions {
+    fn from(o: OptionsJson) -> Self {
+        Self {
+            weighting: match o.weighting {
+                WeightingJson::InverseDistance { alpha } => Weighting::InverseDistance { alpha },
+                WeightingJson::Gaussian { sigma } => Weighting::Gaussian { sigma },
+            },
+            beta: o.beta,
+            smoothing: o.smoothing,
+        }
+    }
+}
+
+/// The data folder of the project file `path`: `<file name>.data` beside it.
+#[must_use]
+pub fn data_folder(path: &Path) -> PathBuf {
+    let mut name = path.file_name().unwrap_or_default().to_os_string();
+    name.push(".data");
+    path.with_file_name(name)
+}
+
+fn project_err(path: &Path, message: impl Into<String>) -> SceneError {
+    SceneError::Project {
+        path: path.display().to_string(),
+        message: message.into(),
+    }
+}
+
+impl Scene {
+    /// Save the scene as the project `path` (see the [module docs](self)): data files first,
+    /// each written atomically, then the manifest, atomically. A failure leaves any previous
+    /// manifest in place.
+    ///
+    /// # Errors
+    /// I/O errors naming the file; [`SceneError::Map`] if a map cannot be serialised.
+    pub fn save(&self, path: &Path) -> Result<(), SceneError> {
+        let folder = data_folder(path);
+        let base = path.parent().unwrap_or(Path::new(""));
+        std::fs::create_dir_all(&folder).map_err(|e| volmorph_io::IoError::os(&folder, e))?;
+        let rel = |file: &str| -> String {
+            let f = folder.join(file);
+            f.strip_prefix(base)
+                .unwrap_or(&f)
+                .to_string_lossy()
+                .replace('\\', "/")
+        };
+        let mut objects = Vec::new();
+        for (id, entry) in self.objects() {
+            let mut o = ObjectJson {
+                id,
+                name: entry.name.clone(),
+                kind: entry.object.kind().to_owned(),
+                file: None,
+                map: None,
+                handles: None,
+                method: None,
+                options: None,
+                source: None,
+                params: None,
+                recipe: None,
+            };
+            match &entry.object {
+                Object::Volume(v) => {
+                    let name = format!("{}.mha", id.0);
+                    volmorph_volume_io::write(&folder.join(&name), v)?;
+                    o.file = Some(rel(&name));
+                }
+                Object::Mesh(m) => {
+                    let name = format!("{}.ply", id.0);
+                    volmorph_mesh::write(&folder.join(&name), m)?;
+                    o.file = Some(rel(&name));
+                }
+                Object::Nurbs(a) => {
+                    let name = format!("{}.json", id.0);
+                    volmorph_trivariate::save(&folder.join(&name), a)?;
+                    o.file = Some(rel(&name));
+                }
+                Object::Frep(f) => {
+                    o.source = Some(f.source().to_owned());
+                    o.params = Some(f.params().clone());
+                }
+                Object::Map(MapObject::Fixed(m)) => o.map = Some(m.to_json_value()?),
+                Object::Map(MapObject::Handles(h)) => {
+                    o.kind = "handles".into();
+                    o.handles = Some(
+                        serde_json::from_str(&h.set().to_json())
+                            .map_err(|e| project_err(path, format!("handles of {id}: {e}")))?,
+                    );
+                    o.method = Some(h.method());
+                    o.options = Some(h.options().into());
+                }
+                Object::Derived(d) => {
+                    o.recipe = Some(d.recipe().clone());
+                    match d.output() {
+                        Some(DerivedOutput::Volume(v)) => {
+                            let name = format!("{}.mha", id.0);
+                            volmorph_volume_io::write(&folder.join(&name), v)?;
+                            o.file = Some(rel(&name));
+                        }
+                        Some(DerivedOutput::Mesh(m)) => {
+                            let name = format!("{}.ply", id.0);
+                            volmorph_mesh::write(&folder.join(&name), m)?;
+                            o.file = Some(rel(&name));
+                        }
+                        None => {}
+                    }
+                }
+            }
+            objects.push(o);
+        }
+        let manifest = Manifest {
+            format: PROJECT_FORMAT.into(),
+            version: PROJECT_VERSION,
+            next_id: self.next_id_value(),
+            objects,
+        };
+        let text = serde_json::to_string_pretty(&manifest)
+            .map_err(|e| project_err(path, e.to_string()))?;
+        crate::files::write_text(path, &text)
+    }
+
+    /// Load the project `path` (see the [module docs](self)) into a new scene with an empty
+    /// history.
+    ///
+    /// # Errors
+    /// [`SceneError::Project`] for a malformed manifest, another format or version, a
+    /// duplicate id, a data path outside the project's folder, or a recipe reading an object
+    /// that does not precede it; the errors of the data files' readers.
+    pub fn load(path: &Path) -> Result<Scene, SceneError> {
+        let text = std::fs::read_to_string(path).map_err(|e| volmorph_io::IoError::os(path, e))?;
+        let m: Manifest =
+            serde_json::from_str(&text).map_err(|e| project_err(path, e.to_string()))?;
+        if m.format != PROJECT_FORMAT {
+            return Err(project_err(
+                path,
+                format!("format {:?} is not {PROJECT_FORMAT:?}", m.format),
+            ));
+        }
+        if m.version != PROJECT_VERSION {
+            return Err(project_err(
+                path,
+                format!(
+                    "version {} is not supported (expected {PROJECT_VERSION})",
+                    m.version
+                ),
+            ));
+        }
+        let base = path.parent().unwrap_or(Path::new(""));
+        let mut scene = Scene::new();
+        for o in m.objects {
+            let id = o.id;
+            if scene.get(id).is_ok() {
+                return Err(project_err(path, format!("object {id} appears twice")));
+            }
+            let file = || -> Result<PathBuf, SceneError> {
+                let f = o
+                    .file
+                    .as_deref()
+                    .ok_or_else(|| project_err(path, format!("object {id}: no \"file\"")))?;
+                contained(base, f).map_err(|m| project_err(path, format!("object {id}: {m}")))
+            };
+            let object = match o.kind.as_str() {
+                "volume" => Object::Volume(Arc::new(volmorph_volume_io::read(&file()?)?)),
+                "mesh" => Object::Mesh(Arc::new(volmorph_mesh::read(&file()?)?)),
+                "nurbs" => Object::Nurbs(Arc::new(volmorph_trivariate::load_volume(&file()?)?)),
+                "frep" => Object::Frep(FrepModel::new(
+                    o.source.as_deref().unwrap_or(""),
+                    o.params.clone().unwrap_or_default(),
+                )?),
+                "map" => {
+                    let v = o
+                        .map
+                        .as_ref()
+                        .ok_or_else(|| project_err(path, format!("object {id}: no \"map\"")))?;
+                    Object::Map(MapObject::Fixed(AnyMap::from_json_value(v, 0)?))
+                }
+                "handles" => {
+                    let v = o
+                        .handles
+                        .as_ref()
+                        .ok_or_else(|| project_err(path, format!("object {id}: no \"handles\"")))?;
+                    let set = HandleSet::from_json(&v.to_string())?;
+                    let method = o.method.unwrap_or(HandleMethod::Rigid);
+                    let options = o.options.map(HandleOptions::from).unwrap_or_default();
+                    Object::Map(MapObject::Handles(HandleMap::new(set, method, options)?))
+                }
+                "derived" => {
+                    let recipe = o
+                        .recipe
+                        .clone()
+                        .ok_or_else(|| project_err(path, format!("object {id}: no \"recipe\"")))?;
+                    if recipe.inputs().iter().any(|i| *i >= id) {
+                        return Err(project_err(
+                            path,
+                            format!(
+                                "object {id}: its recipe reads an object that does not precede it"
+                            ),
+                        ));
+                    }
+                    match o.file {
+                        None => Object::Derived(Derived::new(recipe)),
+                        Some(_) => {
+                            let f = file()?;
+                            let out = if recipe.output_kind() == "volume" {
+                                DerivedOutput::Volume(Arc::new(volmorph_volume_io::read(&f)?))
+                            } else {
+                                DerivedOutput::Mesh(Arc::new(volmorph_mesh::read(&f)?))
+                            };
+                            Object::Derived(Derived::with_output(recipe, out))
+                        }
+                    }
+                }
+                other => {
+                    return Err(project_err(
+                        path,
+                        format!("object {id}: unknown kind {other:?}"),
+                    ));
+                }
+            };
+            scene.insert_raw(
+                id,
+                Entry {
+                    name: o.name,
+                    object,
+                },
+            );
+        }
+        scene.set_next_id(m.next_id);
+        for (id, e) in scene.objects() {
+            if let Object::Derived(d) = &e.object {
+                scene
+                    .check_recipe_of(id, d.recipe())
+                    .map_err(|e| project_err(path, e.to_string()))?;
+            }
+        }
+        scene.compute_missing();
+        scene.clear_history();
+        Ok(scene)
+    }
+}
+
+/// `relative` resolved against `base`, refused unless it stays inside `base`: no absolute
+/// path, no `..`, and after resolving symbolic links still under `base`.
+fn contained(base: &Path, relative: &str) -> Result<PathBuf, String> {
+    let rel = Path::new(relative);
+    if rel.is_absolute()
+        || rel
+            .components()
+            .any(|c| !matches!(c, Component::Normal(_) | Component::CurDir))
+    {
+        return Err(format!(
+            "data path {relative:?} must be relative and stay inside the project's folder"
+        ));
+    }
+    let full = base.join(rel);
+    let canon_base = std::fs::canonicalize(if base.as_os_str().is_empty() {
+        Path::new(".")
+    } else {
+        base
+    })
+    .map_err(|e| format!("project folder: {e}"))?;
+    let canon = std::fs::canonicalize(&full).map_err(|e| format!("{}: {e}", full.display()))?;
+    if !canon.starts_with(&canon_base) {
+        return Err(format!(
+            "data path {relative:?} leaves the project's folder (through a symbolic link)"
+        ));
+    }
+    Ok(full)
+}

@@ -1,0 +1,546 @@
+//! Scene commands: incremental derived objects equal a full recompute, undo/redo restore,
+//! failed commands change nothing, handle maps, project round trips and path containment.
+
+use glam::DVec3;
+use volmorph_handles::HandleSet;
+use volmorph_lattice::{BSplineLattice, DragOptions};
+use volmorph_maps::{AnyMap, HandleMethod, HandleOptions};
+use volmorph_scene::{
+    Change, Command, NewObject, ObjectId, Recipe, Scene, SceneError, SurfaceMethod,
+};
+use volmorph_volume::phantom::{self, Phantom};
+use volmorph_volume::{AnyVolume, Geometry};
+use volmorph_warp::apply::{WarpMethod, WarpOptions, warp_volume};
+
+fn add(scene: &mut Scene, name: &str, object: NewObject) -> ObjectId {
+    scene
+        .apply(Command::Add {
+            name: name.into(),
+            object,
+        })
+        .unwrap()
+        .added[0]
+}
+
+/// A 32³ teapot, its identity 7³ lattice and the antialiased push-forward through it.
+fn teapot_scene() -> (Scene, Geometry, ObjectId, ObjectId, ObjectId) {
+    let mut scene = Scene::new();
+    let vol = phantom::density(Phantom::Teapot, [32; 3]).unwrap();
+    let grid = *vol.geometry();
+    let v = add(
+        &mut scene,
+        "teapot",
+        NewObject::Volume(AnyVolume::from(vol)),
+    );
+    let lattice = BSplineLattice::identity_on_voxels(&grid, [7, 7, 7]).unwrap();
+    let l = add(
+        &mut scene,
+        "lattice",
+        NewObject::Map(AnyMap::Lattice(lattice)),
+    );
+    let w = add(
+        &mut scene,
+        "warped",
+        NewObject::Derived(Recipe::Warp {
+            source: v,
+            map: l,
+            method: WarpMethod::PushforwardAntialiased,
+            background: 0.0,
+            sampled_nodes: None,
+            swap_handles: false,
+        }),
+    );
+    (scene, grid, v, l, w)
+}
+
+fn volume_bytes(scene: &Scene, id: ObjectId) -> Vec<u8> {
+    scene
+        .get(id)
+        .unwrap()
+        .object
+        .volume()
+        .unwrap()
+        .as_bytes()
+        .to_vec()
+}
+
+fn drag(scene: &mut Scene, l: ObjectId, from: DVec3, to: DVec3) -> Change {
+    scene
+        .apply(Command::DragPoints {
+            map: l,
+            grabbed: vec![from],
+            targets: vec![to],
+            options: DragOptions::with_radius(0.5),
+        })
+        .unwrap()
+}
+
+/// The number of bytes that differ and the largest difference.
+fn diff(a: &[u8], b: &[u8]) -> (usize, u8) {
+    a.iter()
+        .zip(b)
+        .filter(|(x, y)| x != y)
+        .fold((0, 0), |(n, m), (x, y)| (n + 1, m.max(x.abs_diff(*y))))
+}
+
+#[test]
+fn incremental_drag_equals_a_fresh_push_forward_and_reports_a_partial_region() {
+    let (mut scene, grid, v, l, w) = teapot_scene();
+    let before = volume_bytes(&scene, w);
+    let spout = DVec3::new(0.76, 0.0, 0.25);
+    let change = drag(&mut scene, l, spout, spout + DVec3::new(0.08, 0.0, -0.15));
+    let d = change.dirty_of(w).expect("the warp is dirty");
+    let b = d.voxels.unwrap();
+    assert!(!b.is_empty() && b.len() < grid.len() / 2, "{b:?}");
+    assert!(change.modified.contains(&l) && change.modified.contains(&w));
+    let drag = change.drag.unwrap();
+    assert_eq!(drag.rank, 1);
+    assert!(drag.max_residual < 1e-9);
+    // Outside the dirty box nothing changed.
+    let after = volume_bytes(&scene, w);
+    let [nx, ny, _] = grid.dims;
+    for (n, (x, y)) in before.iter().zip(&after).enumerate() {
+        let idx = [n % nx, n / nx % ny, n / (nx * ny)];
+        if !b.contains(idx) {
+            assert_eq!(x, y, "voxel {idx:?} outside the dirty box changed");
+        }
+    }
+    // A fresh scene with the dragged lattice gives the same volume (up to the u8 rounding of
+    // values a few ulps apart).
+    let lattice = scene.map(l).unwrap().clone();
+    let mut fresh = Scene::new();
+    let vol = scene
+        .get(v)
+        .unwrap()
+        .object
+        .volume()
+        .unwrap()
+        .as_ref()
+        .clone();
+    let fv = add(&mut fresh, "teapot", NewObject::Volume(vol));
+    let fl = add(&mut fresh, "lattice", NewObject::Map(lattice));
+    let fw = add(
+        &mut fresh,
+        "warped",
+        NewObject::Derived(Recipe::Warp {
+            source: fv,
+            map: fl,
+            method: WarpMethod::PushforwardAntialiased,
+            background: 0.0,
+            sampled_nodes: None,
+            swap_handles: false,
+        }),
+    );
+    let (n, m) = diff(&after, &volume_bytes(&fresh, fw));
+    assert!(m <= 1 && n <= 8, "{n} voxels differ, by up to {m}");
+}
+
+#[test]
+fn undo_and_redo_restore_the_states() {
+    let (mut scene, _, _, l, w) = teapot_scene();
+    let original = volume_bytes(&scene, w);
+    let lattice0 = scene.map(l).unwrap().to_json().unwrap();
+    let spout = DVec3::new(0.76, 0.0, 0.25);
+    drag(&mut scene, l, spout, spout + DVec3::new(0.05, 0.0, -0.12));
+    let dragged = volume_bytes(&scene, w);
+    let lattice1 = scene.map(l).unwrap().to_json().unwrap();
+    assert_ne!(original, dragged);
+    let change = scene.undo().unwrap().unwrap();
+    assert!(change.dirty_of(w).is_some());
+    assert_eq!(scene.map(l).unwrap().to_json().unwrap(), lattice0);
+    let (n, m) = diff(&original, &volume_bytes(&scene, w));
+    assert!(m <= 1 && n <= 8, "undo: {n} voxels differ by up to {m}");
+    scene.redo().unwrap().unwrap();
+    assert_eq!(scene.map(l).unwrap().to_json().unwrap(), lattice1);
+    let (n, m) = diff(&dragged, &volume_bytes(&scene, w));
+    assert!(m <= 1 && n <= 8, "redo: {n} voxels differ by up to {m}");
+    // A new command clears the redo history.
+    scene.undo().unwrap();
+    assert_eq!(scene.redo_depth(), 1);
+    drag(&mut scene, l, spout, spout + DVec3::new(0.0, 0.05, 0.0));
+    assert_eq!(scene.redo_depth(), 0);
+    assert!(scene.redo().unwrap().is_none());
+}
+
+#[test]
+fn failed_commands_change_nothing() {
+    let (mut scene, _, v, l, w) = teapot_scene();
+    let before = volume_bytes(&scene, w);
+    let depth = scene.undo_depth();
+    // A grabbed point outside the lattice box cannot be inverted.
+    let e = scene
+        .apply(Command::DragPoints {
+            map: l,
+            grabbed: vec![DVec3::splat(50.0)],
+            targets: vec![DVec3::ZERO],
+            options: DragOptions::default(),
+        })
+        .unwrap_err();
+    assert!(matches!(e, SceneError::Drag(_)), "{e}");
+    // Wrong kinds, missing objects, objects in use, bad parameters.
+    assert!(matches!(
+        scene.apply(Command::DragPoints {
+            map: v,
+            grabbed: vec![DVec3::ZERO],
+            targets: vec![DVec3::ZERO],
+            options: DragOptions::default(),
+        }),
+        Err(SceneError::WrongKind { .. })
+    ));
+    assert!(matches!(
+        scene.apply(Command::Remove { id: ObjectId(99) }),
+        Err(SceneError::NoObject(_))
+    ));
+    assert!(matches!(
+        scene.apply(Command::Remove { id: l }),
+        Err(SceneError::InUse { .. })
+    ));
+    assert!(
+        scene
+            .apply(Command::SetParameters {
+                map: l,
+                changes: vec![(0, DVec3::NAN)],
+            })
+            .is_err()
+    );
+    assert!(
+        scene
+            .apply(Command::SetParameters {
+                map: l,
+                changes: vec![(100_000, DVec3::ZERO)],
+            })
+            .is_err()
+    );
+    assert_eq!(scene.undo_depth(), depth);
+    assert_eq!(before, volume_bytes(&scene, w));
+    // Removing the user first, then the map, works, and undo brings both back.
+    scene.apply(Command::Remove { id: w }).unwrap();
+    scene.apply(Command::Remove { id: l }).unwrap();
+    assert!(scene.get(w).is_err());
+    scene.undo().unwrap();
+    scene.undo().unwrap();
+    assert_eq!(before, volume_bytes(&scene, w));
+}
+
+fn handles() -> HandleSet {
+    HandleSet::from_lists(
+        &[
+            DVec3::new(-0.6, -0.4, -0.3),
+            DVec3::new(0.6, -0.4, -0.3),
+            DVec3::new(0.0, 0.6, -0.3),
+            DVec3::new(0.0, 0.0, 0.6),
+        ],
+        &[
+            DVec3::new(-0.6, -0.4, -0.3),
+            DVec3::new(0.7, -0.35, -0.3),
+            DVec3::new(0.0, 0.6, -0.25),
+            DVec3::new(0.05, 0.0, 0.6),
+        ],
+    )
+    .unwrap()
+}
+
+#[test]
+fn handle_edits_rebuild_the_map_and_equal_a_direct_warp() {
+    let mut scene = Scene::new();
+    let vol = AnyVolume::from(phantom::density(Phantom::Teapot, [24; 3]).unwrap());
+    let grid = *vol.geometry();
+    let v = add(&mut scene, "teapot", NewObject::Volume(vol.clone()));
+    let h = add(
+        &mut scene,
+        "handles",
+        NewObject::Handles {
+            set: handles(),
+            method: HandleMethod::Affine,
+            options: HandleOptions::default(),
+        },
+    );
+    let w = add(
+        &mut scene,
+        "warped",
+        NewObject::Derived(Recipe::Warp {
+            source: v,
+            map: h,
+            method: WarpMethod::PullbackLinear,
+            background: 0.0,
+            sampled_nodes: Some(16),
+            swap_handles: true,
+        }),
+    );
+    scene
+        .apply(Command::AddHandle {
+            map: h,
+            source: DVec3::new(0.3, 0.3, 0.3),
+            target: DVec3::new(0.35, 0.3, 0.25),
+        })
+        .unwrap();
+    scene
+        .apply(Command::MoveHandle {
+            map: h,
+            index: 4,
+            source: DVec3::new(0.3, 0.3, 0.3),
+            target: DVec3::new(0.4, 0.32, 0.2),
+        })
+        .unwrap();
+    // The derived volume is exactly the direct warp through the swapped handles.
+    let mut set = handles();
+    set.points
+        .push((DVec3::new(0.3, 0.3, 0.3), DVec3::new(0.4, 0.32, 0.2)));
+    let back = volmorph_maps::handle_map(
+        &set,
+        HandleMethod::Affine,
+        &HandleOptions::default(),
+        volmorph_maps::HandleDirection::TargetsToSources,
+    )
+    .unwrap();
+    let direct = warp_volume(
+        &vol,
+        &back,
+        &grid,
+        WarpMethod::PullbackLinear,
+        &WarpOptions {
+            sampled_nodes: Some(16),
+            ..WarpOptions::default()
+        },
+    )
+    .unwrap();
+    assert_eq!(volume_bytes(&scene, w), direct.volume.as_bytes());
+    // Switching the method, deleting a handle, undoing all of it.
+    scene
+        .apply(Command::SetHandleMethod {
+            map: h,
+            method: HandleMethod::Tps,
+            options: HandleOptions::default(),
+        })
+        .unwrap();
+    assert_eq!(scene.map(h).unwrap().kind(), "thin-plate");
+    scene
+        .apply(Command::DeleteHandle { map: h, index: 0 })
+        .unwrap();
+    for _ in 0..3 {
+        scene.undo().unwrap();
+    }
+    assert_eq!(scene.map(h).unwrap().kind(), "mls");
+    assert!(
+        scene
+            .apply(Command::DeleteHandle { map: h, index: 9 })
+            .is_err()
+    );
+}
+
+#[test]
+fn derived_meshes_follow_incrementally_and_equal_a_full_recompute() {
+    let (mut scene, _, v, l, _) = teapot_scene();
+    let iso = add(
+        &mut scene,
+        "surface",
+        NewObject::Derived(Recipe::Isosurface {
+            volume: v,
+            level: 127.0,
+            inside_below: false,
+            method: SurfaceMethod::MarchingCubes,
+        }),
+    );
+    let deformed = add(
+        &mut scene,
+        "deformed surface",
+        NewObject::Derived(Recipe::DeformedMesh { mesh: iso, map: l }),
+    );
+    let spout = DVec3::new(0.76, 0.0, 0.25);
+    let change = drag(&mut scene, l, spout, spout + DVec3::new(0.06, 0.0, -0.1));
+    assert!(change.dirty_of(deformed).and_then(|d| d.bounds).is_some());
+    assert!(
+        change.dirty_of(iso).is_none(),
+        "the source surface did not change"
+    );
+    let inc = scene.get(deformed).unwrap().object.mesh().unwrap().clone();
+    let src = scene.get(iso).unwrap().object.mesh().unwrap().clone();
+    let map = scene.map(l).unwrap();
+    let mut full = vec![DVec3::ZERO; src.vertex_count()];
+    use volmorph_deform::SpaceMap;
+    map.apply_batch(src.positions(), &mut full).unwrap();
+    assert_eq!(inc.positions(), full.as_slice());
+}
+
+#[test]
+fn projects_round_trip_to_the_same_state() {
+    let (mut scene, _, _, l, w) = teapot_scene();
+    let spout = DVec3::new(0.76, 0.0, 0.25);
+    drag(&mut scene, l, spout, spout + DVec3::new(0.05, 0.0, -0.1));
+    add(
+        &mut scene,
+        "model",
+        NewObject::Frep {
+            source: "my_model(x[3], a[1]) { my_model = 1 - x[1]^2 - x[2]^2 - x[3]^2; }".into(),
+            params: [(1, 0.5)].into_iter().collect(),
+        },
+    );
+    add(
+        &mut scene,
+        "handles",
+        NewObject::Handles {
+            set: handles(),
+            method: HandleMethod::Rigid,
+            options: HandleOptions::default(),
+        },
+    );
+    let dir = tempfile::tempdir().unwrap();
+    let path = dir.path().join("scene.vmproj");
+    scene.save(&path).unwrap();
+    let back = Scene::load(&path).unwrap();
+    let ids: Vec<_> = scene
+        .objects()
+        .map(|(id, e)| (id, e.name.clone(), e.object.kind()))
+        .collect();
+    let back_ids: Vec<_> = back
+        .objects()
+        .map(|(id, e)| (id, e.name.clone(), e.object.kind()))
+        .collect();
+    assert_eq!(ids, back_ids);
+    assert_eq!(volume_bytes(&scene, w), volume_bytes(&back, w));
+    for (id, e) in scene.objects() {
+        if let volmorph_scene::Object::Map(m) = &e.object {
+            assert_eq!(
+                m.map().to_json().unwrap(),
+                back.map(id).unwrap().to_json().unwrap()
+            );
+        }
+    }
+    assert_eq!(back.undo_depth(), 0);
+    // Editing the loaded scene works (the engine is rebuilt on demand).
+    let mut back = back;
+    let change = drag(&mut back, l, spout, spout + DVec3::new(0.0, 0.04, 0.0));
+    assert!(change.dirty_of(w).is_some());
+    // New objects never reuse an id.
+    let n = add(&mut back, "later", NewObject::Map(AnyMap::Identity));
+    assert!(scene.objects().all(|(id, _)| id < n));
+}
+
+#[test]
+fn project_data_paths_must_stay_inside_the_project_folder() {
+    let dir = tempfile::tempdir().unwrap();
+    let outside = dir.path().join("secret.mha");
+    let vol = AnyVolume::from(phantom::density(Phantom::Sphere, [8; 3]).unwrap());
+    volmorph_volume_io::write(&outside, &vol).unwrap();
+    let proj = dir.path().join("p");
+    std::fs::create_dir(&proj).unwrap();
+    for file in ["../secret.mha", "/etc/passwd", "sub/../../secret.mha"] {
+        let manifest = format!(
+            r#"{{"format": "volmorph-scene", "version": 1, "next_id": 1, "objects": [
+                {{"id": 1, "name": "v", "kind": "volume", "file": "{file}"}}]}}"#
+        );
+        let path = proj.join("x.vmproj");
+        std::fs::write(&path, manifest).unwrap();
+        let e = Scene::load(&path).unwrap_err();
+        assert!(e.to_string().contains("project's folder"), "{file}: {e}");
+    }
+    // A symbolic link inside the folder that leads out is refused too.
+    #[cfg(unix)]
+    {
+        std::os::unix::fs::symlink(&outside, proj.join("link.mha")).unwrap();
+        let manifest = r#"{"format": "volmorph-scene", "version": 1, "next_id": 1, "objects": [
+            {"id": 1, "name": "v", "kind": "volume", "file": "link.mha"}]}"#;
+        let path = proj.join("x.vmproj");
+        std::fs::write(&path, manifest).unwrap();
+        let e = Scene::load(&path).unwrap_err();
+        assert!(e.to_string().contains("symbolic link"), "{e}");
+    }
+    // Another version is refused with a clear message.
+    let path = proj.join("v2.vmproj");
+    std::fs::write(
+        &path,
+        r#"{"format": "volmorph-scene", "version": 2, "next_id": 0, "objects": []}"#,
+    )
+    .unwrap();
+    assert!(
+        Scene::load(&path)
+            .unwrap_err()
+            .to_string()
+            .contains("version 2")
+    );
+}
+
+#[test]
+fn frep_models_are_sampled_through_maps_and_follow_edits() {
+    let mut scene = Scene::new();
+    let g = Geometry::new([17, 17, 17])
+        .with_origin(DVec3::splat(-2.0))
+        .with_spacing(DVec3::splat(0.25));
+    let grid = add(
+        &mut scene,
+        "grid",
+        NewObject::Volume(AnyVolume::from(
+            volmorph_volume::Volume::<u8>::from_fn(g, |_, _, _| 0).unwrap(),
+        )),
+    );
+    let sphere = "sphere(x[3], a[1]) { sphere = a[1]^2 - x[1]^2 - x[2]^2 - x[3]^2; }";
+    let model = add(
+        &mut scene,
+        "ball",
+        NewObject::Frep {
+            source: sphere.into(),
+            params: [(1, 1.0)].into_iter().collect(),
+        },
+    );
+    let scale = volmorph_deform::Affine {
+        matrix: glam::DMat3::from_diagonal(DVec3::splat(2.0)),
+        offset: DVec3::ZERO,
+    };
+    let m = add(&mut scene, "half", NewObject::Map(AnyMap::Affine(scale)));
+    let plain = add(
+        &mut scene,
+        "sampled",
+        NewObject::Derived(Recipe::FrepSampled {
+            model,
+            map: None,
+            grid,
+        }),
+    );
+    let mapped = add(
+        &mut scene,
+        "sampled through the map",
+        NewObject::Derived(Recipe::FrepSampled {
+            model,
+            map: Some(m),
+            grid,
+        }),
+    );
+    let value = |scene: &Scene, id: ObjectId, p: DVec3| -> f64 {
+        let v = scene
+            .get(id)
+            .unwrap()
+            .object
+            .volume()
+            .unwrap()
+            .to_typed::<f64>();
+        let idx = g.physical_to_index(p).round();
+        v.data()[idx.x as usize + 17 * (idx.y as usize + 17 * idx.z as usize)]
+    };
+    let p = DVec3::new(0.5, 0.25, -0.25);
+    assert!((value(&scene, plain, p) - (1.0 - p.length_squared())).abs() < 1e-6);
+    // Pull-back through x ↦ 2x: the value at p is f(2p).
+    assert!((value(&scene, mapped, p) - (1.0 - (2.0 * p).length_squared())).abs() < 1e-6);
+    // Editing the model's parameter updates both; a syntax error is refused with its position.
+    let change = scene
+        .apply(Command::Replace {
+            id: model,
+            object: NewObject::Frep {
+                source: sphere.into(),
+                params: [(1, 1.5)].into_iter().collect(),
+            },
+        })
+        .unwrap();
+    assert!(change.dirty_of(plain).is_some() && change.dirty_of(mapped).is_some());
+    assert!((value(&scene, plain, p) - (2.25 - p.length_squared())).abs() < 1e-6);
+    let e = scene
+        .apply(Command::Replace {
+            id: model,
+            object: NewObject::Frep {
+                source: "sphere(x[3]) { sphere = 1 - ; }".into(),
+                params: Default::default(),
+            },
+        })
+        .unwrap_err();
+    assert!(e.to_string().contains("line 1"), "{e}");
+    assert!((value(&scene, plain, p) - (2.25 - p.length_squared())).abs() < 1e-6);
+}
