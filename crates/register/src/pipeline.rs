@@ -17,12 +17,12 @@
 //! | `displacement.mha` | `φ(x) − x` on the fixed grid as a 3-component MetaImage (ITK's displacement field) |
 //! | `warped.<ext>` | the moving scan resampled on the fixed grid through the map |
 //! | `jacobian.<ext>` | `det Dφ` on the fixed grid |
-//!
-//! The three voxel outputs use the map sampled at every other voxel and interpolated
-//! trilinearly (McPhail's §5.5.2 sampled deformation; exact at the samples), the TRE the exact
-//! map.
-//! | `overlay_{before,after}_{x,y,z}.png` | Algorithm 5.1 mid-sections, before and after |
+//! | `overlay_{before,after}_{x,y,z,3d}.png` | Algorithm 5.1 mid-sections and volume rendering, before and after |
 //! | `report.json`, `summary.txt` | metrics before/after, fold report, TRE, timings, options |
+//!
+//! The voxel outputs (displacement field, warped scan, Jacobian map) use the map sampled at
+//! every other voxel and interpolated trilinearly (McPhail's §5.5.2 sampled deformation; exact
+//! at the samples), the TRE the exact map.
 
 use std::io::Write;
 use std::path::{Path, PathBuf};
@@ -43,7 +43,10 @@ use crate::RegisterError;
 use crate::dense::{DenseOptions, DenseResult, Refined, fit_to_map, lattice_on, refine};
 use crate::matching::{Correspondence, MatchOptions, MatchStatus, match_handles};
 use crate::metrics::{ImageMetrics, compare};
-use crate::quality::{LandmarkUnits, OverlayOptions, TreStats, read_landmarks, slice_overlay, tre};
+use crate::quality::{
+    LandmarkUnits, OverlayOptions, TreStats, anterior_camera, read_landmarks, render_overlay,
+    slice_overlay, tre,
+};
 use crate::select::{Handle, SelectOptions, select_handles};
 use crate::solve::{SolveOptions, handle_map, handle_set};
 
@@ -192,8 +195,12 @@ pub fn landmark_tre(
     Ok((tre(&Identity, &a, &b)?, tre(map, &a, &b)?))
 }
 
-/// Algorithm 5.1 mid-sections along x, y and z, before and after, as
-/// `overlay_{before,after}_{x,y,z}.png` in `dir`; returns the file names.
+/// Width in pixels of the volume-rendered overlays.
+const OVERLAY_RENDER_WIDTH: u32 = 384;
+
+/// Algorithm 5.1 mid-sections along x, y and z and the volume rendering seen from the front
+/// ([`render_overlay`], [`anterior_camera`]), before and after, as
+/// `overlay_{before,after}_{x,y,z,3d}.png` in `dir`; returns the file names.
 ///
 /// # Errors
 /// [`RegisterError::Mismatch`] for images on other grids, [`RegisterError::Render`] naming a
@@ -213,6 +220,10 @@ pub fn write_overlays(
             volmorph_render::write_png_rgba(&dir.join(&f), &pic)?;
             files.push(f);
         }
+        let f = format!("overlay_{when}_3d.png");
+        let cam = anterior_camera(fixed.geometry(), OVERLAY_RENDER_WIDTH)?;
+        volmorph_render::write_png_rgba(&dir.join(&f), &render_overlay(fixed, img, &cam, &o)?)?;
+        files.push(f);
     }
     Ok(files)
 }

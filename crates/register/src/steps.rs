@@ -27,7 +27,7 @@ use crate::pipeline::{
     FoldSummary, LandmarkFiles, correspondences_json, landmark_tre, read_correspondences,
     read_mask, read_scan, warp_moving, write_overlays,
 };
-use crate::quality::TreStats;
+use crate::quality::{OverlayOptions, TreStats, slice_overlay, subcube_comparison};
 use crate::select::{SelectOptions, select_handles};
 use crate::solve::{SolveOptions, handle_map};
 use crate::ventilation::{LobeVentilation, ventilation};
@@ -198,6 +198,31 @@ pub struct QualityReport {
     pub folding: FoldSummary,
     /// TRE before and after, if landmarks were given.
     pub tre: Option<(TreStats, TreStats)>,
+    /// The local sub-cube comparison, if asked for.
+    pub subcube: Option<SubcubeSummary>,
+}
+
+/// A local sub-cube comparison to make in `quality` (thesis §5.5.3): the cubes of half-size
+/// `half` voxels around `point` of the fixed image and around its image under the map.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct SubcubeRequest {
+    /// Centre in the fixed image, physical mm (e.g. a handle).
+    pub point: DVec3,
+    /// Half-size of the cubes, voxels.
+    pub half: usize,
+}
+
+/// What the sub-cube comparison found.
+#[derive(Debug, Clone, Copy, PartialEq, Serialize)]
+pub struct SubcubeSummary {
+    /// Centre in the fixed image, mm.
+    pub point: [f64; 3],
+    /// Its image under the map (the matched point in the moving image), mm.
+    pub target: [f64; 3],
+    /// NCC of the fixed cube and the moving image through the map.
+    pub ncc_mapped: f64,
+    /// NCC of the fixed cube and the moving cube around the target, shifted only.
+    pub ncc_shifted: f64,
 }
 
 impl std::fmt::Display for QualityReport {
@@ -211,21 +236,33 @@ impl std::fmt::Display for QualityReport {
         if let Some((b, a)) = &self.tre {
             write!(f, "\nbefore: {b}\nafter:  {a}")?;
         }
+        if let Some(c) = &self.subcube {
+            write!(
+                f,
+                "\nsub-cube at ({:.1}, {:.1}, {:.1}): NCC {:.4} through the map, {:.4} shifted only",
+                c.point[0], c.point[1], c.point[2], c.ncc_mapped, c.ncc_shifted
+            )?;
+        }
         Ok(())
     }
 }
 
 /// `quality`: overlays (before/after mid-sections), Jacobian map and fold report, global metrics
-/// and TRE of `map` written into `out_dir`.
+/// and TRE of `map` written into `out_dir` (`quality.json`, `jacobian.nii.gz`, `warped.nii.gz`,
+/// `overlay_*.png`); with `subcube`, the local comparison of [`subcube_comparison`]
+/// (`subcube_{fixed,mapped,shifted}.nii.gz`, `subcube_overlay.png`: the mid z-section of the
+/// Algorithm 5.1 colours of fixed against mapped).
 ///
 /// # Errors
-/// Reading, evaluation and writing errors, naming the file.
+/// Reading, evaluation and writing errors, naming the file; [`RegisterError::TooLittle`] for a
+/// sub-cube outside the images.
 pub fn quality_files(
     fixed: &Path,
     moving: &Path,
     map: &Path,
     solve: &SolveOptions,
     landmarks: Option<&LandmarkFiles>,
+    subcube: Option<SubcubeRequest>,
     out_dir: &Path,
 ) -> Result<QualityReport, RegisterError> {
     let f = read_scan(fixed)?;
@@ -243,11 +280,36 @@ pub fn quality_files(
     let t = landmarks
         .map(|l| landmark_tre(l, &g, m.geometry(), &phi))
         .transpose()?;
+    let cube = match subcube {
+        Some(c) => {
+            let q = phi.apply(c.point);
+            let o = OverlayOptions::for_image(&f);
+            let s = subcube_comparison(&f, &m, &phi, c.point, q, c.half, &o)?;
+            for (name, v) in [
+                ("fixed", &s.fixed),
+                ("mapped", &s.mapped),
+                ("shifted", &s.shifted),
+            ] {
+                write_volume(&out_dir.join(format!("subcube_{name}.nii.gz")), v)?;
+            }
+            let pic = slice_overlay(&s.fixed, &s.mapped, 2, c.half, &o)?;
+            let png = out_dir.join("subcube_overlay.png");
+            volmorph_render::write_png_rgba(&png, &pic)?;
+            Some(SubcubeSummary {
+                point: c.point.to_array(),
+                target: q.to_array(),
+                ncc_mapped: s.ncc_mapped,
+                ncc_shifted: s.ncc_shifted,
+            })
+        }
+        None => None,
+    };
     let r = QualityReport {
         before: compare(&f, &id, None)?,
         after: compare(&f, &warped, None)?,
         folding: fold.into(),
         tre: t,
+        subcube: cube,
     };
     write_text(
         &out_dir.join("quality.json"),

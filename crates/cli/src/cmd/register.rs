@@ -13,7 +13,7 @@ use volmorph_register::pipeline::{LandmarkFiles, RegisterOptions, register_files
 use volmorph_register::quality::LandmarkUnits;
 use volmorph_register::select::SelectOptions;
 use volmorph_register::solve::SolveOptions;
-use volmorph_register::steps;
+use volmorph_register::steps::{self, SubcubeRequest};
 
 use crate::cmd::handles::Method;
 use crate::{args, progress};
@@ -51,7 +51,7 @@ pub enum Step {
     Solve(SolveArgs),
     /// Overlays, Jacobian fold report, global metrics and TRE of a map.
     #[command(
-        after_help = "Example:\n  volmorph register quality inhale.nii.gz exhale.nii.gz --map out/map.tfm --landmarks lm_in.txt,lm_ex.txt -o quality"
+        after_help = "Example:\n  volmorph register quality inhale.nii.gz exhale.nii.gz --map out/map.tfm --landmarks lm_in.txt,lm_ex.txt --subcube 12.5,-40,88 -o quality"
     )]
     Quality(QualityArgs),
     /// Lung mask (thesis §5.6.1) and, with a script of fissure end points, the lobes (§5.6.2–3).
@@ -271,6 +271,12 @@ pub struct QualityArgs {
     /// Landmarks.
     #[command(flatten)]
     pub landmarks: LandmarkArgs,
+    /// Compare the sub-cubes around this fixed point "X,Y,Z" (mm) and its image (thesis §5.5.3).
+    #[arg(long, value_parser = args::point, allow_hyphen_values = true)]
+    pub subcube: Option<glam::DVec3>,
+    /// Half-size of the sub-cubes, voxels.
+    #[arg(long, default_value_t = 8)]
+    pub subcube_half: usize,
 }
 
 /// Arguments of `register segment-lungs`.
@@ -431,6 +437,10 @@ pub fn run(c: &Command) -> anyhow::Result<()> {
                 &a.map,
                 &solve_options(a.method),
                 a.landmarks.files()?.as_ref(),
+                a.subcube.map(|point| SubcubeRequest {
+                    point,
+                    half: a.subcube_half,
+                }),
                 &a.output,
             )?;
             say!("{r}");
