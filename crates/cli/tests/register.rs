@@ -225,7 +225,8 @@ fn every_register_step_runs_on_a_small_phantom() {
         &d("q2"),
     ]);
     assert!(e.contains("lobes.nii.gz"), "{e}");
-    let e = fails(&[
+    // A bad metric name is an argument error (clap's exit status 2) naming the option.
+    let out = volmorph(&[
         "register",
         &inh,
         &exh,
@@ -235,6 +236,8 @@ fn every_register_step_runs_on_a_small_phantom() {
         "--metric",
         "cc",
     ]);
+    let e = String::from_utf8_lossy(&out.stderr);
+    assert_eq!(out.status.code(), Some(2), "{e}");
     assert!(e.contains("metric"), "{e}");
     let e = fails(&[
         "register",

@@ -40,7 +40,7 @@ use volmorph_warp::jacobian::FoldingReport;
 use volmorph_warp::pullback::{ResampleOptions, resample};
 
 use crate::RegisterError;
-use crate::dense::{DenseOptions, DenseResult, Refined, fit_to_map, lattice_on, refine};
+use crate::dense::{DenseOptions, Refined, fit_to_map, lattice_on, refine};
 use crate::matching::{Correspondence, MatchOptions, MatchStatus, match_handles};
 use crate::metrics::{ImageMetrics, compare};
 use crate::quality::{
@@ -106,17 +106,6 @@ impl Registration {
             None => &self.handle_map,
         }
     }
-
-    fn with_dense(mut self, d: Option<DenseResult>) -> Self {
-        if let Some(d) = d {
-            self.dense_levels = d.levels;
-            self.refined = Some(Refined {
-                base: self.handle_map.clone(),
-                correction: d.correction,
-            });
-        }
-        self
-    }
 }
 
 /// Register `moving` to `fixed` (see the [module docs](self)); `mask` (fixed grid) restricts
@@ -136,30 +125,67 @@ pub fn register(
     let sources: Vec<DVec3> = handles.iter().map(|h| h.position).collect();
     let correspondences = match_handles(fixed, moving, &sources, None, &o.matching)?;
     let t2 = Instant::now();
-    let hm = handle_map(&correspondences, &o.solve)?;
-    let t3 = Instant::now();
-    let dense = match &o.dense {
+    let mut reg = solve_and_refine(
+        fixed,
+        moving,
+        mask,
+        correspondences,
+        &o.solve,
+        o.dense.as_ref(),
+    )?;
+    reg.handles = handles;
+    reg.timings.select = (t1 - t0).as_secs_f64();
+    reg.timings.matching = (t2 - t1).as_secs_f64();
+    reg.timings.total += (t2 - t0).as_secs_f64();
+    Ok(reg)
+}
+
+/// The steps of [`register`] after matching: the handle map through the used
+/// `correspondences`, refined densely when `dense` is given (timings of these two steps only;
+/// no handles).
+///
+/// # Errors
+/// The errors of [`handle_map`] and [`refine`].
+pub fn solve_and_refine(
+    fixed: &Volume<f32>,
+    moving: &Volume<f32>,
+    mask: Option<&Volume<u8>>,
+    correspondences: Vec<Correspondence>,
+    solve: &SolveOptions,
+    dense: Option<&DenseOptions>,
+) -> Result<Registration, RegisterError> {
+    let t0 = Instant::now();
+    let hm = handle_map(&correspondences, solve)?;
+    let t1 = Instant::now();
+    let dense = match dense {
         Some(d) => Some(refine(fixed, moving, &hm, &correspondences, mask, d)?),
         None => None,
     };
-    let t4 = Instant::now();
-    let s = |a: Instant, b: Instant| (b - a).as_secs_f64();
+    let t2 = Instant::now();
+    let (refined, dense_levels) = match dense {
+        Some(d) => (
+            Some(Refined {
+                base: hm.clone(),
+                correction: d.correction,
+            }),
+            d.levels,
+        ),
+        None => (None, Vec::new()),
+    };
     Ok(Registration {
-        handles,
+        handles: Vec::new(),
         correspondences,
-        method: o.solve.method,
+        method: solve.method,
         handle_map: hm,
-        refined: None,
-        dense_levels: Vec::new(),
+        refined,
+        dense_levels,
         timings: Timings {
-            select: s(t0, t1),
-            matching: s(t1, t2),
-            solve: s(t2, t3),
-            dense: s(t3, t4),
-            total: s(t0, t4),
+            solve: (t1 - t0).as_secs_f64(),
+            dense: (t2 - t1).as_secs_f64(),
+            total: (t2 - t0).as_secs_f64(),
+            ..Timings::default()
         },
-    }
-    .with_dense(dense))
+    })
 }
 
 /// Resample `moving` on `fixed`'s grid through `map` (pull-back, trilinear, outside → `fill`).
@@ -632,21 +658,11 @@ pub fn register_files(
     out_dir: &Path,
     o: &RegisterOptions,
 ) -> Result<RegisterReport, RegisterError> {
-    let fixed = read_scan(fixed_path)?;
-    let moving = read_scan(moving_path)?;
-    let mask = mask_path.map(read_mask).transpose()?;
+    let (fixed, moving, mask) = read_inputs(fixed_path, moving_path, mask_path)?;
     let reg = register(&fixed, &moving, mask.as_ref(), o)?;
     let spacing = o.dense.map_or(10.0, |d| d.grid_spacing);
-    finish(
-        fixed_path,
-        &fixed,
-        &moving,
-        mask.as_ref(),
-        landmarks,
-        out_dir,
-        &reg,
-        spacing,
-    )
+    let inputs = (fixed_path, &fixed, &moving, mask.as_ref());
+    finish(inputs, landmarks, out_dir, &reg, spacing)
 }
 
 /// Build the map from a correspondence file (the `solve` step), optionally refine it densely,
@@ -665,58 +681,35 @@ pub fn solve_files(
     solve: &SolveOptions,
     dense: Option<&DenseOptions>,
 ) -> Result<RegisterReport, RegisterError> {
-    let fixed = read_scan(fixed_path)?;
-    let moving = read_scan(moving_path)?;
-    let mask = mask_path.map(read_mask).transpose()?;
+    let (fixed, moving, mask) = read_inputs(fixed_path, moving_path, mask_path)?;
     let corr = read_correspondences(correspondences)?;
-    let t0 = Instant::now();
-    let hm = handle_map(&corr, solve)?;
-    let t1 = Instant::now();
-    let dense_result = match dense {
-        Some(d) => Some(refine(&fixed, &moving, &hm, &corr, mask.as_ref(), d)?),
-        None => None,
-    };
-    let t2 = Instant::now();
-    let reg = Registration {
-        handles: Vec::new(),
-        correspondences: corr,
-        method: solve.method,
-        handle_map: hm,
-        refined: None,
-        dense_levels: Vec::new(),
-        timings: Timings {
-            solve: (t1 - t0).as_secs_f64(),
-            dense: (t2 - t1).as_secs_f64(),
-            total: (t2 - t0).as_secs_f64(),
-            ..Timings::default()
-        },
-    }
-    .with_dense(dense_result);
+    let reg = solve_and_refine(&fixed, &moving, mask.as_ref(), corr, solve, dense)?;
     let spacing = dense.map_or(10.0, |d| d.grid_spacing);
-    finish(
-        fixed_path,
-        &fixed,
-        &moving,
-        mask.as_ref(),
-        landmarks,
-        out_dir,
-        &reg,
-        spacing,
-    )
+    let inputs = (fixed_path, &fixed, &moving, mask.as_ref());
+    finish(inputs, landmarks, out_dir, &reg, spacing)
 }
 
-/// Measure a registration and write its outputs.
-#[allow(clippy::too_many_arguments)]
+/// The fixed and moving scans and the optional mask, read.
+type Inputs = (Volume<f32>, Volume<f32>, Option<Volume<u8>>);
+
+fn read_inputs(fixed: &Path, moving: &Path, mask: Option<&Path>) -> Result<Inputs, RegisterError> {
+    Ok((
+        read_scan(fixed)?,
+        read_scan(moving)?,
+        mask.map(read_mask).transpose()?,
+    ))
+}
+
+/// Measure a registration and write its outputs; `inputs` is the fixed path and the scans and
+/// mask read from it.
 fn finish(
-    fixed_path: &Path,
-    fixed: &Volume<f32>,
-    moving: &Volume<f32>,
-    mask: Option<&Volume<u8>>,
+    inputs: (&Path, &Volume<f32>, &Volume<f32>, Option<&Volume<u8>>),
     landmarks: Option<&LandmarkFiles>,
     out_dir: &Path,
     reg: &Registration,
     export_spacing: f64,
 ) -> Result<RegisterReport, RegisterError> {
+    let (fixed_path, fixed, moving, mask) = inputs;
     let fill = crate::metrics::value_range(moving.data(), None).0;
     let fill = if fill.is_finite() { fill } else { 0.0 };
     let g = *fixed.geometry();
