@@ -135,6 +135,11 @@ enum Command {
         after_help = "Examples:\n  volmorph sculpt bunny.obj --tool sphere.obj --op subtract -o carved.ply\n  volmorph sculpt dragon.ply --tool brush.stl --op add --stroke stroke.json --grid 384 -o painted.obj\n  volmorph sculpt part.stl --tool box.obj --op intersect --smooth 0,0,0,10,10,10 --smooth-kernel 3 -o part_cut.stl\n\nStroke file: {\"step\": 0.01, \"poses\": [{\"translate\": [x, y, z], \"rotate\": [w, x, y, z] or {\"axis\": [x, y, z], \"degrees\": a}, \"scale\": s}, ...]}\n(the tool's own coordinates are moved by scale, then rotation, then translation; dabs are inserted so no point moves more than `step`, by default one grid spacing)."
     )]
     Sculpt(cmd::sculpt::Args),
+    /// Register two scans: handles, correspondences, deformation, quality, lungs, ventilation.
+    #[command(
+        after_help = "Examples:\n  volmorph register inhale.nii.gz exhale.nii.gz -o out --handles 300 --radius 10 --method frames --dense --landmarks lm_in.txt,lm_ex.txt\n  volmorph register select inhale.nii.gz -o handles.txt"
+    )]
+    Register(cmd::register::Command),
     /// Time the warps and isosurface extractors on built-in inputs, against their targets.
     #[command(subcommand)]
     Bench(cmd::bench::Command),
@@ -172,6 +177,7 @@ fn main() -> ExitCode {
         Command::Nurbs(c) => cmd::nurbs::run(&c),
         Command::Render(a) => cmd::render::run(&a),
         Command::Sculpt(a) => cmd::sculpt::run(&a),
+        Command::Register(c) => cmd::register::run(&c),
         Command::Bench(c) => cmd::bench::run(&c),
     };
     match result {

@@ -28,6 +28,9 @@ use crate::{BSplineLattice, LatticeFrame};
 use volmorph_deform::DeformError;
 use volmorph_deform::map::check_grid;
 
+mod adjoint;
+pub use adjoint::PointBasis;
+
 /// Largest off-diagonal drift allowed for a grid to count as aligned with a lattice: over the
 /// whole grid, ignoring the cross terms may move a parameter by at most this many lattice
 /// cells (far below the 1e-12 relative agreement the fast paths promise).

@@ -16,6 +16,7 @@ pub mod nurbs;
 pub mod nurbs_trace;
 pub mod phantom;
 pub mod picture;
+pub mod register;
 pub mod render;
 pub mod sculpt;
 pub mod slice;

@@ -1,0 +1,516 @@
+//! `volmorph register …`: the registration workbench (handles, correspondences, deformation,
+//! quality, lungs, ventilation). Every action is one call into `volmorph_register`.
+
+use std::path::{Path, PathBuf};
+
+use anyhow::Context;
+use volmorph_maps::HandleOptions;
+use volmorph_register::dense::{DenseOptions, Metric};
+use volmorph_register::lungs::LungOptions;
+use volmorph_register::matching::MatchOptions;
+use volmorph_register::phantom::{KnownDeformationOptions, LungPhantomOptions};
+use volmorph_register::pipeline::{LandmarkFiles, RegisterOptions, register_files, solve_files};
+use volmorph_register::quality::LandmarkUnits;
+use volmorph_register::select::SelectOptions;
+use volmorph_register::solve::SolveOptions;
+use volmorph_register::steps::{self, SubcubeRequest};
+
+use crate::cmd::handles::Method;
+use crate::{args, progress};
+
+/// `volmorph register`: the whole registration, or one step of it.
+#[derive(Debug, clap::Args)]
+#[command(args_conflicts_with_subcommands = true)]
+pub struct Command {
+    /// A single step instead of the whole registration.
+    #[command(subcommand)]
+    pub step: Option<Step>,
+    /// The whole registration.
+    #[command(flatten)]
+    pub run: RunArgs,
+}
+
+/// Steps of the workbench.
+#[derive(Debug, clap::Subcommand)]
+pub enum Step {
+    /// Select handles on the edge-enhanced fixed scan (thesis §5.3.1); writes x y z per line.
+    #[command(
+        after_help = "Example:\n  volmorph register select inhale.nii.gz -o handles.txt --handles 300 --radius 10 --mask lungs.nii.gz"
+    )]
+    Select(SelectArgs),
+    /// Match handles in the moving scan by NCC (thesis §5.3.2); writes correspondences JSON.
+    #[command(
+        after_help = "Example:\n  volmorph register match inhale.nii.gz exhale.nii.gz --handles handles.txt -o correspondences.json"
+    )]
+    Match(MatchArgs),
+    /// Build the map from correspondences (tps, mls, frames), optionally refine it densely,
+    /// and write the outputs of a registration.
+    #[command(
+        after_help = "Example:\n  volmorph register solve inhale.nii.gz exhale.nii.gz --correspondences correspondences.json --method frames --dense -o out"
+    )]
+    Solve(SolveArgs),
+    /// Overlays, Jacobian fold report, global metrics and TRE of a map.
+    #[command(
+        after_help = "Example:\n  volmorph register quality inhale.nii.gz exhale.nii.gz --map out/map.tfm --landmarks lm_in.txt,lm_ex.txt --subcube 12.5,-40,88 -o quality"
+    )]
+    Quality(QualityArgs),
+    /// Lung mask (thesis §5.6.1) and, with a script of fissure end points, the lobes (§5.6.2–3).
+    #[command(
+        after_help = "Example:\n  volmorph register segment-lungs inhale.nii.gz -o lungs.nii.gz --lobes lobe_script.json --reference lobes.nii.gz"
+    )]
+    SegmentLungs(LungArgs),
+    /// Ventilation per lobe from the Jacobian (thesis §5.7) and from the HU values.
+    #[command(
+        after_help = "Example:\n  volmorph register ventilation inhale.nii.gz exhale.nii.gz --map out/map.tfm --labels lungs_lobes.nii.gz -o vent"
+    )]
+    Ventilation(VentilationArgs),
+    /// Write the breathing lung phantom (inhale, exhale, lobes, landmarks, lobe script).
+    #[command(
+        after_help = "Example:\n  volmorph register phantom -o phantom --dims 128,112,96 --spacing 2.5,2.5,3 --amplitude 15"
+    )]
+    Phantom(PhantomArgs),
+    /// Deform a volume by a known random smooth B-spline field (a pair with known truth).
+    #[command(
+        after_help = "Example:\n  volmorph register known-pair cranium_ct.nii.gz -o pair --magnitude 6 --seed 3"
+    )]
+    KnownPair(KnownPairArgs),
+}
+
+/// Options of the handle map and the dense refinement.
+#[derive(Debug, clap::Args)]
+pub struct MapOptions {
+    /// Deformation through the handles (MLS: affine, similarity, rigid).
+    #[arg(long, value_enum, default_value_t = Method::Tps)]
+    pub method: Method,
+    /// Thin-plate smoothing (0 interpolates).
+    #[arg(long, default_value_t = 0.0)]
+    pub smoothing: f64,
+    /// Refine densely with a B-spline lattice on an intensity metric.
+    #[arg(long)]
+    pub dense: bool,
+    /// Metric of the dense refinement: mse, ncc or mi (Mattes mutual information).
+    #[arg(long, default_value = "ncc", value_parser = str::parse::<Metric>)]
+    pub metric: Metric,
+    /// Control-point spacing of the finest lattice, mm.
+    #[arg(long, default_value_t = 10.0)]
+    pub grid_spacing: f64,
+    /// Resolution levels of the dense refinement.
+    #[arg(long, default_value_t = 3)]
+    pub levels: usize,
+    /// L-BFGS iterations per level.
+    #[arg(long, default_value_t = 60)]
+    pub iterations: usize,
+    /// Bending-energy weight.
+    #[arg(long, default_value_t = 0.05)]
+    pub bending: f64,
+    /// Weight of the handle correspondences as soft constraints in the dense refinement.
+    #[arg(long, default_value_t = 1.0)]
+    pub handle_weight: f64,
+}
+
+impl MapOptions {
+    fn solve(&self) -> SolveOptions {
+        SolveOptions {
+            method: self.method.into(),
+            handle: HandleOptions {
+                smoothing: self.smoothing,
+                ..HandleOptions::default()
+            },
+        }
+    }
+
+    fn dense(&self) -> Option<DenseOptions> {
+        self.dense.then(|| DenseOptions {
+            metric: self.metric,
+            grid_spacing: self.grid_spacing,
+            levels: self.levels,
+            iterations: self.iterations,
+            bending: self.bending,
+            landmarks: self.handle_weight,
+            ..DenseOptions::default()
+        })
+    }
+}
+
+/// Landmark pairs for the TRE.
+#[derive(Debug, clap::Args)]
+pub struct LandmarkArgs {
+    /// Landmarks "FIXED,MOVING": two point lists (.fcsv or x y z text) paired by order.
+    #[arg(long, value_name = "FIXED,MOVING")]
+    pub landmarks: Option<String>,
+    /// The landmark text files hold DIR-Lab voxel indices (from 1) instead of millimetres.
+    #[arg(long)]
+    pub dirlab: bool,
+}
+
+impl LandmarkArgs {
+    fn files(&self) -> anyhow::Result<Option<LandmarkFiles>> {
+        let units = if self.dirlab {
+            LandmarkUnits::DirLabVoxels
+        } else {
+            LandmarkUnits::Physical
+        };
+        Ok(self
+            .landmarks
+            .as_deref()
+            .map(|s| LandmarkFiles::parse(s, units))
+            .transpose()?)
+    }
+}
+
+/// Arguments of the whole registration.
+#[derive(Debug, clap::Args)]
+pub struct RunArgs {
+    /// Fixed scan (handles are selected here; the map sends its points to the moving scan).
+    pub fixed: Option<PathBuf>,
+    /// Moving scan.
+    pub moving: Option<PathBuf>,
+    /// Output folder.
+    #[arg(short, long)]
+    pub output: Option<PathBuf>,
+    /// Number of handles.
+    #[arg(long, default_value_t = 300)]
+    pub handles: usize,
+    /// Handle radius (no two handles closer), mm.
+    #[arg(long, default_value_t = 10.0)]
+    pub radius: f64,
+    /// Mask of the fixed scan (non-zero: handles and dense metric allowed).
+    #[arg(long)]
+    pub mask: Option<PathBuf>,
+    /// Map options.
+    #[command(flatten)]
+    pub map: MapOptions,
+    /// Landmarks.
+    #[command(flatten)]
+    pub landmarks: LandmarkArgs,
+}
+
+/// Arguments of `register select`.
+#[derive(Debug, clap::Args)]
+pub struct SelectArgs {
+    /// Fixed scan.
+    pub fixed: PathBuf,
+    /// Output point list (.txt).
+    #[arg(short, long)]
+    pub output: PathBuf,
+    /// Number of handles.
+    #[arg(long, default_value_t = 300)]
+    pub handles: usize,
+    /// Handle radius, mm.
+    #[arg(long, default_value_t = 10.0)]
+    pub radius: f64,
+    /// Mask (non-zero: allowed).
+    #[arg(long)]
+    pub mask: Option<PathBuf>,
+}
+
+/// Arguments of `register match`.
+#[derive(Debug, clap::Args)]
+pub struct MatchArgs {
+    /// Fixed scan.
+    pub fixed: PathBuf,
+    /// Moving scan.
+    pub moving: PathBuf,
+    /// Handle point list (from `select`, .fcsv or x y z text).
+    #[arg(long)]
+    pub handles: PathBuf,
+    /// Output correspondences JSON.
+    #[arg(short, long)]
+    pub output: PathBuf,
+    /// Pyramid levels.
+    #[arg(long, default_value_t = 3)]
+    pub levels: usize,
+    /// Half-size of the NCC window, voxels.
+    #[arg(long, default_value_t = 5)]
+    pub window: usize,
+    /// Search range beyond the window, voxels per level.
+    #[arg(long, default_value_t = 4)]
+    pub search: usize,
+}
+
+/// Arguments of `register solve`.
+#[derive(Debug, clap::Args)]
+pub struct SolveArgs {
+    /// Fixed scan.
+    pub fixed: PathBuf,
+    /// Moving scan.
+    pub moving: PathBuf,
+    /// Correspondences JSON (from `match`).
+    #[arg(long)]
+    pub correspondences: PathBuf,
+    /// Output folder.
+    #[arg(short, long)]
+    pub output: PathBuf,
+    /// Mask of the fixed scan for the dense metric.
+    #[arg(long)]
+    pub mask: Option<PathBuf>,
+    /// Map options.
+    #[command(flatten)]
+    pub map: MapOptions,
+    /// Landmarks.
+    #[command(flatten)]
+    pub landmarks: LandmarkArgs,
+}
+
+/// Arguments of `register quality`.
+#[derive(Debug, clap::Args)]
+pub struct QualityArgs {
+    /// Fixed scan.
+    pub fixed: PathBuf,
+    /// Moving scan.
+    pub moving: PathBuf,
+    /// Map: lattice (.tfm, lattice JSON) or correspondences / handle JSON (built with --method).
+    #[arg(long)]
+    pub map: PathBuf,
+    /// Method for a correspondence or handle map.
+    #[arg(long, value_enum, default_value_t = Method::Tps)]
+    pub method: Method,
+    /// Output folder.
+    #[arg(short, long)]
+    pub output: PathBuf,
+    /// Landmarks.
+    #[command(flatten)]
+    pub landmarks: LandmarkArgs,
+    /// Compare the sub-cubes around this fixed point "X,Y,Z" (mm) and its image (thesis §5.5.3).
+    #[arg(long, value_parser = args::point, allow_hyphen_values = true)]
+    pub subcube: Option<glam::DVec3>,
+    /// Half-size of the sub-cubes, voxels.
+    #[arg(long, default_value_t = 8)]
+    pub subcube_half: usize,
+}
+
+/// Arguments of `register segment-lungs`.
+#[derive(Debug, clap::Args)]
+pub struct LungArgs {
+    /// CT in HU.
+    pub ct: PathBuf,
+    /// Output lung mask (1 right, 2 left).
+    #[arg(short, long)]
+    pub output: PathBuf,
+    /// Lobe script (fissure end points per section, JSON) to trace the lobes.
+    #[arg(long)]
+    pub lobes: Option<PathBuf>,
+    /// Reference lobe labels for Dice.
+    #[arg(long, requires = "lobes")]
+    pub reference: Option<PathBuf>,
+    /// Low-density threshold, HU.
+    #[arg(long, default_value_t = -400.0, allow_hyphen_values = true)]
+    pub threshold: f32,
+    /// Rounds of majority filtering.
+    #[arg(long, default_value_t = 3)]
+    pub rounds: usize,
+}
+
+/// Arguments of `register ventilation`.
+#[derive(Debug, clap::Args)]
+pub struct VentilationArgs {
+    /// Inhale scan (fixed).
+    pub inhale: PathBuf,
+    /// Exhale scan (moving).
+    pub exhale: PathBuf,
+    /// Map inhale → exhale (as for `quality`).
+    #[arg(long)]
+    pub map: PathBuf,
+    /// Method for a correspondence or handle map.
+    #[arg(long, value_enum, default_value_t = Method::Tps)]
+    pub method: Method,
+    /// Lobe or lung labels on the inhale grid.
+    #[arg(long)]
+    pub labels: PathBuf,
+    /// Output folder.
+    #[arg(short, long)]
+    pub output: PathBuf,
+}
+
+/// Arguments of `register phantom`.
+#[derive(Debug, clap::Args)]
+pub struct PhantomArgs {
+    /// Output folder.
+    #[arg(short, long)]
+    pub output: PathBuf,
+    /// Voxels "NX,NY,NZ".
+    #[arg(long, default_value = "96,80,72")]
+    pub dims: String,
+    /// Spacing "SX,SY,SZ", mm.
+    #[arg(long, default_value = "3,3,3.5")]
+    pub spacing: String,
+    /// Superior motion of the lung base, mm.
+    #[arg(long, default_value_t = 18.0)]
+    pub amplitude: f64,
+    /// Noise, HU.
+    #[arg(long, default_value_t = 15.0)]
+    pub noise: f64,
+    /// Seed.
+    #[arg(long, default_value_t = 1)]
+    pub seed: u64,
+}
+
+/// Arguments of `register known-pair`.
+#[derive(Debug, clap::Args)]
+pub struct KnownPairArgs {
+    /// Input volume.
+    pub input: PathBuf,
+    /// Output folder.
+    #[arg(short, long)]
+    pub output: PathBuf,
+    /// Largest control-point displacement, mm.
+    #[arg(long, default_value_t = 5.0)]
+    pub magnitude: f64,
+    /// Control-point spacing, mm.
+    #[arg(long, default_value_t = 40.0)]
+    pub spacing: f64,
+    /// Seed.
+    #[arg(long, default_value_t = 1)]
+    pub seed: u64,
+    /// Also change the intensities (gain, gamma, bias field): an inter-subject-like pair.
+    #[arg(long)]
+    pub intensity_change: bool,
+    /// Landmarks to write.
+    #[arg(long, default_value_t = 300)]
+    pub landmarks: usize,
+}
+
+fn need<'a>(p: &'a Option<PathBuf>, what: &str) -> anyhow::Result<&'a Path> {
+    p.as_deref()
+        .with_context(|| format!("volmorph register needs {what} (or a step: select, match, …)"))
+}
+
+/// Run `volmorph register`.
+pub fn run(c: &Command) -> anyhow::Result<()> {
+    match &c.step {
+        None => {
+            let a = &c.run;
+            let (f, m, out) = (
+                need(&a.fixed, "FIXED")?,
+                need(&a.moving, "MOVING")?,
+                need(&a.output, "-o OUT_DIR")?,
+            );
+            let o = RegisterOptions {
+                select: select_options(a.handles, a.radius),
+                matching: MatchOptions::default(),
+                solve: a.map.solve(),
+                dense: a.map.dense(),
+            };
+            let pb = progress::spinner(format!("registering {} to {}", m.display(), f.display()));
+            let landmarks = a.landmarks.files()?;
+            let r = register_files(f, m, a.mask.as_deref(), landmarks.as_ref(), out, &o)
+                .context("registration failed")?;
+            pb.finish_and_clear();
+            say!("{r}\nwrote {} files to {}", r.files.len(), out.display());
+        }
+        Some(Step::Select(a)) => {
+            let o = select_options(a.handles, a.radius);
+            let n = steps::select_files(&a.fixed, a.mask.as_deref(), &a.output, &o)?;
+            say!("{n} handles written to {}", a.output.display());
+        }
+        Some(Step::Match(a)) => {
+            let o = MatchOptions {
+                levels: a.levels,
+                window: a.window,
+                search: a.search,
+                ..MatchOptions::default()
+            };
+            let s = steps::match_files(&a.fixed, &a.moving, &a.handles, &a.output, &o)?;
+            say!("{s}");
+        }
+        Some(Step::Solve(a)) => {
+            let r = solve_files(
+                &a.fixed,
+                &a.moving,
+                &a.correspondences,
+                a.mask.as_deref(),
+                a.landmarks.files()?.as_ref(),
+                &a.output,
+                &a.map.solve(),
+                a.map.dense().as_ref(),
+            )?;
+            say!(
+                "{r}\nwrote {} files to {}",
+                r.files.len(),
+                a.output.display()
+            );
+        }
+        Some(Step::Quality(a)) => {
+            let r = steps::quality_files(
+                &a.fixed,
+                &a.moving,
+                &a.map,
+                &solve_options(a.method),
+                a.landmarks.files()?.as_ref(),
+                a.subcube.map(|point| SubcubeRequest {
+                    point,
+                    half: a.subcube_half,
+                }),
+                &a.output,
+            )?;
+            say!("{r}");
+        }
+        Some(Step::SegmentLungs(a)) => {
+            let o = LungOptions {
+                threshold: a.threshold,
+                majority_rounds: a.rounds,
+                ..LungOptions::default()
+            };
+            let r = steps::segment_lungs_files(
+                &a.ct,
+                &a.output,
+                a.lobes.as_deref(),
+                a.reference.as_deref(),
+                &o,
+            )?;
+            say!("{r}");
+        }
+        Some(Step::Ventilation(a)) => {
+            let r = steps::ventilation_files(
+                &a.inhale,
+                &a.exhale,
+                &a.map,
+                &a.labels,
+                &solve_options(a.method),
+                &a.output,
+            )?;
+            say!("{r}");
+        }
+        Some(Step::Phantom(a)) => {
+            let o = LungPhantomOptions {
+                dims: args::triple(&a.dims)?,
+                spacing: glam::DVec3::from_array(args::triple(&a.spacing)?),
+                amplitude: a.amplitude,
+                noise: a.noise,
+                seed: a.seed,
+                ..LungPhantomOptions::default()
+            };
+            let n = steps::write_phantom(&a.output, &o)?;
+            say!(
+                "phantom with {n} landmark pairs written to {}",
+                a.output.display()
+            );
+        }
+        Some(Step::KnownPair(a)) => {
+            let o = KnownDeformationOptions {
+                magnitude: a.magnitude,
+                spacing: a.spacing,
+                seed: a.seed,
+                intensity_change: a.intensity_change,
+            };
+            steps::write_known_pair(&a.input, &a.output, &o, a.landmarks)?;
+            say!("pair written to {}", a.output.display());
+        }
+    }
+    Ok(())
+}
+
+fn select_options(count: usize, radius: f64) -> SelectOptions {
+    SelectOptions {
+        count,
+        radius,
+        ..SelectOptions::default()
+    }
+}
+
+fn solve_options(method: Method) -> SolveOptions {
+    SolveOptions {
+        method: method.into(),
+        ..SolveOptions::default()
+    }
+}
