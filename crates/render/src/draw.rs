@@ -1,7 +1,7 @@
 //! Drawing into an [`RgbaImage`]: line segments, point markers and rectangles, for handle and
 //! correspondence overlays.
 //!
-//! Coordinates are continuous image coordinates, as for [`Camera`](crate::Camera): x to the
+//! Coordinates are continuous image coordinates, as for [`Camera`]: x to the
 //! right from the left edge, y down from the top edge, pixel `(i, j)` covering
 //! `[i, i+1) × [j, j+1)` with its centre at `(i + 0.5, j + 0.5)`. Colours are composited with
 //! [`blend_over`](crate::blend_over), so a translucent colour tints what is underneath; each

@@ -39,7 +39,7 @@ mod raster;
 pub mod shading;
 mod slice_picture;
 pub mod transfer;
-mod view;
+pub mod view;
 mod window;
 
 pub use camera::{BOX_FILL, Camera, FIT_MARGIN, Framing, Projection};
