@@ -233,10 +233,10 @@ pub fn drag_through_scene(
     if let Some((_, e)) = change.errors.first() {
         return Err(BenchError::check("drag through the scene", e.clone()));
     }
-    if !change
+    if change
         .dirty_of(warped)
         .and_then(|d| d.voxels)
-        .is_some_and(|b| !b.is_empty())
+        .is_none_or(|b| b.is_empty())
     {
         return Err(BenchError::check(
             "drag through the scene",

@@ -45,7 +45,7 @@ pub struct WarpConfig {
     pub lattice: usize,
     /// Voxels per axis of the teapot of the editing cases, 8 to [`MAX_SIZE`].
     pub edit_size: usize,
-    /// Timed runs per case, 1 to [`MAX_REPEAT`].
+    /// Timed runs per case, 1 to [`crate::MAX_REPEAT`].
     pub repeat: usize,
 }
 

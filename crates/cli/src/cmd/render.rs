@@ -86,7 +86,7 @@ pub struct Args {
     /// Do not light the gradients.
     #[arg(long)]
     pub no_shading: bool,
-    /// Background: black, white, transparent, or R,G,B[,A] (0–255).
+    /// Background: black, white, transparent, or R,G,B or R,G,B,A (0–255).
     #[arg(long, default_value = "black")]
     pub background: String,
     /// Cut-away plane X,Y,Z,NX,NY,NZ: a point of the plane and the normal pointing into the
