@@ -129,7 +129,7 @@ def check_nibabel(vm: Volmorph) -> None:
                     fails.append(f"frames {info['frames']} vs {frames}")
                 ours = vm.voxels(p, frame)
                 want = data[..., t] if frames > 1 else data
-                if ours.shape != want.shape or not np.allclose(ours, want, rtol=1e-6, atol=1e-6):
+                if ours.shape != want.shape or not np.allclose(ours, want, rtol=1e-6, atol=1e-6, equal_nan=True):
                     fails.append(f"frame {t}: voxels differ")
                 if hdr_ok:
                     g = geometry_close(info, *lps_from_affine(img.affine, img.header.get_zooms()))
@@ -269,7 +269,7 @@ def check_bundled_nifti(vm: Volmorph, package: str, paths_of) -> None:
                 fails.append(str(e)[:160])
                 break
             want = data[..., t] if frames > 1 else data
-            if not np.allclose(ours, want, rtol=1e-6, atol=1e-6):
+            if not np.allclose(ours, want, rtol=1e-6, atol=1e-6, equal_nan=True):
                 fails.append(f"frame {t}: voxels differ")
             g = geometry_close(info, *lps_from_affine(img.affine, img.header.get_zooms()))
             if g:

@@ -145,8 +145,8 @@ fn refs(ids: &[usize]) -> String {
 pub const PLANAR_TOL: f64 = 0.01 * STEP_UNCERTAINTY;
 
 /// The plane of a surface whose control points all lie within [`PLANAR_TOL`] of it:
-/// `(point, unit normal S_σ × S_τ, unit in-plane direction along S_σ)`.
-fn plane_of(s: &BezierSurface) -> Option<(DVec3, DVec3, DVec3)> {
+/// `(point, unit normal S_σ × S_τ)`.
+fn plane_of(s: &BezierSurface) -> Option<(DVec3, DVec3)> {
     let c = [
         0.5 * (s.rect[0][0] + s.rect[0][1]),
         0.5 * (s.rect[1][0] + s.rect[1][1]),
@@ -164,8 +164,7 @@ fn plane_of(s: &BezierSurface) -> Option<(DVec3, DVec3, DVec3)> {
     {
         return None;
     }
-    let x = (ds - n * ds.dot(n)).normalize_or_zero();
-    (x != DVec3::ZERO).then_some((p, n, x))
+    Some((p, n))
 }
 
 /// `true` if the Bézier curve is the straight segment between its end points with linear
@@ -257,10 +256,13 @@ pub fn step_string(model: &TrimmedModel, name: &str) -> Result<(String, StepSumm
             continue;
         }
         let s = &model.surfaces[g];
-        patch_surface[g] = Some(if let Some((p, n, x)) = plane_of(s) {
+        patch_surface[g] = Some(if let Some((p, n)) = plane_of(s) {
             planes += 1;
-            let (pp, nn, xx) = (o.point3(p), o.direction(n), o.direction(x));
-            let ax = o.shared(format!("AXIS2_PLACEMENT_3D('',#{pp},#{nn},#{xx})"));
+            // No reference direction (`$`): planar faces carry no pcurves, so the plane's
+            // in-plane parametrisation is the reader's choice, and one DIRECTION less per
+            // plane is written.
+            let (pp, nn) = (o.point3(p), o.direction(n));
+            let ax = o.shared(format!("AXIS2_PLACEMENT_3D('',#{pp},#{nn},$)"));
             (o.shared(format!("PLANE('',#{ax})")), true)
         } else {
             let [ns, nt] = s.degrees;

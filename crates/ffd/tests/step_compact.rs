@@ -73,7 +73,15 @@ fn identity_lattice_writes_planes_lines_and_a_solid() {
             assert!(pts.contains_key(id));
         }
     }
-    // Each plane holds the images of its faces' vertices.
+    // Planes carry no reference direction (no pcurves on them to parametrise).
+    for b in bodies(&text, "PLANE") {
+        let ax = b.trim_start_matches("PLANE('',").trim_end_matches(");");
+        let placement = text
+            .lines()
+            .find(|l| l.starts_with(&format!("{ax}=AXIS2_PLACEMENT_3D(")))
+            .unwrap_or_else(|| panic!("no placement {ax}"));
+        assert!(placement.ends_with(",$);"), "{placement}");
+    }
     assert!(sum.vertices > 0);
 }
 
