@@ -25,7 +25,7 @@
 //!    six neighbours' (face centres are averages), so the voxels whose boxes change are the
 //!    influenced centres dilated by one voxel, clipped to the source.
 //! 3. **Remap.** The influenced centre images are re-evaluated with the new map through
-//!    [`SpaceMap::apply_grid`] on the sub-grid they form (the evaluation a full push-forward
+//!    [`SpaceMap::apply_grid`](volmorph_deform::SpaceMap::apply_grid) on the sub-grid they form (the evaluation a full push-forward
 //!    uses) and stored, in one pass that also bounds the redone voxels' old and new boxes.
 //!    Every output voxel those boxes overlap may change; no other can.
 //! 4. **Recompute the changed output region.** True erases the old boxes of the redone
