@@ -159,7 +159,7 @@ pub fn slice_overlay(
 }
 
 /// Samples per voxel length along a ray of [`render_overlay`].
-const SAMPLES_PER_VOXEL: f64 = 2.0;
+pub const SAMPLES_PER_VOXEL: f64 = 2.0;
 /// Accumulated opacity at which a ray of [`render_overlay`] stops: what lies behind changes the
 /// pixel by less than one 8-bit level.
 const OPAQUE: f64 = 1.0 - 1.0 / 512.0;
