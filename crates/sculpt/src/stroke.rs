@@ -24,6 +24,18 @@ use crate::tool::Pose;
 pub const MAX_STROKE_BYTES: u64 = 256 << 20;
 
 /// A painting stroke: the tool's poses, and the largest movement between dabs.
+///
+/// Its file form (JSON):
+///
+/// ```json
+/// {"step": 0.01,
+///  "poses": [{"translate": [x, y, z],
+///             "rotate": [w, x, y, z] | {"axis": [x, y, z], "degrees": a},
+///             "scale": s}, …]}
+/// ```
+///
+/// Every pose field is optional (identity translation, rotation and scale); `step` is
+/// optional (`None`: one grid spacing). A bare array of poses is accepted too.
 #[derive(Debug, Clone, PartialEq)]
 pub struct Stroke {
     /// The poses, in order (at least one).
@@ -34,7 +46,7 @@ pub struct Stroke {
 }
 
 impl Stroke {
-    /// Parse a stroke from JSON text (see the [module docs](self)).
+    /// Parse a stroke from JSON text (the format is in [`Stroke`]'s documentation).
     ///
     /// # Errors
     /// [`SculptError::Stroke`] naming the pose and field that are wrong, for invalid JSON,
@@ -88,7 +100,7 @@ impl Stroke {
         Ok(Self { poses, step })
     }
 
-    /// Read a stroke file (see the [module docs](self)).
+    /// Read a stroke file (the format is in [`Stroke`]'s documentation).
     ///
     /// # Errors
     /// [`SculptError::Io`] when the file cannot be read; [`SculptError::Stroke`] (with the
