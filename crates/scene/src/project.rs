@@ -319,7 +319,8 @@ impl Scene {
                     let m = sc.mesh().ok_or_else(|| {
                         project_err(path, format!("sculpt object {id}: its mesh is too large"))
                     })?;
-                    let name = format!("{}.ply", id.0);
+                    let name = format!("{}.{tag}.ply", id.0);
+                    written.push(name.clone());
                     volmorph_mesh::write(&folder.join(&name), m)?;
                     o.file = Some(rel(&name));
                     o.sculpt = Some(SculptJson::from(sc.document()));
