@@ -55,7 +55,7 @@ fn a_scene_session_writes_what_the_cli_writes() {
     let teapot = d.join("teapot.nii.gz");
     volmorph(&[&"phantom", &"teapot", &"-o", &teapot, &"--size", &"40"]);
 
-    let spout = DVec3::new(0.76, 0.0, 0.25);
+    let spout = volmorph_volume::phantom::TEAPOT_SPOUT_TIP;
     let goal = DVec3::new(0.85, 0.0, 0.04);
     let initial = [
         (DVec3::new(-0.7, -0.5, -0.4), DVec3::new(-0.7, -0.5, -0.4)),

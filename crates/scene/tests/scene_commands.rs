@@ -88,7 +88,7 @@ fn diff(a: &[u8], b: &[u8]) -> (usize, u8) {
 fn incremental_drag_equals_a_fresh_push_forward_and_reports_a_partial_region() {
     let (mut scene, grid, v, l, w) = teapot_scene();
     let before = volume_bytes(&scene, w);
-    let spout = DVec3::new(0.76, 0.0, 0.25);
+    let spout = volmorph_volume::phantom::TEAPOT_SPOUT_TIP;
     let change = drag(&mut scene, l, spout, spout + DVec3::new(0.08, 0.0, -0.15));
     let d = change.dirty_of(w).expect("the warp is dirty");
     let b = d.voxels.unwrap();
@@ -141,7 +141,7 @@ fn undo_and_redo_restore_the_states() {
     let (mut scene, _, _, l, w) = teapot_scene();
     let original = volume_bytes(&scene, w);
     let lattice0 = scene.map(l).unwrap().to_json().unwrap();
-    let spout = DVec3::new(0.76, 0.0, 0.25);
+    let spout = volmorph_volume::phantom::TEAPOT_SPOUT_TIP;
     drag(&mut scene, l, spout, spout + DVec3::new(0.05, 0.0, -0.12));
     let dragged = volume_bytes(&scene, w);
     let lattice1 = scene.map(l).unwrap().to_json().unwrap();
@@ -347,7 +347,7 @@ fn derived_meshes_follow_incrementally_and_equal_a_full_recompute() {
         "deformed surface",
         NewObject::Derived(Recipe::DeformedMesh { mesh: iso, map: l }),
     );
-    let spout = DVec3::new(0.76, 0.0, 0.25);
+    let spout = volmorph_volume::phantom::TEAPOT_SPOUT_TIP;
     let change = drag(&mut scene, l, spout, spout + DVec3::new(0.06, 0.0, -0.1));
     assert!(change.dirty_of(deformed).and_then(|d| d.bounds).is_some());
     assert!(
@@ -366,7 +366,7 @@ fn derived_meshes_follow_incrementally_and_equal_a_full_recompute() {
 #[test]
 fn projects_round_trip_to_the_same_state() {
     let (mut scene, _, _, l, w) = teapot_scene();
-    let spout = DVec3::new(0.76, 0.0, 0.25);
+    let spout = volmorph_volume::phantom::TEAPOT_SPOUT_TIP;
     drag(&mut scene, l, spout, spout + DVec3::new(0.05, 0.0, -0.1));
     add(
         &mut scene,
@@ -569,7 +569,7 @@ fn project_resave_rewrote_data_files_the_old_manifest_names() {
     let first_manifest = std::fs::read_to_string(&path).unwrap();
     assert!(first.iter().all(|n| first_manifest.contains(n.as_str())));
 
-    let spout = DVec3::new(0.76, 0.0, 0.25);
+    let spout = volmorph_volume::phantom::TEAPOT_SPOUT_TIP;
     drag(&mut scene, l, spout, spout + DVec3::new(0.05, 0.0, -0.1));
     // What a save killed before its commit leaves: an unreferenced data file.
     std::fs::write(folder.join("9.0badf00d.mha"), b"orphan").unwrap();

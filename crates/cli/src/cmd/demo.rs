@@ -64,7 +64,7 @@ pub struct Args {
 const LATTICE_COUNTS: [usize; 3] = [9, 9, 9];
 /// The spout tip of the built-in teapot (model units) and where the drag takes it: down and
 /// a little outwards, as in True's Fig. 10.
-const SPOUT_TIP: DVec3 = DVec3::new(0.76, 0.0, 0.25);
+const SPOUT_TIP: DVec3 = phantom::TEAPOT_SPOUT_TIP;
 const SPOUT_TARGET: DVec3 = DVec3::new(0.85, 0.0, 0.04);
 /// Radius of the drag tool (model units): control points farther than this from a dragged
 /// point stay where they are.
