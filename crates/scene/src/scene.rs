@@ -7,7 +7,8 @@ use glam::DVec3;
 use volmorph_deform::LinearMap;
 use volmorph_lattice::{drags_from_deformed, solve_drags};
 use volmorph_maps::AnyMap;
-use volmorph_volume::IndexBox;
+use volmorph_mesh::Mesh;
+use volmorph_volume::{AnyVolume, IndexBox};
 
 use crate::SceneError;
 use crate::command::{Change, Command, NewObject};
@@ -107,6 +108,28 @@ impl Scene {
             .iter()
             .find(|(_, e)| e.name == name)
             .map(|(id, _)| *id)
+    }
+
+    /// The volume object `id` is or holds (a volume, or a derived volume once computed).
+    ///
+    /// # Errors
+    /// [`SceneError::NoObject`]; [`SceneError::WrongKind`] when it holds no volume.
+    pub fn volume(&self, id: ObjectId) -> Result<&Arc<AnyVolume>, SceneError> {
+        let e = self.get(id)?;
+        e.object
+            .volume()
+            .ok_or_else(|| self.wrong_kind(id, "volume", e.object.kind()))
+    }
+
+    /// The mesh object `id` is or holds (a mesh, a derived mesh once computed).
+    ///
+    /// # Errors
+    /// [`SceneError::NoObject`]; [`SceneError::WrongKind`] when it holds no mesh.
+    pub fn mesh(&self, id: ObjectId) -> Result<&Arc<Mesh>, SceneError> {
+        let e = self.get(id)?;
+        e.object
+            .mesh()
+            .ok_or_else(|| self.wrong_kind(id, "mesh", e.object.kind()))
     }
 
     /// The map of map object `id`.

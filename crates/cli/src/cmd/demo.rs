@@ -20,15 +20,12 @@ use std::fmt::Write as _;
 use std::path::{Path, PathBuf};
 use std::time::Instant;
 
-use std::sync::Arc;
-
 use anyhow::{Context, bail};
 use clap::ValueEnum as _;
 use glam::DVec3;
 use volmorph_deform::SpaceMap;
 use volmorph_lattice::manipulate::DragOptions;
 use volmorph_maps::AnyMap;
-use volmorph_mesh::Mesh;
 use volmorph_render::{Colormap, Window};
 use volmorph_scene::{Command, NewObject, ObjectId, Recipe, Scene, SurfaceMethod};
 use volmorph_volume::phantom::{self, Phantom};
@@ -225,18 +222,18 @@ fn warp_demo(args: &Args, index: &mut String, timings: &mut Timings) -> anyhow::
             &WarpOptions::default(),
         )
     })?;
-    let diff = max_abs_diff(&*scene_volume(&scene, warped)?, &full.volume)?;
+    let diff = max_abs_diff(scene.volume(warped)?, &full.volume)?;
     let folding = {
-        let det = scene_volume(&scene, jacobian)?;
-        match &*det {
+        let det = scene.volume(jacobian)?;
+        match &**det {
             AnyVolume::F32(v) => FoldingReport::of(v.data()),
             other => bail!("the Jacobian is {}, not f32", other.voxel_type()),
         }
     };
 
     pb.set_message("pictures");
-    let before_mesh = scene_mesh(&scene, before)?;
-    let after_mesh = scene_mesh(&scene, after)?;
+    let before_mesh = scene.mesh(before)?.clone();
+    let after_mesh = scene.mesh(after)?.clone();
     // One frame for both pictures, so before and after line up.
     let both = volmorph_render::Aabb::from_points(
         before_mesh
@@ -268,13 +265,13 @@ fn warp_demo(args: &Args, index: &mut String, timings: &mut Timings) -> anyhow::
     pb.set_message("undo and redo");
     let undo_diff = timings.time("undo (scene command)", || -> anyhow::Result<f64> {
         scene.undo()?.context("nothing to undo")?;
-        max_abs_diff(&*scene_volume(&scene, warped)?, &input)
+        max_abs_diff(scene.volume(warped)?, &input)
     })?;
     timings.time("redo (scene command)", || -> anyhow::Result<()> {
         scene.redo()?.context("nothing to redo")?;
         Ok(())
     })?;
-    let redo_diff = max_abs_diff(&*scene_volume(&scene, warped)?, &full.volume)?;
+    let redo_diff = max_abs_diff(scene.volume(warped)?, &full.volume)?;
 
     pb.set_message("writing");
     timings.time(
@@ -367,26 +364,6 @@ fn warp_demo(args: &Args, index: &mut String, timings: &mut Timings) -> anyhow::
     }
     let _ = writeln!(index);
     Ok(())
-}
-
-/// The volume scene object `id` holds, as f32 values.
-fn scene_volume(scene: &Scene, id: ObjectId) -> anyhow::Result<Arc<AnyVolume>> {
-    scene
-        .get(id)?
-        .object
-        .volume()
-        .cloned()
-        .with_context(|| format!("scene object {id} holds no volume"))
-}
-
-/// The mesh scene object `id` holds.
-fn scene_mesh(scene: &Scene, id: ObjectId) -> anyhow::Result<Arc<Mesh>> {
-    scene
-        .get(id)?
-        .object
-        .mesh()
-        .cloned()
-        .with_context(|| format!("scene object {id} holds no mesh"))
 }
 
 /// Largest |a − b| over the voxels of two volumes of the same size (any voxel types).
