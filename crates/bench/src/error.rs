@@ -71,7 +71,7 @@ impl BenchError {
     }
 
     /// A [`BenchError::Check`].
-    pub(crate) fn check(case: impl Into<String>, message: impl Into<String>) -> Self {
+    pub fn check(case: impl Into<String>, message: impl Into<String>) -> Self {
         Self::Check {
             case: case.into(),
             message: message.into(),
