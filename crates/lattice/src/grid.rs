@@ -84,6 +84,11 @@ struct AxisPlan {
     lo: usize,
     hi: usize,
     table: Option<BasisTable>,
+    /// First control index of each in-domain grid index `lo + r` (entry `r`): the table's,
+    /// copied into one flat array for the per-voxel loop.
+    firsts: Vec<usize>,
+    /// The basis values of grid index `lo + r` at entries `r·(p+1) .. (r+1)·(p+1)`.
+    values: Vec<f64>,
 }
 
 impl AxisPlan {
@@ -95,13 +100,24 @@ impl AxisPlan {
                 lo: 0,
                 hi: 0,
                 table: None,
+                firsts: Vec::new(),
+                values: Vec::new(),
             });
         };
         let params: Vec<f64> = (lo..=last).map(param).collect();
+        let table = BasisTable::new(kv, &params, false)?;
+        let firsts = (0..params.len()).filter_map(|r| table.first(r)).collect();
+        let values = (0..params.len())
+            .filter_map(|r| table.values(r))
+            .flatten()
+            .copied()
+            .collect();
         Ok(Self {
             lo,
             hi: last + 1,
-            table: Some(BasisTable::new(kv, &params, false)?),
+            table: Some(table),
+            firsts,
+            values,
         })
     }
 
@@ -289,29 +305,40 @@ impl LatticeGridPlan {
                             }
                         }
                     }
+                    // Outside the knot domain along u: the identity.
+                    let (lo, hi) = (ax.lo.min(nx), ax.hi.min(nx));
                     for (i, o) in row.iter_mut().enumerate() {
-                        *o = match ax.at(i) {
-                            Some((fx, bx)) => {
-                                let s = &row_sum[fx - c_lo..fx - c_lo + wx];
-                                if let (Ok(b), Ok(p)) =
-                                    (<&[f64; 4]>::try_from(bx), <&[DVec3; 4]>::try_from(s))
-                                {
-                                    // Cubic: the loop below unrolled (same sums, same order).
-                                    DVec3::ZERO
-                                        + b[0] * p[0]
-                                        + b[1] * p[1]
-                                        + b[2] * p[2]
-                                        + b[3] * p[3]
-                                } else {
-                                    let mut acc = DVec3::ZERO;
-                                    for (&n, &p) in bx.iter().zip(s) {
-                                        acc += n * p;
-                                    }
-                                    acc
-                                }
+                        if i < lo || i >= hi {
+                            *o = centre(grid, i, j, k);
+                        }
+                    }
+                    let inside = &mut row[lo..hi];
+                    let firsts = ax.firsts.iter().map(|&f| f - c_lo);
+                    if wx == 4 {
+                        // Cubic: the general loop below unrolled (same sums, same order).
+                        for ((o, f), b) in
+                            inside.iter_mut().zip(firsts).zip(ax.values.chunks_exact(4))
+                        {
+                            if let Some(p) = row_sum.get(f..f + 4) {
+                                *o = DVec3::ZERO
+                                    + b[0] * p[0]
+                                    + b[1] * p[1]
+                                    + b[2] * p[2]
+                                    + b[3] * p[3];
                             }
-                            None => centre(grid, i, j, k),
-                        };
+                        }
+                    } else {
+                        for ((o, f), b) in inside
+                            .iter_mut()
+                            .zip(firsts)
+                            .zip(ax.values.chunks_exact(wx))
+                        {
+                            let mut acc = DVec3::ZERO;
+                            for (&n, &p) in b.iter().zip(row_sum.get(f..f + wx).unwrap_or(&[])) {
+                                acc += n * p;
+                            }
+                            *o = acc;
+                        }
                     }
                 }
             },

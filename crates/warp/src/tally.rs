@@ -150,9 +150,9 @@ fn axis_range(lo: f64, hi: f64, n: usize, r0: usize, rn: usize) -> Option<(usize
 }
 
 /// For a box `[lo, hi]` at most two cells long: the first cell `a = ⌊lo + ½⌋`, the
-/// overlaps with cells `a`, `a + 1`, `a + 2` (zero-padded) and the number of cells needed
-/// (2, or 3 for lengths above 1). Equal to [`overlap`], since `a − ½ ≤ lo < a + ½` and
-/// `hi ≤ lo + 2`.
+/// overlaps with cells `a`, `a + 1`, `a + 2` (zero-padded) and the number of cells with
+/// positive overlap (1 to 3: a box of length at most 1 reaches 1 or 2 cells, a longer one
+/// 2 or 3). Equal to [`overlap`], since `a − ½ ≤ lo < a + ½` and `hi ≤ lo + 2`.
 #[inline(always)]
 fn short(lo: f64, hi: f64) -> Option<(usize, [f64; 3], usize)> {
     let s = lo + 0.5;
@@ -163,11 +163,15 @@ fn short(lo: f64, hi: f64) -> Option<(usize, [f64; 3], usize)> {
         let ai = s as i64;
         let a = ai as usize;
         let e = ai as f64 + 0.5;
+        // The last cell's weight is zero unless `hi` passes its lower edge; such a cell is
+        // left out (see `splat` on why skipping a zero term changes no bit).
         if len <= 1.0 {
-            return Some((a, [fmin(hi, e) - lo, fmax(hi - e, 0.0), 0.0], 2));
+            let n = if hi > e { 2 } else { 1 };
+            return Some((a, [fmin(hi, e) - lo, fmax(hi - e, 0.0), 0.0], n));
         }
         let e1 = e + 1.0;
-        return Some((a, [e - lo, fmin(hi, e1) - e, fmax(hi - e1, 0.0)], 3));
+        let n = if hi > e1 { 3 } else { 2 };
+        return Some((a, [e - lo, fmin(hi, e1) - e, fmax(hi - e1, 0.0)], n));
     }
     None
 }
@@ -242,9 +246,11 @@ pub(crate) fn splat<C: Cell>(
     let [rx, ry, rz] = region.lo;
     let [dx, dy, dz] = region.dims;
     // Fast path: a box at most two cells long along every axis, inside the region, covers
-    // two or three cells per axis from `a = ⌊lo + ½⌋` (the last possibly with weight 0,
-    // which adds nothing to a finite value); fully unrolled per shape. Same weights and
-    // products as the general path.
+    // one to three cells per axis from `a = ⌊lo + ½⌋`; fully unrolled per shape. Same
+    // weights and products as the general path. Cells of zero overlap are skipped: their
+    // terms are ±0, and adding ±0 to a tally changes no bit, because a tally starts at +0
+    // and a sum of rounded additions is −0 only when both addends are −0, so no tally is
+    // ever −0 (the one value to which adding +0 is not the identity).
     if d.is_finite()
         && let (Some(x), Some(y), Some(z)) =
             (short(lo.x, hi.x), short(lo.y, hi.y), short(lo.z, hi.z))
@@ -262,16 +268,19 @@ pub(crate) fn splat<C: Cell>(
                 d,
                 sign,
             };
-            match (nx, ny, nz) {
-                (2, 2, 2) => k.run::<C, 2, 2, 2>(buf),
-                (3, 2, 2) => k.run::<C, 3, 2, 2>(buf),
-                (2, 3, 2) => k.run::<C, 2, 3, 2>(buf),
-                (3, 3, 2) => k.run::<C, 3, 3, 2>(buf),
-                (2, 2, 3) => k.run::<C, 2, 2, 3>(buf),
-                (3, 2, 3) => k.run::<C, 3, 2, 3>(buf),
-                (2, 3, 3) => k.run::<C, 2, 3, 3>(buf),
-                _ => k.run::<C, 3, 3, 3>(buf),
+            macro_rules! shapes {
+                ($($x:literal $y:literal $z:literal),*) => {
+                    match (nx, ny, nz) {
+                        $(($x, $y, $z) => k.run::<C, $x, $y, $z>(buf),)*
+                        _ => k.run::<C, 3, 3, 3>(buf),
+                    }
+                };
             }
+            shapes!(
+                1 1 1, 2 1 1, 3 1 1, 1 2 1, 2 2 1, 3 2 1, 1 3 1, 2 3 1, 3 3 1,
+                1 1 2, 2 1 2, 3 1 2, 1 2 2, 2 2 2, 3 2 2, 1 3 2, 2 3 2, 3 3 2,
+                1 1 3, 2 1 3, 3 1 3, 1 2 3, 2 2 3, 3 2 3, 1 3 3, 2 3 3
+            );
             return true;
         }
         // Partly outside the region: the same weights and products on the cells inside.
