@@ -16,7 +16,10 @@ use volmorph_bench::{BenchError, Case};
 
 fn main() -> Result<(), BenchError> {
     let args: Vec<String> = std::env::args().skip(1).collect();
-    let id = args.first().cloned().unwrap_or_else(|| "pullback_trilinear".into());
+    let id = args
+        .first()
+        .cloned()
+        .unwrap_or_else(|| "pullback_trilinear".into());
     let num = |i: usize, d: usize| args.get(i).and_then(|s| s.parse().ok()).unwrap_or(d);
     let config = WarpConfig {
         size: num(2, 256),
@@ -24,7 +27,12 @@ fn main() -> Result<(), BenchError> {
         ..WarpConfig::default()
     };
     let runs = num(1, 1);
-    let edits = ["incremental_update", "drag", "full_push_forward_f32", "engine_set_up"];
+    let edits = [
+        "incremental_update",
+        "drag",
+        "full_push_forward_f32",
+        "engine_set_up",
+    ];
     let mut times = Vec::new();
     let mut go = |mut case: Case<'_>| -> Result<(), BenchError> {
         for _ in 0..runs {
@@ -72,6 +80,9 @@ fn main() -> Result<(), BenchError> {
         go(case.ok_or_else(|| BenchError::check("profile_case", format!("no case {id}")))?)?;
     }
     times.sort_by(f64::total_cmp);
-    println!("{id}: median {:.3} ms over {runs} runs", 1e3 * times[times.len() / 2]);
+    println!(
+        "{id}: median {:.3} ms over {runs} runs",
+        1e3 * times[times.len() / 2]
+    );
     Ok(())
 }

@@ -63,7 +63,8 @@ fn lattice(g: &Geometry) -> BSplineLattice {
     for k in 1..6 {
         for j in 1..6 {
             for i in 1..6 {
-                lat.move_control_point([i, j, k], cell * rng.point(0.5)).unwrap();
+                lat.move_control_point([i, j, k], cell * rng.point(0.5))
+                    .unwrap();
             }
         }
     }
