@@ -33,6 +33,7 @@ fn _volmorph(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add_class::<ops::PyNurbs>()?;
     m.add_class::<scene::PyScene>()?;
     m.add_function(wrap_pyfunction!(ops::warp, m)?)?;
+    m.add_function(wrap_pyfunction!(ops::warp_timed, m)?)?;
     m.add_function(wrap_pyfunction!(ops::jacobian_map, m)?)?;
     m.add_function(wrap_pyfunction!(ops::isosurface, m)?)?;
     m.add_function(wrap_pyfunction!(ops::ffd, m)?)?;

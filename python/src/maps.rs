@@ -278,8 +278,14 @@ impl PyMap {
             )));
         };
         let [cx, cy, cz] = l.counts();
-        let flat: Vec<f64> = l.control_points().into_iter().flat_map(|p| p.to_array()).collect();
-        Ok(PyArray1::from_vec(py, flat).reshape([cz, cy, cx, 3])?.into_any())
+        let flat: Vec<f64> = l
+            .control_points()
+            .into_iter()
+            .flat_map(|p| p.to_array())
+            .collect();
+        Ok(PyArray1::from_vec(py, flat)
+            .reshape([cz, cy, cx, 3])?
+            .into_any())
     }
 
     /// For a lattice: a copy with the control points `points` (shape `(nz, ny, nx, 3)`).

@@ -27,7 +27,10 @@ use crate::maps::{PyMap, points, points_out};
 use crate::volume::{PyGeometry, PyVolume};
 
 /// `(vertices, faces)` of a mesh, triangulated.
-pub fn mesh_out<'py>(py: Python<'py>, m: &Mesh) -> PyResult<(Bound<'py, PyAny>, Bound<'py, PyAny>)> {
+pub fn mesh_out<'py>(
+    py: Python<'py>,
+    m: &Mesh,
+) -> PyResult<(Bound<'py, PyAny>, Bound<'py, PyAny>)> {
     let t;
     let m = if m.is_triangle_mesh() {
         m
@@ -103,12 +106,32 @@ pub fn warp<'py>(
     sampled: Option<usize>,
     mask: bool,
 ) -> PyResult<Bound<'py, PyAny>> {
+    warp_timed(py, volume, map, method, geometry, background, sampled, mask).map(|(v, _)| v)
+}
+
+/// As [`warp`], also returning the seconds spent inside `warp_volume` (the Rust call alone),
+/// for the Python-overhead benchmark (`scripts/python_overhead_bench.py`).
+#[pyfunction]
+#[pyo3(name = "_warp_timed", signature = (volume, map, method="pullback-linear", geometry=None, background=0.0, sampled=None, mask=false))]
+#[allow(clippy::too_many_arguments)]
+pub fn warp_timed<'py>(
+    py: Python<'py>,
+    volume: &PyVolume,
+    map: &PyMap,
+    method: &str,
+    geometry: Option<PyGeometry>,
+    background: f64,
+    sampled: Option<usize>,
+    mask: bool,
+) -> PyResult<(Bound<'py, PyAny>, f64)> {
     let method = warp_method(method)?;
     if mask && !method.is_inverse() {
         return Err(input("mask=True needs an inverse-* method"));
     }
     if !background.is_finite() {
-        return Err(input(format!("background must be finite, got {background}")));
+        return Err(input(format!(
+            "background must be finite, got {background}"
+        )));
     }
     let input_volume = volume.to_rust(py)?;
     let out_geometry = geometry.map_or(volume.geometry(), |g| g.inner);
@@ -117,16 +140,19 @@ pub fn warp<'py>(
         mask,
         sampled_nodes: sampled,
     };
-    let out = py
-        .detach(|| warp_volume(&input_volume, &map.inner, &out_geometry, method, &options))
-        .map_err(|e| to_py(WarpError::new_err, &e))?;
+    let (out, seconds) = py.detach(|| {
+        let t = std::time::Instant::now();
+        let out = warp_volume(&input_volume, &map.inner, &out_geometry, method, &options);
+        (out, t.elapsed().as_secs_f64())
+    });
+    let out = out.map_err(|e| to_py(WarpError::new_err, &e))?;
     let v = Bound::new(py, PyVolume::from_rust(py, out.volume)?)?.into_any();
     match out.mask {
         Some(m) if mask => {
             let m = Bound::new(py, PyVolume::from_rust(py, AnyVolume::from(m))?)?;
-            Ok((v, m).into_pyobject(py)?.into_any())
+            Ok(((v, m).into_pyobject(py)?.into_any(), seconds))
         }
-        _ => Ok(v),
+        _ => Ok((v, seconds)),
     }
 }
 
@@ -156,7 +182,9 @@ pub fn isosurface<'py>(
     }
     let v = volume.to_rust(py)?;
     let s = match method {
-        "marching-cubes" => py.detach(|| marching_cubes_any(&v, level, &McOptions { inside_below })),
+        "marching-cubes" => {
+            py.detach(|| marching_cubes_any(&v, level, &McOptions { inside_below }))
+        }
         "dual-contouring" => py.detach(|| {
             dual_contouring_any(
                 &v,
@@ -230,7 +258,9 @@ pub fn ffd<'py>(
     let out = match mode {
         "vertex" => {
             if step.is_some() {
-                return Err(input("STEP output holds trimmed surfaces and needs mode=\"accurate\""));
+                return Err(input(
+                    "STEP output holds trimmed surfaces and needs mode=\"accurate\"",
+                ));
             }
             py.detach(|| volmorph_ffd::baseline::vertex_ffd(&m, l))
         }
@@ -276,7 +306,11 @@ impl PyFrep {
     /// missing entries 0) and the object `object` (default: the last one).
     #[new]
     #[pyo3(signature = (source, params=None, object=None))]
-    fn new(source: &str, params: Option<HashMap<usize, f64>>, object: Option<String>) -> PyResult<Self> {
+    fn new(
+        source: &str,
+        params: Option<HashMap<usize, f64>>,
+        object: Option<String>,
+    ) -> PyResult<Self> {
         let params = params.unwrap_or_default();
         if let Some((k, v)) = params.iter().find(|(_, v)| !v.is_finite()) {
             return Err(input(format!("parameter a{k} must be finite, got {v}")));
@@ -289,7 +323,11 @@ impl PyFrep {
     /// Compile a model file.
     #[staticmethod]
     #[pyo3(signature = (path, params=None, object=None))]
-    fn load(path: PathBuf, params: Option<HashMap<usize, f64>>, object: Option<String>) -> PyResult<Self> {
+    fn load(
+        path: PathBuf,
+        params: Option<HashMap<usize, f64>>,
+        object: Option<String>,
+    ) -> PyResult<Self> {
         let src = std::fs::read_to_string(&path).map_err(|e| {
             FileError::new_err(format!("cannot read model {}: {e}", path.display()))
         })?;
@@ -299,7 +337,11 @@ impl PyFrep {
     }
 
     /// The field at N×3 points (float64, ≥ 0 inside).
-    fn evaluate<'py>(&self, py: Python<'py>, points: PyReadonlyArray2<'py, f64>) -> PyResult<Bound<'py, PyAny>> {
+    fn evaluate<'py>(
+        &self,
+        py: Python<'py>,
+        points: PyReadonlyArray2<'py, f64>,
+    ) -> PyResult<Bound<'py, PyAny>> {
         let p = self::points(&points)?;
         let out = py.detach(|| {
             let tape = Tape::new(&self.shape);
@@ -395,7 +437,11 @@ impl PyNurbs {
     #[staticmethod]
     fn load(path: PathBuf) -> PyResult<Self> {
         let model = volmorph_trivariate::load_volume(&path).map_err(|e| {
-            FileError::new_err(format!("cannot load model {}: {}", path.display(), crate::error::chain(&e)))
+            FileError::new_err(format!(
+                "cannot load model {}: {}",
+                path.display(),
+                crate::error::chain(&e)
+            ))
         })?;
         Ok(Self { model })
     }
@@ -408,20 +454,36 @@ impl PyNurbs {
     /// Attribute names.
     #[getter]
     fn attributes(&self) -> Vec<String> {
-        self.model.attributes().iter().map(|a| a.name().to_owned()).collect()
+        self.model
+            .attributes()
+            .iter()
+            .map(|a| a.name().to_owned())
+            .collect()
     }
 
     /// Evaluate at N×3 parameters `(u, v, w)`: `{"points": N×3, "<attribute>": N, …}`.
-    fn evaluate<'py>(&self, py: Python<'py>, params: PyReadonlyArray2<'py, f64>) -> PyResult<Bound<'py, PyDict>> {
+    fn evaluate<'py>(
+        &self,
+        py: Python<'py>,
+        params: PyReadonlyArray2<'py, f64>,
+    ) -> PyResult<Bound<'py, PyDict>> {
         let u = points(&params)?;
         let mut pts = Vec::with_capacity(u.len());
-        let mut attrs: Vec<Vec<f64>> = vec![Vec::with_capacity(u.len()); self.model.attributes().len()];
+        let mut attrs: Vec<Vec<f64>> =
+            vec![Vec::with_capacity(u.len()); self.model.attributes().len()];
         for q in &u {
             let a = q.to_array();
-            let p = self.model.geometry().eval(a).map_err(|e| to_py(ModelError::new_err, &e))?;
+            let p = self
+                .model
+                .geometry()
+                .eval(a)
+                .map_err(|e| to_py(ModelError::new_err, &e))?;
             pts.push(DVec3::new(p[0], p[1], p[2]));
             for (out, at) in attrs.iter_mut().zip(self.model.attributes()) {
-                let v = at.spline().eval(a).map_err(|e| to_py(ModelError::new_err, &e))?;
+                let v = at
+                    .spline()
+                    .eval(a)
+                    .map_err(|e| to_py(ModelError::new_err, &e))?;
                 out.push(v[0]);
             }
         }
@@ -436,16 +498,34 @@ impl PyNurbs {
     /// The planar slice `a·x + b·y + c·z + d = 0` (`plane = (a, b, c, d)`), coloured by
     /// `attribute`: `{"vertices", "faces", "values", "attribute"}`.
     #[pyo3(signature = (plane, attribute=None))]
-    fn slice<'py>(&self, py: Python<'py>, plane: [f64; 4], attribute: Option<String>) -> PyResult<Bound<'py, PyDict>> {
+    fn slice<'py>(
+        &self,
+        py: Python<'py>,
+        plane: [f64; 4],
+        attribute: Option<String>,
+    ) -> PyResult<Bound<'py, PyDict>> {
         let z = py
-            .detach(|| volmorph_trivariate::slice(&self.model, plane, attribute.as_deref(), &PolygonizeOptions::default()))
+            .detach(|| {
+                volmorph_trivariate::slice(
+                    &self.model,
+                    plane,
+                    attribute.as_deref(),
+                    &PolygonizeOptions::default(),
+                )
+            })
             .map_err(|e| to_py(ModelError::new_err, &e))?;
         zero_set(py, &z)
     }
 
     /// The isosurface `attribute = level`: `{"vertices", "faces", "values", "attribute"}`.
     #[pyo3(signature = (attribute, level, inside_below=false))]
-    fn isosurface<'py>(&self, py: Python<'py>, attribute: &str, level: f64, inside_below: bool) -> PyResult<Bound<'py, PyDict>> {
+    fn isosurface<'py>(
+        &self,
+        py: Python<'py>,
+        attribute: &str,
+        level: f64,
+        inside_below: bool,
+    ) -> PyResult<Bound<'py, PyDict>> {
         let opts = PolygonizeOptions {
             inside_below,
             ..PolygonizeOptions::default()
@@ -456,4 +536,3 @@ impl PyNurbs {
         zero_set(py, &z)
     }
 }
-

@@ -35,8 +35,7 @@ fn change<'py>(py: Python<'py>, c: &Change) -> PyResult<Bound<'py, PyDict>> {
         e.set_item("voxels", x.voxels.map(|b| (b.start, b.end)))?;
         e.set_item(
             "bounds",
-            x.bounds
-                .map(|(lo, hi)| (lo.to_array(), hi.to_array())),
+            x.bounds.map(|(lo, hi)| (lo.to_array(), hi.to_array())),
         )?;
         dirty.append(e)?;
     }
@@ -204,8 +203,8 @@ impl PyScene {
             .import("json")?
             .call_method1("dumps", (recipe,))?
             .extract()?;
-        let recipe: Recipe = serde_json::from_str(&text)
-            .map_err(|e| input(format!("recipe: {e}")))?;
+        let recipe: Recipe =
+            serde_json::from_str(&text).map_err(|e| input(format!("recipe: {e}")))?;
         let c = self.run(
             py,
             Command::Add {
@@ -318,7 +317,9 @@ impl PyScene {
             .lock()
             .map_err(|_| SceneError::new_err("the scene was poisoned by an earlier panic"))?;
         let s: &mut Scene = &mut guard;
-        let c = py.detach(|| s.undo()).map_err(|e| to_py(SceneError::new_err, &e))?;
+        let c = py
+            .detach(|| s.undo())
+            .map_err(|e| to_py(SceneError::new_err, &e))?;
         c.map(|c| change(py, &c)).transpose()
     }
 
@@ -329,7 +330,9 @@ impl PyScene {
             .lock()
             .map_err(|_| SceneError::new_err("the scene was poisoned by an earlier panic"))?;
         let s: &mut Scene = &mut guard;
-        let c = py.detach(|| s.redo()).map_err(|e| to_py(SceneError::new_err, &e))?;
+        let c = py
+            .detach(|| s.redo())
+            .map_err(|e| to_py(SceneError::new_err, &e))?;
         c.map(|c| change(py, &c)).transpose()
     }
 
@@ -392,4 +395,3 @@ impl PyScene {
         })
     }
 }
-

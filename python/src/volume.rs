@@ -67,7 +67,13 @@ pub fn rows(m: DMat3) -> [[f64; 3]; 3] {
 /// >>> g = Geometry((4, 5, 6), spacing=(0.5, 0.5, 2.0))
 /// >>> g.shape, g.spacing
 /// ((4, 5, 6), (0.5, 0.5, 2.0))
-#[pyclass(name = "Geometry", module = "volmorph._volmorph", frozen, eq, from_py_object)]
+#[pyclass(
+    name = "Geometry",
+    module = "volmorph._volmorph",
+    frozen,
+    eq,
+    from_py_object
+)]
 #[derive(Clone, Copy, PartialEq)]
 pub struct PyGeometry {
     /// The Rust geometry.
@@ -197,8 +203,12 @@ where
     let s = r
         .as_slice()
         .map_err(|_| input("the array must be C-contiguous"))?;
-    volmorph_io::check_elems("the volume's Rust copy", s.len() as u64, std::mem::size_of::<T>() as u64)
-        .map_err(|e| to_py(FileError::new_err, &e))?;
+    volmorph_io::check_elems(
+        "the volume's Rust copy",
+        s.len() as u64,
+        std::mem::size_of::<T>() as u64,
+    )
+    .map_err(|e| to_py(FileError::new_err, &e))?;
     let v = RVolume::new(g, s.to_vec()).map_err(|e| input(e.to_string()))?;
     Ok(Some(AnyVolume::from(v)))
 }
@@ -209,7 +219,10 @@ impl PyVolume {
         let a = array.cast::<PyUntypedArray>().map_err(|_| {
             input(format!(
                 "expected a numpy array, got {}",
-                array.get_type().name().map_or_else(|_| "?".into(), |n| n.to_string())
+                array
+                    .get_type()
+                    .name()
+                    .map_or_else(|_| "?".into(), |n| n.to_string())
             ))
         })?;
         if a.ndim() != 3 {
@@ -221,9 +234,7 @@ impl PyVolume {
         }
         let dt = a.dtype().to_string();
         if !DTYPES.split(", ").any(|d| d == dt) {
-            return Err(input(format!(
-                "unsupported dtype {dt}; one of {DTYPES}"
-            )));
+            return Err(input(format!("unsupported dtype {dt}; one of {DTYPES}")));
         }
         if !a.is_c_contiguous() {
             return Err(input(
@@ -356,7 +367,11 @@ impl PyVolume {
     ) -> PyResult<Bound<'py, PyAny>> {
         let np = py.import("numpy")?;
         let a = self.array.bind(py);
-        let f = if copy == Some(true) { "array" } else { "asarray" };
+        let f = if copy == Some(true) {
+            "array"
+        } else {
+            "asarray"
+        };
         np.call_method1(f, (a, dtype))
     }
 
