@@ -89,6 +89,23 @@ impl PyScene {
             .map_err(|e| to_py(SceneError::new_err, &e))
     }
 
+    /// Undo or redo (`step` is `Scene::undo` or `Scene::redo`) with the GIL released.
+    fn history<'py>(
+        &self,
+        py: Python<'py>,
+        step: fn(&mut Scene) -> Result<Option<Change>, volmorph_scene::SceneError>,
+    ) -> PyResult<Option<Bound<'py, PyDict>>> {
+        let mut guard = self
+            .scene
+            .lock()
+            .map_err(|_| SceneError::new_err("the scene was poisoned by an earlier panic"))?;
+        let s: &mut Scene = &mut guard;
+        let c = py
+            .detach(|| step(s))
+            .map_err(|e| to_py(SceneError::new_err, &e))?;
+        c.map(|c| change(py, &c)).transpose()
+    }
+
     fn with<R>(&self, f: impl FnOnce(&Scene) -> PyResult<R>) -> PyResult<R> {
         let scene = self
             .scene
@@ -312,28 +329,12 @@ impl PyScene {
 
     /// Undo the last command; the change report, or `None` with nothing to undo.
     fn undo<'py>(&self, py: Python<'py>) -> PyResult<Option<Bound<'py, PyDict>>> {
-        let mut guard = self
-            .scene
-            .lock()
-            .map_err(|_| SceneError::new_err("the scene was poisoned by an earlier panic"))?;
-        let s: &mut Scene = &mut guard;
-        let c = py
-            .detach(|| s.undo())
-            .map_err(|e| to_py(SceneError::new_err, &e))?;
-        c.map(|c| change(py, &c)).transpose()
+        self.history(py, Scene::undo)
     }
 
     /// Redo the last undone command; the change report, or `None`.
     fn redo<'py>(&self, py: Python<'py>) -> PyResult<Option<Bound<'py, PyDict>>> {
-        let mut guard = self
-            .scene
-            .lock()
-            .map_err(|_| SceneError::new_err("the scene was poisoned by an earlier panic"))?;
-        let s: &mut Scene = &mut guard;
-        let c = py
-            .detach(|| s.redo())
-            .map_err(|e| to_py(SceneError::new_err, &e))?;
-        c.map(|c| change(py, &c)).transpose()
+        self.history(py, Scene::redo)
     }
 
     /// Commands that can be undone.

@@ -398,22 +398,22 @@ impl PyVolume {
         }
     }
 
-    /// Voxel spacing `(x, y, z)`.
+    /// Voxel spacing `(x, y, z)` (as `Geometry.spacing`).
     #[getter]
     fn spacing(&self) -> (f64, f64, f64) {
-        self.geometry.spacing.into()
+        self.py_geometry().spacing()
     }
 
-    /// Centre of voxel `(0, 0, 0)`, physical `(x, y, z)`.
+    /// Centre of voxel `(0, 0, 0)` (as `Geometry.origin`).
     #[getter]
     fn origin(&self) -> (f64, f64, f64) {
-        self.geometry.origin.into()
+        self.py_geometry().origin()
     }
 
-    /// Direction matrix as rows; column `c` is the direction of index axis `c`.
+    /// Direction matrix as rows (as `Geometry.direction`).
     #[getter]
     fn direction(&self) -> [[f64; 3]; 3] {
-        rows(self.geometry.direction)
+        self.py_geometry().direction()
     }
 
     fn __repr__(&self, py: Python<'_>) -> PyResult<String> {

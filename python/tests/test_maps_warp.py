@@ -183,3 +183,11 @@ def test_the_gil_is_released_during_a_warp(volume, lattice):
         t.join()
     for r in results:
         np.testing.assert_array_equal(r, alone)
+
+
+def test_timed_warp_returns_the_same_volume_and_the_rust_time(volume, lattice):
+    from volmorph._volmorph import _warp_timed
+
+    w, seconds = _warp_timed(volume, lattice, "pullback-cubic")
+    np.testing.assert_array_equal(w.array, vm.warp(volume, lattice, "pullback-cubic").array)
+    assert 0 < seconds < 60

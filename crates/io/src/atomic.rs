@@ -227,7 +227,10 @@ impl PartialDir {
         let _ = std::fs::remove_file(self.path.join(PARTIAL_DIR_LOCK));
         let dir = folder_of(&self.target).to_path_buf();
         let aside = if self.target.is_dir() {
-            let aside = dir.join(format!("{PARTIAL_PREFIX}{:08x}.old{PARTIAL_SUFFIX}", token()));
+            let aside = dir.join(format!(
+                "{PARTIAL_PREFIX}{:08x}.old{PARTIAL_SUFFIX}",
+                token()
+            ));
             std::fs::rename(&self.target, &aside).map_err(os)?;
             Some(aside)
         } else {
