@@ -210,7 +210,7 @@ fn parse(bytes: &[u8]) -> Result<Mgh, VolumeError> {
 /// Read frame `frame` of an MGH stream positioned at byte 0.
 fn read_stream<R: Read>(
     r: &mut R,
-    frame: Option<usize>,
+    frame: impl Into<crate::FrameChoice>,
 ) -> Result<(AnyVolume, Header, usize), VolumeError> {
     let mut head = Vec::with_capacity(DATA_OFFSET);
     r.by_ref()
@@ -277,7 +277,7 @@ pub fn read_bytes(
 
 pub(crate) fn read(
     path: &Path,
-    frame: Option<usize>,
+    frame: crate::FrameChoice,
 ) -> Result<(AnyVolume, Header, usize), VolumeError> {
     let os = os_err(path);
     let mut br = BufReader::with_capacity(1 << 20, File::open(path).map_err(os)?);

@@ -1728,7 +1728,7 @@ where
 fn read_stream<R: Read>(
     r: &mut R,
     file_len: Option<u64>,
-    frame: Option<usize>,
+    frame: impl Into<crate::FrameChoice>,
 ) -> Result<(AnyVolume, Header, usize), VolumeError> {
     let mut hb = [0u8; HEADER2_SIZE];
     let mut got = fill(r, &mut hb[..HEADER_SIZE], "header")?;
@@ -1822,7 +1822,7 @@ pub fn read_bytes(bytes: &[u8]) -> Result<(AnyVolume, Header), VolumeError> {
 /// Read a `.nii` or `.nii.gz` file (gzip detected by magic number).
 pub(crate) fn read(
     path: &Path,
-    frame: Option<usize>,
+    frame: crate::FrameChoice,
 ) -> Result<(AnyVolume, Header, usize), VolumeError> {
     let os = crate::text_header::os_err(path);
     let file = volmorph_io::open_regular(path)?;
