@@ -54,6 +54,7 @@ use std::borrow::Borrow;
 use std::collections::BTreeMap;
 use std::path::{Path, PathBuf};
 
+use dicom_core::header::Header as _;
 use dicom_core::VR;
 use dicom_core::dictionary::{DataDictionary, DataDictionaryEntry};
 use dicom_dictionary_std::{StandardDataDictionary, tags};
@@ -660,8 +661,9 @@ fn read_multiframe_object(
     let decoded = obj
         .decode_pixel_data()
         .map_err(|e| pixel_error(&what, &e.to_string()))?;
+    let swapped = halves_swapped(obj, &format);
     let volume = fill(&format, &planes, &order, geometry, |p: &Plane| {
-        frame_values(&decoded, &format, p.frame, &what)
+        frame_values(&decoded, &format, p.frame, &what, swapped)
     })?;
     Ok((volume, header))
 }
@@ -715,7 +717,21 @@ fn decode_frame(
     let decoded = obj
         .decode_pixel_data()
         .map_err(|e| pixel_error(what, &e.to_string()))?;
-    frame_values(&decoded, format, frame, what)
+    frame_values(&decoded, format, frame, what, halves_swapped(obj, format))
+}
+
+/// Whether the decoded bytes of 32-bit pixels have their 16-bit halves swapped: an explicit VR
+/// big endian file whose `PixelData` has VR `OW` is parsed as native 16-bit words (PS3.5
+/// §8.2: `OW` is byte-swapped per word), so each 32-bit value arrives as its high word then its
+/// low word, each little-endian. (`OL` data and little-endian files come out in order.)
+fn halves_swapped(obj: &DefaultDicomObject, format: &PixelFormat) -> bool {
+    use dicom_core::value::{PrimitiveValue, Value};
+    const EXPLICIT_VR_BIG_ENDIAN: &str = "1.2.840.10008.1.2.2";
+    format.bits_allocated == 32
+        && obj.meta().transfer_syntax().trim_end_matches(['\0', ' ']) == EXPLICIT_VR_BIG_ENDIAN
+        && obj.element(tags::PIXEL_DATA).is_ok_and(|e| {
+            matches!(e.value(), Value::Primitive(PrimitiveValue::U16(_)))
+        })
 }
 
 fn frame_values(
@@ -723,6 +739,7 @@ fn frame_values(
     format: &PixelFormat,
     frame: u32,
     what: &str,
+    halves_swapped: bool,
 ) -> Result<Vec<i64>, VolumeError> {
     let bytes = decoded
         .frame_data(frame)
@@ -730,6 +747,13 @@ fn frame_values(
     let n = format.rows * format.cols;
     if bytes.len() < n * usize::from(format.bits_allocated / 8) {
         return Err(err(format!("{what}: pixel data truncated")));
+    }
+    if halves_swapped {
+        let mut fixed = bytes[..4 * n].to_vec();
+        for v in fixed.chunks_exact_mut(4) {
+            v.rotate_left(2);
+        }
+        return Ok((0..n).map(|k| format.value(&fixed, k)).collect());
     }
     Ok((0..n).map(|k| format.value(bytes, k)).collect())
 }

@@ -372,7 +372,7 @@ mod tests {
         for name in ["a.mgh", "a.mgz"] {
             let p = dir.path().join(name);
             write(&p, &v, &WriteOptions::default()).unwrap();
-            let (back, _, frames) = read(&p, None).unwrap();
+            let (back, _, frames) = read(&p, crate::FrameChoice::Single).unwrap();
             assert_eq!(frames, 1);
             assert_eq!(back.as_bytes(), v.as_bytes());
             let b = back.geometry();

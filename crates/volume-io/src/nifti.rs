@@ -2100,7 +2100,7 @@ mod tests {
         let dir = tempfile::tempdir().unwrap();
         let p = dir.path().join("long.nii.gz");
         write(&p, &v, &WriteOptions::default()).unwrap();
-        let (back, h, frames) = read(&p, None).unwrap();
+        let (back, h, frames) = read(&p, crate::FrameChoice::Single).unwrap();
         assert_eq!(frames, 1);
         assert_eq!(back.as_bytes(), v.as_bytes());
         let size = h.fields.iter().find(|(k, _)| k == "sizeof_hdr").unwrap();
