@@ -124,6 +124,10 @@ def nibabel_fixtures(out: Path, expected: dict) -> None:
         e["frame"] = t
         e["frames"] = int(full.shape[3])
         expected[f"nibabel_4d.nii.gz#{t}"] = e
+    # Frame 1 alone, with the series' header (same sform/qform bytes): what every command
+    # must read from the series with --frame 1 (crates/cli/tests/realdata.rs).
+    frame1 = nib.Nifti1Image(full[..., 1], back.affine, header=back.header.copy())
+    nib.save(frame1, out / "nibabel_4d_frame1.nii.gz")
 
     # FreeSurfer MGZ: oblique, uint8 and float32.
     for name, dtype in [("nibabel_oblique_u8.mgz", np.uint8), ("nibabel_f32.mgz", np.float32)]:

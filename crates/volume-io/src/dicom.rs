@@ -658,6 +658,7 @@ fn read_multiframe_object(
         &[format.cols, format.rows, frames as usize],
         usize::from(format.bits_allocated / 8),
     )?;
+    check_decodable(obj, &format, &what)?;
     let decoded = obj
         .decode_pixel_data()
         .map_err(|e| pixel_error(&what, &e.to_string()))?;
@@ -714,10 +715,29 @@ fn decode_frame(
     frame: u32,
     what: &str,
 ) -> Result<Vec<i64>, VolumeError> {
+    check_decodable(obj, format, what)?;
     let decoded = obj
         .decode_pixel_data()
         .map_err(|e| pixel_error(what, &e.to_string()))?;
     frame_values(&decoded, format, frame, what, halves_swapped(obj, format))
+}
+
+/// Refuse, as unsupported, pixel data that the dicom-rs decoders do not decode: RLE Lossless
+/// with 32-bit samples (its decoder reads 8 and 16 bits; PS3.5 Annex G allows 32).
+fn check_decodable(
+    obj: &DefaultDicomObject,
+    format: &PixelFormat,
+    what: &str,
+) -> Result<(), VolumeError> {
+    const RLE_LOSSLESS: &str = "1.2.840.10008.1.2.5";
+    let syntax = obj.meta().transfer_syntax().trim_end_matches(['\0', ' ']);
+    if syntax == RLE_LOSSLESS && format.bits_allocated == 32 {
+        return Err(VolumeError::Unsupported(format!(
+            "{what}: RLE Lossless pixel data with BitsAllocated 32 (the RLE decoder reads 8 and \
+             16 bits); convert the file to an uncompressed transfer syntax"
+        )));
+    }
+    Ok(())
 }
 
 /// Whether the decoded bytes of 32-bit pixels have their 16-bit halves swapped: an explicit VR
