@@ -190,7 +190,11 @@ fn every_volume_command_reads_the_global_frame() {
         ),
         (&["drag"], vec!["--from", &from, "--to", &to], "nii"),
         (&["render"], vec!["--size", "32x32"], "png"),
-        (&["nurbs", "fit"], vec!["--order", "2", "--control-points", "2"], "json"),
+        (
+            &["nurbs", "fit"],
+            vec!["--order", "2", "--control-points", "2"],
+            "json",
+        ),
     ];
     for (i, (cmd, rest, ext)) in commands.iter().enumerate() {
         let run = |input: &Path, frame: &[&str], out: &Path| {

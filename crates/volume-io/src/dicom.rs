@@ -54,9 +54,9 @@ use std::borrow::Borrow;
 use std::collections::BTreeMap;
 use std::path::{Path, PathBuf};
 
-use dicom_core::header::Header as _;
 use dicom_core::VR;
 use dicom_core::dictionary::{DataDictionary, DataDictionaryEntry};
+use dicom_core::header::Header as _;
 use dicom_dictionary_std::{StandardDataDictionary, tags};
 use dicom_object::{DefaultDicomObject, InMemDicomObject, OpenFileOptions};
 use dicom_pixeldata::PixelDecoder;
@@ -127,22 +127,46 @@ fn retype_un(obj: &mut InMemDicomObject) {
         let Some(vr) = StandardDataDictionary.by_tag(tag).map(|e| e.vr().relaxed()) else {
             continue;
         };
-        let value = match vr {
-            VR::AE | VR::AS | VR::CS | VR::DA | VR::DS | VR::DT | VR::IS | VR::LO | VR::LT
-            | VR::PN | VR::SH | VR::ST | VR::TM | VR::UC | VR::UI | VR::UR | VR::UT => {
-                let t = String::from_utf8_lossy(&bytes);
-                let t = t.trim_end_matches(['\0', ' ']);
-                Some(PrimitiveValue::Strs(t.split('\\').map(str::to_owned).collect()))
+        let value =
+            match vr {
+                VR::AE
+                | VR::AS
+                | VR::CS
+                | VR::DA
+                | VR::DS
+                | VR::DT
+                | VR::IS
+                | VR::LO
+                | VR::LT
+                | VR::PN
+                | VR::SH
+                | VR::ST
+                | VR::TM
+                | VR::UC
+                | VR::UI
+                | VR::UR
+                | VR::UT => {
+                    let t = String::from_utf8_lossy(&bytes);
+                    let t = t.trim_end_matches(['\0', ' ']);
+                    Some(PrimitiveValue::Strs(
+                        t.split('\\').map(str::to_owned).collect(),
+                    ))
+                }
+                VR::US => binary::<2, _>(&bytes, u16::from_le_bytes)
+                    .map(|v| PrimitiveValue::U16(v.into())),
+                VR::SS => binary::<2, _>(&bytes, i16::from_le_bytes)
+                    .map(|v| PrimitiveValue::I16(v.into())),
+                VR::UL => binary::<4, _>(&bytes, u32::from_le_bytes)
+                    .map(|v| PrimitiveValue::U32(v.into())),
+                VR::SL => binary::<4, _>(&bytes, i32::from_le_bytes)
+                    .map(|v| PrimitiveValue::I32(v.into())),
+                VR::FL => binary::<4, _>(&bytes, f32::from_le_bytes)
+                    .map(|v| PrimitiveValue::F32(v.into())),
+                VR::FD => binary::<8, _>(&bytes, f64::from_le_bytes)
+                    .map(|v| PrimitiveValue::F64(v.into())),
+                _ => None,
             }
-            VR::US => binary::<2, _>(&bytes, u16::from_le_bytes).map(|v| PrimitiveValue::U16(v.into())),
-            VR::SS => binary::<2, _>(&bytes, i16::from_le_bytes).map(|v| PrimitiveValue::I16(v.into())),
-            VR::UL => binary::<4, _>(&bytes, u32::from_le_bytes).map(|v| PrimitiveValue::U32(v.into())),
-            VR::SL => binary::<4, _>(&bytes, i32::from_le_bytes).map(|v| PrimitiveValue::I32(v.into())),
-            VR::FL => binary::<4, _>(&bytes, f32::from_le_bytes).map(|v| PrimitiveValue::F32(v.into())),
-            VR::FD => binary::<8, _>(&bytes, f64::from_le_bytes).map(|v| PrimitiveValue::F64(v.into())),
-            _ => None,
-        }
-        .unwrap_or(PrimitiveValue::Empty);
+            .unwrap_or(PrimitiveValue::Empty);
         if value != PrimitiveValue::Empty {
             obj.put(DataElement::new(tag, vr, value));
         }
@@ -420,7 +444,10 @@ pub(crate) fn read(path: &Path) -> Result<(AnyVolume, Header), VolumeError> {
 }
 
 fn read_series(series: &[Scanned]) -> Result<(AnyVolume, Header), VolumeError> {
-    let names: Vec<String> = series.iter().map(|s| s.path.display().to_string()).collect();
+    let names: Vec<String> = series
+        .iter()
+        .map(|s| s.path.display().to_string())
+        .collect();
     let (volume, mut header) = read_slices(
         &names,
         |i| open_header(&series[i].path).ok_or_else(|| err(format!("{}: unreadable", names[i]))),
@@ -482,11 +509,9 @@ where
     let first = first.ok_or_else(|| err("empty series"))?;
     let first: &DefaultDicomObject = first.borrow();
     let format = format.ok_or_else(|| err("empty series"))?;
-    let single_step = float(first, tags::SPACING_BETWEEN_SLICES)
-        .or_else(|| float(first, tags::SLICE_THICKNESS));
-    let (geometry, order) = assemble(&mut planes, single_step, &|p: &Plane| {
-        names[p.file].clone()
-    })?;
+    let single_step =
+        float(first, tags::SPACING_BETWEEN_SLICES).or_else(|| float(first, tags::SLICE_THICKNESS));
+    let (geometry, order) = assemble(&mut planes, single_step, &|p: &Plane| names[p.file].clone())?;
     let header = summary(first, &format, &planes, geometry);
     // Decode slice by slice (one file at a time in memory).
     let volume = fill(&format, &planes, &order, geometry, |p: &Plane| {
@@ -749,9 +774,9 @@ fn halves_swapped(obj: &DefaultDicomObject, format: &PixelFormat) -> bool {
     const EXPLICIT_VR_BIG_ENDIAN: &str = "1.2.840.10008.1.2.2";
     format.bits_allocated == 32
         && obj.meta().transfer_syntax().trim_end_matches(['\0', ' ']) == EXPLICIT_VR_BIG_ENDIAN
-        && obj.element(tags::PIXEL_DATA).is_ok_and(|e| {
-            matches!(e.value(), Value::Primitive(PrimitiveValue::U16(_)))
-        })
+        && obj
+            .element(tags::PIXEL_DATA)
+            .is_ok_and(|e| matches!(e.value(), Value::Primitive(PrimitiveValue::U16(_))))
 }
 
 fn frame_values(

@@ -189,7 +189,8 @@ pub fn set_allow_external_data_default(allow: bool) {
 /// No process-wide frame (see [`set_frame_default`]).
 const NO_FRAME: usize = usize::MAX;
 
-static FRAME_DEFAULT: std::sync::atomic::AtomicUsize = std::sync::atomic::AtomicUsize::new(NO_FRAME);
+static FRAME_DEFAULT: std::sync::atomic::AtomicUsize =
+    std::sync::atomic::AtomicUsize::new(NO_FRAME);
 
 /// Set [`ReadOptions::default_frame`] in [`ReadOptions::default`] (and so in [`read`], the
 /// read of every command, the scene's imports and the registration pipeline) for the rest of

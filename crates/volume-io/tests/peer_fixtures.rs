@@ -149,6 +149,32 @@ fn four_d_nifti_frames_match_nibabel() {
     assert!(e.to_string().contains("frame 3 does not exist"), "{e}");
 }
 
+/// `ReadOptions::default_frame` (the command line's global `--frame`) picks the frame of a
+/// series, reads a 3-D file as it is, and refuses a series without that frame; an explicit
+/// `frame` is strict even for a 3-D file.
+#[test]
+fn default_frame_reads_series_frames_and_leaves_3d_files_alone() {
+    let series = corpus().join("nibabel_4d.nii.gz");
+    let single = corpus().join("nibabel_4d_frame1.nii.gz");
+    let with = |default_frame, frame| ReadOptions {
+        frame,
+        default_frame,
+        ..ReadOptions::default()
+    };
+    let f = format::read_with(&series, &with(Some(1), None)).unwrap();
+    assert_eq!((f.frame, f.frames), (1, 3));
+    let alone = format::read(&single).unwrap();
+    assert_eq!(f.volume.as_bytes(), alone.as_bytes());
+    assert_eq!(f.volume.geometry(), alone.geometry());
+    let g = format::read_with(&single, &with(Some(2), None)).unwrap();
+    assert_eq!((g.frame, g.frames), (0, 1));
+    assert_eq!(g.volume.as_bytes(), alone.as_bytes());
+    let e = format::read_with(&series, &with(Some(3), None)).unwrap_err();
+    assert!(e.to_string().contains("frame 3 does not exist"), "{e}");
+    let e = format::read_with(&single, &with(None, Some(2))).unwrap_err();
+    assert!(e.to_string().contains("frame 2 does not exist"), "{e}");
+}
+
 #[test]
 fn vti_in_every_vtk_layout_matches_vtk() {
     check_prefix("vtk_");
@@ -200,7 +226,11 @@ fn attributes_stored_with_vr_un_are_read_by_their_dictionary_vr() {
 /// reader does.
 #[test]
 fn dicom_bytes_read_as_the_file() {
-    for f in ["pydicom_enhanced_ct.dcm", "pydicom_rtdose.dcm", "pydicom_un_vr.dcm"] {
+    for f in [
+        "pydicom_enhanced_ct.dcm",
+        "pydicom_rtdose.dcm",
+        "pydicom_un_vr.dcm",
+    ] {
         let p = corpus().join(f);
         let (v, _) = format::dicom::read_bytes(&std::fs::read(&p).unwrap()).unwrap();
         let w = format::read(&p).unwrap();
@@ -224,7 +254,11 @@ fn seeds(names: &[&str]) -> Vec<Vec<u8>> {
 fn mutated_vti_files_never_panic() {
     common::assert_mutations_never_panic(
         format::vti::read_bytes,
-        &seeds(&["vtk_ascii.vti", "vtk_appended_raw_zlib.vti", "vtk_binary.vti"]),
+        &seeds(&[
+            "vtk_ascii.vti",
+            "vtk_appended_raw_zlib.vti",
+            "vtk_binary.vti",
+        ]),
     );
 }
 
