@@ -117,7 +117,7 @@ fn retype_un(obj: &mut InMemDicomObject) {
         .filter_map(|e| Some((e.tag(), e.to_bytes().ok()?.into_owned())))
         .collect();
     fn binary<const N: usize, T>(b: &[u8], f: impl Fn([u8; N]) -> T) -> Option<Vec<T>> {
-        (b.len() % N == 0).then(|| {
+        b.len().is_multiple_of(N).then(|| {
             b.chunks_exact(N)
                 .map(|c| f(c.try_into().unwrap_or([0; N])))
                 .collect()
@@ -476,7 +476,7 @@ where
     for (i, what) in names.iter().enumerate() {
         let h = header(i)?;
         let obj: &DefaultDicomObject = h.borrow();
-        let pf = PixelFormat::of(&obj, &what)?;
+        let pf = PixelFormat::of(obj, what)?;
         match format {
             None => format = Some(pf),
             Some(f) if f != pf => {
@@ -487,18 +487,18 @@ where
             Some(_) => {}
         }
         let (position, row_dir, col_dir, spacing) = plane_from(
-            &what,
-            floats(&obj, tags::IMAGE_ORIENTATION_PATIENT),
-            floats(&obj, tags::IMAGE_POSITION_PATIENT),
-            floats(&obj, tags::PIXEL_SPACING),
+            what,
+            floats(obj, tags::IMAGE_ORIENTATION_PATIENT),
+            floats(obj, tags::IMAGE_POSITION_PATIENT),
+            floats(obj, tags::PIXEL_SPACING),
         )?;
         planes.push(Plane {
             position,
             row_dir,
             col_dir,
             spacing,
-            slope: float(&obj, tags::RESCALE_SLOPE).unwrap_or(1.0) * dose_scaling(&obj),
-            intercept: float(&obj, tags::RESCALE_INTERCEPT).unwrap_or(0.0),
+            slope: float(obj, tags::RESCALE_SLOPE).unwrap_or(1.0) * dose_scaling(obj),
+            intercept: float(obj, tags::RESCALE_INTERCEPT).unwrap_or(0.0),
             file: i,
             frame: 0,
         });
@@ -558,11 +558,11 @@ fn read_multiframe_object(
     what: &str,
 ) -> Result<(AnyVolume, Header), VolumeError> {
     let what = what.to_owned();
-    let format = PixelFormat::of(&obj, &what)?;
-    let frames = int(&obj, tags::NUMBER_OF_FRAMES).unwrap_or(1).max(1);
+    let format = PixelFormat::of(obj, &what)?;
+    let frames = int(obj, tags::NUMBER_OF_FRAMES).unwrap_or(1).max(1);
     let frames =
         u32::try_from(frames).map_err(|_| err(format!("{what}: NumberOfFrames {frames}")))?;
-    let shared = item(&obj, tags::SHARED_FUNCTIONAL_GROUPS_SEQUENCE);
+    let shared = item(obj, tags::SHARED_FUNCTIONAL_GROUPS_SEQUENCE);
     let per_frame: &[InMemDicomObject] = obj
         .get(tags::PER_FRAME_FUNCTIONAL_GROUPS_SEQUENCE)
         .and_then(|e| e.items())
@@ -588,8 +588,8 @@ fn read_multiframe_object(
     }
     let mut planes = Vec::with_capacity(frames as usize);
     let top_step =
-        float(&obj, tags::SPACING_BETWEEN_SLICES).or_else(|| float(&obj, tags::SLICE_THICKNESS));
-    let grid_offsets = grid_frame_offsets(&obj, frames as usize, &what)?;
+        float(obj, tags::SPACING_BETWEEN_SLICES).or_else(|| float(obj, tags::SLICE_THICKNESS));
+    let grid_offsets = grid_frame_offsets(obj, frames as usize, &what)?;
     for f in 0..frames as usize {
         let fw = format!("{what} frame {}", f + 1);
         let (ipp, iop, ps, slope, inter) = if enhanced {
@@ -599,35 +599,35 @@ fn read_multiframe_object(
                     tags::PLANE_POSITION_SEQUENCE,
                     tags::IMAGE_POSITION_PATIENT,
                 )
-                .or_else(|| floats(&obj, tags::IMAGE_POSITION_PATIENT)),
+                .or_else(|| floats(obj, tags::IMAGE_POSITION_PATIENT)),
                 fg(
                     f,
                     tags::PLANE_ORIENTATION_SEQUENCE,
                     tags::IMAGE_ORIENTATION_PATIENT,
                 )
-                .or_else(|| floats(&obj, tags::IMAGE_ORIENTATION_PATIENT)),
+                .or_else(|| floats(obj, tags::IMAGE_ORIENTATION_PATIENT)),
                 fg(f, tags::PIXEL_MEASURES_SEQUENCE, tags::PIXEL_SPACING)
-                    .or_else(|| floats(&obj, tags::PIXEL_SPACING)),
+                    .or_else(|| floats(obj, tags::PIXEL_SPACING)),
                 fg(
                     f,
                     tags::PIXEL_VALUE_TRANSFORMATION_SEQUENCE,
                     tags::RESCALE_SLOPE,
                 )
                 .and_then(|v| v.first().copied())
-                .or_else(|| float(&obj, tags::RESCALE_SLOPE)),
+                .or_else(|| float(obj, tags::RESCALE_SLOPE)),
                 fg(
                     f,
                     tags::PIXEL_VALUE_TRANSFORMATION_SEQUENCE,
                     tags::RESCALE_INTERCEPT,
                 )
                 .and_then(|v| v.first().copied())
-                .or_else(|| float(&obj, tags::RESCALE_INTERCEPT)),
+                .or_else(|| float(obj, tags::RESCALE_INTERCEPT)),
             )
         } else {
             // Classic multi-frame: frames placed along the normal from the top-level position,
             // by the RT Dose GridFrameOffsetVector or stepped by the slice spacing.
-            let iop = floats(&obj, tags::IMAGE_ORIENTATION_PATIENT);
-            let ipp = floats(&obj, tags::IMAGE_POSITION_PATIENT);
+            let iop = floats(obj, tags::IMAGE_ORIENTATION_PATIENT);
+            let ipp = floats(obj, tags::IMAGE_POSITION_PATIENT);
             let offset = match &grid_offsets {
                 Some(v) => v[f] - v[0],
                 None => {
@@ -652,19 +652,19 @@ fn read_multiframe_object(
             (
                 ipp,
                 iop,
-                floats(&obj, tags::PIXEL_SPACING),
-                float(&obj, tags::RESCALE_SLOPE),
-                float(&obj, tags::RESCALE_INTERCEPT),
+                floats(obj, tags::PIXEL_SPACING),
+                float(obj, tags::RESCALE_SLOPE),
+                float(obj, tags::RESCALE_INTERCEPT),
             )
         };
-        let slope = Some(slope.unwrap_or(1.0) * dose_scaling(&obj));
+        let slope = slope.unwrap_or(1.0) * dose_scaling(obj);
         let (position, row_dir, col_dir, spacing) = plane_from(&fw, iop, ipp, ps)?;
         planes.push(Plane {
             position,
             row_dir,
             col_dir,
             spacing,
-            slope: slope.unwrap_or(1.0),
+            slope,
             intercept: inter.unwrap_or(0.0),
             file: 0,
             frame: f as u32,
@@ -676,7 +676,7 @@ fn read_multiframe_object(
     let (geometry, order) = assemble(&mut planes, single_step, &|p: &Plane| {
         format!("{what} frame {}", p.frame + 1)
     })?;
-    let mut header = summary(&obj, &format, &planes, geometry);
+    let mut header = summary(obj, &format, &planes, geometry);
     header.fields.push(("frames".into(), frames.to_string()));
     // Check the decoded size before decoding everything.
     volmorph_io::checked_len(
