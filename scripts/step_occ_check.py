@@ -68,6 +68,9 @@ def main() -> int:
     ap.add_argument("--area-rel", type=float, default=1e-6, help="relative area tolerance")
     ap.add_argument("--load-only", action="store_true", help="time the load and stop")
     ap.add_argument("--json", help="write size, load time and peak memory to this file")
+    ap.add_argument("--surfacecurve-mode", type=int,
+                    help="OpenCASCADE's read.surfacecurve.mode (0 default, 2/-2 prefer/force "
+                         "pcurves, 3/-3 prefer/force 3-D curves) for timing the transfer")
     ap.add_argument("--entities", action="store_true",
                     help="print bytes and count per entity type (no OpenCASCADE needed)")
     a = ap.parse_args()
@@ -93,6 +96,10 @@ def main() -> int:
         with open(a.report) as f:
             area_ref = json.load(f)["surface_area"]
 
+    if a.surfacecurve_mode is not None:
+        from OCP.Interface import Interface_Static
+
+        Interface_Static.SetIVal_s("read.surfacecurve.mode", a.surfacecurve_mode)
     t0 = time.perf_counter()
     reader = STEPControl_Reader()
     if reader.ReadFile(a.step) != IFSelect_RetDone:
