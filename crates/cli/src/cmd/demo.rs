@@ -24,10 +24,10 @@ use anyhow::{Context, bail};
 use clap::ValueEnum as _;
 use glam::DVec3;
 use volmorph_deform::SpaceMap;
-use volmorph_lattice::manipulate::DragOptions;
 use volmorph_maps::AnyMap;
 use volmorph_render::{Colormap, Window};
-use volmorph_scene::{Command, NewObject, ObjectId, Recipe, Scene, SurfaceMethod};
+use volmorph_scene::teapot::{DEMO_LATTICE_COUNTS, SPOUT_TARGET};
+use volmorph_scene::{Command, NewObject, ObjectId, Recipe, Scene, SurfaceMethod, TeapotSession};
 use volmorph_volume::phantom::{self, Phantom};
 use volmorph_volume::slice::{self, Axis, SlicePosition};
 use volmorph_volume::{AnyVolume, Volume};
@@ -57,15 +57,8 @@ pub struct Args {
     pub picture: (u32, u32),
 }
 
-/// Control points per axis of the demo lattice (True's Fig. 8 layout: 6 × 6 × 6 regions).
-const LATTICE_COUNTS: [usize; 3] = [9, 9, 9];
-/// The spout tip of the built-in teapot (model units) and where the drag takes it: down and
-/// a little outwards, as in True's Fig. 10.
+/// The spout tip of the built-in teapot (model units), grabbed by the session's drag.
 const SPOUT_TIP: DVec3 = phantom::TEAPOT_SPOUT_TIP;
-const SPOUT_TARGET: DVec3 = DVec3::new(0.85, 0.0, 0.04);
-/// Radius of the drag tool (model units): control points farther than this from a dragged
-/// point stay where they are.
-const TOOL_RADIUS: f64 = 0.45;
 /// Isovalue of the u8 density models.
 const LEVEL: f64 = 127.0;
 
@@ -128,12 +121,23 @@ fn warp_demo(args: &Args, index: &mut String, timings: &mut Timings) -> anyhow::
     let source: Volume<u8> = timings.time("teapot density volume", || {
         phantom::density(Phantom::Teapot, [n; 3])
     })?;
-    let grid = *source.geometry();
-    let lattice = volmorph_lattice::BSplineLattice::identity_on_voxels(&grid, LATTICE_COUNTS)?;
+    let lattice =
+        volmorph_lattice::BSplineLattice::identity_on_voxels(source.geometry(), DEMO_LATTICE_COUNTS)?;
 
     // The scene: the teapot, its lattice, and what is derived from them — the warped volume
     // (kept up to date incrementally), the isosurfaces before and after, and the Jacobian.
-    let mut scene = Scene::new();
+    pb.set_message("initial push-forward");
+    let session = timings.time("initial antialiased push-forward (identity)", || {
+        TeapotSession::with(source.clone(), lattice)
+    })?;
+    let drag = session.spout_drag();
+    let TeapotSession {
+        mut scene,
+        teapot: t,
+        lattice: l,
+        warped,
+        grid,
+    } = session;
     let add = |scene: &mut Scene, name: &str, object| -> anyhow::Result<ObjectId> {
         let change = scene.apply(Command::Add {
             name: name.into(),
@@ -144,31 +148,6 @@ fn warp_demo(args: &Args, index: &mut String, timings: &mut Timings) -> anyhow::
         }
         Ok(change.added[0])
     };
-    let t = add(
-        &mut scene,
-        "teapot",
-        NewObject::Volume(source.clone().into()),
-    )?;
-    let l = add(
-        &mut scene,
-        "lattice",
-        NewObject::Map(AnyMap::Lattice(lattice)),
-    )?;
-    pb.set_message("initial push-forward");
-    let warped = timings.time("initial antialiased push-forward (identity)", || {
-        add(
-            &mut scene,
-            "teapot warped",
-            NewObject::Derived(Recipe::Warp {
-                source: t,
-                map: l,
-                method: WarpMethod::PushforwardAntialiased,
-                background: 0.0,
-                sampled_nodes: None,
-                swap_handles: false,
-            }),
-        )
-    })?;
     pb.set_message("isosurfaces and Jacobian");
     let iso = |volume| {
         NewObject::Derived(Recipe::Isosurface {
@@ -192,12 +171,7 @@ fn warp_demo(args: &Args, index: &mut String, timings: &mut Timings) -> anyhow::
     let change = timings.time(
         "drag: least-norm solve, incremental warp, surface, Jacobian",
         || {
-            scene.apply(Command::DragPoints {
-                map: l,
-                grabbed: vec![SPOUT_TIP],
-                targets: vec![SPOUT_TARGET],
-                options: DragOptions::with_radius(TOOL_RADIUS),
-            })
+            scene.apply(drag)
         },
     )?;
     if let Some((id, e)) = change.errors.first() {
