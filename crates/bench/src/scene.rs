@@ -16,8 +16,8 @@ use glam::DVec3;
 use serde_json::json;
 use volmorph_lattice::{BSplineLattice, DragOptions, drags_from_deformed, solve_drags};
 use volmorph_scene::{Change, Command, ObjectId, Scene, TeapotSession};
-use volmorph_volume::phantom::TEAPOT_SPOUT_TIP;
 use volmorph_volume::Volume;
+use volmorph_volume::phantom::TEAPOT_SPOUT_TIP;
 use volmorph_warp::incremental::IncrementalPushForward;
 use volmorph_warp::pushforward::AntialiasOptions;
 

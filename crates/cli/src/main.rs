@@ -42,6 +42,10 @@ struct Cli {
     /// lies outside its header's folder.
     #[arg(long, global = true)]
     allow_external_data: bool,
+    /// Draw no progress bars (they are drawn on standard error only when it is a terminal;
+    /// results, warnings and errors are printed as always).
+    #[arg(short, long, global = true)]
+    quiet: bool,
 }
 
 #[derive(Debug, Subcommand)]
@@ -157,6 +161,7 @@ fn main() -> ExitCode {
         }
     }
     volmorph_volume_io::set_allow_external_data_default(cli.allow_external_data);
+    progress::set_quiet(cli.quiet);
     let result = match cli.command {
         Command::Demo(a) => cmd::demo::run(&a),
         Command::Info(a) => cmd::info::run(&a),

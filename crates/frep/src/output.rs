@@ -159,7 +159,11 @@ impl std::fmt::Display for NotClosed {
 /// `…, not a closed manifold (reasons)`.
 impl std::fmt::Display for SurfaceSummary {
     fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
-        write!(f, "{} vertices, {} triangles, ", self.vertices, self.triangles)?;
+        write!(
+            f,
+            "{} vertices, {} triangles, ",
+            self.vertices, self.triangles
+        )?;
         match &self.closed {
             Ok(chi) => write!(f, "closed manifold, Euler characteristic {chi}"),
             Err(why) => {

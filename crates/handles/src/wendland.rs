@@ -247,28 +247,22 @@ impl Trend {
     }
 }
 
-/// Least-squares affine map `x ↦ A x + b` sending `sources` towards `targets`; a translation
-/// when the sources are too flat (see [`MIN_AFFINE_CONDITION`]).
-fn affine_fit(sources: &[DVec3], targets: &[DVec3]) -> (DMat3, DVec3) {
-    let n = sources.len() as f64;
-    let ps = sources.iter().sum::<DVec3>() / n;
-    let qs = targets.iter().sum::<DVec3>() / n;
-    let mut spp = DMat3::ZERO;
-    let mut sqp = DMat3::ZERO;
-    for (&p, &q) in sources.iter().zip(targets) {
-        let (dp, dq) = (p - ps, q - qs);
-        spp += outer(dp, dp);
-        sqp += outer(dq, dp);
+/// Least-squares affine map `x ↦ A x + b` sending `sources` towards `targets`, of the form
+/// `trend` fixes: a translation when the sources are too flat (see [`MIN_AFFINE_CONDITION`]
+/// and [`Trend::of`]).
+fn affine_fit(trend: &Trend, sources: &[DVec3], targets: &[DVec3]) -> (DMat3, DVec3) {
+    let qs = targets.iter().sum::<DVec3>() / targets.len() as f64;
+    match *trend {
+        Trend::Translation { mean } => (DMat3::IDENTITY, qs - mean),
+        Trend::Affine { mean, inv_cov } => {
+            let mut sqp = DMat3::ZERO;
+            for (&p, &q) in sources.iter().zip(targets) {
+                sqp += outer(q - qs, p - mean);
+            }
+            let a = sqp * inv_cov;
+            (a, qs - a * mean)
+        }
     }
-    // det / trace³ is a scale-free flatness test of the (positive semi-definite) covariance:
-    // it is 1/27 for an isotropic set and 0 for a coplanar one.
-    let tr = spp.x_axis.x + spp.y_axis.y + spp.z_axis.z;
-    let flat = tr.is_nan() || tr <= 0.0 || spp.determinant() <= MIN_AFFINE_CONDITION * tr * tr * tr;
-    if flat {
-        return (DMat3::IDENTITY, qs - ps);
-    }
-    let a = sqp * spp.inverse();
-    (a, qs - a * ps)
 }
 
 fn outer(a: DVec3, b: DVec3) -> DMat3 {
@@ -452,7 +446,7 @@ impl WendlandMap {
     /// The map of `system` through `targets`: trend fit and weights by the kept factor.
     fn solved(system: Arc<System>, targets: Vec<DVec3>) -> Result<Self, DeformError> {
         let n = targets.len();
-        let (affine, translation) = affine_fit(&system.sources, &targets);
+        let (affine, translation) = affine_fit(&system.trend, &system.sources, &targets);
         let mut rhs = Mat::<f64>::zeros(n, 3);
         for i in 0..n {
             let r = targets[i] - (affine * system.sources[i] + translation);
@@ -702,11 +696,11 @@ mod tests {
             })
             .collect();
         let dst: Vec<DVec3> = src.iter().map(|&p| a * p + b).collect();
-        let (fa, fb) = affine_fit(&src, &dst);
+        let (fa, fb) = affine_fit(&Trend::of(&src), &src, &dst);
         assert!((fa - a).abs_diff_eq(DMat3::ZERO, 1e-9) && fb.abs_diff_eq(b, 1e-9));
         let flat: Vec<DVec3> = src.iter().map(|p| DVec3::new(p.x, p.y, 0.0)).collect();
         let moved: Vec<DVec3> = flat.iter().map(|&p| p + b).collect();
-        let (fa, fb) = affine_fit(&flat, &moved);
+        let (fa, fb) = affine_fit(&Trend::of(&flat), &flat, &moved);
         assert_eq!(fa, DMat3::IDENTITY);
         assert!(fb.abs_diff_eq(b, 1e-12));
     }

@@ -184,7 +184,8 @@ fn wendland(identity: bool) -> WendlandMap {
 /// Handles on the plane z = 1 with an explicit support radius: the translation-only trend.
 fn wendland_flat(identity: bool) -> WendlandMap {
     let (s, t) = handles(30, 17);
-    let flat = |v: &[DVec3]| -> Vec<DVec3> { v.iter().map(|p| DVec3::new(p.x, p.y, 1.0)).collect() };
+    let flat =
+        |v: &[DVec3]| -> Vec<DVec3> { v.iter().map(|p| DVec3::new(p.x, p.y, 1.0)).collect() };
     let (s, t) = (flat(&s), flat(&t));
     let t = if identity { s.clone() } else { t };
     WendlandMap::with_support(&s, &t, Some(9.0), 0.0, &volmorph_io::NoProgress).unwrap()

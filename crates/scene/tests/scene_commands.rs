@@ -3,7 +3,7 @@
 
 use glam::DVec3;
 use volmorph_handles::HandleSet;
-use volmorph_lattice::{BSplineLattice, DragOptions};
+use volmorph_lattice::DragOptions;
 use volmorph_maps::{AnyMap, HandleMethod, HandleOptions};
 use volmorph_scene::{
     Change, Command, NewObject, ObjectId, Recipe, Scene, SceneError, SurfaceMethod,

@@ -205,8 +205,15 @@ pub fn side_view(
     let look = fan.direction.cross(fan.spread).normalize_or(DVec3::Y);
     let ortho = Projection::Orthographic { view_height: 1.0 };
     let render = |e: volmorph_render::RenderError| TrivariateError::InvalidArgument(e.to_string());
-    let cam = view_camera(look, fan.spread, (lo, hi), ortho, Framing::Box, (width, height))
-        .map_err(render)?;
+    let cam = view_camera(
+        look,
+        fan.spread,
+        (lo, hi),
+        ortho,
+        Framing::Box,
+        (width, height),
+    )
+    .map_err(render)?;
     let mut img = RgbaImage::new(width, height, [255, 255, 255, 255]).map_err(render)?;
     draw_box_edges(&mut img, &cam, bounds.0, bounds.1, [150, 150, 150, 255]);
     draw_paths(&mut img, &cam, paths, [200, 30, 30, 255]);

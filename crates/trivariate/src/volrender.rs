@@ -169,7 +169,10 @@ impl TransferFunction {
     ///
     /// # Errors
     /// [`TrivariateError::InvalidArgument`] for a missing attribute or a non-finite range.
-    pub fn for_attribute(model: &AggregateVolume, attribute: &str) -> Result<Self, TrivariateError> {
+    pub fn for_attribute(
+        model: &AggregateVolume,
+        attribute: &str,
+    ) -> Result<Self, TrivariateError> {
         let (lo, mut hi) = model.attribute_range(attribute)?;
         if hi <= lo {
             hi = lo + 1.0;

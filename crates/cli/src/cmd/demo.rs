@@ -24,7 +24,6 @@ use anyhow::{Context, bail};
 use clap::ValueEnum as _;
 use glam::DVec3;
 use volmorph_deform::SpaceMap;
-use volmorph_maps::AnyMap;
 use volmorph_render::{Colormap, Window};
 use volmorph_scene::teapot::{DEMO_LATTICE_COUNTS, SPOUT_TARGET};
 use volmorph_scene::{Command, NewObject, ObjectId, Recipe, Scene, SurfaceMethod, TeapotSession};
@@ -121,8 +120,10 @@ fn warp_demo(args: &Args, index: &mut String, timings: &mut Timings) -> anyhow::
     let source: Volume<u8> = timings.time("teapot density volume", || {
         phantom::density(Phantom::Teapot, [n; 3])
     })?;
-    let lattice =
-        volmorph_lattice::BSplineLattice::identity_on_voxels(source.geometry(), DEMO_LATTICE_COUNTS)?;
+    let lattice = volmorph_lattice::BSplineLattice::identity_on_voxels(
+        source.geometry(),
+        DEMO_LATTICE_COUNTS,
+    )?;
 
     // The scene: the teapot, its lattice, and what is derived from them — the warped volume
     // (kept up to date incrementally), the isosurfaces before and after, and the Jacobian.
@@ -170,9 +171,7 @@ fn warp_demo(args: &Args, index: &mut String, timings: &mut Timings) -> anyhow::
     pb.set_message("dragging the spout");
     let change = timings.time(
         "drag: least-norm solve, incremental warp, surface, Jacobian",
-        || {
-            scene.apply(drag)
-        },
+        || scene.apply(drag),
     )?;
     if let Some((id, e)) = change.errors.first() {
         bail!("cannot update {id}: {e}");
@@ -196,7 +195,7 @@ fn warp_demo(args: &Args, index: &mut String, timings: &mut Timings) -> anyhow::
             &WarpOptions::default(),
         )
     })?;
-    let diff = max_abs_diff(scene.volume(warped)?, &full.volume)?;
+    let diff = scene.volume(warped)?.max_abs_difference(&full.volume)?;
     let folding = {
         let det = scene.volume(jacobian)?;
         match &**det {
@@ -239,13 +238,13 @@ fn warp_demo(args: &Args, index: &mut String, timings: &mut Timings) -> anyhow::
     pb.set_message("undo and redo");
     let undo_diff = timings.time("undo (scene command)", || -> anyhow::Result<f64> {
         scene.undo()?.context("nothing to undo")?;
-        max_abs_diff(scene.volume(warped)?, &input)
+        Ok(scene.volume(warped)?.max_abs_difference(&input)?)
     })?;
     timings.time("redo (scene command)", || -> anyhow::Result<()> {
         scene.redo()?.context("nothing to redo")?;
         Ok(())
     })?;
-    let redo_diff = max_abs_diff(scene.volume(warped)?, &full.volume)?;
+    let redo_diff = scene.volume(warped)?.max_abs_difference(&full.volume)?;
 
     pb.set_message("writing");
     timings.time(
@@ -341,22 +340,6 @@ fn warp_demo(args: &Args, index: &mut String, timings: &mut Timings) -> anyhow::
 }
 
 /// Largest |a − b| over the voxels of two volumes of the same size (any voxel types).
-fn max_abs_diff(a: &AnyVolume, b: &AnyVolume) -> anyhow::Result<f64> {
-    let (a, b) = (a.to_typed::<f64>(), b.to_typed::<f64>());
-    if a.geometry().dims != b.geometry().dims {
-        bail!(
-            "{:?} voxels against {:?}",
-            a.geometry().dims,
-            b.geometry().dims
-        );
-    }
-    Ok(a.data()
-        .iter()
-        .zip(b.data())
-        .map(|(&x, &y)| (x - y).abs())
-        .fold(0.0, f64::max))
-}
-
 fn fmt(p: DVec3) -> String {
     format!("({:.2}, {:.2}, {:.2})", p.x, p.y, p.z)
 }

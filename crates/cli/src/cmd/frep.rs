@@ -7,7 +7,7 @@ use std::path::{Path, PathBuf};
 
 use anyhow::{Context, bail};
 use glam::DVec3;
-use volmorph_frep::grid::{box_geometry, sample};
+use volmorph_frep::grid::{box_geometry, sample, sample_with};
 use volmorph_frep::mapping::{Schedule, morph};
 use volmorph_frep::output::{
     MeshMethod, MeshOptions, RenderOptions, SurfaceSummary, mesh, render, render_animation,
@@ -300,10 +300,10 @@ fn eval(a: &EvalArgs) -> anyhow::Result<()> {
     let b = bounds(&a.common.bounds)?;
     let g = grid_geometry(a.grid, b)?;
     let shape = load(&a.model, &params(&a.common.params)?)?;
-    let pb = progress::spinner(format!("sampling {} on {}³", a.model.display(), a.grid));
+    let pb = progress::bar(0);
     let tape = Tape::new(&shape);
     let t0 = std::time::Instant::now();
-    let vol = sample(&tape, &g).context("cannot sample the model")?;
+    let vol = sample_with(&tape, &g, &progress::Bar(&pb)).context("cannot sample the model")?;
     let dt = t0.elapsed();
     pb.set_message(format!("writing {}", a.output.display()));
     format::write(&a.output, &AnyVolume::from(vol.clone()))
@@ -340,7 +340,11 @@ fn mesh_cmd(a: &MeshArgs) -> anyhow::Result<()> {
 }
 
 /// Write an extracted surface (binary unless `ascii`) and return its summary.
-fn write_surface(m: &volmorph_mesh::Mesh, path: &Path, ascii: bool) -> anyhow::Result<SurfaceSummary> {
+fn write_surface(
+    m: &volmorph_mesh::Mesh,
+    path: &Path,
+    ascii: bool,
+) -> anyhow::Result<SurfaceSummary> {
     let opts = MeshWriteOptions {
         binary: !ascii,
         ..MeshWriteOptions::default()

@@ -7,8 +7,8 @@ use anyhow::{Context, bail};
 use glam::DVec3;
 use volmorph_render::{DEFAULT_FOV_Y, Framing, Projection, Shading, UpAxis, write_png_rgba};
 use volmorph_trivariate::{
-    AggregateVolume, GRIN_ATTRIBUTE, GrinLensSpec, OpticsOptions, RayFan, RayTracer,
-    RenderOptions, TraceOptions, TransferFunction, VolumeRenderer, grin_lens, load_volume,
+    AggregateVolume, GRIN_ATTRIBUTE, GrinLensSpec, OpticsOptions, RayFan, RayTracer, RenderOptions,
+    TraceOptions, TransferFunction, VolumeRenderer, grin_lens, load_volume,
     measured_back_focal_distance, paraxial_focus, save, side_view, write_paths_obj,
 };
 
@@ -130,9 +130,11 @@ pub fn run_render(a: &RenderArgs) -> anyhow::Result<()> {
         fov_y: DEFAULT_FOV_Y,
     };
     let cam = orbit.camera(bounds(&tracer), perspective, Framing::Sphere, w, h)?;
-    let pb = progress::spinner(format!("ray tracing {}", a.model.display()));
+    let pb = progress::bar(0);
     let t0 = std::time::Instant::now();
-    let img = renderer.render_image(&cam).context("cannot render")?;
+    let img = renderer
+        .render_image_with(&cam, &progress::Bar(&pb))
+        .context("cannot render")?;
     pb.finish_and_clear();
     let img = img.composite_over([0, 0, 0, 255]);
     write_png_rgba(&a.output, &img)
