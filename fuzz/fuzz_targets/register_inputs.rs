@@ -5,19 +5,14 @@
 //! allocation. The readers take paths, so each input is written to a private folder.
 #![no_main]
 
-use std::sync::OnceLock;
+mod common;
 
+use common::folder;
 use libfuzzer_sys::fuzz_target;
 use volmorph_register::quality::{LandmarkUnits, read_landmarks};
 use volmorph_register::lungs::LobeScript;
 use volmorph_register::pipeline::read_correspondences;
 use volmorph_volume::Geometry;
-
-fn folder() -> &'static std::path::Path {
-    static DIR: OnceLock<tempfile::TempDir> = OnceLock::new();
-    DIR.get_or_init(|| tempfile::tempdir().expect("a temporary folder"))
-        .path()
-}
 
 fuzz_target!(|data: &[u8]| {
     // The budget every reader checks sizes against, below libFuzzer's -rss_limit_mb.

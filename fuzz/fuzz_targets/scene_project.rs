@@ -5,15 +5,10 @@
 //! only file (data files it names are absent, or the manifest itself).
 #![no_main]
 
-use std::sync::OnceLock;
+mod common;
 
+use common::folder;
 use libfuzzer_sys::fuzz_target;
-
-fn folder() -> &'static std::path::Path {
-    static DIR: OnceLock<tempfile::TempDir> = OnceLock::new();
-    DIR.get_or_init(|| tempfile::tempdir().expect("a temporary folder"))
-        .path()
-}
 
 fuzz_target!(|data: &[u8]| {
     // The budget every reader checks sizes against, below libFuzzer's -rss_limit_mb.

@@ -2254,3 +2254,27 @@ fn quiet_flag_is_global_and_silences_progress() {
     let text = ok(&[&"info", &"-q", &p]);
     assert!(text.contains("12 x 12 x 12"), "{text}");
 }
+
+/// Issue 14 item 10: `warp`, `drag` and `jacobian` said "cannot read lattice: …" without the
+/// path of the lattice.
+#[test]
+fn warp_drag_jacobian_say_cannot_read_lattice_without_the_path() {
+    let dir = tempfile::tempdir().unwrap();
+    let vol = dir.path().join("s.nii");
+    ok(&[&"phantom", &"sphere", &"--size", &"10", &"-o", &vol]);
+    let bad = dir.path().join("broken_lattice.json");
+    std::fs::write(&bad, "{\"bad\": 1}").unwrap();
+    let out = dir.path().join("o.nii");
+    for err in [
+        fails(&[&"warp", &vol, &"--lattice", &bad, &"-o", &out]),
+        fails(&[
+            &"drag", &vol, &"--lattice", &bad, &"--from", &"0,0,0", &"--to", &"0.1,0,0", &"-o",
+            &out,
+        ]),
+        fails(&[&"jacobian", &"--lattice", &bad, &"--grid", &vol, &"-o", &out]),
+    ] {
+        assert!(err.contains("broken_lattice.json"), "{err}");
+        assert!(err.contains("version"), "names the field: {err}");
+    }
+    assert!(!out.exists());
+}

@@ -320,20 +320,6 @@ pub struct WendlandMap {
     translation: DVec3,
 }
 
-fn check_points(what: &str, pts: &[DVec3]) -> Result<(), DeformError> {
-    for (i, p) in pts.iter().enumerate() {
-        for a in 0..3 {
-            if !p[a].is_finite() {
-                return Err(DeformError::NonFinite {
-                    what: format!("{what} {i}, component {a}"),
-                    value: p[a],
-                });
-            }
-        }
-    }
-    Ok(())
-}
-
 impl WendlandMap {
     /// The map sending `sources[i]` to `targets[i]`, with the default support radius
     /// ([`default_support`]) and smoothing `smoothing ≥ 0` (0 interpolates; larger values
@@ -369,8 +355,8 @@ impl WendlandMap {
                 targets.len()
             )));
         }
-        check_points("source", sources)?;
-        check_points("target", targets)?;
+        volmorph_deform::map::check_finite("source", sources)?;
+        volmorph_deform::map::check_finite("target", targets)?;
         if !(smoothing.is_finite() && smoothing >= 0.0) {
             return Err(DeformError::InvalidHandles(format!(
                 "smoothing must be finite and ≥ 0, got {}",
@@ -485,7 +471,7 @@ impl WendlandMap {
                 self.targets.len()
             )));
         }
-        check_points("target", targets)?;
+        volmorph_deform::map::check_finite("target", targets)?;
         *self = Self::solved(Arc::clone(&self.system), targets.to_vec())?;
         Ok(())
     }
