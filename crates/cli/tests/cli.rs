@@ -2268,10 +2268,26 @@ fn warp_drag_jacobian_say_cannot_read_lattice_without_the_path() {
     for err in [
         fails(&[&"warp", &vol, &"--lattice", &bad, &"-o", &out]),
         fails(&[
-            &"drag", &vol, &"--lattice", &bad, &"--from", &"0,0,0", &"--to", &"0.1,0,0", &"-o",
+            &"drag",
+            &vol,
+            &"--lattice",
+            &bad,
+            &"--from",
+            &"0,0,0",
+            &"--to",
+            &"0.1,0,0",
+            &"-o",
             &out,
         ]),
-        fails(&[&"jacobian", &"--lattice", &bad, &"--grid", &vol, &"-o", &out]),
+        fails(&[
+            &"jacobian",
+            &"--lattice",
+            &bad,
+            &"--grid",
+            &vol,
+            &"-o",
+            &out,
+        ]),
     ] {
         assert!(err.contains("broken_lattice.json"), "{err}");
         assert!(err.contains("version"), "names the field: {err}");
