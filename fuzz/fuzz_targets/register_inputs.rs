@@ -9,9 +9,9 @@ mod common;
 
 use common::folder;
 use libfuzzer_sys::fuzz_target;
-use volmorph_register::quality::{LandmarkUnits, read_landmarks};
 use volmorph_register::lungs::LobeScript;
 use volmorph_register::pipeline::read_correspondences;
+use volmorph_register::quality::{LandmarkUnits, read_landmarks};
 use volmorph_volume::Geometry;
 
 fuzz_target!(|data: &[u8]| {

@@ -14,7 +14,10 @@ fuzz_target!(|data: &[u8]| {
     if let Ok(t) = volmorph_trivariate::TransferFunction::parse(&text) {
         for v in [-1e9, -1.0, 0.0, 0.5, 1.0, 1e9] {
             let (rgb, opacity) = t.lookup(v);
-            assert!(rgb.iter().all(|x| x.is_finite()) && opacity.is_finite(), "{v}");
+            assert!(
+                rgb.iter().all(|x| x.is_finite()) && opacity.is_finite(),
+                "{v}"
+            );
         }
     }
 });
