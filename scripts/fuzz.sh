@@ -69,8 +69,13 @@ for t in $targets; do
     for f in $(seeds_of "$t"); do
         [ -f "$f" ] && cp -n "$f" "$corpus/seed-$(basename "$f")"
     done
+    # -jobs makes libFuzzer fork workers logging to fuzz-N.log files: only when asked for.
+    par=()
+    if [ "$JOBS" -gt 1 ]; then
+        par=(-jobs="$JOBS" -workers="$JOBS")
+    fi
     if cargo fuzz run "${FLAGS[@]}" "$t" "$corpus" -- \
-        -max_total_time="$SECS" -rss_limit_mb=2048 -timeout=10 -jobs="$JOBS" -workers="$JOBS" \
+        -max_total_time="$SECS" -rss_limit_mb=2048 -timeout=10 "${par[@]}" \
         -print_final_stats=1 >"fuzz/$t.log" 2>&1; then
         ok=$((ok + 1))
         runs=$(sed -n 's/^stat::number_of_executed_units: *//p' "fuzz/$t.log" | tail -1)
