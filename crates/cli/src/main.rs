@@ -47,6 +47,10 @@ struct Cli {
     /// frame count.
     #[arg(long, global = true, value_name = "N")]
     frame: Option<usize>,
+    /// Draw no progress bars (they are drawn on standard error only when it is a terminal;
+    /// results, warnings and errors are printed as always).
+    #[arg(short, long, global = true)]
+    quiet: bool,
 }
 
 #[derive(Debug, Subcommand)]
@@ -163,6 +167,7 @@ fn main() -> ExitCode {
     }
     volmorph_volume_io::set_allow_external_data_default(cli.allow_external_data);
     volmorph_volume_io::set_frame_default(cli.frame);
+    progress::set_quiet(cli.quiet);
     let result = match cli.command {
         Command::Demo(a) => cmd::demo::run(&a),
         Command::Info(a) => cmd::info::run(&a),
