@@ -17,7 +17,7 @@ if ! command -v strace >/dev/null 2>&1; then
     echo "fault_injection: strace not found; skipped (apt-get install strace)"
     exit 0
 fi
-if ! strace -f -e trace=none -e inject=write:error=EIO:when=1000000 true >/dev/null 2>&1; then
+if ! strace -f -e trace=none -e inject=write:error=EIO:when=65535 true >/dev/null 2>&1; then
     echo "fault_injection: strace cannot inject faults here (ptrace not permitted); skipped"
     exit 0
 fi
@@ -54,7 +54,8 @@ PY
 # The command writing OUT with the "old" content, and with the "new" content, per format.
 cmd_old() {
     local out="$1"
-    case "$out" in
+    # Matched on the file name: the reference outputs are written under ref/.
+    case "$(basename "$out")" in
     *.nii | *.nii.gz | *.mha | *.mhd | *.nrrd | *.nhdr | *.vtk | *.raw)
         $RUN "$VM" phantom sphere --size 16 -o "$out" ;;
     *.obj | *.stl | *.ply | *.off) $RUN "$VM" isosurface sphere.nii --level 127 -o "$out" ;;
@@ -67,7 +68,8 @@ cmd_old() {
 }
 cmd_new() {
     local out="$1"
-    case "$out" in
+    # Matched on the file name: the reference outputs are written under ref/.
+    case "$(basename "$out")" in
     *.nii | *.nii.gz | *.mha | *.mhd | *.nrrd | *.nhdr | *.vtk | *.raw)
         $RUN "$VM" phantom torus --kind sdf --size 24 -o "$out" ;;
     *.obj | *.stl | *.ply | *.off) $RUN "$VM" isosurface torus.nii --level 0 --inside-below -o "$out" ;;
@@ -94,8 +96,9 @@ fingerprint() {
     esac
 }
 
-outputs="v.nii v.nii.gz v.mha v.mhd v.nrrd v.nhdr v.vtk v.raw m.obj m.stl m.ply m.off
-lat_l.json l.tfm l.bxf p.png s.step model_n.json map_c.json map_c.tfm"
+# FI_OUTPUTS="m.obj p.png" restricts the run to some formats.
+outputs="${FI_OUTPUTS:-v.nii v.nii.gz v.mha v.mhd v.nrrd v.nhdr v.vtk v.raw m.obj m.stl m.ply m.off
+lat_l.json l.tfm l.bxf p.png s.step model_n.json map_c.json map_c.tfm}"
 
 # Faults: failures and kills at the first, a middle and the committing system calls.
 faults="write:error=EIO:when=1

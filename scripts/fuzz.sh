@@ -1,41 +1,90 @@
 #!/usr/bin/env bash
-# Run every cargo-fuzz target for a bounded time: scripts/fuzz.sh [SECONDS_PER_TARGET]
+# Run every cargo-fuzz target for a bounded time:
 #
-# Needs a nightly toolchain (rustup toolchain install nightly) and cargo-fuzz
-# (cargo install cargo-fuzz); skips cleanly (exit 0) when either is missing. Seeds each
-# target's corpus with the test corpora of the readers. A crash, leak or timeout fails the
-# run (exit 1) and leaves the reproducer under fuzz/artifacts/TARGET/.
+#   scripts/fuzz.sh [SECONDS_PER_TARGET] [TARGET...]
+#
+# Works with the stable toolchain: cargo-fuzz asks rustc for unstable flags (sanitizer
+# coverage instrumentation), which RUSTC_BOOTSTRAP=1 allows on a stable compiler, so no nightly
+# toolchain is needed. Needs cargo-fuzz: with FUZZ_INSTALL=1 (what .ci/run sets) it is
+# installed when missing (`cargo install cargo-fuzz --locked`); otherwise the script skips
+# cleanly (exit 0) without it.
+#
+# Environment:
+#   FUZZ_SANITIZER  none (default) or address. The workspace forbids unsafe code, so the
+#                   faults fuzzing finds are panics, hangs and runaway allocations, which need
+#                   no sanitizer; `address` also checks the dependencies' unsafe code, at
+#                   about 2x the build and run time.
+#   FUZZ_JOBS       parallel fuzzing processes per target (default 1).
+#
+# Each target starts from its saved corpus (fuzz/corpus/TARGET, not in git) plus the seed
+# files of the readers' test corpora. Builds with debug assertions (overflow checks on).
+# A crash, a leak, a timeout (10 s for one input) or an allocation beyond -rss_limit_mb fails
+# the run (exit 1) and leaves the reproducer under fuzz/artifacts/TARGET/; replay it with
+#   RUSTC_BOOTSTRAP=1 cargo fuzz run -O -a -s none --fuzz-dir fuzz TARGET fuzz/artifacts/TARGET/crash-…
 set -euo pipefail
 cd "$(dirname "$0")/.."
 SECS="${1:-20}"
-if ! rustup run nightly rustc --version >/dev/null 2>&1; then
-    echo "fuzz: no nightly toolchain; skipped (rustup toolchain install nightly)"
-    exit 0
-fi
+shift || true
+SAN="${FUZZ_SANITIZER:-none}"
+JOBS="${FUZZ_JOBS:-1}"
+
 if ! cargo fuzz --version >/dev/null 2>&1; then
-    echo "fuzz: cargo-fuzz not installed; skipped (cargo install cargo-fuzz)"
-    exit 0
+    if [ "${FUZZ_INSTALL:-0}" = "1" ]; then
+        echo "fuzz: installing cargo-fuzz"
+        start=$(date +%s)
+        cargo install cargo-fuzz --locked --quiet
+        echo "fuzz: cargo-fuzz installed in $(($(date +%s) - start)) s"
+    else
+        echo "fuzz: cargo-fuzz not installed; skipped (cargo install cargo-fuzz, or FUZZ_INSTALL=1)"
+        exit 0
+    fi
 fi
-targets=$(sed -n 's/^name = "\(.*\)"$/\1/p' fuzz/Cargo.toml | grep -v '^volmorph-fuzz$')
-cargo +nightly fuzz build -O --fuzz-dir fuzz
+export RUSTC_BOOTSTRAP=1
+FLAGS=(-O -a -s "$SAN" --fuzz-dir fuzz)
+
+all=$(sed -n 's/^name = "\(.*\)"$/\1/p' fuzz/Cargo.toml | grep -v '^volmorph-fuzz$')
+targets="${*:-$all}"
+
+start=$(date +%s)
+cargo fuzz build "${FLAGS[@]}"
+echo "fuzz: targets built in $(($(date +%s) - start)) s"
+
+# Seed files per target: the test corpora of the readers and peer-written fixtures.
+seeds_of() {
+    local c=crates/volume-io/tests/corpus
+    case "$1" in
+    nifti) ls "$c"/nifti/* "$c"/peers/*.nii "$c"/peers/*.nii.gz ;;
+    metaimage | nrrd | vtk) ls "$c/$1"/* ;;
+    vti) ls "$c"/peers/*.vti ;;
+    mgh) ls "$c"/peers/*.mgz ;;
+    dicom) ls "$c"/peers/*.dcm "$c"/peers/sitk_ct_series/* ;;
+    esac 2>/dev/null || true
+}
+
 ok=0
 bad=0
 for t in $targets; do
-    mkdir -p "fuzz/corpus/$t"
-    seeds=()
-    case "$t" in
-    nifti | metaimage | nrrd | vtk) [ -d "crates/volume-io/tests/corpus/$t" ] && seeds+=("crates/volume-io/tests/corpus/$t") ;;
-    esac
-    if cargo +nightly fuzz run -O --fuzz-dir fuzz "$t" "fuzz/corpus/$t" "${seeds[@]}" -- \
-        -max_total_time="$SECS" -rss_limit_mb=4096 -timeout=10 -print_final_stats=0 \
-        >"fuzz/$t.log" 2>&1; then
+    corpus="fuzz/corpus/$t"
+    mkdir -p "$corpus"
+    for f in $(seeds_of "$t"); do
+        [ -f "$f" ] && cp -n "$f" "$corpus/seed-$(basename "$f")"
+    done
+    # -jobs makes libFuzzer fork workers logging to fuzz-N.log files: only when asked for.
+    par=()
+    if [ "$JOBS" -gt 1 ]; then
+        par=(-jobs="$JOBS" -workers="$JOBS")
+    fi
+    if cargo fuzz run "${FLAGS[@]}" "$t" "$corpus" -- \
+        -max_total_time="$SECS" -rss_limit_mb=2048 -timeout=10 "${par[@]}" \
+        -print_final_stats=1 >"fuzz/$t.log" 2>&1; then
         ok=$((ok + 1))
-        echo "fuzz $t: ok (${SECS} s)"
+        runs=$(sed -n 's/^stat::number_of_executed_units: *//p' "fuzz/$t.log" | tail -1)
+        echo "fuzz $t: ok (${SECS} s, ${runs:-?} inputs)"
     else
         bad=$((bad + 1))
         echo "fuzz $t: FAILED (see fuzz/$t.log and fuzz/artifacts/$t/)"
-        tail -20 "fuzz/$t.log"
+        tail -30 "fuzz/$t.log"
     fi
 done
-echo "fuzz targets: $ok clean, $bad crashed"
+echo "fuzz: $ok passed, $bad failed"
 [ "$bad" -eq 0 ]

@@ -124,6 +124,10 @@ def nibabel_fixtures(out: Path, expected: dict) -> None:
         e["frame"] = t
         e["frames"] = int(full.shape[3])
         expected[f"nibabel_4d.nii.gz#{t}"] = e
+    # Frame 1 alone, with the series' header (same sform/qform bytes): what every command
+    # must read from the series with --frame 1 (crates/cli/tests/realdata.rs).
+    frame1 = nib.Nifti1Image(full[..., 1], back.affine, header=back.header.copy())
+    nib.save(frame1, out / "nibabel_4d_frame1.nii.gz")
 
     # FreeSurfer MGZ: oblique, uint8 and float32.
     for name, dtype in [("nibabel_oblique_u8.mgz", np.uint8), ("nibabel_f32.mgz", np.float32)]:
@@ -315,6 +319,126 @@ def enhanced_fixture(out: Path, expected: dict) -> None:
     }
 
 
+def _image_dataset(sop_class: str, uid: str, syntax):
+    from pydicom.dataset import Dataset, FileMetaDataset
+
+    meta = FileMetaDataset()
+    meta.MediaStorageSOPClassUID = sop_class
+    meta.MediaStorageSOPInstanceUID = uid + ".1"
+    meta.TransferSyntaxUID = syntax
+    ds = Dataset()
+    ds.file_meta = meta
+    ds.SOPClassUID = sop_class
+    ds.SOPInstanceUID = meta.MediaStorageSOPInstanceUID
+    ds.StudyInstanceUID = uid + ".2"
+    ds.SeriesInstanceUID = uid + ".3"
+    ds.SamplesPerPixel = 1
+    ds.PhotometricInterpretation = "MONOCHROME2"
+    return ds
+
+
+def rtdose_fixture(out: Path, expected: dict) -> None:
+    """RT Dose files as treatment-planning systems write them, by pydicom: 32-bit unsigned
+    frames placed by an absolute GridFrameOffsetVector (its first element is the z of
+    ImagePositionPatient, uneven steps), DoseGridScaling to Gy; the same dose in explicit VR big
+    endian (one frame)."""
+    from pydicom.uid import ExplicitVRBigEndian, ExplicitVRLittleEndian
+
+    nx, ny, nz = 4, 3, 3
+    origin = np.array([-20.0, 7.5, -31.0])
+    offsets = [-31.0, -28.5, -26.0]  # absolute: z of each frame
+    spacing = [2.0, 2.5, 2.5]
+    stored = (ramp((nx, ny, nz), np.int64) * 1000 + 123456).astype(np.uint32)
+    scaling = 1.5e-5
+
+    def dose(syntax, frames, uid):
+        ds = _image_dataset("1.2.840.10008.5.1.4.1.1.481.2", uid, syntax)
+        ds.Modality = "RTDOSE"
+        ds.Rows, ds.Columns = ny, nx
+        ds.BitsAllocated, ds.BitsStored, ds.HighBit, ds.PixelRepresentation = 32, 32, 31, 0
+        ds.ImagePositionPatient = [float(v) for v in origin]
+        ds.ImageOrientationPatient = [1.0, 0.0, 0.0, 0.0, 1.0, 0.0]
+        ds.PixelSpacing = [spacing[1], spacing[0]]
+        ds.DoseUnits, ds.DoseType, ds.DoseSummationType = "GY", "PHYSICAL", "PLAN"
+        ds.DoseGridScaling = scaling
+        ds.GridFrameOffsetVector = offsets[:frames] if frames > 1 else offsets
+        if frames > 1:
+            ds.NumberOfFrames = frames
+            ds.FrameIncrementPointer = 0x3004000C
+        arr = np.stack([stored[:, :, k].T for k in range(frames)])
+        dt = ">u4" if syntax == ExplicitVRBigEndian else "<u4"
+        ds.PixelData = arr.astype(dt).tobytes()
+        return ds
+
+    uid = "1.2.826.0.1.3680043.2.1125.3"
+    dose(ExplicitVRLittleEndian, nz, uid).save_as(out / "pydicom_rtdose.dcm", enforce_file_format=True)
+    # Another series: the files share a folder.
+    be = dose(ExplicitVRBigEndian, 1, uid + ".5")
+    be.save_as(out / "pydicom_rtdose_be_1frame.dcm", enforce_file_format=True)
+    values = stored.astype(np.float64) * scaling
+    expected["pydicom_rtdose.dcm"] = {
+        "dims": [nx, ny, nz],
+        "spacing": spacing,
+        "origin": [float(v) for v in origin],
+        "direction": [1.0, 0.0, 0.0, 0.0, 1.0, 0.0, 0.0, 0.0, 1.0],
+        "values": [float(v) for v in values.reshape(-1, order="F")],
+    }
+    expected["pydicom_rtdose_be_1frame.dcm"] = {
+        "dims": [nx, ny, 1],
+        "spacing": [spacing[0], spacing[1], 1.0],
+        "origin": [float(v) for v in origin],
+        "direction": [1.0, 0.0, 0.0, 0.0, 1.0, 0.0, 0.0, 0.0, 1.0],
+        "values": [float(v) for v in values[:, :, :1].reshape(-1, order="F")],
+    }
+
+
+def un_vr_fixture(out: Path, expected: dict) -> None:
+    """A CT slice whose geometry and pixel-description attributes are stored with VR UN (what a
+    converter that drops the dictionary VRs writes, as in pydicom's explicit_VR-UN.dcm)."""
+    import pydicom
+    from pydicom.dataelem import RawDataElement
+    from pydicom.tag import Tag
+    from pydicom.uid import ExplicitVRLittleEndian
+
+    ds = _image_dataset("1.2.840.10008.5.1.4.1.1.2", "1.2.826.0.1.3680043.2.1125.4", ExplicitVRLittleEndian)
+    ds.Modality = "CT"
+    nx, ny = 5, 3
+    stored = (ramp((nx, ny, 1), np.int32) * 3 - 20).astype(np.int16)
+
+    def un(tag, raw: bytes):
+        # A raw element keeps VR UN when it is written (with the dictionary VR kept off).
+        ds[tag] = RawDataElement(Tag(tag), "UN", len(raw), raw, 0, False, True)
+
+    def text(values):
+        t = "\\".join(values).encode()
+        return t + b" " * (len(t) % 2)
+
+    un(0x00280010, np.uint16(ny).tobytes())  # Rows
+    un(0x00280011, np.uint16(nx).tobytes())  # Columns
+    ds.BitsAllocated, ds.BitsStored, ds.HighBit, ds.PixelRepresentation = 16, 16, 15, 1
+    un(0x00200032, text(["-4.5", "10", "2.25"]))  # ImagePositionPatient
+    un(0x00200037, text(["0", "1", "0", "0", "0", "-1"]))  # ImageOrientationPatient (sagittal)
+    un(0x00280030, text(["0.75", "1.25"]))  # PixelSpacing: row, column spacing
+    un(0x00180050, text(["3"]))  # SliceThickness
+    un(0x00281053, text(["2"]))  # RescaleSlope
+    un(0x00281052, text(["-1024"]))  # RescaleIntercept
+    ds.PixelData = stored[:, :, 0].T.astype("<i2").tobytes()
+    keep = pydicom.config.replace_un_with_known_vr
+    pydicom.config.replace_un_with_known_vr = False
+    try:
+        ds.save_as(out / "pydicom_un_vr.dcm", enforce_file_format=True)
+    finally:
+        pydicom.config.replace_un_with_known_vr = keep
+    expected["pydicom_un_vr.dcm"] = {
+        "dims": [nx, ny, 1],
+        "spacing": [1.25, 0.75, 3.0],
+        "origin": [-4.5, 10.0, 2.25],
+        # columns: row direction (0, 1, 0), column direction (0, 0, -1), normal their cross
+        "direction": [0.0, 0.0, -1.0, 1.0, 0.0, 0.0, 0.0, -1.0, 0.0],
+        "values": [float(v) for v in (stored.astype(np.float64) * 2 - 1024).reshape(-1, order="F")],
+    }
+
+
 def main() -> int:
     ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
     ap.add_argument("--out", type=Path, default=ROOT / "crates/volume-io/tests/corpus/peers")
@@ -332,6 +456,8 @@ def main() -> int:
     sitk_fixtures(a.out, expected)
     vtk_fixtures(a.out, expected)
     enhanced_fixture(a.out, expected)
+    rtdose_fixture(a.out, expected)
+    un_vr_fixture(a.out, expected)
     (a.out / "expected.json").write_text(json.dumps(expected, indent=1) + "\n")
     print(f"wrote {len(expected)} fixtures to {a.out}")
     return 0

@@ -13,6 +13,9 @@ exits 0, so it can run on machines without OpenCASCADE.
 Usage:
   python3 scripts/step_occ_check.py OUT.step [--report OUT.json | --area A] [--tol 1e-6]
                                    [--load-only] [--json RESULT.json]
+  python3 scripts/step_occ_check.py OUT.step --entities
+      (no OpenCASCADE needed: bytes and count of each entity type of the DATA section, and the
+      control points of the B-spline surfaces, to see where the size of a file goes)
 """
 
 import argparse
@@ -21,6 +24,39 @@ import os
 import resource
 import sys
 import time
+
+
+def entity_sizes(path: str) -> int:
+    """Print bytes and count per entity type of a STEP file (instances `#N=TYPE(...);`)."""
+    import re
+
+    text = open(path, encoding="ascii", errors="replace").read()
+    start = text.find("DATA;")
+    body = text[start + 5:text.find("ENDSEC;", start)] if start >= 0 else text
+    stats = {}
+    surf_points = []
+    # Instances end at ';' outside strings; volmorph writes no ';' inside strings.
+    for inst in body.split(";"):
+        inst = inst.strip()
+        m = re.match(r"#\d+\s*=\s*\(?\s*([A-Z_0-9]+)", inst)
+        if not m:
+            continue
+        kind = m.group(1)
+        n, b = stats.get(kind, (0, 0))
+        stats[kind] = (n + 1, b + len(inst) + 2)
+        if kind.startswith("B_SPLINE_SURFACE") or "B_SPLINE_SURFACE" in inst[:200]:
+            surf_points.append(inst.count("#") - 1)
+    total = sum(b for _, b in stats.values())
+    print(f"{path}: {os.path.getsize(path) / 1e6:.1f} MB, {sum(n for n, _ in stats.values())} "
+          f"instances")
+    print(f"{'entity':40} {'count':>10} {'MB':>9} {'%':>6} {'bytes each':>11}")
+    for kind, (n, b) in sorted(stats.items(), key=lambda kv: -kv[1][1]):
+        print(f"{kind:40} {n:10d} {b / 1e6:9.2f} {100 * b / total:6.1f} {b / n:11.1f}")
+    if surf_points:
+        surf_points.sort()
+        print(f"B-spline surfaces: {len(surf_points)}, control points each: median "
+              f"{surf_points[len(surf_points) // 2]}, max {surf_points[-1]}")
+    return 0
 
 
 def main() -> int:
@@ -32,7 +68,14 @@ def main() -> int:
     ap.add_argument("--area-rel", type=float, default=1e-6, help="relative area tolerance")
     ap.add_argument("--load-only", action="store_true", help="time the load and stop")
     ap.add_argument("--json", help="write size, load time and peak memory to this file")
+    ap.add_argument("--surfacecurve-mode", type=int,
+                    help="OpenCASCADE's read.surfacecurve.mode (0 default, 2/-2 prefer/force "
+                         "pcurves, 3/-3 prefer/force 3-D curves) for timing the transfer")
+    ap.add_argument("--entities", action="store_true",
+                    help="print bytes and count per entity type (no OpenCASCADE needed)")
     a = ap.parse_args()
+    if a.entities:
+        return entity_sizes(a.step)
 
     try:
         from OCP.STEPControl import STEPControl_Reader
@@ -53,6 +96,10 @@ def main() -> int:
         with open(a.report) as f:
             area_ref = json.load(f)["surface_area"]
 
+    if a.surfacecurve_mode is not None:
+        from OCP.Interface import Interface_Static
+
+        Interface_Static.SetIVal_s("read.surfacecurve.mode", a.surfacecurve_mode)
     t0 = time.perf_counter()
     reader = STEPControl_Reader()
     if reader.ReadFile(a.step) != IFSelect_RetDone:

@@ -7,6 +7,8 @@ use libfuzzer_sys::fuzz_target;
 use volmorph_handles::handles::{HandleSet, parse_fcsv, parse_text};
 
 fuzz_target!(|data: &[u8]| {
+    // The budget every reader checks sizes against, below libFuzzer's -rss_limit_mb.
+    volmorph_io::set_memory_limit(512 << 20);
     let text = String::from_utf8_lossy(data);
     if let Ok(set) = HandleSet::from_json(&text) {
         let _ = set.validate();

@@ -9,6 +9,8 @@ use volmorph_deform::SpaceMap;
 use volmorph_maps::AnyMap;
 
 fuzz_target!(|data: &[u8]| {
+    // The budget every reader checks sizes against, below libFuzzer's -rss_limit_mb.
+    volmorph_io::set_memory_limit(512 << 20);
     let text = String::from_utf8_lossy(data);
     let Ok(map) = AnyMap::from_json(&text) else {
         return;

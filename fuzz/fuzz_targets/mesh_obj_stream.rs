@@ -3,6 +3,8 @@
 #![no_main]
 use libfuzzer_sys::fuzz_target;
 fuzz_target!(|data: &[u8]| {
+    // The budget every reader checks sizes against, below libFuzzer's -rss_limit_mb.
+    volmorph_io::set_memory_limit(512 << 20);
     let mut r = std::io::BufReader::with_capacity(7, data);
     let streamed = volmorph_mesh::format::obj::read_obj_stream(&mut r);
     let whole = volmorph_mesh::read_obj_bytes(data);

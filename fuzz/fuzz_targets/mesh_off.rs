@@ -5,5 +5,7 @@
 use libfuzzer_sys::fuzz_target;
 
 fuzz_target!(|data: &[u8]| {
+    // The budget every reader checks sizes against, below libFuzzer's -rss_limit_mb.
+    volmorph_io::set_memory_limit(512 << 20);
     let _ = volmorph_mesh::read_off_bytes(data);
 });

@@ -3,6 +3,8 @@
 #![no_main]
 use libfuzzer_sys::fuzz_target;
 fuzz_target!(|data: &[u8]| {
+    // The budget every reader checks sizes against, below libFuzzer's -rss_limit_mb.
+    volmorph_io::set_memory_limit(512 << 20);
     let text = String::from_utf8_lossy(data);
     let _ = volmorph_trivariate::format::from_json_str(&text);
 });

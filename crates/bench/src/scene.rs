@@ -15,11 +15,9 @@ use std::time::Instant;
 use glam::DVec3;
 use serde_json::json;
 use volmorph_lattice::{BSplineLattice, DragOptions, drags_from_deformed, solve_drags};
-use volmorph_maps::AnyMap;
-use volmorph_scene::{Change, Command, NewObject, ObjectId, Recipe, Scene};
+use volmorph_scene::{Change, Command, ObjectId, Scene, TeapotSession};
+use volmorph_volume::Volume;
 use volmorph_volume::phantom::TEAPOT_SPOUT_TIP;
-use volmorph_volume::{AnyVolume, Volume};
-use volmorph_warp::apply::WarpMethod;
 use volmorph_warp::incremental::IncrementalPushForward;
 use volmorph_warp::pushforward::AntialiasOptions;
 
@@ -28,12 +26,7 @@ use crate::timing::{Case, Item, Report, Sample, Unit};
 use crate::warp::{EDIT_TARGET_SIZE, TARGET_LATTICE, teapot};
 use crate::{BenchError, MAX_SIZE, check_repeat};
 
-/// Where the drag takes the spout tip ([`TEAPOT_SPOUT_TIP`]): down and a little outwards, as
-/// in True's Fig. 10 (model units).
-pub const SPOUT_TARGET: DVec3 = DVec3::new(0.85, 0.0, 0.04);
-/// Radius of the drag tool (model units): control points farther than this from the grabbed
-/// point stay.
-pub const TOOL_RADIUS: f64 = 0.45;
+pub use volmorph_scene::teapot::{SPOUT_TARGET, TOOL_RADIUS};
 
 /// Settings of the scene suite.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
@@ -84,16 +77,9 @@ pub struct SceneInputs {
     at_target: bool,
 }
 
-/// A scene holding the teapot, the lattice and the warped teapot, with their ids.
-#[derive(Debug)]
-pub struct TeapotScene {
-    /// The scene.
-    pub scene: Scene,
-    /// The lattice map object.
-    pub lattice: ObjectId,
-    /// The warped volume (derived: antialiased push-forward of the teapot by the lattice).
-    pub warped: ObjectId,
-}
+/// A scene holding the teapot, the lattice and the warped teapot, with their ids (the one
+/// teapot session of `volmorph demo` and the scene tests).
+pub type TeapotScene = TeapotSession;
 
 impl SceneInputs {
     /// Build the teapot and the lattice.
@@ -121,42 +107,10 @@ impl SceneInputs {
     /// # Errors
     /// [`BenchError::Scene`] from the commands; [`BenchError::Check`] if the warp failed.
     pub fn scene(&self) -> Result<TeapotScene, BenchError> {
-        let mut scene = Scene::new();
-        let add = |name: &str, object| Command::Add {
-            name: name.into(),
-            object,
-        };
-        let v = scene
-            .apply(add(
-                "teapot",
-                NewObject::Volume(AnyVolume::from(self.density.clone())),
-            ))?
-            .added[0];
-        let lattice = scene
-            .apply(add(
-                "lattice",
-                NewObject::Map(AnyMap::Lattice(self.lattice.clone())),
-            ))?
-            .added[0];
-        let change = scene.apply(add(
-            "warped",
-            NewObject::Derived(Recipe::Warp {
-                source: v,
-                map: lattice,
-                method: WarpMethod::PushforwardAntialiased,
-                background: 0.0,
-                sampled_nodes: None,
-                swap_handles: false,
-            }),
-        ))?;
-        if let Some((_, e)) = change.errors.first() {
-            return Err(BenchError::check("scene set-up", e.clone()));
-        }
-        Ok(TeapotScene {
-            scene,
-            lattice,
-            warped: change.added[0],
-        })
+        Ok(TeapotSession::with(
+            self.density.clone(),
+            self.lattice.clone(),
+        )?)
     }
 
     /// The incremental push-forward engine of the teapot under the lattice.
@@ -182,6 +136,7 @@ impl SceneInputs {
             mut scene,
             lattice,
             warped,
+            ..
         } = self.scene()?;
         let through_scene = Case::new("drag through the scene", "scene_drag", move || {
             let start = Instant::now();

@@ -42,6 +42,15 @@ struct Cli {
     /// lies outside its header's folder.
     #[arg(long, global = true)]
     allow_external_data: bool,
+    /// The 3-D frame (0-based) of every 4-D volume the command reads (a NIfTI or MGH time
+    /// series); 3-D inputs are read as they are. Without it a 4-D input is refused, naming its
+    /// frame count.
+    #[arg(long, global = true, value_name = "N")]
+    frame: Option<usize>,
+    /// Draw no progress bars (they are drawn on standard error only when it is a terminal;
+    /// results, warnings and errors are printed as always).
+    #[arg(short, long, global = true)]
+    quiet: bool,
 }
 
 #[derive(Debug, Subcommand)]
@@ -157,6 +166,8 @@ fn main() -> ExitCode {
         }
     }
     volmorph_volume_io::set_allow_external_data_default(cli.allow_external_data);
+    volmorph_volume_io::set_frame_default(cli.frame);
+    progress::set_quiet(cli.quiet);
     let result = match cli.command {
         Command::Demo(a) => cmd::demo::run(&a),
         Command::Info(a) => cmd::info::run(&a),

@@ -1,8 +1,9 @@
 //! Progress reporting: an indicatif bar on standard error, hidden when standard error is not
-//! a terminal (pipes, CI logs), and [`Bar`], the adapter through which library functions
-//! that take a [`volmorph_io::Progress`] drive it.
+//! a terminal (pipes, CI logs) or under `--quiet` ([`set_quiet`]), and [`Bar`], the adapter
+//! through which library functions that take a [`volmorph_io::Progress`] drive it.
 
 use std::io::IsTerminal;
+use std::sync::atomic::{AtomicBool, Ordering};
 use std::time::Duration;
 
 use indicatif::{ProgressBar, ProgressDrawTarget, ProgressStyle};
@@ -32,8 +33,16 @@ pub fn spinner(msg: impl Into<std::borrow::Cow<'static, str>>) -> ProgressBar {
     pb
 }
 
+/// Set by `--quiet`: no bar or spinner is drawn.
+static QUIET: AtomicBool = AtomicBool::new(false);
+
+/// Hide every progress bar and spinner from now on (`--quiet`), even on a terminal.
+pub fn set_quiet(quiet: bool) {
+    QUIET.store(quiet, Ordering::Relaxed);
+}
+
 fn target() -> ProgressDrawTarget {
-    if std::io::stderr().is_terminal() {
+    if !QUIET.load(Ordering::Relaxed) && std::io::stderr().is_terminal() {
         ProgressDrawTarget::stderr()
     } else {
         ProgressDrawTarget::hidden()

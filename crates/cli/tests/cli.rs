@@ -1503,6 +1503,79 @@ fn mls2d_deforms_a_picture_and_reports_folds() {
     assert!(!out.exists());
 }
 
+/// CRC-32 (ISO-HDLC, the PNG chunk checksum) of `bytes`.
+fn crc32(bytes: &[u8]) -> u32 {
+    let mut c = !0u32;
+    for &b in bytes {
+        c ^= u32::from(b);
+        for _ in 0..8 {
+            c = if c & 1 == 1 {
+                (c >> 1) ^ 0xEDB8_8320
+            } else {
+                c >> 1
+            };
+        }
+    }
+    !c
+}
+
+/// A PNG file of a few dozen bytes whose header claims a `width × height` RGBA image: the
+/// signature, IHDR, an empty IDAT and IEND.
+fn png_claiming(width: u32, height: u32) -> Vec<u8> {
+    let mut out = b"\x89PNG\r\n\x1a\n".to_vec();
+    let mut chunk = |kind: &[u8; 4], data: &[u8]| {
+        out.extend_from_slice(&u32::try_from(data.len()).unwrap().to_be_bytes());
+        let mut body = kind.to_vec();
+        body.extend_from_slice(data);
+        out.extend_from_slice(&body);
+        out.extend_from_slice(&crc32(&body).to_be_bytes());
+    };
+    let mut ihdr = Vec::new();
+    ihdr.extend_from_slice(&width.to_be_bytes());
+    ihdr.extend_from_slice(&height.to_be_bytes());
+    ihdr.extend_from_slice(&[8, 6, 0, 0, 0]); // 8-bit RGBA, deflate, no filter, no interlace
+    chunk(b"IHDR", &ihdr);
+    chunk(b"IDAT", &[]);
+    chunk(b"IEND", &[]);
+    out
+}
+
+/// Issue: `mls2d` on a 30000² PNG took 4.5 GB from an 875 KB file. The declared size is
+/// checked against the memory budget before anything is decoded or allocated.
+#[test]
+fn mls2d_on_a_30000_square_png_is_refused_before_decoding() {
+    let dir = tempfile::tempdir().unwrap();
+    let png = dir.path().join("huge.png");
+    std::fs::write(&png, png_claiming(30_000, 30_000)).unwrap();
+    let h = dir.path().join("h.json");
+    std::fs::write(
+        &h,
+        r#"{"points": [{"source": [5, 5], "target": [6, 5]}, {"source": [30, 6], "target": [30, 6]}]}"#,
+    )
+    .unwrap();
+    let out = dir.path().join("out.png");
+    let start = std::time::Instant::now();
+    let err = fails(&[
+        &"--memory-limit",
+        &"1G",
+        &"mls2d",
+        &png,
+        &"--handles",
+        &h,
+        &"-o",
+        &out,
+    ]);
+    assert!(err.contains("huge.png"), "{err}");
+    assert!(err.contains("30000×30000"), "{err}");
+    assert!(
+        err.contains("--memory-limit"),
+        "names how to raise the budget: {err}"
+    );
+    assert!(!out.exists());
+    // Refused from the header alone: decoding 3.6 GB of pixels would take far longer.
+    assert!(start.elapsed().as_secs() < 20, "{:?}", start.elapsed());
+}
+
 #[test]
 fn handles_apply_maps_points_forward_with_full_precision() {
     let dir = tempfile::tempdir().unwrap();
@@ -2148,4 +2221,76 @@ fn render_draws_a_volume_deformed_turning_and_compared() {
     assert!(e.contains("X,Y,Z,NX,NY,NZ"), "{e}");
     let e = fails(&[&"render", &d.join("missing.nii"), &"-o", &plain]);
     assert!(e.contains("missing.nii"), "{e}");
+}
+
+/// Issue 15 item 10: `--quiet` is taken by every command, before or after the subcommand, and
+/// leaves standard error empty on success (results still go to standard output).
+#[test]
+fn quiet_flag_is_global_and_silences_progress() {
+    let dir = tempfile::tempdir().unwrap();
+    let p = dir.path().join("s.nii");
+    for args in [
+        vec!["--quiet", "phantom", "sphere", "--size", "12", "-o"],
+        vec!["phantom", "sphere", "-q", "--size", "12", "-o"],
+    ] {
+        let mut full: Vec<&dyn AsRef<std::ffi::OsStr>> = args
+            .iter()
+            .map(|a| a as &dyn AsRef<std::ffi::OsStr>)
+            .collect();
+        full.push(&p);
+        let out = volmorph(&full);
+        assert!(
+            out.status.success(),
+            "{}",
+            String::from_utf8_lossy(&out.stderr)
+        );
+        assert!(
+            out.stderr.is_empty(),
+            "{}",
+            String::from_utf8_lossy(&out.stderr)
+        );
+        assert!(p.exists());
+    }
+    let text = ok(&[&"info", &"-q", &p]);
+    assert!(text.contains("12 x 12 x 12"), "{text}");
+}
+
+/// Issue 14 item 10: `warp`, `drag` and `jacobian` said "cannot read lattice: …" without the
+/// path of the lattice.
+#[test]
+fn warp_drag_jacobian_say_cannot_read_lattice_without_the_path() {
+    let dir = tempfile::tempdir().unwrap();
+    let vol = dir.path().join("s.nii");
+    ok(&[&"phantom", &"sphere", &"--size", &"10", &"-o", &vol]);
+    let bad = dir.path().join("broken_lattice.json");
+    std::fs::write(&bad, "{\"bad\": 1}").unwrap();
+    let out = dir.path().join("o.nii");
+    for err in [
+        fails(&[&"warp", &vol, &"--lattice", &bad, &"-o", &out]),
+        fails(&[
+            &"drag",
+            &vol,
+            &"--lattice",
+            &bad,
+            &"--from",
+            &"0,0,0",
+            &"--to",
+            &"0.1,0,0",
+            &"-o",
+            &out,
+        ]),
+        fails(&[
+            &"jacobian",
+            &"--lattice",
+            &bad,
+            &"--grid",
+            &vol,
+            &"-o",
+            &out,
+        ]),
+    ] {
+        assert!(err.contains("broken_lattice.json"), "{err}");
+        assert!(err.contains("version"), "names the field: {err}");
+    }
+    assert!(!out.exists());
 }

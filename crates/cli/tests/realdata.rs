@@ -146,3 +146,104 @@ fn dicom_folder_converts_to_nifti_in_hounsfield_units() {
     let e = fails(&[&"convert", &out, &dir.path().join("ct.dcm")]);
     assert!(e.contains("does not write"), "{e}");
 }
+
+fn as_args(v: &[std::ffi::OsString]) -> Vec<&dyn AsRef<std::ffi::OsStr>> {
+    v.iter().map(|a| a as &dyn AsRef<std::ffi::OsStr>).collect()
+}
+
+/// The global `--frame N` reaches every command that reads a volume through the one read path
+/// (`volmorph_volume_io::read`): each command run on frame 1 of a 4-D series writes exactly what
+/// it writes from that frame saved alone as a 3-D file, and refuses the series without `--frame`,
+/// naming it. A 3-D input beside it (the map of `warp`, the grid of `jacobian`) is read as it is.
+#[test]
+fn every_volume_command_reads_the_global_frame() {
+    let dir = tempfile::tempdir().unwrap();
+    let d = dir.path();
+    let series = fixture("nibabel_4d.nii.gz");
+    // Frame 1 written by nibabel with the series' header bytes.
+    let one = fixture("nibabel_4d_frame1.nii.gz");
+    let c = centre(&info_json(&one, &[]));
+    let (from, to) = (
+        format!("{},{},{}", c[0], c[1], c[2]),
+        format!("{},{},{}", c[0] + 0.3, c[1], c[2]),
+    );
+    let lattice = d.join("l.json");
+    ok(&[
+        &"lattice",
+        &"init",
+        &one,
+        &"--counts",
+        &"4,4,4",
+        &"-o",
+        &lattice,
+    ]);
+    let lat = lattice.to_str().unwrap();
+    // (command arguments before the input, after the input, output extension)
+    let commands: Vec<(&[&str], Vec<&str>, &str)> = vec![
+        (&["slice"], vec!["--axis", "z"], "png"),
+        (&["isosurface"], vec!["--level", "1050"], "ply"),
+        (&["lattice", "init"], vec!["--counts", "4,4,4"], "json"),
+        (
+            &["warp"],
+            vec!["--map", lat, "--method", "pullback-linear"],
+            "nii",
+        ),
+        (&["drag"], vec!["--from", &from, "--to", &to], "nii"),
+        (&["render"], vec!["--size", "32x32"], "png"),
+        (
+            &["nurbs", "fit"],
+            vec!["--order", "2", "--control-points", "2"],
+            "json",
+        ),
+    ];
+    for (i, (cmd, rest, ext)) in commands.iter().enumerate() {
+        let run = |input: &Path, frame: &[&str], out: &Path| {
+            let mut args: Vec<&dyn AsRef<std::ffi::OsStr>> = Vec::new();
+            for a in *cmd {
+                args.push(a);
+            }
+            args.push(&input);
+            for a in rest {
+                args.push(a);
+            }
+            args.extend([&"-o" as &dyn AsRef<std::ffi::OsStr>, &out]);
+            for a in frame {
+                args.push(a);
+            }
+            args.iter()
+                .map(|a| a.as_ref().to_owned())
+                .collect::<Vec<_>>()
+        };
+        let (want, got) = (
+            d.join(format!("want{i}.{ext}")),
+            d.join(format!("got{i}.{ext}")),
+        );
+        let a = run(&one, &[], &want);
+        ok(&as_args(&a));
+        let b = run(&series, &["--frame", "1"], &got);
+        ok(&as_args(&b));
+        let (w, g) = (std::fs::read(&want).unwrap(), std::fs::read(&got).unwrap());
+        assert!(
+            w == g,
+            "{cmd:?}: frame 1 of the series differs from the 3-D frame"
+        );
+        let e = fails(&as_args(&run(&series, &[], &got)));
+        assert!(
+            e.contains("3 frames") && e.contains("--frame"),
+            "{cmd:?}: {e}"
+        );
+    }
+    // The grid of `jacobian` is 3-D; the global frame leaves it alone.
+    let j = d.join("j.nii");
+    ok(&[
+        &"jacobian",
+        &"--map",
+        &lattice,
+        &"--grid",
+        &one,
+        &"-o",
+        &j,
+        &"--frame",
+        &"1",
+    ]);
+}

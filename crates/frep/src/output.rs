@@ -83,6 +83,97 @@ pub fn mesh(
     })
 }
 
+/// What a front-end says about an extracted surface ([`SurfaceSummary::of`]): its size and
+/// whether it is a closed manifold, or why not.
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub struct SurfaceSummary {
+    /// Vertices of the mesh.
+    pub vertices: usize,
+    /// Triangles (faces) of the mesh.
+    pub triangles: usize,
+    /// `Ok(χ)` (the Euler characteristic) for a closed manifold, else the reasons it is not.
+    pub closed: Result<i64, Vec<NotClosed>>,
+}
+
+/// Why an extracted surface is not a closed manifold.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum NotClosed {
+    /// Edges with one face: the grid's box cuts the shape (enlarge the box, or cap the
+    /// shape with [`MeshOptions::close`]).
+    Boundary(usize),
+    /// Edges or vertices shared by more than one sheet: features thinner than a grid cell,
+    /// where one dual-contouring vertex serves several sheets (refine the grid, or use
+    /// marching cubes).
+    NonManifold(usize),
+    /// Neither of the above, e.g. faces that disagree on orientation.
+    Other,
+}
+
+impl SurfaceSummary {
+    /// Validate `mesh` and summarise it.
+    #[must_use]
+    pub fn of(mesh: &volmorph_mesh::Mesh) -> Self {
+        let report = mesh.validate();
+        let closed = if report.is_closed_manifold() {
+            Ok(report.euler_characteristic)
+        } else {
+            let mut why = Vec::new();
+            if report.boundary_edges.count > 0 {
+                why.push(NotClosed::Boundary(report.boundary_edges.count));
+            }
+            let nm = report.non_manifold_edges.count + report.non_manifold_vertices.count;
+            if nm > 0 {
+                why.push(NotClosed::NonManifold(nm));
+            }
+            if why.is_empty() {
+                why.push(NotClosed::Other);
+            }
+            Err(why)
+        };
+        Self {
+            vertices: mesh.vertex_count(),
+            triangles: mesh.face_count(),
+            closed,
+        }
+    }
+}
+
+impl std::fmt::Display for NotClosed {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        match self {
+            NotClosed::Boundary(n) => write!(
+                f,
+                "{n} boundary edges: the box cuts the shape, enlarge the bounds or close the box"
+            ),
+            NotClosed::NonManifold(n) => write!(
+                f,
+                "{n} non-manifold edges/vertices: features thinner than a grid cell, refine \
+                 the grid or use marching cubes"
+            ),
+            NotClosed::Other => write!(f, "inconsistently oriented faces"),
+        }
+    }
+}
+
+/// `V vertices, T triangles, closed manifold, Euler characteristic χ`, or
+/// `…, not a closed manifold (reasons)`.
+impl std::fmt::Display for SurfaceSummary {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        write!(
+            f,
+            "{} vertices, {} triangles, ",
+            self.vertices, self.triangles
+        )?;
+        match &self.closed {
+            Ok(chi) => write!(f, "closed manifold, Euler characteristic {chi}"),
+            Err(why) => {
+                let why: Vec<String> = why.iter().map(ToString::to_string).collect();
+                write!(f, "not a closed manifold ({})", why.join("; "))
+            }
+        }
+    }
+}
+
 /// Options of [`render`].
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct RenderOptions {

@@ -619,7 +619,7 @@ pub fn warp_rgba(
     volmorph_deform::map::check_len(w * h, pixels.len())?;
     let src = image_grid(width, height, nx, ny)?;
     volmorph_deform::map::check_len(nx * ny, deformed.len())?;
-    let mut out = vec![background; w * h];
+    let mut out = volmorph_io::try_vec("the deformed picture", w * h, background)?;
     let sample = |p: DVec2| -> [u8; 4] {
         let x = p.x.clamp(0.0, (w - 1) as f64);
         let y = p.y.clamp(0.0, (h - 1) as f64);

@@ -33,15 +33,30 @@
 //! volume `V` with each edge at least 1 % of the diagonal, so flat handle sets get a finite
 //! radius). A larger radius gives smoother, more global corrections at more cost.
 //!
+//! # Live edits
+//! The map is linear in its targets (the trend is a least-squares fit, the weights a linear
+//! solve), so it implements [`LinearMap`] with the targets as parameters: moving a target
+//! re-solves with the kept Cholesky factor (no refactorisation), and live grids and the
+//! incremental push-forward work with it. With `N` the number of handles, `M` the inverse
+//! covariance of the sources about their mean `p̄`, the trend's coefficient of target `k` at
+//! `x` is `a_k(x) = 1/N + (p_k − p̄)ᵀ M (x − p̄)` (`1/N` alone for a flat set, whose trend is
+//! the translation `x − p̄ + q̄`), and the map's is
+//! `c_k(x) = a_k(x) + Σ_i φ_i(x) [(K + λI)⁻¹ (e_k − a_k(P))]_i`. Moving one target changes
+//! the trend, so its influence is everywhere.
+//!
 //! The neighbour grid is written here because it is twenty lines, needed for both the
 //! assembly and every evaluation, and a general k-d tree crate would add more than it saves.
 
+use std::sync::Arc;
+
 use faer::linalg::solvers::Solve;
+use faer::sparse::linalg::solvers::Llt;
 use faer::sparse::{SparseColMat, Triplet};
 use faer::{Mat, Side};
 use glam::{DMat3, DVec3};
 use rayon::prelude::*;
 
+use volmorph_deform::live::{LinearMap, check_parameter};
 use volmorph_deform::{DeformError, SpaceMap};
 
 /// Average number of other handles within the support radius chosen by default. Enough for
@@ -174,46 +189,135 @@ pub fn default_support(sources: &[DVec3]) -> f64 {
     (3.0 * DEFAULT_NEIGHBOURS * v / (4.0 * std::f64::consts::PI * n)).cbrt()
 }
 
-/// Least-squares affine map `x ↦ A x + b` sending `sources` towards `targets`; a translation
-/// when the sources are too flat (see [`MIN_AFFINE_CONDITION`]).
-fn affine_fit(sources: &[DVec3], targets: &[DVec3]) -> (DMat3, DVec3) {
-    let n = sources.len() as f64;
-    let ps = sources.iter().sum::<DVec3>() / n;
-    let qs = targets.iter().sum::<DVec3>() / n;
-    let mut spp = DMat3::ZERO;
-    let mut sqp = DMat3::ZERO;
-    for (&p, &q) in sources.iter().zip(targets) {
-        let (dp, dq) = (p - ps, q - qs);
-        spp += outer(dp, dp);
-        sqp += outer(dq, dp);
+/// The trend's dependence on the targets, fixed by the sources: the least-squares affine
+/// fit about the sources' mean, or a translation for flat sets.
+#[derive(Debug, Clone, Copy, PartialEq)]
+enum Trend {
+    /// `a_k(x) = 1/N + (p_k − mean)ᵀ inv_cov (x − mean)`.
+    Affine { mean: DVec3, inv_cov: DMat3 },
+    /// `a_k(x) = 1/N`, base `x − mean`.
+    Translation { mean: DVec3 },
+}
+
+impl Trend {
+    fn of(sources: &[DVec3]) -> Self {
+        let n = sources.len() as f64;
+        let mean = sources.iter().sum::<DVec3>() / n;
+        let mut spp = DMat3::ZERO;
+        for &p in sources {
+            let dp = p - mean;
+            spp += outer(dp, dp);
+        }
+        // det / trace³ is a scale-free flatness test of the (positive semi-definite)
+        // covariance: it is 1/27 for an isotropic set and 0 for a coplanar one.
+        let tr = spp.x_axis.x + spp.y_axis.y + spp.z_axis.z;
+        let flat =
+            tr.is_nan() || tr <= 0.0 || spp.determinant() <= MIN_AFFINE_CONDITION * tr * tr * tr;
+        if flat {
+            Trend::Translation { mean }
+        } else {
+            Trend::Affine {
+                mean,
+                inv_cov: spp.inverse(),
+            }
+        }
     }
-    // det / trace³ is a scale-free flatness test of the (positive semi-definite) covariance:
-    // it is 1/27 for an isotropic set and 0 for a coplanar one.
-    let tr = spp.x_axis.x + spp.y_axis.y + spp.z_axis.z;
-    let flat = tr.is_nan() || tr <= 0.0 || spp.determinant() <= MIN_AFFINE_CONDITION * tr * tr * tr;
-    if flat {
-        return (DMat3::IDENTITY, qs - ps);
+
+    /// The part of the trend at `x` that does not depend on the targets.
+    fn base(&self, x: DVec3) -> DVec3 {
+        match *self {
+            Trend::Affine { .. } => DVec3::ZERO,
+            Trend::Translation { mean } => x - mean,
+        }
     }
-    let a = sqp * spp.inverse();
-    (a, qs - a * ps)
+
+    /// `M (x − p̄)` for the affine trend (zero for a translation), so that
+    /// `a_k(x) = 1/N + (p_k − p̄) · lever(x)`.
+    fn lever(&self, x: DVec3) -> DVec3 {
+        match *self {
+            Trend::Affine { mean, inv_cov } => inv_cov * (x - mean),
+            Trend::Translation { .. } => DVec3::ZERO,
+        }
+    }
+
+    fn mean(&self) -> DVec3 {
+        match *self {
+            Trend::Affine { mean, .. } | Trend::Translation { mean } => mean,
+        }
+    }
+}
+
+/// Least-squares affine map `x ↦ A x + b` sending `sources` towards `targets`, of the form
+/// `trend` fixes: a translation when the sources are too flat (see [`MIN_AFFINE_CONDITION`]
+/// and [`Trend::of`]).
+fn affine_fit(trend: &Trend, sources: &[DVec3], targets: &[DVec3]) -> (DMat3, DVec3) {
+    let qs = targets.iter().sum::<DVec3>() / targets.len() as f64;
+    match *trend {
+        Trend::Translation { mean } => (DMat3::IDENTITY, qs - mean),
+        Trend::Affine { mean, inv_cov } => {
+            let mut sqp = DMat3::ZERO;
+            for (&p, &q) in sources.iter().zip(targets) {
+                sqp += outer(q - qs, p - mean);
+            }
+            let a = sqp * inv_cov;
+            (a, qs - a * mean)
+        }
+    }
 }
 
 fn outer(a: DVec3, b: DVec3) -> DMat3 {
     DMat3::from_cols(a * b.x, a * b.y, a * b.z)
 }
 
+/// What a Wendland map keeps of its sources, shared by the maps that differ only in their
+/// targets (a live edit clones the map, not the factorisation).
+#[derive(Debug)]
+struct System {
+    sources: Vec<DVec3>,
+    support: f64,
+    smoothing: f64,
+    grid: CellGrid,
+    /// Cholesky factor of `K + λI`.
+    llt: Llt<usize, f64>,
+    trend: Trend,
+}
+
+impl System {
+    /// `(K + λI)⁻¹ R` for the `c` columns of `rhs` (`n × c`, row-major by handle).
+    fn solve(&self, rhs: &mut Mat<f64>) {
+        self.llt.solve_in_place(rhs.as_mut());
+    }
+
+    /// `Σ_i φ(‖x − p_i‖/ρ) w_i` for any per-handle values `w`.
+    #[inline]
+    fn kernel_sum<T>(&self, x: DVec3, w: &[T]) -> T
+    where
+        T: Copy + std::ops::Mul<f64, Output = T> + std::ops::AddAssign + Default,
+    {
+        let inv = 1.0 / self.support;
+        let r2max = self.support * self.support;
+        let mut d = T::default();
+        self.grid.for_each_near(x, |i| {
+            // Most candidates lie outside the support: reject them before the square root.
+            let r2 = (x - self.sources[i]).length_squared();
+            if r2 < r2max {
+                d += w[i] * wendland_c2(r2.sqrt() * inv);
+            }
+        });
+        d
+    }
+}
+
 /// Affine trend plus compactly supported Wendland corrections through handle pairs (see the
-/// module documentation): a push-forward `SpaceMap` sending each source to its target.
+/// module documentation): a push-forward `SpaceMap` sending each source to its target, linear
+/// in the targets ([`LinearMap`]).
 #[derive(Debug, Clone)]
 pub struct WendlandMap {
-    sources: Vec<DVec3>,
+    system: Arc<System>,
     targets: Vec<DVec3>,
     weights: Vec<DVec3>,
     affine: DMat3,
     translation: DVec3,
-    support: f64,
-    smoothing: f64,
-    grid: CellGrid,
 }
 
 impl WendlandMap {
@@ -251,30 +355,21 @@ impl WendlandMap {
                 targets.len()
             )));
         }
-        for (what, pts) in [("source", sources), ("target", targets)] {
-            for (i, p) in pts.iter().enumerate() {
-                for a in 0..3 {
-                    if !p[a].is_finite() {
-                        return Err(DeformError::NonFinite {
-                            what: format!("{what} {i}, component {a}"),
-                            value: p[a],
-                        });
-                    }
-                }
-            }
-        }
+        volmorph_deform::map::check_finite("source", sources)?;
+        volmorph_deform::map::check_finite("target", targets)?;
         if !(smoothing.is_finite() && smoothing >= 0.0) {
             return Err(DeformError::InvalidHandles(format!(
-                "smoothing must be finite and ≥ 0, got {smoothing}"
+                "smoothing must be finite and ≥ 0, got {}",
+                volmorph_io::Num(smoothing)
             )));
         }
         let rho = support.unwrap_or_else(|| default_support(sources));
         if !(rho.is_finite() && rho > 0.0) {
             return Err(DeformError::InvalidHandles(format!(
-                "support radius must be positive and finite, got {rho}"
+                "support radius must be positive and finite, got {}",
+                volmorph_io::Num(rho)
             )));
         }
-        let (affine, translation) = affine_fit(sources, targets);
         let grid = CellGrid::new(sources, rho)?;
 
         // Assembly: the lower triangle, one column per source, in parallel.
@@ -323,14 +418,29 @@ impl WendlandMap {
             ))
         })?;
         progress.advance(1);
+        let system = Arc::new(System {
+            sources: sources.to_vec(),
+            support: rho,
+            smoothing,
+            grid,
+            llt,
+            trend: Trend::of(sources),
+        });
+        Self::solved(system, targets.to_vec())
+    }
+
+    /// The map of `system` through `targets`: trend fit and weights by the kept factor.
+    fn solved(system: Arc<System>, targets: Vec<DVec3>) -> Result<Self, DeformError> {
+        let n = targets.len();
+        let (affine, translation) = affine_fit(&system.trend, &system.sources, &targets);
         let mut rhs = Mat::<f64>::zeros(n, 3);
         for i in 0..n {
-            let r = targets[i] - (affine * sources[i] + translation);
+            let r = targets[i] - (affine * system.sources[i] + translation);
             for c in 0..3 {
                 rhs[(i, c)] = r[c];
             }
         }
-        llt.solve_in_place(rhs.as_mut());
+        system.solve(&mut rhs);
         let weights: Vec<DVec3> = (0..n)
             .map(|i| DVec3::new(rhs[(i, 0)], rhs[(i, 1)], rhs[(i, 2)]))
             .collect();
@@ -340,33 +450,48 @@ impl WendlandMap {
             ));
         }
         Ok(Self {
-            sources: sources.to_vec(),
-            targets: targets.to_vec(),
+            system,
+            targets,
             weights,
             affine,
             translation,
-            support: rho,
-            smoothing,
-            grid,
         })
+    }
+
+    /// Move the targets (same count), keeping the sources' factorisation: one sparse solve.
+    ///
+    /// # Errors
+    /// [`DeformError::InvalidHandles`] for a wrong count, [`DeformError::NonFinite`] for a
+    /// non-finite target; the map is unchanged on error.
+    pub fn set_targets(&mut self, targets: &[DVec3]) -> Result<(), DeformError> {
+        if targets.len() != self.targets.len() {
+            return Err(DeformError::InvalidHandles(format!(
+                "{} targets given for {} handles",
+                targets.len(),
+                self.targets.len()
+            )));
+        }
+        volmorph_deform::map::check_finite("target", targets)?;
+        *self = Self::solved(Arc::clone(&self.system), targets.to_vec())?;
+        Ok(())
     }
 
     /// The support radius `ρ` in physical units.
     #[must_use]
     pub fn support(&self) -> f64 {
-        self.support
+        self.system.support
     }
 
     /// The smoothing parameter.
     #[must_use]
     pub fn smoothing(&self) -> f64 {
-        self.smoothing
+        self.system.smoothing
     }
 
     /// The handles' sources.
     #[must_use]
     pub fn sources(&self) -> &[DVec3] {
-        &self.sources
+        &self.system.sources
     }
 
     /// The handles' targets.
@@ -380,6 +505,16 @@ impl WendlandMap {
     pub fn affine(&self) -> (DMat3, DVec3) {
         (self.affine, self.translation)
     }
+
+    /// `a_k(x)` for every `k` into `out`, from the trend's lever at `x`.
+    fn trend_coefficients(&self, lever: DVec3, out: &mut [f64]) {
+        let sys = &*self.system;
+        let inv_n = 1.0 / sys.sources.len() as f64;
+        let mean = sys.trend.mean();
+        for (o, &p) in out.iter_mut().zip(&sys.sources) {
+            *o = inv_n + (p - mean).dot(lever);
+        }
+    }
 }
 
 fn cancelled(c: volmorph_io::Cancelled) -> DeformError {
@@ -388,17 +523,7 @@ fn cancelled(c: volmorph_io::Cancelled) -> DeformError {
 
 impl SpaceMap for WendlandMap {
     fn apply(&self, p: DVec3) -> DVec3 {
-        let inv = 1.0 / self.support;
-        let r2max = self.support * self.support;
-        let mut d = DVec3::ZERO;
-        self.grid.for_each_near(p, |i| {
-            // Most candidates lie outside the support: reject them before the square root.
-            let r2 = (p - self.sources[i]).length_squared();
-            if r2 < r2max {
-                d += self.weights[i] * wendland_c2(r2.sqrt() * inv);
-            }
-        });
-        self.affine * p + self.translation + d
+        self.affine * p + self.translation + self.system.kernel_sum(p, &self.weights)
     }
 
     fn jacobian(&self, p: DVec3) -> DMat3 {
@@ -406,11 +531,12 @@ impl SpaceMap for WendlandMap {
     }
 
     fn apply_with_jacobian(&self, p: DVec3) -> (DVec3, DMat3) {
-        let inv = 1.0 / self.support;
+        let sys = &*self.system;
+        let inv = 1.0 / sys.support;
         let mut d = DVec3::ZERO;
         let mut j = self.affine;
-        self.grid.for_each_near(p, |i| {
-            let r = p - self.sources[i];
+        sys.grid.for_each_near(p, |i| {
+            let r = p - sys.sources[i];
             let s = r.length() * inv;
             if s < 1.0 {
                 let w = self.weights[i];
@@ -434,6 +560,92 @@ impl SpaceMap for WendlandMap {
                 }
             });
         Ok(())
+    }
+}
+
+/// Parameters: the targets, in handle order (see the [module docs](self#live-edits)).
+impl LinearMap for WendlandMap {
+    fn parameter_count(&self) -> usize {
+        self.targets.len()
+    }
+
+    fn parameters(&self) -> Vec<DVec3> {
+        self.targets.clone()
+    }
+
+    fn set_parameters(&mut self, values: &[DVec3]) -> Result<(), DeformError> {
+        self.set_targets(values)
+    }
+
+    fn coefficients_into(&self, v: DVec3, out: &mut [f64]) -> DVec3 {
+        // c(v)ᵀ = a(v)ᵀ + yᵀ (I − a(P)) with y = (K + λI)⁻¹ φ(v); b(v) = b₀(v) − Σ y_i b₀(p_i).
+        let sys = &*self.system;
+        let n = sys.sources.len();
+        let inv = 1.0 / sys.support;
+        let mut phi = Mat::<f64>::zeros(n, 1);
+        sys.grid.for_each_near(v, |i| {
+            let s = (v - sys.sources[i]).length() * inv;
+            if s < 1.0 {
+                phi[(i, 0)] = wendland_c2(s);
+            }
+        });
+        sys.solve(&mut phi);
+        let y: Vec<f64> = (0..n).map(|i| phi[(i, 0)]).collect();
+        let sum_y: f64 = y.iter().sum();
+        let mut lever_y = DVec3::ZERO;
+        let mut base = sys.trend.base(v);
+        for (&yi, &p) in y.iter().zip(&sys.sources) {
+            lever_y += yi * sys.trend.lever(p);
+            base -= yi * sys.trend.base(p);
+        }
+        let m = out.len().min(n);
+        let mut a = vec![0.0; n];
+        self.trend_coefficients(sys.trend.lever(v), &mut a);
+        let mean = sys.trend.mean();
+        let inv_n = 1.0 / n as f64;
+        for k in 0..m {
+            // Σ_i y_i a_k(p_i) = Σy / N + (p_k − p̄) · Σ_i y_i M (p_i − p̄).
+            let ya = sum_y * inv_n + (sys.sources[k] - mean).dot(lever_y);
+            out[k] = a[k] + y[k] - ya;
+        }
+        base
+    }
+
+    fn coefficient_column(
+        &self,
+        k: usize,
+        points: &[DVec3],
+        out: &mut [f64],
+    ) -> Result<(), DeformError> {
+        let sys = &*self.system;
+        let n = sys.sources.len();
+        check_parameter(k, n)?;
+        volmorph_deform::map::check_len(points.len(), out.len())?;
+        // z = (K + λI)⁻¹ (e_k − a_k(P)); c_k(x) = a_k(x) + Σ_i φ_i(x) z_i.
+        let mean = sys.trend.mean();
+        let inv_n = 1.0 / n as f64;
+        let dk = sys.sources[k] - mean;
+        let mut rhs = Mat::<f64>::zeros(n, 1);
+        for (i, &p) in sys.sources.iter().enumerate() {
+            rhs[(i, 0)] = f64::from(u8::from(i == k)) - (inv_n + dk.dot(sys.trend.lever(p)));
+        }
+        sys.solve(&mut rhs);
+        let z: Vec<f64> = (0..n).map(|i| rhs[(i, 0)]).collect();
+        out.par_chunks_mut(1024)
+            .zip(points.par_chunks(1024))
+            .for_each(|(o, p)| {
+                for (o, &x) in o.iter_mut().zip(p) {
+                    *o = inv_n + dk.dot(sys.trend.lever(x)) + sys.kernel_sum(x, &z);
+                }
+            });
+        Ok(())
+    }
+
+    fn same_structure(&self, other: &Self) -> bool {
+        Arc::ptr_eq(&self.system, &other.system)
+            || (self.system.sources == other.system.sources
+                && self.system.support == other.system.support
+                && self.system.smoothing == other.system.smoothing)
     }
 }
 
@@ -470,11 +682,11 @@ mod tests {
             })
             .collect();
         let dst: Vec<DVec3> = src.iter().map(|&p| a * p + b).collect();
-        let (fa, fb) = affine_fit(&src, &dst);
+        let (fa, fb) = affine_fit(&Trend::of(&src), &src, &dst);
         assert!((fa - a).abs_diff_eq(DMat3::ZERO, 1e-9) && fb.abs_diff_eq(b, 1e-9));
         let flat: Vec<DVec3> = src.iter().map(|p| DVec3::new(p.x, p.y, 0.0)).collect();
         let moved: Vec<DVec3> = flat.iter().map(|&p| p + b).collect();
-        let (fa, fb) = affine_fit(&flat, &moved);
+        let (fa, fb) = affine_fit(&Trend::of(&flat), &flat, &moved);
         assert_eq!(fa, DMat3::IDENTITY);
         assert!(fb.abs_diff_eq(b, 1e-12));
     }

@@ -103,7 +103,20 @@ pub fn remove_stale_partials(dir: &Path) {
             .ok()
             .and_then(|m| now.duration_since(m).ok())
             .is_some_and(|age| age >= STALE_AGE);
-        if !meta.is_file() || !old {
+        if !old {
+            continue;
+        }
+        if meta.is_dir() {
+            // A partial folder ([`PartialDir`]) is stale when its lock file is not held.
+            let Ok(f) = File::open(path.join(PARTIAL_DIR_LOCK)) else {
+                continue;
+            };
+            if f.try_lock().is_ok() {
+                let _ = std::fs::remove_dir_all(&path);
+            }
+            continue;
+        }
+        if !meta.is_file() {
             continue;
         }
         let Ok(f) = File::open(&path) else {
@@ -111,6 +124,138 @@ pub fn remove_stale_partials(dir: &Path) {
         };
         if f.try_lock().is_ok() {
             let _ = std::fs::remove_file(&path);
+        }
+    }
+}
+
+/// Name of the lock file inside a [`PartialDir`]: held by the writer while it works, so a
+/// later writer can tell a folder left by a killed process from one still being written.
+pub const PARTIAL_DIR_LOCK: &str = ".volmorph-lock";
+
+/// An output **folder** (a Zarr store) built under a hidden temporary name next to its
+/// target and committed by renaming it into place.
+///
+/// * [`PartialDir::create`] makes `.volmorph-XXXXXX.partial/` in the target's folder (after
+///   removing stale ones) holding a locked [`PARTIAL_DIR_LOCK`] file; the writer fills
+///   [`PartialDir::path`].
+/// * [`PartialDir::commit`] removes the lock file and renames the folder to the target. An
+///   existing target folder is first renamed aside and removed after the new one is in
+///   place, so at every instant the target is the old folder, the new one, or (for the
+///   instant between the two renames) absent; it is never a mixture of both.
+/// * Dropping an uncommitted `PartialDir` (an error on the way) removes it; one left by a
+///   kill is removed by the next write to the same folder.
+///
+/// Written by hand for the same reason as the rest of this module: the commit protocol is
+/// volmorph's own (`tempfile` has no folder rename over an existing one).
+#[derive(Debug)]
+pub struct PartialDir {
+    path: PathBuf,
+    target: PathBuf,
+    lock: Option<File>,
+    committed: bool,
+}
+
+impl PartialDir {
+    /// Create the temporary folder for `target`.
+    ///
+    /// # Errors
+    /// [`IoError::Os`] naming `target` if the folder cannot be created, or if `target` exists
+    /// and is not a folder (a folder output never replaces a file).
+    pub fn create(target: &Path) -> Result<Self, IoError> {
+        if let Ok(meta) = std::fs::symlink_metadata(target)
+            && !meta.is_dir()
+        {
+            return Err(IoError::os(
+                target,
+                io::Error::new(
+                    io::ErrorKind::AlreadyExists,
+                    format!(
+                        "exists and is a {}, not a folder: remove it first",
+                        crate::file_kind(&meta)
+                    ),
+                ),
+            ));
+        }
+        let dir = folder_of(target);
+        remove_stale_partials(dir);
+        let tmp = tempfile::Builder::new()
+            .prefix(PARTIAL_PREFIX)
+            .suffix(PARTIAL_SUFFIX)
+            .tempdir_in(dir)
+            .map_err(|e| {
+                let why = match e.kind() {
+                    io::ErrorKind::NotFound => format!("folder {} does not exist", dir.display()),
+                    io::ErrorKind::PermissionDenied => {
+                        format!("no permission to create files in {}", dir.display())
+                    }
+                    kind => format!("cannot create a folder in {}: {kind}", dir.display()),
+                };
+                IoError::os(target, io::Error::new(e.kind(), why))
+            })?;
+        let path = tmp.keep();
+        let lock_path = path.join(PARTIAL_DIR_LOCK);
+        let lock = File::create(&lock_path).map_err(|e| IoError::os(&lock_path, e))?;
+        let _ = lock.lock();
+        Ok(Self {
+            path,
+            target: target.to_path_buf(),
+            lock: Some(lock),
+            committed: false,
+        })
+    }
+
+    /// The temporary folder to write into.
+    #[must_use]
+    pub fn path(&self) -> &Path {
+        &self.path
+    }
+
+    /// The folder this one becomes on [`PartialDir::commit`].
+    #[must_use]
+    pub fn target(&self) -> &Path {
+        &self.target
+    }
+
+    /// Rename the folder into place (see the type's documentation).
+    ///
+    /// # Errors
+    /// [`IoError::Os`] naming the target if a rename fails; the old target is then put back
+    /// where possible and the new folder removed.
+    pub fn commit(mut self) -> Result<(), IoError> {
+        let os = |error| IoError::os(&self.target, error);
+        drop(self.lock.take());
+        let _ = std::fs::remove_file(self.path.join(PARTIAL_DIR_LOCK));
+        let dir = folder_of(&self.target).to_path_buf();
+        let aside = if self.target.is_dir() {
+            let aside = dir.join(format!(
+                "{PARTIAL_PREFIX}{:08x}.old{PARTIAL_SUFFIX}",
+                token()
+            ));
+            std::fs::rename(&self.target, &aside).map_err(os)?;
+            Some(aside)
+        } else {
+            None
+        };
+        if let Err(e) = std::fs::rename(&self.path, &self.target) {
+            if let Some(aside) = &aside {
+                let _ = std::fs::rename(aside, &self.target);
+            }
+            return Err(os(e));
+        }
+        self.committed = true;
+        sync_folder(&dir);
+        if let Some(aside) = aside {
+            let _ = std::fs::remove_dir_all(aside);
+        }
+        Ok(())
+    }
+}
+
+impl Drop for PartialDir {
+    fn drop(&mut self) {
+        if !self.committed {
+            drop(self.lock.take());
+            let _ = std::fs::remove_dir_all(&self.path);
         }
     }
 }
@@ -411,6 +556,61 @@ mod tests {
         want.sort();
         assert_eq!(names(dir.path()), want);
         drop(busy_file);
+    }
+
+    #[test]
+    fn partial_dir_replaces_a_folder_in_one_commit() {
+        let dir = tempfile::tempdir().unwrap();
+        let target = dir.path().join("out.zarr");
+        std::fs::create_dir(&target).unwrap();
+        std::fs::write(target.join("old"), b"old").unwrap();
+        // An error on the way (the writer drops the folder) leaves the old one untouched.
+        let failed = PartialDir::create(&target).unwrap();
+        std::fs::write(failed.path().join("new"), b"new").unwrap();
+        drop(failed);
+        assert_eq!(names(dir.path()), vec!["out.zarr".to_string()]);
+        assert_eq!(names(&target), vec!["old".to_string()]);
+        let p = PartialDir::create(&target).unwrap();
+        std::fs::write(p.path().join("new"), b"new").unwrap();
+        p.commit().unwrap();
+        assert_eq!(names(dir.path()), vec!["out.zarr".to_string()]);
+        assert_eq!(names(&target), vec!["new".to_string()]);
+        // A file in the way is refused, not replaced.
+        let file = dir.path().join("file.zarr");
+        std::fs::write(&file, b"x").unwrap();
+        let e = PartialDir::create(&file).unwrap_err().to_string();
+        assert!(e.contains("not a folder"), "{e}");
+    }
+
+    #[test]
+    fn killed_partial_dirs_are_removed_unless_locked() {
+        let dir = tempfile::tempdir().unwrap();
+        let past = SystemTime::now() - Duration::from_secs(60);
+        let mk = |name: &str| {
+            let p = dir.path().join(name);
+            std::fs::create_dir(&p).unwrap();
+            std::fs::write(p.join("0"), b"chunk").unwrap();
+            let lock = File::create(p.join(PARTIAL_DIR_LOCK)).unwrap();
+            lock.set_modified(past).unwrap();
+            File::open(&p).unwrap().set_modified(past).unwrap();
+            lock
+        };
+        drop(mk(".volmorph-dead01.partial"));
+        let busy = mk(".volmorph-busy01.partial");
+        busy.lock().unwrap();
+        // A user's folder that merely looks like one, without the lock file, stays.
+        let other = dir.path().join(".volmorph-user01.partial");
+        std::fs::create_dir(&other).unwrap();
+        File::open(&other).unwrap().set_modified(past).unwrap();
+        remove_stale_partials(dir.path());
+        assert_eq!(
+            names(dir.path()),
+            vec![
+                ".volmorph-busy01.partial".to_string(),
+                ".volmorph-user01.partial".to_string()
+            ]
+        );
+        drop(busy);
     }
 
     #[test]

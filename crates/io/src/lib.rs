@@ -23,7 +23,7 @@ pub mod progress;
 use std::io::{self, Read};
 use std::path::Path;
 
-pub use atomic::{write_atomic, write_detached};
+pub use atomic::{PartialDir, write_atomic, write_detached};
 pub use budget::{
     MEMORY_LIMIT_ENV, Num, check_bytes, check_elems, human_bytes, memory_limit, set_memory_limit,
     try_vec, try_with_capacity,

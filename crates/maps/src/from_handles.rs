@@ -24,7 +24,8 @@ pub enum HandleMethod {
     /// Frame-based moving least squares (frame handles).
     Frames,
     /// Affine trend plus compactly supported Wendland kernels, solved by sparse Cholesky (at
-    /// least 1 point handle; the support radius is chosen from the handles' density, see
+    /// least 1 point handle; the support radius is [`HandleOptions::support`], by default
+    /// chosen from the handles' density, see
     /// [`volmorph_handles::wendland::default_support`]). Interpolates like `tps` but scales
     /// to tens of thousands of handles, where the thin-plate spline's dense system does not.
     Wendland,
@@ -65,6 +66,11 @@ pub struct HandleOptions {
     pub beta: f64,
     /// Smoothing `λ ≥ 0` of the thin-plate and Wendland splines (0 interpolates).
     pub smoothing: f64,
+    /// Support radius `ρ > 0` of the Wendland kernels (physical units): the distance beyond
+    /// which a handle no longer bends the map. `None` picks the radius that puts about
+    /// [`volmorph_handles::wendland::DEFAULT_NEIGHBOURS`] other handles within reach of each
+    /// ([`volmorph_handles::wendland::default_support`]).
+    pub support: Option<f64>,
 }
 
 impl Default for HandleOptions {
@@ -73,6 +79,7 @@ impl Default for HandleOptions {
             weighting: Weighting::default(),
             beta: 1.0,
             smoothing: 0.0,
+            support: None,
         }
     }
 }
@@ -122,7 +129,13 @@ pub fn handle_map(
         HandleMethod::Similarity => AnyMap::SimilarityMls(SimilarityMls::new(&s, &t, w)?),
         HandleMethod::Rigid => AnyMap::RigidMls(RigidMls::new(&s, &t, w)?),
         HandleMethod::Tps => AnyMap::ThinPlate(ThinPlateMap::new(&s, &t, options.smoothing)?),
-        HandleMethod::Wendland => AnyMap::Wendland(WendlandMap::new(&s, &t, options.smoothing)?),
+        HandleMethod::Wendland => AnyMap::Wendland(WendlandMap::with_support(
+            &s,
+            &t,
+            options.support,
+            options.smoothing,
+            &volmorph_io::NoProgress,
+        )?),
         HandleMethod::Frames => {
             if set.frames.is_empty() {
                 return Err(DeformError::InvalidHandles(

@@ -4,15 +4,15 @@
 use glam::{DMat3, DVec3};
 use volmorph_deform::live::{Influence, LinearMap};
 use volmorph_deform::{DeformError, SpaceMap};
-use volmorph_handles::{AffineMls, FrameMls, ThinPlateMap};
+use volmorph_handles::{AffineMls, FrameMls, ThinPlateMap, WendlandMap};
 use volmorph_lattice::BSplineLattice;
 use volmorph_volume::Geometry;
 
 use crate::AnyMap;
 
 /// A map linear in its parameters: control points of a lattice, targets of affine MLS, target
-/// frames of frame MLS, targets of a thin-plate spline (see [`LinearMap`] for the parameter
-/// order of each).
+/// frames of frame MLS, targets of a thin-plate or Wendland spline (see [`LinearMap`] for the
+/// parameter order of each).
 // One value per map object, never stored in bulk: boxing the lattice would only add an
 // indirection to every evaluation.
 #[allow(clippy::large_enum_variant)]
@@ -26,6 +26,8 @@ pub enum LiveMap {
     FrameMls(FrameMls),
     /// A thin-plate spline.
     ThinPlate(ThinPlateMap),
+    /// A compactly supported Wendland spline.
+    Wendland(WendlandMap),
 }
 
 impl AnyMap {
@@ -38,6 +40,7 @@ impl AnyMap {
             AnyMap::AffineMls(m) => Some(LiveMap::AffineMls(m.clone())),
             AnyMap::FrameMls(m) => Some(LiveMap::FrameMls(m.clone())),
             AnyMap::ThinPlate(m) => Some(LiveMap::ThinPlate(m.clone())),
+            AnyMap::Wendland(m) => Some(LiveMap::Wendland(m.clone())),
             _ => None,
         }
     }
@@ -50,6 +53,7 @@ impl From<LiveMap> for AnyMap {
             LiveMap::AffineMls(m) => AnyMap::AffineMls(m),
             LiveMap::FrameMls(m) => AnyMap::FrameMls(m),
             LiveMap::ThinPlate(m) => AnyMap::ThinPlate(m),
+            LiveMap::Wendland(m) => AnyMap::Wendland(m),
         }
     }
 }
@@ -61,6 +65,7 @@ macro_rules! each {
             LiveMap::AffineMls($m) => $e,
             LiveMap::FrameMls($m) => $e,
             LiveMap::ThinPlate($m) => $e,
+            LiveMap::Wendland($m) => $e,
         }
     };
 }
@@ -135,6 +140,7 @@ impl LinearMap for LiveMap {
             (LiveMap::AffineMls(a), LiveMap::AffineMls(b)) => a.same_structure(b),
             (LiveMap::FrameMls(a), LiveMap::FrameMls(b)) => a.same_structure(b),
             (LiveMap::ThinPlate(a), LiveMap::ThinPlate(b)) => a.same_structure(b),
+            (LiveMap::Wendland(a), LiveMap::Wendland(b)) => a.same_structure(b),
             _ => false,
         }
     }

@@ -175,6 +175,22 @@ fn sampled(identity: bool) -> SampledMap {
     SampledMap::from_map(&l, grid).unwrap()
 }
 
+/// 60 handles (a flat subset would take the translation-only trend, see `wendland_flat`).
+fn wendland(identity: bool) -> WendlandMap {
+    let (s, t) = handles(60, 16);
+    WendlandMap::new(&s, if identity { &s } else { &t }, 0.0).unwrap()
+}
+
+/// Handles on the plane z = 1 with an explicit support radius: the translation-only trend.
+fn wendland_flat(identity: bool) -> WendlandMap {
+    let (s, t) = handles(30, 17);
+    let flat =
+        |v: &[DVec3]| -> Vec<DVec3> { v.iter().map(|p| DVec3::new(p.x, p.y, 1.0)).collect() };
+    let (s, t) = (flat(&s), flat(&t));
+    let t = if identity { s.clone() } else { t };
+    WendlandMap::with_support(&s, &t, Some(9.0), 0.0, &volmorph_io::NoProgress).unwrap()
+}
+
 fn tps(identity: bool) -> ThinPlateMap {
     let (s, t) = handles(20, 15);
     ThinPlateMap::new(&s, if identity { &s } else { &t }, 0.0).unwrap()
@@ -279,14 +295,8 @@ space_map_conformance!(
 space_map_conformance!(
     wendland,
     suite(
-        || {
-            let (s, t) = handles(60, 16);
-            AnyMap::Wendland(WendlandMap::new(&s, &t, 0.0).unwrap())
-        },
-        || {
-            let (s, _) = handles(60, 16);
-            AnyMap::Wendland(WendlandMap::new(&s, &s, 0.0).unwrap())
-        },
+        || AnyMap::Wendland(wendland(false)),
+        || AnyMap::Wendland(wendland(true)),
         1e-5
     )
 );
@@ -375,6 +385,20 @@ linear_map_conformance!(
     )
 );
 linear_map_conformance!(
+    live_wendland,
+    live_suite(
+        || LiveMap::Wendland(wendland(false)),
+        || LiveMap::Wendland(wendland(true))
+    )
+);
+linear_map_conformance!(
+    live_wendland_flat,
+    live_suite(
+        || LiveMap::Wendland(wendland_flat(false)),
+        || LiveMap::Wendland(wendland_flat(true))
+    )
+);
+linear_map_conformance!(
     live_thin_plate,
     live_suite(
         || LiveMap::ThinPlate(tps(false)),
@@ -407,6 +431,7 @@ fn incremental_push_forward_equals_full_for_every_live_kind() {
             LiveMap::FrameMls(FrameMls::new(&s, &t, 1.0, Weighting::default()).unwrap())
         }),
         ("thin-plate", LiveMap::ThinPlate(tps(false))),
+        ("wendland", LiveMap::Wendland(wendland(false))),
     ];
     for (name, map) in kinds {
         let mut e = IncrementalPushForward::new(&src, map.clone(), &g, &opts).unwrap();

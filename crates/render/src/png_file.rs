@@ -268,7 +268,12 @@ fn decode<R: BufRead + Seek>(r: R) -> Result<RgbaImage, RenderError> {
         height: height.into(),
         reason: "decoded image does not fit in memory",
     })?;
-    let mut buf = vec![0u8; size];
+    // The decoded rows and the RGBA pixels are held together: check their sum.
+    volmorph_io::budget::check_bytes(
+        &format!("decoding a {width}×{height} PNG"),
+        (size as u64).saturating_add((n as u64).saturating_mul(4)),
+    )?;
+    let mut buf = volmorph_io::try_vec("the decoded PNG rows", size, 0u8)?;
     let info = reader.next_frame(&mut buf)?;
     let (fw, fh) = (info.width, info.height);
     let channels = match info.color_type {
@@ -310,7 +315,7 @@ fn decode<R: BufRead + Seek>(r: R) -> Result<RgbaImage, RenderError> {
             _ => 0,
         }
     };
-    let mut pixels = Vec::with_capacity(n);
+    let mut pixels = volmorph_io::try_with_capacity("the PNG's RGBA pixels", n)?;
     for row in buf.chunks(info.line_size).take(height as usize) {
         for px in row.get(..row_bytes).unwrap_or(&[]).chunks_exact(bpp) {
             let mut s = px.chunks_exact(bytes_per_sample).map(sample);

@@ -69,9 +69,11 @@ pub mod files;
 mod object;
 pub mod project;
 mod scene;
+pub mod teapot;
 
 pub use command::{Change, Command, DragSummary, NewObject};
 pub use derived::{Derived, DerivedOutput, Dirty, Recipe, SurfaceMethod};
 pub use error::SceneError;
 pub use object::{Entry, FrepModel, HandleMap, MapObject, Object, ObjectId, SculptObject};
 pub use scene::{DEFAULT_UNDO_LIMIT, Scene};
+pub use teapot::TeapotSession;

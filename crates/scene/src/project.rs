@@ -156,6 +156,10 @@ struct OptionsJson {
     weighting: WeightingJson,
     beta: f64,
     smoothing: f64,
+    /// The Wendland support radius; absent for the default (and in projects written before
+    /// the option existed).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    support: Option<f64>,
 }
 
 impl From<&HandleOptions> for OptionsJson {
@@ -167,6 +171,7 @@ impl From<&HandleOptions> for OptionsJson {
             },
             beta: o.beta,
             smoothing: o.smoothing,
+            support: o.support,
         }
     }
 }
@@ -180,6 +185,7 @@ impl From<OptionsJson> for HandleOptions {
             },
             beta: o.beta,
             smoothing: o.smoothing,
+            support: o.support,
         }
     }
 }

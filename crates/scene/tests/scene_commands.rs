@@ -3,7 +3,7 @@
 
 use glam::DVec3;
 use volmorph_handles::HandleSet;
-use volmorph_lattice::{BSplineLattice, DragOptions};
+use volmorph_lattice::DragOptions;
 use volmorph_maps::{AnyMap, HandleMethod, HandleOptions};
 use volmorph_scene::{
     Change, Command, NewObject, ObjectId, Recipe, Scene, SceneError, SurfaceMethod,
@@ -23,35 +23,10 @@ fn add(scene: &mut Scene, name: &str, object: NewObject) -> ObjectId {
 }
 
 /// A 48³ teapot, its identity 11³ lattice (cells of about 6 voxels) and the antialiased
-/// push-forward through it.
+/// push-forward through it: the shared teapot session.
 fn teapot_scene() -> (Scene, Geometry, ObjectId, ObjectId, ObjectId) {
-    let mut scene = Scene::new();
-    let vol = phantom::density(Phantom::Teapot, [48; 3]).unwrap();
-    let grid = *vol.geometry();
-    let v = add(
-        &mut scene,
-        "teapot",
-        NewObject::Volume(AnyVolume::from(vol)),
-    );
-    let lattice = BSplineLattice::identity_on_voxels(&grid, [11, 11, 11]).unwrap();
-    let l = add(
-        &mut scene,
-        "lattice",
-        NewObject::Map(AnyMap::Lattice(lattice)),
-    );
-    let w = add(
-        &mut scene,
-        "warped",
-        NewObject::Derived(Recipe::Warp {
-            source: v,
-            map: l,
-            method: WarpMethod::PushforwardAntialiased,
-            background: 0.0,
-            sampled_nodes: None,
-            swap_handles: false,
-        }),
-    );
-    (scene, grid, v, l, w)
+    let s = volmorph_scene::TeapotSession::new(48, [11, 11, 11]).unwrap();
+    (s.scene, s.grid, s.teapot, s.lattice, s.warped)
 }
 
 fn volume_bytes(scene: &Scene, id: ObjectId) -> Vec<u8> {

@@ -253,3 +253,50 @@ fn projects_keep_sculpt_objects() {
             .is_closed_manifold()
     );
 }
+
+#[test]
+fn sculpt_object_carved_to_nothing_saves_but_does_not_load() {
+    let (mut scene, id, _) = sphere_scene();
+    // A tool far larger than the sphere removes all of it.
+    let eraser = Edit::Tool {
+        tool: Arc::new(Tool::new(&icosphere(2, 2.5, DVec3::ZERO).unwrap()).unwrap()),
+        op: Op::Subtract,
+        poses: vec![Pose::at(DVec3::ZERO)],
+        step: None,
+    };
+    scene.apply(Command::Sculpt { id, edit: eraser }).unwrap();
+    assert_eq!(scene.sculpt(id).unwrap().triangle_count(), 0);
+    assert_eq!(mesh_of(&scene, id).face_count(), 0);
+
+    let dir = tempfile::tempdir().unwrap();
+    let path = dir.path().join("gone.vmproj");
+    scene.save(&path).unwrap();
+    let mut loaded = Scene::load(&path).expect("an empty sculpt object is a valid state");
+    let (a, b) = (scene.sculpt(id).unwrap(), loaded.sculpt(id).unwrap());
+    assert_eq!(a.grid(), b.grid());
+    assert_eq!(b.triangle_count(), 0);
+    assert!(b.dexel() == a.dexel(), "no dexel crossings in either");
+    // Material can be added again to the empty object, and the result is a closed solid.
+    loaded
+        .apply(Command::Sculpt {
+            id,
+            edit: dab(Op::Add, DVec3::new(0.2, 0.0, 0.0)),
+        })
+        .unwrap();
+    let m = mesh_of(&loaded, id);
+    assert!(m.face_count() > 0 && m.validate().is_closed_manifold());
+    // An empty scene object added directly (no base mesh) is the same state.
+    let mut fresh = Scene::new();
+    let grid = *a.grid();
+    let e = add(
+        &mut fresh,
+        "empty",
+        NewObject::Sculpt {
+            mesh: Mesh::default(),
+            grid,
+            options: SculptOptions::default(),
+        },
+    );
+    let f = fresh.sculpt(e).unwrap();
+    assert!(f.dexel() == a.dexel() && f.triangle_count() == 0);
+}

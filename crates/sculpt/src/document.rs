@@ -206,10 +206,17 @@ impl SculptDocument {
     /// A document for a closed mesh (see [`closed_soup`]) on `grid`. The mesh must lie
     /// strictly inside the grid's box, so that the outermost grid points are outside.
     ///
+    /// A mesh without faces is the empty solid: a valid state of a document (everything
+    /// carved away, or nothing added yet), saved as an empty mesh and loaded back as one;
+    /// material can be added to it.
+    ///
     /// # Errors
     /// [`SculptError::InvalidMesh`] for an unusable mesh or one reaching the grid's border;
     /// [`SculptError::InvalidOption`] for a margin below 2; as [`TriDexel::from_soup`].
     pub fn new(mesh: &Mesh, grid: Grid, options: SculptOptions) -> Result<Self, SculptError> {
+        if mesh.face_count() == 0 {
+            return Self::from_soup(&TriangleSoup::default(), grid, options);
+        }
         let soup = closed_soup(mesh, "base")?;
         Self::from_soup(&soup, grid, options)
     }

@@ -259,6 +259,19 @@ impl<const N: usize> Aggregate<N> {
             .map(|a| &a.spline)
     }
 
+    /// Smallest and largest value of the first component of attribute `name` over its
+    /// control points (Cartesian, for rational attributes): every value the attribute takes
+    /// lies in it, by the convex hull property.
+    ///
+    /// # Errors
+    /// [`TrivariateError::InvalidArgument`] when there is no attribute `name`.
+    pub fn attribute_range(&self, name: &str) -> Result<(f64, f64), TrivariateError> {
+        let s = self.attribute(name).ok_or_else(|| {
+            TrivariateError::InvalidArgument(format!("model has no attribute {name:?}"))
+        })?;
+        Ok(crate::isosurface::control_range(s))
+    }
+
     /// Physical point at parameters `u ∈ [0, 1]^N`.
     ///
     /// # Errors

@@ -480,7 +480,7 @@ fn check_scalar(name: &str, s: &TensorBSpline<3>) -> Result<(), TrivariateError>
 }
 
 /// Smallest and largest Cartesian control value (first component).
-fn control_range(s: &TensorBSpline<3>) -> (f64, f64) {
+pub(crate) fn control_range<const N: usize>(s: &TensorBSpline<N>) -> (f64, f64) {
     let hd = s.homogeneous_dim();
     let rational = s.is_rational();
     s.homogeneous_coefficients()

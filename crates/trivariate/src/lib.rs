@@ -24,7 +24,9 @@
 //! * [`VolumeRenderer`] — front-to-back volume rendering of an attribute through
 //!   [`TransferFunction`]s ([`volrender`]).
 //! * [`trace_optical_path`] — bent rays through a refractive-index attribute (§5.3,
-//!   [`optics`]); [`grin_lens`] builds the gradient-index lens example ([`examples`]).
+//!   [`optics`]); [`grin_lens`] builds the gradient-index lens example ([`examples`]);
+//!   [`RayFan`]s of parallel rays, the measured back focal distance and the side view of the
+//!   paths ([`ray_fan`]).
 //!
 //! The spline machinery (knot vectors, bases, refinement, Greville interpolation) is
 //! `volmorph_spline`'s; this crate builds on it.
@@ -42,6 +44,7 @@ pub mod invert;
 pub mod isosurface;
 pub mod modeling;
 pub mod optics;
+pub mod ray_fan;
 pub mod raytrace;
 pub mod space_map;
 pub mod volrender;
@@ -61,6 +64,7 @@ pub use optics::{
     OpticalPath, OpticsOptions, PathMethod, draw_paths, refract, trace_optical_path,
     write_paths_obj,
 };
+pub use ray_fan::{RayFan, measured_back_focal_distance, side_view};
 pub use raytrace::{BoundaryHit, HitKind, RayTracer, TraceOptions, Tracked};
 pub use space_map::GeometryMap;
 pub use volrender::{RayColor, RenderOptions, TransferFunction, TransferPoint, VolumeRenderer};

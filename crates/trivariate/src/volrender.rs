@@ -159,6 +159,27 @@ impl TransferFunction {
         Self::new(pts)
     }
 
+    /// Opacity per unit length that [`TransferFunction::for_attribute`] rises to.
+    pub const DEFAULT_MAX_OPACITY: f64 = 0.9;
+
+    /// The default transfer function of attribute `attribute` of `model`: a viridis
+    /// [`ramp`](Self::ramp) over the attribute's range ([`AggregateVolume::attribute_range`])
+    /// with opacity rising to [`DEFAULT_MAX_OPACITY`](Self::DEFAULT_MAX_OPACITY); a constant
+    /// attribute gets a ramp one unit wide starting at its value.
+    ///
+    /// # Errors
+    /// [`TrivariateError::InvalidArgument`] for a missing attribute or a non-finite range.
+    pub fn for_attribute(
+        model: &AggregateVolume,
+        attribute: &str,
+    ) -> Result<Self, TrivariateError> {
+        let (lo, mut hi) = model.attribute_range(attribute)?;
+        if hi <= lo {
+            hi = lo + 1.0;
+        }
+        Self::ramp(lo, hi, Colormap::Viridis, Self::DEFAULT_MAX_OPACITY)
+    }
+
     /// The control points, sorted by value.
     #[must_use]
     pub fn points(&self) -> &[TransferPoint] {

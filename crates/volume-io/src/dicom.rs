@@ -50,10 +50,14 @@
 //! Writing DICOM is not supported (a DICOM file needs patient and study identity that a volume
 //! does not carry): write NIfTI, NRRD, MetaImage or `.vti`.
 
+use std::borrow::Borrow;
 use std::collections::BTreeMap;
 use std::path::{Path, PathBuf};
 
-use dicom_dictionary_std::tags;
+use dicom_core::VR;
+use dicom_core::dictionary::{DataDictionary, DataDictionaryEntry};
+use dicom_core::header::Header as _;
+use dicom_dictionary_std::{StandardDataDictionary, tags};
 use dicom_object::{DefaultDicomObject, InMemDicomObject, OpenFileOptions};
 use dicom_pixeldata::PixelDecoder;
 use glam::{DMat3, DVec3};
@@ -96,6 +100,77 @@ fn text(obj: &InMemDicomObject, tag: dicom_object::Tag) -> Option<String> {
     let s = obj.get(tag)?.to_str().ok()?;
     let s = s.trim_matches(|c: char| c == '\0' || c.is_whitespace());
     (!s.is_empty()).then(|| s.to_owned())
+}
+
+/// Give the top-level attributes of `obj` stored with VR `UN` ("unknown": what a file
+/// converted from implicit to explicit VR without a dictionary keeps, e.g. pydicom's
+/// `explicit_VR-UN.dcm`) the VR the standard dictionary has for their tag, decoding their
+/// bytes as that VR does: backslash-separated text for the string VRs, little-endian binary
+/// for `US`, `SS`, `UL`, `SL`, `FL`, `FD` (`UN` values keep the little-endian encoding they were
+/// read from, PS3.5 §6.2.2). Attributes with other VRs or unknown tags stay `UN`. Done once
+/// after opening, so every later look-up (and the pixel decoder's own) sees typed values.
+fn retype_un(obj: &mut InMemDicomObject) {
+    use dicom_core::{DataElement, PrimitiveValue};
+    let un: Vec<(dicom_object::Tag, Vec<u8>)> = obj
+        .iter()
+        .filter(|e| e.vr() == VR::UN)
+        .filter_map(|e| Some((e.tag(), e.to_bytes().ok()?.into_owned())))
+        .collect();
+    fn binary<const N: usize, T>(b: &[u8], f: impl Fn([u8; N]) -> T) -> Option<Vec<T>> {
+        b.len().is_multiple_of(N).then(|| {
+            b.chunks_exact(N)
+                .map(|c| f(c.try_into().unwrap_or([0; N])))
+                .collect()
+        })
+    }
+    for (tag, bytes) in un {
+        let Some(vr) = StandardDataDictionary.by_tag(tag).map(|e| e.vr().relaxed()) else {
+            continue;
+        };
+        let value =
+            match vr {
+                VR::AE
+                | VR::AS
+                | VR::CS
+                | VR::DA
+                | VR::DS
+                | VR::DT
+                | VR::IS
+                | VR::LO
+                | VR::LT
+                | VR::PN
+                | VR::SH
+                | VR::ST
+                | VR::TM
+                | VR::UC
+                | VR::UI
+                | VR::UR
+                | VR::UT => {
+                    let t = String::from_utf8_lossy(&bytes);
+                    let t = t.trim_end_matches(['\0', ' ']);
+                    Some(PrimitiveValue::Strs(
+                        t.split('\\').map(str::to_owned).collect(),
+                    ))
+                }
+                VR::US => binary::<2, _>(&bytes, u16::from_le_bytes)
+                    .map(|v| PrimitiveValue::U16(v.into())),
+                VR::SS => binary::<2, _>(&bytes, i16::from_le_bytes)
+                    .map(|v| PrimitiveValue::I16(v.into())),
+                VR::UL => binary::<4, _>(&bytes, u32::from_le_bytes)
+                    .map(|v| PrimitiveValue::U32(v.into())),
+                VR::SL => binary::<4, _>(&bytes, i32::from_le_bytes)
+                    .map(|v| PrimitiveValue::I32(v.into())),
+                VR::FL => binary::<4, _>(&bytes, f32::from_le_bytes)
+                    .map(|v| PrimitiveValue::F32(v.into())),
+                VR::FD => binary::<8, _>(&bytes, f64::from_le_bytes)
+                    .map(|v| PrimitiveValue::F64(v.into())),
+                _ => None,
+            }
+            .unwrap_or(PrimitiveValue::Empty);
+        if value != PrimitiveValue::Empty {
+            obj.put(DataElement::new(tag, vr, value));
+        }
+    }
 }
 
 /// The first item of sequence `seq` in `obj`.
@@ -252,16 +327,20 @@ struct Scanned {
 }
 
 fn open_header(path: &Path) -> Option<DefaultDicomObject> {
-    OpenFileOptions::new()
+    let mut obj = OpenFileOptions::new()
         .read_until(tags::PIXEL_DATA)
         .open_file(path)
-        .ok()
+        .ok()?;
+    retype_un(&mut obj);
+    Some(obj)
 }
 
 fn open_full(path: &Path) -> Result<DefaultDicomObject, VolumeError> {
-    OpenFileOptions::new()
+    let mut obj = OpenFileOptions::new()
         .open_file(path)
-        .map_err(|e| err(format!("{}: {e}", path.display())))
+        .map_err(|e| err(format!("{}: {e}", path.display())))?;
+    retype_un(&mut obj);
+    Ok(obj)
 }
 
 fn scan(path: &Path) -> Option<Scanned> {
@@ -365,13 +444,39 @@ pub(crate) fn read(path: &Path) -> Result<(AnyVolume, Header), VolumeError> {
 }
 
 fn read_series(series: &[Scanned]) -> Result<(AnyVolume, Header), VolumeError> {
-    let mut planes = Vec::with_capacity(series.len());
+    let names: Vec<String> = series
+        .iter()
+        .map(|s| s.path.display().to_string())
+        .collect();
+    let (volume, mut header) = read_slices(
+        &names,
+        |i| open_header(&series[i].path).ok_or_else(|| err(format!("{}: unreadable", names[i]))),
+        |i| open_full(&series[i].path),
+    )?;
+    header
+        .fields
+        .push(("files".into(), series.len().to_string()));
+    Ok((volume, header))
+}
+
+/// A stack of single-frame slices named `names`: `header(i)` opens slice `i` without its
+/// pixels, `full(i)` with them (one slice in memory at a time).
+fn read_slices<H, F>(
+    names: &[String],
+    header: impl Fn(usize) -> Result<H, VolumeError>,
+    full: impl Fn(usize) -> Result<F, VolumeError>,
+) -> Result<(AnyVolume, Header), VolumeError>
+where
+    H: Borrow<DefaultDicomObject>,
+    F: Borrow<DefaultDicomObject>,
+{
+    let mut planes = Vec::with_capacity(names.len());
     let mut format: Option<PixelFormat> = None;
-    let mut first: Option<DefaultDicomObject> = None;
-    for (i, s) in series.iter().enumerate() {
-        let what = s.path.display().to_string();
-        let obj = open_header(&s.path).ok_or_else(|| err(format!("{what}: unreadable")))?;
-        let pf = PixelFormat::of(&obj, &what)?;
+    let mut first: Option<H> = None;
+    for (i, what) in names.iter().enumerate() {
+        let h = header(i)?;
+        let obj: &DefaultDicomObject = h.borrow();
+        let pf = PixelFormat::of(obj, what)?;
         match format {
             None => format = Some(pf),
             Some(f) if f != pf => {
@@ -382,53 +487,82 @@ fn read_series(series: &[Scanned]) -> Result<(AnyVolume, Header), VolumeError> {
             Some(_) => {}
         }
         let (position, row_dir, col_dir, spacing) = plane_from(
-            &what,
-            floats(&obj, tags::IMAGE_ORIENTATION_PATIENT),
-            floats(&obj, tags::IMAGE_POSITION_PATIENT),
-            floats(&obj, tags::PIXEL_SPACING),
+            what,
+            floats(obj, tags::IMAGE_ORIENTATION_PATIENT),
+            floats(obj, tags::IMAGE_POSITION_PATIENT),
+            floats(obj, tags::PIXEL_SPACING),
         )?;
         planes.push(Plane {
             position,
             row_dir,
             col_dir,
             spacing,
-            slope: float(&obj, tags::RESCALE_SLOPE).unwrap_or(1.0),
-            intercept: float(&obj, tags::RESCALE_INTERCEPT).unwrap_or(0.0),
+            slope: float(obj, tags::RESCALE_SLOPE).unwrap_or(1.0) * dose_scaling(obj),
+            intercept: float(obj, tags::RESCALE_INTERCEPT).unwrap_or(0.0),
             file: i,
             frame: 0,
         });
         if first.is_none() {
-            first = Some(obj);
+            first = Some(h);
         }
     }
     let first = first.ok_or_else(|| err("empty series"))?;
+    let first: &DefaultDicomObject = first.borrow();
     let format = format.ok_or_else(|| err("empty series"))?;
-    let single_step = float(&first, tags::SPACING_BETWEEN_SLICES)
-        .or_else(|| float(&first, tags::SLICE_THICKNESS));
-    let paths: Vec<&Path> = series.iter().map(|s| s.path.as_path()).collect();
-    let (geometry, order) = assemble(&mut planes, single_step, &|p: &Plane| {
-        paths[p.file].display().to_string()
-    })?;
-    let mut header = summary(&first, &format, &planes, geometry);
-    header
-        .fields
-        .push(("files".into(), series.len().to_string()));
+    let single_step =
+        float(first, tags::SPACING_BETWEEN_SLICES).or_else(|| float(first, tags::SLICE_THICKNESS));
+    let (geometry, order) = assemble(&mut planes, single_step, &|p: &Plane| names[p.file].clone())?;
+    let header = summary(first, &format, &planes, geometry);
     // Decode slice by slice (one file at a time in memory).
     let volume = fill(&format, &planes, &order, geometry, |p: &Plane| {
-        let obj = open_full(paths[p.file])?;
-        decode_frame(&obj, &format, 0, &paths[p.file].display().to_string())
+        let obj = full(p.file)?;
+        decode_frame(obj.borrow(), &format, 0, &names[p.file])
     })?;
     Ok((volume, header))
 }
 
 fn read_multiframe(path: &Path) -> Result<(AnyVolume, Header), VolumeError> {
-    let what = path.display().to_string();
-    let obj = open_full(path)?;
-    let format = PixelFormat::of(&obj, &what)?;
-    let frames = int(&obj, tags::NUMBER_OF_FRAMES).unwrap_or(1).max(1);
+    read_multiframe_object(&open_full(path)?, &path.display().to_string())
+}
+
+/// Read one DICOM file held in memory (with or without the 128-byte preamble and `DICM`
+/// magic): a multi-frame file's frames, or a single slice as a one-slice volume (its slice
+/// step from `SpacingBetweenSlices` or `SliceThickness`, else 1). The in-memory entry point
+/// of the DICOM reader (fuzzing, files that are not on disk); a folder or a series needs
+/// [`crate::read`].
+///
+/// # Errors
+/// [`VolumeError::Format`] for bytes that are not a DICOM image, missing or inconsistent
+/// patient geometry, or undecodable pixel data; [`VolumeError::Unsupported`] for colour images,
+/// `BitsAllocated` other than 8, 16 or 32 and transfer syntaxes without a decoder;
+/// [`VolumeError::Io`] when the pixel matrix exceeds the memory budget.
+pub fn read_bytes(bytes: &[u8]) -> Result<(AnyVolume, Header), VolumeError> {
+    let what = "DICOM data";
+    let open = || {
+        OpenFileOptions::new()
+            .read_preamble(dicom_object::file::ReadPreamble::Auto)
+            .from_reader(bytes)
+            .map_err(|e| err(format!("{what}: {e}")))
+    };
+    let mut obj = open()?;
+    retype_un(&mut obj);
+    if int(&obj, tags::NUMBER_OF_FRAMES).unwrap_or(1) > 1 {
+        return read_multiframe_object(&obj, what);
+    }
+    let names = [what.to_owned()];
+    read_slices(&names, |_| Ok(&obj), |_| Ok(&obj))
+}
+
+fn read_multiframe_object(
+    obj: &DefaultDicomObject,
+    what: &str,
+) -> Result<(AnyVolume, Header), VolumeError> {
+    let what = what.to_owned();
+    let format = PixelFormat::of(obj, &what)?;
+    let frames = int(obj, tags::NUMBER_OF_FRAMES).unwrap_or(1).max(1);
     let frames =
         u32::try_from(frames).map_err(|_| err(format!("{what}: NumberOfFrames {frames}")))?;
-    let shared = item(&obj, tags::SHARED_FUNCTIONAL_GROUPS_SEQUENCE);
+    let shared = item(obj, tags::SHARED_FUNCTIONAL_GROUPS_SEQUENCE);
     let per_frame: &[InMemDicomObject] = obj
         .get(tags::PER_FRAME_FUNCTIONAL_GROUPS_SEQUENCE)
         .and_then(|e| e.items())
@@ -454,7 +588,8 @@ fn read_multiframe(path: &Path) -> Result<(AnyVolume, Header), VolumeError> {
     }
     let mut planes = Vec::with_capacity(frames as usize);
     let top_step =
-        float(&obj, tags::SPACING_BETWEEN_SLICES).or_else(|| float(&obj, tags::SLICE_THICKNESS));
+        float(obj, tags::SPACING_BETWEEN_SLICES).or_else(|| float(obj, tags::SLICE_THICKNESS));
+    let grid_offsets = grid_frame_offsets(obj, frames as usize, &what)?;
     for f in 0..frames as usize {
         let fw = format!("{what} frame {}", f + 1);
         let (ipp, iop, ps, slope, inter) = if enhanced {
@@ -464,44 +599,52 @@ fn read_multiframe(path: &Path) -> Result<(AnyVolume, Header), VolumeError> {
                     tags::PLANE_POSITION_SEQUENCE,
                     tags::IMAGE_POSITION_PATIENT,
                 )
-                .or_else(|| floats(&obj, tags::IMAGE_POSITION_PATIENT)),
+                .or_else(|| floats(obj, tags::IMAGE_POSITION_PATIENT)),
                 fg(
                     f,
                     tags::PLANE_ORIENTATION_SEQUENCE,
                     tags::IMAGE_ORIENTATION_PATIENT,
                 )
-                .or_else(|| floats(&obj, tags::IMAGE_ORIENTATION_PATIENT)),
+                .or_else(|| floats(obj, tags::IMAGE_ORIENTATION_PATIENT)),
                 fg(f, tags::PIXEL_MEASURES_SEQUENCE, tags::PIXEL_SPACING)
-                    .or_else(|| floats(&obj, tags::PIXEL_SPACING)),
+                    .or_else(|| floats(obj, tags::PIXEL_SPACING)),
                 fg(
                     f,
                     tags::PIXEL_VALUE_TRANSFORMATION_SEQUENCE,
                     tags::RESCALE_SLOPE,
                 )
                 .and_then(|v| v.first().copied())
-                .or_else(|| float(&obj, tags::RESCALE_SLOPE)),
+                .or_else(|| float(obj, tags::RESCALE_SLOPE)),
                 fg(
                     f,
                     tags::PIXEL_VALUE_TRANSFORMATION_SEQUENCE,
                     tags::RESCALE_INTERCEPT,
                 )
                 .and_then(|v| v.first().copied())
-                .or_else(|| float(&obj, tags::RESCALE_INTERCEPT)),
+                .or_else(|| float(obj, tags::RESCALE_INTERCEPT)),
             )
         } else {
-            // Classic multi-frame: frames stepped along the normal from the top-level position.
-            let iop = floats(&obj, tags::IMAGE_ORIENTATION_PATIENT);
-            let ipp = floats(&obj, tags::IMAGE_POSITION_PATIENT);
-            let step = top_step.ok_or_else(|| {
-                err(format!(
-                    "{what}: a multi-frame image without functional groups needs \
-                     SpacingBetweenSlices or SliceThickness to place its frames"
-                ))
-            })?;
+            // Classic multi-frame: frames placed along the normal from the top-level position,
+            // by the RT Dose GridFrameOffsetVector or stepped by the slice spacing.
+            let iop = floats(obj, tags::IMAGE_ORIENTATION_PATIENT);
+            let ipp = floats(obj, tags::IMAGE_POSITION_PATIENT);
+            let offset = match &grid_offsets {
+                Some(v) => v[f] - v[0],
+                None => {
+                    let step = top_step.ok_or_else(|| {
+                        err(format!(
+                            "{what}: a multi-frame image without functional groups needs \
+                             GridFrameOffsetVector, SpacingBetweenSlices or SliceThickness \
+                             to place its frames"
+                        ))
+                    })?;
+                    step * f as f64
+                }
+            };
             let ipp = match (&iop, ipp) {
                 (Some(o), Some(p)) if o.len() == 6 && p.len() == 3 => {
                     let n = DVec3::new(o[0], o[1], o[2]).cross(DVec3::new(o[3], o[4], o[5]));
-                    let q = DVec3::new(p[0], p[1], p[2]) + n.normalize_or_zero() * step * f as f64;
+                    let q = DVec3::new(p[0], p[1], p[2]) + n.normalize_or_zero() * offset;
                     Some(q.to_array().to_vec())
                 }
                 (_, p) => p,
@@ -509,18 +652,19 @@ fn read_multiframe(path: &Path) -> Result<(AnyVolume, Header), VolumeError> {
             (
                 ipp,
                 iop,
-                floats(&obj, tags::PIXEL_SPACING),
-                float(&obj, tags::RESCALE_SLOPE),
-                float(&obj, tags::RESCALE_INTERCEPT),
+                floats(obj, tags::PIXEL_SPACING),
+                float(obj, tags::RESCALE_SLOPE),
+                float(obj, tags::RESCALE_INTERCEPT),
             )
         };
+        let slope = slope.unwrap_or(1.0) * dose_scaling(obj);
         let (position, row_dir, col_dir, spacing) = plane_from(&fw, iop, ipp, ps)?;
         planes.push(Plane {
             position,
             row_dir,
             col_dir,
             spacing,
-            slope: slope.unwrap_or(1.0),
+            slope,
             intercept: inter.unwrap_or(0.0),
             file: 0,
             frame: f as u32,
@@ -532,20 +676,54 @@ fn read_multiframe(path: &Path) -> Result<(AnyVolume, Header), VolumeError> {
     let (geometry, order) = assemble(&mut planes, single_step, &|p: &Plane| {
         format!("{what} frame {}", p.frame + 1)
     })?;
-    let mut header = summary(&obj, &format, &planes, geometry);
+    let mut header = summary(obj, &format, &planes, geometry);
     header.fields.push(("frames".into(), frames.to_string()));
     // Check the decoded size before decoding everything.
     volmorph_io::checked_len(
         &[format.cols, format.rows, frames as usize],
         usize::from(format.bits_allocated / 8),
     )?;
+    check_decodable(obj, &format, &what)?;
     let decoded = obj
         .decode_pixel_data()
         .map_err(|e| pixel_error(&what, &e.to_string()))?;
+    let swapped = halves_swapped(obj, &format);
     let volume = fill(&format, &planes, &order, geometry, |p: &Plane| {
-        frame_values(&decoded, &format, p.frame, &what)
+        frame_values(&decoded, &format, p.frame, &what, swapped)
     })?;
     Ok((volume, header))
+}
+
+/// `DoseGridScaling` (RT Dose, PS3.3 C.8.8.3): the factor from stored values to dose in Gy,
+/// applied like a rescale slope; 1 for other images.
+fn dose_scaling(obj: &InMemDicomObject) -> f64 {
+    float(obj, tags::DOSE_GRID_SCALING)
+        .filter(|s| s.is_finite() && *s != 0.0)
+        .unwrap_or(1.0)
+}
+
+/// The RT Dose `GridFrameOffsetVector` (PS3.3 C.8.8.3.2) of a multi-frame file with `frames`
+/// frames: the frames' offsets along the slice normal. Whether the vector is relative (its
+/// first element 0) or absolute (its first element the z of `ImagePositionPatient`, axial
+/// doses only), frame `f` lies at `ImagePositionPatient + n · (v[f] − v[0])`.
+///
+/// # Errors
+/// A vector whose length is not the frame count, or that is not finite.
+fn grid_frame_offsets(
+    obj: &InMemDicomObject,
+    frames: usize,
+    what: &str,
+) -> Result<Option<Vec<f64>>, VolumeError> {
+    let Some(v) = floats(obj, tags::GRID_FRAME_OFFSET_VECTOR) else {
+        return Ok(None);
+    };
+    if v.len() != frames || v.iter().any(|x| !x.is_finite()) {
+        return Err(err(format!(
+            "{what}: GridFrameOffsetVector holds {} values for {frames} frames",
+            v.len()
+        )));
+    }
+    Ok(Some(v))
 }
 
 fn pixel_error(what: &str, e: &str) -> VolumeError {
@@ -562,10 +740,43 @@ fn decode_frame(
     frame: u32,
     what: &str,
 ) -> Result<Vec<i64>, VolumeError> {
+    check_decodable(obj, format, what)?;
     let decoded = obj
         .decode_pixel_data()
         .map_err(|e| pixel_error(what, &e.to_string()))?;
-    frame_values(&decoded, format, frame, what)
+    frame_values(&decoded, format, frame, what, halves_swapped(obj, format))
+}
+
+/// Refuse, as unsupported, pixel data that the dicom-rs decoders do not decode: RLE Lossless
+/// with 32-bit samples (its decoder reads 8 and 16 bits; PS3.5 Annex G allows 32).
+fn check_decodable(
+    obj: &DefaultDicomObject,
+    format: &PixelFormat,
+    what: &str,
+) -> Result<(), VolumeError> {
+    const RLE_LOSSLESS: &str = "1.2.840.10008.1.2.5";
+    let syntax = obj.meta().transfer_syntax().trim_end_matches(['\0', ' ']);
+    if syntax == RLE_LOSSLESS && format.bits_allocated == 32 {
+        return Err(VolumeError::Unsupported(format!(
+            "{what}: RLE Lossless pixel data with BitsAllocated 32 (the RLE decoder reads 8 and \
+             16 bits); convert the file to an uncompressed transfer syntax"
+        )));
+    }
+    Ok(())
+}
+
+/// Whether the decoded bytes of 32-bit pixels have their 16-bit halves swapped: an explicit VR
+/// big endian file whose `PixelData` has VR `OW` is parsed as native 16-bit words (PS3.5
+/// §8.2: `OW` is byte-swapped per word), so each 32-bit value arrives as its high word then its
+/// low word, each little-endian. (`OL` data and little-endian files come out in order.)
+fn halves_swapped(obj: &DefaultDicomObject, format: &PixelFormat) -> bool {
+    use dicom_core::value::{PrimitiveValue, Value};
+    const EXPLICIT_VR_BIG_ENDIAN: &str = "1.2.840.10008.1.2.2";
+    format.bits_allocated == 32
+        && obj.meta().transfer_syntax().trim_end_matches(['\0', ' ']) == EXPLICIT_VR_BIG_ENDIAN
+        && obj
+            .element(tags::PIXEL_DATA)
+            .is_ok_and(|e| matches!(e.value(), Value::Primitive(PrimitiveValue::U16(_))))
 }
 
 fn frame_values(
@@ -573,6 +784,7 @@ fn frame_values(
     format: &PixelFormat,
     frame: u32,
     what: &str,
+    halves_swapped: bool,
 ) -> Result<Vec<i64>, VolumeError> {
     let bytes = decoded
         .frame_data(frame)
@@ -580,6 +792,13 @@ fn frame_values(
     let n = format.rows * format.cols;
     if bytes.len() < n * usize::from(format.bits_allocated / 8) {
         return Err(err(format!("{what}: pixel data truncated")));
+    }
+    if halves_swapped {
+        let mut fixed = bytes[..4 * n].to_vec();
+        for v in fixed.chunks_exact_mut(4) {
+            v.rotate_left(2);
+        }
+        return Ok((0..n).map(|k| format.value(&fixed, k)).collect());
     }
     Ok((0..n).map(|k| format.value(bytes, k)).collect())
 }

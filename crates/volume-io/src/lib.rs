@@ -168,6 +168,13 @@ pub struct ReadOptions {
     /// and refuses a file with more, naming how many it holds, so a time series is never
     /// silently cut to its first volume. Files with one frame accept `Some(0)`.
     pub frame: Option<usize>,
+    /// The frame to read from a file holding several when [`ReadOptions::frame`] is `None`:
+    /// the command line's global `--frame N`, applied to every volume a command reads. A file
+    /// with a single frame is read as it is (so a 3-D reference grid beside a 4-D series
+    /// needs nothing); a file with several but not this one is refused. `None` (the default,
+    /// unless changed for the process with [`set_frame_default`]) refuses files with several
+    /// frames, as [`ReadOptions::frame`] does.
+    pub default_frame: Option<usize>,
 }
 
 static ALLOW_EXTERNAL_DEFAULT: std::sync::atomic::AtomicBool =
@@ -179,12 +186,68 @@ pub fn set_allow_external_data_default(allow: bool) {
     ALLOW_EXTERNAL_DEFAULT.store(allow, std::sync::atomic::Ordering::Relaxed);
 }
 
+/// No process-wide frame (see [`set_frame_default`]).
+const NO_FRAME: usize = usize::MAX;
+
+static FRAME_DEFAULT: std::sync::atomic::AtomicUsize =
+    std::sync::atomic::AtomicUsize::new(NO_FRAME);
+
+/// Set [`ReadOptions::default_frame`] in [`ReadOptions::default`] (and so in [`read`], the
+/// read of every command, the scene's imports and the registration pipeline) for the rest of
+/// the process: the command line's global `--frame N`.
+pub fn set_frame_default(frame: Option<usize>) {
+    FRAME_DEFAULT.store(
+        frame.unwrap_or(NO_FRAME),
+        std::sync::atomic::Ordering::Relaxed,
+    );
+}
+
+/// The frame set by [`set_frame_default`], if any.
+#[must_use]
+pub fn frame_default() -> Option<usize> {
+    let f = FRAME_DEFAULT.load(std::sync::atomic::Ordering::Relaxed);
+    (f != NO_FRAME).then_some(f)
+}
+
 impl Default for ReadOptions {
     fn default() -> Self {
         Self {
             allow_external_data: ALLOW_EXTERNAL_DEFAULT.load(std::sync::atomic::Ordering::Relaxed),
             frame: None,
+            default_frame: frame_default(),
         }
+    }
+}
+
+/// Which 3-D frame of a file a reader returns (from [`ReadOptions::frame`] and
+/// [`ReadOptions::default_frame`]).
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
+pub enum FrameChoice {
+    /// The file must hold a single frame; a file with several is refused, naming how many.
+    #[default]
+    Single,
+    /// This frame; a file that does not hold it is refused.
+    Exactly(usize),
+    /// This frame of a file holding several; a file with a single frame is read as it is.
+    OfSeries(usize),
+}
+
+impl FrameChoice {
+    /// The choice [`read_with`] makes for `options`.
+    #[must_use]
+    pub fn of(options: &ReadOptions) -> Self {
+        match (options.frame, options.default_frame) {
+            (Some(f), _) => Self::Exactly(f),
+            (None, Some(f)) => Self::OfSeries(f),
+            (None, None) => Self::Single,
+        }
+    }
+}
+
+impl From<Option<usize>> for FrameChoice {
+    /// `Some(f)` is [`FrameChoice::Exactly`], `None` is [`FrameChoice::Single`].
+    fn from(frame: Option<usize>) -> Self {
+        frame.map_or(Self::Single, Self::Exactly)
     }
 }
 
@@ -210,25 +273,31 @@ pub struct VolumeFile {
     pub frame: usize,
 }
 
-/// The frame to read from a file holding `frames` 3-D frames (see [`ReadOptions::frame`]).
+/// The frame to read from a file holding `frames` 3-D frames (see [`FrameChoice`]).
 ///
 /// # Errors
 /// [`VolumeError::InvalidArgument`] for a frame past the end, or no frame for a file with
 /// several.
-pub(crate) fn choose_frame(frame: Option<usize>, frames: usize) -> Result<usize, VolumeError> {
-    match frame {
-        Some(f) if f < frames => Ok(f),
-        Some(f) => Err(VolumeError::InvalidArgument(format!(
-            "frame {f} does not exist: the file holds {frames} frame{} (0 to {})",
-            if frames == 1 { "" } else { "s" },
-            frames.saturating_sub(1)
-        ))),
-        None if frames > 1 => Err(VolumeError::InvalidArgument(format!(
+pub(crate) fn choose_frame(
+    choice: impl Into<FrameChoice>,
+    frames: usize,
+) -> Result<usize, VolumeError> {
+    match choice.into() {
+        FrameChoice::OfSeries(_) if frames <= 1 => Ok(0),
+        FrameChoice::Exactly(f) | FrameChoice::OfSeries(f) if f < frames => Ok(f),
+        FrameChoice::Exactly(f) | FrameChoice::OfSeries(f) => {
+            Err(VolumeError::InvalidArgument(format!(
+                "frame {f} does not exist: the file holds {frames} frame{} (0 to {})",
+                if frames == 1 { "" } else { "s" },
+                frames.saturating_sub(1)
+            )))
+        }
+        FrameChoice::Single if frames > 1 => Err(VolumeError::InvalidArgument(format!(
             "this 4-D image holds {frames} frames; choose one with --frame N \
              (ReadOptions::frame), 0 to {}",
             frames - 1
         ))),
-        None => Ok(0),
+        FrameChoice::Single => Ok(0),
     }
 }
 
@@ -271,28 +340,26 @@ pub fn read_with(path: &Path, options: &ReadOptions) -> Result<VolumeFile, Volum
         Err(_) if dicom::has_dicom_magic(path) => Format::Dicom,
         f => f?,
     };
+    let choice = FrameChoice::of(options);
     let single = |r: Result<(AnyVolume, Header), VolumeError>| {
         let (v, h) = r?;
-        match options.frame {
-            None | Some(0) => Ok((v, h, 1)),
-            Some(f) => Err(VolumeError::InvalidArgument(format!(
-                "frame {f} does not exist: the file holds a single 3-D volume (frame 0)"
-            ))),
-        }
+        choose_frame(choice, 1)?;
+        Ok((v, h, 1))
     };
     let res = match format {
-        Format::Nifti => nifti::read(path, options.frame),
+        Format::Nifti => nifti::read(path, choice),
         Format::MetaImage => single(metaimage::read(path, options)),
         Format::Nrrd => single(nrrd::read(path, options)),
         Format::Vtk => single(vtk::read(path)),
         Format::Vti => single(vti::read(path)),
-        Format::Mgh => mgh::read(path, options.frame),
+        Format::Mgh => mgh::read(path, choice),
         Format::Dicom => single(dicom::read(path)),
         Format::Raw => Err(VolumeError::Unsupported(
             "a .raw file has no header: give its dims and voxel type (raw::RawSpec)".into(),
         )),
     };
     let (mut volume, header, frames) = res.map_err(|e| e.at(path))?;
+    let frame = choose_frame(choice, frames).map_err(|e| e.at(path))?;
     let mut g = *volume.geometry();
     g.direction = snap_direction(g.direction);
     volume.set_geometry(g).map_err(|e| e.at(path))?;
@@ -301,7 +368,7 @@ pub fn read_with(path: &Path, options: &ReadOptions) -> Result<VolumeFile, Volum
         format,
         header,
         frames,
-        frame: options.frame.unwrap_or(0),
+        frame,
     })
 }
 

@@ -210,7 +210,7 @@ fn parse(bytes: &[u8]) -> Result<Mgh, VolumeError> {
 /// Read frame `frame` of an MGH stream positioned at byte 0.
 fn read_stream<R: Read>(
     r: &mut R,
-    frame: Option<usize>,
+    frame: impl Into<crate::FrameChoice>,
 ) -> Result<(AnyVolume, Header, usize), VolumeError> {
     let mut head = Vec::with_capacity(DATA_OFFSET);
     r.by_ref()
@@ -277,7 +277,7 @@ pub fn read_bytes(
 
 pub(crate) fn read(
     path: &Path,
-    frame: Option<usize>,
+    frame: crate::FrameChoice,
 ) -> Result<(AnyVolume, Header, usize), VolumeError> {
     let os = os_err(path);
     let mut br = BufReader::with_capacity(1 << 20, File::open(path).map_err(os)?);
@@ -372,7 +372,7 @@ mod tests {
         for name in ["a.mgh", "a.mgz"] {
             let p = dir.path().join(name);
             write(&p, &v, &WriteOptions::default()).unwrap();
-            let (back, _, frames) = read(&p, None).unwrap();
+            let (back, _, frames) = read(&p, crate::FrameChoice::Single).unwrap();
             assert_eq!(frames, 1);
             assert_eq!(back.as_bytes(), v.as_bytes());
             let b = back.geometry();

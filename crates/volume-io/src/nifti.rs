@@ -1728,7 +1728,7 @@ where
 fn read_stream<R: Read>(
     r: &mut R,
     file_len: Option<u64>,
-    frame: Option<usize>,
+    frame: impl Into<crate::FrameChoice>,
 ) -> Result<(AnyVolume, Header, usize), VolumeError> {
     let mut hb = [0u8; HEADER2_SIZE];
     let mut got = fill(r, &mut hb[..HEADER_SIZE], "header")?;
@@ -1822,7 +1822,7 @@ pub fn read_bytes(bytes: &[u8]) -> Result<(AnyVolume, Header), VolumeError> {
 /// Read a `.nii` or `.nii.gz` file (gzip detected by magic number).
 pub(crate) fn read(
     path: &Path,
-    frame: Option<usize>,
+    frame: crate::FrameChoice,
 ) -> Result<(AnyVolume, Header, usize), VolumeError> {
     let os = crate::text_header::os_err(path);
     let file = volmorph_io::open_regular(path)?;
@@ -2100,7 +2100,7 @@ mod tests {
         let dir = tempfile::tempdir().unwrap();
         let p = dir.path().join("long.nii.gz");
         write(&p, &v, &WriteOptions::default()).unwrap();
-        let (back, h, frames) = read(&p, None).unwrap();
+        let (back, h, frames) = read(&p, crate::FrameChoice::Single).unwrap();
         assert_eq!(frames, 1);
         assert_eq!(back.as_bytes(), v.as_bytes());
         let size = h.fields.iter().find(|(k, _)| k == "sizeof_hdr").unwrap();

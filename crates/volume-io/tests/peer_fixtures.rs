@@ -4,6 +4,8 @@
 //! 3.0 (see its docstring), and `expected.json` holds each peer's own reading — geometry in
 //! ITK/LPS convention (direction row-major), every voxel value in x-fastest order.
 
+mod common;
+
 use std::path::{Path, PathBuf};
 
 use volmorph_volume::direction::orthonormality_deviation;
@@ -147,6 +149,32 @@ fn four_d_nifti_frames_match_nibabel() {
     assert!(e.to_string().contains("frame 3 does not exist"), "{e}");
 }
 
+/// `ReadOptions::default_frame` (the command line's global `--frame`) picks the frame of a
+/// series, reads a 3-D file as it is, and refuses a series without that frame; an explicit
+/// `frame` is strict even for a 3-D file.
+#[test]
+fn default_frame_reads_series_frames_and_leaves_3d_files_alone() {
+    let series = corpus().join("nibabel_4d.nii.gz");
+    let single = corpus().join("nibabel_4d_frame1.nii.gz");
+    let with = |default_frame, frame| ReadOptions {
+        frame,
+        default_frame,
+        ..ReadOptions::default()
+    };
+    let f = format::read_with(&series, &with(Some(1), None)).unwrap();
+    assert_eq!((f.frame, f.frames), (1, 3));
+    let alone = format::read(&single).unwrap();
+    assert_eq!(f.volume.as_bytes(), alone.as_bytes());
+    assert_eq!(f.volume.geometry(), alone.geometry());
+    let g = format::read_with(&single, &with(Some(2), None)).unwrap();
+    assert_eq!((g.frame, g.frames), (0, 1));
+    assert_eq!(g.volume.as_bytes(), alone.as_bytes());
+    let e = format::read_with(&series, &with(Some(3), None)).unwrap_err();
+    assert!(e.to_string().contains("frame 3 does not exist"), "{e}");
+    let e = format::read_with(&single, &with(None, Some(2))).unwrap_err();
+    assert!(e.to_string().contains("frame 2 does not exist"), "{e}");
+}
+
 #[test]
 fn vti_in_every_vtk_layout_matches_vtk() {
     check_prefix("vtk_");
@@ -172,6 +200,91 @@ fn enhanced_multiframe_dicom_matches_pydicom() {
     check_prefix("pydicom_enhanced_ct.dcm");
 }
 
+/// RT Dose frames are placed by `GridFrameOffsetVector` (here absolute, its first element the
+/// z of `ImagePositionPatient`) and scaled to Gy by `DoseGridScaling`. Regression: such files
+/// were refused ("needs SpacingBetweenSlices or SliceThickness") or read unscaled.
+#[test]
+fn rtdose_grid_frame_offsets_and_dose_scaling_match_pydicom() {
+    check_prefix("pydicom_rtdose.dcm");
+}
+
+/// Regression: 32-bit pixels of an explicit VR big endian file were read with their bytes
+/// in the wrong order.
+#[test]
+fn big_endian_rtdose_values_match_pydicom() {
+    check_prefix("pydicom_rtdose_be_1frame.dcm");
+}
+
+/// Regression: geometry attributes stored with VR UN ("no ImageOrientationPatient") were
+/// not found; they are read as their dictionary VR.
+#[test]
+fn attributes_stored_with_vr_un_are_read_by_their_dictionary_vr() {
+    check_prefix("pydicom_un_vr.dcm");
+}
+
+/// The in-memory DICOM entry point reads a multi-frame file and a single slice as the path
+/// reader does.
+#[test]
+fn dicom_bytes_read_as_the_file() {
+    for f in [
+        "pydicom_enhanced_ct.dcm",
+        "pydicom_rtdose.dcm",
+        "pydicom_un_vr.dcm",
+    ] {
+        let p = corpus().join(f);
+        let (v, _) = format::dicom::read_bytes(&std::fs::read(&p).unwrap()).unwrap();
+        let w = format::read(&p).unwrap();
+        assert_eq!(v.as_bytes(), w.as_bytes(), "{f}");
+        assert_eq!(v.geometry().dims, w.geometry().dims, "{f}");
+        let d = (v.geometry().origin - w.geometry().origin).length();
+        assert!(d < 1e-12, "{f}");
+    }
+}
+
+fn seeds(names: &[&str]) -> Vec<Vec<u8>> {
+    names
+        .iter()
+        .map(|n| std::fs::read(corpus().join(n)).unwrap())
+        .collect()
+}
+
+/// Mutation fuzzing of the VTK XML reader from VTK-written seeds: every corrupted file gives
+/// an error or a valid volume, never a panic.
+#[test]
+fn mutated_vti_files_never_panic() {
+    common::assert_mutations_never_panic(
+        format::vti::read_bytes,
+        &seeds(&[
+            "vtk_ascii.vti",
+            "vtk_appended_raw_zlib.vti",
+            "vtk_binary.vti",
+        ]),
+    );
+}
+
+/// Mutation fuzzing of the MGH reader from nibabel-written seeds.
+#[test]
+fn mutated_mgz_files_never_panic() {
+    common::assert_mutations_never_panic(
+        |b| format::mgh::read_bytes(b, Some(0)).map(|(v, h, _)| (v, h)),
+        &seeds(&["nibabel_f32.mgz", "nibabel_oblique_u8.mgz"]),
+    );
+}
+
+/// Mutation fuzzing of the DICOM reader from pydicom- and SimpleITK-written seeds.
+#[test]
+fn mutated_dicom_files_never_panic() {
+    common::assert_mutations_never_panic(
+        format::dicom::read_bytes,
+        &seeds(&[
+            "pydicom_enhanced_ct.dcm",
+            "pydicom_rtdose.dcm",
+            "pydicom_un_vr.dcm",
+            "sitk_ct_series/slice0.dcm",
+        ]),
+    );
+}
+
 #[test]
 fn every_fixture_is_checked() {
     let covered = [
@@ -184,6 +297,9 @@ fn every_fixture_is_checked() {
         "nibabel_f32.mgz",
         "sitk_ct_series",
         "pydicom_enhanced_ct.dcm",
+        "pydicom_rtdose.dcm",
+        "pydicom_rtdose_be_1frame.dcm",
+        "pydicom_un_vr.dcm",
     ];
     for key in expected().keys() {
         assert!(

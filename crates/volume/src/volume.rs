@@ -344,6 +344,28 @@ impl AnyVolume {
         with_volume!(self, v => v.cast::<U>())
     }
 
+    /// Largest absolute difference `|a − b|` between corresponding voxels of `self` and
+    /// `other`, both read as `f64` (any voxel types); differences that are NaN (a NaN voxel
+    /// on either side) are skipped. 0 for identical volumes. Geometry other than the dims is
+    /// not compared.
+    ///
+    /// # Errors
+    /// [`VolumeError::InvalidArgument`] when the dims differ.
+    pub fn max_abs_difference(&self, other: &AnyVolume) -> Result<f64, VolumeError> {
+        let (da, db) = (self.geometry().dims, other.geometry().dims);
+        if da != db {
+            return Err(VolumeError::InvalidArgument(format!(
+                "cannot compare volumes of {da:?} and {db:?} voxels"
+            )));
+        }
+        Ok(with_volume!(self, a => with_volume!(other, b => a
+            .data()
+            .iter()
+            .zip(b.data())
+            .map(|(&x, &y)| (x.to_f64() - y.to_f64()).abs())
+            .fold(0.0, f64::max))))
+    }
+
     /// Convert to another run-time type, optionally through `v·slope + inter`.
     #[must_use]
     pub fn cast(&self, to: VoxelType, slope: f64, inter: f64) -> AnyVolume {
@@ -440,6 +462,25 @@ mod tests {
             })
         ));
         assert!(Volume::new(Geometry::new([2, 0, 4]), Vec::<u8>::new()).is_err());
+    }
+
+    #[test]
+    fn max_abs_difference_compares_across_voxel_types() {
+        let g = Geometry::new([3, 2, 2]);
+        let a = AnyVolume::from(Volume::from_fn(g, |i, j, k| (i + 3 * j + 6 * k) as u8).unwrap());
+        let mut data: Vec<f32> = (0..12).map(|i| i as f32).collect();
+        let same = AnyVolume::from(Volume::new(g, data.clone()).unwrap());
+        assert_eq!(a.max_abs_difference(&same).unwrap(), 0.0);
+        data[7] = 9.5;
+        data[2] = f32::NAN;
+        let b = AnyVolume::from(Volume::new(g, data).unwrap());
+        assert_eq!(a.max_abs_difference(&b).unwrap(), 2.5);
+        assert_eq!(b.max_abs_difference(&a).unwrap(), 2.5);
+        let other = AnyVolume::from(Volume::new(Geometry::new([2, 3, 2]), vec![0u8; 12]).unwrap());
+        assert!(matches!(
+            a.max_abs_difference(&other),
+            Err(VolumeError::InvalidArgument(_))
+        ));
     }
 
     #[test]

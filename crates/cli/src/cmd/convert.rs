@@ -37,9 +37,6 @@ pub struct Args {
     /// Compression level 0-9.
     #[arg(long, default_value_t = 6, value_parser = clap::value_parser!(u32).range(0..=9))]
     pub level: u32,
-    /// Frame of a 4-D input to convert (0-based); required when the input holds several.
-    #[arg(long, value_name = "N")]
-    pub frame: Option<usize>,
     /// For a .raw input: dims "NX,NY,NZ".
     #[arg(long, value_name = "NX,NY,NZ")]
     pub raw_dims: Option<String>,
@@ -102,7 +99,8 @@ fn read_input(args: &Args) -> anyhow::Result<AnyVolume> {
     let is_raw = format::Format::from_path(&args.input).ok() == Some(format::Format::Raw);
     if !is_raw {
         let options = format::ReadOptions {
-            frame: args.frame,
+            // The global --frame, strictly: a 3-D input has no frame 3.
+            frame: format::frame_default(),
             ..format::ReadOptions::default()
         };
         return format::read_with(&args.input, &options)

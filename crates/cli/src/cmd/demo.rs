@@ -24,10 +24,9 @@ use anyhow::{Context, bail};
 use clap::ValueEnum as _;
 use glam::DVec3;
 use volmorph_deform::SpaceMap;
-use volmorph_lattice::manipulate::DragOptions;
-use volmorph_maps::AnyMap;
 use volmorph_render::{Colormap, Window};
-use volmorph_scene::{Command, NewObject, ObjectId, Recipe, Scene, SurfaceMethod};
+use volmorph_scene::teapot::{DEMO_LATTICE_COUNTS, SPOUT_TARGET};
+use volmorph_scene::{Command, NewObject, ObjectId, Recipe, Scene, SurfaceMethod, TeapotSession};
 use volmorph_volume::phantom::{self, Phantom};
 use volmorph_volume::slice::{self, Axis, SlicePosition};
 use volmorph_volume::{AnyVolume, Volume};
@@ -57,15 +56,8 @@ pub struct Args {
     pub picture: (u32, u32),
 }
 
-/// Control points per axis of the demo lattice (True's Fig. 8 layout: 6 × 6 × 6 regions).
-const LATTICE_COUNTS: [usize; 3] = [9, 9, 9];
-/// The spout tip of the built-in teapot (model units) and where the drag takes it: down and
-/// a little outwards, as in True's Fig. 10.
+/// The spout tip of the built-in teapot (model units), grabbed by the session's drag.
 const SPOUT_TIP: DVec3 = phantom::TEAPOT_SPOUT_TIP;
-const SPOUT_TARGET: DVec3 = DVec3::new(0.85, 0.0, 0.04);
-/// Radius of the drag tool (model units): control points farther than this from a dragged
-/// point stay where they are.
-const TOOL_RADIUS: f64 = 0.45;
 /// Isovalue of the u8 density models.
 const LEVEL: f64 = 127.0;
 
@@ -128,12 +120,25 @@ fn warp_demo(args: &Args, index: &mut String, timings: &mut Timings) -> anyhow::
     let source: Volume<u8> = timings.time("teapot density volume", || {
         phantom::density(Phantom::Teapot, [n; 3])
     })?;
-    let grid = *source.geometry();
-    let lattice = volmorph_lattice::BSplineLattice::identity_on_voxels(&grid, LATTICE_COUNTS)?;
+    let lattice = volmorph_lattice::BSplineLattice::identity_on_voxels(
+        source.geometry(),
+        DEMO_LATTICE_COUNTS,
+    )?;
 
     // The scene: the teapot, its lattice, and what is derived from them — the warped volume
     // (kept up to date incrementally), the isosurfaces before and after, and the Jacobian.
-    let mut scene = Scene::new();
+    pb.set_message("initial push-forward");
+    let session = timings.time("initial antialiased push-forward (identity)", || {
+        TeapotSession::with(source.clone(), lattice)
+    })?;
+    let drag = session.spout_drag();
+    let TeapotSession {
+        mut scene,
+        teapot: t,
+        lattice: l,
+        warped,
+        grid,
+    } = session;
     let add = |scene: &mut Scene, name: &str, object| -> anyhow::Result<ObjectId> {
         let change = scene.apply(Command::Add {
             name: name.into(),
@@ -144,31 +149,6 @@ fn warp_demo(args: &Args, index: &mut String, timings: &mut Timings) -> anyhow::
         }
         Ok(change.added[0])
     };
-    let t = add(
-        &mut scene,
-        "teapot",
-        NewObject::Volume(source.clone().into()),
-    )?;
-    let l = add(
-        &mut scene,
-        "lattice",
-        NewObject::Map(AnyMap::Lattice(lattice)),
-    )?;
-    pb.set_message("initial push-forward");
-    let warped = timings.time("initial antialiased push-forward (identity)", || {
-        add(
-            &mut scene,
-            "teapot warped",
-            NewObject::Derived(Recipe::Warp {
-                source: t,
-                map: l,
-                method: WarpMethod::PushforwardAntialiased,
-                background: 0.0,
-                sampled_nodes: None,
-                swap_handles: false,
-            }),
-        )
-    })?;
     pb.set_message("isosurfaces and Jacobian");
     let iso = |volume| {
         NewObject::Derived(Recipe::Isosurface {
@@ -191,14 +171,7 @@ fn warp_demo(args: &Args, index: &mut String, timings: &mut Timings) -> anyhow::
     pb.set_message("dragging the spout");
     let change = timings.time(
         "drag: least-norm solve, incremental warp, surface, Jacobian",
-        || {
-            scene.apply(Command::DragPoints {
-                map: l,
-                grabbed: vec![SPOUT_TIP],
-                targets: vec![SPOUT_TARGET],
-                options: DragOptions::with_radius(TOOL_RADIUS),
-            })
-        },
+        || scene.apply(drag),
     )?;
     if let Some((id, e)) = change.errors.first() {
         bail!("cannot update {id}: {e}");
@@ -222,7 +195,7 @@ fn warp_demo(args: &Args, index: &mut String, timings: &mut Timings) -> anyhow::
             &WarpOptions::default(),
         )
     })?;
-    let diff = max_abs_diff(scene.volume(warped)?, &full.volume)?;
+    let diff = scene.volume(warped)?.max_abs_difference(&full.volume)?;
     let folding = {
         let det = scene.volume(jacobian)?;
         match &**det {
@@ -265,13 +238,13 @@ fn warp_demo(args: &Args, index: &mut String, timings: &mut Timings) -> anyhow::
     pb.set_message("undo and redo");
     let undo_diff = timings.time("undo (scene command)", || -> anyhow::Result<f64> {
         scene.undo()?.context("nothing to undo")?;
-        max_abs_diff(scene.volume(warped)?, &input)
+        Ok(scene.volume(warped)?.max_abs_difference(&input)?)
     })?;
     timings.time("redo (scene command)", || -> anyhow::Result<()> {
         scene.redo()?.context("nothing to redo")?;
         Ok(())
     })?;
-    let redo_diff = max_abs_diff(scene.volume(warped)?, &full.volume)?;
+    let redo_diff = scene.volume(warped)?.max_abs_difference(&full.volume)?;
 
     pb.set_message("writing");
     timings.time(
@@ -367,22 +340,6 @@ fn warp_demo(args: &Args, index: &mut String, timings: &mut Timings) -> anyhow::
 }
 
 /// Largest |a − b| over the voxels of two volumes of the same size (any voxel types).
-fn max_abs_diff(a: &AnyVolume, b: &AnyVolume) -> anyhow::Result<f64> {
-    let (a, b) = (a.to_typed::<f64>(), b.to_typed::<f64>());
-    if a.geometry().dims != b.geometry().dims {
-        bail!(
-            "{:?} voxels against {:?}",
-            a.geometry().dims,
-            b.geometry().dims
-        );
-    }
-    Ok(a.data()
-        .iter()
-        .zip(b.data())
-        .map(|(&x, &y)| (x - y).abs())
-        .fold(0.0, f64::max))
-}
-
 fn fmt(p: DVec3) -> String {
     format!("({:.2}, {:.2}, {:.2})", p.x, p.y, p.z)
 }

@@ -7,10 +7,10 @@ use std::path::{Path, PathBuf};
 
 use anyhow::{Context, bail};
 use glam::DVec3;
-use volmorph_frep::grid::{box_geometry, sample};
+use volmorph_frep::grid::{box_geometry, sample, sample_with};
 use volmorph_frep::mapping::{Schedule, morph};
 use volmorph_frep::output::{
-    MeshMethod, MeshOptions, RenderOptions, mesh, render, render_animation,
+    MeshMethod, MeshOptions, RenderOptions, SurfaceSummary, mesh, render, render_animation,
 };
 use volmorph_frep::reconstruct::{SectionBlend, SectionStack, femur_sections};
 use volmorph_frep::{CompileOptions, Field, Shape, Tape, compile_source};
@@ -300,10 +300,10 @@ fn eval(a: &EvalArgs) -> anyhow::Result<()> {
     let b = bounds(&a.common.bounds)?;
     let g = grid_geometry(a.grid, b)?;
     let shape = load(&a.model, &params(&a.common.params)?)?;
-    let pb = progress::spinner(format!("sampling {} on {}³", a.model.display(), a.grid));
+    let pb = progress::bar(0);
     let tape = Tape::new(&shape);
     let t0 = std::time::Instant::now();
-    let vol = sample(&tape, &g).context("cannot sample the model")?;
+    let vol = sample_with(&tape, &g, &progress::Bar(&pb)).context("cannot sample the model")?;
     let dt = t0.elapsed();
     pb.set_message(format!("writing {}", a.output.display()));
     format::write(&a.output, &AnyVolume::from(vol.clone()))
@@ -339,54 +339,19 @@ fn mesh_cmd(a: &MeshArgs) -> anyhow::Result<()> {
     Ok(())
 }
 
-/// Write an extracted surface (binary unless `ascii`) and describe it: vertex and triangle
-/// counts, and whether it is a closed manifold (with its Euler characteristic) or why not.
-fn write_surface(m: &volmorph_mesh::Mesh, path: &Path, ascii: bool) -> anyhow::Result<String> {
+/// Write an extracted surface (binary unless `ascii`) and return its summary.
+fn write_surface(
+    m: &volmorph_mesh::Mesh,
+    path: &Path,
+    ascii: bool,
+) -> anyhow::Result<SurfaceSummary> {
     let opts = MeshWriteOptions {
         binary: !ascii,
         ..MeshWriteOptions::default()
     };
     meshio::write_with(path, m, &opts)
         .with_context(|| format!("cannot write {}", path.display()))?;
-    let report = m.validate();
-    let closed = if report.is_closed_manifold() {
-        format!(
-            "closed manifold, Euler characteristic {}",
-            report.euler_characteristic
-        )
-    } else {
-        not_closed_reason(&report)
-    };
-    Ok(format!(
-        "{} vertices, {} triangles, {closed}",
-        m.vertex_count(),
-        m.face_count()
-    ))
-}
-
-/// Why an extracted surface is not a closed manifold: open boundaries (the box cuts the
-/// shape) or non-manifold edges/vertices (features thinner than a cell, where one cell
-/// vertex of dual contouring serves several sheets).
-fn not_closed_reason(report: &volmorph_mesh::ValidationReport) -> String {
-    let mut why = Vec::new();
-    if report.boundary_edges.count > 0 {
-        why.push(format!(
-            "{} boundary edges: the box cuts the shape, enlarge --bounds or use --close",
-            report.boundary_edges.count
-        ));
-    }
-    let nm = report.non_manifold_edges.count + report.non_manifold_vertices.count;
-    if nm > 0 {
-        why.push(format!(
-            "{} non-manifold edges/vertices: features thinner than a grid cell, refine --grid or use marching cubes",
-            nm
-        ));
-    }
-    if why.is_empty() {
-        "not a closed manifold".to_string()
-    } else {
-        format!("not a closed manifold ({})", why.join("; "))
-    }
+    Ok(SurfaceSummary::of(m))
 }
 
 fn sections_cmd(a: &SectionsArgs) -> anyhow::Result<()> {

@@ -112,9 +112,14 @@ pub struct MapArgs {
     /// Weight beta of the frame axes (frames method).
     #[arg(long, default_value_t = 1.0)]
     pub beta: f64,
-    /// Smoothing of the thin-plate spline (0 interpolates the handles).
+    /// Smoothing of the thin-plate and Wendland splines (0 interpolates the handles).
     #[arg(long, default_value_t = 0.0)]
     pub smoothing: f64,
+    /// Support radius of the Wendland kernels (physical units): a handle bends the map only
+    /// within this distance. Default: the radius that reaches about 40 other handles on
+    /// average, from the handles' bounding box (see the `wendland` method).
+    #[arg(long, value_name = "R")]
+    pub support: Option<f64>,
 }
 
 /// Arguments of `volmorph handles warp`.
@@ -191,6 +196,12 @@ pub(crate) fn options(a: &MapArgs) -> anyhow::Result<HandleOptions> {
         },
         beta: a.beta,
         smoothing: a.smoothing,
+        support: match a.support {
+            Some(r) if a.method != Method::Wendland => {
+                bail!("--support {r}: only the wendland method has a support radius")
+            }
+            s => s,
+        },
     })
 }
 

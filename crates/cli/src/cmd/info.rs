@@ -15,9 +15,6 @@ pub struct Args {
     /// Volume file (.nii, .nii.gz, .mha, .mhd, .nrrd, .nhdr, .vtk, .vti, .mgh, .mgz, .dcm) or
     /// a folder holding a DICOM series.
     pub input: PathBuf,
-    /// Frame of a 4-D file to describe (0-based; default 0). The frame count is always listed.
-    #[arg(long, value_name = "N")]
-    pub frame: Option<usize>,
     /// Also print every header field of the file.
     #[arg(long)]
     pub header: bool,
@@ -33,7 +30,8 @@ pub struct Args {
 pub fn run(args: &Args) -> anyhow::Result<()> {
     let pb = progress::spinner(format!("reading {}", args.input.display()));
     let options = ReadOptions {
-        frame: Some(args.frame.unwrap_or(0)),
+        // The frame of the global --frame (default 0); the frame count is always listed.
+        frame: Some(format::frame_default().unwrap_or(0)),
         ..ReadOptions::default()
     };
     let file = format::read_with(&args.input, &options).context("cannot read volume")?;

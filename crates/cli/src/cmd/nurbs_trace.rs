@@ -5,15 +5,11 @@ use std::path::PathBuf;
 
 use anyhow::{Context, bail};
 use glam::DVec3;
-use volmorph_render::draw::draw_box_edges;
-use volmorph_render::{
-    Colormap, DEFAULT_FOV_Y, Framing, Projection, RgbaImage, Shading, UpAxis, view_camera,
-    write_png_rgba,
-};
+use volmorph_render::{DEFAULT_FOV_Y, Framing, Projection, Shading, UpAxis, write_png_rgba};
 use volmorph_trivariate::{
-    AggregateVolume, GRIN_ATTRIBUTE, GrinLensSpec, OpticalPath, OpticsOptions, RayTracer,
-    RenderOptions, TraceOptions, TransferFunction, VolumeRenderer, draw_paths, grin_lens,
-    load_volume, paraxial_focus, save, trace_optical_path, write_paths_obj,
+    AggregateVolume, GRIN_ATTRIBUTE, GrinLensSpec, OpticsOptions, RayFan, RayTracer, RenderOptions,
+    TraceOptions, TransferFunction, VolumeRenderer, grin_lens, load_volume,
+    measured_back_focal_distance, paraxial_focus, save, side_view, write_paths_obj,
 };
 
 use crate::progress;
@@ -105,24 +101,6 @@ fn bounds(tracer: &RayTracer) -> (DVec3, DVec3) {
     (DVec3::from_array(lo), DVec3::from_array(hi))
 }
 
-/// Range of an attribute's first component over its control points (it contains every value,
-/// by the convex hull property).
-fn attribute_range(v: &AggregateVolume, name: &str) -> anyhow::Result<(f64, f64)> {
-    let s = v
-        .attribute(name)
-        .with_context(|| format!("model has no attribute {name:?}"))?;
-    let dim = s.dim();
-    let (mut lo, mut hi) = (f64::INFINITY, f64::NEG_INFINITY);
-    for c in s.control_points().chunks_exact(dim) {
-        lo = lo.min(c[0]);
-        hi = hi.max(c[0]);
-    }
-    if hi <= lo {
-        hi = lo + 1.0;
-    }
-    Ok((lo, hi))
-}
-
 /// `volmorph nurbs render`.
 ///
 /// # Errors
@@ -131,10 +109,9 @@ fn attribute_range(v: &AggregateVolume, name: &str) -> anyhow::Result<(f64, f64)
 pub fn run_render(a: &RenderArgs) -> anyhow::Result<()> {
     let (w, h) = crate::args::size(&a.size).context("--size")?;
     let model = load(&a.model)?;
-    let (lo, hi) = attribute_range(&model, &a.attribute)?;
     let transfer = match &a.transfer {
         Some(t) => TransferFunction::parse(t).context("--transfer")?,
-        None => TransferFunction::ramp(lo, hi, Colormap::Viridis, 0.9)?,
+        None => TransferFunction::for_attribute(&model, &a.attribute)?,
     };
     let tracer = RayTracer::new(&model, TraceOptions::default()).context("cannot prepare model")?;
     let mut options = RenderOptions::for_diagonal(tracer.diagonal());
@@ -153,9 +130,11 @@ pub fn run_render(a: &RenderArgs) -> anyhow::Result<()> {
         fov_y: DEFAULT_FOV_Y,
     };
     let cam = orbit.camera(bounds(&tracer), perspective, Framing::Sphere, w, h)?;
-    let pb = progress::spinner(format!("ray tracing {}", a.model.display()));
+    let pb = progress::bar(0);
     let t0 = std::time::Instant::now();
-    let img = renderer.render_image(&cam).context("cannot render")?;
+    let img = renderer
+        .render_image_with(&cam, &progress::Bar(&pb))
+        .context("cannot render")?;
     pb.finish_and_clear();
     let img = img.composite_over([0, 0, 0, 255]);
     write_png_rgba(&a.output, &img)
@@ -193,77 +172,20 @@ pub fn run_trace_optics(a: &TraceOpticsArgs) -> anyhow::Result<()> {
         bail!("model has no attribute {:?}", a.attribute);
     }
     let tracer = RayTracer::new(&model, TraceOptions::default()).context("cannot prepare model")?;
-    let (b0, b1) = bounds(&tracer);
-    let diag = tracer.diagonal();
-    let opts = OpticsOptions::for_diagonal(diag);
-    // Rays: parallel to `dir`, starting before the box, spread over a line across it; ray `i`
-    // sits at fraction `spread(i)` of that line.
-    let n = a.rays;
-    let spread = |i: usize| {
-        if n == 1 {
-            0.5
-        } else {
-            i as f64 / (n - 1) as f64
-        }
-    };
-    let (dir, starts): (DVec3, Vec<DVec3>) = if example {
-        // Meridional plane at azimuth 0.3 rad (off the revolution seam), heights ±0.9 R.
-        let radial = DVec3::new(0.3f64.cos(), 0.3f64.sin(), 0.0);
-        let starts = (0..n)
-            .map(|i| {
-                let r = (2.0 * spread(i) - 1.0) * 0.9 * spec.radius;
-                r * radial + DVec3::new(0.0, 0.0, -0.5 * spec.thickness)
-            })
-            .collect();
-        (DVec3::Z, starts)
+    let opts = OpticsOptions::for_diagonal(tracer.diagonal());
+    let fan = if example {
+        RayFan::grin_meridian(&spec, a.rays)?
     } else {
         let d: [f64; 3] = crate::args::triple(&a.direction).context("--direction")?;
-        let d = DVec3::from_array(d)
-            .try_normalize()
-            .with_context(|| format!("--direction {}: must be finite and non-zero", a.direction))?;
-        let center = 0.5 * (b0 + b1);
-        let side = d.any_orthonormal_vector();
-        let starts = (0..n)
-            .map(|i| center - diag * d + (spread(i) - 0.5) * 0.9 * diag * side)
-            .collect();
-        (d, starts)
+        RayFan::across(bounds(&tracer), DVec3::from_array(d), a.rays)
+            .with_context(|| format!("--direction {}", a.direction))?
     };
-    let pb = progress::spinner(format!("tracing {} rays", starts.len()));
-    let paths: Vec<OpticalPath> = starts
-        .iter()
-        .map(|s| {
-            trace_optical_path(
-                &model,
-                &tracer,
-                &a.attribute,
-                s.to_array(),
-                dir.to_array(),
-                &opts,
-            )
-        })
-        .collect::<Result<_, _>>()
+    let pb = progress::spinner(format!("tracing {} rays", fan.starts.len()));
+    let paths = fan
+        .trace(&model, &tracer, &a.attribute, &opts)
         .context("cannot trace rays")?;
     pb.finish_and_clear();
-    // Side view: orthographic, looking across the plane of the rays.
-    let mut lo = b0;
-    let mut hi = b1;
-    for p in &paths {
-        for q in &p.points {
-            lo = lo.min(DVec3::from_array(*q));
-            hi = hi.max(DVec3::from_array(*q));
-        }
-    }
-    let spread = if example {
-        DVec3::new(0.3f64.cos(), 0.3f64.sin(), 0.0)
-    } else {
-        dir.any_orthonormal_vector()
-    };
-    let look = dir.cross(spread).normalize_or(DVec3::Y);
-    let ortho = Projection::Orthographic { view_height: 1.0 };
-    let cam = view_camera(look, spread, (lo, hi), ortho, Framing::Box, (w, h))?;
-    let mut img = RgbaImage::new(w, h, [255, 255, 255, 255])?;
-    draw_box_edges(&mut img, &cam, b0, b1, [150, 150, 150, 255]);
-    draw_paths(&mut img, &cam, &paths, [200, 30, 30, 255]);
+    let img = side_view(&paths, bounds(&tracer), &fan, (w, h))?;
     write_png_rgba(&a.output, &img)
         .with_context(|| format!("cannot write {}", a.output.display()))?;
     if let Some(p) = &a.paths {
@@ -277,25 +199,8 @@ pub fn run_trace_optics(a: &TraceOpticsArgs) -> anyhow::Result<()> {
     );
     if example {
         let focus = paraxial_focus(&spec)?;
-        let radial = DVec3::new(0.3f64.cos(), 0.3f64.sin(), 0.0);
-        // Measured back focal distance: a paraxial probe ray at height 0.02 R (not drawn)
-        // crossing the axis after the exit face.
-        let r0 = 0.02 * spec.radius;
-        let probe = r0 * radial + DVec3::new(0.0, 0.0, -0.5 * spec.thickness);
-        let p = trace_optical_path(
-            &model,
-            &tracer,
-            &a.attribute,
-            probe.to_array(),
-            [0.0, 0.0, 1.0],
-            &opts,
-        )
-        .context("cannot trace the paraxial probe ray")?;
-        let best = p.exit.and_then(|(e, v)| {
-            let (e, v) = (DVec3::from_array(e), DVec3::from_array(v));
-            let (re, vr) = (e.dot(radial), v.dot(radial));
-            (vr.abs() > 1e-15).then(|| (r0, e.z + (-re / vr) * v.z - spec.thickness))
-        });
+        let measured = measured_back_focal_distance(&model, &tracer, &a.attribute, &spec, &opts)
+            .context("cannot trace the paraxial probe ray")?;
         say!(
             "GRIN lens R = {}, d = {}, n(r) = {}·(1 − {}·r²/2): paraxial back focal distance \
              {:.5}, effective focal length {:.5}",
@@ -306,7 +211,7 @@ pub fn run_trace_optics(a: &TraceOpticsArgs) -> anyhow::Result<()> {
             focus.back_focal_distance,
             focus.effective_focal_length
         );
-        match best {
+        match measured {
             Some((r0, bfd)) => say!(
                 "measured back focal distance {bfd:.5} (ray at height {r0:.4}), {:+.2} % from \
                  paraxial",

@@ -1,0 +1,12 @@
+//! Fuzz the VTK XML image-data (`.vti`) reader: any byte string must give a volume or an
+//! error, never a panic, a hang or an unbounded allocation (every layout: ascii, base64,
+//! appended raw/base64, zlib blocks, either byte order).
+#![no_main]
+
+use libfuzzer_sys::fuzz_target;
+
+fuzz_target!(|data: &[u8]| {
+    // The budget every reader checks sizes against, below libFuzzer's -rss_limit_mb.
+    volmorph_io::set_memory_limit(512 << 20);
+    let _ = volmorph_volume_io::vti::read_bytes(data);
+});

@@ -1,0 +1,110 @@
+#!/usr/bin/env python3
+"""ITK transform files written by volmorph, applied by SimpleITK: the same points come out.
+
+volmorph writes an affine map, a cubic B-spline lattice moved at random, and their
+composition (affine applied first, then the lattice; and the reverse) as ITK `.tfm` files
+(`volmorph map compose … -o C.tfm`, `volmorph lattice convert … -o L.tfm`). Each file is read
+by SimpleITK (`ReadTransform`) and applied to points spread over the lattice box; volmorph
+applies the same file (`volmorph map apply`) and its own JSON form of the map. The largest
+distance between SimpleITK's and volmorph's mapped points must be at most 1e-9 of the box
+diagonal (rounding of the 17-digit text), for every file.
+
+Usage:  python3 scripts/transform_peer_check.py [--volmorph target/release/volmorph]
+Exits 0 with a SKIP message when SimpleITK is not installed or the binary is missing; 1 when a
+check fails.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import subprocess
+import sys
+import tempfile
+from pathlib import Path
+
+import numpy as np
+
+ROOT = Path(__file__).resolve().parent.parent
+#: Largest allowed distance between the peers' mapped points, relative to the box diagonal.
+REL_TOL = 1e-9
+
+
+def run(vm: Path, *args) -> None:
+    r = subprocess.run([str(vm), *map(str, args)], capture_output=True, text=True)
+    if r.returncode != 0:
+        raise RuntimeError(f"volmorph {' '.join(map(str, args))}: {r.stderr.strip()}")
+
+
+def main() -> int:
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--volmorph", default=str(ROOT / "target/release/volmorph"))
+    ap.add_argument("--points", type=int, default=500)
+    a = ap.parse_args()
+    try:
+        import SimpleITK as sitk
+    except ImportError:
+        print("SKIP: SimpleITK is not installed (pip install SimpleITK)")
+        return 0
+    vm = Path(a.volmorph)
+    if not vm.is_file():
+        print(f"SKIP: no volmorph binary at {vm} (cargo build --release -p volmorph-cli)")
+        return 0
+    rng = np.random.default_rng(7)
+    ok = True
+    with tempfile.TemporaryDirectory() as tmp:
+        t = Path(tmp)
+        run(vm, "phantom", "sphere", "-o", t / "v.nii.gz", "--size", "24")
+        run(vm, "lattice", "init", t / "v.nii.gz", "--counts", "7,6,5", "-o", t / "l0.json")
+        lat = json.loads((t / "l0.json").read_text())
+        pts = np.array(lat["control_points"], dtype=float)
+        lo, hi = pts.min(axis=0), pts.max(axis=0)
+        diag = float(np.linalg.norm(hi - lo))
+        lat["control_points"] = (pts + rng.uniform(-0.04, 0.04, pts.shape) * diag).tolist()
+        (t / "l.json").write_text(json.dumps(lat))
+        angle = 0.3
+        c, s = np.cos(angle), np.sin(angle)
+        matrix = np.array([[c, -s, 0.0], [s, c, 0.0], [0.0, 0.0, 1.0]]) @ np.diag([1.1, 0.95, 1.02])
+        matrix[0, 2] = 0.05  # a shear
+        affine = {"version": 1, "kind": "affine", "matrix": matrix.tolist(),
+                  "offset": (0.02 * diag * np.array([1.0, -0.5, 0.3])).tolist()}
+        (t / "a.json").write_text(json.dumps(affine))
+        run(vm, "lattice", "convert", t / "l.json", "-o", t / "l.tfm")
+        run(vm, "map", "compose", t / "a.json", t / "a.json", "-o", t / "aa.tfm")
+        run(vm, "map", "compose", t / "a.json", t / "l.json", "-o", t / "al.tfm")
+        run(vm, "map", "compose", t / "a.json", t / "l.json", "-o", t / "al.json")
+        run(vm, "map", "compose", t / "l.json", t / "a.json", "-o", t / "la.tfm")
+        run(vm, "map", "compose", t / "l.json", t / "a.json", "-o", t / "la.json")
+        inner = lo + 0.1 * (hi - lo), hi - 0.1 * (hi - lo)
+        p = rng.uniform(inner[0], inner[1], (a.points, 3))
+        np.savetxt(t / "p.txt", p, fmt="%.17g")
+        cases = [
+            ("cubic B-spline lattice", "l.tfm", "l.json"),
+            ("affine then affine", "aa.tfm", None),
+            ("composite: affine then B-spline", "al.tfm", "al.json"),
+            ("composite: B-spline then affine", "la.tfm", "la.json"),
+        ]
+        for name, tfm, own in cases:
+            tx = sitk.ReadTransform(str(t / tfm))
+            theirs = np.array([tx.TransformPoint(tuple(q)) for q in p])
+            run(vm, "map", "apply", t / tfm, t / "p.txt", "-o", t / "q.txt")
+            ours = np.loadtxt(t / "q.txt", comments="#", delimiter=None, ndmin=2)[:, :3]
+            err = float(np.max(np.linalg.norm(ours - theirs, axis=1)))
+            moved = float(np.max(np.linalg.norm(theirs - p, axis=1)))
+            line = f"{name} ({tfm}, {tx.GetName()}): largest |volmorph − SimpleITK| = {err:.2e}"
+            if own:
+                run(vm, "map", "apply", t / own, t / "p.txt", "-o", t / "r.txt")
+                mine = np.loadtxt(t / "r.txt", comments="#", ndmin=2)[:, :3]
+                err_own = float(np.max(np.linalg.norm(mine - theirs, axis=1)))
+                line += f", JSON form {err_own:.2e}"
+                err = max(err, err_own)
+            line += f" (points moved up to {moved:.3g}, box diagonal {diag:.3g})"
+            good = err <= REL_TOL * diag and moved > 1e-3 * diag
+            print(("PASS  " if good else "FAIL  ") + line)
+            ok &= good
+    print("PASS" if ok else "FAIL")
+    return 0 if ok else 1
+
+
+if __name__ == "__main__":
+    sys.exit(main())
