@@ -632,7 +632,7 @@ impl LevelProblem<'_> {
             }
         }
         let counts = self.lat.counts();
-        let axes = self.lat.frame().axes();
+        let axes = self.lat.frame().gradient_matrix();
         if self.options.folding > 0.0 && !self.fold_points.is_empty() {
             let w = self.options.folding / self.fold_points.len() as f64;
             let eps = self.options.fold_threshold;
