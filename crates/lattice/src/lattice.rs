@@ -166,8 +166,7 @@ impl LatticeFrame {
                 spacing[a] *= len;
             }
         }
-        if volmorph_volume::direction::orthonormality_deviation(unit) <= DIRECTION_ORTHONORMAL_TOL
-        {
+        if volmorph_volume::direction::orthonormality_deviation(unit) <= DIRECTION_ORTHONORMAL_TOL {
             return Self::new(origin, unit, spacing);
         }
         let volume = unit.determinant();

@@ -210,7 +210,10 @@ fn grid_fast_paths_on_a_sheared_grid_equal_pointwise() {
     let mut slow = vec![DVec3::ZERO; grid.len()];
     volmorph_deform::map::apply_grid_pointwise(&lat, &grid, &mut slow).unwrap();
     for (a, b) in fast.iter().zip(&slow) {
-        assert!((*a - *b).length() < 1e-11 * b.length().max(1.0), "{a} vs {b}");
+        assert!(
+            (*a - *b).length() < 1e-11 * b.length().max(1.0),
+            "{a} vs {b}"
+        );
     }
     let mut jf = vec![DMat3::ZERO; grid.len()];
     lat.jacobian_grid(&grid, &mut jf).unwrap();
@@ -234,7 +237,9 @@ fn skewed_json_and_tfm_round_trip_exactly_and_bxf_refuses() {
     assert_eq!(back, lat);
     // Without the flag, a non-orthonormal frame is refused.
     let unflagged = text.replace("\"skewed\": true", "\"skewed\": false");
-    let e = BSplineLattice::from_json(&unflagged).unwrap_err().to_string();
+    let e = BSplineLattice::from_json(&unflagged)
+        .unwrap_err()
+        .to_string();
     assert!(e.contains("orthonormal"), "{e}");
     // Orthonormal lattices keep their files: no flag written.
     let plain = BSplineLattice::uniform_cubic_around(DVec3::ZERO, DVec3::ONE, [4; 3]).unwrap();
@@ -258,13 +263,31 @@ fn degenerate_and_nearly_orthonormal_frames() {
     let flat = DMat3::from_cols(DVec3::X, DVec3::Y, DVec3::new(1.0, 1.0, 1e-5));
     let e = LatticeFrame::parallelepiped(DVec3::ZERO, flat).unwrap_err();
     assert!(e.to_string().contains("degenerate"), "{e}");
-    assert!(LatticeFrame::parallelepiped(DVec3::ZERO, DMat3::from_cols(DVec3::X, DVec3::ZERO, DVec3::Z)).is_err());
+    assert!(
+        LatticeFrame::parallelepiped(
+            DVec3::ZERO,
+            DMat3::from_cols(DVec3::X, DVec3::ZERO, DVec3::Z)
+        )
+        .is_err()
+    );
     // Just above the bound is accepted.
     let sin = 2.0 * MIN_FRAME_VOLUME;
-    let ok = DMat3::from_cols(DVec3::X, DVec3::new((1.0 - sin * sin).sqrt(), sin, 0.0), DVec3::Z);
-    assert!(LatticeFrame::parallelepiped(DVec3::ZERO, ok).unwrap().is_skewed());
+    let ok = DMat3::from_cols(
+        DVec3::X,
+        DVec3::new((1.0 - sin * sin).sqrt(), sin, 0.0),
+        DVec3::Z,
+    );
+    assert!(
+        LatticeFrame::parallelepiped(DVec3::ZERO, ok)
+            .unwrap()
+            .is_skewed()
+    );
     // Axes orthonormal within the direction tolerance snap to an orthonormal frame.
-    let nearly = DMat3::from_cols(DVec3::new(2.0, 0.0, 0.0), DVec3::new(1e-5, 3.0, 0.0), DVec3::new(0.0, 0.0, 0.5));
+    let nearly = DMat3::from_cols(
+        DVec3::new(2.0, 0.0, 0.0),
+        DVec3::new(1e-5, 3.0, 0.0),
+        DVec3::new(0.0, 0.0, 0.5),
+    );
     let f = LatticeFrame::parallelepiped(DVec3::ONE, nearly).unwrap();
     assert!(!f.is_skewed());
     assert!((f.spacing() - DVec3::new(2.0, 3.0, 0.5)).length() < 1e-9);

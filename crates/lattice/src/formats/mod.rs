@@ -230,8 +230,7 @@ pub(crate) fn axes_from_rows(
     let d = DMat3::from_cols_array(&rows).transpose();
     match orthonormalize(d) {
         Ok(axes) => Ok(axes),
-        Err(_) if skew && d.is_finite() => match LatticeFrame::skewed(DVec3::ZERO, d, DVec3::ONE)
-        {
+        Err(_) if skew && d.is_finite() => match LatticeFrame::skewed(DVec3::ZERO, d, DVec3::ONE) {
             Ok(_) => Ok(d),
             Err(e) => Err(DeformError::Parse {
                 format,
