@@ -73,3 +73,194 @@ fn lattice_init_on_a_parallelepiped_writes_a_skewed_lattice() {
     ]);
     assert!(err.contains("degenerate"), "{err}");
 }
+
+fn dims(path: &std::path::Path) -> serde_json::Value {
+    let j: serde_json::Value = serde_json::from_str(&ok(&[&"info", &"--json", &path])).unwrap();
+    j["dims"].clone()
+}
+
+fn control_points(path: &std::path::Path) -> Vec<[f64; 3]> {
+    json(path)["control_points"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .map(|p| {
+            let v: Vec<f64> = p
+                .as_array()
+                .unwrap()
+                .iter()
+                .map(|x| x.as_f64().unwrap())
+                .collect();
+            [v[0], v[1], v[2]]
+        })
+        .collect()
+}
+
+/// True 1992 §5.1 from the CLI: `--pad`, `--output-geometry` and `--like` on `warp`.
+#[test]
+fn warp_writes_padded_and_explicit_output_grids() {
+    let dir = tempfile::tempdir().unwrap();
+    let d = dir.path();
+    let src = d.join("s.nii.gz");
+    ok(&[&"phantom", &"sphere", &"--dims", &"20,16,12", &"-o", &src]);
+    let lat = d.join("l.json");
+    ok(&[
+        &"lattice",
+        &"init",
+        &src,
+        &"--counts",
+        &"5,5,5",
+        &"-o",
+        &lat,
+    ]);
+    let out = d.join("padded.nii.gz");
+    ok(&[&"warp", &src, &"--map", &lat, &"-o", &out, &"--pad", &"4"]);
+    assert_eq!(dims(&out), serde_json::json!([28, 24, 20]));
+    ok(&[
+        &"warp",
+        &src,
+        &"--map",
+        &lat,
+        &"-o",
+        &out,
+        &"--pad",
+        &"0,0,0,6,0,2",
+    ]);
+    assert_eq!(dims(&out), serde_json::json!([26, 16, 14]));
+    let g = d.join("g.nii.gz");
+    ok(&[
+        &"warp",
+        &src,
+        &"--map",
+        &lat,
+        &"-o",
+        &g,
+        &"--output-geometry",
+        &"10,11,12;0.2,0.2,0.2;-1,-1,-1",
+    ]);
+    assert_eq!(dims(&g), serde_json::json!([10, 11, 12]));
+    let like = d.join("like.nii.gz");
+    ok(&[&"warp", &src, &"--map", &lat, &"-o", &like, &"--like", &g]);
+    assert_eq!(dims(&like), serde_json::json!([10, 11, 12]));
+    let err = fails(&[&"warp", &src, &"--map", &lat, &"-o", &out, &"--pad", &"1.5"]);
+    assert!(err.contains("padding"), "{err}");
+    let err = fails(&[
+        &"warp",
+        &src,
+        &"--map",
+        &lat,
+        &"-o",
+        &out,
+        &"--pad",
+        &"100000000",
+    ]);
+    assert!(err.contains("output grid"), "{err}");
+}
+
+/// The §6 tool from the CLI: a box tool inside a realm on a padded grid; control points
+/// outside the realm stay where the identity lattice has them.
+#[test]
+fn drag_with_a_box_tool_and_a_realm_moves_only_realm_control_points() {
+    let dir = tempfile::tempdir().unwrap();
+    let d = dir.path();
+    let src = d.join("s.nii.gz");
+    ok(&[&"phantom", &"sphere", &"--dims", &"24,24,24", &"-o", &src]);
+    let identity = d.join("id.json");
+    ok(&[
+        &"lattice",
+        &"init",
+        &src,
+        &"--counts",
+        &"9,9,9",
+        &"-o",
+        &identity,
+    ]);
+    let (out, moved) = (d.join("o.nii.gz"), d.join("moved.json"));
+    ok(&[
+        &"drag",
+        &src,
+        &"--from",
+        &"0.5,0,0",
+        &"--to",
+        &"0.6,0.05,0",
+        &"--tool",
+        &"box:0.6,0.6,0.6",
+        &"--realm",
+        &"indices:4,2,2,7,6,6",
+        &"--pad",
+        &"3",
+        &"-o",
+        &out,
+        &"--lattice-out",
+        &moved,
+    ]);
+    assert_eq!(dims(&out), serde_json::json!([30, 30, 30]));
+    let (a, b) = (control_points(&identity), control_points(&moved));
+    let mut changed = 0;
+    for (n, (p, q)) in a.iter().zip(&b).enumerate() {
+        let idx = [n % 9, n / 9 % 9, n / 81];
+        let inside =
+            idx[0] >= 4 && idx[0] <= 7 && (2..=6).contains(&idx[1]) && (2..=6).contains(&idx[2]);
+        if p != q {
+            changed += 1;
+            assert!(inside, "control point {idx:?} outside the realm moved");
+        }
+    }
+    assert!(changed > 0);
+    let err = fails(&[
+        &"drag", &src, &"--from", &"0.5,0,0", &"--to", &"0.6,0,0", &"--tool", &"cone:1", &"-o",
+        &out,
+    ]);
+    assert!(err.contains("tool"), "{err}");
+}
+
+/// §6.3 from the CLI: a curve drag writes one frame per step and ends on the goal curve.
+#[test]
+fn drag_along_a_curve_writes_every_frame_and_ends_on_the_goal() {
+    let dir = tempfile::tempdir().unwrap();
+    let d = dir.path();
+    let src = d.join("s.nii.gz");
+    ok(&[&"phantom", &"sphere", &"--dims", &"24,24,24", &"-o", &src]);
+    let (out, moved, frames) = (d.join("o.nii.gz"), d.join("m.json"), d.join("frames"));
+    let text = ok(&[
+        &"drag",
+        &src,
+        &"--start-curve",
+        &"-0.5,0,0;0,0,0;0.5,0,0",
+        &"--goal-curve",
+        &"-0.5,0.1,0;0,0.25,0;0.5,0.1,0",
+        &"--steps",
+        &"4",
+        &"--frames",
+        &frames,
+        &"-o",
+        &out,
+        &"--lattice-out",
+        &moved,
+        &"--radius",
+        &"0.8",
+    ]);
+    assert!(text.contains("curve drag of 3 points in 4 steps"), "{text}");
+    for n in 1..=4 {
+        assert!(
+            frames.join(format!("frame_{n:03}.nii.gz")).exists(),
+            "frame {n}"
+        );
+    }
+    assert!(!frames.join("frame_005.nii.gz").exists());
+    // The final lattice sends the start curve (on the undeformed model) onto the goal: a
+    // further drag from the goal to itself moves nothing.
+    let again = ok(&[
+        &"drag",
+        &src,
+        &"--lattice",
+        &moved,
+        &"--from",
+        &"0,0.25,0",
+        &"--to",
+        &"0,0.25,0",
+        &"-o",
+        &d.join("again.nii.gz"),
+    ]);
+    assert!(again.contains("moved 0 control points"), "{again}");
+}
