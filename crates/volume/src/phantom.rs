@@ -134,7 +134,22 @@ pub enum Phantom {
     /// True's 30³, so the density isosurface follows the model there. Mirror-symmetric about
     /// the plane y = 0 only. 1-Lipschitz bound.
     Teapot,
+    /// A tree, z up, for True's sculpted tree (§7, Figs. 13–14): a tapering trunk (radius
+    /// 0.13 → 0.11) from (0, 0, −0.75) to the fork at (0, 0, −0.1), [`TREE_LIMBS`] limbs
+    /// (radius 0.1 → 0.09) from the fork at azimuths 0°, 120° and 240° rising to radius 0.4
+    /// and height 0.25, and at the end of each limb [`TREE_TWIGS_PER_LIMB`] twigs (radius
+    /// 0.085 → 0.075) splaying ±0.6 rad in azimuth to radius 0.7 and height 0.7. Joints are
+    /// smooth unions. One connected solid of genus 0; a horizontal cut between heights 0.0
+    /// and 0.15 crosses the three limbs, one between 0.4 and 0.6 the six twigs. No part is
+    /// thinner than 0.15 (two voxels at 30³). 1-Lipschitz bound.
+    Tree,
 }
+
+/// Number of limbs of [`Phantom::Tree`] leaving the top of the trunk.
+pub const TREE_LIMBS: usize = 3;
+
+/// Number of twigs at the end of each limb of [`Phantom::Tree`].
+pub const TREE_TWIGS_PER_LIMB: usize = 2;
 
 impl Phantom {
     /// Every phantom, in the order of the enum.
@@ -367,6 +382,7 @@ fn sample<T: Voxel>(
         Phantom::RoundedBox => sample_with(g, rounded_box_sdf, map),
         Phantom::ClayBlock => sample_with(g, clay::sdf, map),
         Phantom::Teapot => sample_with(g, teapot::sdf, map),
+        Phantom::Tree => sample_with(g, tree::sdf, map),
     }
 }
 

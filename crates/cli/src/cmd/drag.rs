@@ -35,10 +35,10 @@ pub struct Args {
     /// currently deformed; it moves onto --goal-curve over --steps constrained drags (both
     /// curves resampled evenly by arc length to the larger point count).
     #[arg(long, requires = "goal_curve", conflicts_with_all = ["from", "to"], value_parser = args::points, allow_hyphen_values = true)]
-    pub start_curve: Option<Vec<DVec3>>,
+    pub start_curve: Option<::std::vec::Vec<DVec3>>,
     /// The goal curve "x,y,z;x,y,z;…" of a curve drag.
     #[arg(long, requires = "start_curve", value_parser = args::points, allow_hyphen_values = true)]
-    pub goal_curve: Option<Vec<DVec3>>,
+    pub goal_curve: Option<::std::vec::Vec<DVec3>>,
     /// Number of drags (frames) of a curve drag.
     #[arg(long, default_value_t = 10, requires = "start_curve")]
     pub steps: usize,
