@@ -946,6 +946,12 @@ mod tests {
     fn wavy() -> BSplineLattice {
         let g = Geometry::new([20, 16, 12]).with_spacing(DVec3::new(1.0, 1.5, 2.0));
         let mut lat = lattice_on(&g, [3, 2, 2]).unwrap();
+        jiggle(&mut lat);
+        lat
+    }
+
+    /// Move every control point of `lat` by a fixed pattern.
+    fn jiggle(lat: &mut BSplineLattice) {
         let c = lat.counts();
         for k in 0..c[2] {
             for j in 0..c[1] {
@@ -959,7 +965,6 @@ mod tests {
                 }
             }
         }
-        lat
     }
 
     #[test]
@@ -988,19 +993,7 @@ mod tests {
         );
         let mut lat =
             BSplineLattice::uniform_cubic_in_parallelepiped(DVec3::ZERO, edges, [6, 5, 5]).unwrap();
-        let c = lat.counts();
-        for k in 0..c[2] {
-            for j in 0..c[1] {
-                for i in 0..c[0] {
-                    let d = DVec3::new(
-                        ((i * 3 + j) % 5) as f64 * 0.3,
-                        ((j * 2 + k) % 3) as f64 * -0.4,
-                        ((i + k) % 4) as f64 * 0.2,
-                    );
-                    lat.move_control_point([i, j, k], d).unwrap();
-                }
-            }
-        }
+        jiggle(&mut lat);
         let fine = subdivide(&lat).unwrap();
         assert!(fine.frame().is_skewed());
         assert_eq!(fine.counts(), [9, 7, 7]);

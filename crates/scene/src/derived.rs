@@ -139,6 +139,41 @@ mod method_name {
 }
 
 impl Recipe {
+    /// This recipe onto the output grid `grid`: a [`Recipe::Warp`] becomes the
+    /// [`Recipe::WarpOnto`] of the same warp, a [`Recipe::WarpOnto`] changes its grid; other
+    /// recipes are returned unchanged.
+    #[must_use]
+    pub fn onto(self, grid: &Geometry) -> Self {
+        match self {
+            Recipe::Warp {
+                source,
+                map,
+                method,
+                background,
+                sampled_nodes,
+                swap_handles,
+            }
+            | Recipe::WarpOnto {
+                source,
+                map,
+                method,
+                background,
+                sampled_nodes,
+                swap_handles,
+                ..
+            } => Recipe::WarpOnto {
+                source,
+                map,
+                method,
+                background,
+                sampled_nodes,
+                swap_handles,
+                grid: GridJson::from(grid),
+            },
+            other => other,
+        }
+    }
+
     /// The objects this recipe reads.
     #[must_use]
     pub fn inputs(&self) -> Vec<ObjectId> {

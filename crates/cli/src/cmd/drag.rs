@@ -10,7 +10,6 @@ use anyhow::{Context, bail};
 use glam::DVec3;
 use volmorph_deform::SpaceMap;
 use volmorph_lattice::{BSplineLattice, DragOptions, Realm, ToolShape, curve_drag_steps};
-use volmorph_maps::json::GridJson;
 use volmorph_maps::{AnyMap, read_map};
 use volmorph_scene::{Command, NewObject, Recipe, Scene, files};
 use volmorph_warp::apply::WarpMethod;
@@ -148,26 +147,17 @@ pub fn run(a: &Args) -> anyhow::Result<()> {
         .apply(add("lattice", NewObject::Map(AnyMap::Lattice(lattice))))?
         .added[0];
     pb.set_message("initial warp");
-    let recipe = if out_grid == grid {
-        Recipe::Warp {
-            source: v,
-            map: l,
-            method: a.method,
-            background: 0.0,
-            sampled_nodes: None,
-            swap_handles: false,
-        }
-    } else {
-        Recipe::WarpOnto {
-            source: v,
-            map: l,
-            method: a.method,
-            background: 0.0,
-            sampled_nodes: None,
-            swap_handles: false,
-            grid: GridJson::from(&out_grid),
-        }
+    let mut recipe = Recipe::Warp {
+        source: v,
+        map: l,
+        method: a.method,
+        background: 0.0,
+        sampled_nodes: None,
+        swap_handles: false,
     };
+    if out_grid != grid {
+        recipe = recipe.onto(&out_grid);
+    }
     let w = scene.apply(add("output", NewObject::Derived(recipe)))?;
     if let Some((_, e)) = w.errors.first() {
         bail!("cannot warp {}: {e}", a.input.display());
