@@ -110,7 +110,7 @@ enum Command {
     Handles(cmd::handles::Command),
     /// Deform a picture with 2D moving least squares through point and segment handles.
     #[command(
-        after_help = "Example:\n  volmorph mls2d face.png --handles smile.json -o smiling.png --method rigid\n\nHandles: {\"points\": [{\"source\": [x, y], \"target\": [x, y]}], \"segments\": [{\"source\": [[x, y], [x, y]], \"target\": [[x, y], [x, y]]}]}\nin pixel coordinates (x right, y down)."
+        after_help = "Example:\n  volmorph mls2d face.png --handles smile.json -o smiling.png --method rigid\n  volmorph mls2d face.png --handles smile.json -o smiling_tps.png --method tps\n\nHandles: {\"points\": [{\"source\": [x, y], \"target\": [x, y]}], \"segments\": [{\"source\": [[x, y], [x, y]], \"target\": [[x, y], [x, y]]}]}\nin pixel coordinates (x right, y down)."
     )]
     Mls2d(cmd::handles::Mls2dArgs),
     /// Polygon mesh tasks.

@@ -281,3 +281,50 @@ fn drag_along_a_curve_writes_every_frame_and_ends_on_the_goal() {
         );
     }
 }
+
+/// McPhail Fig. 4.2 from the CLI: `mls2d --method tps` deforms a picture through its handles
+/// (the interpolation itself is tested in `volmorph_handles::mls2d`), and refuses too few.
+#[test]
+fn mls2d_thin_plate_method_deforms_a_picture() {
+    let dir = tempfile::tempdir().unwrap();
+    let d = dir.path();
+    let vol = d.join("s.nii.gz");
+    ok(&[&"phantom", &"teapot", &"--size", &"40", &"-o", &vol]);
+    let png = d.join("s.png");
+    ok(&[
+        &"slice", &vol, &"-o", &png, &"--axis", &"z", &"--index", &"20",
+    ]);
+    let h = d.join("h.json");
+    std::fs::write(
+        &h,
+        r#"{"points": [{"source": [5, 5], "target": [7, 6]}, {"source": [34, 5], "target": [33, 7]},
+            {"source": [20, 20], "target": [24, 18]}, {"source": [5, 34], "target": [5, 34]},
+            {"source": [34, 34], "target": [34, 34]}]}"#,
+    )
+    .unwrap();
+    let out = d.join("tps.png");
+    let text = ok(&[
+        &"mls2d",
+        &png,
+        &"--handles",
+        &h,
+        &"-o",
+        &out,
+        &"--method",
+        &"tps",
+    ]);
+    assert!(text.contains("deformed") && out.exists(), "{text}");
+    assert_ne!(std::fs::read(&out).unwrap(), std::fs::read(&png).unwrap());
+    std::fs::write(&h, r#"{"points": [{"source": [5, 5], "target": [7, 6]}]}"#).unwrap();
+    let err = fails(&[
+        &"mls2d",
+        &png,
+        &"--handles",
+        &h,
+        &"-o",
+        &out,
+        &"--method",
+        &"tps",
+    ]);
+    assert!(err.contains("at least 3"), "{err}");
+}

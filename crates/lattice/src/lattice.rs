@@ -170,7 +170,7 @@ impl LatticeFrame {
             return Self::new(origin, unit, spacing);
         }
         let volume = unit.determinant();
-        if !(volume.abs() >= MIN_FRAME_VOLUME) {
+        if volume.is_nan() || volume.abs() < MIN_FRAME_VOLUME {
             return Err(DeformError::InvalidFrame(format!(
                 "lattice axes {unit} span a volume of {volume:.3e} (unit axes), below \
                  {MIN_FRAME_VOLUME:e}: the parallelepiped is degenerate"
