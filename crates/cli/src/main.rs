@@ -89,7 +89,7 @@ enum Command {
     Drag(cmd::drag::Args),
     /// Jacobian determinant map of any map on a volume's grid, with a folding summary.
     #[command(
-        after_help = "Example:\n  volmorph jacobian --map moved.tfm --grid ct.nii.gz -o jacobian.nii.gz"
+        after_help = "Examples:\n  volmorph jacobian --map moved.tfm --grid ct.nii.gz -o jacobian.nii.gz\n  volmorph jacobian --map handles_tps.json --grid ct.nii.gz -o j.nii.gz --map-out used.json"
     )]
     Jacobian(cmd::warp::JacobianArgs),
     /// Free-form deformation of a polygon mesh: vertices only, after uniform or adaptive

@@ -39,8 +39,13 @@ pub struct GridArgs {
     /// Write the output on this grid: NX,NY,NZ;SX,SY,SZ;OX,OY,OZ[;D00,D01,…,D22] (dims,
     /// spacing, origin of voxel 0, optionally the direction matrix row by row), e.g.
     /// "96,96,96;1,1,1;-48,-48,-48".
-    #[arg(long, value_name = "GEOMETRY", value_parser = parse_geometry, allow_hyphen_values = true)]
-    pub output_geometry: Option<volmorph_volume::Geometry>,
+    #[arg(long, value_name = "GEOMETRY", value_parser = boxed_geometry, allow_hyphen_values = true)]
+    pub output_geometry: Option<Box<volmorph_volume::Geometry>>,
+}
+
+/// [`parse_geometry`], boxed (keeps the argument structs small).
+fn boxed_geometry(s: &str) -> anyhow::Result<Box<volmorph_volume::Geometry>> {
+    Ok(Box::new(parse_geometry(s)?))
 }
 
 impl GridArgs {
@@ -58,14 +63,12 @@ impl GridArgs {
             let r = format::read(path)
                 .with_context(|| format!("cannot read the reference volume {}", path.display()))?;
             OutputGrid::Explicit(*r.geometry())
-        } else if let Some(g) = self.output_geometry {
-            OutputGrid::Explicit(g)
+        } else if let Some(g) = &self.output_geometry {
+            OutputGrid::Explicit(**g)
         } else {
             OutputGrid::Input
         };
-        Ok(choice
-            .resolve(input)
-            .context("cannot make the output grid")?)
+        choice.resolve(input).context("cannot make the output grid")
     }
 }
 
@@ -150,6 +153,10 @@ pub struct JacobianArgs {
     /// Output volume of Jacobian determinants (f32); J <= 0 marks folding.
     #[arg(short, long)]
     pub output: PathBuf,
+    /// Also write the map the determinants were taken of, as read (any kind; .json for
+    /// volmorph map JSON, .tfm/.bxf where the map fits those formats).
+    #[arg(long, value_name = "PATH")]
+    pub map_out: Option<PathBuf>,
 }
 
 /// Run `volmorph jacobian`.
@@ -164,6 +171,9 @@ pub fn run_jacobian(a: &JacobianArgs) -> anyhow::Result<()> {
     let report = FoldingReport::of(det.data());
     pb.set_message(format!("writing {}", a.output.display()));
     format::write(&a.output, &det.into()).context("cannot write")?;
+    if let Some(path) = &a.map_out {
+        volmorph_maps::write_map(path, &map).context("cannot write the map")?;
+    }
     pb.finish_and_clear();
     say!("{report}");
     Ok(())
