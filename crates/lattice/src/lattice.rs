@@ -102,7 +102,7 @@ impl LatticeFrame {
     /// `spacing` of one parameter unit along each axis.
     ///
     /// Axes orthonormal within
-    /// [`DIRECTION_ORTHONORMAL_TOL`](volmorph_volume::direction::DIRECTION_ORTHONORMAL_TOL) (e.g. an oblique scan's direction,
+    /// [`DIRECTION_ORTHONORMAL_TOL`] (e.g. an oblique scan's direction,
     /// orthonormal only to single precision) are replaced by their polar factor, the nearest
     /// orthonormal matrix, by [`orthonormalize`] — the rule every direction entering volmorph
     /// follows; [`LatticeFrame::axes`] returns the snapped matrix. For skewed axes use
@@ -111,7 +111,7 @@ impl LatticeFrame {
     /// # Errors
     /// [`DeformError::InvalidFrame`] for non-finite values, a spacing that is not > 0, or axes
     /// whose Gram matrix deviates from `I` by more than
-    /// [`DIRECTION_ORTHONORMAL_TOL`](volmorph_volume::direction::DIRECTION_ORTHONORMAL_TOL).
+    /// [`DIRECTION_ORTHONORMAL_TOL`].
     pub fn new(origin: DVec3, axes: DMat3, spacing: DVec3) -> Result<Self, DeformError> {
         check_origin_spacing(origin, spacing)?;
         if !axes.is_finite() {
