@@ -32,6 +32,20 @@ pub fn point(s: &str) -> anyhow::Result<glam::DVec3> {
     Ok(p)
 }
 
+/// Parse a polyline of physical points `"x,y,z;x,y,z;…"` (at least one point).
+pub fn points(s: &str) -> anyhow::Result<Vec<glam::DVec3>> {
+    s.split(';')
+        .filter(|p| !p.trim().is_empty())
+        .map(point)
+        .collect::<anyhow::Result<Vec<_>>>()
+        .and_then(|v| {
+            if v.is_empty() {
+                bail!("no points in {s:?}; write x,y,z;x,y,z;…")
+            }
+            Ok(v)
+        })
+}
+
 /// Parse `"a,b"` into two `f64`.
 pub fn pair(s: &str) -> anyhow::Result<[f64; 2]> {
     let parts: Vec<&str> = s.split(',').map(str::trim).collect();

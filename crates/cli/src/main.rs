@@ -86,18 +86,19 @@ enum Command {
     /// Warp a volume through any map (lattice, handle map, NURBS geometry, composition, ITK
     /// transform).
     #[command(
-        after_help = "Examples:\n  volmorph warp ct.nii.gz --map moved.json -o warped.nii.gz --method pullback-cubic\n  volmorph warp model.nii.gz --map ffd.json -o deformed.nii.gz --method inverse-linear --nonconverged-mask failed.nii.gz\n  volmorph warp ct.nii.gz --map registration.tfm -o resampled.nii.gz"
+        after_help = "Examples:\n  volmorph warp ct.nii.gz --map moved.json -o warped.nii.gz --method pullback-cubic\n  volmorph warp model.nii.gz --map ffd.json -o deformed.nii.gz --method inverse-linear --nonconverged-mask failed.nii.gz\n  volmorph warp ct.nii.gz --map registration.tfm -o resampled.nii.gz\n  volmorph warp teapot.nii.gz --map bent.json -o bent.nii.gz --method pushforward-antialiased --pad 8\n  volmorph warp ct.nii.gz --map moved.json -o on_ref.nii.gz --like reference.nii.gz"
     )]
     Warp(cmd::warp::Args),
-    /// Drag points of a volume to new places; the lattice follows by least-norm control-point
-    /// moves (direct manipulation), and the volume is warped through it.
+    /// Drag points of a volume to new places, or a start curve onto a goal curve in steps; the
+    /// lattice follows by least-norm moves of the control points inside the tool shape and
+    /// realm (direct manipulation, True 1992 §6), and the volume is warped through it.
     #[command(
-        after_help = "Examples:\n  volmorph drag teapot.nii.gz --from 0.76,0,0.25 --to 0.86,0,-0.02 --radius 0.75 -o lowered.nii.gz --lattice-out lowered.json\n  volmorph drag ct.nii.gz --lattice current.tfm --from 10,-4,30 --to 12,-4,26 --from 0,0,0 --to 0,0,0 -o ct_dragged.nii.gz --method inverse-linear"
+        after_help = "Examples:\n  volmorph drag teapot.nii.gz --from 0.76,0,0.25 --to 0.86,0,-0.02 --radius 0.75 -o lowered.nii.gz --lattice-out lowered.json\n  volmorph drag ct.nii.gz --lattice current.tfm --from 10,-4,30 --to 12,-4,26 --from 0,0,0 --to 0,0,0 -o ct_dragged.nii.gz --method inverse-linear\n  volmorph drag clay.nii.gz --from 0.7,-0.45,0.4 --to 0.55,-0.3,0.25 --tool box:0.5,0.5,0.5 --realm region:0,-1.2,0,1.2,0,1.2 -o dented.nii.gz\n  volmorph drag tree.nii.gz --start-curve \"0,0,-0.1;0.3,0,0.2;0.6,0,0.6\" --goal-curve \"0,0,-0.1;0.4,0.1,0.15;0.8,0.2,0.45\" --steps 8 --frames gust/ --pad 0,0,0,10,6,0 -o gust.nii.gz"
     )]
     Drag(cmd::drag::Args),
     /// Jacobian determinant map of any map on a volume's grid, with a folding summary.
     #[command(
-        after_help = "Example:\n  volmorph jacobian --map moved.tfm --grid ct.nii.gz -o jacobian.nii.gz"
+        after_help = "Examples:\n  volmorph jacobian --map moved.tfm --grid ct.nii.gz -o jacobian.nii.gz\n  volmorph jacobian --map handles_tps.json --grid ct.nii.gz -o j.nii.gz --map-out used.json"
     )]
     Jacobian(cmd::warp::JacobianArgs),
     /// Free-form deformation of a polygon mesh: vertices only, after uniform or adaptive
@@ -118,7 +119,7 @@ enum Command {
     Handles(cmd::handles::Command),
     /// Deform a picture with 2D moving least squares through point and segment handles.
     #[command(
-        after_help = "Example:\n  volmorph mls2d face.png --handles smile.json -o smiling.png --method rigid\n\nHandles: {\"points\": [{\"source\": [x, y], \"target\": [x, y]}], \"segments\": [{\"source\": [[x, y], [x, y]], \"target\": [[x, y], [x, y]]}]}\nin pixel coordinates (x right, y down)."
+        after_help = "Example:\n  volmorph mls2d face.png --handles smile.json -o smiling.png --method rigid\n  volmorph mls2d face.png --handles smile.json -o smiling_tps.png --method tps\n\nHandles: {\"points\": [{\"source\": [x, y], \"target\": [x, y]}], \"segments\": [{\"source\": [[x, y], [x, y]], \"target\": [[x, y], [x, y]]}]}\nin pixel coordinates (x right, y down)."
     )]
     Mls2d(cmd::handles::Mls2dArgs),
     /// Polygon mesh tasks.

@@ -969,6 +969,56 @@ mod tests {
     }
 }
 
+#[cfg(test)]
+mod tps_tests {
+    use glam::DVec3;
+
+    use super::*;
+
+    /// The thin-plate picture warp interpolates its handles: every source pixel lands on its
+    /// target, and a picture of one bright pixel at a source shows it at the target.
+    #[test]
+    fn thin_plate_picture_warp_interpolates_its_handles() {
+        let pairs = [
+            ([4.0, 4.0], [6.0, 5.0]),
+            ([27.0, 3.0], [25.0, 4.0]),
+            ([15.0, 16.0], [18.0, 13.0]),
+            ([3.0, 28.0], [4.0, 27.0]),
+            ([28.0, 27.0], [28.0, 27.0]),
+        ];
+        let set = crate::HandleSet {
+            dim: 2,
+            points: pairs
+                .iter()
+                .map(|(a, b)| (DVec3::new(a[0], a[1], 0.0), DVec3::new(b[0], b[1], 0.0)))
+                .collect(),
+            segments: Vec::new(),
+            frames: Vec::new(),
+        };
+        let spline = tps_2d(&set).unwrap();
+        for (a, b) in pairs {
+            let mut u = [0.0; 2];
+            spline.eval(a, &mut u);
+            assert!((a[0] + u[0] - b[0]).abs() < 1e-9 && (a[1] + u[1] - b[1]).abs() < 1e-9);
+        }
+        // The centre handle's pixel moves to its target in the picture (full-resolution grid).
+        let (w, h) = (32u32, 32u32);
+        let mut px = vec![[0u8, 0, 0, 255]; (w * h) as usize];
+        px[16 * 32 + 15] = [255, 255, 255, 255];
+        let out = warp_picture_tps(w, h, &px, &set, 64).unwrap();
+        let brightest = (0..px.len()).max_by_key(|&n| out.pixels[n][0]).unwrap();
+        let (x, y) = (brightest % 32, brightest / 32);
+        assert!(
+            x.abs_diff(18) <= 1 && y.abs_diff(13) <= 1,
+            "brightest at ({x}, {y})"
+        );
+        assert!(out.pixels[brightest][0] > 64);
+        let mut few = set.clone();
+        few.points.truncate(2);
+        assert!(warp_picture_tps(w, h, &px, &few, 64).is_err());
+    }
+}
+
 /// A picture deformed by [`warp_picture`].
 #[derive(Debug, Clone, PartialEq)]
 pub struct PictureWarp {
@@ -1005,11 +1055,6 @@ pub fn warp_picture(
                 .into(),
         ));
     }
-    if grid < 2 {
-        return Err(DeformError::InvalidHandles(format!(
-            "the deformed grid needs at least 2 vertices per axis, got {grid}"
-        )));
-    }
     let v2 = |p: glam::DVec3| DVec2::new(p.x, p.y);
     let points: Vec<DVec2> = set.points.iter().map(|p| v2(p.0)).collect();
     let segments: Vec<[DVec2; 2]> = set
@@ -1020,14 +1065,92 @@ pub fn warp_picture(
     let mut targets: Vec<DVec2> = set.points.iter().map(|p| v2(p.1)).collect();
     targets.extend(set.segments.iter().flat_map(|s| [v2(s.1[0]), v2(s.1[1])]));
     let handles = Mls2dHandles::new(&points, &segments, alpha)?;
+    fill_picture(width, height, pixels, grid, |verts, deformed| {
+        let plan = handles.plan(verts, kind)?;
+        plan.deform(&targets, deformed)
+    })
+}
+
+/// Deform a `width × height` RGBA picture by the 2D **thin-plate spline** through the point
+/// handles of `set` (segment handles contribute their two end points): Bookstein's warp with
+/// Duchon's kernel `r² log r` plus an affine part (McPhail Fig. 4.2's comparison with moving
+/// least squares; [`crate::volume_spline`] with `D = 2`), interpolating every handle exactly.
+/// Evaluated and filled like [`warp_picture`].
+///
+/// # Errors
+/// As [`warp_picture`]; [`DeformError::InvalidHandles`] for fewer than 3 handles or handles
+/// all on one line (the affine part is then undetermined), and coincident sources.
+pub fn warp_picture_tps(
+    width: u32,
+    height: u32,
+    pixels: &[[u8; 4]],
+    set: &crate::HandleSet,
+    grid: usize,
+) -> Result<PictureWarp, DeformError> {
+    if set.dim != 2 {
+        return Err(DeformError::InvalidHandles(
+            "picture deformation needs 2D handles (pixel coordinates [x, y]); the set has 3D \
+             coordinates"
+                .into(),
+        ));
+    }
+    let spline = tps_2d(set)?;
+    fill_picture(width, height, pixels, grid, |verts, deformed| {
+        for (v, d) in verts.iter().zip(deformed.iter_mut()) {
+            let mut u = [0.0; 2];
+            spline.eval([v.x, v.y], &mut u);
+            *d = *v + DVec2::new(u[0], u[1]);
+        }
+        Ok(())
+    })
+}
+
+/// The 2D thin-plate spline of the displacements `target − source` of `set`'s point handles
+/// and segment end points.
+fn tps_2d(set: &crate::HandleSet) -> Result<crate::volume_spline::VolumeSpline<2>, DeformError> {
+    let mut pairs: Vec<([f64; 2], [f64; 2])> = set
+        .points
+        .iter()
+        .map(|p| ([p.0.x, p.0.y], [p.1.x - p.0.x, p.1.y - p.0.y]))
+        .collect();
+    for s in &set.segments {
+        for e in 0..2 {
+            let (a, b) = (s.0[e], s.1[e]);
+            pairs.push(([a.x, a.y], [b.x - a.x, b.y - a.y]));
+        }
+    }
+    if pairs.len() < 3 {
+        return Err(DeformError::InvalidHandles(format!(
+            "a thin-plate spline needs at least 3 handles, got {}",
+            pairs.len()
+        )));
+    }
+    let centres: Vec<[f64; 2]> = pairs.iter().map(|p| p.0).collect();
+    let values: Vec<f64> = pairs.iter().flat_map(|p| p.1).collect();
+    crate::volume_spline::VolumeSplineSystem::<2>::new(&centres, 0.0)?.solve(&values, 2)
+}
+
+/// Evaluate `deform(vertices, out)` on a grid of at most `grid × grid` vertices over the
+/// picture and fill its quads bilinearly.
+fn fill_picture(
+    width: u32,
+    height: u32,
+    pixels: &[[u8; 4]],
+    grid: usize,
+    deform: impl FnOnce(&[DVec2], &mut [DVec2]) -> Result<(), DeformError>,
+) -> Result<PictureWarp, DeformError> {
+    if grid < 2 {
+        return Err(DeformError::InvalidHandles(format!(
+            "the deformed grid needs at least 2 vertices per axis, got {grid}"
+        )));
+    }
     let (nx, ny) = (
         grid.min(width.max(2) as usize),
         grid.min(height.max(2) as usize),
     );
     let verts = image_grid(width, height, nx, ny)?;
-    let plan = handles.plan(&verts, kind)?;
     let mut deformed = vec![DVec2::ZERO; verts.len()];
-    plan.deform(&targets, &mut deformed)?;
+    deform(&verts, &mut deformed)?;
     let fold_fraction = fold_fraction(nx, ny, &deformed);
     let pixels = warp_rgba(width, height, pixels, nx, ny, &deformed, [0; 4])?;
     Ok(PictureWarp {

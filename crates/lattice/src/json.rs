@@ -10,7 +10,8 @@
 //!   "frame": {
 //!     "origin": [x, y, z],
 //!     "axes": [[ux, uy, uz], [vx, vy, vz], [wx, wy, wz]],
-//!     "spacing": [su, sv, sw]
+//!     "spacing": [su, sv, sw],
+//!     "skewed": true
 //!   },
 //!   "control_points": [[x, y, z], …]
 //! }
@@ -19,8 +20,14 @@
 //! * `degrees[a]` and `knots[a]` describe the knot vector of parameter axis `a` (u, v, w);
 //!   `counts[a]` must equal `knots[a].len() − degrees[a] − 1`.
 //! * `frame` is the [`LatticeFrame`]: physical position of parameter `(0, 0, 0)`, the three
-//!   orthonormal axis directions (`axes[a]` is the physical direction of parameter axis `a`)
-//!   and the physical length of one parameter unit per axis.
+//!   axis directions (`axes[a]` is the physical direction of parameter axis `a`) and the
+//!   physical length of one parameter unit per axis. The axes are orthonormal (snapped to the
+//!   nearest rotation within 1e-4, the one direction rule) unless the frame also says
+//!   `"skewed": true`: then they are the unit edge directions of a Sederberg–Parry
+//!   parallelepiped at any non-degenerate angles ([`LatticeFrame::skewed`]). The flag is
+//!   written only for skewed frames, so files of orthonormal lattices are unchanged, and a
+//!   non-orthonormal frame without it is an error (a mistyped rotation is not silently read
+//!   as a shear).
 //! * `control_points` are physical coordinates, `counts[0]·counts[1]·counts[2]` of them, index
 //!   `i` (u) fastest, then `j`, then `k`.
 //!
@@ -50,6 +57,8 @@ struct FrameJson {
     origin: [f64; 3],
     axes: [[f64; 3]; 3],
     spacing: [f64; 3],
+    #[serde(default, skip_serializing_if = "std::ops::Not::not")]
+    skewed: bool,
 }
 
 #[derive(Serialize, Deserialize)]
@@ -86,6 +95,7 @@ impl BSplineLattice {
                     axes.z_axis.to_array(),
                 ],
                 spacing: f.spacing().to_array(),
+                skewed: f.is_skewed(),
             },
             control_points: self.control_points().iter().map(|p| p.to_array()).collect(),
         };
@@ -158,7 +168,12 @@ impl BSplineLattice {
             )));
         }
         let [ax, ay, az] = doc.frame.axes.map(DVec3::from_array);
-        let frame = LatticeFrame::new(
+        let make = if doc.frame.skewed {
+            LatticeFrame::skewed
+        } else {
+            LatticeFrame::new
+        };
+        let frame = make(
             DVec3::from_array(doc.frame.origin),
             DMat3::from_cols(ax, ay, az),
             DVec3::from_array(doc.frame.spacing),

@@ -11,11 +11,25 @@
 //! is the lattice's [`LatticeFrame`], the affine map from parameter space to physical space
 //!
 //! ```text
-//! F(u) = origin + axes · (spacing ⊙ u),    F⁻¹(x) = spacing⁻¹ ⊙ (axesᵀ · (x − origin))
+//! F(u) = origin + axes · (spacing ⊙ u),    F⁻¹(x) = (axes · diag(spacing))⁻¹ · (x − origin)
 //! ```
 //!
-//! with orthonormal `axes` (columns: physical direction of the u, v and w axes). Parameter `u`
+//! with unit `axes` (columns: physical direction of the u, v and w axes). Parameter `u`
 //! therefore counts lattice cells of physical size `spacing.x` along `axes.x_axis`.
+//!
+//! # Orthonormal and skewed frames
+//!
+//! Most lattices have **orthonormal** axes (a box, possibly rotated; then
+//! `F⁻¹(x) = spacing⁻¹ ⊙ (axesᵀ · (x − origin))`). A **skewed** frame
+//! ([`LatticeFrame::parallelepiped`], [`LatticeFrame::skewed`]) has unit axes at arbitrary,
+//! non-degenerate angles: the lattice box is then Sederberg and Parry's parallelepiped
+//! (True 1992 §2.1), `Q = Q₀ + sS + tT + uU` with `S, T, U` the frame's edge vectors
+//! ([`LatticeFrame::edges`], the columns of `axes · diag(spacing)`) and the local coordinates
+//! `(s, t, u)` found by the linear equations of §2.1 (here the inverse of the edge matrix).
+//! Everything a lattice does — evaluation, analytic Jacobians (`∂S/∂u · F⁻¹'s matrix`), Newton
+//! inversion, drags, the JSON form — holds for either kind; the fast grid paths apply when a
+//! grid's index axes are parallel to the lattice axes (e.g. a sheared CT grid and the lattice
+//! placed on its voxels), and fall back to pointwise evaluation otherwise.
 //!
 //! # Identity placement
 //!
@@ -46,7 +60,7 @@
 use glam::{DMat3, DVec3};
 use volmorph_spline::{BSplineVolume, KnotVector, SplineError, TensorBSpline};
 use volmorph_volume::Geometry;
-use volmorph_volume::direction::orthonormalize;
+use volmorph_volume::direction::{DIRECTION_ORTHONORMAL_TOL, orthonormalize};
 
 use rayon::prelude::*;
 
@@ -59,14 +73,27 @@ const BATCH_CHUNK: usize = 4096;
 /// Largest order (degree + 1) of the small-degree batch kernel.
 const SMALL_ORDER: usize = 4;
 
-/// The affine frame of a lattice: parameter `u ↦ origin + axes·(spacing ⊙ u)`. See the
-/// [module docs](self).
+/// Smallest volume `|det(axes)|` of the parallelepiped spanned by the unit axes of a skewed
+/// [`LatticeFrame`] (1 for orthonormal axes, 0 for coplanar ones). The condition number of the
+/// axes matrix is at most about `2 / |det|`, so above this bound parameters keep at least 12
+/// significant digits of their `f64` precision through `F⁻¹`; a lattice closer to flat (two
+/// axes within 0.06° of each other) is refused as degenerate.
+pub const MIN_FRAME_VOLUME: f64 = 1e-3;
+
+/// An axis whose length is within this of 1 counts as a unit vector in
+/// [`LatticeFrame::skewed`] and is kept bit for bit (a normalised vector has a length within a
+/// few ulps of 1).
+const UNIT_AXIS_TOL: f64 = 8.0 * f64::EPSILON;
+
+/// The affine frame of a lattice: parameter `u ↦ origin + axes·(spacing ⊙ u)`, with orthonormal
+/// or skewed unit axes. See the [module docs](self).
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct LatticeFrame {
     origin: DVec3,
     axes: DMat3,
     spacing: DVec3,
     to_param: DMat3,
+    skewed: bool,
 }
 
 impl LatticeFrame {
@@ -75,38 +102,110 @@ impl LatticeFrame {
     /// `spacing` of one parameter unit along each axis.
     ///
     /// Axes orthonormal within
-    /// [`DIRECTION_ORTHONORMAL_TOL`](volmorph_volume::direction::DIRECTION_ORTHONORMAL_TOL) (e.g. an oblique scan's direction,
+    /// [`DIRECTION_ORTHONORMAL_TOL`] (e.g. an oblique scan's direction,
     /// orthonormal only to single precision) are replaced by their polar factor, the nearest
     /// orthonormal matrix, by [`orthonormalize`] — the rule every direction entering volmorph
-    /// follows; [`LatticeFrame::axes`] returns the snapped matrix.
+    /// follows; [`LatticeFrame::axes`] returns the snapped matrix. For skewed axes use
+    /// [`LatticeFrame::skewed`].
     ///
     /// # Errors
     /// [`DeformError::InvalidFrame`] for non-finite values, a spacing that is not > 0, or axes
     /// whose Gram matrix deviates from `I` by more than
-    /// [`DIRECTION_ORTHONORMAL_TOL`](volmorph_volume::direction::DIRECTION_ORTHONORMAL_TOL).
+    /// [`DIRECTION_ORTHONORMAL_TOL`].
     pub fn new(origin: DVec3, axes: DMat3, spacing: DVec3) -> Result<Self, DeformError> {
-        if !origin.is_finite() {
-            return Err(DeformError::InvalidFrame(format!(
-                "origin {origin} is not finite"
-            )));
-        }
-        if !(spacing.is_finite() && spacing.min_element() > 0.0) {
-            return Err(DeformError::InvalidFrame(format!(
-                "spacing {spacing} must be finite and > 0"
-            )));
-        }
+        check_origin_spacing(origin, spacing)?;
         if !axes.is_finite() {
             return Err(DeformError::InvalidFrame("axes are not finite".into()));
         }
-        let axes = orthonormalize(axes)
-            .map_err(|e| DeformError::InvalidFrame(format!("lattice axes {axes}: {e}")))?;
+        let axes = orthonormalize(axes).map_err(|e| {
+            DeformError::InvalidFrame(format!(
+                "lattice axes {axes}: {e} (a skewed lattice is made by LatticeFrame::skewed)"
+            ))
+        })?;
         let to_param = DMat3::from_diagonal(spacing.recip()) * axes.transpose();
         Ok(Self {
             origin,
             axes,
             spacing,
             to_param,
+            skewed: false,
         })
+    }
+
+    /// A frame whose axes may be **skewed** (Sederberg–Parry's parallelepiped, True 1992
+    /// §2.1): `axes` columns are the physical directions of u, v, w, of any non-zero length
+    /// (each is normalised, its length folded into `spacing`) and at any non-degenerate angles;
+    /// `spacing` is the physical length of one parameter unit along each (normalised) axis.
+    /// Axes that are orthonormal within
+    /// [`DIRECTION_ORTHONORMAL_TOL`] after normalisation give the orthonormal frame of
+    /// [`LatticeFrame::new`] (snapped by the one direction rule), so a frame is skewed exactly
+    /// when [`LatticeFrame::is_skewed`] says so.
+    ///
+    /// # Errors
+    /// [`DeformError::InvalidFrame`] for non-finite values, a spacing that is not > 0, a zero
+    /// axis, or unit axes spanning a volume below [`MIN_FRAME_VOLUME`] (nearly coplanar).
+    pub fn skewed(origin: DVec3, axes: DMat3, spacing: DVec3) -> Result<Self, DeformError> {
+        check_origin_spacing(origin, spacing)?;
+        if !axes.is_finite() {
+            return Err(DeformError::InvalidFrame("axes are not finite".into()));
+        }
+        let mut unit = axes;
+        let mut spacing = spacing;
+        for a in 0..3 {
+            let len = axes.col(a).length();
+            if !(len.is_finite() && len > 0.0) {
+                return Err(DeformError::InvalidFrame(format!(
+                    "lattice axis {a} {} has no direction",
+                    axes.col(a)
+                )));
+            }
+            // Unit to rounding (as written by `to_json`): keep the bits, so a written frame
+            // reads back identical.
+            if (len - 1.0).abs() > UNIT_AXIS_TOL {
+                *unit.col_mut(a) = axes.col(a) / len;
+                spacing[a] *= len;
+            }
+        }
+        if volmorph_volume::direction::orthonormality_deviation(unit) <= DIRECTION_ORTHONORMAL_TOL {
+            return Self::new(origin, unit, spacing);
+        }
+        let volume = unit.determinant();
+        if volume.is_nan() || volume.abs() < MIN_FRAME_VOLUME {
+            return Err(DeformError::InvalidFrame(format!(
+                "lattice axes {unit} span a volume of {volume:.3e} (unit axes), below \
+                 {MIN_FRAME_VOLUME:e}: the parallelepiped is degenerate"
+            )));
+        }
+        let edges = unit * DMat3::from_diagonal(spacing);
+        if !(edges.is_finite() && spacing.is_finite()) {
+            return Err(DeformError::InvalidFrame(format!(
+                "lattice edges {edges} overflow"
+            )));
+        }
+        let to_param = edges.inverse();
+        if !to_param.is_finite() {
+            return Err(DeformError::InvalidFrame(format!(
+                "lattice edges {edges} cannot be inverted"
+            )));
+        }
+        Ok(Self {
+            origin,
+            axes: unit,
+            spacing,
+            to_param,
+            skewed: true,
+        })
+    }
+
+    /// The frame of Sederberg and Parry's parallelepiped (True 1992 §2.1): parameter
+    /// `(0, 0, 0)` at `origin` and one parameter unit along u, v, w given by the physical edge
+    /// vectors `edges` (columns `S, T, U`), so `F(s, t, u) = origin + sS + tT + uU`. Orthonormal
+    /// or skewed as [`LatticeFrame::skewed`] decides.
+    ///
+    /// # Errors
+    /// As [`LatticeFrame::skewed`].
+    pub fn parallelepiped(origin: DVec3, edges: DMat3) -> Result<Self, DeformError> {
+        Self::skewed(origin, edges, DVec3::ONE)
     }
 
     /// An axis-aligned frame (`axes = I`).
@@ -123,7 +222,8 @@ impl LatticeFrame {
         self.origin
     }
 
-    /// Orthonormal axes (columns: physical directions of u, v, w).
+    /// Unit axes (columns: physical directions of u, v, w); orthonormal unless
+    /// [`LatticeFrame::is_skewed`].
     #[must_use]
     pub fn axes(&self) -> DMat3 {
         self.axes
@@ -135,13 +235,40 @@ impl LatticeFrame {
         self.spacing
     }
 
-    /// The linear part of `F⁻¹`: `diag(1/spacing) · axesᵀ` (physical → parameter steps).
+    /// `true` for a skewed frame (axes not orthonormal; see [`LatticeFrame::skewed`]).
+    #[must_use]
+    pub fn is_skewed(&self) -> bool {
+        self.skewed
+    }
+
+    /// The edge vectors of one parameter unit, `axes · diag(spacing)` (columns `S, T, U` of
+    /// True's §2.1): the linear part of `F`.
+    #[must_use]
+    pub fn edges(&self) -> DMat3 {
+        self.axes * DMat3::from_diagonal(self.spacing)
+    }
+
+    /// The linear part of `F⁻¹` (physical → parameter steps): `diag(1/spacing) · axesᵀ` for an
+    /// orthonormal frame, the inverse of [`LatticeFrame::edges`] in general.
     #[must_use]
     pub fn to_parameter_matrix(&self) -> DMat3 {
         self.to_param
     }
 
-    /// Parameters of physical point `x`: `F⁻¹(x) = diag(1/spacing)·axesᵀ·(x − origin)`.
+    /// The matrix `G = axes⁻ᵀ` turning per-axis derivatives into physical gradients: a
+    /// function `w(x)` of the parameters with `d_a = (∂w/∂u_a) / spacing_a` (the derivative per
+    /// unit of physical length along axis `a`, as [`BSplineLattice::point_basis`] gives it) has
+    /// the physical gradient `∇w = G · d`. `G = axes` for an orthonormal frame.
+    #[must_use]
+    pub fn gradient_matrix(&self) -> DMat3 {
+        if self.skewed {
+            self.to_param.transpose() * DMat3::from_diagonal(self.spacing)
+        } else {
+            self.axes
+        }
+    }
+
+    /// Parameters of physical point `x`: `F⁻¹(x) = to_parameter_matrix · (x − origin)`.
     #[inline]
     #[must_use]
     pub fn to_parameter(&self, x: DVec3) -> DVec3 {
@@ -154,6 +281,21 @@ impl LatticeFrame {
     pub fn to_physical(&self, u: DVec3) -> DVec3 {
         self.origin + self.axes * (self.spacing * u)
     }
+}
+
+/// Check a frame's origin and spacing.
+fn check_origin_spacing(origin: DVec3, spacing: DVec3) -> Result<(), DeformError> {
+    if !origin.is_finite() {
+        return Err(DeformError::InvalidFrame(format!(
+            "origin {origin} is not finite"
+        )));
+    }
+    if !(spacing.is_finite() && spacing.min_element() > 0.0) {
+        return Err(DeformError::InvalidFrame(format!(
+            "spacing {spacing} must be finite and > 0"
+        )));
+    }
+    Ok(())
 }
 
 /// A trivariate B-spline (or Bézier) lattice map with physical control points. See the
@@ -300,6 +442,72 @@ impl BSplineLattice {
         Self::identity_in_box(corner, axes, extent, knots)
     }
 
+    /// The identity lattice for `knots` fitted to the **parallelepiped** with corner `corner`
+    /// and edge vectors `edges` (columns: the three box edges leaving the corner, at any
+    /// non-degenerate angles; Sederberg–Parry's `S, T, U` of True 1992 §2.1): the knot domain
+    /// `[a, b]` of each axis is stretched onto its edge, so `F(a_u, a_v, a_w) = corner` and the
+    /// lattice box is `corner + s·S + t·T + u·U`, `s, t, u ∈ [0, 1]`. Orthonormal edges give the
+    /// lattice of [`BSplineLattice::identity_in_box`].
+    ///
+    /// # Errors
+    /// [`DeformError::InvalidFrame`] for a non-finite corner, a zero edge or edges spanning a
+    /// degenerate parallelepiped (see [`MIN_FRAME_VOLUME`]), and the errors of
+    /// [`BSplineLattice::identity`].
+    pub fn identity_in_parallelepiped(
+        corner: DVec3,
+        edges: DMat3,
+        knots: [KnotVector; 3],
+    ) -> Result<Self, DeformError> {
+        let mut start = DVec3::ZERO;
+        let mut unit_edges = edges;
+        for a in 0..3 {
+            let [lo, hi] = knots[a].domain();
+            start[a] = lo;
+            *unit_edges.col_mut(a) = edges.col(a) / (hi - lo);
+        }
+        if !corner.is_finite() {
+            return Err(DeformError::InvalidFrame(format!(
+                "corner {corner} is not finite"
+            )));
+        }
+        let frame = LatticeFrame::parallelepiped(DVec3::ZERO, unit_edges)?;
+        let origin = corner - frame.edges() * start;
+        let frame = LatticeFrame::parallelepiped(origin, unit_edges)?;
+        Self::identity(frame, knots)
+    }
+
+    /// True's uniform cubic lattice (§5.5) on the parallelepiped with corner `corner` and edge
+    /// vectors `edges` (see [`BSplineLattice::identity_in_parallelepiped`]): `counts[a] − 3`
+    /// equal regions along each edge, the control points an evenly spaced skewed grid reaching
+    /// one region beyond the box on each side. The identity on the box.
+    ///
+    /// # Errors
+    /// [`DeformError::TooFewControlPoints`] if a count is below 4, and the errors of
+    /// [`BSplineLattice::identity_in_parallelepiped`].
+    pub fn uniform_cubic_in_parallelepiped(
+        corner: DVec3,
+        edges: DMat3,
+        counts: [usize; 3],
+    ) -> Result<Self, DeformError> {
+        let knots = uniform_cubic_knots(counts)?;
+        Self::identity_in_parallelepiped(corner, edges, knots)
+    }
+
+    /// Sederberg and Parry's Bézier lattice of degrees `(l, m, n)` (each ≥ 1) on the
+    /// parallelepiped `corner + s·S + t·T + u·U` (`edges` = columns `S, T, U`): control points
+    /// at `corner + (i/l)·S + (j/m)·T + (k/n)·U` (True 1992 §2.1), the identity map.
+    ///
+    /// # Errors
+    /// As [`BSplineLattice::bezier_in_box`] and
+    /// [`BSplineLattice::identity_in_parallelepiped`].
+    pub fn bezier_in_parallelepiped(
+        corner: DVec3,
+        edges: DMat3,
+        degrees: [usize; 3],
+    ) -> Result<Self, DeformError> {
+        Self::identity_in_parallelepiped(corner, edges, bezier_knots(degrees)?)
+    }
+
     /// True's uniform cubic lattice on the axis-aligned box `[min, max]`; see
     /// [`BSplineLattice::uniform_cubic_in_box`].
     ///
@@ -327,17 +535,7 @@ impl BSplineLattice {
         extent: DVec3,
         degrees: [usize; 3],
     ) -> Result<Self, DeformError> {
-        let knots = try_axes(|a| {
-            if degrees[a] == 0 {
-                return Err(DeformError::TooFewControlPoints {
-                    axis: a,
-                    count: 1,
-                    min: 2,
-                });
-            }
-            Ok(KnotVector::bezier(degrees[a], [0.0, 1.0])?)
-        })?;
-        Self::identity_in_box(corner, axes, extent, knots)
+        Self::identity_in_box(corner, axes, extent, bezier_knots(degrees)?)
     }
 
     /// A Sederberg–Parry Bézier lattice on the axis-aligned box `[min, max]`; see
@@ -522,12 +720,15 @@ impl BSplineLattice {
 
     /// The identity uniform cubic lattice with `counts` control points per axis on the box of
     /// voxel centres of `grid`, in the grid's own direction frame (True 1992 Fig. 8: the box
-    /// from the first to the last voxel centre, so every voxel centre is inside).
+    /// from the first to the last voxel centre, so every voxel centre is inside). A sheared
+    /// grid (e.g. a tilted-gantry CT) gets a skewed lattice with the same shear, so the grid's
+    /// index axes stay parallel to the lattice axes and the fast grid paths apply.
     ///
     /// # Errors
     /// [`DeformError::DegenerateBox`] if the grid is a single voxel thick along an axis,
-    /// [`DeformError::InvalidFrame`] if its direction is not orthonormal, and the errors of
-    /// [`BSplineLattice::uniform_cubic_in_box`] (fewer than 4 control points per axis).
+    /// [`DeformError::InvalidFrame`] if its direction is degenerate, and the errors of
+    /// [`BSplineLattice::uniform_cubic_in_parallelepiped`] (fewer than 4 control points per
+    /// axis).
     pub fn identity_on_voxels(grid: &Geometry, counts: [usize; 3]) -> Result<Self, DeformError> {
         let extent = grid.spacing
             * DVec3::new(
@@ -544,7 +745,13 @@ impl BSplineLattice {
                 });
             }
         }
-        Self::uniform_cubic_in_box(grid.origin, grid.direction, extent, counts)
+        if volmorph_volume::direction::orthonormality_deviation(grid.direction)
+            <= DIRECTION_ORTHONORMAL_TOL
+        {
+            return Self::uniform_cubic_in_box(grid.origin, grid.direction, extent, counts);
+        }
+        let edges = grid.direction * DMat3::from_diagonal(extent);
+        Self::uniform_cubic_in_parallelepiped(grid.origin, edges, counts)
     }
 
     /// The parameter frame.
@@ -890,6 +1097,20 @@ pub(crate) fn uniform_cubic_knots(counts: [usize; 3]) -> Result<[KnotVector; 3],
     try_axes(|a| {
         let n = counts[a];
         Ok(KnotVector::uniform(3, n, [0.0, (n - 3) as f64])?)
+    })
+}
+
+/// Single-span clamped knot vectors on `[0, 1]` of `degrees` (Sederberg–Parry Bézier lattices).
+fn bezier_knots(degrees: [usize; 3]) -> Result<[KnotVector; 3], DeformError> {
+    try_axes(|a| {
+        if degrees[a] == 0 {
+            return Err(DeformError::TooFewControlPoints {
+                axis: a,
+                count: 1,
+                min: 2,
+            });
+        }
+        Ok(KnotVector::bezier(degrees[a], [0.0, 1.0])?)
     })
 }
 

@@ -43,9 +43,11 @@ pub mod json;
 pub mod lattice;
 pub mod live;
 pub mod manipulate;
+pub mod tool;
 
 pub use lattice::{BSplineLattice, FengForm, LatticeFrame};
 pub use manipulate::{
     Drag, DragError, DragOptions, DragSolution, ManipulationSession, drags_from_deformed,
     solve_drags,
 };
+pub use tool::{CurveStep, Realm, ToolShape, curve_drag_steps};

@@ -32,13 +32,15 @@
 //!   non-zero at `p_m`: at most `(p+1)³` points around the dragged point (64 for cubic
 //!   lattices; fewer when a parameter of `p_m` sits on a knot, where a basis function
 //!   vanishes). Control points that influence no dragged point never move.
-//! * **Tool radius** ([`DragOptions::radius`], the "magnet tool" of §6 and its region of
-//!   influence): when set, a candidate of drag `m` is kept only if its **current physical
-//!   position** lies within distance `r` (closed ball) of the dragged point's **current image**
-//!   `φ(p_m)` — the point the user sees and grabs. Distances are physical, so the region is a
-//!   true ball around the grabbed point whatever the lattice spacing, frame or earlier
-//!   deformation. A larger radius spreads the edit over more control points (smoother, smaller
-//!   moves); a smaller one keeps it local.
+//! * **Tool shape** ([`DragOptions::tool`], the "magnet tool" of §6 and its region of
+//!   influence; [`ToolShape`]: sphere, ellipsoid or box): when set, a candidate of drag `m` is
+//!   kept only if its **current physical position** lies in the closed shape centred on the
+//!   dragged point's **current image** `φ(p_m)` — the point the user sees and grabs. Sizes are
+//!   physical, so a sphere is a true ball around the grabbed point whatever the lattice
+//!   spacing, frame or earlier deformation. A larger tool spreads the edit over more control
+//!   points (smoother, smaller moves); a smaller one keeps it local.
+//! * **Realm** ([`DragOptions::realm`], [`Realm`]): control points outside it never move,
+//!   for any drag (a range of control indices, or a physical box of current positions).
 //! * **Frozen boundary** ([`DragOptions::freeze_boundary`]): control points whose basis
 //!   function is non-zero somewhere on the box surface are never moved. Points outside the box
 //!   are not moved by the map, so moving such a control point opens a seam at the box surface
@@ -94,6 +96,7 @@ use glam::DVec3;
 use volmorph_spline::{MAX_DEGREE, basis_funs_into};
 
 use crate::BSplineLattice;
+use crate::tool::{Realm, ToolShape};
 use volmorph_deform::{DeformError, SpaceMap};
 
 /// Smallest total weight `(Σ_c N_c(p)²)^½` of the free control points at a dragged point, and
@@ -136,35 +139,54 @@ impl Drag {
 /// Which control points a drag may move; see the [module docs](self).
 #[derive(Debug, Clone, Copy, PartialEq, Default)]
 pub struct DragOptions {
-    /// Tool radius (physical length, > 0): only control points whose current position lies
-    /// within this distance of a dragged point's current image move for that drag. `None`:
-    /// the whole support of the dragged point.
-    pub radius: Option<f64>,
+    /// Tool shape ([`ToolShape`]: sphere, ellipsoid or box, physical units): only control
+    /// points whose current position lies in the shape centred on a dragged point's current
+    /// image move for that drag. `None`: the whole support of the dragged point.
+    pub tool: Option<ToolShape>,
     /// Never move control points whose basis function is non-zero on the box surface, so the
     /// map stays continuous across the box surface.
     pub freeze_boundary: bool,
+    /// Only control points of this realm may move, for every drag (True 1992 §6's realm of
+    /// influence). `None`: every control point.
+    pub realm: Option<Realm>,
 }
 
 impl DragOptions {
-    /// Options with tool radius `radius` and the boundary not frozen.
+    /// Options with a spherical tool of radius `radius`, no realm and the boundary not frozen.
     #[must_use]
     pub fn with_radius(radius: f64) -> Self {
+        Self::with_tool(ToolShape::Sphere { radius })
+    }
+
+    /// Options with tool `tool`, no realm and the boundary not frozen.
+    #[must_use]
+    pub fn with_tool(tool: ToolShape) -> Self {
         Self {
-            radius: Some(radius),
-            freeze_boundary: false,
+            tool: Some(tool),
+            ..Self::default()
         }
     }
 
     /// Check the options.
     ///
     /// # Errors
-    /// [`DragError::InvalidRadius`] for a radius that is NaN or not > 0 (`+∞` is allowed and
-    /// means no limit).
+    /// [`DragError::InvalidRadius`] for a sphere radius that is NaN or not > 0 (`+∞` is
+    /// allowed and means no limit); [`DragError::InvalidTool`] for another invalid shape or
+    /// an empty realm (see [`ToolShape::validate`], [`Realm::validate`]).
     pub fn validate(&self) -> Result<(), DragError> {
-        match self.radius {
-            Some(r) if r.is_nan() || r <= 0.0 => Err(DragError::InvalidRadius { radius: r }),
-            _ => Ok(()),
+        if let Some(t) = &self.tool {
+            t.validate()?;
         }
+        if let Some(r) = &self.realm {
+            r.validate()?;
+        }
+        Ok(())
+    }
+
+    /// The tool, for messages.
+    fn tool_text(&self) -> String {
+        self.tool
+            .map_or_else(|| "unlimited".to_string(), |t| t.to_string())
     }
 }
 
@@ -220,12 +242,15 @@ pub enum DragError {
         /// The radius given.
         radius: f64,
     },
-    /// No control point that may move (within the tool radius, not frozen) has a basis weight
-    /// of at least [`MIN_INFLUENCE`] at a dragged point.
+    /// A tool shape (other than a sphere's radius) or a realm is unusable.
+    #[error("invalid drag tool: {0}")]
+    InvalidTool(String),
+    /// No control point that may move (within the tool shape and the realm, not frozen) has a
+    /// basis weight of at least [`MIN_INFLUENCE`] at a dragged point.
     #[error(
         "drag {drag}: no movable control point influences the material point {point:.6} \
-         (tool radius {}, boundary {}); enlarge the radius or free the boundary",
-        .radius.map_or_else(|| "unlimited".to_string(), |r| r.to_string()),
+         (tool {tool}, realm {realm}, boundary {}); enlarge the tool or the realm, or free the \
+         boundary",
         if *.freeze_boundary { "frozen" } else { "free" }
     )]
     NoInfluence {
@@ -233,8 +258,10 @@ pub enum DragError {
         drag: usize,
         /// The material point.
         point: DVec3,
-        /// The tool radius in force.
-        radius: Option<f64>,
+        /// The tool in force.
+        tool: String,
+        /// The realm in force.
+        realm: String,
         /// Whether the boundary layers were frozen.
         freeze_boundary: bool,
     },
@@ -569,7 +596,7 @@ fn supports(lattice: &BSplineLattice, drags: &[Drag]) -> Result<Vec<Support>, Dr
 /// [`DragError::NoDrags`] for an empty list, [`DragError::InvalidRadius`],
 /// [`DragError::NonFinite`] for a NaN or infinite point, [`DragError::MaterialOutsideBox`] /
 /// [`DragError::TargetOutsideBox`] for a point outside the closed lattice box,
-/// [`DragError::NoInfluence`] when the radius or the frozen boundary leaves a drag without a
+/// [`DragError::NoInfluence`] when the tool, the realm or the frozen boundary leaves a drag without a
 /// control point to move, [`DragError::TooLarge`] for a system too large to allocate and
 /// [`DragError::NoConvergence`] if the SVD fails.
 pub fn solve_drags(
@@ -606,11 +633,15 @@ pub fn solve_drags(
             if frozen(idx) {
                 return;
             }
-            if let Some(r) = options.radius {
-                let dist = position(lin).distance(s.image);
-                if dist.is_nan() || dist > r {
-                    return;
-                }
+            if let Some(t) = &options.tool
+                && !t.contains(position(lin) - s.image)
+            {
+                return;
+            }
+            if let Some(r) = &options.realm
+                && !r.admits(idx, position(lin))
+            {
+                return;
             }
             weight2 += w * w;
             columns.push((lin, idx));
@@ -619,7 +650,10 @@ pub fn solve_drags(
             return Err(DragError::NoInfluence {
                 drag: m,
                 point: drags[m].material,
-                radius: options.radius,
+                tool: options.tool_text(),
+                realm: options
+                    .realm
+                    .map_or_else(|| "all".to_string(), |r| r.to_string()),
                 freeze_boundary: options.freeze_boundary,
             });
         }
@@ -809,7 +843,7 @@ impl ManipulationSession {
         &self.options
     }
 
-    /// Change the drag options (tool radius, frozen boundary) for later drags.
+    /// Change the drag options (tool, realm, frozen boundary) for later drags.
     ///
     /// # Errors
     /// [`DragError::InvalidRadius`]; the options are then unchanged.

@@ -466,8 +466,8 @@ fn map_is_unchanged_outside_the_support() {
 fn frozen_boundary_keeps_the_box_surface_fixed() {
     let lat = cubic9();
     let opts = DragOptions {
-        radius: None,
         freeze_boundary: true,
+        ..DragOptions::default()
     };
     // Near the face x = 0: the support reaches the three outermost layers, which stay.
     let p = DVec3::new(4.0, 30.0, 30.0);

@@ -345,8 +345,13 @@ fn malformed_files_give_clear_errors() {
     assert!(m.contains("integer"), "{m}");
     let (_, m) = parse_err(&with_lines(b, &p, "4 4 4 0 0 0 1 0 1 1 0 0 0 1 0 0 0 1"));
     assert!(m.contains("spacing"), "{m}");
-    let (_, m) = parse_err(&with_lines(b, &p, "4 4 4 0 0 0 1 1 1 1 0.2 0 0 1 0 0 0 1"));
-    assert!(m.contains("orthonormal"), "{m}");
+    // A skewed direction reads as a skewed lattice; a degenerate one is refused.
+    let skewed =
+        parse_itk_tfm(&with_lines(b, &p, "4 4 4 0 0 0 1 1 1 1 0.2 0 0 1 0 0 0 1")).unwrap();
+    assert!(skewed.frame().is_skewed());
+    let (line, m) = parse_err(&with_lines(b, &p, "4 4 4 0 0 0 1 1 1 1 1 0 0 0 0 0 0 1"));
+    assert_eq!(line, 5);
+    assert!(m.contains("direction") && m.contains("degenerate"), "{m}");
     let (line, m) = parse_err(&with_lines(b, &format!("{} abc", zeros(191)), FIXED_4));
     assert_eq!(line, 4);
     assert!(m.contains("'abc'"), "{m}");

@@ -145,13 +145,45 @@ struct BoxJson {
     max: [f64; 3],
 }
 
-#[derive(Serialize, Deserialize)]
+/// The JSON form of a voxel grid's [`Geometry`] (sampled maps' `grid`, warp output grids of
+/// scene recipes): `dims`, `spacing`, `origin` (voxel (0, 0, 0)) and `direction` row by row
+/// (`direction[r][c]`; column `c` is the unit direction of index axis `c`, as ITK writes it).
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
 #[serde(deny_unknown_fields)]
-struct GridJson {
-    dims: [usize; 3],
-    spacing: [f64; 3],
-    origin: [f64; 3],
-    direction: [[f64; 3]; 3],
+pub struct GridJson {
+    /// Voxels per index axis.
+    pub dims: [usize; 3],
+    /// Voxel spacing per index axis (physical units).
+    pub spacing: [f64; 3],
+    /// Physical position of voxel (0, 0, 0).
+    pub origin: [f64; 3],
+    /// Direction matrix, row by row.
+    pub direction: [[f64; 3]; 3],
+}
+
+impl From<&Geometry> for GridJson {
+    fn from(g: &Geometry) -> Self {
+        Self {
+            dims: g.dims,
+            spacing: g.spacing.to_array(),
+            origin: g.origin.to_array(),
+            direction: rows(g.direction),
+        }
+    }
+}
+
+impl GridJson {
+    /// The geometry, its direction snapped by the one direction rule (a skewed matrix is
+    /// kept); not validated (see [`Geometry::validate`]).
+    #[must_use]
+    pub fn geometry(&self) -> Geometry {
+        Geometry {
+            dims: self.dims,
+            spacing: DVec3::from_array(self.spacing),
+            origin: DVec3::from_array(self.origin),
+            direction: snap_direction(from_rows(self.direction)),
+        }
+    }
 }
 
 fn rows(m: DMat3) -> [[f64; 3]; 3] {
@@ -304,12 +336,7 @@ impl AnyMap {
                 tagged(
                     "sampled",
                     json!({
-                        "grid": GridJson {
-                            dims: g.dims,
-                            spacing: g.spacing.to_array(),
-                            origin: g.origin.to_array(),
-                            direction: rows(g.direction),
-                        },
+                        "grid": GridJson::from(g),
                         "positions": points(s.positions()),
                     }),
                 )?
@@ -502,14 +529,9 @@ impl AnyMap {
                     positions: Vec<[f64; 3]>,
                 }
                 let s: SampledJson = serde_json::from_value(body()).map_err(parse("sampled"))?;
-                let grid = Geometry {
-                    dims: s.grid.dims,
-                    spacing: DVec3::from_array(s.grid.spacing),
-                    origin: DVec3::from_array(s.grid.origin),
-                    // The one rule for directions entering volmorph (a sampled grid may
-                    // legitimately be skewed, so a skewed matrix is kept).
-                    direction: snap_direction(from_rows(s.grid.direction)),
-                };
+                // The one rule for directions entering volmorph (a sampled grid may
+                // legitimately be skewed, so a skewed matrix is kept).
+                let grid = s.grid.geometry();
                 AnyMap::Sampled(SampledMap::from_positions(grid, vecs(&s.positions))?)
             }
             "compose" => {

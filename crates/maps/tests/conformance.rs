@@ -77,6 +77,31 @@ fn lattice(moved: f64, oblique: bool) -> BSplineLattice {
     l
 }
 
+/// A skewed (Sederberg–Parry parallelepiped) cubic lattice around the domain: axes at 70°, 80°
+/// and 65°, every control point moved randomly by up to `moved`.
+fn skewed_lattice(moved: f64) -> BSplineLattice {
+    let edges = DMat3::from_cols(
+        DVec3::new(40.0, 0.0, 0.0),
+        DVec3::new(14.0, 38.0, 0.0),
+        DVec3::new(-8.0, 6.0, 36.0),
+    );
+    // Corner such that the parallelepiped holds the domain [LO, HI].
+    let corner = DVec3::new(-24.0, -16.0, -17.0);
+    let mut l = BSplineLattice::uniform_cubic_in_parallelepiped(corner, edges, [7, 6, 8]).unwrap();
+    assert!(l.frame().is_skewed());
+    let mut r = Rng::new(16);
+    let [nx, ny, nz] = l.counts();
+    for k in 0..nz {
+        for j in 0..ny {
+            for i in 0..nx {
+                l.move_control_point([i, j, k], moved * r.point(1.0))
+                    .unwrap();
+            }
+        }
+    }
+    l
+}
+
 fn feng(moved: f64) -> BSplineLattice {
     let mut l =
         BSplineLattice::feng_end_interpolating_around(LO * 1.2, HI * 1.2, [2, 3, 2], [5, 6, 4])
@@ -221,6 +246,14 @@ space_map_conformance!(
     )
 );
 space_map_conformance!(
+    lattice_cubic_skewed,
+    suite(
+        || AnyMap::Lattice(skewed_lattice(1.5)),
+        || AnyMap::Lattice(skewed_lattice(0.0)),
+        1e-6
+    )
+);
+space_map_conformance!(
     lattice_feng_mixed_degree,
     suite(
         || AnyMap::Lattice(feng(1.0)),
@@ -359,6 +392,13 @@ linear_map_conformance!(
     )
 );
 linear_map_conformance!(
+    live_lattice_skewed,
+    live_suite(
+        || LiveMap::Lattice(skewed_lattice(1.5)),
+        || LiveMap::Lattice(skewed_lattice(0.0))
+    )
+);
+linear_map_conformance!(
     live_mls_affine,
     live_suite(
         || {
@@ -422,6 +462,7 @@ fn incremental_push_forward_equals_full_for_every_live_kind() {
     let opts = AntialiasOptions::default();
     let kinds: Vec<(&str, LiveMap)> = vec![
         ("lattice", LiveMap::Lattice(lattice(0.5, true))),
+        ("skewed lattice", LiveMap::Lattice(skewed_lattice(0.5))),
         ("affine MLS", {
             let (s, t) = handles(12, 1);
             LiveMap::AffineMls(AffineMls::new(&s, &t, Weighting::default()).unwrap())

@@ -236,12 +236,16 @@ pub fn subdivide(lat: &BSplineLattice) -> Result<BSplineLattice, RegisterError> 
             (counts[2] - 3) as f64,
         );
     let corner = f.to_physical(DVec3::ZERO);
-    let fine = BSplineLattice::uniform_cubic_in_box(
-        corner,
-        f.axes(),
-        extent,
-        counts.map(|n| 2 * (n - 3) + 3),
-    )?;
+    let fine_counts = counts.map(|n| 2 * (n - 3) + 3);
+    let fine = if f.is_skewed() {
+        BSplineLattice::uniform_cubic_in_parallelepiped(
+            corner,
+            f.axes() * DMat3::from_diagonal(extent),
+            fine_counts,
+        )?
+    } else {
+        BSplineLattice::uniform_cubic_in_box(corner, f.axes(), extent, fine_counts)?
+    };
     let mut pts = lat.control_points();
     let mut dims = counts;
     for axis in 0..3 {
@@ -632,7 +636,7 @@ impl LevelProblem<'_> {
             }
         }
         let counts = self.lat.counts();
-        let axes = self.lat.frame().axes();
+        let axes = self.lat.frame().gradient_matrix();
         if self.options.folding > 0.0 && !self.fold_points.is_empty() {
             let w = self.options.folding / self.fold_points.len() as f64;
             let eps = self.options.fold_threshold;
@@ -942,6 +946,12 @@ mod tests {
     fn wavy() -> BSplineLattice {
         let g = Geometry::new([20, 16, 12]).with_spacing(DVec3::new(1.0, 1.5, 2.0));
         let mut lat = lattice_on(&g, [3, 2, 2]).unwrap();
+        jiggle(&mut lat);
+        lat
+    }
+
+    /// Move every control point of `lat` by a fixed pattern.
+    fn jiggle(lat: &mut BSplineLattice) {
         let c = lat.counts();
         for k in 0..c[2] {
             for j in 0..c[1] {
@@ -955,7 +965,6 @@ mod tests {
                 }
             }
         }
-        lat
     }
 
     #[test]
@@ -970,6 +979,28 @@ mod tests {
                 (t * 0.61).fract() * 22.5,
                 (t * 0.13).fract() * 22.0,
             );
+            assert!((fine.apply(p) - lat.apply(p)).length() < 1e-10, "{p}");
+        }
+    }
+
+    /// A skewed (parallelepiped) lattice subdivides into a skewed lattice of the same map.
+    #[test]
+    fn subdivision_of_a_skewed_lattice_keeps_the_map() {
+        let edges = DMat3::from_cols(
+            DVec3::new(20.0, 0.0, 0.0),
+            DVec3::new(6.0, 18.0, 0.0),
+            DVec3::new(-3.0, 4.0, 16.0),
+        );
+        let mut lat =
+            BSplineLattice::uniform_cubic_in_parallelepiped(DVec3::ZERO, edges, [6, 5, 5]).unwrap();
+        jiggle(&mut lat);
+        let fine = subdivide(&lat).unwrap();
+        assert!(fine.frame().is_skewed());
+        assert_eq!(fine.counts(), [9, 7, 7]);
+        for i in 0..200 {
+            let t = f64::from(i);
+            let s = DVec3::new((t * 0.37).fract(), (t * 0.61).fract(), (t * 0.13).fract());
+            let p = edges * s;
             assert!((fine.apply(p) - lat.apply(p)).length() < 1e-10, "{p}");
         }
     }

@@ -13,6 +13,7 @@ use volmorph_deform::live::{Influence, LinearMap};
 use volmorph_frep::Tape;
 use volmorph_frep::grid::sample as frep_sample;
 use volmorph_frep::mapping::Pullback;
+use volmorph_maps::json::GridJson;
 use volmorph_maps::{AnyMap, LiveMap};
 use volmorph_mesh::Mesh;
 use volmorph_volume::{AnyVolume, Geometry, IndexBox, Volume, Voxel, with_volume};
@@ -59,6 +60,28 @@ pub enum Recipe {
         sampled_nodes: Option<usize>,
         /// For handle maps: pull back through the swapped handles.
         swap_handles: bool,
+    },
+    /// As [`Recipe::Warp`], onto the explicit output grid `grid` instead of the source's own
+    /// (True 1992 §5.1: a target grid larger than the source, e.g. the source's grid padded
+    /// by [`volmorph_warp::output::OutputGrid::resolve`], so the deformed model is not
+    /// clipped). The incremental push-forward applies as for [`Recipe::Warp`].
+    WarpOnto {
+        /// The volume warped.
+        source: ObjectId,
+        /// The map object.
+        map: ObjectId,
+        /// How the map is applied.
+        #[serde(with = "method_name")]
+        method: WarpMethod,
+        /// Value of voxels nothing reaches.
+        background: f64,
+        /// Evaluate the map on an `n³` grid and interpolate (see
+        /// [`WarpOptions::sampled_nodes`]).
+        sampled_nodes: Option<usize>,
+        /// For handle maps: pull back through the swapped handles.
+        swap_handles: bool,
+        /// The output grid.
+        grid: GridJson,
     },
     /// The vertices of mesh `mesh` pushed forward through map `map` (faces kept).
     DeformedMesh {
@@ -116,11 +139,48 @@ mod method_name {
 }
 
 impl Recipe {
+    /// This recipe onto the output grid `grid`: a [`Recipe::Warp`] becomes the
+    /// [`Recipe::WarpOnto`] of the same warp, a [`Recipe::WarpOnto`] changes its grid; other
+    /// recipes are returned unchanged.
+    #[must_use]
+    pub fn onto(self, grid: &Geometry) -> Self {
+        match self {
+            Recipe::Warp {
+                source,
+                map,
+                method,
+                background,
+                sampled_nodes,
+                swap_handles,
+            }
+            | Recipe::WarpOnto {
+                source,
+                map,
+                method,
+                background,
+                sampled_nodes,
+                swap_handles,
+                ..
+            } => Recipe::WarpOnto {
+                source,
+                map,
+                method,
+                background,
+                sampled_nodes,
+                swap_handles,
+                grid: GridJson::from(grid),
+            },
+            other => other,
+        }
+    }
+
     /// The objects this recipe reads.
     #[must_use]
     pub fn inputs(&self) -> Vec<ObjectId> {
         match self {
-            Recipe::Warp { source, map, .. } => vec![*source, *map],
+            Recipe::Warp { source, map, .. } | Recipe::WarpOnto { source, map, .. } => {
+                vec![*source, *map]
+            }
             Recipe::DeformedMesh { mesh, map } => vec![*mesh, *map],
             Recipe::Isosurface { volume, .. } => vec![*volume],
             Recipe::Jacobian { map, grid } => vec![*map, *grid],
@@ -137,6 +197,7 @@ impl Recipe {
     pub fn map(&self) -> Option<ObjectId> {
         match self {
             Recipe::Warp { map, .. }
+            | Recipe::WarpOnto { map, .. }
             | Recipe::DeformedMesh { map, .. }
             | Recipe::Jacobian { map, .. } => Some(*map),
             Recipe::FrepSampled { map, .. } => *map,
@@ -148,7 +209,10 @@ impl Recipe {
     #[must_use]
     pub fn output_kind(&self) -> &'static str {
         match self {
-            Recipe::Warp { .. } | Recipe::Jacobian { .. } | Recipe::FrepSampled { .. } => "volume",
+            Recipe::Warp { .. }
+            | Recipe::WarpOnto { .. }
+            | Recipe::Jacobian { .. }
+            | Recipe::FrepSampled { .. } => "volume",
             Recipe::DeformedMesh { .. } | Recipe::Isosurface { .. } => "mesh",
         }
     }
@@ -298,6 +362,11 @@ pub(crate) fn physical_box(g: &Geometry, b: &IndexBox) -> Option<(DVec3, DVec3)>
 
 /// Copy the engine's `f32` result in box `b` into `out` (the source's voxel type), rounding as
 /// the full push-forward does.
+/// A zero volume of `source`'s voxel type on `grid`.
+fn blank_like<T: Voxel>(_source: &Volume<T>, grid: Geometry) -> Result<Volume<T>, SceneError> {
+    Ok(Volume::filled(grid, T::from_f64(0.0))?)
+}
+
 fn copy_box<T: Voxel>(engine: &Volume<f32>, out: &mut Volume<T>, b: &IndexBox) {
     let [nx, ny, _] = out.geometry().dims;
     let src = engine.data();
@@ -353,6 +422,24 @@ impl Derived {
                 background,
                 sampled_nodes,
                 swap_handles,
+                None,
+            ),
+            Recipe::WarpOnto {
+                method,
+                background,
+                sampled_nodes,
+                swap_handles,
+                grid,
+                ..
+            } => self.warp(
+                id,
+                inputs,
+                hint,
+                method,
+                background,
+                sampled_nodes,
+                swap_handles,
+                Some(grid.geometry()),
             ),
             Recipe::DeformedMesh { .. } => self.deform_mesh(id, inputs, hint),
             Recipe::Isosurface {
@@ -453,6 +540,7 @@ impl Derived {
         background: f64,
         sampled_nodes: Option<usize>,
         swap_handles: bool,
+        onto: Option<Geometry>,
     ) -> Result<Dirty, SceneError> {
         let source = inputs
             .volume
@@ -460,7 +548,9 @@ impl Derived {
         let map_object = inputs
             .map
             .ok_or_else(|| SceneError::invalid("warp without a map"))?;
-        let grid = *source.geometry();
+        let grid = onto.unwrap_or(*source.geometry());
+        grid.validate()
+            .map_err(|e| SceneError::invalid(format!("warp output grid: {e}")))?;
         // The incremental path: an antialiased push-forward through a map linear in its
         // parameters, evaluated exactly.
         let live = match (map_object, swap_handles) {
@@ -490,7 +580,7 @@ impl Derived {
             let engine = with_volume!(&**source, v => {
                 IncrementalPushForward::new(v, live.clone(), &grid, &options)?
             });
-            let mut out = (**source).clone();
+            let mut out = with_volume!(&**source, v => AnyVolume::from(blank_like(v, grid)?));
             let all = IndexBox::all(grid.dims);
             with_volume!(&mut out, v => copy_box(engine.volume(), v, &all));
             self.engine = Some(Box::new(engine));

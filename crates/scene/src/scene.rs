@@ -322,7 +322,7 @@ impl Scene {
             }
         };
         match recipe {
-            Recipe::Warp { source, map, .. } => {
+            Recipe::Warp { source, map, .. } | Recipe::WarpOnto { source, map, .. } => {
                 volume(*source)?;
                 self.map_object(*map).map(|_| ())
             }
@@ -804,7 +804,7 @@ impl Scene {
         use crate::Recipe;
         let object = |id: ObjectId| self.objects.get(&id).map(|e| &e.object);
         match recipe {
-            Recipe::Warp { source, map, .. } => Inputs {
+            Recipe::Warp { source, map, .. } | Recipe::WarpOnto { source, map, .. } => Inputs {
                 volume: object(*source).and_then(Object::volume),
                 mesh: None,
                 map: self.map_object(*map).ok(),

@@ -597,3 +597,67 @@ fn fifo_as_model_file_reported_as_not_found_or_hangs() {
     let e = Scene::load(&path).unwrap_err().to_string();
     assert!(e.contains("FIFO") && e.contains("p.vmproj"), "{e}");
 }
+
+/// True 1992 §5.1: a warp onto a padded grid (TSIZE > ISIZE) keeps the source's voxels at
+/// their places, follows drags incrementally and equals a direct warp onto that grid.
+#[test]
+fn warp_onto_a_padded_grid_follows_drags_and_equals_a_direct_warp() {
+    let (mut scene, grid, v, l, _) = teapot_scene();
+    let padded = grid.padded([4, 0, 2], [4, 6, 2]);
+    let w = add(
+        &mut scene,
+        "padded",
+        NewObject::Derived(Recipe::WarpOnto {
+            source: v,
+            map: l,
+            method: WarpMethod::PushforwardAntialiased,
+            background: 0.0,
+            sampled_nodes: None,
+            swap_handles: false,
+            grid: volmorph_maps::json::GridJson::from(&padded),
+        }),
+    );
+    let out = scene.get(w).unwrap().object.volume().unwrap().clone();
+    assert_eq!(out.geometry(), &padded);
+    let spout = volmorph_volume::phantom::TEAPOT_SPOUT_TIP;
+    let change = drag(&mut scene, l, spout, spout + DVec3::new(0.08, 0.0, -0.15));
+    let b = change
+        .dirty_of(w)
+        .expect("the padded warp is dirty")
+        .voxels
+        .unwrap();
+    assert!(!b.is_empty() && b.len() < padded.len() / 2, "{b:?}");
+    let after = volume_bytes(&scene, w);
+    let lattice = scene.map(l).unwrap().clone();
+    let src = scene
+        .get(v)
+        .unwrap()
+        .object
+        .volume()
+        .unwrap()
+        .as_ref()
+        .clone();
+    let direct = warp_volume(
+        &src,
+        &lattice,
+        &padded,
+        WarpMethod::PushforwardAntialiased,
+        &WarpOptions::default(),
+    )
+    .unwrap();
+    let (n, m) = diff(&after, direct.volume.as_bytes());
+    assert!(m <= 1 && n <= 8, "{n} voxels differ, by up to {m}");
+    // The padding's voxels are empty (the teapot stays inside its lattice box), and the
+    // source-grid part equals the unpadded warp.
+    let total = |b: &[u8]| b.iter().map(|&x| u64::from(x)).sum::<u64>();
+    let unpadded = warp_volume(
+        &src,
+        &lattice,
+        &grid,
+        WarpMethod::PushforwardAntialiased,
+        &WarpOptions::default(),
+    )
+    .unwrap();
+    let (t1, t2) = (total(&after), total(unpadded.volume.as_bytes()));
+    assert!(t1.abs_diff(t2) <= 8, "{t1} vs {t2}");
+}

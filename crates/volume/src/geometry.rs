@@ -168,6 +168,24 @@ impl Geometry {
             .fold((c[0], c[0]), |(lo, hi), p| (lo.min(*p), hi.max(*p)))
     }
 
+    /// The grid grown by `low[a]` voxels before the first and `high[a]` voxels after the last
+    /// voxel along index axis `a` (same spacing and direction; True 1992 §5.1's target grid
+    /// larger than the source, TSIZE > ISIZE). Voxel `(i, j, k)` of `self` is voxel
+    /// `(i + low[0], j + low[1], k + low[2])` of the result, at the same physical point.
+    /// Dims saturate at `usize::MAX`; [`Geometry::validate`] rejects a result too large.
+    #[must_use]
+    pub fn padded(&self, low: [usize; 3], high: [usize; 3]) -> Self {
+        let dims =
+            std::array::from_fn(|a| self.dims[a].saturating_add(low[a]).saturating_add(high[a]));
+        let shift = DVec3::new(low[0] as f64, low[1] as f64, low[2] as f64);
+        Self {
+            dims,
+            spacing: self.spacing,
+            origin: self.index_to_physical(-shift),
+            direction: self.direction,
+        }
+    }
+
     /// Geometry that covers the same physical region as `self` with `dims` voxels instead:
     /// the first and last voxel centres keep their physical positions along each axis where
     /// both grids have more than one voxel (same origin and direction).
@@ -191,6 +209,19 @@ impl Geometry {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn padded_grid_keeps_every_voxel_at_its_physical_point() {
+        let g = oblique();
+        let p = g.padded([2, 0, 1], [3, 4, 0]);
+        assert_eq!(p.dims, [12, 9, 4]);
+        for (i, j, k) in [(0, 0, 0), (6, 4, 2), (3, 1, 1)] {
+            let a = g.index_to_physical(DVec3::new(i as f64, j as f64, k as f64));
+            let b = p.index_to_physical(DVec3::new((i + 2) as f64, j as f64, (k + 1) as f64));
+            assert!((a - b).length() < 1e-12, "{a} {b}");
+        }
+        assert_eq!(g.padded([0; 3], [0; 3]), g);
+    }
 
     fn oblique() -> Geometry {
         let rot = DMat3::from_rotation_z(0.3) * DMat3::from_rotation_x(-0.7);

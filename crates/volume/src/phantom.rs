@@ -2,8 +2,8 @@
 //!
 //! A [`Phantom`] is a solid given by a signed distance function (SDF) in its **model frame**.
 //! The phantoms are the default data of volume warping and contouring: a sphere, a torus, a
-//! rounded box, a block of sculpting clay with a hole, a groove and a bump, and a teapot (the
-//! model of True's volume warping examples, §7, Figs. 9–10).
+//! rounded box, a block of sculpting clay with a hole, a groove and a bump, a teapot (the
+//! model of True's volume warping examples, §7, Figs. 9–10) and a tree (Figs. 13–14).
 //!
 //! # Sign convention
 //!
@@ -134,16 +134,32 @@ pub enum Phantom {
     /// True's 30³, so the density isosurface follows the model there. Mirror-symmetric about
     /// the plane y = 0 only. 1-Lipschitz bound.
     Teapot,
+    /// A tree, z up, for True's sculpted tree (§7, Figs. 13–14): a tapering trunk (radius
+    /// 0.13 → 0.11) from (0, 0, −0.75) to the fork at (0, 0, −0.1), [`TREE_LIMBS`] limbs
+    /// (radius 0.1 → 0.09) from the fork at azimuths 0°, 120° and 240° rising to radius 0.4
+    /// and height 0.25, and at the end of each limb [`TREE_TWIGS_PER_LIMB`] twigs (radius
+    /// 0.085 → 0.075) splaying ±0.6 rad in azimuth to radius 0.7 and height 0.7. Joints are
+    /// smooth unions. One connected solid of genus 0; a horizontal cut between heights 0.0
+    /// and 0.15 crosses the three limbs, one between 0.4 and 0.6 the six twigs. No part is
+    /// thinner than 0.15 (two voxels at 30³). 1-Lipschitz bound.
+    Tree,
 }
+
+/// Number of limbs of [`Phantom::Tree`] leaving the top of the trunk.
+pub const TREE_LIMBS: usize = 3;
+
+/// Number of twigs at the end of each limb of [`Phantom::Tree`].
+pub const TREE_TWIGS_PER_LIMB: usize = 2;
 
 impl Phantom {
     /// Every phantom, in the order of the enum.
-    pub const ALL: [Phantom; 5] = [
+    pub const ALL: [Phantom; 6] = [
         Self::Sphere,
         Self::Torus,
         Self::RoundedBox,
         Self::ClayBlock,
         Self::Teapot,
+        Self::Tree,
     ];
 
     /// Kebab-case name, as accepted by [`FromStr`]: `sphere`, `torus`, `rounded-box`,
@@ -156,6 +172,7 @@ impl Phantom {
             Self::RoundedBox => "rounded-box",
             Self::ClayBlock => "clay-block",
             Self::Teapot => "teapot",
+            Self::Tree => "tree",
         }
     }
 
@@ -174,6 +191,7 @@ impl Phantom {
             Self::Teapot => {
                 "teapot, z up: body, lid with knob, spout towards +x, handle towards -x"
             }
+            Self::Tree => "tree, z up: a trunk forking into three limbs of two twigs each",
         }
     }
 
@@ -218,6 +236,7 @@ impl Phantom {
                     teapot::KNOB_CENTER.z + teapot::KNOB_RADIUS,
                 ),
             ),
+            Self::Tree => tree::bounds(),
         };
         (lo - DVec3::splat(PAD), hi + DVec3::splat(PAD))
     }
@@ -235,6 +254,7 @@ impl Phantom {
             Self::RoundedBox => rounded_box_sdf(p),
             Self::ClayBlock => clay::sdf(p),
             Self::Teapot => teapot::sdf(p),
+            Self::Tree => tree::sdf(p),
         }
     }
 }
@@ -247,7 +267,9 @@ impl fmt::Display for Phantom {
 
 /// The error of parsing a [`Phantom`] from a name that is not one of [`Phantom::name`].
 #[derive(Debug, Clone, PartialEq, Eq, thiserror::Error)]
-#[error("unknown phantom `{given}`; valid names: sphere, torus, rounded-box, clay-block, teapot")]
+#[error(
+    "unknown phantom `{given}`; valid names: sphere, torus, rounded-box, clay-block, teapot, tree"
+)]
 pub struct ParsePhantomError {
     /// The name that was given.
     pub given: String,
@@ -360,6 +382,7 @@ fn sample<T: Voxel>(
         Phantom::RoundedBox => sample_with(g, rounded_box_sdf, map),
         Phantom::ClayBlock => sample_with(g, clay::sdf, map),
         Phantom::Teapot => sample_with(g, teapot::sdf, map),
+        Phantom::Tree => sample_with(g, tree::sdf, map),
     }
 }
 
@@ -594,6 +617,73 @@ mod teapot {
         let d = smin(body, top, LID_BLEND);
         let d = smin(d, spout, SPOUT_BLEND);
         smin(d, handle, HANDLE_BLEND)
+    }
+}
+
+/// The tree ([`Phantom::Tree`]).
+mod tree {
+    use glam::DVec3;
+
+    use super::{TREE_LIMBS, TREE_TWIGS_PER_LIMB, round_cone, smin};
+
+    /// Foot and top of the trunk, and their radii.
+    const TRUNK: (DVec3, f64, DVec3, f64) = (
+        DVec3::new(0.0, 0.0, -0.75),
+        0.13,
+        DVec3::new(0.0, 0.0, -0.1),
+        0.11,
+    );
+    /// Limb radii at the fork and at the limb's end.
+    const LIMB_RADII: (f64, f64) = (0.1, 0.09);
+    /// Horizontal distance and height of a limb's end.
+    const LIMB_END: (f64, f64) = (0.4, 0.25);
+    /// Twig radii at the limb's end and at the tip.
+    const TWIG_RADII: (f64, f64) = (0.085, 0.075);
+    /// Horizontal distance and height of a twig's tip, and its azimuth offset (rad).
+    const TWIG_TIP: (f64, f64, f64) = (0.7, 0.7, 0.6);
+    /// Blend width of the joints.
+    const BLEND: f64 = 0.04;
+
+    /// Every segment `(a, ra, b, rb)`: trunk, limbs, twigs.
+    fn segments() -> impl Iterator<Item = (DVec3, f64, DVec3, f64)> {
+        let fork = TRUNK.2;
+        let limbs = (0..TREE_LIMBS).flat_map(move |l| {
+            let az = std::f64::consts::TAU * l as f64 / TREE_LIMBS as f64;
+            let end = DVec3::new(LIMB_END.0 * az.cos(), LIMB_END.0 * az.sin(), LIMB_END.1);
+            let limb = (fork, LIMB_RADII.0, end, LIMB_RADII.1);
+            let twigs = (0..TREE_TWIGS_PER_LIMB).map(move |t| {
+                let off = if TREE_TWIGS_PER_LIMB == 1 {
+                    0.0
+                } else {
+                    TWIG_TIP.2 * (2.0 * t as f64 / (TREE_TWIGS_PER_LIMB - 1) as f64 - 1.0)
+                };
+                let a = az + off;
+                let tip = DVec3::new(TWIG_TIP.0 * a.cos(), TWIG_TIP.0 * a.sin(), TWIG_TIP.1);
+                (end, TWIG_RADII.0, tip, TWIG_RADII.1)
+            });
+            std::iter::once(limb).chain(twigs)
+        });
+        std::iter::once(TRUNK).chain(limbs)
+    }
+
+    pub(super) fn sdf(p: DVec3) -> f64 {
+        segments()
+            .map(|(a, ra, b, rb)| round_cone(p, a, ra, b, rb))
+            .reduce(|d, e| smin(d, e, BLEND))
+            .unwrap_or(f64::INFINITY)
+    }
+
+    /// The union of the segments' boxes (each round cone lies in the box of its two balls).
+    pub(super) fn bounds() -> (DVec3, DVec3) {
+        segments().fold(
+            (DVec3::splat(f64::INFINITY), DVec3::splat(f64::NEG_INFINITY)),
+            |(lo, hi), (a, ra, b, rb)| {
+                (
+                    lo.min(a - DVec3::splat(ra)).min(b - DVec3::splat(rb)),
+                    hi.max(a + DVec3::splat(ra)).max(b + DVec3::splat(rb)),
+                )
+            },
+        )
     }
 }
 

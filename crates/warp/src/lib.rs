@@ -14,6 +14,8 @@
 //! * [`inverse`] — *pull-back through the inverse of a push-forward map*: output voxel `y`
 //!   takes the input's value at `map⁻¹(y)` (Newton inversion per voxel), rendering the model
 //!   deformed by a free-form deformation without push-forward's holes and aliasing.
+//! * [`output`] — the output grid of a warp: the input's, padded (True 1992 §5.1, TSIZE >
+//!   ISIZE) or explicit.
 //! * [`jacobian`] — determinant maps of a map on a grid, and folding statistics.
 
 pub mod apply;
@@ -21,6 +23,7 @@ mod error;
 pub mod incremental;
 pub mod inverse;
 pub mod jacobian;
+pub mod output;
 pub mod pullback;
 pub mod pushforward;
 mod tally;

@@ -9,13 +9,13 @@ use std::time::Instant;
 use anyhow::{Context, bail};
 use glam::DVec3;
 use volmorph_deform::SpaceMap;
-use volmorph_lattice::{BSplineLattice, DragOptions};
+use volmorph_lattice::{BSplineLattice, DragOptions, Realm, ToolShape, curve_drag_steps};
 use volmorph_maps::{AnyMap, read_map};
 use volmorph_scene::{Command, NewObject, Recipe, Scene, files};
 use volmorph_warp::apply::WarpMethod;
 use volmorph_warp::jacobian::FoldingReport;
 
-use super::warp::{METHOD_HELP, method};
+use super::warp::{GridArgs, METHOD_HELP, method};
 use crate::{args, progress};
 
 /// Arguments of `volmorph drag`.
@@ -25,15 +25,40 @@ pub struct Args {
     pub input: PathBuf,
     /// A point of the model as currently deformed (physical coordinates "x,y,z"); repeat
     /// `--from`/`--to` pairs to drag several points at once.
-    #[arg(long = "from", required = true, value_parser = args::point, allow_hyphen_values = true)]
+    #[arg(long = "from", required_unless_present = "start_curve", conflicts_with = "start_curve", value_parser = args::point, allow_hyphen_values = true)]
     pub from: Vec<DVec3>,
     /// Where that point must go ("x,y,z"), one per `--from`.
-    #[arg(long = "to", required = true, value_parser = args::point, allow_hyphen_values = true)]
+    #[arg(long = "to", required_unless_present = "start_curve", value_parser = args::point, allow_hyphen_values = true)]
     pub to: Vec<DVec3>,
-    /// Tool radius (physical units): only control points within this distance of a dragged
-    /// point move. Without it, every control point that influences the point may move.
-    #[arg(long)]
+    /// Drag along curves (True 1992 §6.3): the start curve "x,y,z;x,y,z;…" on the model as
+    /// currently deformed; it moves onto --goal-curve over --steps constrained drags (both
+    /// curves resampled evenly by arc length to the larger point count).
+    #[arg(long, requires = "goal_curve", conflicts_with_all = ["from", "to"], value_parser = args::points, allow_hyphen_values = true)]
+    pub start_curve: Option<::std::vec::Vec<DVec3>>,
+    /// The goal curve "x,y,z;x,y,z;…" of a curve drag.
+    #[arg(long, requires = "start_curve", value_parser = args::points, allow_hyphen_values = true)]
+    pub goal_curve: Option<::std::vec::Vec<DVec3>>,
+    /// Number of drags (frames) of a curve drag.
+    #[arg(long, default_value_t = 10, requires = "start_curve")]
+    pub steps: usize,
+    /// Write the model after every step of a curve drag into this folder as
+    /// frame_001.EXT, frame_002.EXT, … (EXT of --output).
+    #[arg(long, value_name = "DIR", requires = "start_curve")]
+    pub frames: Option<PathBuf>,
+    /// Tool radius (physical units): a spherical tool, same as --tool sphere:R.
+    #[arg(long, conflicts_with = "tool")]
     pub radius: Option<f64>,
+    /// Tool shape (True 1992 §6): only control points inside it, centred on a dragged point
+    /// as seen, move: sphere:R, ellipsoid:RX,RY,RZ or box:HX,HY,HZ (half side lengths;
+    /// physical units, world axes). Without it, every control point that influences the point
+    /// may move.
+    #[arg(long, value_name = "SHAPE")]
+    pub tool: Option<ToolShape>,
+    /// Realm (True 1992 §6): only these control points may move, for every drag:
+    /// indices:I0,J0,K0,I1,J1,K1 (control indices, inclusive) or region:X0,Y0,Z0,X1,Y1,Z1
+    /// (a physical box of current control-point positions).
+    #[arg(long, value_name = "REALM")]
+    pub realm: Option<Realm>,
     /// Keep the control points that act on the lattice box's surface in place, so the map
     /// stays continuous across the box surface (needs the dragged points away from it).
     #[arg(long)]
@@ -46,9 +71,12 @@ pub struct Args {
     /// Control points per axis "NX,NY,NZ" of the default identity lattice.
     #[arg(long, default_value = "9,9,9", value_parser = args::triple::<usize>)]
     pub counts: [usize; 3],
-    /// Output volume: the input deformed by the new lattice, on the input's grid.
+    /// Output volume: the input deformed by the new lattice, on the input's grid (or the grid
+    /// of --pad, --like, --output-geometry).
     #[arg(short, long)]
     pub output: PathBuf,
+    #[command(flatten)]
+    pub grid: GridArgs,
     /// Where to write the new lattice (.json, .tfm, .bxf).
     #[arg(long)]
     pub lattice_out: Option<PathBuf>,
@@ -81,6 +109,7 @@ pub fn run(a: &Args) -> anyhow::Result<()> {
         bail!("{} is not a volume", a.input.display());
     };
     let grid = *vol.geometry();
+    let out_grid = a.grid.resolve(&grid)?;
     let lattice = match &a.lattice {
         Some(path) => match read_map(path).context("cannot read the lattice")? {
             AnyMap::Lattice(l) => l,
@@ -93,6 +122,22 @@ pub fn run(a: &Args) -> anyhow::Result<()> {
         None => BSplineLattice::identity_on_voxels(&grid, a.counts)
             .context("cannot place the identity lattice")?,
     };
+    let options = DragOptions {
+        tool: a
+            .tool
+            .or(a.radius.map(|radius| ToolShape::Sphere { radius })),
+        freeze_boundary: a.freeze_boundary,
+        realm: a.realm,
+    };
+    options.validate()?;
+    // The drags: one step of --from/--to pairs, or the steps of a curve drag.
+    let steps: Vec<(Vec<DVec3>, Vec<DVec3>)> = match (&a.start_curve, &a.goal_curve) {
+        (Some(start), Some(goal)) => curve_drag_steps(start, goal, a.steps)?
+            .into_iter()
+            .map(|s| (s.grabbed, s.targets))
+            .collect(),
+        _ => vec![(a.from.clone(), a.to.clone())],
+    };
     let add = |name: &str, object| Command::Add {
         name: name.into(),
         object,
@@ -102,7 +147,7 @@ pub fn run(a: &Args) -> anyhow::Result<()> {
         .apply(add("lattice", NewObject::Map(AnyMap::Lattice(lattice))))?
         .added[0];
     pb.set_message("initial warp");
-    let recipe = Recipe::Warp {
+    let mut recipe = Recipe::Warp {
         source: v,
         map: l,
         method: a.method,
@@ -110,28 +155,48 @@ pub fn run(a: &Args) -> anyhow::Result<()> {
         sampled_nodes: None,
         swap_handles: false,
     };
+    if out_grid != grid {
+        recipe = recipe.onto(&out_grid);
+    }
     let w = scene.apply(add("output", NewObject::Derived(recipe)))?;
     if let Some((_, e)) = w.errors.first() {
         bail!("cannot warp {}: {e}", a.input.display());
     }
     let w = w.added[0];
-    pb.set_message("dragging");
-    let t = Instant::now();
-    let change = scene
-        .apply(Command::DragPoints {
-            map: l,
-            grabbed: a.from.clone(),
-            targets: a.to.clone(),
-            options: DragOptions {
-                radius: a.radius,
-                freeze_boundary: a.freeze_boundary,
-            },
-        })
-        .context("cannot solve the drag")?;
-    let elapsed = t.elapsed();
-    if let Some((_, e)) = change.errors.first() {
-        bail!("cannot warp {}: {e}", a.input.display());
+    if let Some(dir) = &a.frames {
+        std::fs::create_dir_all(dir)
+            .with_context(|| format!("cannot create the frame folder {}", dir.display()))?;
     }
+    // The output's full extension (nii.gz, mha, …) for the frames.
+    let ext = a
+        .output
+        .file_name()
+        .and_then(|n| n.to_str())
+        .and_then(|n| n.split_once('.'))
+        .map_or("nii.gz", |(_, e)| e)
+        .to_string();
+    let t = Instant::now();
+    let mut last = None;
+    for (n, (grabbed, targets)) in steps.iter().enumerate() {
+        pb.set_message(format!("dragging ({}/{})", n + 1, steps.len()));
+        let change = scene
+            .apply(Command::DragPoints {
+                map: l,
+                grabbed: grabbed.clone(),
+                targets: targets.clone(),
+                options,
+            })
+            .with_context(|| format!("cannot solve drag {} of {}", n + 1, steps.len()))?;
+        if let Some((_, e)) = change.errors.first() {
+            bail!("cannot warp {}: {e}", a.input.display());
+        }
+        if let Some(dir) = &a.frames {
+            let frame = dir.join(format!("frame_{:03}.{ext}", n + 1));
+            scene.export(w, &frame).context("cannot write a frame")?;
+        }
+        last = change.drag;
+    }
+    let elapsed = t.elapsed();
     pb.set_message(format!("writing {}", a.output.display()));
     scene.export(w, &a.output).context("cannot write")?;
     if let Some(path) = &a.lattice_out {
@@ -140,10 +205,18 @@ pub fn run(a: &Args) -> anyhow::Result<()> {
     pb.finish_and_clear();
 
     let map = scene.map(l)?;
-    for (from, to) in a.from.iter().zip(&a.to) {
+    let (first, end) = (&steps[0].0, &steps[steps.len() - 1].1);
+    for (from, to) in first.iter().zip(end) {
         say!("dragged {} -> {}", fmt(*from), fmt(*to));
     }
-    if let Some(d) = change.drag {
+    if steps.len() > 1 {
+        say!(
+            "curve drag of {} points in {} steps",
+            first.len(),
+            steps.len()
+        );
+    }
+    if let Some(d) = last {
         say!(
             "moved {} control points (rank {} of {} drags, largest miss {:.3e}); drag and \
              warp update {:.1} ms",

@@ -17,7 +17,7 @@ use anyhow::{Context, bail};
 use volmorph_deform::{SampledMap, SpaceMap};
 use volmorph_handles::Weighting;
 use volmorph_handles::handles::{HandleSet, read_point_list, write_point_list};
-use volmorph_handles::mls2d::{Mls2dKind, warp_picture};
+use volmorph_handles::mls2d::{Mls2dKind, warp_picture, warp_picture_tps};
 use volmorph_maps::{HandleDirection, HandleMethod, HandleOptions, handle_map};
 use volmorph_render::RgbaImage;
 use volmorph_render::{read_png, write_png_rgba};
@@ -322,6 +322,9 @@ pub enum Kind2d {
     Similarity,
     /// Rigid (as rigid as possible).
     Rigid,
+    /// Thin-plate spline (r² log r plus an affine part; interpolates every handle; McPhail
+    /// Fig. 4.2's comparison). Segment handles count by their end points.
+    Tps,
 }
 
 /// Run `volmorph mls2d`.
@@ -329,14 +332,18 @@ pub fn run_mls2d(a: &Mls2dArgs) -> anyhow::Result<()> {
     let set = HandleSet::read(&a.handles)
         .with_context(|| format!("cannot read the handles {}", a.handles.display()))?;
     let img = read_png(&a.input).context("cannot read the picture")?;
-    let kind = match a.method {
-        Kind2d::Affine => Mls2dKind::Affine,
-        Kind2d::Similarity => Mls2dKind::Similarity,
-        Kind2d::Rigid => Mls2dKind::Rigid,
-    };
     let (w, h) = (img.width(), img.height());
-    let out = warp_picture(w, h, img.pixels(), &set, kind, a.alpha, a.grid)
-        .context("cannot deform the picture")?;
+    let kind = match a.method {
+        Kind2d::Affine => Some(Mls2dKind::Affine),
+        Kind2d::Similarity => Some(Mls2dKind::Similarity),
+        Kind2d::Rigid => Some(Mls2dKind::Rigid),
+        Kind2d::Tps => None,
+    };
+    let out = match kind {
+        Some(kind) => warp_picture(w, h, img.pixels(), &set, kind, a.alpha, a.grid),
+        None => warp_picture_tps(w, h, img.pixels(), &set, a.grid),
+    }
+    .context("cannot deform the picture")?;
     write_png_rgba(&a.output, &RgbaImage::from_pixels(w, h, out.pixels)?)
         .context("cannot write the picture")?;
     say!(

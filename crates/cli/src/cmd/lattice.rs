@@ -3,6 +3,7 @@
 use std::path::PathBuf;
 
 use anyhow::{Context, bail};
+use glam::{DMat3, DVec3};
 use volmorph_lattice::formats::{read_lattice, write_lattice};
 use volmorph_lattice::{BSplineLattice, FengForm};
 use volmorph_volume_io as format;
@@ -13,10 +14,12 @@ use crate::args;
 #[derive(Debug, clap::Subcommand)]
 pub enum Command {
     /// Write an identity lattice: the uniform cubic B-spline lattice around a volume (True
-    /// 1992 Fig. 8), or with --mesh Feng et al.'s initial B-spline volume of any degree around
-    /// a mesh's bounding box (identity Jacobian, parameters equal coordinates).
+    /// 1992 Fig. 8), on a Sederberg–Parry parallelepiped given by --corner and three --edge
+    /// vectors at any non-degenerate angles (a skewed lattice, True §2.1), or with --mesh Feng
+    /// et al.'s initial B-spline volume of any degree around a mesh's bounding box (identity
+    /// Jacobian, parameters equal coordinates).
     #[command(
-        after_help = "Examples:\n  volmorph lattice init teapot.nii.gz --counts 9,9,9 -o lattice.json\n  volmorph lattice init --mesh bunny.obj --degree 2,2,2 --size 6,8,6 -o bunny_lattice.json"
+        after_help = "Examples:\n  volmorph lattice init teapot.nii.gz --counts 9,9,9 -o lattice.json\n  volmorph lattice init --corner 0,0,0 --edge 64,0,0 --edge 20,60,0 --edge 0,-10,64 --counts 7,7,7 -o skewed.json\n  volmorph lattice init --mesh bunny.obj --degree 2,2,2 --size 6,8,6 -o bunny_lattice.json"
     )]
     Init(InitArgs),
     /// Convert a lattice file between formats (.json, .tfm, .bxf), e.g. to hand a lattice
@@ -39,9 +42,17 @@ pub struct ConvertArgs {
 #[derive(Debug, clap::Args)]
 pub struct InitArgs {
     /// Volume whose voxel-centre box (in its own index frame) the lattice covers.
-    #[arg(required_unless_present = "mesh", conflicts_with = "mesh")]
+    #[arg(required_unless_present_any = ["mesh", "corner"], conflicts_with_all = ["mesh", "corner"])]
     pub input: Option<PathBuf>,
-    /// Control points per axis "NX,NY,NZ" of the volume lattice (each at least 4).
+    /// Corner "x,y,z" of a parallelepiped lattice box (with three --edge vectors).
+    #[arg(long, requires = "edge", conflicts_with = "mesh", value_parser = args::point, allow_hyphen_values = true)]
+    pub corner: Option<DVec3>,
+    /// An edge vector "x,y,z" of the parallelepiped leaving --corner, once per lattice axis u,
+    /// v, w (three times; any lengths, any non-degenerate angles: a skewed lattice).
+    #[arg(long, requires = "corner", value_parser = args::point, allow_hyphen_values = true)]
+    pub edge: Vec<DVec3>,
+    /// Control points per axis "NX,NY,NZ" of the volume or parallelepiped lattice (each at
+    /// least 4).
     #[arg(long, default_value = "9,9,9", value_parser = args::triple::<usize>)]
     pub counts: [usize; 3],
     /// Mesh whose axis-aligned bounding box the lattice covers (Feng et al. 2002 §3.1); an
@@ -109,6 +120,22 @@ fn init(a: &InitArgs) -> anyhow::Result<()> {
             l,
             format!("of degree {dx}x{dy}x{dz} around {}", path.display()),
         )
+    } else if let Some(corner) = a.corner {
+        let [s, t, u] = a.edge[..] else {
+            bail!("give three --edge vectors (u, v, w), got {}", a.edge.len());
+        };
+        let l = BSplineLattice::uniform_cubic_in_parallelepiped(
+            corner,
+            DMat3::from_cols(s, t, u),
+            a.counts,
+        )
+        .context("cannot place a lattice on the parallelepiped")?;
+        let kind = if l.frame().is_skewed() {
+            "skewed"
+        } else {
+            "rectangular"
+        };
+        (l, format!("on the {kind} parallelepiped at {corner}"))
     } else {
         let Some(input) = &a.input else {
             bail!("give a volume or --mesh MESH");

@@ -21,7 +21,7 @@ pub enum Kind {
 /// Arguments of `volmorph phantom`.
 #[derive(Debug, clap::Args)]
 pub struct Args {
-    /// Model: sphere, torus, rounded-box, clay-block, teapot.
+    /// Model: sphere, torus, rounded-box, clay-block, teapot, tree.
     pub model: String,
     /// Output volume; the format is chosen by extension.
     #[arg(short, long)]

@@ -7,6 +7,7 @@ use volmorph_maps::read_map;
 use volmorph_volume_io as format;
 use volmorph_warp::apply::{WarpMethod, WarpOptions, warp_volume};
 use volmorph_warp::jacobian::{FoldingReport, jacobian_determinant};
+use volmorph_warp::output::{OutputGrid, Padding, parse_geometry};
 
 use crate::progress;
 
@@ -22,6 +23,55 @@ pushforward-nearest|antialiased (each input voxel goes to map(x), True 1992 §5.
 inverse-nearest|linear|cubic (output voxel y takes the input at map⁻¹(y), found by Newton \
 iteration: the model deformed by the map, without holes)";
 
+/// The output grid of `warp` and `drag` (True 1992 §5.1: a target grid larger than the
+/// source, TSIZE > ISIZE, so the deformed model is not clipped).
+#[derive(Debug, clap::Args)]
+pub struct GridArgs {
+    /// Pad the output grid beyond the input's, keeping its spacing and direction: P, PX,PY,PZ
+    /// (both sides per axis) or LX,LY,LZ,HX,HY,HZ (before, after) voxels, or lengths with a
+    /// trailing mm (rounded up to whole voxels), e.g. --pad 8, --pad 0,0,0,20,0,0mm.
+    #[arg(long, value_name = "PAD", conflicts_with_all = ["like", "output_geometry"])]
+    pub pad: Option<Padding>,
+    /// Write the output on the grid of this reference volume (dims, spacing, origin,
+    /// direction).
+    #[arg(long, value_name = "REF", conflicts_with = "output_geometry")]
+    pub like: Option<PathBuf>,
+    /// Write the output on this grid: NX,NY,NZ;SX,SY,SZ;OX,OY,OZ[;D00,D01,…,D22] (dims,
+    /// spacing, origin of voxel 0, optionally the direction matrix row by row), e.g.
+    /// "96,96,96;1,1,1;-48,-48,-48".
+    #[arg(long, value_name = "GEOMETRY", value_parser = boxed_geometry, allow_hyphen_values = true)]
+    pub output_geometry: Option<Box<volmorph_volume::Geometry>>,
+}
+
+/// [`parse_geometry`], boxed (keeps the argument structs small).
+fn boxed_geometry(s: &str) -> anyhow::Result<Box<volmorph_volume::Geometry>> {
+    Ok(Box::new(parse_geometry(s)?))
+}
+
+impl GridArgs {
+    /// The output geometry for an input on `input`.
+    ///
+    /// # Errors
+    /// An unreadable `--like` volume, a bad padding or a grid beyond the memory budget.
+    pub fn resolve(
+        &self,
+        input: &volmorph_volume::Geometry,
+    ) -> anyhow::Result<volmorph_volume::Geometry> {
+        let choice = if let Some(p) = self.pad {
+            OutputGrid::Padded(p)
+        } else if let Some(path) = &self.like {
+            let r = format::read(path)
+                .with_context(|| format!("cannot read the reference volume {}", path.display()))?;
+            OutputGrid::Explicit(*r.geometry())
+        } else if let Some(g) = &self.output_geometry {
+            OutputGrid::Explicit(**g)
+        } else {
+            OutputGrid::Input
+        };
+        choice.resolve(input).context("cannot make the output grid")
+    }
+}
+
 /// Arguments of `volmorph warp`.
 #[derive(Debug, clap::Args)]
 pub struct Args {
@@ -32,9 +82,12 @@ pub struct Args {
     /// plastimatch .bxf.
     #[arg(long, visible_alias = "lattice")]
     pub map: PathBuf,
-    /// Output volume, on the input's grid and with its voxel type.
+    /// Output volume, with the input's voxel type, on the input's grid (or the grid of
+    /// --pad, --like, --output-geometry).
     #[arg(short, long)]
     pub output: PathBuf,
+    #[command(flatten)]
+    pub grid: GridArgs,
     #[doc = "How the map is applied (see --help)."]
     #[arg(long, default_value = "pullback-linear", value_parser = method, long_help = METHOD_HELP)]
     pub method: WarpMethod,
@@ -67,7 +120,8 @@ pub fn run(a: &Args) -> anyhow::Result<()> {
         mask: a.nonconverged_mask.is_some(),
         sampled_nodes: a.sampled,
     };
-    let out = warp_volume(&vol, &map, vol.geometry(), a.method, &options)
+    let grid = a.grid.resolve(vol.geometry())?;
+    let out = warp_volume(&vol, &map, &grid, a.method, &options)
         .with_context(|| format!("cannot warp {}", a.input.display()))?;
     if let Some(r) = out.inverse_report.filter(|r| !r.is_clean()) {
         pb.suspend(|| eprintln!("volmorph: warning: {r}"));
@@ -99,6 +153,10 @@ pub struct JacobianArgs {
     /// Output volume of Jacobian determinants (f32); J <= 0 marks folding.
     #[arg(short, long)]
     pub output: PathBuf,
+    /// Also write the map the determinants were taken of, as read (any kind; .json for
+    /// volmorph map JSON, .tfm/.bxf where the map fits those formats).
+    #[arg(long, value_name = "PATH")]
+    pub map_out: Option<PathBuf>,
 }
 
 /// Run `volmorph jacobian`.
@@ -113,6 +171,9 @@ pub fn run_jacobian(a: &JacobianArgs) -> anyhow::Result<()> {
     let report = FoldingReport::of(det.data());
     pb.set_message(format!("writing {}", a.output.display()));
     format::write(&a.output, &det.into()).context("cannot write")?;
+    if let Some(path) = &a.map_out {
+        volmorph_maps::write_map(path, &map).context("cannot write the map")?;
+    }
     pb.finish_and_clear();
     say!("{report}");
     Ok(())

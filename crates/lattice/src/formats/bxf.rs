@@ -201,7 +201,7 @@ pub fn parse_bxf(text: &str) -> Result<BSplineLattice, DeformError> {
     let mut axes = DMat3::IDENTITY;
     if let Some(dc) = values[6].as_deref() {
         rows.copy_from_slice(dc);
-        axes = axes_from_rows(rows, FORMAT, lines_of[6])?;
+        axes = axes_from_rows(rows, FORMAT, lines_of[6], false)?;
     }
     let mut size = [0usize; 3];
     let mut img_spacing = DVec3::ZERO;

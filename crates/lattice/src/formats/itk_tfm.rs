@@ -115,7 +115,8 @@ fn check_type(name: &str) -> Result<(), DeformError> {
 /// # Errors
 /// [`DeformError::Parse`] (with the line) for a missing header, missing or repeated fields,
 /// non-numeric or non-finite values, a wrong number of parameters, a grid size below 4 or
-/// non-integral, a non-positive spacing or a direction matrix that is not orthonormal;
+/// non-integral, a non-positive spacing or a non-finite direction matrix (a direction that is
+/// not orthonormal gives a skewed lattice; a degenerate one is [`DeformError::InvalidFrame`]);
 /// [`DeformError::Unsupported`] for composite transforms, several transforms, or other
 /// transform types / dimensions / spline orders.
 pub fn parse_itk_tfm(text: &str) -> Result<BSplineLattice, DeformError> {
@@ -217,7 +218,7 @@ pub fn parse_itk_tfm(text: &str) -> Result<BSplineLattice, DeformError> {
     }
     let mut rows = [0.0; 9];
     rows.copy_from_slice(&fp[9..]);
-    let axes = axes_from_rows(rows, FORMAT, fline)?;
+    let axes = axes_from_rows(rows, FORMAT, fline, true)?;
 
     // Count before allocating: the allocation is bounded by the text, not by the header.
     let found = params.split_whitespace().count();

@@ -38,11 +38,19 @@
 //!
 //! Lattices these formats cannot represent are refused with [`DeformError::Unsupported`]:
 //! degrees other than 3, knot vectors that are not uniform, and frames the format has no
-//! room for (see each module). Every frame of a volmorph lattice is orthonormal, so the
-//! direction matrix never needs approximating on export; on import a direction matrix that
-//! deviates from orthonormal by at most [`DIRECTION_ORTHONORMAL_TOL`] (the rounding of files
-//! written with 6 decimals or in single precision) is snapped to the nearest orthonormal matrix
-//! by the one rule of [`volmorph_volume::direction`], a larger deviation is an error.
+//! room for (see each module). On import a direction matrix that deviates from orthonormal by
+//! at most [`DIRECTION_ORTHONORMAL_TOL`] (the rounding of files written with 6 decimals or in
+//! single precision) is snapped to the nearest orthonormal matrix by the one rule of
+//! [`volmorph_volume::direction`].
+//!
+//! **Skewed lattices** (Sederberg–Parry parallelepipeds, [`LatticeFrame::skewed`]): ITK's
+//! `BSplineTransform` takes any invertible direction matrix (it maps points to the grid by
+//! `D⁻¹`, as the model above does with `D⁻¹` in place of `Dᵀ`), so `.tfm` files carry skewed
+//! frames both ways: a skewed lattice is written with its unit axes as the direction, and a
+//! file whose direction is not orthonormal reads as a skewed lattice. plastimatch's `.bxf`
+//! evaluates its direction cosines only as a rotation, so skewed lattices are refused there
+//! ([`DeformError::Unsupported`]) and a `.bxf` with non-orthonormal direction cosines is a
+//! parse error.
 //!
 //! ```
 //! use glam::DVec3;
@@ -89,7 +97,7 @@ pub(crate) struct UniformGrid {
     pub origin: DVec3,
     /// Physical control-point spacing per axis.
     pub spacing: DVec3,
-    /// Orthonormal directions (columns) of the index axes.
+    /// Unit directions (columns) of the index axes; orthonormal unless the lattice is skewed.
     pub axes: DMat3,
     /// Displacement coefficients, index `i` fastest.
     pub coefficients: Vec<DVec3>,
@@ -99,6 +107,13 @@ impl UniformGrid {
     /// The grid of `lat`, or [`DeformError::Unsupported`] naming why `format` cannot hold it.
     pub fn from_lattice(lat: &BSplineLattice, format: &str) -> Result<Self, DeformError> {
         let frame = lat.frame();
+        if frame.is_skewed() && format.contains("bxf") {
+            return Err(DeformError::Unsupported(format!(
+                "{format} holds rotated grids only; this lattice is skewed (axes {}): write it \
+                 as .json or ITK .tfm",
+                frame.axes()
+            )));
+        }
         let mut start = DVec3::ZERO;
         let mut step = DVec3::ZERO;
         for (a, kv) in lat.knots().iter().enumerate() {
@@ -154,7 +169,7 @@ impl UniformGrid {
     /// `origin + axes·spacing` (the start of the domain), control points at their identity
     /// places plus the coefficients.
     pub fn into_lattice(self) -> Result<BSplineLattice, DeformError> {
-        let frame = LatticeFrame::new(
+        let frame = LatticeFrame::skewed(
             self.origin + self.axes * self.spacing,
             self.axes,
             self.spacing,
@@ -200,19 +215,35 @@ pub(crate) fn checked_grid_len(
         })
 }
 
-/// Orthonormal axes (columns) from a row-major direction matrix `rows[3r + c] = D[r][c]`
-/// (column `c` is the direction of index axis `c`), snapped to the nearest orthonormal matrix
-/// by [`orthonormalize`] (within [`DIRECTION_ORTHONORMAL_TOL`]).
+/// Axes (columns) from a row-major direction matrix `rows[3r + c] = D[r][c]` (column `c` is
+/// the direction of index axis `c`), snapped to the nearest orthonormal matrix by
+/// [`orthonormalize`] (within [`DIRECTION_ORTHONORMAL_TOL`]). A matrix further from
+/// orthonormal is returned as it is when `skew` allows skewed frames (its validity is checked
+/// by [`LatticeFrame::skewed`], a degenerate one is a parse error), and is a parse error
+/// otherwise.
 pub(crate) fn axes_from_rows(
     rows: [f64; 9],
     format: &'static str,
     line: usize,
+    skew: bool,
 ) -> Result<DMat3, DeformError> {
-    orthonormalize(DMat3::from_cols_array(&rows).transpose()).map_err(|e| DeformError::Parse {
-        format,
-        line,
-        message: format!("direction matrix {rows:?}: {e}"),
-    })
+    let d = DMat3::from_cols_array(&rows).transpose();
+    match orthonormalize(d) {
+        Ok(axes) => Ok(axes),
+        Err(_) if skew && d.is_finite() => match LatticeFrame::skewed(DVec3::ZERO, d, DVec3::ONE) {
+            Ok(_) => Ok(d),
+            Err(e) => Err(DeformError::Parse {
+                format,
+                line,
+                message: format!("direction matrix {rows:?}: {e}"),
+            }),
+        },
+        Err(e) => Err(DeformError::Parse {
+            format,
+            line,
+            message: format!("direction matrix {rows:?}: {e}"),
+        }),
+    }
 }
 
 /// Row-major entries `D[r][c]` of the axes matrix (columns are axis directions).

@@ -51,8 +51,11 @@ impl PointBasis {
 impl BSplineLattice {
     /// The non-zero basis functions at physical point `x`: `φ(x) = Σ N_a N_b N_c P` over the
     /// `order` cube starting at `first`. Derivatives are per unit of physical length along
-    /// each lattice axis, so `∂φ/∂x = Σ (N'_a N_b N_c P) ⊗ axes.x_axis + …` (for an
-    /// axis-aligned frame the three derivative products are the columns of the Jacobian).
+    /// each lattice axis (`dN/du / spacing`), so the physical gradient of a basis product is
+    /// `G · (N'_a N_b N_c, N_a N'_b N_c, N_a N_b N'_c)` with
+    /// [`LatticeFrame::gradient_matrix`](crate::LatticeFrame::gradient_matrix) `G` (the axes for
+    /// an orthonormal frame; for an axis-aligned one the three derivative products are the
+    /// columns of the Jacobian).
     /// `None` outside the lattice box (where the map is the identity and does not depend on
     /// the control points) and for rational lattices.
     #[must_use]
