@@ -84,6 +84,11 @@ test('drag moves the spout; the slice shown is the server slice; undo restores i
   await page.evaluate((p) => { const a = window.__studio; const g = a.volume().volume.geometry; a.setCursor(p.map((c, i) => Math.round((c - g.origin[i]) / g.spacing[i])), -1); }, SPOUT);
   await waitIdle();
   const s = await screenOf(1, SPOUT);
+  // Put the crosshair where the drag will grab (a probe click), then take the picture.
+  await page.selectOption('#tool', 'probe');
+  await page.mouse.click(s.x, s.y);
+  await page.selectOption('#tool', 'drag');
+  await waitIdle();
   const box = [Math.round(s.cx - 40), Math.round(s.cy - 40), 80, 80];
   const before = await pixels('slice-y', box);
   await page.screenshot({ path: path.join(artifacts, 'before-drag.png') });
@@ -195,7 +200,7 @@ test('lattice control points are dragged in the 3D view', async () => {
     const p = [0, 1, 2].map((c) => v.overlay.points[3 * k + c]);
     const [x, y] = v.project(p, mvp);
     const r = v.canvas.getBoundingClientRect();
-    return { k, p, x: r.left + x * r.width / v.canvas.width, y: r.top + y * r.height / v.canvas.height };
+    return { k, p, all: Array.from(v.overlay.points), x: r.left + x * r.width / v.canvas.width, y: r.top + y * r.height / v.canvas.height };
   });
   await page.mouse.move(target.x, target.y);
   await page.mouse.down();
@@ -203,6 +208,8 @@ test('lattice control points are dragged in the 3D view', async () => {
   await page.mouse.up();
   await page.waitForFunction(() => window.__studio.lastChange?.edit === 'end-gesture', null, { timeout: 60000 });
   await waitIdle();
+  target.k = await page.evaluate(() => [...window.__studio.view3d.selected][0]);
+  target.p = target.all.slice(3 * target.k, 3 * target.k + 3);
   const moved = await page.evaluate((k) => [0, 1, 2].map((c) => window.__studio.view3d.overlay.points[3 * k + c]), target.k);
   const d = Math.hypot(...moved.map((m, i) => m - target.p[i]));
   assert.ok(d > 0.02, `the control point moved by ${d}`);

@@ -12,8 +12,12 @@ use std::sync::{Condvar, Mutex};
 pub trait Coalesce: Sized {
     /// The gesture this job belongs to, if it may be coalesced.
     fn key(&self) -> Option<u64>;
-    /// Absorb `newer` (same key), which arrived later.
-    fn absorb(&mut self, newer: Self);
+    /// Absorb `newer` (same key), which arrived later; give it back if it is of another
+    /// kind (it is then queued behind).
+    ///
+    /// # Errors
+    /// `newer` itself when it cannot be absorbed.
+    fn absorb(&mut self, newer: Self) -> Result<(), Self>;
 }
 
 /// A multi-producer, single-consumer queue that coalesces.
@@ -54,10 +58,10 @@ impl<J: Coalesce> Queue<J> {
     pub fn push(&self, job: J) {
         let mut s = self.state.lock().unwrap_or_else(std::sync::PoisonError::into_inner);
         match (job.key(), s.jobs.back_mut()) {
-            (Some(k), Some(last)) if last.key() == Some(k) => {
-                last.absorb(job);
-                s.coalesced += 1;
-            }
+            (Some(k), Some(last)) if last.key() == Some(k) => match last.absorb(job) {
+                Ok(()) => s.coalesced += 1,
+                Err(job) => s.jobs.push_back(job),
+            },
             _ => s.jobs.push_back(job),
         }
         self.ready.notify_one();
@@ -117,8 +121,9 @@ mod tests {
                 Fake::Drag { gesture, .. } => Some(*gesture),
             }
         }
-        fn absorb(&mut self, newer: Self) {
+        fn absorb(&mut self, newer: Self) -> Result<(), Self> {
             *self = newer;
+            Ok(())
         }
     }
 

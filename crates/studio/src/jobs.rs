@@ -86,7 +86,7 @@ impl Coalesce for Job {
         }
     }
 
-    fn absorb(&mut self, newer: Self) {
+    fn absorb(&mut self, newer: Self) -> Result<(), Self> {
         match (&mut self.work, newer.work) {
             (Work::Drag { target, radius, .. }, Work::Drag { target: t, radius: r, .. }) => {
                 *target = t;
@@ -95,9 +95,21 @@ impl Coalesce for Job {
             (Work::Parameters { changes, .. }, Work::Parameters { changes: c, .. }) => {
                 changes.extend(c);
             }
-            (_, other) => self.work = other,
+            // A command replaces a pending command of the same kind (absolute edits).
+            (Work::Command(c, _), Work::Command(n, g))
+                if std::mem::discriminant(&**c) == std::mem::discriminant(&*n) =>
+            {
+                self.work = Work::Command(n, g);
+            }
+            (_, work) => {
+                return Err(Job {
+                    origin: newer.origin,
+                    work,
+                });
+            }
         }
         self.origin = newer.origin;
+        Ok(())
     }
 }
 

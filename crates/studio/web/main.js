@@ -120,8 +120,7 @@ class App {
     const meshes = s.objects.filter((o) => o.mesh);
     for (const id of [...this.view3d.meshes.keys()]) if (!meshes.some((m) => m.id === id)) this.view3d.dropMesh(id);
     for (const m of meshes) if (!this.view3d.meshes.has(m.id)) this.view3d.setMesh(m.id).catch((e) => this.error(e.message));
-    const over = this.lattice() || this.handleMap();
-    if (over) this.loadOverlay(over.id);
+    for (const over of [this.lattice(), this.handleMap()]) if (over) this.loadOverlay(over.id);
     this.panels?.sceneChanged();
   }
 
@@ -142,7 +141,7 @@ class App {
 
   async loadOverlay(id) {
     const f = await this.client.request(Kind.GetLattice, { map: id });
-    this.view3d.setOverlay(f);
+    if (f.header.kind === 'lattice' || !this.lattice()) this.view3d.setOverlay(f);
     if (f.header.kind === 'handles') {
       const p = new Float32Array(f.payload);
       this.handles = [];
