@@ -4,7 +4,7 @@
 //! Routes, all under `/TOKEN/`: `GET /` (the page), `GET /app/{file}` (its modules and
 //! style), `GET /ws` (the WebSocket), `GET /download/{id}/{file}` (an object exported in the
 //! format the file name's extension names), `POST /upload/{file}` (a file for the upload
-//! root, at most [`Config::upload_limit`] bytes). Anything else is 404; a wrong token 403.
+//! root, at most [`Config::upload_limit`] bytes). Anything else, and a wrong token, is 403.
 
 use std::net::{Ipv4Addr, SocketAddr};
 use std::path::PathBuf;
@@ -162,17 +162,16 @@ pub async fn start(config: Config) -> Result<Studio, StudioError> {
         .name("volmorph-studio-editor".into())
         .spawn(move || editor.run())
         .map_err(|e| StudioError::Server(e.to_string()))?;
-    let inner = Router::new()
-        .route("/", get(page))
-        .route("/app/{file}", get(asset))
-        .route("/ws", get(ws_upgrade))
-        .route("/download/{id}/{file}", get(download))
-        .route(
-            "/upload/{file}",
-            post(upload).layer(DefaultBodyLimit::max(config.upload_limit)),
-        );
+    let t = &token;
     let app = Router::new()
-        .nest(&format!("/{token}"), inner)
+        .route(&format!("/{t}/"), get(page))
+        .route(&format!("/{t}/app/{{file}}"), get(asset))
+        .route(&format!("/{t}/ws"), get(ws_upgrade))
+        .route(&format!("/{t}/download/{{id}}/{{file}}"), get(download))
+        .route(
+            &format!("/{t}/upload/{{file}}"),
+            post(upload).layer(DefaultBodyLimit::max(config.upload_limit)),
+        )
         .fallback(forbidden)
         .layer(middleware::from_fn_with_state(Arc::clone(&shared), guard))
         .with_state(Arc::clone(&shared));
