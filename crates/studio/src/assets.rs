@@ -3,13 +3,41 @@
 
 /// `(name, MIME type, contents)` of every embedded file.
 const FILES: &[(&str, &str, &[u8])] = &[
-    ("index.html", "text/html; charset=utf-8", include_bytes!("../web/index.html")),
-    ("studio.css", "text/css; charset=utf-8", include_bytes!("../web/studio.css")),
-    ("main.js", "text/javascript; charset=utf-8", include_bytes!("../web/main.js")),
-    ("protocol.js", "text/javascript; charset=utf-8", include_bytes!("../web/protocol.js")),
-    ("slices.js", "text/javascript; charset=utf-8", include_bytes!("../web/slices.js")),
-    ("view3d.js", "text/javascript; charset=utf-8", include_bytes!("../web/view3d.js")),
-    ("panels.js", "text/javascript; charset=utf-8", include_bytes!("../web/panels.js")),
+    (
+        "index.html",
+        "text/html; charset=utf-8",
+        include_bytes!("../web/index.html"),
+    ),
+    (
+        "studio.css",
+        "text/css; charset=utf-8",
+        include_bytes!("../web/studio.css"),
+    ),
+    (
+        "main.js",
+        "text/javascript; charset=utf-8",
+        include_bytes!("../web/main.js"),
+    ),
+    (
+        "protocol.js",
+        "text/javascript; charset=utf-8",
+        include_bytes!("../web/protocol.js"),
+    ),
+    (
+        "slices.js",
+        "text/javascript; charset=utf-8",
+        include_bytes!("../web/slices.js"),
+    ),
+    (
+        "view3d.js",
+        "text/javascript; charset=utf-8",
+        include_bytes!("../web/view3d.js"),
+    ),
+    (
+        "panels.js",
+        "text/javascript; charset=utf-8",
+        include_bytes!("../web/panels.js"),
+    ),
 ];
 
 /// The MIME type and contents of embedded file `name`.

@@ -56,7 +56,10 @@ impl<J: Coalesce> Queue<J> {
 
     /// Add `job`; if the last pending job has the same key, it absorbs `job` instead.
     pub fn push(&self, job: J) {
-        let mut s = self.state.lock().unwrap_or_else(std::sync::PoisonError::into_inner);
+        let mut s = self
+            .state
+            .lock()
+            .unwrap_or_else(std::sync::PoisonError::into_inner);
         match (job.key(), s.jobs.back_mut()) {
             (Some(k), Some(last)) if last.key() == Some(k) => match last.absorb(job) {
                 Ok(()) => s.coalesced += 1,
@@ -69,7 +72,10 @@ impl<J: Coalesce> Queue<J> {
 
     /// The next job, waiting for one; `None` once closed and drained.
     pub fn pop(&self) -> Option<J> {
-        let mut s = self.state.lock().unwrap_or_else(std::sync::PoisonError::into_inner);
+        let mut s = self
+            .state
+            .lock()
+            .unwrap_or_else(std::sync::PoisonError::into_inner);
         loop {
             if let Some(j) = s.jobs.pop_front() {
                 return Some(j);
@@ -86,7 +92,10 @@ impl<J: Coalesce> Queue<J> {
 
     /// Stop: `pop` returns the remaining jobs, then `None`.
     pub fn close(&self) {
-        let mut s = self.state.lock().unwrap_or_else(std::sync::PoisonError::into_inner);
+        let mut s = self
+            .state
+            .lock()
+            .unwrap_or_else(std::sync::PoisonError::into_inner);
         s.closed = true;
         self.ready.notify_all();
     }

@@ -26,11 +26,10 @@ fn params(h: &Value) -> Result<BTreeMap<usize, f64>, QueryError> {
                 .map_err(|e| QueryError(format!("field \"params\": {e}")))?;
             m.into_iter()
                 .map(|(k, v)| {
-                    let i: usize = k
-                        .parse()
-                        .ok()
-                        .filter(|i| *i >= 1)
-                        .ok_or_else(|| QueryError(format!("parameter {k:?} must be 1, 2, …")))?;
+                    let i: usize =
+                        k.parse().ok().filter(|i| *i >= 1).ok_or_else(|| {
+                            QueryError(format!("parameter {k:?} must be 1, 2, …"))
+                        })?;
                     if v.is_finite() {
                         Ok((i, v))
                     } else {
@@ -117,15 +116,48 @@ mod tests {
 
     #[test]
     fn commands_parse_and_bad_fields_are_named() {
-        let c = parse(&json!({"command": "add-handle", "map": 3, "source": [0, 0, 0], "target": [1, 0, 0]})).unwrap();
-        assert!(matches!(c, Command::AddHandle { map: ObjectId(3), .. }));
+        let c = parse(
+            &json!({"command": "add-handle", "map": 3, "source": [0, 0, 0], "target": [1, 0, 0]}),
+        )
+        .unwrap();
+        assert!(matches!(
+            c,
+            Command::AddHandle {
+                map: ObjectId(3),
+                ..
+            }
+        ));
         let c = parse(&json!({"command": "set-handle-method", "map": 3, "method": "tps"})).unwrap();
-        assert!(matches!(c, Command::SetHandleMethod { method: HandleMethod::Tps, .. }));
+        assert!(matches!(
+            c,
+            Command::SetHandleMethod {
+                method: HandleMethod::Tps,
+                ..
+            }
+        ));
         let c = parse(&json!({"command": "add-frep", "name": "m", "source": "my(x[3], a[1]) { my = 1 - x[1]; }", "params": {"1": 0.5}})).unwrap();
-        assert!(matches!(c, Command::Add { object: NewObject::Frep { .. }, .. }));
-        let e = parse(&json!({"command": "move-handle", "map": 3, "index": 0, "source": [0, 0]})).unwrap_err();
-        assert!(e.0.contains("\"target\"") || e.0.contains("\"source\""), "{e}");
-        assert!(parse(&json!({"command": "explode"})).unwrap_err().0.contains("explode"));
-        assert!(parse(&json!({"command": "add-frep", "name": "m", "source": "", "params": {"0": 1}})).is_err());
+        assert!(matches!(
+            c,
+            Command::Add {
+                object: NewObject::Frep { .. },
+                ..
+            }
+        ));
+        let e = parse(&json!({"command": "move-handle", "map": 3, "index": 0, "source": [0, 0]}))
+            .unwrap_err();
+        assert!(
+            e.0.contains("\"target\"") || e.0.contains("\"source\""),
+            "{e}"
+        );
+        assert!(
+            parse(&json!({"command": "explode"}))
+                .unwrap_err()
+                .0
+                .contains("explode")
+        );
+        assert!(
+            parse(&json!({"command": "add-frep", "name": "m", "source": "", "params": {"0": 1}}))
+                .is_err()
+        );
     }
 }

@@ -88,7 +88,14 @@ impl Coalesce for Job {
 
     fn absorb(&mut self, newer: Self) -> Result<(), Self> {
         match (&mut self.work, newer.work) {
-            (Work::Drag { target, radius, .. }, Work::Drag { target: t, radius: r, .. }) => {
+            (
+                Work::Drag { target, radius, .. },
+                Work::Drag {
+                    target: t,
+                    radius: r,
+                    ..
+                },
+            ) => {
                 *target = t;
                 *radius = r;
             }
@@ -175,8 +182,16 @@ impl Editor {
             match result {
                 Ok((change, undo, redo)) => {
                     self.edits_run += 1;
-                    let header =
-                        change_header(&change, label, origin, ms, undo, redo, self.edits_run, self.queue.coalesced());
+                    let header = change_header(
+                        &change,
+                        label,
+                        origin,
+                        ms,
+                        undo,
+                        redo,
+                        self.edits_run,
+                        self.queue.coalesced(),
+                    );
                     self.send(None, Frame::new(Kind::Changed, 0, header));
                 }
                 Err(e) => {

@@ -219,7 +219,11 @@ impl Frame {
         out.extend_from_slice(&VERSION.to_le_bytes());
         out.extend_from_slice(&(self.kind as u16).to_le_bytes());
         out.extend_from_slice(&self.request.to_le_bytes());
-        out.extend_from_slice(&u32::try_from(header.len()).unwrap_or(u32::MAX).to_le_bytes());
+        out.extend_from_slice(
+            &u32::try_from(header.len())
+                .unwrap_or(u32::MAX)
+                .to_le_bytes(),
+        );
         out.extend_from_slice(header.as_bytes());
         out.extend_from_slice(&self.payload);
         out
@@ -310,7 +314,10 @@ mod tests {
     #[test]
     fn truncated_and_malformed_frames_are_errors() {
         let b = Frame::new(Kind::Hello, 1, json!({"x": "yyyy"})).encode();
-        assert!(matches!(Frame::decode(&b[..20]), Err(FrameError::Truncated(_))));
+        assert!(matches!(
+            Frame::decode(&b[..20]),
+            Err(FrameError::Truncated(_))
+        ));
         assert_eq!(Frame::decode(&b[..3]), Err(FrameError::Truncated(3)));
         let mut m = b.clone();
         m[0] = b'X';

@@ -50,7 +50,11 @@ pub fn new_token() -> Result<String, getrandom::Error> {
 /// `a == b` in time independent of where they differ.
 #[must_use]
 pub fn tokens_equal(a: &str, b: &str) -> bool {
-    a.len() == b.len() && a.bytes().zip(b.bytes()).fold(0u8, |acc, (x, y)| acc | (x ^ y)) == 0
+    a.len() == b.len()
+        && a.bytes()
+            .zip(b.bytes())
+            .fold(0u8, |acc, (x, y)| acc | (x ^ y))
+            == 0
 }
 
 /// Whether `host` (a `Host` header) names this server: 127.0.0.1 or localhost at `port`.
@@ -200,9 +204,18 @@ mod tests {
         std::os::unix::fs::symlink(outside.path(), dir.path().join("escape")).unwrap();
         let roots = Roots::new(&[dir.path().to_path_buf()]).unwrap();
         assert!(roots.resolve(0, "sub/a.nii").is_ok());
-        assert!(matches!(roots.resolve(0, "../x"), Err(AccessError::NotRelative(_))));
-        assert!(matches!(roots.resolve(0, "sub/../../x"), Err(AccessError::NotRelative(_))));
-        assert!(matches!(roots.resolve(0, "/etc/passwd"), Err(AccessError::NotRelative(_))));
+        assert!(matches!(
+            roots.resolve(0, "../x"),
+            Err(AccessError::NotRelative(_))
+        ));
+        assert!(matches!(
+            roots.resolve(0, "sub/../../x"),
+            Err(AccessError::NotRelative(_))
+        ));
+        assert!(matches!(
+            roots.resolve(0, "/etc/passwd"),
+            Err(AccessError::NotRelative(_))
+        ));
         assert!(matches!(roots.resolve(1, "a"), Err(AccessError::NoRoot(1))));
         #[cfg(unix)]
         {

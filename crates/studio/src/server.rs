@@ -140,7 +140,9 @@ pub async fn start(config: Config) -> Result<Studio, StudioError> {
     );
     let listener = tokio::net::TcpListener::bind((Ipv4Addr::LOCALHOST, config.port))
         .await
-        .map_err(|e| StudioError::Server(format!("cannot listen on 127.0.0.1:{}: {e}", config.port)))?;
+        .map_err(|e| {
+            StudioError::Server(format!("cannot listen on 127.0.0.1:{}: {e}", config.port))
+        })?;
     let addr = listener
         .local_addr()
         .map_err(|e| StudioError::Server(e.to_string()))?;
@@ -197,7 +199,9 @@ async fn guard(State(s): State<Arc<Shared>>, req: Request, next: Next) -> Respon
         return (StatusCode::FORBIDDEN, "wrong Host").into_response();
     }
     if let Some(o) = headers.get(header::ORIGIN)
-        && !o.to_str().is_ok_and(|o| security::origin_allowed(o, s.port))
+        && !o
+            .to_str()
+            .is_ok_and(|o| security::origin_allowed(o, s.port))
     {
         return (StatusCode::FORBIDDEN, "wrong Origin").into_response();
     }
@@ -234,16 +238,16 @@ fn asset_response(file: &str) -> Response {
     }
 }
 
-async fn download(
-    State(s): State<Arc<Shared>>,
-    Path((id, file)): Path<(u64, String)>,
-) -> Response {
+async fn download(State(s): State<Arc<Shared>>, Path((id, file)): Path<(u64, String)>) -> Response {
     let shared = Arc::clone(&s);
     let res = tokio::task::spawn_blocking(move || -> Result<Vec<u8>, String> {
         if file.contains('/') || file.contains('\\') || file.starts_with('.') {
             return Err(format!("file name {file:?} must be plain"));
         }
-        let dir = shared.upload_dir.join(format!("export-{}", shared.next_page.fetch_add(1, Ordering::Relaxed)));
+        let dir = shared.upload_dir.join(format!(
+            "export-{}",
+            shared.next_page.fetch_add(1, Ordering::Relaxed)
+        ));
         std::fs::create_dir_all(&dir).map_err(|e| e.to_string())?;
         let path = dir.join(&file);
         let scene = shared.scene.read().unwrap_or_else(|p| p.into_inner());
@@ -266,13 +270,13 @@ async fn download(
     }
 }
 
-async fn upload(
-    State(s): State<Arc<Shared>>,
-    Path(file): Path<String>,
-    body: Bytes,
-) -> Response {
+async fn upload(State(s): State<Arc<Shared>>, Path(file): Path<String>, body: Bytes) -> Response {
     if file.contains('/') || file.contains('\\') || file.starts_with('.') || file.is_empty() {
-        return (StatusCode::BAD_REQUEST, format!("file name {file:?} must be plain")).into_response();
+        return (
+            StatusCode::BAD_REQUEST,
+            format!("file name {file:?} must be plain"),
+        )
+            .into_response();
     }
     let root = s.roots.list().len() - 1;
     let path = match s.roots.resolve_new(root, &file) {
@@ -291,7 +295,6 @@ async fn upload(
     }
 }
 
-
 async fn ws_upgrade(
     State(s): State<Arc<Shared>>,
     headers: HeaderMap,
@@ -299,7 +302,11 @@ async fn ws_upgrade(
 ) -> Response {
     // The guard refused a foreign Origin; the WebSocket also requires one.
     if headers.get(header::ORIGIN).is_none() {
-        return (StatusCode::FORBIDDEN, "the WebSocket needs an Origin header").into_response();
+        return (
+            StatusCode::FORBIDDEN,
+            "the WebSocket needs an Origin header",
+        )
+            .into_response();
     }
     ws.max_message_size(MAX_CLIENT_FRAME)
         .max_frame_size(MAX_CLIENT_FRAME)
@@ -379,25 +386,34 @@ fn handle(s: &Arc<Shared>, page: u64, frame: Frame, reply: &mpsc::UnboundedSende
                 radius: views::f64_field(h, "radius")?,
             },
             Kind::MoveControlPoints => {
-                let pts = h
-                    .get("points")
-                    .and_then(Value::as_array)
-                    .ok_or_else(|| QueryError("field \"points\" must be a list of [index, x, y, z]".into()))?;
+                let pts = h.get("points").and_then(Value::as_array).ok_or_else(|| {
+                    QueryError("field \"points\" must be a list of [index, x, y, z]".into())
+                })?;
                 let mut changes = std::collections::BTreeMap::new();
                 for p in pts {
-                    let a: Vec<f64> = p.as_array().map(|a| a.iter().filter_map(Value::as_f64).collect()).unwrap_or_default();
+                    let a: Vec<f64> = p
+                        .as_array()
+                        .map(|a| a.iter().filter_map(Value::as_f64).collect())
+                        .unwrap_or_default();
                     if a.len() != 4 || a[0] < 0.0 || a[0].fract() != 0.0 {
                         return Err(QueryError("each point must be [index, x, y, z]".into()));
                     }
                     changes.insert(a[0] as usize, glam::DVec3::new(a[1], a[2], a[3]));
                 }
-                Work::Parameters { gesture: gesture_key(page, h)?, map: ObjectId(u64_field(h, "map")?), changes }
+                Work::Parameters {
+                    gesture: gesture_key(page, h)?,
+                    map: ObjectId(u64_field(h, "map")?),
+                    changes,
+                }
             }
-            Kind::EndGesture => Work::EndGesture { gesture: gesture_key(page, h)? },
+            Kind::EndGesture => Work::EndGesture {
+                gesture: gesture_key(page, h)?,
+            },
             Kind::Undo => Work::Undo,
             Kind::Redo => Work::Redo,
             Kind::Setup => Work::Setup(
-                serde_json::from_value::<Setup>(h.clone()).map_err(|e| QueryError(format!("bad set-up: {e}")))?,
+                serde_json::from_value::<Setup>(h.clone())
+                    .map_err(|e| QueryError(format!("bad set-up: {e}")))?,
             ),
             Kind::Command => Work::Command(
                 Box::new(command_json::parse(h)?),
@@ -406,7 +422,10 @@ fn handle(s: &Arc<Shared>, page: u64, frame: Frame, reply: &mpsc::UnboundedSende
             Kind::OpenFile => {
                 let path = resolve(s, h)?;
                 let object = volmorph_scene::files::read_object(&path)?;
-                let name = path.file_name().map(|n| n.to_string_lossy().into_owned()).unwrap_or_default();
+                let name = path
+                    .file_name()
+                    .map(|n| n.to_string_lossy().into_owned())
+                    .unwrap_or_default();
                 Work::Command(Box::new(Command::Add { name, object }), None)
             }
             _ => return Ok(None),
@@ -416,7 +435,8 @@ fn handle(s: &Arc<Shared>, page: u64, frame: Frame, reply: &mpsc::UnboundedSende
         Ok(Some(work)) => return push(work),
         Ok(None) => {}
         Err(e) => {
-            let _ = reply.send(Frame::new(Kind::Error, frame.request, json!({"message": e.0})).encode());
+            let _ = reply
+                .send(Frame::new(Kind::Error, frame.request, json!({"message": e.0})).encode());
             return;
         }
     }
@@ -425,21 +445,32 @@ fn handle(s: &Arc<Shared>, page: u64, frame: Frame, reply: &mpsc::UnboundedSende
     let reply = reply.clone();
     tokio::task::spawn_blocking(move || {
         let r = query(&s, page, &frame);
-        let f = r.unwrap_or_else(|e| Frame::new(Kind::Error, frame.request, json!({"message": e.0})));
+        let f =
+            r.unwrap_or_else(|e| Frame::new(Kind::Error, frame.request, json!({"message": e.0})));
         let _ = reply.send(f.encode());
     });
 }
 
 fn resolve(s: &Shared, h: &Value) -> Result<PathBuf, QueryError> {
     let root = usize::try_from(u64_field(h, "root")?).unwrap_or(usize::MAX);
-    let path = h.get("path").and_then(Value::as_str).ok_or_else(|| QueryError("field \"path\" must be a string".into()))?;
-    s.roots.resolve(root, path).map_err(|e| QueryError(e.to_string()))
+    let path = h
+        .get("path")
+        .and_then(Value::as_str)
+        .ok_or_else(|| QueryError("field \"path\" must be a string".into()))?;
+    s.roots
+        .resolve(root, path)
+        .map_err(|e| QueryError(e.to_string()))
 }
 
 fn resolve_new(s: &Shared, h: &Value) -> Result<PathBuf, QueryError> {
     let root = usize::try_from(u64_field(h, "root")?).unwrap_or(usize::MAX);
-    let path = h.get("path").and_then(Value::as_str).ok_or_else(|| QueryError("field \"path\" must be a string".into()))?;
-    s.roots.resolve_new(root, path).map_err(|e| QueryError(e.to_string()))
+    let path = h
+        .get("path")
+        .and_then(Value::as_str)
+        .ok_or_else(|| QueryError("field \"path\" must be a string".into()))?;
+    s.roots
+        .resolve_new(root, path)
+        .map_err(|e| QueryError(e.to_string()))
 }
 
 fn query(s: &Shared, page: u64, frame: &Frame) -> Result<Frame, QueryError> {
@@ -450,8 +481,15 @@ fn query(s: &Shared, page: u64, frame: &Frame) -> Result<Frame, QueryError> {
         let loaded = Scene::load(&path)?;
         *s.scene.write().unwrap_or_else(|p| p.into_inner()) = loaded;
         let f = views::scene_frame(&s.scene.read().unwrap_or_else(|p| p.into_inner()), 0);
-        let _ = s.out.send(Outgoing { page: None, bytes: Arc::new(f.encode()) });
-        return Ok(Frame::new(Kind::Done, r, json!({"loaded": path.display().to_string()})));
+        let _ = s.out.send(Outgoing {
+            page: None,
+            bytes: Arc::new(f.encode()),
+        });
+        return Ok(Frame::new(
+            Kind::Done,
+            r,
+            json!({"loaded": path.display().to_string()}),
+        ));
     }
     let scene = s.scene.read().unwrap_or_else(|p| p.into_inner());
     match frame.kind {
@@ -477,7 +515,10 @@ fn query(s: &Shared, page: u64, frame: &Frame) -> Result<Frame, QueryError> {
         Kind::ListDir => {
             let dir = resolve(s, h)?;
             let mut entries = Vec::new();
-            for e in std::fs::read_dir(&dir).map_err(|e| QueryError(e.to_string()))?.flatten() {
+            for e in std::fs::read_dir(&dir)
+                .map_err(|e| QueryError(e.to_string()))?
+                .flatten()
+            {
                 let meta = e.metadata().ok();
                 entries.push(json!({
                     "name": e.file_name().to_string_lossy(),
@@ -486,18 +527,32 @@ fn query(s: &Shared, page: u64, frame: &Frame) -> Result<Frame, QueryError> {
                 }));
             }
             entries.sort_by(|a, b| a["name"].as_str().cmp(&b["name"].as_str()));
-            Ok(Frame::new(Kind::Listing, r, json!({"root": h["root"], "path": h["path"], "entries": entries})))
+            Ok(Frame::new(
+                Kind::Listing,
+                r,
+                json!({"root": h["root"], "path": h["path"], "entries": entries}),
+            ))
         }
         Kind::SaveScene => {
             let path = resolve_new(s, h)?;
             scene.save(&path)?;
-            Ok(Frame::new(Kind::Done, r, json!({"saved": path.display().to_string()})))
+            Ok(Frame::new(
+                Kind::Done,
+                r,
+                json!({"saved": path.display().to_string()}),
+            ))
         }
         Kind::Export => {
             let path = resolve_new(s, h)?;
             scene.export(ObjectId(u64_field(h, "id")?), &path)?;
-            Ok(Frame::new(Kind::Done, r, json!({"exported": path.display().to_string()})))
+            Ok(Frame::new(
+                Kind::Done,
+                r,
+                json!({"exported": path.display().to_string()}),
+            ))
         }
-        k => Err(QueryError(format!("message kind {k:?} is not a request a page sends"))),
+        k => Err(QueryError(format!(
+            "message kind {k:?} is not a request a page sends"
+        ))),
     }
 }

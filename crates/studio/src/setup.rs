@@ -4,10 +4,12 @@
 //! isosurface of the result).
 
 use serde::Deserialize;
-use volmorph_lattice::BSplineLattice;
 use volmorph_handles::HandleSet;
+use volmorph_lattice::BSplineLattice;
 use volmorph_maps::{AnyMap, HandleMethod, HandleOptions};
-use volmorph_scene::{Change, Command, NewObject, ObjectId, Recipe, Scene, SceneError, SurfaceMethod};
+use volmorph_scene::{
+    Change, Command, NewObject, ObjectId, Recipe, Scene, SceneError, SurfaceMethod,
+};
 use volmorph_volume::AnyVolume;
 use volmorph_volume::phantom::{self, Phantom};
 use volmorph_warp::apply::WarpMethod;

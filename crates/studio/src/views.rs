@@ -122,7 +122,8 @@ pub fn geometry_json(g: &Geometry) -> Value {
 fn object_json(id: ObjectId, name: &str, object: &Object) -> Value {
     let mut o = json!({"id": id.0, "name": name, "kind": object.kind()});
     if let Some(v) = object.volume() {
-        o["volume"] = json!({"geometry": geometry_json(v.geometry()), "type": v.voxel_type().to_string()});
+        o["volume"] =
+            json!({"geometry": geometry_json(v.geometry()), "type": v.voxel_type().to_string()});
     }
     if let Some(m) = object.mesh() {
         o["mesh"] = json!({"vertices": m.vertex_count(), "faces": m.face_count()});
@@ -272,7 +273,10 @@ impl Caches {
         }
         let dvr = self.dvr(id, v)?;
         let g = v.geometry();
-        let (lo, hi) = (DVec3::splat(-0.5), DVec3::from_array(g.dims.map(|d| d as f64)) - 0.5);
+        let (lo, hi) = (
+            DVec3::splat(-0.5),
+            DVec3::from_array(g.dims.map(|d| d as f64)) - 0.5,
+        );
         let corners: Vec<DVec3> = (0..8)
             .map(|c| {
                 g.index_to_physical(DVec3::new(
@@ -326,7 +330,13 @@ pub fn volume_frame(scene: &Scene, h: &Value, request: u32) -> Result<Frame, Que
     if min > max {
         return Err(QueryError::new(format!("volume {id} has no finite value")));
     }
-    let stride = g.dims.iter().map(|&d| d.div_ceil(MAX_TEXTURE_AXIS)).max().unwrap_or(1).max(1);
+    let stride = g
+        .dims
+        .iter()
+        .map(|&d| d.div_ceil(MAX_TEXTURE_AXIS))
+        .max()
+        .unwrap_or(1)
+        .max(1);
     let dims = g.dims.map(|d| d.div_ceil(stride));
     let scale = if max > min { 255.0 / (max - min) } else { 0.0 };
     let mut out = Vec::with_capacity(dims.iter().product());
@@ -335,7 +345,11 @@ pub fn volume_frame(scene: &Scene, h: &Value, request: u32) -> Result<Frame, Que
             let row = (k * stride * g.dims[1] + j * stride) * g.dims[0];
             for i in 0..dims[0] {
                 let x = data[row + i * stride];
-                let c = if x.is_finite() { ((x - min) * scale).round() } else { 0.0 };
+                let c = if x.is_finite() {
+                    ((x - min) * scale).round()
+                } else {
+                    0.0
+                };
                 out.push(c.clamp(0.0, 255.0) as u8);
             }
         }
@@ -358,8 +372,14 @@ pub fn mesh_frame(scene: &Scene, h: &Value, request: u32) -> Result<Frame, Query
     let m = scene.mesh(ObjectId(id))?;
     let normals = m.vertex_normals();
     let tris: Vec<[u32; 3]> = m.fan_triangles().collect();
-    let mut payload = f32_bytes(m.positions().iter().flat_map(|p| p.to_array().map(|c| c as f32)));
-    payload.extend(f32_bytes(normals.iter().flat_map(|n| n.to_array().map(|c| c as f32))));
+    let mut payload = f32_bytes(
+        m.positions()
+            .iter()
+            .flat_map(|p| p.to_array().map(|c| c as f32)),
+    );
+    payload.extend(f32_bytes(
+        normals.iter().flat_map(|n| n.to_array().map(|c| c as f32)),
+    ));
     payload.extend(u32_bytes(tris.iter().flatten().copied()));
     Ok(Frame::new(
         Kind::MeshData,
@@ -392,7 +412,10 @@ pub fn overlay_frame(scene: &Scene, h: &Value, request: u32) -> Result<Frame, Qu
             json!({"map": id, "kind": "handles", "count": hm.set().points.len()}),
         )
         .with_payload(f32_bytes(
-            hm.set().points.iter().flat_map(|(s, t)| f(s).into_iter().chain(f(t))),
+            hm.set()
+                .points
+                .iter()
+                .flat_map(|(s, t)| f(s).into_iter().chain(f(t))),
         ))),
         other => Err(QueryError::new(format!(
             "object {id} is a {}, not a lattice or handle map",
