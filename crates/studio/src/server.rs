@@ -374,65 +374,11 @@ fn handle(s: &Arc<Shared>, page: u64, frame: Frame, reply: &mpsc::UnboundedSende
         page,
         request: frame.request,
     };
-    let h = &frame.header;
-    let push = |work: Work| s.queue.push(Job { origin, work });
-    let edit: Result<Option<Work>, QueryError> = (|| {
-        Ok(Some(match frame.kind {
-            Kind::Drag => Work::Drag {
-                gesture: gesture_key(page, h)?,
-                map: ObjectId(u64_field(h, "map")?),
-                start: vec3_field(h, "start")?,
-                target: vec3_field(h, "target")?,
-                radius: views::f64_field(h, "radius")?,
-            },
-            Kind::MoveControlPoints => {
-                let pts = h.get("points").and_then(Value::as_array).ok_or_else(|| {
-                    QueryError("field \"points\" must be a list of [index, x, y, z]".into())
-                })?;
-                let mut changes = std::collections::BTreeMap::new();
-                for p in pts {
-                    let a: Vec<f64> = p
-                        .as_array()
-                        .map(|a| a.iter().filter_map(Value::as_f64).collect())
-                        .unwrap_or_default();
-                    if a.len() != 4 || a[0] < 0.0 || a[0].fract() != 0.0 {
-                        return Err(QueryError("each point must be [index, x, y, z]".into()));
-                    }
-                    changes.insert(a[0] as usize, glam::DVec3::new(a[1], a[2], a[3]));
-                }
-                Work::Parameters {
-                    gesture: gesture_key(page, h)?,
-                    map: ObjectId(u64_field(h, "map")?),
-                    changes,
-                }
-            }
-            Kind::EndGesture => Work::EndGesture {
-                gesture: gesture_key(page, h)?,
-            },
-            Kind::Undo => Work::Undo,
-            Kind::Redo => Work::Redo,
-            Kind::Setup => Work::Setup(
-                serde_json::from_value::<Setup>(h.clone())
-                    .map_err(|e| QueryError(format!("bad set-up: {e}")))?,
-            ),
-            Kind::Command => Work::Command(
-                Box::new(command_json::parse(h)?),
-                h.get("gesture").map(|_| gesture_key(page, h)).transpose()?,
-            ),
-            Kind::OpenFile => {
-                let path = resolve(s, h)?;
-                let object = volmorph_scene::files::read_object(&path)?;
-                let name = path
-                    .file_name()
-                    .map(|n| n.to_string_lossy().into_owned())
-                    .unwrap_or_default();
-                Work::Command(Box::new(Command::Add { name, object }), None)
-            }
-            _ => return Ok(None),
-        }))
-    })();
-    match edit {
-        Ok(Some(work)) => return push(work),
+    match edit_of(s, page, &frame) {
+        Ok(Some(work)) => {
+            s.queue.push(Job { origin, work });
+            return;
+        }
         Ok(None) => {}
         Err(e) => {
             let _ = reply
@@ -451,26 +397,84 @@ fn handle(s: &Arc<Shared>, page: u64, frame: Frame, reply: &mpsc::UnboundedSende
     });
 }
 
-fn resolve(s: &Shared, h: &Value) -> Result<PathBuf, QueryError> {
+/// The edit a frame asks for (`None` for queries).
+fn edit_of(s: &Shared, page: u64, frame: &Frame) -> Result<Option<Work>, QueryError> {
+    let h = &frame.header;
+    Ok(Some(match frame.kind {
+        Kind::Drag => Work::Drag {
+            gesture: gesture_key(page, h)?,
+            map: ObjectId(u64_field(h, "map")?),
+            start: vec3_field(h, "start")?,
+            target: vec3_field(h, "target")?,
+            radius: views::f64_field(h, "radius")?,
+        },
+        Kind::MoveControlPoints => {
+            let pts = h.get("points").and_then(Value::as_array).ok_or_else(|| {
+                QueryError("field \"points\" must be a list of [index, x, y, z]".into())
+            })?;
+            let mut changes = std::collections::BTreeMap::new();
+            for p in pts {
+                let a: Vec<f64> = p
+                    .as_array()
+                    .map(|a| a.iter().filter_map(Value::as_f64).collect())
+                    .unwrap_or_default();
+                if a.len() != 4 || a[0] < 0.0 || a[0].fract() != 0.0 {
+                    return Err(QueryError("each point must be [index, x, y, z]".into()));
+                }
+                changes.insert(a[0] as usize, glam::DVec3::new(a[1], a[2], a[3]));
+            }
+            Work::Parameters {
+                gesture: gesture_key(page, h)?,
+                map: ObjectId(u64_field(h, "map")?),
+                changes,
+            }
+        }
+        Kind::EndGesture => Work::EndGesture {
+            gesture: gesture_key(page, h)?,
+        },
+        Kind::Undo => Work::Undo,
+        Kind::Redo => Work::Redo,
+        Kind::Setup => Work::Setup(
+            serde_json::from_value::<Setup>(h.clone())
+                .map_err(|e| QueryError(format!("bad set-up: {e}")))?,
+        ),
+        Kind::Command => Work::Command(
+            Box::new(command_json::parse(h)?),
+            h.get("gesture").map(|_| gesture_key(page, h)).transpose()?,
+        ),
+        Kind::OpenFile => {
+            let path = resolve(s, h)?;
+            let object = volmorph_scene::files::read_object(&path)?;
+            let name = path
+                .file_name()
+                .map(|n| n.to_string_lossy().into_owned())
+                .unwrap_or_default();
+            Work::Command(Box::new(Command::Add { name, object }), None)
+        }
+        _ => return Ok(None),
+    }))
+}
+
+fn resolve_path(s: &Shared, h: &Value, new: bool) -> Result<PathBuf, QueryError> {
     let root = usize::try_from(u64_field(h, "root")?).unwrap_or(usize::MAX);
     let path = h
         .get("path")
         .and_then(Value::as_str)
         .ok_or_else(|| QueryError("field \"path\" must be a string".into()))?;
-    s.roots
-        .resolve(root, path)
-        .map_err(|e| QueryError(e.to_string()))
+    let r = if new {
+        s.roots.resolve_new(root, path)
+    } else {
+        s.roots.resolve(root, path)
+    };
+    r.map_err(|e| QueryError(e.to_string()))
+}
+
+fn resolve(s: &Shared, h: &Value) -> Result<PathBuf, QueryError> {
+    resolve_path(s, h, false)
 }
 
 fn resolve_new(s: &Shared, h: &Value) -> Result<PathBuf, QueryError> {
-    let root = usize::try_from(u64_field(h, "root")?).unwrap_or(usize::MAX);
-    let path = h
-        .get("path")
-        .and_then(Value::as_str)
-        .ok_or_else(|| QueryError("field \"path\" must be a string".into()))?;
-    s.roots
-        .resolve_new(root, path)
-        .map_err(|e| QueryError(e.to_string()))
+    resolve_path(s, h, true)
 }
 
 fn query(s: &Shared, page: u64, frame: &Frame) -> Result<Frame, QueryError> {
