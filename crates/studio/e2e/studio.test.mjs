@@ -34,7 +34,8 @@ before(async () => {
     args: ['--headless', '--no-sandbox', '--disable-gpu', '--disable-background-networking', '--disable-component-update',
       '--disable-sync', '--no-first-run', '--enable-unsafe-swiftshader', '--use-angle=swiftshader'],
   });
-  page = await browser.newPage({ viewport: { width: 1400, height: 900 } });
+  // Playwright's polling evaluates strings, which the studio's Content-Security-Policy forbids.
+  page = await browser.newPage({ viewport: { width: 1400, height: 900 }, bypassCSP: true });
   page.on('pageerror', (e) => console.error('page error:', e.message));
   const external = [];
   page.on('request', (r) => { if (!r.url().startsWith(url.slice(0, url.indexOf('/', 8)))) external.push(r.url()); });
