@@ -58,6 +58,11 @@ enum Command {
     /// Write the built-in models, as volumes and slice pictures, to a folder.
     #[command(after_help = "Example:\n  volmorph demo --out volmorph-demo --size 96")]
     Demo(cmd::demo::Args),
+    /// Start the browser studio on 127.0.0.1 and print its URL.
+    #[command(
+        after_help = "Examples:\n  volmorph studio --phantom teapot --size 128 --lattice 9\n  volmorph studio ct.nii.gz --root ~/data --port 8421"
+    )]
+    Studio(cmd::studio::Args),
     /// Print a volume file's header, geometry and value statistics.
     #[command(
         after_help = "Examples:\n  volmorph info brain.nii.gz\n  volmorph info bold.nii.gz --frame 12\n  volmorph info dicom/ct_series/"
@@ -171,6 +176,7 @@ fn main() -> ExitCode {
     progress::set_quiet(cli.quiet);
     let result = match cli.command {
         Command::Demo(a) => cmd::demo::run(&a),
+        Command::Studio(a) => cmd::studio::run(&a),
         Command::Info(a) => cmd::info::run(&a),
         Command::Convert(a) => cmd::convert::run(&a),
         Command::Slice(a) => cmd::slice::run(&a),

@@ -268,6 +268,31 @@ impl Scene {
         }
     }
 
+    /// Make the last `n` commands one undo step (a gesture: the moves of one drag are
+    /// undone and redone together). Undoing the merged step runs the commands' inverses
+    /// last to first; redoing it runs them first to last. `n` larger than the undo depth
+    /// merges the whole history; `n < 2` changes nothing. Returns the number of commands
+    /// merged (0 or 1 when nothing changed).
+    pub fn merge_last(&mut self, n: usize) -> usize {
+        let n = n.min(self.undo.len());
+        if n < 2 {
+            return n;
+        }
+        let tail = self.undo.split_off(self.undo.len() - n);
+        let mut merged = Record {
+            forward: Vec::new(),
+            inverse: Vec::new(),
+        };
+        for r in &tail {
+            merged.forward.extend(r.forward.iter().cloned());
+        }
+        for r in tail.into_iter().rev() {
+            merged.inverse.extend(r.inverse);
+        }
+        self.undo.push(merged);
+        n
+    }
+
     /// Forget the undo and redo histories (e.g. after loading a project).
     pub fn clear_history(&mut self) {
         self.undo.clear();

@@ -660,4 +660,37 @@ fn warp_onto_a_padded_grid_follows_drags_and_equals_a_direct_warp() {
     .unwrap();
     let (t1, t2) = (total(&after), total(unpadded.volume.as_bytes()));
     assert!(t1.abs_diff(t2) <= 8, "{t1} vs {t2}");
+
+/// The moves of one gesture merged into one undo step: undo restores the state before the
+/// first move, redo the state after the last, and the history holds one step.
+#[test]
+fn merge_last_undoes_a_gesture_as_one_step() {
+    let (mut scene, grid, _v, l, w) = teapot_scene();
+    let before = volume_bytes(&scene, w);
+    let depth = scene.undo_depth();
+    let p0 = grid.index_to_physical(DVec3::new(40.0, 24.0, 24.0));
+    let mut at = p0;
+    for k in 1..=3 {
+        let t = p0 + DVec3::new(0.04 * f64::from(k), 0.0, 0.0);
+        scene
+            .apply(Command::DragPoints {
+                map: l,
+                grabbed: vec![at],
+                targets: vec![t],
+                options: DragOptions::with_radius(0.5),
+            })
+            .unwrap();
+        at = t;
+    }
+    let after = volume_bytes(&scene, w);
+    assert_ne!(before, after);
+    assert_eq!(scene.merge_last(3), 3);
+    assert_eq!(scene.undo_depth(), depth + 1);
+    scene.undo().unwrap().unwrap();
+    assert_eq!(volume_bytes(&scene, w), before);
+    scene.redo().unwrap().unwrap();
+    assert_eq!(volume_bytes(&scene, w), after);
+    assert_eq!(scene.merge_last(1), 1);
+    assert_eq!(scene.merge_last(0), 0);
+    assert_eq!(scene.undo_depth(), depth + 1);
 }

@@ -20,4 +20,5 @@ pub mod register;
 pub mod render;
 pub mod sculpt;
 pub mod slice;
+pub mod studio;
 pub mod warp;

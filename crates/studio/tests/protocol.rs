@@ -1,0 +1,546 @@
+//! The studio's protocol and security rules, tested as a client against the running server:
+//! every message kind, the version check, errors, coalescing, the token, Host and Origin
+//! checks, bounded messages and bodies, and file confinement.
+
+use std::time::Duration;
+
+use futures_util::{SinkExt, StreamExt};
+use serde_json::{Value, json};
+use tokio::io::{AsyncReadExt, AsyncWriteExt};
+use tokio_tungstenite::tungstenite::{Message, client::IntoClientRequest, http::HeaderValue};
+use volmorph_studio::protocol::{Frame, Kind, read_f32};
+use volmorph_studio::setup::Setup;
+use volmorph_studio::{Config, Studio, start};
+use volmorph_volume::AnyVolume;
+use volmorph_volume::phantom::{self, Phantom};
+use volmorph_volume::slice::{self, Axis, SlicePosition};
+
+type Ws =
+    tokio_tungstenite::WebSocketStream<tokio_tungstenite::MaybeTlsStream<tokio::net::TcpStream>>;
+
+const SIZE: usize = 40;
+
+async fn studio(root: &std::path::Path, upload_limit: usize) -> Studio {
+    start(Config {
+        files: vec![],
+        roots: vec![root.to_path_buf()],
+        port: 0,
+        upload_limit,
+        setups: vec![
+            Setup::Phantom {
+                model: "teapot".into(),
+                size: SIZE,
+            },
+            Setup::DirectManipulation {
+                volume: 1,
+                counts: 7,
+                level: 127.0,
+            },
+        ],
+    })
+    .await
+    .unwrap()
+}
+
+async fn connect_with(s: &Studio, path: &str, origin: Option<&str>) -> Result<Ws, String> {
+    let url = format!("ws://{}/{}", s.addr(), path);
+    let mut req = url.into_client_request().unwrap();
+    if let Some(o) = origin {
+        req.headers_mut()
+            .insert("Origin", HeaderValue::from_str(o).unwrap());
+    }
+    tokio_tungstenite::connect_async(req)
+        .await
+        .map(|(ws, _)| ws)
+        .map_err(|e| e.to_string())
+}
+
+async fn connect(s: &Studio) -> Ws {
+    let origin = format!("http://{}", s.addr());
+    let mut ws = connect_with(s, &format!("{}/ws", s.token()), Some(&origin))
+        .await
+        .unwrap();
+    send(&mut ws, Kind::Hello, 1, json!({})).await;
+    let w = recv_kind(&mut ws, Kind::Welcome).await;
+    assert_eq!(w.header["version"], 1);
+    ws
+}
+
+async fn send(ws: &mut Ws, kind: Kind, request: u32, header: Value) {
+    ws.send(Message::Binary(
+        Frame::new(kind, request, header).encode().into(),
+    ))
+    .await
+    .unwrap();
+}
+
+async fn recv(ws: &mut Ws) -> Option<Frame> {
+    loop {
+        let m = tokio::time::timeout(Duration::from_secs(60), ws.next())
+            .await
+            .ok()??;
+        match m.ok()? {
+            Message::Binary(b) => return Some(Frame::decode(&b).unwrap()),
+            Message::Close(_) => return None,
+            _ => {}
+        }
+    }
+}
+
+async fn recv_kind(ws: &mut Ws, kind: Kind) -> Frame {
+    loop {
+        let f = recv(ws).await.expect("connection closed");
+        if f.kind == kind {
+            return f;
+        }
+        assert_ne!(f.kind, Kind::Error, "unexpected error {:?}", f.header);
+    }
+}
+
+/// A reply to `request` (skipping pushes).
+async fn reply(ws: &mut Ws, request: u32) -> Frame {
+    loop {
+        let f = recv(ws).await.expect("connection closed");
+        if f.request == request && f.kind != Kind::Changed {
+            return f;
+        }
+    }
+}
+
+async fn ask(ws: &mut Ws, kind: Kind, request: u32, header: Value) -> Frame {
+    send(ws, kind, request, header).await;
+    reply(ws, request).await
+}
+
+/// Status code of a raw HTTP request.
+async fn http(s: &Studio, request: &str) -> u16 {
+    let mut c = tokio::net::TcpStream::connect(s.addr()).await.unwrap();
+    c.write_all(request.as_bytes()).await.unwrap();
+    let mut buf = vec![0u8; 64];
+    let mut n = 0;
+    while n < 12 {
+        let k = c.read(&mut buf[n..]).await.unwrap();
+        if k == 0 {
+            break;
+        }
+        n += k;
+    }
+    String::from_utf8_lossy(&buf[9..12]).parse().unwrap()
+}
+
+fn get(s: &Studio, path: &str, extra: &str) -> String {
+    format!(
+        "GET {path} HTTP/1.1\r\nHost: {}\r\n{extra}Connection: close\r\n\r\n",
+        s.addr()
+    )
+}
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn token_is_required_on_every_http_request_and_the_websocket() {
+    let dir = tempfile::tempdir().unwrap();
+    let s = studio(dir.path(), 1 << 20).await;
+    let t = s.token().to_owned();
+    assert_eq!(http(&s, &get(&s, &format!("/{t}/"), "")).await, 200);
+    assert_eq!(
+        http(&s, &get(&s, &format!("/{t}/app/main.js"), "")).await,
+        200
+    );
+    assert_eq!(http(&s, &get(&s, "/", "")).await, 403);
+    assert_eq!(http(&s, &get(&s, "/app/main.js", "")).await, 403);
+    let wrong = format!("{}0", &t[..31]);
+    assert_eq!(http(&s, &get(&s, &format!("/{wrong}/"), "")).await, 403);
+    let origin = format!("http://{}", s.addr());
+    assert!(
+        connect_with(&s, &format!("{wrong}/ws"), Some(&origin))
+            .await
+            .is_err()
+    );
+    assert!(connect_with(&s, "ws", Some(&origin)).await.is_err());
+    assert!(
+        connect_with(&s, &format!("{t}/ws"), Some(&origin))
+            .await
+            .is_ok()
+    );
+}
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn host_and_origin_are_checked() {
+    let dir = tempfile::tempdir().unwrap();
+    let s = studio(dir.path(), 1 << 20).await;
+    let t = s.token().to_owned();
+    // DNS rebinding: another name for 127.0.0.1.
+    let rebound = format!(
+        "GET /{t}/ HTTP/1.1\r\nHost: evil.example:{}\r\nConnection: close\r\n\r\n",
+        s.addr().port()
+    );
+    assert_eq!(http(&s, &rebound).await, 403);
+    assert_eq!(
+        http(
+            &s,
+            &get(&s, &format!("/{t}/"), "Origin: http://evil.example\r\n")
+        )
+        .await,
+        403
+    );
+    let own = format!("Origin: http://{}\r\n", s.addr());
+    assert_eq!(http(&s, &get(&s, &format!("/{t}/"), &own)).await, 200);
+    assert!(
+        connect_with(&s, &format!("{t}/ws"), Some("http://evil.example"))
+            .await
+            .is_err()
+    );
+    assert!(
+        connect_with(&s, &format!("{t}/ws"), None).await.is_err(),
+        "the WebSocket needs an Origin"
+    );
+}
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn other_versions_and_malformed_frames_are_refused() {
+    let dir = tempfile::tempdir().unwrap();
+    let s = studio(dir.path(), 1 << 20).await;
+    let mut ws = connect(&s).await;
+    // Malformed but current version: an error, the socket stays open.
+    ws.send(Message::Binary(b"VMST\x01\x00".to_vec().into()))
+        .await
+        .unwrap();
+    let e = recv_kind(&mut ws, Kind::Error).await;
+    assert!(e.header["message"].as_str().unwrap().contains("truncated"));
+    ws.send(Message::Text("hello".into())).await.unwrap();
+    let e = recv_kind(&mut ws, Kind::Error).await;
+    assert!(e.header["message"].as_str().unwrap().contains("binary"));
+    let f = ask(&mut ws, Kind::ListObjects, 5, json!({})).await;
+    assert_eq!(f.kind, Kind::Scene);
+    // Another version: told so, then closed.
+    let mut b = Frame::new(Kind::ListObjects, 6, json!({})).encode();
+    b[4] = 9;
+    ws.send(Message::Binary(b.into())).await.unwrap();
+    let e = recv_kind(&mut ws, Kind::Error).await;
+    assert_eq!(e.header["fatal"], true);
+    assert!(e.header["message"].as_str().unwrap().contains("version 9"));
+    assert!(
+        recv(&mut ws).await.is_none(),
+        "the socket is closed after a version mismatch"
+    );
+}
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn messages_and_bodies_are_bounded() {
+    let dir = tempfile::tempdir().unwrap();
+    let s = studio(dir.path(), 1000).await;
+    let mut ws = connect(&s).await;
+    let big = vec![0u8; (1 << 20) + 100];
+    let _ = ws.send(Message::Binary(big.into())).await;
+    assert!(
+        recv(&mut ws).await.is_none(),
+        "an oversized message closes the socket"
+    );
+    let t = s.token();
+    let origin = format!("Origin: http://{}\r\n", s.addr());
+    let post = |n: usize| {
+        format!(
+            "POST /{t}/upload/a.obj HTTP/1.1\r\nHost: {}\r\n{origin}Content-Length: {n}\r\nConnection: close\r\n\r\n{}",
+            s.addr(),
+            "x".repeat(n)
+        )
+    };
+    assert_eq!(http(&s, &post(2000)).await, 413);
+    assert_eq!(http(&s, &post(500)).await, 200);
+}
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn file_access_is_confined_to_the_roots() {
+    let dir = tempfile::tempdir().unwrap();
+    let outside = tempfile::tempdir().unwrap();
+    let vol = phantom::density(Phantom::Sphere, [12; 3]).unwrap();
+    volmorph_volume_io::write(
+        &outside.path().join("secret.nii"),
+        &AnyVolume::from(vol.clone()),
+    )
+    .unwrap();
+    volmorph_volume_io::write(&dir.path().join("ball.nii"), &AnyVolume::from(vol)).unwrap();
+    #[cfg(unix)]
+    std::os::unix::fs::symlink(outside.path(), dir.path().join("link")).unwrap();
+    let s = studio(dir.path(), 1 << 20).await;
+    let mut ws = connect(&s).await;
+    let l = ask(&mut ws, Kind::ListDir, 2, json!({"root": 0, "path": "."})).await;
+    assert_eq!(l.kind, Kind::Listing);
+    let names: Vec<&str> = l.header["entries"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .map(|e| e["name"].as_str().unwrap())
+        .collect();
+    assert!(names.contains(&"ball.nii"));
+    for (path, why) in [
+        ("..", "'..'"),
+        ("/etc", "'..'"),
+        ("link", "outside"),
+        ("link/secret.nii", "outside"),
+    ] {
+        let e = ask(&mut ws, Kind::ListDir, 3, json!({"root": 0, "path": path})).await;
+        assert_eq!(e.kind, Kind::Error, "{path}");
+        assert!(
+            e.header["message"].as_str().unwrap().contains(why),
+            "{path}: {}",
+            e.header
+        );
+        send(&mut ws, Kind::OpenFile, 4, json!({"root": 0, "path": path})).await;
+        assert_eq!(reply(&mut ws, 4).await.kind, Kind::Error, "{path}");
+    }
+    let e = ask(
+        &mut ws,
+        Kind::SaveScene,
+        5,
+        json!({"root": 0, "path": "link/x.vmproj"}),
+    )
+    .await;
+    assert_eq!(e.kind, Kind::Error);
+    // Inside the root: open, save, export.
+    send(
+        &mut ws,
+        Kind::OpenFile,
+        6,
+        json!({"root": 0, "path": "ball.nii"}),
+    )
+    .await;
+    let c = recv_kind(&mut ws, Kind::Changed).await;
+    assert_eq!(c.header["request"], 6);
+    assert_eq!(c.header["added"].as_array().unwrap().len(), 1);
+    let d = ask(
+        &mut ws,
+        Kind::SaveScene,
+        7,
+        json!({"root": 0, "path": "s.vmproj"}),
+    )
+    .await;
+    assert_eq!(d.kind, Kind::Done, "{}", d.header);
+    assert!(dir.path().join("s.vmproj").exists());
+    let d = ask(
+        &mut ws,
+        Kind::Export,
+        8,
+        json!({"root": 0, "path": "warped.nii.gz", "id": 3}),
+    )
+    .await;
+    assert_eq!(d.kind, Kind::Done, "{}", d.header);
+    let d = ask(
+        &mut ws,
+        Kind::LoadScene,
+        9,
+        json!({"root": 0, "path": "s.vmproj"}),
+    )
+    .await;
+    assert_eq!(d.kind, Kind::Done, "{}", d.header);
+}
+
+/// Burst of drags while edits compute: fewer edits run than drags sent, the lattice ends
+/// where the last drag put the grabbed point, and the whole gesture undoes as one step.
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn a_burst_of_drags_is_coalesced_and_ends_at_the_last_target() {
+    let dir = tempfile::tempdir().unwrap();
+    let s = studio(dir.path(), 1 << 20).await;
+    let mut ws = connect(&s).await;
+    let start = [0.6, 0.0, 0.04];
+    let n = 60;
+    let target = |k: usize| [0.6 + 0.003 * k as f64, 0.0, 0.04 - 0.004 * k as f64];
+    for k in 1..=n {
+        send(
+            &mut ws,
+            Kind::Drag,
+            100 + k as u32,
+            json!({"gesture": 1, "map": 2, "start": start, "target": target(k), "radius": 0.5}),
+        )
+        .await;
+    }
+    send(&mut ws, Kind::EndGesture, 999, json!({"gesture": 1})).await;
+    let mut drags = 0;
+    let mut last_request = 0;
+    loop {
+        let c = recv_kind(&mut ws, Kind::Changed).await;
+        match c.header["edit"].as_str().unwrap() {
+            "drag" => {
+                drags += 1;
+                last_request = c.header["request"].as_u64().unwrap();
+                assert!(c.header["dirty"].as_array().is_some_and(|d| !d.is_empty()));
+            }
+            "end-gesture" => break,
+            e => panic!("unexpected edit {e}"),
+        }
+    }
+    assert!(drags >= 1 && drags < n, "{drags} edits ran for {n} drags");
+    assert_eq!(
+        last_request,
+        100 + n as u64,
+        "the last edit is the newest drag"
+    );
+    let p = ask(&mut ws, Kind::Probe, 2, json!({"map": 2, "point": start})).await;
+    let img: Vec<f64> = serde_json::from_value(p.header["image"].clone()).unwrap();
+    for c in 0..3 {
+        assert!(
+            (img[c] - target(n)[c]).abs() < 1e-6,
+            "{img:?} vs {:?}",
+            target(n)
+        );
+    }
+    send(&mut ws, Kind::Undo, 3, json!({})).await;
+    let u = recv_kind(&mut ws, Kind::Changed).await;
+    assert_eq!(u.header["edit"], "undo");
+    let p = ask(&mut ws, Kind::Probe, 4, json!({"map": 2, "point": start})).await;
+    let img: Vec<f64> = serde_json::from_value(p.header["image"].clone()).unwrap();
+    for c in 0..3 {
+        assert!(
+            (img[c] - start[c]).abs() < 1e-9,
+            "one undo takes the whole gesture back: {img:?}"
+        );
+    }
+    send(&mut ws, Kind::Redo, 5, json!({})).await;
+    assert_eq!(
+        recv_kind(&mut ws, Kind::Changed).await.header["edit"],
+        "redo"
+    );
+}
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn every_query_kind_answers() {
+    let dir = tempfile::tempdir().unwrap();
+    let s = studio(dir.path(), 1 << 20).await;
+    let mut ws = connect(&s).await;
+    let sc = ask(&mut ws, Kind::ListObjects, 2, json!({})).await;
+    let kinds: Vec<&str> = sc.header["objects"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .map(|o| o["kind"].as_str().unwrap())
+        .collect();
+    assert_eq!(kinds, ["volume", "map", "derived", "derived"]);
+    // The slice is the library's slice.
+    let f = ask(
+        &mut ws,
+        Kind::GetSlice,
+        3,
+        json!({"volume": 1, "axis": 1, "index": 17}),
+    )
+    .await;
+    assert_eq!(f.kind, Kind::Slice);
+    let vol = AnyVolume::from(phantom::density(Phantom::Teapot, [SIZE; 3]).unwrap());
+    let expect = slice::extract(&vol, Axis::Y, SlicePosition::Index(17.0)).unwrap();
+    assert_eq!(read_f32(&f.payload), expect.values);
+    assert_eq!(f.header["width"], expect.width);
+    let w: Vec<f64> = serde_json::from_value(f.header["window"].clone()).unwrap();
+    assert!(w[0] < w[1]);
+    let e = ask(&mut ws, Kind::GetSlice, 4, json!({"volume": 1, "axis": 3})).await;
+    assert_eq!(e.kind, Kind::Error);
+    let e = ask(&mut ws, Kind::GetSlice, 4, json!({"volume": 77, "axis": 0})).await;
+    assert!(e.header["message"].as_str().unwrap().contains("#77"));
+    // Volume texture.
+    let v = ask(&mut ws, Kind::GetVolume, 5, json!({"volume": 1})).await;
+    assert_eq!(v.payload.len(), SIZE * SIZE * SIZE);
+    assert_eq!(
+        v.payload,
+        *vol.as_bytes(),
+        "a u8 volume spanning 0..255 is sent as it is"
+    );
+    // Proxy geometry: indices within the vertices, texture coordinates in [0, 1].
+    let p = ask(
+        &mut ws,
+        Kind::GetProxy,
+        6,
+        json!({"volume": 1, "forward": [0.3, -0.5, -0.8], "slices": 64}),
+    )
+    .await;
+    assert_eq!(p.kind, Kind::Proxy, "{}", p.header);
+    let nv = p.header["vertices"].as_u64().unwrap() as usize;
+    let ni = p.header["indices"].as_u64().unwrap() as usize;
+    assert!(nv > 64 * 3 && ni % 3 == 0);
+    let verts = read_f32(&p.payload[..nv * 24]);
+    assert!(
+        verts
+            .chunks(6)
+            .all(|v| v[3..].iter().all(|t| (-1e-4..=1.0001).contains(t)))
+    );
+    let idx: Vec<u32> = p.payload[nv * 24..]
+        .chunks(4)
+        .map(|c| u32::from_le_bytes([c[0], c[1], c[2], c[3]]))
+        .collect();
+    assert_eq!(idx.len(), ni);
+    assert!(idx.iter().all(|&i| (i as usize) < nv));
+    let e = ask(
+        &mut ws,
+        Kind::GetProxy,
+        6,
+        json!({"volume": 1, "forward": [0, 0, 0], "slices": 64}),
+    )
+    .await;
+    assert_eq!(e.kind, Kind::Error);
+    // Mesh (the isosurface) and the lattice.
+    let m = ask(&mut ws, Kind::GetMesh, 7, json!({"id": 4})).await;
+    let (nv, nt) = (
+        m.header["vertices"].as_u64().unwrap() as usize,
+        m.header["triangles"].as_u64().unwrap() as usize,
+    );
+    assert!(nt > 100);
+    assert_eq!(m.payload.len(), nv * 24 + nt * 12);
+    let l = ask(&mut ws, Kind::GetLattice, 8, json!({"map": 2})).await;
+    assert_eq!(l.header["counts"], json!([7, 7, 7]));
+    assert_eq!(l.payload.len(), 7 * 7 * 7 * 12);
+    let e = ask(&mut ws, Kind::GetLattice, 8, json!({"map": 1})).await;
+    assert_eq!(e.kind, Kind::Error);
+    // Transfer table; a malformed one is an error naming the entry.
+    let t = ask(
+        &mut ws,
+        Kind::GetTransfer,
+        9,
+        json!({"text": "0:0,0,0,0; 255:1,1,1,1", "min": 0, "max": 255}),
+    )
+    .await;
+    assert_eq!(t.payload.len(), 1024);
+    assert_eq!(&t.payload[1020..], &[255, 255, 255, 255]);
+    let e = ask(
+        &mut ws,
+        Kind::GetTransfer,
+        9,
+        json!({"text": "0:zero", "min": 0, "max": 1}),
+    )
+    .await;
+    assert!(e.header["message"].as_str().unwrap().contains("0:zero"));
+    // Lattice control points moved directly; an F-rep syntax error at its line.
+    send(
+        &mut ws,
+        Kind::MoveControlPoints,
+        10,
+        json!({"gesture": 4, "map": 2, "points": [[171, 0.1, 0.1, 0.1]]}),
+    )
+    .await;
+    let c = recv_kind(&mut ws, Kind::Changed).await;
+    assert_eq!(c.header["edit"], "parameters");
+    let l = ask(&mut ws, Kind::GetLattice, 11, json!({"map": 2})).await;
+    assert_eq!(
+        &read_f32(&l.payload)[171 * 3..171 * 3 + 3],
+        &[0.1f32, 0.1, 0.1]
+    );
+    send(&mut ws, Kind::Command, 12, json!({"command": "add-frep", "name": "m", "source": "m(x[3], a[1]) {\n  m = 1 - x[1] *;\n}"})).await;
+    let e = reply(&mut ws, 12).await;
+    assert_eq!(e.kind, Kind::Error);
+    assert_eq!(e.header["line"], 2, "{}", e.header);
+    send(&mut ws, Kind::Command, 13, json!({"command": "nonsense"})).await;
+    assert_eq!(reply(&mut ws, 13).await.kind, Kind::Error);
+    // Set-up of handles, then a handle move through a command.
+    send(
+        &mut ws,
+        Kind::Setup,
+        14,
+        json!({"setup": "handles", "volume": 1, "method": "affine"}),
+    )
+    .await;
+    let c = recv_kind(&mut ws, Kind::Changed).await;
+    assert_eq!(c.header["added"].as_array().unwrap().len(), 2);
+    let hm = c.header["added"][0].as_u64().unwrap();
+    send(&mut ws, Kind::Command, 15, json!({"command": "move-handle", "map": hm, "index": 8, "source": [0, 0, 0], "target": [0.1, 0, 0]})).await;
+    let c = recv_kind(&mut ws, Kind::Changed).await;
+    assert!(
+        c.header["modified"].as_array().unwrap().len() >= 2,
+        "{}",
+        c.header
+    );
+}

@@ -1,0 +1,268 @@
+// The studio page: connects, keeps the object list, and turns pointer gestures into scene
+// commands; redraws what each Change names. No modelling happens here.
+import { Client, Kind } from './protocol.js';
+import { SliceView, physical } from './slices.js';
+import { View3D } from './view3d.js';
+import { setupPanels } from './panels.js';
+
+const $ = (id) => document.getElementById(id);
+
+class App {
+  constructor() {
+    this.objects = [];
+    this.window = new Map();
+    this.cursor = [0, 0, 0];
+    this.tool = 'drag';
+    this.radius = 0.45;
+    this.gestureNo = 1;
+    this.latencies = [];
+    this.handles = [];
+    this.colormap = 'grey';
+  }
+
+  async start() {
+    const url = new URL('ws', location.href);
+    url.protocol = 'ws:';
+    this.client = await new Client(url.href).open();
+    const w = await this.client.request(Kind.Hello, {});
+    this.page = w.header.page;
+    this.client.page = this.page;
+    this.luts = w.header.colormaps;
+    this.roots = w.header.roots;
+    for (const name of Object.keys(this.luts)) $('colormap').add(new Option(name, name));
+    this.client.on(Kind.Changed, (f) => this.onChanged(f));
+    this.client.on(Kind.Scene, (f) => this.setScene(f.header));
+    this.client.on(Kind.Error, (f) => this.error(f.header.message, f.header));
+    this.client.on(-1, (f) => this.error(f.header.message));
+    this.slices = [new SliceView($('slice-x'), 0, this), new SliceView($('slice-y'), 1, this), new SliceView($('slice-z'), 2, this)];
+    this.view3d = new View3D($('view3d'), this);
+    this.bind();
+    setupPanels(this);
+    await this.setScene(w.header.scene);
+    this.status('ready');
+    document.body.dataset.ready = '1';
+  }
+
+  bind() {
+    $('undo').onclick = () => this.client.send(Kind.Undo, {});
+    $('redo').onclick = () => this.client.send(Kind.Redo, {});
+    document.addEventListener('keydown', (e) => {
+      if (e.target.tagName === 'TEXTAREA' || e.target.tagName === 'INPUT') return;
+      if ((e.ctrlKey || e.metaKey) && e.key.toLowerCase() === 'z') {
+        e.preventDefault();
+        this.client.send(e.shiftKey ? Kind.Redo : Kind.Undo, {});
+      } else if ((e.ctrlKey || e.metaKey) && e.key.toLowerCase() === 'y') {
+        e.preventDefault(); this.client.send(Kind.Redo, {});
+      }
+    });
+    $('tool').onchange = (e) => { this.tool = e.target.value; this.redrawSlices(); };
+    $('radius').oninput = (e) => { this.radius = Number(e.target.value); $('radius-out').value = e.target.value; this.redrawSlices(); };
+    $('layer').onchange = (e) => this.showLayer(Number(e.target.value));
+    $('colormap').onchange = (e) => { this.colormap = e.target.value; this.redrawSlices(); };
+    $('wl-lo').onchange = $('wl-hi').onchange = () => this.setWindow([Number($('wl-lo').value), Number($('wl-hi').value)]);
+    $('wl-auto').onclick = () => { const v = this.volume(); if (v) { this.window.delete(v.id); this.reloadSlices(); } };
+    $('new-teapot').onclick = () => this.client.send(Kind.Setup, { setup: 'phantom', model: 'teapot', size: 128 });
+    $('setup-handles').onclick = () => {
+      const v = this.volume();
+      if (v) this.client.send(Kind.Setup, { setup: 'handles', volume: v.id, method: $('handle-method').value });
+    };
+    $('setup-drag').onclick = () => {
+      const v = this.volume();
+      if (v) this.client.send(Kind.Setup, { setup: 'direct-manipulation', volume: v.id, counts: 9, level: 127 });
+    };
+    document.querySelectorAll('[data-view]').forEach((b) => { b.onclick = () => this.view3d.frame(null, b.dataset.view); });
+    $('show-volume').onchange = (e) => { this.view3d.showVolume = e.target.checked; this.view3d.draw(); };
+    $('show-lattice').onchange = (e) => { this.view3d.showLattice = e.target.checked; this.view3d.draw(); };
+  }
+
+  status(m) { $('status').textContent = m; $('status').className = ''; }
+  error(m) { $('status').textContent = m; $('status').className = 'error'; }
+
+  byId(id) { return this.objects.find((o) => o.id === id); }
+  volume() { return this.byId(this.layer); }
+  lattice() { return this.objects.find((o) => o.map && o.map.kind === 'lattice'); }
+  handleMap() { return this.objects.find((o) => o.map && o.map.kind === 'handles'); }
+  lut() { return this.luts[this.colormap]; }
+  currentWindow() { return this.window.get(this.layer) || [0, 1]; }
+
+  setWindow(w) {
+    if (!(w[1] > w[0])) return;
+    this.window.set(this.layer, w);
+    this.windowChanged(true);
+  }
+
+  windowChanged(redraw) {
+    const [lo, hi] = this.currentWindow();
+    $('wl-lo').value = +lo.toPrecision(5); $('wl-hi').value = +hi.toPrecision(5);
+    if (redraw) this.redrawSlices();
+  }
+
+  // The object list: pick the volume shown (the newest derived volume by default).
+  async setScene(s) {
+    this.objects = s.objects;
+    this.undoDepth = s.undo; this.redoDepth = s.redo;
+    const ul = $('objects'); ul.textContent = '';
+    const sel = $('layer'); sel.textContent = '';
+    for (const o of s.objects) {
+      const li = document.createElement('li');
+      li.textContent = `${o.id} ${o.name} (${o.kind}${o.recipe ? ' ' + o.recipe.recipe : ''})`;
+      li.dataset.id = o.id;
+      if (o.error) li.classList.add('error');
+      ul.append(li);
+      if (o.volume) sel.add(new Option(`${o.id} ${o.name}`, o.id));
+    }
+    const vols = s.objects.filter((o) => o.volume);
+    if (!this.byId(this.layer)?.volume) {
+      const pick = vols.filter((o) => o.kind === 'derived' && o.recipe?.recipe === 'warp').pop() || vols[vols.length - 1];
+      if (pick) await this.showLayer(pick.id);
+    }
+    if (this.layer !== undefined) sel.value = this.layer;
+    const meshes = s.objects.filter((o) => o.mesh);
+    for (const id of [...this.view3d.meshes.keys()]) if (!meshes.some((m) => m.id === id)) this.view3d.dropMesh(id);
+    for (const m of meshes) if (!this.view3d.meshes.has(m.id)) this.view3d.setMesh(m.id).catch((e) => this.error(e.message));
+    for (const over of [this.lattice(), this.handleMap()]) if (over) this.loadOverlay(over.id);
+    this.panels?.sceneChanged();
+  }
+
+  async showLayer(id) {
+    const v = this.byId(id);
+    if (!v || !v.volume) return;
+    const first = this.layer === undefined;
+    this.layer = id;
+    const g = v.volume.geometry;
+    if (first || this.cursor.some((c, a) => c < 0 || c > g.dims[a] - 1)) this.cursor = g.dims.map((d) => (d - 1) / 2);
+    const ext = Math.max(...g.dims.map((d, a) => d * g.spacing[a]));
+    const r = $('radius');
+    r.max = (ext / 2).toPrecision(3); r.min = (ext / 200).toPrecision(3); r.step = (ext / 1000).toPrecision(3);
+    if (this.radius > ext / 2 || this.radius < ext / 200) { this.radius = ext * 0.2; }
+    r.value = this.radius; $('radius-out').value = (+this.radius).toPrecision(3);
+    await Promise.all([...this.slices.map((s) => s.load()), this.view3d.setVolume(id).catch((e) => this.error(e.message))]);
+  }
+
+  async loadOverlay(id) {
+    const f = await this.client.request(Kind.GetLattice, { map: id });
+    if (f.header.kind === 'lattice' || !this.lattice()) this.view3d.setOverlay(f);
+    if (f.header.kind === 'handles') {
+      const p = new Float32Array(f.payload);
+      this.handles = [];
+      for (let h = 0; h < f.header.count; h++) this.handles.push({ source: [...p.slice(6 * h, 6 * h + 3)], target: [...p.slice(6 * h + 3, 6 * h + 6)] });
+      this.redrawSlices();
+    }
+  }
+
+  reloadSlices() { return Promise.all(this.slices.map((s) => s.load())); }
+  redrawSlices() { for (const s of this.slices) s.render(); }
+
+  setCursor(idx, fromAxis) {
+    const old = this.cursor;
+    this.cursor = idx.slice();
+    for (const s of this.slices) {
+      if (Math.round(old[s.axis]) !== Math.round(idx[s.axis]) && s.axis !== fromAxis) s.load();
+      else s.render();
+    }
+  }
+
+  showCursor(idx, value) {
+    const v = this.volume(); if (!v) return;
+    const p = physical(v.volume.geometry, idx);
+    $('cursor').textContent = `index (${idx.map((x) => x.toFixed(1)).join(', ')})  physical (${p.map((x) => x.toFixed(3)).join(', ')})  value ${value === null ? '–' : +value.toPrecision(6)}`;
+  }
+
+  cursorPhysical() { return physical(this.volume().volume.geometry, this.cursor); }
+
+  newGesture() { return this.gestureNo++; }
+
+  gestureStart(idx, e) {
+    const v = this.volume(); if (!v) return;
+    this.g = { idx, p: physical(v.volume.geometry, idx), id: this.newGesture(), moved: false };
+    if (this.tool === 'handles') this.panels.handleDown(this.g, e);
+  }
+
+  gestureMove(idx, e) {
+    if (!this.g) return;
+    const v = this.volume();
+    const target = physical(v.volume.geometry, idx);
+    this.g.moved = true;
+    if (this.tool === 'drag') {
+      const l = this.lattice();
+      if (!l) { this.error('no lattice: press "Lattice + warp" first'); return; }
+      const r = this.client.send(Kind.Drag, { gesture: this.g.id, map: l.id, start: this.g.p, target, radius: this.radius });
+      performance.mark(`drag-${r}`);
+    } else if (this.tool === 'handles') {
+      this.panels.handleMove(this.g, target, e);
+    } else if (this.tool === 'sculpt') {
+      this.panels.sculptMove(this.g, target, e);
+    } else {
+      this.setCursor(idx, -1);
+    }
+  }
+
+  gestureEnd(idx, e) {
+    if (!this.g) return;
+    if (this.tool === 'drag' && this.g.moved) this.endGesture(this.g.id);
+    if (this.tool === 'handles') this.panels.handleUp(this.g, idx, e);
+    this.g = null;
+  }
+
+  endGesture(id) { this.client.send(Kind.EndGesture, { gesture: id }); }
+
+  moveControlPoints(map, gesture, points) {
+    this.client.send(Kind.MoveControlPoints, { gesture, map, points });
+  }
+
+  async transferChanged() {
+    const v = this.view3d;
+    if (!v.range) return;
+    const text = this.panels ? this.panels.transferText(v.range) : null;
+    if (!text) return;
+    try {
+      const f = await this.client.request(Kind.GetTransfer, { text, min: v.range[0], max: v.range[1] });
+      v.setLut(new Uint8Array(f.payload));
+    } catch (e) { this.error(e.message); }
+  }
+
+  // A Change: refresh what it names; time a drag from its input event to the pixels.
+  async onChanged(f) {
+    const h = f.header;
+    const t0 = h.page === this.page ? this.client.sentAt.get(h.request) : undefined;
+    this.undoDepth = h.undo; this.redoDepth = h.redo;
+    if (h.added.length || h.removed.length || h.edit === 'undo' || h.edit === 'redo' || h.edit === 'setup' || h.edit === 'command') {
+      const s = await this.client.request(Kind.ListObjects, {});
+      await this.setScene(s.header);
+      // A set-up that made a warped volume shows it.
+      const warp = h.added.map((id) => this.byId(id)).find((o) => o?.recipe?.recipe === 'warp');
+      if (h.edit === 'setup' && warp) { $('layer').value = warp.id; await this.showLayer(warp.id); }
+    }
+    const touched = new Set([...h.modified, ...h.added]);
+    const jobs = [];
+    if (touched.has(this.layer)) {
+      jobs.push(this.reloadSlices());
+      if (!this.volumeTimer) this.volumeTimer = setTimeout(() => { this.volumeTimer = null; this.view3d.setVolume(this.layer).catch((e) => this.error(e.message)); }, 150);
+    }
+    for (const id of touched) {
+      const o = this.byId(id);
+      if (o?.mesh) jobs.push(this.view3d.setMesh(id).catch(() => {}));
+      if (o?.map) jobs.push(this.loadOverlay(id).catch(() => {}));
+    }
+    await Promise.all(jobs);
+    const errs = h.errors.map((e) => `${e.object}: ${e.message}`).join('; ');
+    if (errs) this.error(errs);
+    else if (h.edit !== 'end-gesture') this.status(`${h.edit} done`);
+    let text = `server ${h.ms.toFixed(1)} ms`;
+    if (t0 !== undefined) {
+      const total = performance.now() - t0;
+      if (h.edit === 'drag' || h.edit === 'parameters') {
+        this.latencies.push({ edit: h.edit, ms: total, server: h.ms });
+        try { performance.measure(`${h.edit}-to-pixels`, { start: t0, end: performance.now() }); } catch (_) { /* old browsers */ }
+      }
+      text += ` · on screen ${total.toFixed(1)} ms`;
+    }
+    $('timing').textContent = text;
+    this.lastChange = h;
+    this.changes = (this.changes || 0) + 1;
+  }
+}
+
+const app = new App();
+window.__studio = app;
+app.start().catch((e) => { document.getElementById('status').textContent = e.message; document.getElementById('status').className = 'error'; });

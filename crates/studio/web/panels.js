@@ -1,0 +1,196 @@
+// The side panels: transfer-function editor, F-rep editor, handles, sculpting, files.
+import { Kind } from './protocol.js';
+
+const $ = (id) => document.getElementById(id);
+
+const DEFAULT_FREP = `my_model(x[3], a[1]) {
+  -- a sphere of radius a[1]
+  my_model = a[1]*a[1] - x[1]*x[1] - x[2]*x[2] - x[3]*x[3];
+}`;
+
+export function setupPanels(app) {
+  const P = {
+    // Opacity nodes over the value range, as fractions (t, opacity per voxel length).
+    nodes: [[0, 0], [0.45, 0], [0.6, 0.35], [1, 0.6]],
+    sceneChanged() {
+      const f = app.objects.find((o) => o.kind === 'frep');
+      if (f && !P.frepEdited) $('frep-src').value = f.frep.source;
+      const hm = app.handleMap();
+      if (hm) $('handle-method').value = String(hm.map.method).toLowerCase();
+    },
+  };
+  app.panels = P;
+
+  // Transfer function: drag a node; the table is computed by the server from the text.
+  const tf = $('tf');
+  const drawTf = () => {
+    const c = tf.getContext('2d');
+    c.fillStyle = '#111'; c.fillRect(0, 0, tf.width, tf.height);
+    c.strokeStyle = '#9cf'; c.beginPath();
+    P.nodes.forEach(([t, a], i) => { const x = t * tf.width, y = (1 - a) * tf.height; if (i) c.lineTo(x, y); else c.moveTo(x, y); });
+    c.stroke();
+    c.fillStyle = '#fc6';
+    for (const [t, a] of P.nodes) { c.beginPath(); c.arc(t * tf.width, (1 - a) * tf.height, 4, 0, 7); c.fill(); }
+  };
+  P.transferText = (range) => {
+    const lut = app.lut();
+    const text = P.nodes.map(([t, a]) => {
+      const c = lut[Math.round(t * 255)].map((x) => (x / 255).toFixed(3));
+      return `${(range[0] + t * (range[1] - range[0])).toPrecision(6)}:${c.join(',')},${a.toFixed(3)}`;
+    }).join('; ');
+    $('tf-text').value = text;
+    return text;
+  };
+  let dragNode = -1;
+  tf.onpointerdown = (e) => {
+    const r = tf.getBoundingClientRect();
+    const x = (e.clientX - r.left) / r.width, y = 1 - (e.clientY - r.top) / r.height;
+    let best = -1, bd = 0.01;
+    P.nodes.forEach(([t, a], i) => { const d = (t - x) ** 2 + (a - y) ** 2; if (d < bd) { bd = d; best = i; } });
+    dragNode = best; tf.setPointerCapture(e.pointerId);
+  };
+  tf.onpointermove = (e) => {
+    if (dragNode < 0 || !(e.buttons & 1)) return;
+    const r = tf.getBoundingClientRect();
+    const x = Math.max(0, Math.min(1, (e.clientX - r.left) / r.width)), y = Math.max(0, Math.min(1, 1 - (e.clientY - r.top) / r.height));
+    const lo = dragNode ? P.nodes[dragNode - 1][0] + 1e-3 : 0, hi = dragNode < P.nodes.length - 1 ? P.nodes[dragNode + 1][0] - 1e-3 : 1;
+    P.nodes[dragNode] = [dragNode === 0 ? 0 : dragNode === P.nodes.length - 1 ? 1 : Math.max(lo, Math.min(hi, x)), y];
+    drawTf(); app.transferChanged();
+  };
+  tf.onpointerup = () => { dragNode = -1; };
+  $('tf-text').onchange = async () => {
+    const v = app.view3d;
+    try {
+      const f = await app.client.request(Kind.GetTransfer, { text: $('tf-text').value, min: v.range[0], max: v.range[1] });
+      v.setLut(new Uint8Array(f.payload));
+    } catch (e) { app.error(e.message); }
+  };
+  drawTf();
+
+  // F-rep: the model is replaced only when it compiles; an error names its line and column
+  // and the previous model stays.
+  $('frep-src').value = DEFAULT_FREP;
+  $('frep-src').oninput = () => { P.frepEdited = true; };
+  P.applyFrep = async () => {
+    const source = $('frep-src').value;
+    const params = { 1: 0.6 };
+    const model = app.objects.find((o) => o.kind === 'frep');
+    $('frep-error').textContent = '';
+    try {
+      if (model) {
+        await app.client.edit(Kind.Command, { command: 'replace-frep', id: model.id, source, params });
+      } else {
+        const grid = app.volume();
+        if (!grid) throw new Error('open or make a volume first: the model is sampled on its grid');
+        const c = await app.client.edit(Kind.Command, { command: 'add-frep', name: 'model', source, params });
+        const id = c.header.added[0];
+        const s = await app.client.edit(Kind.Command, { command: 'add-derived', name: 'model-sampled', recipe: { recipe: 'frep-sampled', model: id, map: null, grid: grid.id } });
+        await app.client.edit(Kind.Command, { command: 'add-derived', name: 'model-surface', recipe: { recipe: 'isosurface', volume: s.header.added[0], level: 0, inside_below: false, method: 'marching-cubes' } });
+      }
+      app.status('model updated');
+    } catch (e) {
+      const h = e.header || {};
+      $('frep-error').textContent = h.line ? `line ${h.line}, column ${h.column}: ${e.message}` : e.message;
+      $('frep-error').dataset.line = h.line || '';
+    }
+  };
+  $('frep-apply').onclick = P.applyFrep;
+
+  // Handles: click to add (source = target), drag a handle's target to move it; while
+  // dragging the warp is previewed on a coarse grid, at full resolution on release.
+  $('handle-method').onchange = (e) => {
+    const hm = app.handleMap();
+    if (hm) app.client.send(Kind.Command, { command: 'set-handle-method', map: hm.id, method: e.target.value });
+  };
+  const warpOf = (map) => app.objects.find((o) => o.recipe?.recipe === 'warp' && o.recipe.map === map);
+  const nearest = (p) => {
+    let best = -1, bd = Infinity;
+    app.handles.forEach((h, i) => { const d = Math.hypot(h.target[0] - p[0], h.target[1] - p[1], h.target[2] - p[2]); if (d < bd) { bd = d; best = i; } });
+    return bd < app.radius * 0.25 ? best : -1;
+  };
+  P.handleDown = (g) => {
+    const hm = app.handleMap();
+    if (!hm) { app.error('no handle map: press "Handles" set-up first'); return; }
+    g.handle = nearest(g.p);
+    g.map = hm.id;
+    const w = warpOf(hm.id);
+    if (g.handle >= 0 && w) {
+      g.warp = w;
+      app.client.send(Kind.Command, { command: 'set-recipe', id: w.id, recipe: { ...w.recipe, sampled_nodes: 17 }, gesture: g.id });
+    }
+  };
+  P.handleMove = (g, target) => {
+    if (g.handle < 0 || g.map === undefined) return;
+    const h = app.handles[g.handle];
+    const r = app.client.send(Kind.Command, { command: 'move-handle', map: g.map, index: g.handle, source: h.source, target, gesture: g.id });
+    performance.mark(`handle-${r}`);
+  };
+  P.handleUp = (g, idx) => {
+    if (g.map === undefined) return;
+    if (g.handle < 0 && !g.moved) {
+      app.client.send(Kind.Command, { command: 'add-handle', map: g.map, source: g.p, target: g.p });
+    } else if (g.warp) {
+      app.client.send(Kind.Command, { command: 'set-recipe', id: g.warp.id, recipe: { ...g.warp.recipe, sampled_nodes: null }, gesture: g.id });
+      app.endGesture(g.id);
+    }
+  };
+  document.addEventListener('keydown', (e) => {
+    if (app.tool !== 'handles' || (e.key !== 'Delete' && e.key !== 'Backspace') || e.target.tagName === 'INPUT' || e.target.tagName === 'TEXTAREA') return;
+    const hm = app.handleMap();
+    const v = app.volume();
+    if (!hm || !v) return;
+    const i = nearest(app.cursorPhysical());
+    if (i >= 0) app.client.send(Kind.Command, { command: 'delete-handle', map: hm.id, index: i });
+  });
+  P.sculptMove = () => app.error('sculpting is not available in this version of the studio');
+
+  // Files: a browser confined to the server's roots, save/load, drag-and-drop upload.
+  const rootSel = $('root');
+  app.roots.forEach((r, i) => rootSel.add(new Option(i === app.roots.length - 1 ? `uploads (${r})` : r, i)));
+  let cwd = '.';
+  const list = async () => {
+    try {
+      const f = await app.client.request(Kind.ListDir, { root: Number(rootSel.value), path: cwd });
+      $('path').textContent = cwd;
+      const ul = $('files'); ul.textContent = '';
+      if (cwd !== '.') { const up = document.createElement('li'); up.textContent = '⟵ up'; up.className = 'dir'; up.onclick = () => { cwd = cwd.split('/').slice(0, -1).join('/') || '.'; list(); }; ul.append(up); }
+      for (const e of f.header.entries) {
+        const li = document.createElement('li');
+        li.textContent = e.name + (e.dir ? '/' : '');
+        li.className = e.dir ? 'dir' : 'file';
+        const rel = cwd === '.' ? e.name : `${cwd}/${e.name}`;
+        li.onclick = () => {
+          if (e.dir) { cwd = rel; list(); } else {
+            $('save-name').value = rel;
+            if (!rel.endsWith('.vmproj')) app.client.edit(Kind.OpenFile, { root: Number(rootSel.value), path: rel }).then(() => app.status(`opened ${rel}`)).catch((x) => app.error(x.message));
+          }
+        };
+        ul.append(li);
+      }
+    } catch (e) { app.error(e.message); }
+  };
+  rootSel.onchange = () => { cwd = '.'; list(); };
+  P.listFiles = list;
+  $('save').onclick = () => app.client.request(Kind.SaveScene, { root: Number(rootSel.value), path: $('save-name').value })
+    .then(() => { app.status(`saved ${$('save-name').value}`); list(); }).catch((e) => app.error(e.message));
+  $('load').onclick = () => app.client.request(Kind.LoadScene, { root: Number(rootSel.value), path: $('save-name').value })
+    .then(() => app.status(`loaded ${$('save-name').value}`)).catch((e) => app.error(e.message));
+  const drop = $('drop');
+  drop.ondragover = (e) => { e.preventDefault(); drop.classList.add('over'); };
+  drop.ondragleave = () => drop.classList.remove('over');
+  drop.ondrop = async (e) => {
+    e.preventDefault(); drop.classList.remove('over');
+    for (const file of e.dataTransfer.files) await P.upload(file.name, file);
+  };
+  P.upload = async (name, blob) => {
+    const r = await fetch(`upload/${encodeURIComponent(name)}`, { method: 'POST', body: blob });
+    if (!r.ok) { app.error(`upload of ${name} failed: ${await r.text()}`); return; }
+    const j = await r.json();
+    try {
+      await app.client.edit(Kind.OpenFile, { root: j.root, path: j.path });
+      app.status(`uploaded and opened ${name}`);
+    } catch (e) { app.error(e.message); }
+  };
+  list();
+  return P;
+}

@@ -1,0 +1,202 @@
+// The three orthogonal slice views: window/level and a colour map applied to the server's
+// f32 slice, a crosshair shared by the views, physical position and value under the cursor,
+// and the drag gestures of the active tool.
+import { Kind } from './protocol.js';
+
+const IN_PLANE = [[1, 2], [0, 2], [0, 1]];
+
+// Physical position of a continuous index (geometry as sent by the server).
+export function physical(g, idx) {
+  const p = g.origin.slice();
+  for (let a = 0; a < 3; a++) for (let c = 0; c < 3; c++) p[c] += g.direction[a][c] * g.spacing[a] * idx[a];
+  return p;
+}
+
+// Continuous index of a physical position.
+export function indexOf(g, p) {
+  // direction columns are orthonormal for every volume volmorph reads (polar factor rule).
+  const d = [p[0] - g.origin[0], p[1] - g.origin[1], p[2] - g.origin[2]];
+  return [0, 1, 2].map((a) => (g.direction[a][0] * d[0] + g.direction[a][1] * d[1] + g.direction[a][2] * d[2]) / g.spacing[a]);
+}
+
+export class SliceView {
+  constructor(canvas, axis, app) {
+    this.canvas = canvas;
+    this.ctx = canvas.getContext('2d');
+    this.axis = axis;
+    this.app = app;
+    this.slice = null;
+    this.off = document.createElement('canvas');
+    this.loading = null;
+    this.wanted = false;
+    canvas.addEventListener('pointerdown', (e) => this.down(e));
+    canvas.addEventListener('pointermove', (e) => this.move(e));
+    canvas.addEventListener('pointerup', (e) => this.up(e));
+    canvas.addEventListener('wheel', (e) => this.wheel(e), { passive: false });
+    canvas.addEventListener('contextmenu', (e) => e.preventDefault());
+  }
+
+  // Ask for the slice at the cursor; a request while one is loading runs once after it.
+  async load() {
+    const app = this.app;
+    const vol = app.volume();
+    if (!vol) return;
+    if (this.loading) { this.wanted = true; return this.loading; }
+    const g = vol.volume.geometry;
+    const n = g.dims[this.axis];
+    const index = Math.max(0, Math.min(n - 1, Math.round(app.cursor[this.axis])));
+    this.loading = app.client.request(Kind.GetSlice, { volume: vol.id, axis: this.axis, index })
+      .then((f) => {
+        this.slice = { ...f.header, values: new Float32Array(f.payload) };
+        if (!app.window.has(vol.id)) app.window.set(vol.id, f.header.window.slice());
+        app.windowChanged(false);
+        this.render();
+      })
+      .catch((e) => app.error(e.message))
+      .finally(() => {
+        this.loading = null;
+        if (this.wanted) { this.wanted = false; this.load(); }
+      });
+    return this.loading;
+  }
+
+  // The slice as RGBA through the window and colour map (what the canvas shows, unscaled).
+  image() {
+    const s = this.slice;
+    const [lo, hi] = this.app.currentWindow();
+    const lut = this.app.lut();
+    const img = new ImageData(s.width, s.height);
+    const d = img.data;
+    const scale = hi > lo ? 255 / (hi - lo) : 0;
+    for (let i = 0; i < s.values.length; i++) {
+      const v = s.values[i];
+      let t = hi > lo ? (v - lo) * scale : (v >= lo ? 255 : 0);
+      t = Number.isFinite(t) ? Math.max(0, Math.min(255, Math.round(t))) : 0;
+      const c = lut[t];
+      d[4 * i] = c[0]; d[4 * i + 1] = c[1]; d[4 * i + 2] = c[2]; d[4 * i + 3] = 255;
+    }
+    return img;
+  }
+
+  layout() {
+    const s = this.slice;
+    const cw = this.canvas.width, ch = this.canvas.height;
+    const pw = s.width * s.pixelSpacing[0], ph = s.height * s.pixelSpacing[1];
+    const k = Math.min(cw / pw, ch / ph);
+    const sa = s.pixelSpacing[0] * k, sb = s.pixelSpacing[1] * k;
+    return { sa, sb, ox: (cw - s.width * sa) / 2, oy: (ch - s.height * sb) / 2 };
+  }
+
+  // Canvas position of a continuous index's in-plane coordinates.
+  toCanvas(idx) {
+    const s = this.slice, L = this.layout();
+    const [a, b] = IN_PLANE[this.axis];
+    return [L.ox + (idx[a] + 0.5) * L.sa, L.oy + (s.height - 0.5 - idx[b]) * L.sb];
+  }
+
+  // Continuous index under a canvas position (on this slice's plane).
+  toIndex(x, y) {
+    const s = this.slice, L = this.layout();
+    const [a, b] = IN_PLANE[this.axis];
+    const idx = [0, 0, 0];
+    idx[this.axis] = s.index;
+    idx[a] = (x - L.ox) / L.sa - 0.5;
+    idx[b] = s.height - 0.5 - (y - L.oy) / L.sb;
+    return idx;
+  }
+
+  render() {
+    const s = this.slice;
+    if (!s) return;
+    const ctx = this.ctx;
+    this.off.width = s.width; this.off.height = s.height;
+    this.off.getContext('2d').putImageData(this.image(), 0, 0);
+    const L = this.layout();
+    ctx.fillStyle = '#000';
+    ctx.fillRect(0, 0, this.canvas.width, this.canvas.height);
+    ctx.imageSmoothingEnabled = false;
+    ctx.drawImage(this.off, L.ox, L.oy, s.width * L.sa, s.height * L.sb);
+    this.overlay();
+  }
+
+  // Crosshair, tool radius, handles: drawn over the picture.
+  overlay() {
+    const ctx = this.ctx, app = this.app;
+    const [cx, cy] = this.toCanvas(app.cursor);
+    ctx.strokeStyle = 'rgba(255,220,0,0.6)';
+    ctx.lineWidth = 1;
+    ctx.beginPath();
+    ctx.moveTo(cx, 0); ctx.lineTo(cx, this.canvas.height);
+    ctx.moveTo(0, cy); ctx.lineTo(this.canvas.width, cy);
+    ctx.stroke();
+    if (app.tool === 'drag' || app.tool === 'sculpt') {
+      const g = app.volume().volume.geometry;
+      const [a] = IN_PLANE[this.axis];
+      const L = this.layout();
+      const r = (app.radius / g.spacing[a]) * L.sa;
+      ctx.strokeStyle = 'rgba(80,200,255,0.8)';
+      ctx.beginPath(); ctx.arc(cx, cy, r, 0, 2 * Math.PI); ctx.stroke();
+    }
+    for (const h of app.handles || []) {
+      const g = app.volume().volume.geometry;
+      const [sx, sy] = this.toCanvas(indexOf(g, h.source));
+      const [tx, ty] = this.toCanvas(indexOf(g, h.target));
+      ctx.strokeStyle = '#ff0'; ctx.fillStyle = '#f80';
+      ctx.beginPath(); ctx.moveTo(sx, sy); ctx.lineTo(tx, ty); ctx.stroke();
+      ctx.beginPath(); ctx.arc(tx, ty, 3, 0, 2 * Math.PI); ctx.fill();
+    }
+  }
+
+  point(e) {
+    const r = this.canvas.getBoundingClientRect();
+    const x = (e.clientX - r.left) * (this.canvas.width / r.width);
+    const y = (e.clientY - r.top) * (this.canvas.height / r.height);
+    return this.toIndex(x, y);
+  }
+
+  down(e) {
+    if (!this.slice) return;
+    this.canvas.setPointerCapture(e.pointerId);
+    const idx = this.point(e);
+    if (e.button === 2 || e.shiftKey) {
+      this.wl = { x: e.clientX, y: e.clientY, w: this.app.currentWindow().slice() };
+      return;
+    }
+    this.app.setCursor(idx, this.axis);
+    this.app.gestureStart(idx, e);
+  }
+
+  move(e) {
+    if (!this.slice) return;
+    const idx = this.point(e);
+    this.app.showCursor(idx, this.valueAt(idx));
+    if (this.wl) {
+      const [lo, hi] = this.wl.w;
+      const width = Math.max(1e-6, (hi - lo) * Math.exp((e.clientX - this.wl.x) / 200));
+      const center = (lo + hi) / 2 - ((e.clientY - this.wl.y) / 200) * (hi - lo);
+      this.app.setWindow([center - width / 2, center + width / 2]);
+      return;
+    }
+    if (e.buttons & 1) this.app.gestureMove(idx, e);
+  }
+
+  up(e) {
+    if (this.wl) { this.wl = null; return; }
+    this.app.gestureEnd(this.point(e), e);
+  }
+
+  wheel(e) {
+    e.preventDefault();
+    const c = this.app.cursor.slice();
+    c[this.axis] += e.deltaY > 0 ? -1 : 1;
+    this.app.setCursor(c, -1);
+  }
+
+  valueAt(idx) {
+    const s = this.slice;
+    const [a, b] = IN_PLANE[this.axis];
+    const col = Math.round(idx[a]), row = s.height - 1 - Math.round(idx[b]);
+    if (col < 0 || row < 0 || col >= s.width || row >= s.height) return null;
+    return s.values[row * s.width + col];
+  }
+}
