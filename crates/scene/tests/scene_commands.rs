@@ -660,6 +660,7 @@ fn warp_onto_a_padded_grid_follows_drags_and_equals_a_direct_warp() {
     .unwrap();
     let (t1, t2) = (total(&after), total(unpadded.volume.as_bytes()));
     assert!(t1.abs_diff(t2) <= 8, "{t1} vs {t2}");
+}
 
 /// The moves of one gesture merged into one undo step: undo restores the state before the
 /// first move, redo the state after the last, and the history holds one step.
