@@ -297,8 +297,9 @@ impl PyScene {
                 grabbed: g,
                 targets: t,
                 options: DragOptions {
-                    radius,
+                    tool: radius.map(|radius| volmorph_lattice::ToolShape::Sphere { radius }),
                     freeze_boundary,
+                    realm: None,
                 },
             },
         )?;

@@ -116,7 +116,7 @@ async fn ask(ws: &mut Ws, kind: Kind, request: u32, header: Value) -> Frame {
 async fn http(s: &Studio, request: &str) -> u16 {
     let mut c = tokio::net::TcpStream::connect(s.addr()).await.unwrap();
     c.write_all(request.as_bytes()).await.unwrap();
-    let mut buf = vec![0u8; 64];
+    let mut buf = [0u8; 64];
     let mut n = 0;
     while n < 12 {
         let k = c.read(&mut buf[n..]).await.unwrap();
@@ -452,7 +452,7 @@ async fn every_query_kind_answers() {
     assert_eq!(p.kind, Kind::Proxy, "{}", p.header);
     let nv = p.header["vertices"].as_u64().unwrap() as usize;
     let ni = p.header["indices"].as_u64().unwrap() as usize;
-    assert!(nv > 64 * 3 && ni % 3 == 0);
+    assert!(nv > 64 * 3 && ni.is_multiple_of(3));
     let verts = read_f32(&p.payload[..nv * 24]);
     assert!(
         verts
