@@ -242,6 +242,33 @@ pub fn box_geometry(lo: DVec3, hi: DVec3, dims: [usize; 3]) -> Result<Geometry, 
         .with_spacing((hi - lo) / steps))
 }
 
+/// A grid over the box `[lo, hi]` with equal steps on every axis: `longest` voxel centres
+/// along the longest edge, and on the other axes the count that keeps the same step (rounded,
+/// at least 2, at most `max_dims`). Corners on the first and last voxel centres as in
+/// [`box_geometry`].
+///
+/// # Errors
+/// [`FrepError::InvalidArgument`] when `longest` is outside `2..=max_dims` or the box is
+/// empty, inverted or not finite.
+pub fn isotropic_box_geometry(
+    lo: DVec3,
+    hi: DVec3,
+    longest: usize,
+    max_dims: usize,
+) -> Result<Geometry, FrepError> {
+    if !(2..=max_dims).contains(&longest) {
+        return Err(FrepError::InvalidArgument(format!(
+            "grid size {longest} must be between 2 and {max_dims}"
+        )));
+    }
+    let ext = hi - lo;
+    let step = ext.max_element() / (longest - 1) as f64;
+    let dims = ext
+        .to_array()
+        .map(|e| ((e / step).round() as usize + 1).clamp(2, max_dims));
+    box_geometry(lo, hi, dims)
+}
+
 struct Worker<'a> {
     geometry: &'a Geometry,
     frame: Frame,

@@ -7,7 +7,7 @@ use std::path::{Path, PathBuf};
 
 use anyhow::{Context, bail};
 use glam::DVec3;
-use volmorph_frep::grid::{box_geometry, sample, sample_with};
+use volmorph_frep::grid::{box_geometry, isotropic_box_geometry, sample, sample_with};
 use volmorph_frep::mapping::{Schedule, morph};
 use volmorph_frep::output::{
     MeshMethod, MeshOptions, RenderOptions, SurfaceSummary, mesh, render, render_animation,
@@ -381,15 +381,8 @@ fn sections_cmd(a: &SectionsArgs) -> anyhow::Result<()> {
             (lo - DVec3::splat(pad), hi + DVec3::splat(pad))
         }
     };
-    if !(2..=MAX_GRID).contains(&a.grid) {
-        bail!("--grid {}: must be between 2 and {MAX_GRID}", a.grid);
-    }
-    let ext = hi - lo;
-    let step = ext.max_element() / (a.grid - 1) as f64;
-    let dims = ext
-        .to_array()
-        .map(|e| ((e / step).round() as usize + 1).clamp(2, MAX_GRID));
-    let g = box_geometry(lo, hi, dims)?;
+    let g = isotropic_box_geometry(lo, hi, a.grid, MAX_GRID).context("--grid")?;
+    let dims = g.dims;
     if meshio::MeshFormat::from_path(&a.output).is_ok() {
         let pb = progress::spinner(format!("meshing {name}"));
         let options = MeshOptions {
