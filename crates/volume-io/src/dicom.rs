@@ -235,6 +235,13 @@ impl PixelFormat {
         }
     }
 
+    /// Bytes of one decoded frame: `rows · cols · BitsAllocated / 8` (saturating).
+    fn frame_bytes(&self) -> usize {
+        self.rows
+            .saturating_mul(self.cols)
+            .saturating_mul(usize::from(self.bits_allocated / 8))
+    }
+
     /// Stored value `k` of a frame's little-endian bytes, masked / sign-extended to
     /// `BitsStored`.
     #[inline]
@@ -514,9 +521,10 @@ where
     let (geometry, order) = assemble(&mut planes, single_step, &|p: &Plane| names[p.file].clone())?;
     let header = summary(first, &format, &planes, geometry);
     // Decode slice by slice (one file at a time in memory).
-    let volume = fill(&format, &planes, &order, geometry, |p: &Plane| {
+    let one_slice = format.frame_bytes() as u64;
+    let volume = fill(&format, &planes, &order, geometry, one_slice, |p, sink| {
         let obj = full(p.file)?;
-        decode_frame(obj.borrow(), &format, 0, &names[p.file])
+        decode_frame(obj.borrow(), &format, 0, &names[p.file], sink)
     })?;
     Ok((volume, header))
 }
@@ -562,6 +570,7 @@ fn read_multiframe_object(
     let frames = int(obj, tags::NUMBER_OF_FRAMES).unwrap_or(1).max(1);
     let frames =
         u32::try_from(frames).map_err(|_| err(format!("{what}: NumberOfFrames {frames}")))?;
+    check_frames_present(obj, &format, frames, &what)?;
     let shared = item(obj, tags::SHARED_FUNCTIONAL_GROUPS_SEQUENCE);
     let per_frame: &[InMemDicomObject] = obj
         .get(tags::PER_FRAME_FUNCTIONAL_GROUPS_SEQUENCE)
@@ -678,20 +687,70 @@ fn read_multiframe_object(
     })?;
     let mut header = summary(obj, &format, &planes, geometry);
     header.fields.push(("frames".into(), frames.to_string()));
-    // Check the decoded size before decoding everything.
-    volmorph_io::checked_len(
-        &[format.cols, format.rows, frames as usize],
-        usize::from(format.bits_allocated / 8),
+    // Check the volume and every decoded frame together before decoding anything.
+    let all_frames = (format.frame_bytes() as u64).saturating_mul(u64::from(frames));
+    let (vt, _) = output_type(&format, &planes);
+    let out = volmorph_io::checked_len(&[format.cols, format.rows, planes.len()], vt.size())?;
+    volmorph_io::check_bytes(
+        &format!("{what}: the volume and its decoded pixel data"),
+        (out as u64 * vt.size() as u64).saturating_add(all_frames),
     )?;
     check_decodable(obj, &format, &what)?;
     let decoded = obj
         .decode_pixel_data()
         .map_err(|e| pixel_error(&what, &e.to_string()))?;
     let swapped = halves_swapped(obj, &format);
-    let volume = fill(&format, &planes, &order, geometry, |p: &Plane| {
-        frame_values(&decoded, &format, p.frame, &what, swapped)
+    let volume = fill(&format, &planes, &order, geometry, all_frames, |p, sink| {
+        sink(frame_bytes(&decoded, &format, p.frame, &what)?, swapped);
+        Ok(())
     })?;
     Ok((volume, header))
+}
+
+/// Check that the `PixelData` of `obj` can hold `frames` frames before anything per frame is
+/// built: native data must have `frames · rows · cols · BitsAllocated / 8` bytes, and
+/// encapsulated data at least one fragment per frame (PS3.5 A.4: a fragment never holds
+/// data of two frames). This bounds the work and memory a forged `NumberOfFrames` can ask
+/// for by the size of the file.
+///
+/// # Errors
+/// No `PixelData`, or too little of it for `frames` frames.
+fn check_frames_present(
+    obj: &DefaultDicomObject,
+    format: &PixelFormat,
+    frames: u32,
+    what: &str,
+) -> Result<(), VolumeError> {
+    use dicom_core::value::Value;
+    let e = obj
+        .element(tags::PIXEL_DATA)
+        .map_err(|_| err(format!("{what}: no PixelData")))?;
+    match e.value() {
+        Value::PixelSequence(seq) => {
+            let have = seq.fragments().len();
+            if have < frames as usize {
+                return Err(err(format!(
+                    "{what}: NumberOfFrames {frames} but the encapsulated PixelData holds \
+                     {have} fragments (each frame needs at least one)"
+                )));
+            }
+        }
+        Value::Primitive(p) => {
+            let have = p.calculate_byte_len() as u64;
+            let need = (format.frame_bytes() as u64).saturating_mul(u64::from(frames));
+            if have < need {
+                return Err(err(format!(
+                    "{what}: NumberOfFrames {frames} of {}×{} {}-bit pixels need {need} bytes \
+                     of PixelData; it holds {have}",
+                    format.rows, format.cols, format.bits_allocated
+                )));
+            }
+        }
+        Value::Sequence(_) => {
+            return Err(err(format!("{what}: PixelData is a sequence of items")));
+        }
+    }
+    Ok(())
 }
 
 /// `DoseGridScaling` (RT Dose, PS3.3 C.8.8.3): the factor from stored values to dose in Gy,
@@ -734,17 +793,23 @@ fn pixel_error(what: &str, e: &str) -> VolumeError {
     }
 }
 
+/// Decode frame `frame` of `obj` and hand its bytes to `sink` (see [`fill`]).
 fn decode_frame(
     obj: &DefaultDicomObject,
     format: &PixelFormat,
     frame: u32,
     what: &str,
-) -> Result<Vec<i64>, VolumeError> {
+    sink: &mut dyn FnMut(&[u8], bool),
+) -> Result<(), VolumeError> {
     check_decodable(obj, format, what)?;
     let decoded = obj
         .decode_pixel_data()
         .map_err(|e| pixel_error(what, &e.to_string()))?;
-    frame_values(&decoded, format, frame, what, halves_swapped(obj, format))
+    sink(
+        frame_bytes(&decoded, format, frame, what)?,
+        halves_swapped(obj, format),
+    );
+    Ok(())
 }
 
 /// Refuse, as unsupported, pixel data that the dicom-rs decoders do not decode: RLE Lossless
@@ -779,28 +844,20 @@ fn halves_swapped(obj: &DefaultDicomObject, format: &PixelFormat) -> bool {
             .is_ok_and(|e| matches!(e.value(), Value::Primitive(PrimitiveValue::U16(_))))
 }
 
-fn frame_values(
-    decoded: &dicom_pixeldata::DecodedPixelData<'_>,
+/// The bytes of frame `frame` of `decoded`, checked to hold the whole frame.
+fn frame_bytes<'a>(
+    decoded: &'a dicom_pixeldata::DecodedPixelData<'_>,
     format: &PixelFormat,
     frame: u32,
     what: &str,
-    halves_swapped: bool,
-) -> Result<Vec<i64>, VolumeError> {
+) -> Result<&'a [u8], VolumeError> {
     let bytes = decoded
         .frame_data(frame)
         .map_err(|e| err(format!("{what}: frame {}: {e}", frame + 1)))?;
-    let n = format.rows * format.cols;
-    if bytes.len() < n * usize::from(format.bits_allocated / 8) {
+    if bytes.len() < format.frame_bytes() {
         return Err(err(format!("{what}: pixel data truncated")));
     }
-    if halves_swapped {
-        let mut fixed = bytes[..4 * n].to_vec();
-        for v in fixed.chunks_exact_mut(4) {
-            v.rotate_left(2);
-        }
-        return Ok((0..n).map(|k| format.value(&fixed, k)).collect());
-    }
-    Ok((0..n).map(|k| format.value(bytes, k)).collect())
+    Ok(bytes)
 }
 
 /// Sort the planes along the normal, check them, and derive the geometry. Returns the
@@ -974,32 +1031,48 @@ fn output_type(format: &PixelFormat, planes: &[Plane]) -> (VoxelType, bool) {
     (VoxelType::F64, false)
 }
 
-/// Allocate the volume (size checked first) and fill it slice by slice.
+/// Allocate the volume and fill it slice by slice. `decoded_bytes` is the largest decoded pixel
+/// buffer held while filling (one slice of a series, or every frame of a multi-frame file):
+/// the output and that buffer are checked together against the memory budget before either
+/// is allocated. `frame(p, sink)` hands the little-endian bytes of plane `p`'s frame (at least
+/// `rows · cols · BitsAllocated / 8` of them; see [`frame_bytes`]) and whether their 16-bit
+/// halves are swapped to `sink`, which rescales them straight into the
+/// output slice: no intermediate per-voxel buffer.
 fn fill(
     format: &PixelFormat,
     planes: &[Plane],
     order: &[usize],
     mut geometry: Geometry,
-    mut values: impl FnMut(&Plane) -> Result<Vec<i64>, VolumeError>,
+    decoded_bytes: u64,
+    mut frame: impl FnMut(&Plane, &mut dyn FnMut(&[u8], bool)) -> Result<(), VolumeError>,
 ) -> Result<AnyVolume, VolumeError> {
     geometry.dims = [format.cols, format.rows, order.len()];
     let (vt, _) = output_type(format, planes);
     let n = volmorph_io::checked_len(&geometry.dims, vt.size())?;
+    let out_bytes = n as u64 * vt.size() as u64;
+    volmorph_io::check_bytes(
+        "DICOM volume and its decoded pixel data",
+        out_bytes.saturating_add(decoded_bytes),
+    )?;
     geometry.validate()?;
     let per = format.cols * format.rows;
     Ok(volmorph_volume::with_voxel_type!(vt, T => {
-        let mut data: Vec<T> = Vec::new();
-        data.try_reserve_exact(n)
-            .map_err(|_| err(format!("cannot allocate {n} voxels of {vt}")))?;
-        data.resize(n, T::default());
+        let mut data: Vec<T> = volmorph_io::try_vec("DICOM volume", n, T::default())?;
         for (k, &pi) in order.iter().enumerate() {
             let p = &planes[pi];
-            let v = values(p)?;
             let out = &mut data[k * per..(k + 1) * per];
-            for (o, &s) in out.iter_mut().zip(&v) {
-                // slope·v + intercept, as ITK/GDCM apply it.
-                *o = T::from_f64(s as f64 * p.slope + p.intercept);
-            }
+            frame(p, &mut |bytes: &[u8], swapped: bool| {
+                for (i, o) in out.iter_mut().enumerate() {
+                    let s = if swapped {
+                        let b = &bytes[4 * i..4 * i + 4];
+                        format.value(&[b[2], b[3], b[0], b[1]], 0)
+                    } else {
+                        format.value(bytes, i)
+                    };
+                    // slope·v + intercept, as ITK/GDCM apply it.
+                    *o = T::from_f64(s as f64 * p.slope + p.intercept);
+                }
+            })?;
         }
         AnyVolume::from(Volume::new(geometry, data)?)
     }))
@@ -1094,5 +1167,38 @@ mod tests {
         assert_eq!(output_type(&u, &[p.clone()]).0, VoxelType::I16);
         p.slope = 0.5;
         assert_eq!(output_type(&u, &[p]).0, VoxelType::F32);
+    }
+
+    /// A corpus file with `NumberOfFrames` replaced by `frames`, as bytes.
+    fn with_frame_count(name: &str, frames: &str) -> Vec<u8> {
+        use dicom_core::{DataElement, PrimitiveValue};
+        let path = Path::new(env!("CARGO_MANIFEST_DIR"))
+            .join("tests/corpus/peers")
+            .join(name);
+        let mut obj = OpenFileOptions::new().open_file(&path).unwrap();
+        obj.put(DataElement::new(
+            tags::NUMBER_OF_FRAMES,
+            VR::IS,
+            PrimitiveValue::from(frames),
+        ));
+        let mut bytes = Vec::new();
+        obj.write_all(&mut bytes).unwrap();
+        bytes
+    }
+
+    /// Regression (fuzzing, out of memory): a forged `NumberOfFrames` of two billion made the
+    /// multi-frame reader reserve a plane per frame (hundreds of GB) before looking at the
+    /// pixel data. The frame count is now checked against the `PixelData` first.
+    #[test]
+    fn forged_frame_count_is_refused_before_allocating() {
+        for name in ["pydicom_rtdose.dcm", "pydicom_enhanced_ct.dcm"] {
+            let bytes = with_frame_count(name, "2000000000");
+            let e = read_bytes(&bytes).unwrap_err().to_string();
+            assert!(e.contains("NumberOfFrames 2000000000"), "{name}: {e}");
+            assert!(e.contains("PixelData"), "{name}: {e}");
+        }
+        // The true count still reads.
+        let (v, _) = read_bytes(&with_frame_count("pydicom_rtdose.dcm", "3")).unwrap();
+        assert_eq!(v.geometry().dims[2], 3);
     }
 }
