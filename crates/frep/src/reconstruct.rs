@@ -328,6 +328,12 @@ pub enum SectionBlend {
     CatmullRom,
 }
 
+/// Margin of [`SectionStack::sampling_bounds`], as a fraction of the largest extent of the
+/// sections' bounds. A choice, not a published value: the padded box is 1.1 extents wide,
+/// so a grid of 23 or more samples along its largest axis keeps at least one sample layer
+/// outside the surface on every side.
+pub const SAMPLING_MARGIN: f64 = 0.05;
+
 /// A solid reconstructed from cross-sections (the seed's Fig. 4): between sections `k` and
 /// `k + 1` the defining function is the [`SectionBlend`] of their [`SectionFunction`]s in
 /// `(x, y)`, with `z` as the metamorphosis parameter; it is then R-intersected (`min`) with
@@ -519,6 +525,17 @@ impl SectionStack {
     pub fn with_blend(mut self, blend: SectionBlend) -> Self {
         self.blend = blend;
         self
+    }
+
+    /// The box to sample or mesh the reconstruction in: [`Self::bounds`] grown on every side
+    /// by [`SAMPLING_MARGIN`] times its largest extent, so the surface (including the caps
+    /// that close the slab at its first and last heights) lies strictly inside the grid and
+    /// every cell crossing it has samples on both sides.
+    #[must_use]
+    pub fn sampling_bounds(&self) -> (DVec3, DVec3) {
+        let (lo, hi) = self.bounds();
+        let pad = DVec3::splat(SAMPLING_MARGIN * (hi - lo).max_element());
+        (lo - pad, hi + pad)
     }
 
     /// The bounding box of the contour points and the slab, `(lo, hi)`.
@@ -907,6 +924,33 @@ mod tests {
         let report = surf.mesh.validate();
         assert!(report.is_closed_manifold(), "{report}");
         assert!(surf.mesh.signed_volume() > 0.0);
+    }
+
+    /// The sampling box holds the whole solid with a margin: every point on its faces is
+    /// outside (f < 0).
+    #[test]
+    fn sampling_bounds_enclose_the_solid_with_a_margin() {
+        let stack = SectionStack::new(&femur_sections(16).unwrap(), SectionBlend::Linear).unwrap();
+        let (lo, hi) = stack.sampling_bounds();
+        let (blo, bhi) = stack.bounds();
+        let pad = SAMPLING_MARGIN * (bhi - blo).max_element();
+        assert!(((blo - lo) - DVec3::splat(pad)).abs().max_element() < 1e-12);
+        assert!(((hi - bhi) - DVec3::splat(pad)).abs().max_element() < 1e-12);
+        let n = 24;
+        for a in 0..3 {
+            for side in [lo, hi] {
+                for i in 0..=n {
+                    for j in 0..=n {
+                        let mut t = DVec3::ZERO;
+                        t[(a + 1) % 3] = i as f64 / n as f64;
+                        t[(a + 2) % 3] = j as f64 / n as f64;
+                        let mut p = lo + (hi - lo) * t;
+                        p[a] = side[a];
+                        assert!(stack.value(p) < 0.0, "face point {p} is not outside");
+                    }
+                }
+            }
+        }
     }
 
     #[test]

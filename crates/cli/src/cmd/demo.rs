@@ -339,7 +339,7 @@ fn warp_demo(args: &Args, index: &mut String, timings: &mut Timings) -> anyhow::
     Ok(())
 }
 
-/// Largest |a − b| over the voxels of two volumes of the same size (any voxel types).
+/// A point as `(x, y, z)` with two decimals, for the summary lines.
 fn fmt(p: DVec3) -> String {
     format!("({:.2}, {:.2}, {:.2})", p.x, p.y, p.z)
 }

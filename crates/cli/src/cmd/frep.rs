@@ -198,7 +198,7 @@ pub struct SectionsArgs {
     #[arg(long, default_value_t = 128)]
     pub grid: usize,
     /// Box: `lo,hi` or `x0,y0,z0,x1,y1,z1`; default: the contours' bounding box and the slab
-    /// of the sections, enlarged by 5 % on every side.
+    /// of the sections, enlarged by 5 % of its largest extent on every side.
     #[arg(long, allow_hyphen_values = true)]
     pub bounds: Option<String>,
     /// Blend along z between sections (overrides the file's `blend`).
@@ -375,11 +375,7 @@ fn sections_cmd(a: &SectionsArgs) -> anyhow::Result<()> {
     };
     let (lo, hi) = match &a.bounds {
         Some(b) => bounds(b)?,
-        None => {
-            let (lo, hi) = stack.bounds();
-            let pad = 0.05 * (hi - lo).max_element();
-            (lo - DVec3::splat(pad), hi + DVec3::splat(pad))
-        }
+        None => stack.sampling_bounds(),
     };
     let g = isotropic_box_geometry(lo, hi, a.grid, MAX_GRID).context("--grid")?;
     let dims = g.dims;
