@@ -11,7 +11,7 @@ a 200-handle affine MLS map sampled on a 33³ grid, and reports both ratios agai
 Skips cleanly (exit 0 with a message) when VTK is not installed or the volume is absent.
 Build first:  cargo build --release -p volmorph-cli
 Run from the repository root:
-    python3 scripts/dvr_vtk_bench.py ../shared/data/volumes/cranium_ct.nii.gz [--repeat 5]
+    python3 scripts/dvr_vtk_bench.py ../shared/data/volumes/cranium_ct.nii.gz [--repeat 5] [--rounds 3]
 """
 import argparse
 import json
@@ -19,11 +19,15 @@ import math
 import os
 import random
 import re
+import resource
 import statistics
 import subprocess
 import sys
 import tempfile
 import time
+
+# Offscreen through EGL (no X server needed); VTK's PyPI wheels choose the window at run time.
+os.environ.setdefault("VTK_DEFAULT_OPENGL_WINDOW", "vtkEGLRenderWindow")
 
 try:
     import vtk
@@ -44,21 +48,44 @@ def volmorph_exe(root):
     return exe
 
 
+def children_cpu():
+    r = resource.getrusage(resource.RUSAGE_CHILDREN)
+    return r.ru_utime + r.ru_stime
+
+
 def run_volmorph(exe, args):
+    """Median wall milliseconds per picture (as volmorph reports it), CPU seconds of the whole
+    run (all threads, reading and preparation included) and volmorph's summary line."""
+    cpu = children_cpu()
     out = subprocess.run([exe, "render"] + args, check=True, capture_output=True, text=True).stdout
+    cpu = children_cpu() - cpu
     m = re.search(r"median ([0-9.]+) ms", out)
     if not m:
         sys.exit(f"unexpected volmorph output: {out}")
-    return float(m.group(1)), out.strip()
+    return float(m.group(1)), cpu, out.strip()
 
 
-def physical_bounds(exe, volume):
-    """The volume's physical bounds as volmorph reads them (spacing and direction applied)."""
+def volmorph_times(exe, args, repeat):
+    """Median wall ms per picture, and CPU ms per picture: the CPU time of a run of `repeat`
+    pictures less that of a run of one, over `repeat − 1` (so reading and preparation cancel)."""
+    wall, cpu, text = run_volmorph(exe, args + ["--repeat", str(repeat)])
+    _, cpu1, _ = run_volmorph(exe, args + ["--repeat", "1"])
+    return wall, (cpu - cpu1) / (repeat - 1) * 1e3, text
+
+
+def geometry(exe, volume):
+    """The volume's geometry as volmorph reads it: physical bounds of the voxel centres,
+    origin and direction columns (LPS, spacing and direction applied)."""
     out = subprocess.run([exe, "info", volume], check=True, capture_output=True, text=True).stdout
-    m = re.search(r"bounds:\s*\(([^)]*)\)\s*\.\.\s*\(([^)]*)\)", out)
-    if not m:
+    num = r"\(([^)]*)\)"
+    b = re.search(r"bounds:\s*" + num + r"\s*\.\.\s*" + num, out)
+    o = re.search(r"origin:\s*" + num, out)
+    d = re.search(r"direction:\s*" + num + r"\s*" + num + r"\s*" + num, out)
+    if not (b and o and d):
         sys.exit(f"unexpected volmorph info output: {out}")
-    return tuple([float(x) for x in g.split(",")] for g in m.groups())
+    vec = lambda g: [float(x) for x in g.split(",")]
+    return {"bounds": (vec(b.group(1)), vec(b.group(2))), "origin": vec(o.group(1)),
+            "direction": [vec(g) for g in d.groups()]}
 
 
 def handles_file(path, bounds, n=200, seed=20241201):
@@ -79,11 +106,15 @@ def handles_file(path, bounds, n=200, seed=20241201):
         json.dump({"points": pts}, f)
 
 
-def vtk_render_times(volume, tf, step, size, repeat, png):
+def vtk_renderer(volume, geo, tf, step, size):
+    """VTK's pipeline for the picture; returns the render window after a first picture."""
     reader = vtk.vtkNIFTIImageReader()
     reader.SetFileName(volume)
     reader.Update()
     img = reader.GetOutput()
+    # vtkNIFTIImageReader gives the voxel grid with spacing only; the orientation goes into
+    # the volume's matrix so that VTK's world is volmorph's (LPS, the same anterior view).
+    img.SetOrigin(0.0, 0.0, 0.0)
     lo_s, hi_s = img.GetScalarRange()
 
     color = vtk.vtkColorTransferFunction()
@@ -114,6 +145,12 @@ def vtk_render_times(volume, tf, step, size, repeat, png):
 
     vol = vtk.vtkVolume()
     vol.SetMapper(mapper)
+    m = vtk.vtkMatrix4x4()
+    for r in range(3):
+        for c in range(3):
+            m.SetElement(r, c, geo["direction"][c][r])
+        m.SetElement(r, 3, geo["origin"][r])
+    vol.SetUserMatrix(m)
     vol.SetProperty(prop)
     ren = vtk.vtkRenderer()
     ren.AddVolume(vol)
@@ -135,30 +172,49 @@ def vtk_render_times(volume, tf, step, size, repeat, png):
     cam.SetViewAngle(math.degrees(FOV_Y))
     ren.ResetCameraClippingRange()
 
+    win.Render()  # first picture: set-up, kept out of the timings
+    print(f"VTK {vtk.vtkVersion.GetVTKVersion()}, {win.GetClassName()}, "
+          f"{mapper.GetNumberOfThreads()} threads")
+    return win
+
+
+def vtk_times(win, repeat):
+    """Median wall milliseconds of `repeat` pictures, and the mean CPU milliseconds per
+    picture of this process (all threads: VTK's ray casters and the EGL driver's)."""
     times = []
+    cpu = time.process_time()
     for _ in range(repeat):
         t = time.perf_counter()
         win.Render()
         times.append(time.perf_counter() - t)
-    if png:
-        grab = vtk.vtkWindowToImageFilter()
-        grab.SetInput(win)
-        grab.Update()
-        w = vtk.vtkPNGWriter()
-        w.SetFileName(png)
-        w.SetInputConnection(grab.GetOutputPort())
-        w.Write()
-    return statistics.median(times) * 1e3, (lo_s, hi_s), (b[0::2], b[1::2])
+    cpu = time.process_time() - cpu
+    return statistics.median(times) * 1e3, cpu / repeat * 1e3
+
+
+def vtk_png(win, png):
+    grab = vtk.vtkWindowToImageFilter()
+    grab.SetInput(win)
+    grab.Update()
+    w = vtk.vtkPNGWriter()
+    w.SetFileName(png)
+    w.SetInputConnection(grab.GetOutputPort())
+    w.Write()
 
 
 def main():
     p = argparse.ArgumentParser(description=__doc__.split("\n")[0])
     p.add_argument("volume", nargs="?",
                    default=os.path.join("..", "shared", "data", "volumes", "cranium_ct.nii.gz"))
-    p.add_argument("--repeat", type=int, default=5)
+    p.add_argument("--repeat", type=int, default=5,
+                   help="pictures per round and renderer (at least 2)")
+    p.add_argument("--rounds", type=int, default=3,
+                   help="rounds, each timing volmorph, VTK and the deformed picture in turn "
+                        "(so that a change of machine load affects all three alike)")
     p.add_argument("--size", type=int, default=512)
     p.add_argument("--keep", help="folder for the pictures (default: a temporary one)")
     a = p.parse_args()
+    if a.repeat < 2:
+        sys.exit("--repeat must be at least 2")
     if not os.path.isfile(a.volume):
         print(f"SKIP: {a.volume} not found")
         return
@@ -169,29 +225,45 @@ def main():
         os.makedirs(out, exist_ok=True)
         tf_path = os.path.join(out, "ct_bone.json")
         size = f"{a.size}x{a.size}"
-        common = ["--transfer", "ct-bone", "--size", size, "--view", "anterior",
-                  "--repeat", str(a.repeat)]
-        ours, text = run_volmorph(exe, [a.volume, "-o", os.path.join(out, "volmorph.png"),
-                                        "--save-transfer", tf_path] + common)
+        common = ["--transfer", "ct-bone", "--size", size, "--view", "anterior"]
+        plain_args = [a.volume, "-o", os.path.join(out, "volmorph.png"),
+                      "--save-transfer", tf_path] + common
+        _, _, text = run_volmorph(exe, plain_args)
         print(text)
         step = float(re.search(r"step ([0-9.]+)", text).group(1))
         with open(tf_path) as f:
             tf = json.load(f)
-        theirs, _, _ = vtk_render_times(a.volume, tf, step, a.size, a.repeat,
-                                             os.path.join(out, "vtk.png"))
+        geo = geometry(exe, a.volume)
+        win = vtk_renderer(a.volume, geo, tf, step, a.size)
+        vtk_png(win, os.path.join(out, "vtk.png"))
         h = os.path.join(out, "handles200.json")
-        handles_file(h, physical_bounds(exe, a.volume))
-        deformed, text = run_volmorph(exe, [a.volume, "-o", os.path.join(out, "deformed.png"),
-                                            "--handles", h, "--method", "affine",
-                                            "--grid", "33"] + common)
-        print(text)
-    print(f"\n{a.size}×{a.size} composite, CT bone, step {step:.3f}, median of {a.repeat}:")
-    print(f"  VTK vtkFixedPointVolumeRayCastMapper {theirs:9.1f} ms")
-    print(f"  volmorph                             {ours:9.1f} ms   "
-          f"VTK / volmorph = {theirs / ours:.2f} (target ≥ 2)")
-    print(f"  volmorph, 200-handle MLS on 33³      {deformed:9.1f} ms   "
-          f"deformed / undeformed = {deformed / ours:.2f} (target ≤ 1.5)")
-
+        handles_file(h, geo["bounds"])
+        deformed_args = [a.volume, "-o", os.path.join(out, "deformed.png"),
+                         "--handles", h, "--method", "affine", "--grid", "33"] + common
+        rounds = []
+        for r in range(a.rounds):
+            ours = volmorph_times(exe, plain_args, a.repeat)
+            theirs = vtk_times(win, a.repeat)
+            deformed = volmorph_times(exe, deformed_args, a.repeat)
+            if r == 0:
+                print(deformed[2])
+            rounds.append((ours[:2], theirs, deformed[:2]))
+            print(f"round {r + 1} (wall / CPU ms per picture): volmorph {ours[0]:.1f} / "
+                  f"{ours[1]:.1f}, VTK {theirs[0]:.1f} / {theirs[1]:.1f}, deformed "
+                  f"{deformed[0]:.1f} / {deformed[1]:.1f}")
+    med = statistics.median
+    print(f"\n{a.size}×{a.size} composite, CT bone, step {step:.3f}; medians over {a.rounds} "
+          f"rounds of {a.repeat} pictures (ratios: medians of the per-round ratios)")
+    print("                                        wall ms    CPU ms")
+    for name, k in [("VTK vtkFixedPointVolumeRayCastMapper", 1), ("volmorph", 0),
+                    ("volmorph, 200-handle MLS on 33³", 2)]:
+        print(f"  {name:36s} {med(r[k][0] for r in rounds):9.1f} "
+              f"{med(r[k][1] for r in rounds):9.1f}")
+    for what, i in [("wall", 0), ("CPU", 1)]:
+        speedup = med(r[1][i] / r[0][i] for r in rounds)
+        slowdown = med(r[2][i] / r[0][i] for r in rounds)
+        print(f"  {what:4s}: VTK / volmorph = {speedup:.2f} (target ≥ 2), "
+              f"deformed / undeformed = {slowdown:.2f} (target ≤ 1.5)")
 
 if __name__ == "__main__":
     main()

@@ -1,7 +1,10 @@
 //! Cube cutting (McPhail ch. 2): proxy-polygon generation time for 64–1024 view-aligned
 //! slices by the table-driven sweep, Rezk-Salama and Kolb's per-vertex method and clipping,
-//! on a single cube and on the octree-culled teapot at 256³ (a largely empty volume, as the
-//! thesis' Fig. 2.9). Target: 256 slices over the octree-culled 256³ volume in at most 2 ms.
+//! on a single cube, on the octree-culled teapot at 256³ (a largely empty volume, as the
+//! thesis' Fig. 2.9) and on the octree-culled cranium CT under the CT bone preset (when the
+//! file is present: `VOLMORPH_BENCH_CT`, or `../shared/data/volumes/cranium_ct.nii.gz` from
+//! the workspace root; the group is skipped otherwise). Target: 256 slices over the
+//! octree-culled 256³ volume in at most 2 ms.
 //!
 //! `cargo bench -p volmorph-render --bench cubecut`
 
@@ -12,7 +15,7 @@ use glam::{DMat3, DVec3};
 use volmorph_render::cubecut::cut_box;
 use volmorph_render::{
     CutMethod, DvrOptions, DvrRenderer, DvrVolume, ProxyBox, ProxyGeometry, Slicing,
-    TransferFunction,
+    TransferFunction, TransferPreset,
 };
 use volmorph_volume::AnyVolume;
 use volmorph_volume::phantom::{Phantom, density};
@@ -59,10 +62,35 @@ fn octree_culled(c: &mut Criterion) {
     let dv = DvrVolume::new(&AnyVolume::from(teapot)).expect("prepare");
     let tf = TransferFunction::parse("0:0,0,0,0; 126:0,0,0,0; 127:1,1,1,0.5; 255:1,1,1,1")
         .expect("transfer function");
-    let r = DvrRenderer::new(&dv, DvrOptions::new(tf)).expect("renderer");
+    culled(c, "cubecut_teapot256_culled", &dv, tf);
+}
+
+fn ct_culled(c: &mut Criterion) {
+    let path = std::env::var_os("VOLMORPH_BENCH_CT").map_or_else(
+        || {
+            std::path::Path::new(env!("CARGO_MANIFEST_DIR"))
+                .join("../../../shared/data/volumes/cranium_ct.nii.gz")
+        },
+        std::path::PathBuf::from,
+    );
+    if !path.is_file() {
+        eprintln!("cubecut_ct_culled skipped: no CT at {}", path.display());
+        return;
+    }
+    let volume = volmorph_volume_io::read(&path).expect("CT volume");
+    let dv = DvrVolume::new(&volume).expect("prepare");
+    let tf = TransferPreset::CtBone
+        .build(dv.value_range())
+        .expect("transfer function");
+    culled(c, "cubecut_ct_culled", &dv, tf);
+}
+
+/// Proxy geometry of the octree nodes of `dv` visible under `tf`, per method and slice count.
+fn culled(c: &mut Criterion, name: &str, dv: &DvrVolume, tf: TransferFunction) {
+    let r = DvrRenderer::new(dv, DvrOptions::new(tf)).expect("renderer");
     // Octree level 2: nodes of 16³ cells, the thesis' depth 4 on a 256³ volume.
     let level = 2;
-    let mut g = c.benchmark_group("cubecut_teapot256_culled");
+    let mut g = c.benchmark_group(name);
     g.sample_size(30);
     let mut out = ProxyGeometry::default();
     for n in SLICES {
@@ -82,5 +110,5 @@ fn octree_culled(c: &mut Criterion) {
     g.finish();
 }
 
-criterion_group!(benches, single_cube, octree_culled);
+criterion_group!(benches, single_cube, octree_culled, ct_culled);
 criterion_main!(benches);

@@ -460,7 +460,7 @@ impl DvrRenderer<'_> {
                     },
                     |s| {
                         if s == 0.0 {
-                            (jac(c) * to_grid).transpose() * vol.gradient(u)
+                            (jac(c) * to_grid).transpose() * vol.gradient_cell(cell, f)
                         } else {
                             let c = c - d * (self.step * s);
                             view.jacobian_at(c, to_grid).transpose() * vol.gradient(view.map_at(c))

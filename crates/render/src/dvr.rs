@@ -330,27 +330,33 @@ impl DvrVolume {
     /// inside the grid.
     #[inline(always)]
     pub(crate) fn gradient(&self, u: Vec3) -> Vec3 {
-        let g = self.gradients();
         let [nx, ny, nz] = self.dims;
-        let cell = |x: f32, n: usize| -> (usize, f32) {
-            let x = x.clamp(0.0, (n - 1) as f32);
-            let i = (x as i32).clamp(0, n as i32 - 2) as usize;
-            (i, x - i as f32)
-        };
-        let (i, fx) = cell(u.x, nx);
-        let (j, fy) = cell(u.y, ny);
-        let (k, fz) = cell(u.z, nz);
-        let o = i + nx * (j + ny * k);
+        let u = u.clamp(
+            Vec3::ZERO,
+            Vec3::new((nx - 1) as f32, (ny - 1) as f32, (nz - 1) as f32),
+        );
+        let (o, f) = self.cell_of(u);
+        self.gradient_cell(o, f)
+    }
+
+    /// [`Self::gradient`] in the cell at offset `o` with fractions `f` (see
+    /// [`Self::cell_of`]): for a sample whose cell is known, equal to `gradient(u)` for `u`
+    /// in the grid box.
+    #[inline(always)]
+    pub(crate) fn gradient_cell(&self, o: usize, f: Vec3) -> Vec3 {
+        let [nx, ny, _] = self.dims;
         let (sy, sz) = (nx, nx * ny);
+        // One bounds check for the eight corners.
+        let g = &self.gradients()[o..o + sz + sy + 2];
         let v = |n: usize| {
             let [a, b, c] = g[n];
             Vec3::new(f32::from(a), f32::from(b), f32::from(c))
         };
-        let c00 = v(o).lerp(v(o + 1), fx);
-        let c10 = v(o + sy).lerp(v(o + sy + 1), fx);
-        let c01 = v(o + sz).lerp(v(o + sz + 1), fx);
-        let c11 = v(o + sz + sy).lerp(v(o + sz + sy + 1), fx);
-        c00.lerp(c10, fy).lerp(c01.lerp(c11, fy), fz)
+        let c00 = v(0).lerp(v(1), f.x);
+        let c10 = v(sy).lerp(v(sy + 1), f.x);
+        let c01 = v(sz).lerp(v(sz + 1), f.x);
+        let c11 = v(sz + sy).lerp(v(sz + sy + 1), f.x);
+        c00.lerp(c10, f.y).lerp(c01.lerp(c11, f.y), f.z)
     }
 
     /// The per-voxel gradients, computed on first use (in parallel over z-slices).
@@ -746,7 +752,14 @@ impl<'a> DvrRenderer<'a> {
                 let stop = acc.add(
                     q,
                     || (t - self.step >= t0).then(|| vol.sample(o + d * (t - self.step))),
-                    |s| grad_to_world * vol.gradient(u - d * (self.step * s)),
+                    |s| {
+                        grad_to_world
+                            * if s == 0.0 {
+                                vol.gradient_cell(cell, f)
+                            } else {
+                                vol.gradient(u - d * (self.step * s))
+                            }
+                    },
                 );
                 k += 1;
                 if stop {
