@@ -9,7 +9,9 @@ use std::path::PathBuf;
 use pyo3::prelude::*;
 use volmorph_volume::sample::Interpolation;
 use volmorph_volume::{IndexBox, VoxelType};
-use volmorph_volume_io::omezarr::{self, OmeZarrReader, OmeZarrWriter, ZarrVersion, ZarrWriteOptions};
+use volmorph_volume_io::omezarr::{
+    self, OmeZarrReader, OmeZarrWriter, ZarrVersion, ZarrWriteOptions,
+};
 use volmorph_warp::apply::WarpMethod;
 use volmorph_warp::chunked::{
     chunk_geometry, chunk_indices, chunk_preimage as preimage, preimage_box, pull_chunk,
@@ -29,7 +31,9 @@ fn options(method: &str, background: f64) -> PyResult<ResampleOptions> {
         .parse()
         .map_err(|e: volmorph_warp::WarpError| to_py(crate::error::InputError::new_err, &e))?;
     if !background.is_finite() {
-        return Err(input(format!("background must be finite, got {background}")));
+        return Err(input(format!(
+            "background must be finite, got {background}"
+        )));
     }
     match m.interpolation().filter(|_| m.is_pullback()) {
         Some(i @ (Interpolation::Linear | Interpolation::Nearest)) => {
@@ -183,7 +187,11 @@ pub fn warp_zarr_chunk(
 /// OME-Zarr image at `path` (metadata only).
 #[pyfunction]
 #[pyo3(signature = (path, level=0))]
-pub fn zarr_info(py: Python<'_>, path: PathBuf, level: usize) -> PyResult<(PyGeometry, String, Zyx)> {
+pub fn zarr_info(
+    py: Python<'_>,
+    path: PathBuf,
+    level: usize,
+) -> PyResult<(PyGeometry, String, Zyx)> {
     let r = py
         .detach(|| OmeZarrReader::open_level(&path, level))
         .map_err(|e| to_py(FileError::new_err, &e))?;
@@ -255,7 +263,8 @@ impl PyOmeZarrWriter {
         zarr_version: u8,
         levels: Option<usize>,
     ) -> PyResult<Self> {
-        let vt = VoxelType::parse(dtype).ok_or_else(|| input(format!("unsupported dtype {dtype}")))?;
+        let vt =
+            VoxelType::parse(dtype).ok_or_else(|| input(format!("unsupported dtype {dtype}")))?;
         let version = match zarr_version {
             2 => ZarrVersion::V2,
             3 => ZarrVersion::V3,

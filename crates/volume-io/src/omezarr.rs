@@ -309,7 +309,9 @@ pub fn parse_attributes(bytes: &[u8], version: ZarrVersion) -> Result<Multiscale
             .ok_or_else(|| fmt_err(format!("{field}.path is missing")))?;
         if path.is_empty()
             || path.starts_with('/')
-            || path.split('/').any(|p| p == ".." || p == "." || p.is_empty())
+            || path
+                .split('/')
+                .any(|p| p == ".." || p == "." || p.is_empty())
         {
             return Err(fmt_err(format!(
                 "{field}.path `{path}` is not a relative path inside the image"
@@ -317,9 +319,9 @@ pub fn parse_attributes(bytes: &[u8], version: ZarrVersion) -> Result<Multiscale
         }
         let mut scale = vec![1.0; n];
         let mut translation = vec![0.0; n];
-        let list = d.get("coordinateTransformations").ok_or_else(|| {
-            fmt_err(format!("{field}.coordinateTransformations is missing"))
-        })?;
+        let list = d
+            .get("coordinateTransformations")
+            .ok_or_else(|| fmt_err(format!("{field}.coordinateTransformations is missing")))?;
         fold_transforms(
             list,
             n,
@@ -338,7 +340,7 @@ pub fn parse_attributes(bytes: &[u8], version: ZarrVersion) -> Result<Multiscale
         }
         let xyz = |v: &[f64]| [v[n - 1], v[n - 2], v[n - 3]];
         let scale = xyz(&scale);
-        if scale.iter().any(|&s| !(s > 0.0) || !s.is_finite()) {
+        if scale.iter().any(|&s| !(s.is_finite() && s > 0.0)) {
             return Err(fmt_err(format!(
                 "{field}: spatial scale {scale:?} (x, y, z) is not positive"
             )));
@@ -800,7 +802,11 @@ impl OmeZarrWriter {
             ]);
             let name = path
                 .file_name()
-                .map(|n| n.to_string_lossy().trim_end_matches(".ome.zarr").to_string())
+                .map(|n| {
+                    n.to_string_lossy()
+                        .trim_end_matches(".ome.zarr")
+                        .to_string()
+                })
                 .unwrap_or_default();
             let (v3type, v2type) = zarr_type_names(voxel_type);
             match options.version {
@@ -968,7 +974,9 @@ impl OmeZarrWriter {
             Ok(())
         };
         go().map_err(|e| e.at(&target))?;
-        self.dir.commit().map_err(|e| VolumeError::from(e).at(&target))
+        self.dir
+            .commit()
+            .map_err(|e| VolumeError::from(e).at(&target))
     }
 }
 
@@ -982,9 +990,8 @@ impl OmeZarrWriter {
 /// type or size.
 pub fn store_chunk(staging: &Path, region: IndexBox, data: &AnyVolume) -> Result<(), VolumeError> {
     let go = || -> Result<(), VolumeError> {
-        let store = Arc::new(
-            FilesystemStore::new(staging).map_err(|e| zerr("cannot open the store", e))?,
-        );
+        let store =
+            Arc::new(FilesystemStore::new(staging).map_err(|e| zerr("cannot open the store", e))?);
         let array = Array::open(store, "/0").map_err(|e| zerr("array 0", e))?;
         let vt = voxel_type_of(array.data_type());
         if vt != Some(data.voxel_type()) {
@@ -1002,7 +1009,11 @@ pub fn store_chunk(staging: &Path, region: IndexBox, data: &AnyVolume) -> Result
             return Err(fmt_err("array 0 is not 3-D"));
         }
         let dims = [shape[2] as usize, shape[1] as usize, shape[0] as usize];
-        let chunk = [cs[2].get() as usize, cs[1].get() as usize, cs[0].get() as usize];
+        let chunk = [
+            cs[2].get() as usize,
+            cs[1].get() as usize,
+            cs[0].get() as usize,
+        ];
         write_level_chunk(&array, chunk, dims, region, data)
     };
     go().map_err(|e| e.at(staging))
@@ -1099,8 +1110,29 @@ fn write_level_chunk(
         (region.start[1] / chunk[1]) as u64,
         (region.start[0] / chunk[0]) as u64,
     ];
-    let res = volmorph_volume::with_volume!(data, v => array.store_chunk(&idx, v.data()));
+    let res = volmorph_volume::with_volume!(data, v => {
+        let d = v.dims();
+        if d == chunk {
+            array.store_chunk(&idx, v.data())
+        } else {
+            // Zarr chunks at the far edges keep the full chunk shape: pad with the fill value.
+            array.store_chunk(&idx, padded(v.data(), d, chunk))
+        }
+    });
     res.map_err(|e| zerr("writing a chunk", e))
+}
+
+/// `data` (`dims` voxels, x fastest) in the corner of a zero-filled block of `chunk` voxels.
+fn padded<T: Voxel>(data: &[T], dims: [usize; 3], chunk: [usize; 3]) -> Vec<T> {
+    let mut out = vec![T::default(); chunk[0] * chunk[1] * chunk[2]];
+    for z in 0..dims[2] {
+        for y in 0..dims[1] {
+            let src = dims[0] * (y + dims[1] * z);
+            let dst = chunk[0] * (y + chunk[1] * z);
+            out[dst..dst + dims[0]].copy_from_slice(&data[src..src + dims[0]]);
+        }
+    }
+    out
 }
 
 /// Write `volume` as an OME-Zarr store with a pyramid (see the [module docs](self)).

@@ -13,9 +13,7 @@ fn sample(dims: [usize; 3]) -> AnyVolume {
     let g = Geometry::new(dims)
         .with_spacing(DVec3::new(0.5, 0.75, 2.0))
         .with_origin(DVec3::new(-3.25, 10.0, 0.125));
-    AnyVolume::from(
-        Volume::<u16>::from_fn(g, |i, j, k| (i * 3 + j * 50 + k * 977) as u16).unwrap(),
-    )
+    AnyVolume::from(Volume::<u16>::from_fn(g, |i, j, k| (i * 3 + j * 50 + k * 977) as u16).unwrap())
 }
 
 fn opts(version: ZarrVersion, chunk: [usize; 3]) -> ZarrWriteOptions {
@@ -31,7 +29,10 @@ fn opts(version: ZarrVersion, chunk: [usize; 3]) -> ZarrWriteOptions {
 fn round_trip_v2_and_v3_keeps_voxels_and_geometry() {
     let dir = tempfile::tempdir().unwrap();
     let v = sample([37, 29, 23]);
-    for (version, name) in [(ZarrVersion::V2, "a.ome.zarr"), (ZarrVersion::V3, "b.ome.zarr")] {
+    for (version, name) in [
+        (ZarrVersion::V2, "a.ome.zarr"),
+        (ZarrVersion::V3, "b.ome.zarr"),
+    ] {
         let p = dir.path().join(name);
         omezarr::write(&p, &v, &opts(version, [16, 10, 7])).unwrap();
         let r = OmeZarrReader::open(&p).unwrap();
@@ -71,7 +72,9 @@ fn pyramid_levels_halve_and_average_blocks() {
     assert_eq!(g1.spacing, g0.spacing * 2.0);
     // Voxel 0 of level 1 is the centre of the first 2×2×2 block of level 0.
     assert_eq!(g1.origin, g0.origin + 0.5 * g0.spacing);
-    let AnyVolume::U16(l1) = r1.read_all().unwrap() else { panic!() };
+    let AnyVolume::U16(l1) = r1.read_all().unwrap() else {
+        panic!()
+    };
     let AnyVolume::U16(l0) = &v else { panic!() };
     for (i, j, k) in [(0, 0, 0), (5, 7, 3), (18, 14, 11)] {
         let mut sum = 0.0;
@@ -99,11 +102,15 @@ fn read_box_equals_the_same_box_of_the_whole() {
         start: [7, 3, 4],
         end: [30, 19, 17],
     };
-    let AnyVolume::U16(part) = r.read_box(b).unwrap() else { panic!() };
+    let AnyVolume::U16(part) = r.read_box(b).unwrap() else {
+        panic!()
+    };
     let AnyVolume::U16(whole) = &v else { panic!() };
     assert_eq!(
         part.geometry().origin,
-        whole.geometry().index_to_physical(DVec3::new(7.0, 3.0, 4.0))
+        whole
+            .geometry()
+            .index_to_physical(DVec3::new(7.0, 3.0, 4.0))
     );
     for k in 0..13 {
         for j in 0..16 {
@@ -168,7 +175,9 @@ fn hand_written_v2_store_with_time_and_channel_axes_reads() {
     assert_eq!(g.origin, DVec3::new(6.0, 4.0, 2.0));
     assert_eq!(g.direction, DMat3::IDENTITY);
     assert_eq!(r.multiscale().units[0].as_deref(), Some("micrometer"));
-    let AnyVolume::F32(v) = r.read_all().unwrap() else { panic!() };
+    let AnyVolume::F32(v) = r.read_all().unwrap() else {
+        panic!()
+    };
     for (i, j, k) in [(0, 0, 0), (3, 2, 1), (2, 1, 0)] {
         assert_eq!(v[[i, j, k]], (100 * k + 10 * j + i) as f32);
     }
@@ -204,7 +213,9 @@ fn failed_rewrite_keeps_the_old_store() {
 }
 
 fn err(json: &str, version: ZarrVersion) -> String {
-    parse_attributes(json.as_bytes(), version).unwrap_err().to_string()
+    parse_attributes(json.as_bytes(), version)
+        .unwrap_err()
+        .to_string()
 }
 
 #[test]
@@ -218,7 +229,10 @@ fn malformed_metadata_names_the_field() {
         v2,
     );
     assert!(e.contains("axes[0] is `x`"), "{e}");
-    let e = err(&format!(r#"{{"multiscales": [{{{axes}, "datasets": []}}]}}"#), v2);
+    let e = err(
+        &format!(r#"{{"multiscales": [{{{axes}, "datasets": []}}]}}"#),
+        v2,
+    );
     assert!(e.contains("datasets is missing or empty"), "{e}");
     let e = err(
         &format!(
@@ -233,7 +247,10 @@ fn malformed_metadata_names_the_field() {
         ),
         v2,
     );
-    assert!(e.contains("datasets[0].coordinateTransformations[0].scale has 2 values"), "{e}");
+    assert!(
+        e.contains("datasets[0].coordinateTransformations[0].scale has 2 values"),
+        "{e}"
+    );
     let e = err(
         &format!(
             r#"{{"multiscales": [{{{axes}, "datasets": [{{"path": "../x", "coordinateTransformations": []}}]}}]}}"#
@@ -263,7 +280,10 @@ fn not_an_ome_zarr_folder_is_a_clear_error() {
     let p = dir.path().join("empty.ome.zarr");
     std::fs::create_dir(&p).unwrap();
     let e = format::read(&p).unwrap_err().to_string();
-    assert!(e.contains("empty.ome.zarr") && e.contains("not an OME-Zarr image"), "{e}");
+    assert!(
+        e.contains("empty.ome.zarr") && e.contains("not an OME-Zarr image"),
+        "{e}"
+    );
     let missing = Path::new("/nonexistent/none.ome.zarr");
     assert!(format::read(missing).is_err());
 }

@@ -127,12 +127,11 @@ pub fn chunk_indices<M: SpaceMap + ?Sized>(
     let to_index = IndexMap::new(input);
     let cd = [0, 1, 2].map(|a| chunk.end[a] - chunk.start[a]);
     let n = cd[0] * cd[1] * cd[2];
-    let mut out = volmorph_io::try_vec("chunk index", n, DVec3::ZERO).map_err(|_| {
-        WarpError::Allocation {
+    let mut out =
+        volmorph_io::try_vec("chunk index", n, DVec3::ZERO).map_err(|_| WarpError::Allocation {
             what: "chunk index",
             bytes: n.saturating_mul(std::mem::size_of::<DVec3>()),
-        }
-    })?;
+        })?;
     // The tiles of `pullback::resample`: anchored at multiples of the tile edge, clipped to
     // the output grid.
     let [nx, ny, nz] = output.dims;
@@ -145,14 +144,16 @@ pub fn chunk_indices<M: SpaceMap + ?Sized>(
                 let dims = [t[0].min(nx - x0), t[1].min(ny - y0), t[2].min(nz - z0)];
                 let tile = Geometry {
                     dims,
-                    origin: output.index_to_physical(DVec3::new(
-                        x0 as f64, y0 as f64, z0 as f64,
-                    )),
+                    origin: output.index_to_physical(DVec3::new(x0 as f64, y0 as f64, z0 as f64)),
                     ..*output
                 };
                 points.resize(dims[0] * dims[1] * dims[2], DVec3::ZERO);
                 map.apply_grid(&tile, &mut points)?;
-                let lo = [x0.max(chunk.start[0]), y0.max(chunk.start[1]), z0.max(chunk.start[2])];
+                let lo = [
+                    x0.max(chunk.start[0]),
+                    y0.max(chunk.start[1]),
+                    z0.max(chunk.start[2]),
+                ];
                 let hi = [
                     (x0 + dims[0]).min(chunk.end[0]),
                     (y0 + dims[1]).min(chunk.end[1]),
@@ -180,7 +181,11 @@ pub fn chunk_indices<M: SpaceMap + ?Sized>(
 /// the clamped boundary points are clamped first. The box is empty when no point reads any
 /// voxel.
 #[must_use]
-pub fn preimage_box(indices: &[DVec3], input_dims: [usize; 3], options: &ResampleOptions) -> IndexBox {
+pub fn preimage_box(
+    indices: &[DVec3],
+    input_dims: [usize; 3],
+    options: &ResampleOptions,
+) -> IndexBox {
     let n = input_dims.map(|d| d as f64);
     let clamp = matches!(options.boundary, Boundary::Clamp);
     let mut lo = [f64::INFINITY; 3];
@@ -289,12 +294,13 @@ fn sample_typed<T: Voxel>(
     options: &ResampleOptions,
 ) -> Result<Volume<T>, WarpError> {
     let sampler = Sampler::new(region, options.interpolation, options.boundary)?;
-    let mut out = volmorph_io::try_vec("chunk output", indices.len(), T::default()).map_err(
-        |_| WarpError::Allocation {
-            what: "chunk output",
-            bytes: indices.len().saturating_mul(std::mem::size_of::<T>()),
-        },
-    )?;
+    let mut out =
+        volmorph_io::try_vec("chunk output", indices.len(), T::default()).map_err(|_| {
+            WarpError::Allocation {
+                what: "chunk output",
+                bytes: indices.len().saturating_mul(std::mem::size_of::<T>()),
+            }
+        })?;
     sampler.sample_index_serial(indices, &mut out)?;
     Volume::new(*chunk_grid, out).map_err(|source| WarpError::Geometry {
         what: "chunk grid",
@@ -331,7 +337,13 @@ pub fn pull_chunk<M: SpaceMap + ?Sized>(
             got: region.geometry().len(),
         });
     }
-    sample_chunk(&mut idx, &region, b.start, &chunk_geometry(output, chunk), options)
+    sample_chunk(
+        &mut idx,
+        &region,
+        b.start,
+        &chunk_geometry(output, chunk),
+        options,
+    )
 }
 
 /// Pull-back of `input` (read box by box through `read`) onto `output`, chunk by chunk over

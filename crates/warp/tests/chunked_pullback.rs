@@ -17,16 +17,22 @@ use volmorph_warp::pullback::{ResampleOptions, resample_any};
 /// A u16 volume with structure on every axis (no two neighbours equal).
 fn source(g: Geometry) -> AnyVolume {
     AnyVolume::from(
-        Volume::<u16>::from_fn(g, |i, j, k| ((i * 37 + j * 101 + k * 251) % 4093) as u16 * 13)
-            .unwrap(),
+        Volume::<u16>::from_fn(g, |i, j, k| {
+            ((i * 37 + j * 101 + k * 251) % 4093) as u16 * 13
+        })
+        .unwrap(),
     )
 }
 
 /// A cubic lattice around `g` with every control point moved by up to `amp` physical units.
 fn bent_lattice(g: &Geometry, amp: f64, seed: u64) -> BSplineLattice {
     let corners = g.corner_points();
-    let lo = corners.iter().fold(DVec3::splat(f64::INFINITY), |a, &c| a.min(c));
-    let hi = corners.iter().fold(DVec3::splat(f64::NEG_INFINITY), |a, &c| a.max(c));
+    let lo = corners
+        .iter()
+        .fold(DVec3::splat(f64::INFINITY), |a, &c| a.min(c));
+    let hi = corners
+        .iter()
+        .fold(DVec3::splat(f64::NEG_INFINITY), |a, &c| a.max(c));
     let mut lat = BSplineLattice::uniform_cubic_around(lo, hi, [6, 5, 7]).unwrap();
     let mut rng = Rng::new(seed);
     for k in 0..7 {
@@ -55,17 +61,26 @@ fn assert_chunked_equals_full(
     let chunks = boxes(output.dims, chunk);
     let ig = *input.geometry();
     let read = |b: IndexBox| -> Result<AnyVolume, WarpError> {
-        assert!(!b.is_empty() && (0..3).all(|a| b.end[a] <= ig.dims[a]), "{b:?}");
+        assert!(
+            !b.is_empty() && (0..3).all(|a| b.end[a] <= ig.dims[a]),
+            "{b:?}"
+        );
         Ok(crop(input, b))
     };
     warp_chunked(map, &ig, output, &chunks, options, read, |c, v| {
         let g = chunk_geometry(output, c);
         assert_eq!(v.geometry(), &g);
-        let AnyVolume::U16(v) = v else { panic!("type changed") };
+        let AnyVolume::U16(v) = v else {
+            panic!("type changed")
+        };
         let mut o = out.lock().unwrap();
         let [nx, ny, _] = output.dims;
         for (n, &x) in v.data().iter().enumerate() {
-            let (i, j, k) = (n % g.dims[0], (n / g.dims[0]) % g.dims[1], n / (g.dims[0] * g.dims[1]));
+            let (i, j, k) = (
+                n % g.dims[0],
+                (n / g.dims[0]) % g.dims[1],
+                n / (g.dims[0] * g.dims[1]),
+            );
             o[c.start[0] + i + nx * (c.start[1] + j + ny * (c.start[2] + k))] = x;
         }
         Ok(())
@@ -84,7 +99,11 @@ fn boxes(dims: [usize; 3], chunk: [usize; 3]) -> Vec<IndexBox> {
             for x in (0..dims[0]).step_by(chunk[0]) {
                 v.push(IndexBox {
                     start: [x, y, z],
-                    end: [(x + chunk[0]).min(dims[0]), (y + chunk[1]).min(dims[1]), (z + chunk[2]).min(dims[2])],
+                    end: [
+                        (x + chunk[0]).min(dims[0]),
+                        (y + chunk[1]).min(dims[1]),
+                        (z + chunk[2]).min(dims[2]),
+                    ],
                 });
             }
         }
@@ -97,7 +116,10 @@ fn crop(v: &AnyVolume, b: IndexBox) -> AnyVolume {
     let d = [0, 1, 2].map(|a| b.end[a] - b.start[a]);
     let g = Geometry::new(d);
     AnyVolume::from(
-        Volume::<u16>::from_fn(g, |i, j, k| v[[b.start[0] + i, b.start[1] + j, b.start[2] + k]]).unwrap(),
+        Volume::<u16>::from_fn(g, |i, j, k| {
+            v[[b.start[0] + i, b.start[1] + j, b.start[2] + k]]
+        })
+        .unwrap(),
     )
 }
 
@@ -109,7 +131,13 @@ fn chunked_linear_pullback_is_bit_identical_on_odd_chunks() {
     let input = source(g);
     let map = bent_lattice(&g, 2.5, 7);
     let opts = ResampleOptions::default();
-    for chunk in [[13, 7, 5], [64, 16, 8], [31, 37, 3], [70, 37, 29], [1, 9, 11]] {
+    for chunk in [
+        [13, 7, 5],
+        [64, 16, 8],
+        [31, 37, 3],
+        [70, 37, 29],
+        [1, 9, 11],
+    ] {
         assert_chunked_equals_full(&input, &map, &g, chunk, &opts);
     }
 }
@@ -150,7 +178,10 @@ fn preimage_box_covers_stencils_and_is_tight() {
     let g = Geometry::new([50, 40, 30]);
     let map = bent_lattice(&g, 2.0, 3);
     let opts = ResampleOptions::default();
-    let chunk = IndexBox { start: [10, 5, 7], end: [27, 19, 16] };
+    let chunk = IndexBox {
+        start: [10, 5, 7],
+        end: [27, 19, 16],
+    };
     let idx = chunk_indices(&map, &g, &g, chunk).unwrap();
     let b = chunk_preimage(&map, &g, &g, chunk, &opts).unwrap();
     assert_eq!(b, preimage_box(&idx, g.dims, &opts));
@@ -177,7 +208,10 @@ fn preimage_box_covers_stencils_and_is_tight() {
 fn chunked_pullback_refuses_cubic_and_mirror() {
     let g = Geometry::new([8, 8, 8]);
     let map = bent_lattice(&g, 0.5, 1);
-    let chunk = IndexBox { start: [0; 3], end: [4; 3] };
+    let chunk = IndexBox {
+        start: [0; 3],
+        end: [4; 3],
+    };
     for opts in [
         ResampleOptions::default().with_interpolation(Interpolation::CubicBSpline),
         ResampleOptions::default().with_boundary(Boundary::Mirror),
@@ -185,6 +219,9 @@ fn chunked_pullback_refuses_cubic_and_mirror() {
         let e = pull_chunk(&map, &g, &g, chunk, &opts, |_| unreachable!()).unwrap_err();
         assert!(matches!(e, WarpError::Unsupported(_)), "{e}");
     }
-    let outside = IndexBox { start: [0; 3], end: [9, 4, 4] };
+    let outside = IndexBox {
+        start: [0; 3],
+        end: [9, 4, 4],
+    };
     assert!(chunk_preimage(&map, &g, &g, outside, &ResampleOptions::default()).is_err());
 }

@@ -172,10 +172,9 @@ fn run_out_of_core(a: &Args) -> anyhow::Result<()> {
         );
     }
     use volmorph_volume::sample::Interpolation;
-    let interpolation = a
-        .method
-        .interpolation()
-        .filter(|i| a.method.is_pullback() && matches!(i, Interpolation::Linear | Interpolation::Nearest));
+    let interpolation = a.method.interpolation().filter(|i| {
+        a.method.is_pullback() && matches!(i, Interpolation::Linear | Interpolation::Nearest)
+    });
     let Some(interpolation) = interpolation else {
         anyhow::bail!(
             "out-of-core (OME-Zarr to OME-Zarr) warps are pull-backs: use --method \
