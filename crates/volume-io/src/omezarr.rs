@@ -1094,7 +1094,7 @@ fn write_level_chunk(
     data: &AnyVolume,
 ) -> Result<(), VolumeError> {
     let ok = (0..3).all(|a| {
-        region.start[a] % chunk[a] == 0
+        region.start[a].is_multiple_of(chunk[a])
             && region.end[a] == (region.start[a] + chunk[a]).min(dims[a])
     });
     if !ok || data.geometry().dims != [0, 1, 2].map(|a| region.end[a] - region.start[a]) {
