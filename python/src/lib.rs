@@ -6,6 +6,7 @@
 //! (`python/volmorph`) re-exports these names, adds the SimpleITK / nibabel conversions and
 //! the Dask graph, and carries the type stubs.
 
+mod chunked;
 mod error;
 mod maps;
 mod ops;
@@ -39,5 +40,12 @@ fn _volmorph(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add_function(wrap_pyfunction!(ops::ffd, m)?)?;
     m.add_function(wrap_pyfunction!(ops::read_mesh, m)?)?;
     m.add_function(wrap_pyfunction!(ops::write_mesh, m)?)?;
+    m.add_class::<chunked::PyOmeZarrWriter>()?;
+    m.add_function(wrap_pyfunction!(chunked::chunk_preimage, m)?)?;
+    m.add_function(wrap_pyfunction!(chunked::warp_chunk, m)?)?;
+    m.add_function(wrap_pyfunction!(chunked::warp_zarr_chunk, m)?)?;
+    m.add_function(wrap_pyfunction!(chunked::zarr_info, m)?)?;
+    m.add_function(wrap_pyfunction!(chunked::zarr_read_box, m)?)?;
+    m.add_function(wrap_pyfunction!(chunked::zarr_store_chunk, m)?)?;
     Ok(())
 }

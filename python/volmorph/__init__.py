@@ -195,3 +195,12 @@ def drag(
     if report["errors"]:
         raise WarpError(report["errors"][0][1])
     return scene.volume(w), scene.map(m), report
+
+
+def __getattr__(name: str):
+    """``volmorph.dask`` is imported on first use (it needs dask only then)."""
+    if name == "dask":
+        import importlib
+
+        return importlib.import_module(".dask", __name__)
+    raise AttributeError(f"module 'volmorph' has no attribute {name!r}")

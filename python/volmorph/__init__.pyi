@@ -39,3 +39,4 @@ def drag(
     freeze_boundary: bool = False,
     method: str = "pushforward-antialiased",
 ) -> Tuple[Volume, Map, dict]: ...
+from . import dask as dask

@@ -214,3 +214,55 @@ def ffd(
 ) -> _Mesh: ...
 def read_mesh(path: _Path) -> _Mesh: ...
 def write_mesh(path: _Path, vertices: _Points, faces: npt.ArrayLike) -> None: ...
+
+# Chunked pull-back and OME-Zarr stores (the Rust half of volmorph.dask). Boxes are (z, y, x).
+_Zyx = Tuple[int, int, int]
+
+def chunk_preimage(
+    map: Map,
+    input_geometry: Geometry,
+    output_geometry: Geometry,
+    start: _Zyx,
+    stop: _Zyx,
+    method: str = "pullback-linear",
+) -> Optional[Tuple[_Zyx, _Zyx]]: ...
+def warp_chunk(
+    region: Volume,
+    region_start: _Zyx,
+    map: Map,
+    input_geometry: Geometry,
+    output_geometry: Geometry,
+    start: _Zyx,
+    stop: _Zyx,
+    method: str = "pullback-linear",
+    background: float = 0.0,
+) -> Volume: ...
+def warp_zarr_chunk(
+    path: _Path,
+    map: Map,
+    output_geometry: Geometry,
+    start: _Zyx,
+    stop: _Zyx,
+    method: str = "pullback-linear",
+    background: float = 0.0,
+    level: int = 0,
+) -> Volume: ...
+def zarr_info(path: _Path, level: int = 0) -> Tuple[Geometry, str, _Zyx]: ...
+def zarr_read_box(path: _Path, start: _Zyx, stop: _Zyx, level: int = 0) -> Volume: ...
+def zarr_store_chunk(staging: _Path, start: _Zyx, data: Volume) -> None: ...
+
+class OmeZarrWriter:
+    def __init__(
+        self,
+        path: _Path,
+        geometry: Geometry,
+        dtype: str,
+        chunks: _Zyx,
+        zarr_version: int = 2,
+        levels: Optional[int] = None,
+    ) -> None: ...
+    @property
+    def staging(self) -> PathLike[str]: ...
+    @property
+    def chunks(self) -> _Zyx: ...
+    def finish(self) -> None: ...

@@ -65,12 +65,12 @@ enum Command {
     Studio(cmd::studio::Args),
     /// Print a volume file's header, geometry and value statistics.
     #[command(
-        after_help = "Examples:\n  volmorph info brain.nii.gz\n  volmorph info bold.nii.gz --frame 12\n  volmorph info dicom/ct_series/"
+        after_help = "Examples:\n  volmorph info brain.nii.gz\n  volmorph info bold.nii.gz --frame 12\n  volmorph info dicom/ct_series/\n  volmorph info cells.ome.zarr --header"
     )]
     Info(cmd::info::Args),
     /// Convert a volume between formats, with optional type casting and rescaling.
     #[command(
-        after_help = "Examples:\n  volmorph convert ct.nii.gz ct.mha --compress\n  volmorph convert ct.nrrd ct_u8.nii --type u8 --rescale\n  volmorph convert scan.raw scan.nii --raw-dims 256,256,128 --raw-type i16 --raw-spacing 0.9,0.9,1.5\n  volmorph convert dicom/ct_series/ ct.nii.gz\n  volmorph convert bold.nii.gz frame3.vti --frame 3"
+        after_help = "Examples:\n  volmorph convert ct.nii.gz ct.mha --compress\n  volmorph convert ct.nrrd ct_u8.nii --type u8 --rescale\n  volmorph convert scan.raw scan.nii --raw-dims 256,256,128 --raw-type i16 --raw-spacing 0.9,0.9,1.5\n  volmorph convert dicom/ct_series/ ct.nii.gz\n  volmorph convert bold.nii.gz frame3.vti --frame 3\n  volmorph convert ct.nii.gz ct.ome.zarr --zarr-version 3 --chunk 64,64,64"
     )]
     Convert(cmd::convert::Args),
     /// Write a PNG picture of an axis-aligned slice of a volume.
@@ -91,7 +91,7 @@ enum Command {
     /// Warp a volume through any map (lattice, handle map, NURBS geometry, composition, ITK
     /// transform).
     #[command(
-        after_help = "Examples:\n  volmorph warp ct.nii.gz --map moved.json -o warped.nii.gz --method pullback-cubic\n  volmorph warp model.nii.gz --map ffd.json -o deformed.nii.gz --method inverse-linear --nonconverged-mask failed.nii.gz\n  volmorph warp ct.nii.gz --map registration.tfm -o resampled.nii.gz\n  volmorph warp teapot.nii.gz --map bent.json -o bent.nii.gz --method pushforward-antialiased --pad 8\n  volmorph warp ct.nii.gz --map moved.json -o on_ref.nii.gz --like reference.nii.gz"
+        after_help = "Examples:\n  volmorph warp ct.nii.gz --map moved.json -o warped.nii.gz --method pullback-cubic\n  volmorph warp model.nii.gz --map ffd.json -o deformed.nii.gz --method inverse-linear --nonconverged-mask failed.nii.gz\n  volmorph warp ct.nii.gz --map registration.tfm -o resampled.nii.gz\n  volmorph warp teapot.nii.gz --map bent.json -o bent.nii.gz --method pushforward-antialiased --pad 8\n  volmorph warp ct.nii.gz --map moved.json -o on_ref.nii.gz --like reference.nii.gz\n  volmorph warp cells.ome.zarr --lattice moved.json -o warped.ome.zarr   (out of core, chunk by chunk)"
     )]
     Warp(cmd::warp::Args),
     /// Drag points of a volume to new places, or a start curve onto a goal curve in steps; the

@@ -9,6 +9,7 @@
 //! | `.vti` | VTK XML image data (with direction, VTK ≥ 9) | [`vti`] |
 //! | `.mgh`, `.mgz` | FreeSurfer MGH (4-D: one frame at a time) | [`mgh`] |
 //! | a folder, `.dcm`, `.dicom`, `.ima` (or the `DICM` preamble) | DICOM series and multi-frame files (read only) | [`dicom`] |
+//! | a `.ome.zarr` (or `.zarr`) folder | OME-Zarr: NGFF v0.4 on Zarr v2, v0.5 on Zarr v3, pyramids, box reads | [`omezarr`] |
 //! | `.raw` | headerless voxels, described by a [`raw::RawSpec`] | [`raw`] |
 //!
 //! Every reader returns the volume in volmorph's convention (see [`volmorph_volume::Geometry`]: ITK
@@ -47,6 +48,7 @@ pub mod metaimage;
 pub mod mgh;
 pub mod nifti;
 pub mod nrrd;
+pub mod omezarr;
 pub mod raw;
 mod text_header;
 pub mod vti;
@@ -77,6 +79,8 @@ pub enum Format {
     Dicom,
     /// Headerless raw voxels (`.raw`); reading needs a [`raw::RawSpec`].
     Raw,
+    /// OME-Zarr (a `.ome.zarr` or `.zarr` folder): see [`omezarr`].
+    OmeZarr,
 }
 
 impl Format {
@@ -86,6 +90,9 @@ impl Format {
     /// # Errors
     /// [`VolumeError::Unsupported`] for an unknown or missing extension.
     pub fn from_path(path: &Path) -> Result<Self, VolumeError> {
+        if omezarr::is_ome_zarr_path(path) {
+            return Ok(Self::OmeZarr);
+        }
         if path.is_dir() {
             return Ok(Self::Dicom);
         }
@@ -112,7 +119,7 @@ impl Format {
         } else {
             return Err(VolumeError::Unsupported(format!(
                 "cannot tell the volume format of {} from its extension \
-                 (known: .nii .nii.gz .mha .mhd .nrrd .nhdr .vtk .vti .mgh .mgz .raw, DICOM .dcm files or \
+                 (known: .nii .nii.gz .mha .mhd .nrrd .nhdr .vtk .vti .mgh .mgz .raw .ome.zarr, DICOM .dcm files or \
                  a folder of them)",
                 path.display()
             )));
@@ -132,6 +139,7 @@ impl Format {
             Self::Mgh => "FreeSurfer MGH",
             Self::Dicom => "DICOM",
             Self::Raw => "raw",
+            Self::OmeZarr => omezarr::FORMAT,
         }
     }
 }
@@ -354,6 +362,7 @@ pub fn read_with(path: &Path, options: &ReadOptions) -> Result<VolumeFile, Volum
         Format::Vti => single(vti::read(path)),
         Format::Mgh => mgh::read(path, choice),
         Format::Dicom => single(dicom::read(path)),
+        Format::OmeZarr => single(omezarr::read(path)),
         Format::Raw => Err(VolumeError::Unsupported(
             "a .raw file has no header: give its dims and voxel type (raw::RawSpec)".into(),
         )),
@@ -403,6 +412,14 @@ pub fn write_with(
                 .into(),
         )),
         Format::Raw => raw::write(path, volume, options),
+        Format::OmeZarr => omezarr::write(
+            path,
+            volume,
+            &omezarr::ZarrWriteOptions {
+                compress: true,
+                ..Default::default()
+            },
+        ),
     };
     res.map_err(|e| e.at(path))
 }
@@ -426,6 +443,8 @@ mod tests {
             ("x.mgh", Format::Mgh),
             ("IM0001.DCM", Format::Dicom),
             ("x.raw", Format::Raw),
+            ("cells.ome.zarr", Format::OmeZarr),
+            ("cells.ZARR", Format::OmeZarr),
         ] {
             assert_eq!(Format::from_path(Path::new(p)).unwrap(), f, "{p}");
         }

@@ -16,9 +16,12 @@
 //!   deformed by a free-form deformation without push-forward's holes and aliasing.
 //! * [`output`] — the output grid of a warp: the input's, padded (True 1992 §5.1, TSIZE >
 //!   ISIZE) or explicit.
+//! * [`chunked`] — pull-back chunk by chunk (out-of-core stores, Dask): each output chunk
+//!   reads only its exact preimage box of the input; bit for bit the in-memory pull-back.
 //! * [`jacobian`] — determinant maps of a map on a grid, and folding statistics.
 
 pub mod apply;
+pub mod chunked;
 mod error;
 pub mod incremental;
 pub mod inverse;

@@ -55,6 +55,16 @@ pub struct Args {
     /// For a .raw input: voxels are big-endian.
     #[arg(long)]
     pub raw_big_endian: bool,
+    /// For an OME-Zarr output: Zarr version, 2 (OME-NGFF v0.4) or 3 (v0.5).
+    #[arg(long, default_value_t = 2, value_parser = clap::value_parser!(u8).range(2..=3))]
+    pub zarr_version: u8,
+    /// For an OME-Zarr output: chunk shape "CX,CY,CZ" in voxels.
+    #[arg(long, value_name = "CX,CY,CZ")]
+    pub chunk: Option<String>,
+    /// For an OME-Zarr output: pyramid levels including full resolution (default: halve
+    /// until the coarsest level fits one chunk).
+    #[arg(long, value_name = "N")]
+    pub levels: Option<usize>,
 }
 
 /// Run `volmorph convert`.
@@ -86,11 +96,33 @@ pub fn run(args: &Args) -> anyhow::Result<()> {
     };
     pb.inc(1);
     pb.set_message(format!("writing {}", args.output.display()));
-    let opts = WriteOptions {
-        compress: args.compress,
-        level: args.level,
-    };
-    format::write_with(&args.output, &output, &opts).context("cannot write")?;
+    if format::Format::from_path(&args.output).ok() == Some(format::Format::OmeZarr) {
+        use format::omezarr::{self, ZarrVersion, ZarrWriteOptions};
+        let mut z = ZarrWriteOptions {
+            version: if args.zarr_version == 3 {
+                ZarrVersion::V3
+            } else {
+                ZarrVersion::V2
+            },
+            levels: args.levels,
+            ..ZarrWriteOptions::default()
+        };
+        if let Some(c) = &args.chunk {
+            z.chunk = args::triple(c).context("--chunk")?;
+        }
+        omezarr::write(&args.output, &output, &z)
+            .map_err(|e| e.at(&args.output))
+            .context("cannot write")?;
+    } else {
+        if args.chunk.is_some() || args.levels.is_some() {
+            anyhow::bail!("--chunk and --levels apply to OME-Zarr outputs (.ome.zarr) only");
+        }
+        let opts = WriteOptions {
+            compress: args.compress,
+            level: args.level,
+        };
+        format::write_with(&args.output, &output, &opts).context("cannot write")?;
+    }
     pb.finish_and_clear();
     Ok(())
 }

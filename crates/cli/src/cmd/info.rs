@@ -12,7 +12,8 @@ use crate::progress;
 /// Arguments of `volmorph info`.
 #[derive(Debug, clap::Args)]
 pub struct Args {
-    /// Volume file (.nii, .nii.gz, .mha, .mhd, .nrrd, .nhdr, .vtk, .vti, .mgh, .mgz, .dcm) or
+    /// Volume file (.nii, .nii.gz, .mha, .mhd, .nrrd, .nhdr, .vtk, .vti, .mgh, .mgz, .dcm, an
+    /// .ome.zarr store: level 0 and every level's scale and translation in the header) or
     /// a folder holding a DICOM series.
     pub input: PathBuf,
     /// Also print every header field of the file.

@@ -104,10 +104,20 @@ pub struct Args {
     /// (det J <= 0), 0 elsewhere.
     #[arg(long, value_name = "PATH")]
     pub nonconverged_mask: Option<PathBuf>,
+    /// OME-Zarr to OME-Zarr only: chunk shape of the output "CX,CY,CZ" (default: the
+    /// input's). The warp runs out of core, one output chunk at a time.
+    #[arg(long, value_name = "CX,CY,CZ")]
+    pub chunk: Option<String>,
 }
 
 /// Run `volmorph warp`.
 pub fn run(a: &Args) -> anyhow::Result<()> {
+    if out_of_core(a) {
+        return run_out_of_core(a);
+    }
+    if a.chunk.is_some() {
+        anyhow::bail!("--chunk applies to OME-Zarr to OME-Zarr warps (out of core) only");
+    }
     if a.nonconverged_mask.is_some() && !a.method.is_inverse() {
         anyhow::bail!("--nonconverged-mask needs an inverse-* method");
     }
@@ -137,6 +147,78 @@ pub fn run(a: &Args) -> anyhow::Result<()> {
         a.input.display(),
         map.summary(),
         a.method
+    );
+    Ok(())
+}
+
+/// `true` when both input and output are OME-Zarr stores: the warp runs out of core.
+fn out_of_core(a: &Args) -> bool {
+    use volmorph_volume_io::omezarr::is_ome_zarr_path;
+    is_ome_zarr_path(&a.input) && is_ome_zarr_path(&a.output)
+}
+
+/// OME-Zarr to OME-Zarr: [`volmorph_warp::chunked::warp_chunked`] over the output's chunks,
+/// each reading only its preimage box of the input store; the output store (with its
+/// pyramid) appears only when complete.
+fn run_out_of_core(a: &Args) -> anyhow::Result<()> {
+    use volmorph_volume_io::omezarr::{OmeZarrReader, OmeZarrWriter, ZarrWriteOptions};
+    use volmorph_warp::WarpError;
+    use volmorph_warp::chunked::warp_chunked;
+    use volmorph_warp::pullback::ResampleOptions;
+    if a.nonconverged_mask.is_some() || a.sampled.is_some() {
+        anyhow::bail!(
+            "--nonconverged-mask and --sampled are not available for out-of-core \
+             (OME-Zarr to OME-Zarr) warps"
+        );
+    }
+    use volmorph_volume::sample::Interpolation;
+    let interpolation = a.method.interpolation().filter(|i| {
+        a.method.is_pullback() && matches!(i, Interpolation::Linear | Interpolation::Nearest)
+    });
+    let Some(interpolation) = interpolation else {
+        anyhow::bail!(
+            "out-of-core (OME-Zarr to OME-Zarr) warps are pull-backs: use --method \
+             pullback-linear or pullback-nearest (not {})",
+            a.method
+        );
+    };
+    let pb = progress::spinner(format!("opening {}", a.input.display()));
+    let reader = OmeZarrReader::open(&a.input).context("cannot read the volume")?;
+    let map = read_map(&a.map).context("cannot read the map")?;
+    let grid = a.grid.resolve(reader.geometry())?;
+    let chunk = match &a.chunk {
+        Some(c) => crate::args::triple(c).context("--chunk")?,
+        None => reader.chunk(),
+    };
+    let options = ZarrWriteOptions {
+        version: reader.version(),
+        chunk,
+        ..ZarrWriteOptions::default()
+    };
+    let writer = OmeZarrWriter::create(&a.output, &grid, reader.voxel_type(), &options)
+        .context("cannot write")?;
+    let resample = ResampleOptions::new(interpolation, a.default);
+    let chunks = writer.chunk_boxes();
+    pb.set_message(format!("warping {} chunks ({})", chunks.len(), a.method));
+    warp_chunked(
+        &map,
+        reader.geometry(),
+        &grid,
+        &chunks,
+        &resample,
+        |b| reader.read_box(b).map_err(WarpError::from),
+        |b, v| writer.write_chunk(b, &v).map_err(WarpError::from),
+    )
+    .with_context(|| format!("cannot warp {}", a.input.display()))?;
+    pb.set_message(format!("writing the pyramid of {}", a.output.display()));
+    writer.finish().context("cannot write")?;
+    pb.finish_and_clear();
+    say!(
+        "warped {} by {} ({}, out of core, {} chunks)",
+        a.input.display(),
+        map.summary(),
+        a.method,
+        chunks.len()
     );
     Ok(())
 }

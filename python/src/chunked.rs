@@ -1,0 +1,314 @@
+//! Chunked pull-back and OME-Zarr stores, the Rust half of `volmorph.dask`.
+//!
+//! Boxes cross this boundary in numpy order: `start` and `stop` are `(z, y, x)` voxel indices
+//! (half-open), as dask slices them. Each call is one library call
+//! ([`volmorph_warp::chunked`], [`volmorph_volume_io::omezarr`]) with the GIL released.
+
+use std::path::PathBuf;
+
+use pyo3::prelude::*;
+use volmorph_volume::sample::Interpolation;
+use volmorph_volume::{IndexBox, VoxelType};
+use volmorph_volume_io::omezarr::{
+    self, OmeZarrReader, OmeZarrWriter, ZarrVersion, ZarrWriteOptions,
+};
+use volmorph_warp::apply::WarpMethod;
+use volmorph_warp::chunked::{
+    chunk_geometry, chunk_indices, chunk_preimage as preimage, preimage_box, pull_chunk,
+    sample_chunk,
+};
+use volmorph_warp::pullback::ResampleOptions;
+
+use crate::error::{FileError, WarpError, input, to_py};
+use crate::maps::PyMap;
+use crate::volume::{PyGeometry, PyVolume};
+
+type Zyx = (usize, usize, usize);
+
+/// The pull-back options of `method` (`pullback-linear` or `pullback-nearest`).
+fn options(method: &str, background: f64) -> PyResult<ResampleOptions> {
+    let m: WarpMethod = method
+        .parse()
+        .map_err(|e: volmorph_warp::WarpError| to_py(crate::error::InputError::new_err, &e))?;
+    if !background.is_finite() {
+        return Err(input(format!(
+            "background must be finite, got {background}"
+        )));
+    }
+    match m.interpolation().filter(|_| m.is_pullback()) {
+        Some(i @ (Interpolation::Linear | Interpolation::Nearest)) => {
+            Ok(ResampleOptions::new(i, background))
+        }
+        _ => Err(input(format!(
+            "chunked warps are pull-backs with linear or nearest interpolation \
+             (pullback-linear, pullback-nearest), not {method}: cubic B-splines prefilter \
+             the whole volume and push-forwards scatter across chunks"
+        ))),
+    }
+}
+
+/// The numpy dtype name of a voxel type.
+fn numpy_dtype(t: VoxelType) -> &'static str {
+    match t {
+        VoxelType::U8 => "uint8",
+        VoxelType::I8 => "int8",
+        VoxelType::U16 => "uint16",
+        VoxelType::I16 => "int16",
+        VoxelType::U32 => "uint32",
+        VoxelType::I32 => "int32",
+        VoxelType::F32 => "float32",
+        VoxelType::F64 => "float64",
+    }
+}
+
+/// `(z, y, x)` start and stop → an index box (x, y, z).
+fn index_box(start: Zyx, stop: Zyx) -> IndexBox {
+    IndexBox {
+        start: [start.2, start.1, start.0],
+        end: [stop.2, stop.1, stop.0],
+    }
+}
+
+fn zyx(b: IndexBox) -> (Zyx, Zyx) {
+    (
+        (b.start[2], b.start[1], b.start[0]),
+        (b.end[2], b.end[1], b.end[0]),
+    )
+}
+
+/// The box of `input` voxels (`(start, stop)`, each `(z, y, x)`) that the output chunk
+/// `start..stop` of `output` reads when pulled back through `map` with `method`, or `None`
+/// if it reads none (every voxel maps outside the input). Exact: computed from the indices
+/// the chunk samples, widened by the kernel support and a one-voxel margin.
+#[pyfunction]
+#[pyo3(signature = (map, input_geometry, output_geometry, start, stop, method="pullback-linear"))]
+pub fn chunk_preimage(
+    py: Python<'_>,
+    map: &PyMap,
+    input_geometry: PyGeometry,
+    output_geometry: PyGeometry,
+    start: Zyx,
+    stop: Zyx,
+    method: &str,
+) -> PyResult<Option<(Zyx, Zyx)>> {
+    let o = options(method, 0.0)?;
+    let b = py
+        .detach(|| {
+            preimage(
+                &map.inner,
+                &input_geometry.inner,
+                &output_geometry.inner,
+                index_box(start, stop),
+                &o,
+            )
+        })
+        .map_err(|e| to_py(WarpError::new_err, &e))?;
+    Ok((!b.is_empty()).then(|| zyx(b)))
+}
+
+/// Pull back the output chunk `start..stop` of `output` from `region`, the voxels of the box
+/// of the input starting at `region_start` (`(z, y, x)`); the box must hold the chunk's
+/// preimage (see `chunk_preimage`). The result equals the same voxels of
+/// `warp(volume, map, method, output)` bit for bit.
+#[pyfunction]
+#[pyo3(signature = (region, region_start, map, input_geometry, output_geometry, start, stop, method="pullback-linear", background=0.0))]
+#[allow(clippy::too_many_arguments)]
+pub fn warp_chunk(
+    py: Python<'_>,
+    region: &PyVolume,
+    region_start: Zyx,
+    map: &PyMap,
+    input_geometry: PyGeometry,
+    output_geometry: PyGeometry,
+    start: Zyx,
+    stop: Zyx,
+    method: &str,
+    background: f64,
+) -> PyResult<PyVolume> {
+    let o = options(method, background)?;
+    let data = region.to_rust(py)?;
+    let chunk = index_box(start, stop);
+    let rs = [region_start.2, region_start.1, region_start.0];
+    let out = py.detach(|| -> Result<_, String> {
+        let (ig, og) = (&input_geometry.inner, &output_geometry.inner);
+        let mut idx = chunk_indices(&map.inner, ig, og, chunk).map_err(|e| e.to_string())?;
+        let need = preimage_box(&idx, ig.dims, &o);
+        let have = data.geometry().dims;
+        let inside = need.is_empty()
+            || (0..3).all(|a| need.start[a] >= rs[a] && need.end[a] <= rs[a] + have[a]);
+        if !inside {
+            return Err(format!(
+                "the region (start {region_start:?}, shape {:?}) does not hold the chunk's \
+                 preimage {:?}",
+                (have[2], have[1], have[0]),
+                zyx(need)
+            ));
+        }
+        sample_chunk(&mut idx, &data, rs, &chunk_geometry(og, chunk), &o).map_err(|e| e.to_string())
+    });
+    let out = out.map_err(WarpError::new_err)?;
+    PyVolume::from_rust(py, out)
+}
+
+/// Pull back the output chunk `start..stop` of `output` from resolution `level` of the
+/// OME-Zarr image at `path`, reading only the chunk's preimage box of the store.
+#[pyfunction]
+#[pyo3(signature = (path, map, output_geometry, start, stop, method="pullback-linear", background=0.0, level=0))]
+#[allow(clippy::too_many_arguments)]
+pub fn warp_zarr_chunk(
+    py: Python<'_>,
+    path: PathBuf,
+    map: &PyMap,
+    output_geometry: PyGeometry,
+    start: Zyx,
+    stop: Zyx,
+    method: &str,
+    background: f64,
+    level: usize,
+) -> PyResult<PyVolume> {
+    let o = options(method, background)?;
+    let out = py.detach(|| -> Result<_, String> {
+        let reader = OmeZarrReader::open_level(&path, level).map_err(|e| e.to_string())?;
+        pull_chunk(
+            &map.inner,
+            reader.geometry(),
+            &output_geometry.inner,
+            index_box(start, stop),
+            &o,
+            |b| reader.read_box(b).map_err(volmorph_warp::WarpError::from),
+        )
+        .map_err(|e| e.to_string())
+    });
+    let out = out.map_err(WarpError::new_err)?;
+    PyVolume::from_rust(py, out)
+}
+
+/// The geometry, numpy dtype name and chunk shape `(z, y, x)` of resolution `level` of the
+/// OME-Zarr image at `path` (metadata only).
+#[pyfunction]
+#[pyo3(signature = (path, level=0))]
+pub fn zarr_info(
+    py: Python<'_>,
+    path: PathBuf,
+    level: usize,
+) -> PyResult<(PyGeometry, String, Zyx)> {
+    let r = py
+        .detach(|| OmeZarrReader::open_level(&path, level))
+        .map_err(|e| to_py(FileError::new_err, &e))?;
+    let c = r.chunk();
+    Ok((
+        PyGeometry {
+            inner: *r.geometry(),
+        },
+        numpy_dtype(r.voxel_type()).to_string(),
+        (c[2], c[1], c[0]),
+    ))
+}
+
+/// Read the box `start..stop` (`(z, y, x)`) of resolution `level` of the OME-Zarr image at
+/// `path` (only the chunks it overlaps).
+#[pyfunction]
+#[pyo3(signature = (path, start, stop, level=0))]
+pub fn zarr_read_box(
+    py: Python<'_>,
+    path: PathBuf,
+    start: Zyx,
+    stop: Zyx,
+    level: usize,
+) -> PyResult<PyVolume> {
+    let v = py
+        .detach(|| {
+            OmeZarrReader::open_level(&path, level).and_then(|r| r.read_box(index_box(start, stop)))
+        })
+        .map_err(|e| to_py(FileError::new_err, &e))?;
+    PyVolume::from_rust(py, v)
+}
+
+/// Write the chunk `start..` (`(z, y, x)`) of level 0 into the OME-Zarr store being written
+/// at `staging` (an `OmeZarrWriter`'s `staging` folder; any process may call this).
+#[pyfunction]
+pub fn zarr_store_chunk(
+    py: Python<'_>,
+    staging: PathBuf,
+    start: Zyx,
+    data: &PyVolume,
+) -> PyResult<()> {
+    let v = data.to_rust(py)?;
+    let d = v.geometry().dims;
+    let b = IndexBox {
+        start: [start.2, start.1, start.0],
+        end: [start.2 + d[0], start.1 + d[1], start.0 + d[2]],
+    };
+    py.detach(|| omezarr::store_chunk(&staging, b, &v))
+        .map_err(|e| to_py(FileError::new_err, &e))
+}
+
+/// An OME-Zarr store being written: chunks go into `staging` (from any process, with
+/// `zarr_store_chunk`); `finish()` builds the pyramid and renames the store into place.
+/// A writer dropped without `finish()` leaves nothing behind.
+#[pyclass(name = "OmeZarrWriter", module = "volmorph._volmorph", unsendable)]
+pub struct PyOmeZarrWriter {
+    inner: Option<OmeZarrWriter>,
+}
+
+#[pymethods]
+impl PyOmeZarrWriter {
+    #[new]
+    #[pyo3(signature = (path, geometry, dtype, chunks, zarr_version=2, levels=None))]
+    fn new(
+        path: PathBuf,
+        geometry: PyGeometry,
+        dtype: &str,
+        chunks: Zyx,
+        zarr_version: u8,
+        levels: Option<usize>,
+    ) -> PyResult<Self> {
+        let vt =
+            VoxelType::parse(dtype).ok_or_else(|| input(format!("unsupported dtype {dtype}")))?;
+        let version = match zarr_version {
+            2 => ZarrVersion::V2,
+            3 => ZarrVersion::V3,
+            v => return Err(input(format!("zarr_version must be 2 or 3, got {v}"))),
+        };
+        let options = ZarrWriteOptions {
+            version,
+            chunk: [chunks.2, chunks.1, chunks.0],
+            levels,
+            compress: true,
+        };
+        let w = OmeZarrWriter::create(&path, &geometry.inner, vt, &options)
+            .map_err(|e| to_py(FileError::new_err, &e))?;
+        Ok(Self { inner: Some(w) })
+    }
+
+    /// The temporary folder chunks are written into until `finish()`.
+    #[getter]
+    fn staging(&self) -> PyResult<PathBuf> {
+        let w = self
+            .inner
+            .as_ref()
+            .ok_or_else(|| input("the store is already finished"))?;
+        Ok(w.staging_path().to_path_buf())
+    }
+
+    /// Chunk shape `(z, y, x)` of level 0 (clipped to the volume).
+    #[getter]
+    fn chunks(&self) -> PyResult<Zyx> {
+        let w = self
+            .inner
+            .as_ref()
+            .ok_or_else(|| input("the store is already finished"))?;
+        let c = w.chunk();
+        Ok((c[2], c[1], c[0]))
+    }
+
+    /// Build the pyramid levels and move the store into place.
+    fn finish(&mut self, py: Python<'_>) -> PyResult<()> {
+        let w = self
+            .inner
+            .take()
+            .ok_or_else(|| input("the store is already finished"))?;
+        py.detach(|| w.finish())
+            .map_err(|e| to_py(FileError::new_err, &e))
+    }
+}
