@@ -104,6 +104,7 @@ use std::sync::atomic::AtomicU8;
 use std::sync::atomic::Ordering::Relaxed;
 
 use glam::DVec3;
+use multiversion::multiversion;
 use rayon::prelude::*;
 use volmorph_deform::live::{Influence, LinearMap, changed_parameters};
 use volmorph_volume::{Geometry, IndexBox, Volume, Voxel};
@@ -844,8 +845,6 @@ impl<M: LinearMap + Clone> IncrementalPushForward<M> {
         let blocks = &self.blocks;
         let status = &self.status;
         let bg = self.background;
-        let redo_end = [0, 1, 2].map(|a| redo.lo[a] + redo.dims[a]);
-        let in_redo = |a: usize, i: usize| i >= redo.lo[a] && i < redo_end[a];
         let z0 = region.lo[2];
         let all_sane = self.insane == 0;
         work.into_par_iter().for_each(|(slab, buf, vol)| {
@@ -884,42 +883,17 @@ impl<M: LinearMap + Clone> IncrementalPushForward<M> {
             for (index, count) in runs {
                 let mut vbox = Blocks::voxels(index, dims);
                 vbox.dims[0] = (vbox.lo[0] + count * BLOCK[0]).min(dims[0]) - vbox.lo[0];
-                let c0 = [0, 1, 2].map(|a| vbox.lo[a] + 1);
-                for dk in 0..vbox.dims[2] {
-                    for dj in 0..vbox.dims[1] {
-                        let Some(row) = row(&src, &vbox, c0, dj, dk) else {
-                            continue;
-                        };
-                        let marks = in_redo(1, vbox.lo[1] + dj) && in_redo(2, vbox.lo[2] + dk);
-                        // One loop body for both ways of getting the boxes.
-                        macro_rules! tally_row {
-                            ($boxes:expr) => {
-                                for (n, (v, proxy)) in $boxes.enumerate() {
-                                    let Some((lo, hi)) = proxy else {
-                                        continue;
-                                    };
-                                    let hit = splat(lo, hi, v.to_f64(), 1.0, out, &slab, buf);
-                                    // The slab holding the box's first output plane (the
-                                    // first slab for boxes reaching below the grid) marks a
-                                    // redone voxel.
-                                    if hit
-                                        && marks
-                                        && in_redo(0, vbox.lo[0] + n)
-                                        && (slab.lo[2] == z0 || lo.z + 0.5 >= slab.lo[2] as f64)
-                                        && let Some(slot) = status.get(row.first + n)
-                                    {
-                                        slot.store(MAPPED, Relaxed);
-                                    }
-                                }
-                            };
-                        }
-                        if all_sane {
-                            tally_row!(row.boxes_unchecked().map(|(v, b)| (v, Some(b))));
-                        } else {
-                            tally_row!(row.boxes());
-                        }
-                    }
-                }
+                tally_run(
+                    &src,
+                    &vbox,
+                    out,
+                    &slab,
+                    buf,
+                    status,
+                    redo,
+                    slab.lo[2] == z0,
+                    all_sane,
+                );
             }
             for (tp, vp) in buf
                 .chunks_exact_mut(rplane)
@@ -934,6 +908,66 @@ impl<M: LinearMap + Clone> IncrementalPushForward<M> {
                 }
             }
         });
+    }
+}
+
+/// Tally the boxes of the source voxels of `vbox` into the slab `slab`'s tallies `buf`, and
+/// mark [`MAPPED`] every voxel of `redo` whose box lands (in the slab holding the box's
+/// first output plane; `first_slab` for the slab that also takes boxes reaching below the
+/// grid). Voxels in index order, as [`IncrementalPushForward::recompute`] requires.
+///
+/// Compiled for the baseline target and for x86-64 with AVX2, chosen at run time; both
+/// give the same bits (the same IEEE operations in the same order; Rust never contracts a
+/// multiply and an add, so FMA is not used).
+#[allow(clippy::too_many_arguments)]
+#[multiversion(targets("x86_64+avx2+fma"))]
+fn tally_run<'a>(
+    src: &Voxels<'a, f32>,
+    vbox: &Region,
+    out: [usize; 3],
+    slab: &Region,
+    buf: &mut [[f64; 2]],
+    status: &[AtomicU8],
+    redo: &Region,
+    first_slab: bool,
+    all_sane: bool,
+) {
+    let redo_end = [0, 1, 2].map(|a| redo.lo[a] + redo.dims[a]);
+    let in_redo = |a: usize, i: usize| i >= redo.lo[a] && i < redo_end[a];
+    let c0 = [0, 1, 2].map(|a| vbox.lo[a] + 1);
+    for dk in 0..vbox.dims[2] {
+        for dj in 0..vbox.dims[1] {
+            let Some(row) = row(src, vbox, c0, dj, dk) else {
+                continue;
+            };
+            let marks = in_redo(1, vbox.lo[1] + dj) && in_redo(2, vbox.lo[2] + dk);
+            // One loop body for both ways of getting the boxes.
+            macro_rules! tally_row {
+                ($boxes:expr) => {
+                    for (n, (v, proxy)) in $boxes.enumerate() {
+                        let Some((lo, hi)) = proxy else {
+                            continue;
+                        };
+                        let hit = splat(lo, hi, v.to_f64(), 1.0, out, slab, buf);
+                        // The slab holding the box's first output plane (the first slab
+                        // for boxes reaching below the grid) marks a redone voxel.
+                        if hit
+                            && marks
+                            && in_redo(0, vbox.lo[0] + n)
+                            && (first_slab || lo.z + 0.5 >= slab.lo[2] as f64)
+                            && let Some(slot) = status.get(row.first + n)
+                        {
+                            slot.store(MAPPED, Relaxed);
+                        }
+                    }
+                };
+            }
+            if all_sane {
+                tally_row!(row.boxes_unchecked().map(|(v, b)| (v, Some(b))));
+            } else {
+                tally_row!(row.boxes());
+            }
+        }
     }
 }
 

@@ -12,6 +12,7 @@
 //! values that adding it (`sign = +1`) added.
 
 use glam::DVec3;
+use multiversion::multiversion;
 use volmorph_volume::Voxel;
 
 use crate::pushforward::PushForwardStats;
@@ -515,8 +516,13 @@ pub(crate) fn row<'a, T>(
 /// Tally (with `sign`) the boxes of the input voxels in `vbox` (value-array indices), whose
 /// centre images sit at centre-array index `c0 + (voxel − vbox.lo)`, with True's averaged
 /// face centres, into `buf` over `region` of an output grid of `out` dims.
-pub(crate) fn tally_averaged<T: Voxel, C: Cell>(
-    src: &Voxels<'_, T>,
+///
+/// Compiled for the baseline target and for x86-64 with AVX2, chosen at run time; both
+/// give the same bits (the same IEEE operations in the same order; Rust never contracts a
+/// multiply and an add, so FMA is not used).
+#[multiversion(targets("x86_64+avx2+fma"))]
+pub(crate) fn tally_averaged<'a, T: Voxel, C: Cell>(
+    src: &Voxels<'a, T>,
     vbox: &Region,
     c0: [usize; 3],
     out: [usize; 3],
