@@ -310,6 +310,66 @@ impl Caches {
     }
 }
 
+/// The Jacobian determinant of a map on one slice ([`Kind::Slice`] in answer to
+/// [`Kind::GetJacobian`]): header `{map, volume, axis, index}`; the values are
+/// `det Dφ(x)` of map object `map` (`φ` as the scene evaluates it: for a lattice the
+/// push-forward, for a handle map sources → targets) at the voxel centres `x` of plane `index`
+/// of `volume`'s grid (`volmorph_warp::jacobian::jacobian_determinant` on that plane), laid out
+/// as [`Caches::slice`] lays out the volume's slice. `J ≤ 0` marks folding; the reply's
+/// `folded` counts those voxels and `window` is `[0, 2]` (1: volume kept).
+///
+/// # Errors
+/// A missing map or volume, an axis or index out of range, a map that cannot be
+/// differentiated there.
+pub fn jacobian_frame(scene: &Scene, h: &Value, request: u32) -> Result<Frame, QueryError> {
+    let map_id = u64_field(h, "map")?;
+    let map = scene.map(ObjectId(map_id))?;
+    let id = u64_field(h, "volume")?;
+    let g = *scene.volume(ObjectId(id))?.geometry();
+    let axis = axis_of(h)?;
+    let a = axis.index();
+    let n = g.dims[a];
+    let index = match h.get("index").and_then(Value::as_f64) {
+        Some(i) => i.round(),
+        None => ((n - 1) / 2) as f64,
+    };
+    if !(0.0..n as f64).contains(&index) {
+        return Err(QueryError::new(format!(
+            "slice index {index} out of range 0 to {} on axis {axis}",
+            n - 1
+        )));
+    }
+    let mut plane_origin = DVec3::ZERO;
+    plane_origin[a] = index;
+    let mut dims = g.dims;
+    dims[a] = 1;
+    let plane = Geometry {
+        dims,
+        origin: g.index_to_physical(plane_origin),
+        ..g
+    };
+    let det = volmorph_warp::jacobian::jacobian_determinant(map, &plane)
+        .map_err(|e| QueryError::new(format!("Jacobian of map {map_id}: {e}")))?;
+    let folded = det.data().iter().filter(|&&d| d <= 0.0).count();
+    let s = slice::extract(&AnyVolume::from(det), axis, SlicePosition::Index(0.0))?;
+    Ok(Frame::new(
+        Kind::Slice,
+        request,
+        json!({
+            "volume": id,
+            "map": map_id,
+            "axis": a,
+            "index": index,
+            "width": s.width,
+            "height": s.height,
+            "pixelSpacing": s.pixel_spacing,
+            "window": [0.0, 2.0],
+            "folded": folded,
+        }),
+    )
+    .with_payload(f32_bytes(s.values)))
+}
+
 /// A volume as an 8-bit texture ([`Kind::VolumeData`]): header `{volume}`; reply `dims` (the
 /// texture's, after decimation by `stride` to at most [`MAX_TEXTURE_AXIS`] per axis), `min`,
 /// `max` (code 0 is `min`, 255 is `max`), and the geometry. Payload: `u8` codes, x fastest.

@@ -544,3 +544,28 @@ async fn every_query_kind_answers() {
         c.header
     );
 }
+
+/// Regression (a slice drag sent no edit and the 3D view drew no lattice): the page looks the
+/// lattice up by the Scene's `map.kind`, which is the map JSON's kind; the page's constant
+/// must be that kind.
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn the_page_finds_the_lattice_under_the_scene_map_kind() {
+    let dir = tempfile::tempdir().unwrap();
+    let s = studio(dir.path(), 1 << 20).await;
+    let mut ws = connect(&s).await;
+    let sc = ask(&mut ws, Kind::ListObjects, 2, json!({})).await;
+    let lattice = sc.header["objects"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .find(|o| o["kind"] == "map")
+        .expect("the set-up adds a lattice map");
+    let kind = lattice["map"]["kind"].as_str().unwrap();
+    assert_eq!(kind, volmorph_lattice::json::LATTICE_JSON_KIND);
+    assert_eq!(lattice["map"]["counts"], json!([7, 7, 7]));
+    let page = std::str::from_utf8(volmorph_studio::assets::get("main.js").unwrap().1).unwrap();
+    assert!(
+        page.contains(&format!("export const LATTICE_KIND = '{kind}';")),
+        "main.js must look lattices up as {kind:?}"
+    );
+}

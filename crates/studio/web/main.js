@@ -7,6 +7,10 @@ import { setupPanels } from './panels.js';
 
 const $ = (id) => document.getElementById(id);
 
+// The Scene's `map.kind` of a B-spline lattice map: the map JSON kind
+// (`volmorph_lattice::json::LATTICE_JSON_KIND`; PROTOCOL.md).
+export const LATTICE_KIND = 'bspline-lattice';
+
 class App {
   constructor() {
     this.objects = [];
@@ -16,6 +20,7 @@ class App {
     this.radius = 0.45;
     this.gestureNo = 1;
     this.latencies = [];
+    this.inputAt = new Map();
     this.handles = [];
     this.colormap = 'grey';
   }
@@ -72,6 +77,7 @@ class App {
     };
     document.querySelectorAll('[data-view]').forEach((b) => { b.onclick = () => this.view3d.frame(null, b.dataset.view); });
     $('show-volume').onchange = (e) => { this.view3d.showVolume = e.target.checked; this.view3d.draw(); };
+    $('show-jacobian').onchange = (e) => { this.showJacobian = e.target.checked; this.reloadSlices(); };
     $('show-lattice').onchange = (e) => { this.view3d.showLattice = e.target.checked; this.view3d.draw(); };
   }
 
@@ -80,9 +86,23 @@ class App {
 
   byId(id) { return this.objects.find((o) => o.id === id); }
   volume() { return this.byId(this.layer); }
-  lattice() { return this.objects.find((o) => o.map && o.map.kind === 'lattice'); }
-  handleMap() { return this.objects.find((o) => o.map && o.map.kind === 'handles'); }
+  lattice() { return this.objects.find((o) => o.map && o.map.kind === LATTICE_KIND); }
+  // The newest handle map (the one a handle set-up made last).
+  handleMap() { return this.objects.filter((o) => o.map && o.map.kind === 'handles').pop(); }
   lut() { return this.luts[this.colormap]; }
+
+  // The map whose Jacobian the overlay shows: the shown volume's warp map, else the lattice,
+  // else the newest handle map.
+  jacobianMap() {
+    const r = this.volume()?.recipe;
+    return (r?.map !== undefined && r.map !== null && this.byId(r.map)) || this.lattice() || this.handleMap();
+  }
+
+  // A slice view drew a Jacobian slice (or none): show the folded voxels it counted.
+  jacobianShown() {
+    const js = this.slices.map((s) => s.jacobian).filter(Boolean);
+    $('jacobian-info').textContent = js.length ? `folded: ${js.map((j) => j.folded).join(' / ')}` : '';
+  }
   currentWindow() { return this.window.get(this.layer) || [0, 1]; }
 
   setWindow(w) {
@@ -172,6 +192,15 @@ class App {
 
   newGesture() { return this.gestureNo++; }
 
+  // Request `r` was sent for input event `e`: its Changed is timed from the event (a
+  // performance mark `input-R` at the event's time stamp).
+  markInput(r, e) {
+    const t = e && e.timeStamp > 0 ? e.timeStamp : performance.now();
+    this.inputAt.set(r, t);
+    if (this.inputAt.size > 4096) this.inputAt.delete(this.inputAt.keys().next().value);
+    try { performance.mark(`input-${r}`, { startTime: t }); } catch (_) { /* marks are optional */ }
+  }
+
   gestureStart(idx, e) {
     const v = this.volume(); if (!v) return;
     this.g = { idx, p: physical(v.volume.geometry, idx), id: this.newGesture(), moved: false };
@@ -187,7 +216,7 @@ class App {
       const l = this.lattice();
       if (!l) { this.error('no lattice: press "Lattice + warp" first'); return; }
       const r = this.client.send(Kind.Drag, { gesture: this.g.id, map: l.id, start: this.g.p, target, radius: this.radius });
-      performance.mark(`drag-${r}`);
+      this.markInput(r, e);
     } else if (this.tool === 'handles') {
       this.panels.handleMove(this.g, target, e);
     } else if (this.tool === 'sculpt') {
@@ -206,8 +235,8 @@ class App {
 
   endGesture(id) { this.client.send(Kind.EndGesture, { gesture: id }); }
 
-  moveControlPoints(map, gesture, points) {
-    this.client.send(Kind.MoveControlPoints, { gesture, map, points });
+  moveControlPoints(map, gesture, points, e) {
+    this.markInput(this.client.send(Kind.MoveControlPoints, { gesture, map, points }), e);
   }
 
   async transferChanged() {
@@ -221,20 +250,27 @@ class App {
     } catch (e) { this.error(e.message); }
   }
 
-  // A Change: refresh what it names; time a drag from its input event to the pixels.
+  // A Change: refresh what it names; time an edit from its input event to the pixels.
   async onChanged(f) {
     const h = f.header;
-    const t0 = h.page === this.page ? this.client.sentAt.get(h.request) : undefined;
+    const mine = h.page === this.page;
+    const t0 = mine ? this.inputAt.get(h.request) : undefined;
+    const sent = mine ? this.client.sentAt.get(h.request) : undefined;
     this.undoDepth = h.undo; this.redoDepth = h.redo;
-    if (h.added.length || h.removed.length || h.edit === 'undo' || h.edit === 'redo' || h.edit === 'setup' || h.edit === 'command') {
+    const jobs = [];
+    const structural = h.added.length || h.removed.length || h.edit === 'undo' || h.edit === 'redo' || h.edit === 'setup';
+    if (structural) {
       const s = await this.client.request(Kind.ListObjects, {});
       await this.setScene(s.header);
       // A set-up that made a warped volume shows it.
       const warp = h.added.map((id) => this.byId(id)).find((o) => o?.recipe?.recipe === 'warp');
       if (h.edit === 'setup' && warp) { $('layer').value = warp.id; await this.showLayer(warp.id); }
+    } else if (h.edit === 'command') {
+      // A command that added or removed nothing (a recipe, a handle, a model's text) changes
+      // only the objects' descriptions: refresh them while the pictures reload.
+      jobs.push(this.client.request(Kind.ListObjects, {}).then((s) => this.setScene(s.header)));
     }
     const touched = new Set([...h.modified, ...h.added]);
-    const jobs = [];
     if (touched.has(this.layer)) {
       jobs.push(this.reloadSlices());
       if (!this.volumeTimer) this.volumeTimer = setTimeout(() => { this.volumeTimer = null; this.view3d.setVolume(this.layer).catch((e) => this.error(e.message)); }, 150);
@@ -245,16 +281,18 @@ class App {
       if (o?.map) jobs.push(this.loadOverlay(id).catch(() => {}));
     }
     await Promise.all(jobs);
+    // The redrawn canvases are composited in the next frame.
+    if (t0 !== undefined) await new Promise((r) => requestAnimationFrame(() => r()));
     const errs = h.errors.map((e) => `${e.object}: ${e.message}`).join('; ');
     if (errs) this.error(errs);
     else if (h.edit !== 'end-gesture') this.status(`${h.edit} done`);
     let text = `server ${h.ms.toFixed(1)} ms`;
     if (t0 !== undefined) {
-      const total = performance.now() - t0;
-      if (h.edit === 'drag' || h.edit === 'parameters') {
-        this.latencies.push({ edit: h.edit, ms: total, server: h.ms });
-        try { performance.measure(`${h.edit}-to-pixels`, { start: t0, end: performance.now() }); } catch (_) { /* old browsers */ }
-      }
+      const end = performance.now();
+      const total = end - t0;
+      this.latencies.push({ edit: h.edit, ms: total, server: h.ms, sent: sent - t0, request: h.request });
+      if (this.latencies.length > 4096) this.latencies.shift();
+      try { performance.measure(`${h.edit}-to-pixels`, { start: t0, end }); } catch (_) { /* marks are optional */ }
       text += ` · on screen ${total.toFixed(1)} ms`;
     }
     $('timing').textContent = text;

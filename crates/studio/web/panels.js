@@ -119,11 +119,11 @@ export function setupPanels(app) {
       app.client.send(Kind.Command, { command: 'set-recipe', id: w.id, recipe: { ...w.recipe, sampled_nodes: 17 }, gesture: g.id });
     }
   };
-  P.handleMove = (g, target) => {
+  P.handleMove = (g, target, e) => {
     if (g.handle < 0 || g.map === undefined) return;
     const h = app.handles[g.handle];
     const r = app.client.send(Kind.Command, { command: 'move-handle', map: g.map, index: g.handle, source: h.source, target, gesture: g.id });
-    performance.mark(`handle-${r}`);
+    app.markInput(r, e);
   };
   P.handleUp = (g, idx) => {
     if (g.map === undefined) return;

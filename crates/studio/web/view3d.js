@@ -345,7 +345,7 @@ export class View3D {
       const s = c.dist * Math.tan(c.fov / 2) * 2 / this.canvas.height;
       const tx = e.clientX - this.start[0], ty = e.clientY - this.start[1];
       const points = [...this.origin].map(([k, p]) => [k, ...[0, 1, 2].map((i) => p[i] + (tx * right[i] - ty * up[i]) * s)]);
-      this.app.moveControlPoints(this.overlay.map, this.gesture, points);
+      this.app.moveControlPoints(this.overlay.map, this.gesture, points, e);
       return;
     }
     this.changed();
