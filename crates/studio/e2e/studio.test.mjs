@@ -223,6 +223,48 @@ test('3D view draws the volume and the isosurface', async () => {
   assert.ok(stats.lit > 2000, `only ${stats.lit} pixels are drawn`);
 });
 
+test('the tool radius is a sphere around the cursor in the 3D view', async () => {
+  // The share of points on the three great circles of radius `r` around the cursor (computed
+  // here) where the 3D view shows the sphere's colour (within a pixel).
+  const onSphere = (r) => page.evaluate(async (r) => {
+    const { SPHERE_RGBA } = await import('./app/view3d.js');
+    const want = SPHERE_RGBA.slice(0, 3).map((x) => Math.round(x * 255));
+    const a = window.__studio, v = a.view3d;
+    v.draw();
+    const gl = v.gl, W = v.canvas.width, H = v.canvas.height;
+    const px = new Uint8Array(W * H * 4);
+    gl.readPixels(0, 0, W, H, gl.RGBA, gl.UNSIGNED_BYTE, px);
+    const c = a.cursorPhysical();
+    const { mvp } = v.matrices();
+    let n = 0, hit = 0;
+    for (let k = 0; k < 48; k++) {
+      const t = 2 * Math.PI * (k + 0.5) / 48, u = r * Math.cos(t), w = r * Math.sin(t);
+      for (const p of [[c[0] + u, c[1] + w, c[2]], [c[0], c[1] + u, c[2] + w], [c[0] + w, c[1], c[2] + u]]) {
+        const [x, y] = v.project(p, mvp);
+        if (x < 2 || y < 2 || x > W - 3 || y > H - 3) continue;
+        n++;
+        let found = false;
+        for (let dy = -1; dy <= 1 && !found; dy++) for (let dx = -1; dx <= 1 && !found; dx++) {
+          const o = 4 * ((H - 1 - Math.floor(y + dy)) * W + Math.floor(x + dx));
+          found = px[o] === want[0] && px[o + 1] === want[1] && px[o + 2] === want[2];
+        }
+        if (found) hit++;
+      }
+    }
+    return { n, share: hit / n };
+  }, r);
+  await page.selectOption('#tool', 'drag');
+  const r = await page.evaluate(() => window.__studio.radius);
+  const drawn = await onSphere(r);
+  assert.ok(drawn.n > 100 && drawn.share > 0.9, `the sphere of radius ${r}: ${JSON.stringify(drawn)}`);
+  const other = await onSphere(r * 1.5);
+  assert.ok(other.share < 0.2, `a sphere of another radius is not drawn: ${JSON.stringify(other)}`);
+  await page.selectOption('#tool', 'probe');
+  const off = await onSphere(r);
+  assert.ok(off.share < 0.1, `no sphere for the probe tool: ${JSON.stringify(off)}`);
+  await page.selectOption('#tool', 'drag');
+});
+
 test('lattice control points are dragged in the 3D view', async () => {
   await page.selectOption('#tool', 'lattice');
   const target = await page.evaluate(() => {
@@ -316,6 +358,67 @@ test('Jacobian overlay: folded voxels are highlighted exactly where the server f
   await page.selectOption('#tool', 'drag');
 });
 
+test('deformed grid: the 3D view draws the grid lines where the map sends them', async () => {
+  // The share of `pts` (world points) drawn in the grid colour (within a pixel).
+  const drawnAt = (pts) => page.evaluate(async (pts) => {
+    const { GRID_RGBA } = await import('./app/view3d.js');
+    const want = GRID_RGBA.slice(0, 3).map((x) => Math.round(x * 255));
+    const v = window.__studio.view3d;
+    v.draw();
+    const gl = v.gl, W = v.canvas.width, H = v.canvas.height;
+    const px = new Uint8Array(W * H * 4);
+    gl.readPixels(0, 0, W, H, gl.RGBA, gl.UNSIGNED_BYTE, px);
+    const { mvp } = v.matrices();
+    let n = 0, hit = 0;
+    for (const p of pts) {
+      const [x, y] = v.project(p, mvp);
+      if (x < 2 || y < 2 || x > W - 3 || y > H - 3) continue;
+      n++;
+      let found = false;
+      for (let dy = -1; dy <= 1 && !found; dy++) for (let dx = -1; dx <= 1 && !found; dx++) {
+        const o = 4 * ((H - 1 - Math.floor(y + dy)) * W + Math.floor(x + dx));
+        found = px[o] === want[0] && px[o + 1] === want[1] && px[o + 2] === want[2];
+      }
+      if (found) hit++;
+    }
+    return { n, share: hit / n };
+  }, pts);
+  const images = () => page.evaluate(() => { const g = window.__studio.view3d.grid; const out = []; for (let i = 0; i < g.points.length; i += 3) out.push([g.points[i], g.points[i + 1], g.points[i + 2]]); return out; });
+  await page.check('#show-grid');
+  await page.waitForFunction(() => window.__studio.view3d.grid?.points.length > 0, null, { timeout: 30000 });
+  const before = await images();
+  const shown = await drawnAt(before);
+  assert.ok(shown.n > 1000 && shown.share > 0.9, `the grid is drawn: ${JSON.stringify(shown)}`);
+  // Lift one control point by 1.5 lattice spacings: the lines near it follow.
+  await page.evaluate(() => {
+    const a = window.__studio, o = a.view3d.overlay;
+    const k = 4 + 9 * (4 + 9 * 4);
+    const p = [0, 1, 2].map((c) => o.points[3 * k + c]);
+    const h = o.points[3 * (k + 9 * 9) + 2] - p[2];
+    const g = a.newGesture();
+    a.moveControlPoints(o.map, g, [[k, p[0], p[1], p[2] + 1.5 * h]]);
+    a.endGesture(g);
+  });
+  await page.waitForFunction(() => window.__studio.lastChange?.edit === 'end-gesture', null, { timeout: 60000 });
+  await waitIdle();
+  const after = await images();
+  const moved = before.filter((p, i) => Math.hypot(...p.map((c, j) => c - after[i][j])) > 0.05);
+  assert.ok(moved.length > 20, `${moved.length} grid samples follow the control point`);
+  const followed = await drawnAt(after);
+  assert.ok(followed.share > 0.9, `the deformed lines are drawn: ${JSON.stringify(followed)}`);
+  const left = await drawnAt(moved);
+  assert.ok(left.share < 0.5, `the lines left their old place: ${JSON.stringify(left)}`);
+  await page.screenshot({ path: path.join(artifacts, 'deformed-grid.png') });
+  await page.keyboard.press('Control+z');
+  await page.waitForFunction(() => window.__studio.lastChange?.edit === 'undo', null, { timeout: 60000 });
+  await waitIdle();
+  await page.waitForFunction((b) => {
+    const g = window.__studio.view3d.grid;
+    return b.every((p, i) => Math.hypot(p[0] - g.points[3 * i], p[1] - g.points[3 * i + 1], p[2] - g.points[3 * i + 2]) < 1e-5);
+  }, before, { timeout: 30000 });
+  await page.uncheck('#show-grid');
+});
+
 test('an F-rep syntax error is shown at its line and the model is kept', async () => {
   await page.fill('#frep-src', 'm(x[3], a[1]) {\n  m = a[1] - x[1]*x[1] - x[2]*x[2] - x[3]*x[3];\n}');
   await page.click('#frep-apply');
@@ -330,6 +433,40 @@ test('an F-rep syntax error is shown at its line and the model is kept', async (
   const src = await page.evaluate(() => window.__studio.objects.find((o) => o.kind === 'frep').frep.source);
   assert.match(src, /x\[3\]\*x\[3\]/, 'the previous valid model stays');
   await page.screenshot({ path: path.join(artifacts, 'frep-error.png') });
+});
+
+test('F-rep parameter slider: a drag re-renders the model live and undoes in one step', async () => {
+  await page.waitForSelector('#frep-a1');
+  // The sampled sphere's largest value on its middle slice: a[1]² at the centre.
+  const peak = () => page.evaluate(async () => {
+    const { Kind } = await import('./app/protocol.js');
+    const a = window.__studio;
+    const s = a.objects.find((o) => o.name === 'model-sampled');
+    const f = await a.client.request(Kind.GetSlice, { volume: s.id, axis: 2 });
+    return new Float32Array(f.payload).reduce((m, x) => Math.max(m, x), -Infinity);
+  });
+  const before = await peak();
+  assert.ok(Math.abs(before - 0.36) < 0.01, `a[1] = 0.6 peaks at ${before}`);
+  const box = await page.locator('#frep-a1').boundingBox();
+  const [min, max] = await page.evaluate(() => { const i = document.getElementById('frep-a1'); return [Number(i.min), Number(i.max)]; });
+  const at = (v) => box.x + 8 + (box.width - 16) * (v - min) / (max - min);
+  await page.mouse.move(at(0.6), box.y + box.height / 2);
+  await page.mouse.down();
+  await page.mouse.move(at(0.3), box.y + box.height / 2, { steps: 8 });
+  await page.mouse.up();
+  await page.waitForFunction(() => window.__studio.lastChange?.edit === 'end-gesture', null, { timeout: 60000 });
+  await waitIdle();
+  const a1 = await page.evaluate(() => Number(document.getElementById('frep-a1').value));
+  const server = await page.evaluate(() => window.__studio.objects.find((o) => o.kind === 'frep').frep.params[1]);
+  assert.ok(Math.abs(a1 - 0.6) > 0.1, `the slider moved to ${a1}`);
+  assert.ok(Math.abs(server - a1) < 1e-9, `the model has the slider's value: ${server} vs ${a1}`);
+  const after = await peak();
+  assert.ok(Math.abs(after - a1 * a1) < 0.01, `a[1] = ${a1} peaks at ${after}`);
+  await page.keyboard.press('Control+z');
+  await page.waitForFunction(() => window.__studio.lastChange?.edit === 'undo', null, { timeout: 60000 });
+  await waitIdle();
+  assert.ok(Math.abs(await peak() - 0.36) < 0.01, 'one undo restores a[1] = 0.6');
+  assert.equal(await page.evaluate(() => Number(document.getElementById('frep-a1').value)), 0.6);
 });
 
 test('handles: set up, drag a handle with the coarse preview, full result on release', async () => {

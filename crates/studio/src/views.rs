@@ -119,6 +119,16 @@ pub fn geometry_json(g: &Geometry) -> Value {
     })
 }
 
+/// The size of the model's parameter array: the second formal of the last object
+/// (HyperFun's `model(x[3], a[k])`), 0 when there is none (or the source does not parse).
+#[must_use]
+pub fn frep_param_count(source: &str) -> usize {
+    volmorph_frep::lang::parse(source)
+        .ok()
+        .and_then(|p| p.objects.last().and_then(|o| o.params.get(1).map(|a| a.1)))
+        .unwrap_or(0)
+}
+
 fn object_json(id: ObjectId, name: &str, object: &Object) -> Value {
     let mut o = json!({"id": id.0, "name": name, "kind": object.kind()});
     if let Some(v) = object.volume() {
@@ -143,7 +153,7 @@ fn object_json(id: ObjectId, name: &str, object: &Object) -> Value {
             o["error"] = json!(d.error());
         }
         Object::Frep(f) => {
-            o["frep"] = json!({"source": f.source(), "params": f.params()});
+            o["frep"] = json!({"source": f.source(), "params": f.params(), "paramCount": frep_param_count(f.source())});
         }
         _ => {}
     }
@@ -484,16 +494,45 @@ pub fn overlay_frame(scene: &Scene, h: &Value, request: u32) -> Result<Frame, Qu
     }
 }
 
-/// A point mapped by a map object ([`Kind::Probed`]): header `{map, point}`; reply
-/// `{map, point, image}`.
+/// Most points one [`Kind::Probe`] may map.
+pub const MAX_PROBE_POINTS: usize = 1 << 16;
+
+/// Points mapped by a map object ([`Kind::Probed`]): header `{map, point}`, reply `{map,
+/// point, image}`; or header `{map, points: [[x, y, z], …]}` (at most [`MAX_PROBE_POINTS`]),
+/// reply `{map, count}` with the images as payload (`f32` xyz per point, in order). The map
+/// is applied as the scene evaluates it (a lattice pushes forward; a handle map sends sources
+/// to targets).
 ///
 /// # Errors
-/// A missing map, a point the map cannot evaluate.
+/// A missing map, a malformed or non-finite point, too many points.
 pub fn probe_frame(scene: &Scene, h: &Value, request: u32) -> Result<Frame, QueryError> {
     use volmorph_deform::SpaceMap as _;
     let id = u64_field(h, "map")?;
-    let p = vec3_field(h, "point")?;
     let m = scene.map(ObjectId(id))?;
+    if let Some(list) = h.get("points") {
+        let list = list
+            .as_array()
+            .ok_or_else(|| QueryError::new("field \"points\" must be a list of [x, y, z]"))?;
+        if list.len() > MAX_PROBE_POINTS {
+            return Err(QueryError::new(format!(
+                "{} points: a probe maps at most {MAX_PROBE_POINTS}",
+                list.len()
+            )));
+        }
+        let mut images = Vec::with_capacity(list.len() * 3);
+        for (i, p) in list.iter().enumerate() {
+            let p = vec3_field(&json!({ "point": p }), "point")
+                .map_err(|_| QueryError::new(format!("point {i} must be three finite numbers")))?;
+            images.extend(m.apply(p).to_array().map(|c| c as f32));
+        }
+        return Ok(Frame::new(
+            Kind::Probed,
+            request,
+            json!({"map": id, "count": list.len()}),
+        )
+        .with_payload(f32_bytes(images)));
+    }
+    let p = vec3_field(h, "point")?;
     let q = m.apply(p);
     Ok(Frame::new(
         Kind::Probed,
@@ -523,4 +562,25 @@ pub fn transfer_frame(h: &Value, request: u32) -> Result<Frame, QueryError> {
         lut.push((a.clamp(0.0, 1.0) * 255.0).round() as u8);
     }
     Ok(Frame::new(Kind::Transfer, request, json!({"text": text})).with_payload(lut))
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn frep_param_count_is_the_last_objects_parameter_array() {
+        assert_eq!(
+            frep_param_count("m(x[3], a[2]) { m = a[1] - x[1]*x[1] + 0*a[2]; }"),
+            2
+        );
+        assert_eq!(
+            frep_param_count(
+                "h(x[3], b[1]) { h = b[1]; }\nm(x[3], a[3]) { m = a[1] - x[2]; }"
+            ),
+            3
+        );
+        assert_eq!(frep_param_count("m(x[3]) { m = 1 - x[1]; }"), 0);
+        assert_eq!(frep_param_count("m(x[3], a[1]) { m = ; }"), 0);
+    }
 }

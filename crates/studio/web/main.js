@@ -11,6 +11,13 @@ const $ = (id) => document.getElementById(id);
 // (`volmorph_lattice::json::LATTICE_JSON_KIND`; PROTOCOL.md).
 export const LATTICE_KIND = 'bspline-lattice';
 
+// A key typed into a text field (not a shortcut): text areas and inputs other than sliders,
+// check boxes and buttons.
+export function typing(e) {
+  const t = e.target;
+  return t.tagName === 'TEXTAREA' || (t.tagName === 'INPUT' && !['range', 'checkbox', 'radio', 'button'].includes(t.type));
+}
+
 class App {
   constructor() {
     this.objects = [];
@@ -52,7 +59,7 @@ class App {
     $('undo').onclick = () => this.client.send(Kind.Undo, {});
     $('redo').onclick = () => this.client.send(Kind.Redo, {});
     document.addEventListener('keydown', (e) => {
-      if (e.target.tagName === 'TEXTAREA' || e.target.tagName === 'INPUT') return;
+      if (typing(e)) return;
       if ((e.ctrlKey || e.metaKey) && e.key.toLowerCase() === 'z') {
         e.preventDefault();
         this.client.send(e.shiftKey ? Kind.Redo : Kind.Undo, {});
@@ -60,8 +67,8 @@ class App {
         e.preventDefault(); this.client.send(Kind.Redo, {});
       }
     });
-    $('tool').onchange = (e) => { this.tool = e.target.value; this.redrawSlices(); };
-    $('radius').oninput = (e) => { this.radius = Number(e.target.value); $('radius-out').value = e.target.value; this.redrawSlices(); };
+    $('tool').onchange = (e) => { this.tool = e.target.value; this.redrawSlices(); this.view3d.redraw(); };
+    $('radius').oninput = (e) => { this.radius = Number(e.target.value); $('radius-out').value = e.target.value; this.redrawSlices(); this.view3d.redraw(); };
     $('layer').onchange = (e) => this.showLayer(Number(e.target.value));
     $('colormap').onchange = (e) => { this.colormap = e.target.value; this.redrawSlices(); };
     $('wl-lo').onchange = $('wl-hi').onchange = () => this.setWindow([Number($('wl-lo').value), Number($('wl-hi').value)]);
@@ -77,6 +84,7 @@ class App {
     };
     document.querySelectorAll('[data-view]').forEach((b) => { b.onclick = () => this.view3d.frame(null, b.dataset.view); });
     $('show-volume').onchange = (e) => { this.view3d.showVolume = e.target.checked; this.view3d.draw(); };
+    $('show-grid').onchange = (e) => { this.view3d.showGrid = e.target.checked; this.refreshGrid(); };
     $('show-jacobian').onchange = (e) => { this.showJacobian = e.target.checked; this.reloadSlices(); };
     $('show-lattice').onchange = (e) => { this.view3d.showLattice = e.target.checked; this.view3d.draw(); };
   }
@@ -97,6 +105,9 @@ class App {
     const r = this.volume()?.recipe;
     return (r?.map !== undefined && r.map !== null && this.byId(r.map)) || this.lattice() || this.handleMap();
   }
+
+  // Map the deformed grid again (through the shown volume's map).
+  refreshGrid() { return this.view3d.setGrid(this.jacobianMap()?.id).catch((e) => this.error(e.message)); }
 
   // A slice view drew a Jacobian slice (or none): show the folded voxels it counted.
   jacobianShown() {
@@ -176,6 +187,7 @@ class App {
   setCursor(idx, fromAxis) {
     const old = this.cursor;
     this.cursor = idx.slice();
+    this.view3d.redraw();
     for (const s of this.slices) {
       if (Math.round(old[s.axis]) !== Math.round(idx[s.axis]) && s.axis !== fromAxis) s.load();
       else s.render();
@@ -191,6 +203,8 @@ class App {
   cursorPhysical() { return physical(this.volume().volume.geometry, this.cursor); }
 
   newGesture() { return this.gestureNo++; }
+
+  typing(e) { return typing(e); }
 
   // Request `r` was sent for input event `e`: its Changed is timed from the event (a
   // performance mark `input-R` at the event's time stamp).
@@ -275,6 +289,7 @@ class App {
       jobs.push(this.reloadSlices());
       if (!this.volumeTimer) this.volumeTimer = setTimeout(() => { this.volumeTimer = null; this.view3d.setVolume(this.layer).catch((e) => this.error(e.message)); }, 150);
     }
+    if (this.view3d.showGrid && (touched.has(this.jacobianMap()?.id) || structural)) jobs.push(this.refreshGrid());
     for (const id of touched) {
       const o = this.byId(id);
       if (o?.mesh) jobs.push(this.view3d.setMesh(id).catch(() => {}));
