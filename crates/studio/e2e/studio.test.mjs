@@ -193,8 +193,8 @@ test('drag moves the spout; the slice shown is the server slice; undo restores i
 test('drag latency and 3D rotation rate on the teapot (report)', async () => {
   // Small drags at the spout, one at a time, timed from the input event to the slice drawn.
   const s = await screenOf(1, SPOUT);
-  const lat = (await timedMoves(page, s, 15)).filter((l) => l.edit === 'drag');
-  assert.equal(lat.length, 15, 'every move is one drag edit');
+  const lat = (await timedMoves(page, s, 9)).filter((l) => l.edit === 'drag');
+  assert.equal(lat.length, 9, 'every move is one drag edit');
   report.teapot = { dragToPixelsMs: stats(lat.map((l) => l.ms)), serverMs: stats(lat.map((l) => l.server)) };
   await page.waitForFunction(() => window.__studio.lastChange?.edit === 'end-gesture', null, { timeout: 60000 });
   await page.keyboard.press('Control+z');
@@ -402,7 +402,10 @@ test('deformed grid: the 3D view draws the grid lines where the map sends them',
   await page.waitForFunction(() => window.__studio.lastChange?.edit === 'end-gesture', null, { timeout: 60000 });
   await waitIdle();
   const after = await images();
-  const moved = before.filter((p, i) => Math.hypot(...p.map((c, j) => c - after[i][j])) > 0.05);
+  // Samples that moved across their line (lines along x come first, then y, then z: 5 × 5
+  // lines of 33 samples per axis).
+  const across = (i) => { const a = Math.floor(i / (5 * 5 * 33)); return [0, 1, 2].filter((c) => c !== a); };
+  const moved = before.filter((p, i) => Math.hypot(...across(i).map((c) => p[c] - after[i][c])) > 0.05);
   assert.ok(moved.length > 20, `${moved.length} grid samples follow the control point`);
   const followed = await drawnAt(after);
   assert.ok(followed.share > 0.9, `the deformed lines are drawn: ${JSON.stringify(followed)}`);
@@ -445,8 +448,9 @@ test('F-rep parameter slider: a drag re-renders the model live and undoes in one
     const f = await a.client.request(Kind.GetSlice, { volume: s.id, axis: 2 });
     return new Float32Array(f.payload).reduce((m, x) => Math.max(m, x), -Infinity);
   });
+  // The model is a[1] − |x|²: it peaks at a[1] at the centre.
   const before = await peak();
-  assert.ok(Math.abs(before - 0.36) < 0.01, `a[1] = 0.6 peaks at ${before}`);
+  assert.ok(Math.abs(before - 0.6) < 0.01, `a[1] = 0.6 peaks at ${before}`);
   const box = await page.locator('#frep-a1').boundingBox();
   const [min, max] = await page.evaluate(() => { const i = document.getElementById('frep-a1'); return [Number(i.min), Number(i.max)]; });
   const at = (v) => box.x + 8 + (box.width - 16) * (v - min) / (max - min);
@@ -461,11 +465,11 @@ test('F-rep parameter slider: a drag re-renders the model live and undoes in one
   assert.ok(Math.abs(a1 - 0.6) > 0.1, `the slider moved to ${a1}`);
   assert.ok(Math.abs(server - a1) < 1e-9, `the model has the slider's value: ${server} vs ${a1}`);
   const after = await peak();
-  assert.ok(Math.abs(after - a1 * a1) < 0.01, `a[1] = ${a1} peaks at ${after}`);
+  assert.ok(Math.abs(after - a1) < 0.01, `a[1] = ${a1} peaks at ${after}`);
   await page.keyboard.press('Control+z');
   await page.waitForFunction(() => window.__studio.lastChange?.edit === 'undo', null, { timeout: 60000 });
   await waitIdle();
-  assert.ok(Math.abs(await peak() - 0.36) < 0.01, 'one undo restores a[1] = 0.6');
+  assert.ok(Math.abs(await peak() - 0.6) < 0.01, 'one undo restores a[1] = 0.6');
   assert.equal(await page.evaluate(() => Number(document.getElementById('frep-a1').value)), 0.6);
 });
 
@@ -517,8 +521,8 @@ test('handle move with 200 handles to the coarse preview (report)', async () => 
   await page.evaluate((p) => { const a = window.__studio; const g = a.volume().volume.geometry; a.setCursor(p.map((c, i) => (c - g.origin[i]) / g.spacing[i]), -1); }, centre);
   await waitIdle();
   const s = await screenOf(2, centre);
-  const lat = (await timedMoves(page, s, 10, [2, 0])).filter((l) => l.edit === 'command');
-  assert.equal(lat.length, 10, 'every move is one handle command');
+  const lat = (await timedMoves(page, s, 7, [2, 0])).filter((l) => l.edit === 'command');
+  assert.equal(lat.length, 7, 'every move is one handle command');
   report.handles200 = { previewToPixelsMs: stats(lat.map((l) => l.ms)), serverMs: stats(lat.map((l) => l.server)) };
   await page.waitForFunction(() => window.__studio.lastChange?.edit === 'end-gesture', null, { timeout: 120000 });
   await waitIdle();
@@ -545,8 +549,8 @@ test('drag latency and 3D rotation rate on the head CT (report)', { skip: CT ? f
       const r = window.__studio.slices[1].canvas.getBoundingClientRect();
       return { x: r.left + r.width * 0.5, y: r.top + r.height * 0.3 };
     });
-    const lat = (await timedMoves(p, s, 10)).filter((l) => l.edit === 'drag');
-    assert.equal(lat.length, 10, 'every move is one drag edit');
+    const lat = (await timedMoves(p, s, 7)).filter((l) => l.edit === 'drag');
+    assert.equal(lat.length, 7, 'every move is one drag edit');
     report.ct = { dragToPixelsMs: stats(lat.map((l) => l.ms)), serverMs: stats(lat.map((l) => l.server)) };
     await p.waitForFunction(() => window.__studio.lastChange?.edit === 'end-gesture', null, { timeout: 60000 });
     await waitIdle(300, p);

@@ -182,6 +182,19 @@ class App {
   }
 
   reloadSlices() { return Promise.all(this.slices.map((s) => s.load())); }
+
+  // Send the shown volume to the 3D view again: one transfer at a time, the newest state
+  // next (a drag's moves do not queue volume transfers behind each other).
+  refreshVolume() {
+    if (this.volumeBusy) { this.volumeWanted = true; return; }
+    this.volumeBusy = true;
+    setTimeout(() => {
+      this.view3d.setVolume(this.layer).catch((e) => this.error(e.message)).finally(() => {
+        this.volumeBusy = false;
+        if (this.volumeWanted) { this.volumeWanted = false; this.refreshVolume(); }
+      });
+    }, 150);
+  }
   redrawSlices() { for (const s of this.slices) s.render(); }
 
   setCursor(idx, fromAxis) {
@@ -285,32 +298,33 @@ class App {
       jobs.push(this.client.request(Kind.ListObjects, {}).then((s) => this.setScene(s.header)));
     }
     const touched = new Set([...h.modified, ...h.added]);
+    // The slices first: an edit is timed from its input event to the frame that composites
+    // its new slice pixels.
+    let slices = Promise.resolve();
     if (touched.has(this.layer)) {
-      jobs.push(this.reloadSlices());
-      if (!this.volumeTimer) this.volumeTimer = setTimeout(() => { this.volumeTimer = null; this.view3d.setVolume(this.layer).catch((e) => this.error(e.message)); }, 150);
+      slices = this.reloadSlices();
+      this.refreshVolume();
     }
+    const timed = t0 === undefined ? Promise.resolve()
+      : slices.then(() => new Promise((r) => requestAnimationFrame(() => r()))).then(() => {
+        const end = performance.now();
+        this.latencies.push({ edit: h.edit, ms: end - t0, server: h.ms, sent: sent - t0, request: h.request });
+        if (this.latencies.length > 4096) this.latencies.shift();
+        try { performance.measure(`${h.edit}-to-pixels`, { start: t0, end }); } catch (_) { /* marks are optional */ }
+        $('timing').textContent = `server ${h.ms.toFixed(1)} ms · on screen ${(end - t0).toFixed(1)} ms`;
+      });
+    jobs.push(slices, timed);
     if (this.view3d.showGrid && (touched.has(this.jacobianMap()?.id) || structural)) jobs.push(this.refreshGrid());
     for (const id of touched) {
       const o = this.byId(id);
       if (o?.mesh) jobs.push(this.view3d.setMesh(id).catch(() => {}));
       if (o?.map) jobs.push(this.loadOverlay(id).catch(() => {}));
     }
+    if (t0 === undefined) $('timing').textContent = `server ${h.ms.toFixed(1)} ms`;
     await Promise.all(jobs);
-    // The redrawn canvases are composited in the next frame.
-    if (t0 !== undefined) await new Promise((r) => requestAnimationFrame(() => r()));
     const errs = h.errors.map((e) => `${e.object}: ${e.message}`).join('; ');
     if (errs) this.error(errs);
     else if (h.edit !== 'end-gesture') this.status(`${h.edit} done`);
-    let text = `server ${h.ms.toFixed(1)} ms`;
-    if (t0 !== undefined) {
-      const end = performance.now();
-      const total = end - t0;
-      this.latencies.push({ edit: h.edit, ms: total, server: h.ms, sent: sent - t0, request: h.request });
-      if (this.latencies.length > 4096) this.latencies.shift();
-      try { performance.measure(`${h.edit}-to-pixels`, { start: t0, end }); } catch (_) { /* marks are optional */ }
-      text += ` · on screen ${total.toFixed(1)} ms`;
-    }
-    $('timing').textContent = text;
     this.lastChange = h;
     this.changes = (this.changes || 0) + 1;
   }
