@@ -96,6 +96,33 @@ async function timedMoves(p, s, n, step = [1, 1]) {
   return p.evaluate(() => window.__studio.latencies);
 }
 
+// The share of world points `pts` that the 3D view shows in colour `rgba` (0‥1, exactly,
+// within a pixel), after a fresh draw; points off the canvas do not count.
+function shareDrawn(pts, rgba) {
+  return page.evaluate(([pts, rgba]) => {
+    const want = rgba.slice(0, 3).map((x) => Math.round(x * 255));
+    const v = window.__studio.view3d;
+    v.draw();
+    const gl = v.gl, W = v.canvas.width, H = v.canvas.height;
+    const px = new Uint8Array(W * H * 4);
+    gl.readPixels(0, 0, W, H, gl.RGBA, gl.UNSIGNED_BYTE, px);
+    const { mvp } = v.matrices();
+    let n = 0, hit = 0;
+    for (const p of pts) {
+      const [x, y] = v.project(p, mvp);
+      if (x < 2 || y < 2 || x > W - 3 || y > H - 3) continue;
+      n++;
+      let found = false;
+      for (let dy = -1; dy <= 1 && !found; dy++) for (let dx = -1; dx <= 1 && !found; dx++) {
+        const o = 4 * ((H - 1 - Math.floor(y + dy)) * W + Math.floor(x + dx));
+        found = px[o] === want[0] && px[o + 1] === want[1] && px[o + 2] === want[2];
+      }
+      if (found) hit++;
+    }
+    return { n, share: hit / n };
+  }, [pts, rgba]);
+}
+
 // Each target of issue 18 (ms), next to the median measured.
 const TARGETS = { teapotDragMs: 50, ctDragMs: 150, handles200PreviewMs: 30, fps3dAim: 20 };
 
@@ -224,35 +251,18 @@ test('3D view draws the volume and the isosurface', async () => {
 });
 
 test('the tool radius is a sphere around the cursor in the 3D view', async () => {
-  // The share of points on the three great circles of radius `r` around the cursor (computed
-  // here) where the 3D view shows the sphere's colour (within a pixel).
-  const onSphere = (r) => page.evaluate(async (r) => {
-    const { SPHERE_RGBA } = await import('./app/view3d.js');
-    const want = SPHERE_RGBA.slice(0, 3).map((x) => Math.round(x * 255));
-    const a = window.__studio, v = a.view3d;
-    v.draw();
-    const gl = v.gl, W = v.canvas.width, H = v.canvas.height;
-    const px = new Uint8Array(W * H * 4);
-    gl.readPixels(0, 0, W, H, gl.RGBA, gl.UNSIGNED_BYTE, px);
-    const c = a.cursorPhysical();
-    const { mvp } = v.matrices();
-    let n = 0, hit = 0;
+  // Points on the three great circles of radius `r` around the cursor (computed here).
+  const circles = (r) => page.evaluate((r) => {
+    const c = window.__studio.cursorPhysical();
+    const out = [];
     for (let k = 0; k < 48; k++) {
       const t = 2 * Math.PI * (k + 0.5) / 48, u = r * Math.cos(t), w = r * Math.sin(t);
-      for (const p of [[c[0] + u, c[1] + w, c[2]], [c[0], c[1] + u, c[2] + w], [c[0] + w, c[1], c[2] + u]]) {
-        const [x, y] = v.project(p, mvp);
-        if (x < 2 || y < 2 || x > W - 3 || y > H - 3) continue;
-        n++;
-        let found = false;
-        for (let dy = -1; dy <= 1 && !found; dy++) for (let dx = -1; dx <= 1 && !found; dx++) {
-          const o = 4 * ((H - 1 - Math.floor(y + dy)) * W + Math.floor(x + dx));
-          found = px[o] === want[0] && px[o + 1] === want[1] && px[o + 2] === want[2];
-        }
-        if (found) hit++;
-      }
+      out.push([c[0] + u, c[1] + w, c[2]], [c[0], c[1] + u, c[2] + w], [c[0] + w, c[1], c[2] + u]);
     }
-    return { n, share: hit / n };
+    return out;
   }, r);
+  const rgba = await page.evaluate(async () => (await import('./app/view3d.js')).SPHERE_RGBA);
+  const onSphere = async (r) => shareDrawn(await circles(r), rgba);
   await page.selectOption('#tool', 'drag');
   const r = await page.evaluate(() => window.__studio.radius);
   const drawn = await onSphere(r);
@@ -359,44 +369,22 @@ test('Jacobian overlay: folded voxels are highlighted exactly where the server f
 });
 
 test('deformed grid: the 3D view draws the grid lines where the map sends them', async () => {
-  // The share of `pts` (world points) drawn in the grid colour (within a pixel).
-  const drawnAt = (pts) => page.evaluate(async (pts) => {
-    const { GRID_RGBA } = await import('./app/view3d.js');
-    const want = GRID_RGBA.slice(0, 3).map((x) => Math.round(x * 255));
-    const v = window.__studio.view3d;
-    v.draw();
-    const gl = v.gl, W = v.canvas.width, H = v.canvas.height;
-    const px = new Uint8Array(W * H * 4);
-    gl.readPixels(0, 0, W, H, gl.RGBA, gl.UNSIGNED_BYTE, px);
-    const { mvp } = v.matrices();
-    let n = 0, hit = 0;
-    for (const p of pts) {
-      const [x, y] = v.project(p, mvp);
-      if (x < 2 || y < 2 || x > W - 3 || y > H - 3) continue;
-      n++;
-      let found = false;
-      for (let dy = -1; dy <= 1 && !found; dy++) for (let dx = -1; dx <= 1 && !found; dx++) {
-        const o = 4 * ((H - 1 - Math.floor(y + dy)) * W + Math.floor(x + dx));
-        found = px[o] === want[0] && px[o + 1] === want[1] && px[o + 2] === want[2];
-      }
-      if (found) hit++;
-    }
-    return { n, share: hit / n };
-  }, pts);
+  const rgba = await page.evaluate(async () => (await import('./app/view3d.js')).GRID_RGBA);
+  const drawnAt = (pts) => shareDrawn(pts, rgba);
   const images = () => page.evaluate(() => { const g = window.__studio.view3d.grid; const out = []; for (let i = 0; i < g.points.length; i += 3) out.push([g.points[i], g.points[i + 1], g.points[i + 2]]); return out; });
   await page.check('#show-grid');
   await page.waitForFunction(() => window.__studio.view3d.grid?.points.length > 0, null, { timeout: 30000 });
   const before = await images();
   const shown = await drawnAt(before);
   assert.ok(shown.n > 1000 && shown.share > 0.9, `the grid is drawn: ${JSON.stringify(shown)}`);
-  // Lift one control point by 1.5 lattice spacings: the lines near it follow.
+  // Lift one control point by 2.5 lattice spacings (no fold below 4.5): the lines near it follow.
   await page.evaluate(() => {
     const a = window.__studio, o = a.view3d.overlay;
     const k = 4 + 9 * (4 + 9 * 4);
     const p = [0, 1, 2].map((c) => o.points[3 * k + c]);
     const h = o.points[3 * (k + 9 * 9) + 2] - p[2];
     const g = a.newGesture();
-    a.moveControlPoints(o.map, g, [[k, p[0], p[1], p[2] + 1.5 * h]]);
+    a.moveControlPoints(o.map, g, [[k, p[0], p[1], p[2] + 2.5 * h]]);
     a.endGesture(g);
   });
   await page.waitForFunction(() => window.__studio.lastChange?.edit === 'end-gesture', null, { timeout: 60000 });
@@ -405,8 +393,8 @@ test('deformed grid: the 3D view draws the grid lines where the map sends them',
   // Samples that moved across their line (lines along x come first, then y, then z: 5 × 5
   // lines of 33 samples per axis).
   const across = (i) => { const a = Math.floor(i / (5 * 5 * 33)); return [0, 1, 2].filter((c) => c !== a); };
-  const moved = before.filter((p, i) => Math.hypot(...across(i).map((c) => p[c] - after[i][c])) > 0.05);
-  assert.ok(moved.length > 20, `${moved.length} grid samples follow the control point`);
+  const moved = before.filter((p, i) => Math.hypot(...across(i).map((c) => p[c] - after[i][c])) > 0.04);
+  assert.ok(moved.length > 10, `${moved.length} grid samples follow the control point`);
   const followed = await drawnAt(after);
   assert.ok(followed.share > 0.9, `the deformed lines are drawn: ${JSON.stringify(followed)}`);
   const left = await drawnAt(moved);

@@ -193,6 +193,24 @@ fn axis_of(h: &Value) -> Result<Axis, QueryError> {
     }
 }
 
+/// The plane a slice query names: header fields `axis` and `index` (a voxel plane, rounded;
+/// default the middle one) checked against `g`.
+fn plane_of(h: &Value, g: &Geometry) -> Result<(Axis, f64), QueryError> {
+    let axis = axis_of(h)?;
+    let n = g.dims[axis.index()];
+    let index = match h.get("index").and_then(Value::as_f64) {
+        Some(i) => i.round(),
+        None => ((n - 1) / 2) as f64,
+    };
+    if !(0.0..n as f64).contains(&index) {
+        return Err(QueryError::new(format!(
+            "slice index {index} out of range 0 to {} on axis {axis}",
+            n - 1
+        )));
+    }
+    Ok((axis, index))
+}
+
 impl Caches {
     /// The automatic window of volume `id` (`render::Window::auto` on its three middle
     /// slices), computed once per volume.
@@ -221,18 +239,7 @@ impl Caches {
     pub fn slice(&self, scene: &Scene, h: &Value, request: u32) -> Result<Frame, QueryError> {
         let id = u64_field(h, "volume")?;
         let v = scene.volume(ObjectId(id))?;
-        let axis = axis_of(h)?;
-        let n = v.geometry().dims[axis.index()];
-        let index = match h.get("index").and_then(Value::as_f64) {
-            Some(i) => i.round(),
-            None => ((n - 1) / 2) as f64,
-        };
-        if !(0.0..n as f64).contains(&index) {
-            return Err(QueryError::new(format!(
-                "slice index {index} out of range 0 to {} on axis {axis}",
-                n - 1
-            )));
-        }
+        let (axis, index) = plane_of(h, v.geometry())?;
         let s = slice::extract(v, axis, SlicePosition::Index(index))?;
         let (lo, hi) = self.window(id, v)?;
         Ok(Frame::new(
@@ -336,19 +343,8 @@ pub fn jacobian_frame(scene: &Scene, h: &Value, request: u32) -> Result<Frame, Q
     let map = scene.map(ObjectId(map_id))?;
     let id = u64_field(h, "volume")?;
     let g = *scene.volume(ObjectId(id))?.geometry();
-    let axis = axis_of(h)?;
+    let (axis, index) = plane_of(h, &g)?;
     let a = axis.index();
-    let n = g.dims[a];
-    let index = match h.get("index").and_then(Value::as_f64) {
-        Some(i) => i.round(),
-        None => ((n - 1) / 2) as f64,
-    };
-    if !(0.0..n as f64).contains(&index) {
-        return Err(QueryError::new(format!(
-            "slice index {index} out of range 0 to {} on axis {axis}",
-            n - 1
-        )));
-    }
     let mut plane_origin = DVec3::ZERO;
     plane_origin[a] = index;
     let mut dims = g.dims;
@@ -575,9 +571,7 @@ mod tests {
             2
         );
         assert_eq!(
-            frep_param_count(
-                "h(x[3], b[1]) { h = b[1]; }\nm(x[3], a[3]) { m = a[1] - x[2]; }"
-            ),
+            frep_param_count("h(x[3], b[1]) { h = b[1]; }\nm(x[3], a[3]) { m = a[1] - x[2]; }"),
             3
         );
         assert_eq!(frep_param_count("m(x[3]) { m = 1 - x[1]; }"), 0);

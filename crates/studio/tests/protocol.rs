@@ -638,13 +638,7 @@ async fn jacobian_slices_and_point_lists_agree_with_the_scene() {
     .await;
     assert_eq!(e.kind, Kind::Error);
     let points = [[0.6, 0.0, 0.04], [0.0, 0.0, 0.0], [-0.5, 0.3, 0.2]];
-    let list = ask(
-        &mut ws,
-        Kind::Probe,
-        8,
-        json!({"map": 2, "points": points}),
-    )
-    .await;
+    let list = ask(&mut ws, Kind::Probe, 8, json!({"map": 2, "points": points})).await;
     assert_eq!(list.header["count"], 3);
     let images = read_f32(&list.payload);
     for (i, p) in points.iter().enumerate() {
