@@ -228,6 +228,7 @@ test('drag latency and 3D rotation rate on the teapot (report)', async () => {
   await page.waitForFunction(() => window.__studio.lastChange?.edit === 'undo', null, { timeout: 60000 });
   await waitIdle();
   report.teapot.fps3d = await page.evaluate(() => window.__studio.view3d.spin(3000));
+  report.teapot.fps3dPlanes = await page.evaluate(() => window.__studio.view3d.proxy.planes);
   const shot = await page.locator('#view3d').screenshot({ path: path.join(artifacts, 'view3d.png') });
   assert.ok(shot.length > 1000);
   assert.ok(report.teapot.fps3d > 0);
@@ -235,6 +236,8 @@ test('drag latency and 3D rotation rate on the teapot (report)', async () => {
 });
 
 test('3D view draws the volume and the isosurface', async () => {
+  // After the interaction, the full number of proxy planes.
+  await page.waitForFunction(() => { const v = window.__studio.view3d; return !v.lod && v.proxy?.planes === v.slices; }, null, { timeout: 30000 });
   const stats = await page.evaluate(() => {
     const v = window.__studio.view3d;
     v.draw();
@@ -543,6 +546,7 @@ test('drag latency and 3D rotation rate on the head CT (report)', { skip: CT ? f
     await p.waitForFunction(() => window.__studio.lastChange?.edit === 'end-gesture', null, { timeout: 60000 });
     await waitIdle(300, p);
     report.ct.fps3d = await p.evaluate(() => window.__studio.view3d.spin(3000));
+    report.ct.fps3dPlanes = await p.evaluate(() => window.__studio.view3d.proxy.planes);
     await p.screenshot({ path: path.join(artifacts, 'ct.png') });
     assert.ok(report.ct.fps3d > 0);
   } finally {

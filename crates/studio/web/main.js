@@ -230,6 +230,7 @@ class App {
 
   gestureStart(idx, e) {
     const v = this.volume(); if (!v) return;
+    this.view3d.interact();
     this.g = { idx, p: physical(v.volume.geometry, idx), id: this.newGesture(), moved: false };
     if (this.tool === 'handles') this.panels.handleDown(this.g, e);
   }
@@ -239,6 +240,7 @@ class App {
     const v = this.volume();
     const target = physical(v.volume.geometry, idx);
     this.g.moved = true;
+    this.view3d.interact();
     if (this.tool === 'drag') {
       const l = this.lattice();
       if (!l) { this.error('no lattice: press "Lattice + warp" first'); return; }

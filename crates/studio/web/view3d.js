@@ -88,6 +88,12 @@ export function gridPoints(lo, hi) {
   return out;
 }
 
+// Proxy planes while the user interacts (a drag, an orbit, a spin): software GL draws every
+// plane over the whole view, so fewer planes keep the page responsive; the full count is
+// drawn again INTERACTIVE_REFINE_MS after the last interaction.
+export const INTERACTIVE_SLICES = 48;
+const INTERACTIVE_REFINE_MS = 400;
+
 export class View3D {
   constructor(canvas, app) {
     this.canvas = canvas;
@@ -206,7 +212,8 @@ export class View3D {
     if (this.proxyBusy) { this.proxyWanted = true; return; }
     this.proxyBusy = true;
     const forward = this.forward();
-    this.app.client.request(Kind.GetProxy, { volume: this.volumeId, forward, slices: this.slices })
+    const planes = this.lod ? Math.min(this.slices, INTERACTIVE_SLICES) : this.slices;
+    this.app.client.request(Kind.GetProxy, { volume: this.volumeId, forward, slices: planes })
       .then((f) => {
         const gl = this.gl;
         const nv = f.header.vertices, ni = f.header.indices;
@@ -222,8 +229,8 @@ export class View3D {
         gl.bufferData(gl.ELEMENT_ARRAY_BUFFER, new Uint32Array(f.payload, nv * 24, ni), gl.DYNAMIC_DRAW);
         gl.bindVertexArray(null);
         const extent = this.box ? Math.abs(dot(sub(this.box[1], this.box[0]), forward)) + Math.hypot(...sub(this.box[1], this.box[0])) : 1;
-        this.proxy = { vao, vb, ib, count: ni, spacing: Math.hypot(...sub(this.box[1], this.box[0])) / this.slices, extent };
-        this.draw();
+        this.proxy = { vao, vb, ib, count: ni, planes, spacing: Math.hypot(...sub(this.box[1], this.box[0])) / planes, extent };
+        this.redraw();
       })
       .catch((e) => this.app.error(e.message))
       .finally(() => { this.proxyBusy = false; if (this.proxyWanted) { this.proxyWanted = false; this.requestProxy(); } });
@@ -246,10 +253,10 @@ export class View3D {
     gl.bindVertexArray(null);
     m.count = nt * 3; m.color = color || [0.85, 0.75, 0.55];
     this.meshes.set(id, m);
-    this.draw();
+    this.redraw();
   }
 
-  dropMesh(id) { this.meshes.delete(id); this.draw(); }
+  dropMesh(id) { this.meshes.delete(id); this.redraw(); }
 
   // The deformed grid: the lines of gridPoints over the volume's box, mapped by `map` (the
   // server's Probe), drawn as line strips. Without a map or with the grid off, nothing.
@@ -297,13 +304,24 @@ export class View3D {
     gl.bindVertexArray(null);
     Object.assign(o, { points: pts, count: pts.length / 3, lines: lines.length, kind: f.header.kind, map: f.header.map });
     this.overlay = o;
-    this.draw();
+    this.redraw();
   }
 
   // The camera moved: new proxy geometry, and a redraw.
   changed() {
+    this.interact();
     this.requestProxy();
     this.redraw();
+  }
+
+  // The user interacts: draw with INTERACTIVE_SLICES planes until INTERACTIVE_REFINE_MS
+  // after the last call, then with the full count again.
+  interact() {
+    const was = this.lod;
+    this.lod = true;
+    clearTimeout(this.refineTimer);
+    this.refineTimer = setTimeout(() => { this.lod = false; this.requestProxy(); }, INTERACTIVE_REFINE_MS);
+    if (!was) this.requestProxy();
   }
 
   // Draw in the next frame (once, however often asked).
@@ -443,6 +461,7 @@ export class View3D {
       const s = c.dist * Math.tan(c.fov / 2) * 2 / this.canvas.height;
       const tx = e.clientX - this.start[0], ty = e.clientY - this.start[1];
       const points = [...this.origin].map(([k, p]) => [k, ...[0, 1, 2].map((i) => p[i] + (tx * right[i] - ty * up[i]) * s)]);
+      this.interact();
       this.app.moveControlPoints(this.overlay.map, this.gesture, points, e);
       return;
     }
@@ -459,7 +478,7 @@ export class View3D {
     return new Promise((resolve) => {
       const t0 = performance.now(); const f0 = this.frames;
       const step = () => {
-        this.cam.yaw += 0.03; this.requestProxy(); this.draw();
+        this.cam.yaw += 0.03; this.interact(); this.requestProxy(); this.draw();
         if (performance.now() - t0 < ms) requestAnimationFrame(step);
         else resolve((this.frames - f0) / ((performance.now() - t0) / 1000));
       };
