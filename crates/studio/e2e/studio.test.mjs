@@ -480,7 +480,8 @@ test('handles: set up, drag a handle with the coarse preview, full result on rel
   await page.mouse.down();
   await page.mouse.move(s.x + 25, s.y, { steps: 5 });
   await page.mouse.up();
-  await page.waitForFunction(() => window.__studio.lastChange?.edit === 'end-gesture', null, { timeout: 60000 });
+  // The full-resolution warp runs on release: allow for a loaded machine.
+  await page.waitForFunction(() => window.__studio.lastChange?.edit === 'end-gesture', null, { timeout: 120000 });
   await waitIdle();
   const h = await page.evaluate(() => window.__studio.handles[8]);
   assert.ok(h.target[0] - h.source[0] > 0.05, `handle target moved: ${JSON.stringify(h)}`);
