@@ -79,6 +79,9 @@ pub enum Kind {
     LoadScene = 20,
     /// Client: export an object to a file under a root.
     Export = 21,
+    /// Client: the Jacobian determinant of a map on a slice of a volume's grid. Reply
+    /// [`Kind::Slice`].
+    GetJacobian = 22,
     /// Server: the reply to [`Kind::Hello`].
     Welcome = 100,
     /// Server: the object list and history depths.
@@ -134,6 +137,7 @@ impl Kind {
             19 => SaveScene,
             20 => LoadScene,
             21 => Export,
+            22 => GetJacobian,
             100 => Welcome,
             101 => Scene,
             102 => Changed,

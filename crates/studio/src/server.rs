@@ -510,6 +510,7 @@ fn query(s: &Shared, page: u64, frame: &Frame) -> Result<Frame, QueryError> {
         )),
         Kind::ListObjects => Ok(views::scene_frame(&scene, r)),
         Kind::GetSlice => s.caches.slice(&scene, h, r),
+        Kind::GetJacobian => views::jacobian_frame(&scene, h, r),
         Kind::GetVolume => views::volume_frame(&scene, h, r),
         Kind::GetProxy => s.caches.proxy(&scene, h, r),
         Kind::GetMesh => views::mesh_frame(&scene, h, r),

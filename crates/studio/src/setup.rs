@@ -17,6 +17,9 @@ use volmorph_warp::apply::WarpMethod;
 /// Largest phantom a page may ask for, voxels per axis (512³ u8 is 128 MiB).
 pub const MAX_PHANTOM_SIZE: usize = 512;
 
+/// Most handles a handle set-up may place (the client frame limit allows about 20 000).
+pub const MAX_SETUP_HANDLES: usize = 4096;
+
 /// A built-in workflow.
 #[derive(Debug, Clone, PartialEq, Deserialize)]
 #[serde(tag = "setup", rename_all = "kebab-case", deny_unknown_fields)]
@@ -39,15 +42,19 @@ pub enum Setup {
         /// The isosurface level.
         level: f64,
     },
-    /// McPhail's handles on `volume`: a handle map of the 8 corners of the middle half of its
-    /// box plus its centre (sources = targets: the identity) by `method`, and the volume
-    /// pulled back through the swapped handles (linear), so each source's content appears
-    /// at its target.
+    /// McPhail's handles on `volume`: a handle map by `method` whose handles sit at `points`
+    /// (physical; sources = targets: the identity), by default the 8 corners of the middle
+    /// half of its box plus its centre, and the volume pulled back through the swapped
+    /// handles (linear), so each source's content appears at its target.
     Handles {
         /// The volume to deform.
         volume: u64,
         /// The method (`affine`, `similarity`, `rigid`, `tps`, `wendland`).
         method: HandleMethod,
+        /// The handles' positions (physical, finite; at most [`MAX_SETUP_HANDLES`]); empty:
+        /// the default nine.
+        #[serde(default)]
+        points: Vec<[f64; 3]>,
     },
 }
 
@@ -140,18 +147,39 @@ impl Setup {
                     }),
                 )?;
             }
-            Setup::Handles { volume, method } => {
+            Setup::Handles {
+                volume,
+                method,
+                points: at,
+            } => {
                 let v = ObjectId(volume);
                 let g = *scene.volume(v)?.geometry();
                 let n = glam::DVec3::from_array(g.dims.map(|d| d as f64 - 1.0));
                 let mut points = vec![];
-                for c in 0..8 {
-                    let f = |bit: usize| if c & bit == 0 { 0.25 } else { 0.75 };
-                    let p = g.index_to_physical(n * glam::DVec3::new(f(1), f(2), f(4)));
+                if at.len() > MAX_SETUP_HANDLES {
+                    return Err(SceneError::Invalid(format!(
+                        "{} handles: a set-up places at most {MAX_SETUP_HANDLES}",
+                        at.len()
+                    )));
+                }
+                for (i, p) in at.iter().enumerate() {
+                    if !p.iter().all(|c| c.is_finite()) {
+                        return Err(SceneError::Invalid(format!(
+                            "handle {i} at {p:?} is not a finite point"
+                        )));
+                    }
+                    let p = glam::DVec3::from_array(*p);
                     points.push((p, p));
                 }
-                let centre = g.index_to_physical(n * 0.5);
-                points.push((centre, centre));
+                if points.is_empty() {
+                    for c in 0..8 {
+                        let f = |bit: usize| if c & bit == 0 { 0.25 } else { 0.75 };
+                        let p = g.index_to_physical(n * glam::DVec3::new(f(1), f(2), f(4)));
+                        points.push((p, p));
+                    }
+                    let centre = g.index_to_physical(n * 0.5);
+                    points.push((centre, centre));
+                }
                 let set = HandleSet {
                     dim: 3,
                     points,
@@ -182,5 +210,95 @@ impl Setup {
             }
         }
         Ok(all)
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use volmorph_scene::{MapObject, Object};
+
+    fn teapot(scene: &mut Scene) {
+        Setup::Phantom {
+            model: "teapot".into(),
+            size: 16,
+        }
+        .run(scene)
+        .unwrap();
+    }
+
+    /// Handles placed where the page asks, sources = targets: the map is the identity, so
+    /// the pulled-back volume is the source; the set-up is one undo step.
+    #[test]
+    fn handles_at_given_points_are_the_identity_and_one_undo_step() {
+        let mut scene = Scene::new();
+        teapot(&mut scene);
+        let depth = scene.undo_depth();
+        let points: Vec<[f64; 3]> = (0..200)
+            .map(|i| {
+                let t = f64::from(i) / 200.0;
+                [
+                    -0.8 + 1.6 * t,
+                    0.5 * (7.0 * t).sin(),
+                    0.5 * (11.0 * t).cos(),
+                ]
+            })
+            .collect();
+        let c = Setup::Handles {
+            volume: 1,
+            method: HandleMethod::Affine,
+            points: points.clone(),
+        }
+        .run(&mut scene)
+        .unwrap();
+        assert_eq!(scene.undo_depth(), depth + 1);
+        let map = c.added[0];
+        let Object::Map(MapObject::Handles(h)) = &scene.get(map).unwrap().object else {
+            panic!("a handle map is added first");
+        };
+        assert_eq!(h.set().points.len(), 200);
+        for ((s, t), p) in h.set().points.iter().zip(&points) {
+            assert_eq!(s.to_array(), *p);
+            assert_eq!(t, s);
+        }
+        let src = scene.volume(ObjectId(1)).unwrap().to_typed::<f32>();
+        let out = scene.volume(c.added[1]).unwrap().to_typed::<f32>();
+        let worst = src
+            .data()
+            .iter()
+            .zip(out.data())
+            .map(|(a, b)| (a - b).abs())
+            .fold(0.0_f32, f32::max);
+        // Identity handles: resampling at the voxel centres themselves (f32 rounding of the
+        // map's evaluation only).
+        assert!(worst < 1e-2, "identity handles changed a voxel by {worst}");
+    }
+
+    /// A non-finite handle or too many handles are refused, naming the problem, and the
+    /// scene is unchanged.
+    #[test]
+    fn bad_handle_points_are_refused_and_change_nothing() {
+        let mut scene = Scene::new();
+        teapot(&mut scene);
+        let depth = scene.undo_depth();
+        let count = scene.objects().count();
+        let e = Setup::Handles {
+            volume: 1,
+            method: HandleMethod::Tps,
+            points: vec![[0.0, 0.0, 0.0], [f64::NAN, 0.0, 0.0]],
+        }
+        .run(&mut scene)
+        .unwrap_err();
+        assert!(e.to_string().contains("handle 1"), "{e}");
+        let e = Setup::Handles {
+            volume: 1,
+            method: HandleMethod::Tps,
+            points: vec![[0.0; 3]; MAX_SETUP_HANDLES + 1],
+        }
+        .run(&mut scene)
+        .unwrap_err();
+        assert!(e.to_string().contains("at most"), "{e}");
+        assert_eq!(scene.undo_depth(), depth);
+        assert_eq!(scene.objects().count(), count);
     }
 }

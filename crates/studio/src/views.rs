@@ -119,6 +119,16 @@ pub fn geometry_json(g: &Geometry) -> Value {
     })
 }
 
+/// The size of the model's parameter array: the second formal of the last object
+/// (HyperFun's `model(x[3], a[k])`), 0 when there is none (or the source does not parse).
+#[must_use]
+pub fn frep_param_count(source: &str) -> usize {
+    volmorph_frep::lang::parse(source)
+        .ok()
+        .and_then(|p| p.objects.last().and_then(|o| o.params.get(1).map(|a| a.1)))
+        .unwrap_or(0)
+}
+
 fn object_json(id: ObjectId, name: &str, object: &Object) -> Value {
     let mut o = json!({"id": id.0, "name": name, "kind": object.kind()});
     if let Some(v) = object.volume() {
@@ -143,7 +153,7 @@ fn object_json(id: ObjectId, name: &str, object: &Object) -> Value {
             o["error"] = json!(d.error());
         }
         Object::Frep(f) => {
-            o["frep"] = json!({"source": f.source(), "params": f.params()});
+            o["frep"] = json!({"source": f.source(), "params": f.params(), "paramCount": frep_param_count(f.source())});
         }
         _ => {}
     }
@@ -183,6 +193,24 @@ fn axis_of(h: &Value) -> Result<Axis, QueryError> {
     }
 }
 
+/// The plane a slice query names: header fields `axis` and `index` (a voxel plane, rounded;
+/// default the middle one) checked against `g`.
+fn plane_of(h: &Value, g: &Geometry) -> Result<(Axis, f64), QueryError> {
+    let axis = axis_of(h)?;
+    let n = g.dims[axis.index()];
+    let index = match h.get("index").and_then(Value::as_f64) {
+        Some(i) => i.round(),
+        None => ((n - 1) / 2) as f64,
+    };
+    if !(0.0..n as f64).contains(&index) {
+        return Err(QueryError::new(format!(
+            "slice index {index} out of range 0 to {} on axis {axis}",
+            n - 1
+        )));
+    }
+    Ok((axis, index))
+}
+
 impl Caches {
     /// The automatic window of volume `id` (`render::Window::auto` on its three middle
     /// slices), computed once per volume.
@@ -211,18 +239,7 @@ impl Caches {
     pub fn slice(&self, scene: &Scene, h: &Value, request: u32) -> Result<Frame, QueryError> {
         let id = u64_field(h, "volume")?;
         let v = scene.volume(ObjectId(id))?;
-        let axis = axis_of(h)?;
-        let n = v.geometry().dims[axis.index()];
-        let index = match h.get("index").and_then(Value::as_f64) {
-            Some(i) => i.round(),
-            None => ((n - 1) / 2) as f64,
-        };
-        if !(0.0..n as f64).contains(&index) {
-            return Err(QueryError::new(format!(
-                "slice index {index} out of range 0 to {} on axis {axis}",
-                n - 1
-            )));
-        }
+        let (axis, index) = plane_of(h, v.geometry())?;
         let s = slice::extract(v, axis, SlicePosition::Index(index))?;
         let (lo, hi) = self.window(id, v)?;
         Ok(Frame::new(
@@ -308,6 +325,55 @@ impl Caches {
         )
         .with_payload(payload))
     }
+}
+
+/// The Jacobian determinant of a map on one slice ([`Kind::Slice`] in answer to
+/// [`Kind::GetJacobian`]): header `{map, volume, axis, index}`; the values are
+/// `det Dφ(x)` of map object `map` (`φ` as the scene evaluates it: for a lattice the
+/// push-forward, for a handle map sources → targets) at the voxel centres `x` of plane `index`
+/// of `volume`'s grid (`volmorph_warp::jacobian::jacobian_determinant` on that plane), laid out
+/// as [`Caches::slice`] lays out the volume's slice. `J ≤ 0` marks folding; the reply's
+/// `folded` counts those voxels and `window` is `[0, 2]` (1: volume kept).
+///
+/// # Errors
+/// A missing map or volume, an axis or index out of range, a map that cannot be
+/// differentiated there.
+pub fn jacobian_frame(scene: &Scene, h: &Value, request: u32) -> Result<Frame, QueryError> {
+    let map_id = u64_field(h, "map")?;
+    let map = scene.map(ObjectId(map_id))?;
+    let id = u64_field(h, "volume")?;
+    let g = *scene.volume(ObjectId(id))?.geometry();
+    let (axis, index) = plane_of(h, &g)?;
+    let a = axis.index();
+    let mut plane_origin = DVec3::ZERO;
+    plane_origin[a] = index;
+    let mut dims = g.dims;
+    dims[a] = 1;
+    let plane = Geometry {
+        dims,
+        origin: g.index_to_physical(plane_origin),
+        ..g
+    };
+    let det = volmorph_warp::jacobian::jacobian_determinant(map, &plane)
+        .map_err(|e| QueryError::new(format!("Jacobian of map {map_id}: {e}")))?;
+    let folded = det.data().iter().filter(|&&d| d <= 0.0).count();
+    let s = slice::extract(&AnyVolume::from(det), axis, SlicePosition::Index(0.0))?;
+    Ok(Frame::new(
+        Kind::Slice,
+        request,
+        json!({
+            "volume": id,
+            "map": map_id,
+            "axis": a,
+            "index": index,
+            "width": s.width,
+            "height": s.height,
+            "pixelSpacing": s.pixel_spacing,
+            "window": [0.0, 2.0],
+            "folded": folded,
+        }),
+    )
+    .with_payload(f32_bytes(s.values)))
 }
 
 /// A volume as an 8-bit texture ([`Kind::VolumeData`]): header `{volume}`; reply `dims` (the
@@ -424,16 +490,45 @@ pub fn overlay_frame(scene: &Scene, h: &Value, request: u32) -> Result<Frame, Qu
     }
 }
 
-/// A point mapped by a map object ([`Kind::Probed`]): header `{map, point}`; reply
-/// `{map, point, image}`.
+/// Most points one [`Kind::Probe`] may map.
+pub const MAX_PROBE_POINTS: usize = 1 << 16;
+
+/// Points mapped by a map object ([`Kind::Probed`]): header `{map, point}`, reply `{map,
+/// point, image}`; or header `{map, points: [[x, y, z], …]}` (at most [`MAX_PROBE_POINTS`]),
+/// reply `{map, count}` with the images as payload (`f32` xyz per point, in order). The map
+/// is applied as the scene evaluates it (a lattice pushes forward; a handle map sends sources
+/// to targets).
 ///
 /// # Errors
-/// A missing map, a point the map cannot evaluate.
+/// A missing map, a malformed or non-finite point, too many points.
 pub fn probe_frame(scene: &Scene, h: &Value, request: u32) -> Result<Frame, QueryError> {
     use volmorph_deform::SpaceMap as _;
     let id = u64_field(h, "map")?;
-    let p = vec3_field(h, "point")?;
     let m = scene.map(ObjectId(id))?;
+    if let Some(list) = h.get("points") {
+        let list = list
+            .as_array()
+            .ok_or_else(|| QueryError::new("field \"points\" must be a list of [x, y, z]"))?;
+        if list.len() > MAX_PROBE_POINTS {
+            return Err(QueryError::new(format!(
+                "{} points: a probe maps at most {MAX_PROBE_POINTS}",
+                list.len()
+            )));
+        }
+        let mut images = Vec::with_capacity(list.len() * 3);
+        for (i, p) in list.iter().enumerate() {
+            let p = vec3_field(&json!({ "point": p }), "point")
+                .map_err(|_| QueryError::new(format!("point {i} must be three finite numbers")))?;
+            images.extend(m.apply(p).to_array().map(|c| c as f32));
+        }
+        return Ok(Frame::new(
+            Kind::Probed,
+            request,
+            json!({"map": id, "count": list.len()}),
+        )
+        .with_payload(f32_bytes(images)));
+    }
+    let p = vec3_field(h, "point")?;
     let q = m.apply(p);
     Ok(Frame::new(
         Kind::Probed,
@@ -463,4 +558,23 @@ pub fn transfer_frame(h: &Value, request: u32) -> Result<Frame, QueryError> {
         lut.push((a.clamp(0.0, 1.0) * 255.0).round() as u8);
     }
     Ok(Frame::new(Kind::Transfer, request, json!({"text": text})).with_payload(lut))
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn frep_param_count_is_the_last_objects_parameter_array() {
+        assert_eq!(
+            frep_param_count("m(x[3], a[2]) { m = a[1] - x[1]*x[1] + 0*a[2]; }"),
+            2
+        );
+        assert_eq!(
+            frep_param_count("h(x[3], b[1]) { h = b[1]; }\nm(x[3], a[3]) { m = a[1] - x[2]; }"),
+            3
+        );
+        assert_eq!(frep_param_count("m(x[3]) { m = 1 - x[1]; }"), 0);
+        assert_eq!(frep_param_count("m(x[3], a[1]) { m = ; }"), 0);
+    }
 }

@@ -147,7 +147,9 @@ async fn token_is_required_on_every_http_request_and_the_websocket() {
     );
     assert_eq!(http(&s, &get(&s, "/", "")).await, 403);
     assert_eq!(http(&s, &get(&s, "/app/main.js", "")).await, 403);
-    let wrong = format!("{}0", &t[..31]);
+    // The token with its last digit changed (a fixed last digit equals the token 1 in 16).
+    let last = if t.ends_with('0') { '1' } else { '0' };
+    let wrong = format!("{}{last}", &t[..31]);
     assert_eq!(http(&s, &get(&s, &format!("/{wrong}/"), "")).await, 403);
     let origin = format!("http://{}", s.addr());
     assert!(
@@ -543,4 +545,117 @@ async fn every_query_kind_answers() {
         "{}",
         c.header
     );
+}
+
+/// Regression (a slice drag sent no edit and the 3D view drew no lattice): the page looks the
+/// lattice up by the Scene's `map.kind`, which is the map JSON's kind; the page's constant
+/// must be that kind.
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn the_page_finds_the_lattice_under_the_scene_map_kind() {
+    let dir = tempfile::tempdir().unwrap();
+    let s = studio(dir.path(), 1 << 20).await;
+    let mut ws = connect(&s).await;
+    let sc = ask(&mut ws, Kind::ListObjects, 2, json!({})).await;
+    let lattice = sc.header["objects"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .find(|o| o["kind"] == "map")
+        .expect("the set-up adds a lattice map");
+    let kind = lattice["map"]["kind"].as_str().unwrap();
+    assert_eq!(kind, volmorph_lattice::json::LATTICE_JSON_KIND);
+    assert_eq!(lattice["map"]["counts"], json!([7, 7, 7]));
+    let page = std::str::from_utf8(volmorph_studio::assets::get("main.js").unwrap().1).unwrap();
+    assert!(
+        page.contains(&format!("export const LATTICE_KIND = '{kind}';")),
+        "main.js must look lattices up as {kind:?}"
+    );
+}
+
+/// The Jacobian slice of a deformed lattice equals the scene's Jacobian volume (computed on
+/// the whole grid) on that plane, its `folded` counts `J ≤ 0`, and a probe of a point list maps
+/// each point as a one-point probe does.
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn jacobian_slices_and_point_lists_agree_with_the_scene() {
+    let dir = tempfile::tempdir().unwrap();
+    let s = studio(dir.path(), 1 << 20).await;
+    let mut ws = connect(&s).await;
+    send(
+        &mut ws,
+        Kind::Drag,
+        2,
+        json!({"gesture": 1, "map": 2, "start": [0.6, 0.0, 0.04], "target": [0.75, 0.05, -0.1], "radius": 0.5}),
+    )
+    .await;
+    send(&mut ws, Kind::EndGesture, 3, json!({"gesture": 1})).await;
+    while recv_kind(&mut ws, Kind::Changed).await.header["edit"] != "end-gesture" {}
+    send(
+        &mut ws,
+        Kind::Command,
+        4,
+        json!({"command": "add-derived", "name": "jac", "recipe": {"recipe": "jacobian", "map": 2, "grid": 1}}),
+    )
+    .await;
+    let c = recv_kind(&mut ws, Kind::Changed).await;
+    let jac = c.header["added"][0].as_u64().unwrap();
+    for (axis, index) in [(0, 30), (1, 20), (2, 21)] {
+        let whole = ask(
+            &mut ws,
+            Kind::GetSlice,
+            5,
+            json!({"volume": jac, "axis": axis, "index": index}),
+        )
+        .await;
+        let plane = ask(
+            &mut ws,
+            Kind::GetJacobian,
+            6,
+            json!({"map": 2, "volume": 1, "axis": axis, "index": index}),
+        )
+        .await;
+        assert_eq!(plane.kind, Kind::Slice, "{}", plane.header);
+        assert_eq!(plane.header["width"], whole.header["width"]);
+        assert_eq!(plane.header["height"], whole.header["height"]);
+        let (a, b) = (read_f32(&whole.payload), read_f32(&plane.payload));
+        assert_eq!(a.len(), b.len());
+        let worst = a
+            .iter()
+            .zip(&b)
+            .map(|(x, y)| (x - y).abs() / x.abs().max(1.0))
+            .fold(0.0_f32, f32::max);
+        assert!(worst < 1e-5, "axis {axis}: the plane differs by {worst}");
+        assert!(
+            b.iter().any(|&j| (j - 1.0).abs() > 1e-3),
+            "the drag changes the Jacobian on axis {axis}"
+        );
+        let folded = b.iter().filter(|&&j| j <= 0.0).count();
+        assert_eq!(plane.header["folded"], folded);
+    }
+    let e = ask(
+        &mut ws,
+        Kind::GetJacobian,
+        7,
+        json!({"map": 1, "volume": 1, "axis": 0}),
+    )
+    .await;
+    assert_eq!(e.kind, Kind::Error);
+    let points = [[0.6, 0.0, 0.04], [0.0, 0.0, 0.0], [-0.5, 0.3, 0.2]];
+    let list = ask(&mut ws, Kind::Probe, 8, json!({"map": 2, "points": points})).await;
+    assert_eq!(list.header["count"], 3);
+    let images = read_f32(&list.payload);
+    for (i, p) in points.iter().enumerate() {
+        let one = ask(&mut ws, Kind::Probe, 9, json!({"map": 2, "point": p})).await;
+        let img: Vec<f64> = serde_json::from_value(one.header["image"].clone()).unwrap();
+        for c in 0..3 {
+            assert_eq!(images[3 * i + c], img[c] as f32);
+        }
+    }
+    let e = ask(
+        &mut ws,
+        Kind::Probe,
+        10,
+        json!({"map": 2, "points": [[0.0, 0.0, 0.0], [1.0, "x", 0.0]]}),
+    )
+    .await;
+    assert!(e.header["message"].as_str().unwrap().contains("point 1"));
 }

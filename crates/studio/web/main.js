@@ -7,6 +7,17 @@ import { setupPanels } from './panels.js';
 
 const $ = (id) => document.getElementById(id);
 
+// The Scene's `map.kind` of a B-spline lattice map: the map JSON kind
+// (`volmorph_lattice::json::LATTICE_JSON_KIND`; PROTOCOL.md).
+export const LATTICE_KIND = 'bspline-lattice';
+
+// A key typed into a text field (not a shortcut): text areas and inputs other than sliders,
+// check boxes and buttons.
+export function typing(e) {
+  const t = e.target;
+  return t.tagName === 'TEXTAREA' || (t.tagName === 'INPUT' && !['range', 'checkbox', 'radio', 'button'].includes(t.type));
+}
+
 class App {
   constructor() {
     this.objects = [];
@@ -16,6 +27,7 @@ class App {
     this.radius = 0.45;
     this.gestureNo = 1;
     this.latencies = [];
+    this.inputAt = new Map();
     this.handles = [];
     this.colormap = 'grey';
   }
@@ -47,7 +59,7 @@ class App {
     $('undo').onclick = () => this.client.send(Kind.Undo, {});
     $('redo').onclick = () => this.client.send(Kind.Redo, {});
     document.addEventListener('keydown', (e) => {
-      if (e.target.tagName === 'TEXTAREA' || e.target.tagName === 'INPUT') return;
+      if (typing(e)) return;
       if ((e.ctrlKey || e.metaKey) && e.key.toLowerCase() === 'z') {
         e.preventDefault();
         this.client.send(e.shiftKey ? Kind.Redo : Kind.Undo, {});
@@ -55,8 +67,8 @@ class App {
         e.preventDefault(); this.client.send(Kind.Redo, {});
       }
     });
-    $('tool').onchange = (e) => { this.tool = e.target.value; this.redrawSlices(); };
-    $('radius').oninput = (e) => { this.radius = Number(e.target.value); $('radius-out').value = e.target.value; this.redrawSlices(); };
+    $('tool').onchange = (e) => { this.tool = e.target.value; this.redrawSlices(); this.view3d.redraw(); };
+    $('radius').oninput = (e) => { this.radius = Number(e.target.value); $('radius-out').value = e.target.value; this.redrawSlices(); this.view3d.redraw(); };
     $('layer').onchange = (e) => this.showLayer(Number(e.target.value));
     $('colormap').onchange = (e) => { this.colormap = e.target.value; this.redrawSlices(); };
     $('wl-lo').onchange = $('wl-hi').onchange = () => this.setWindow([Number($('wl-lo').value), Number($('wl-hi').value)]);
@@ -72,6 +84,8 @@ class App {
     };
     document.querySelectorAll('[data-view]').forEach((b) => { b.onclick = () => this.view3d.frame(null, b.dataset.view); });
     $('show-volume').onchange = (e) => { this.view3d.showVolume = e.target.checked; this.view3d.draw(); };
+    $('show-grid').onchange = (e) => { this.view3d.showGrid = e.target.checked; this.refreshGrid(); };
+    $('show-jacobian').onchange = (e) => { this.showJacobian = e.target.checked; this.reloadSlices(); };
     $('show-lattice').onchange = (e) => { this.view3d.showLattice = e.target.checked; this.view3d.draw(); };
   }
 
@@ -80,9 +94,26 @@ class App {
 
   byId(id) { return this.objects.find((o) => o.id === id); }
   volume() { return this.byId(this.layer); }
-  lattice() { return this.objects.find((o) => o.map && o.map.kind === 'lattice'); }
-  handleMap() { return this.objects.find((o) => o.map && o.map.kind === 'handles'); }
+  lattice() { return this.objects.find((o) => o.map && o.map.kind === LATTICE_KIND); }
+  // The newest handle map (the one a handle set-up made last).
+  handleMap() { return this.objects.filter((o) => o.map && o.map.kind === 'handles').pop(); }
   lut() { return this.luts[this.colormap]; }
+
+  // The map whose Jacobian the overlay shows: the shown volume's warp map, else the lattice,
+  // else the newest handle map.
+  jacobianMap() {
+    const r = this.volume()?.recipe;
+    return (r?.map !== undefined && r.map !== null && this.byId(r.map)) || this.lattice() || this.handleMap();
+  }
+
+  // Map the deformed grid again (through the shown volume's map).
+  refreshGrid() { return this.view3d.setGrid(this.jacobianMap()?.id).catch((e) => this.error(e.message)); }
+
+  // A slice view drew a Jacobian slice (or none): show the folded voxels it counted.
+  jacobianShown() {
+    const js = this.slices.map((s) => s.jacobian).filter(Boolean);
+    $('jacobian-info').textContent = js.length ? `folded: ${js.map((j) => j.folded).join(' / ')}` : '';
+  }
   currentWindow() { return this.window.get(this.layer) || [0, 1]; }
 
   setWindow(w) {
@@ -151,11 +182,25 @@ class App {
   }
 
   reloadSlices() { return Promise.all(this.slices.map((s) => s.load())); }
+
+  // Send the shown volume to the 3D view again: one transfer at a time, the newest state
+  // next (a drag's moves do not queue volume transfers behind each other).
+  refreshVolume() {
+    if (this.volumeBusy) { this.volumeWanted = true; return; }
+    this.volumeBusy = true;
+    setTimeout(() => {
+      this.view3d.setVolume(this.layer).catch((e) => this.error(e.message)).finally(() => {
+        this.volumeBusy = false;
+        if (this.volumeWanted) { this.volumeWanted = false; this.refreshVolume(); }
+      });
+    }, 150);
+  }
   redrawSlices() { for (const s of this.slices) s.render(); }
 
   setCursor(idx, fromAxis) {
     const old = this.cursor;
     this.cursor = idx.slice();
+    this.view3d.redraw();
     for (const s of this.slices) {
       if (Math.round(old[s.axis]) !== Math.round(idx[s.axis]) && s.axis !== fromAxis) s.load();
       else s.render();
@@ -172,8 +217,20 @@ class App {
 
   newGesture() { return this.gestureNo++; }
 
+  typing(e) { return typing(e); }
+
+  // Request `r` was sent for input event `e`: its Changed is timed from the event (a
+  // performance mark `input-R` at the event's time stamp).
+  markInput(r, e) {
+    const t = e && e.timeStamp > 0 ? e.timeStamp : performance.now();
+    this.inputAt.set(r, t);
+    if (this.inputAt.size > 4096) this.inputAt.delete(this.inputAt.keys().next().value);
+    try { performance.mark(`input-${r}`, { startTime: t }); } catch (_) { /* marks are optional */ }
+  }
+
   gestureStart(idx, e) {
     const v = this.volume(); if (!v) return;
+    this.view3d.interact();
     this.g = { idx, p: physical(v.volume.geometry, idx), id: this.newGesture(), moved: false };
     if (this.tool === 'handles') this.panels.handleDown(this.g, e);
   }
@@ -183,11 +240,12 @@ class App {
     const v = this.volume();
     const target = physical(v.volume.geometry, idx);
     this.g.moved = true;
+    this.view3d.interact();
     if (this.tool === 'drag') {
       const l = this.lattice();
       if (!l) { this.error('no lattice: press "Lattice + warp" first'); return; }
       const r = this.client.send(Kind.Drag, { gesture: this.g.id, map: l.id, start: this.g.p, target, radius: this.radius });
-      performance.mark(`drag-${r}`);
+      this.markInput(r, e);
     } else if (this.tool === 'handles') {
       this.panels.handleMove(this.g, target, e);
     } else if (this.tool === 'sculpt') {
@@ -206,8 +264,8 @@ class App {
 
   endGesture(id) { this.client.send(Kind.EndGesture, { gesture: id }); }
 
-  moveControlPoints(map, gesture, points) {
-    this.client.send(Kind.MoveControlPoints, { gesture, map, points });
+  moveControlPoints(map, gesture, points, e) {
+    this.markInput(this.client.send(Kind.MoveControlPoints, { gesture, map, points }), e);
   }
 
   async transferChanged() {
@@ -221,43 +279,54 @@ class App {
     } catch (e) { this.error(e.message); }
   }
 
-  // A Change: refresh what it names; time a drag from its input event to the pixels.
+  // A Change: refresh what it names; time an edit from its input event to the pixels.
   async onChanged(f) {
     const h = f.header;
-    const t0 = h.page === this.page ? this.client.sentAt.get(h.request) : undefined;
+    const mine = h.page === this.page;
+    const t0 = mine ? this.inputAt.get(h.request) : undefined;
+    const sent = mine ? this.client.sentAt.get(h.request) : undefined;
     this.undoDepth = h.undo; this.redoDepth = h.redo;
-    if (h.added.length || h.removed.length || h.edit === 'undo' || h.edit === 'redo' || h.edit === 'setup' || h.edit === 'command') {
+    const jobs = [];
+    const structural = h.added.length || h.removed.length || h.edit === 'undo' || h.edit === 'redo' || h.edit === 'setup';
+    if (structural) {
       const s = await this.client.request(Kind.ListObjects, {});
       await this.setScene(s.header);
       // A set-up that made a warped volume shows it.
       const warp = h.added.map((id) => this.byId(id)).find((o) => o?.recipe?.recipe === 'warp');
       if (h.edit === 'setup' && warp) { $('layer').value = warp.id; await this.showLayer(warp.id); }
+    } else if (h.edit === 'command') {
+      // A command that added or removed nothing (a recipe, a handle, a model's text) changes
+      // only the objects' descriptions: refresh them while the pictures reload.
+      jobs.push(this.client.request(Kind.ListObjects, {}).then((s) => this.setScene(s.header)));
     }
     const touched = new Set([...h.modified, ...h.added]);
-    const jobs = [];
+    // The slices first: an edit is timed from its input event to the frame that composites
+    // its new slice pixels.
+    let slices = Promise.resolve();
     if (touched.has(this.layer)) {
-      jobs.push(this.reloadSlices());
-      if (!this.volumeTimer) this.volumeTimer = setTimeout(() => { this.volumeTimer = null; this.view3d.setVolume(this.layer).catch((e) => this.error(e.message)); }, 150);
+      slices = this.reloadSlices();
+      this.refreshVolume();
     }
+    const timed = t0 === undefined ? Promise.resolve()
+      : slices.then(() => new Promise((r) => requestAnimationFrame(() => r()))).then(() => {
+        const end = performance.now();
+        this.latencies.push({ edit: h.edit, ms: end - t0, server: h.ms, sent: sent - t0, request: h.request });
+        if (this.latencies.length > 4096) this.latencies.shift();
+        try { performance.measure(`${h.edit}-to-pixels`, { start: t0, end }); } catch (_) { /* marks are optional */ }
+        $('timing').textContent = `server ${h.ms.toFixed(1)} ms · on screen ${(end - t0).toFixed(1)} ms`;
+      });
+    jobs.push(slices, timed);
+    if (this.view3d.showGrid && (touched.has(this.jacobianMap()?.id) || structural)) jobs.push(this.refreshGrid());
     for (const id of touched) {
       const o = this.byId(id);
       if (o?.mesh) jobs.push(this.view3d.setMesh(id).catch(() => {}));
       if (o?.map) jobs.push(this.loadOverlay(id).catch(() => {}));
     }
+    if (t0 === undefined) $('timing').textContent = `server ${h.ms.toFixed(1)} ms`;
     await Promise.all(jobs);
     const errs = h.errors.map((e) => `${e.object}: ${e.message}`).join('; ');
     if (errs) this.error(errs);
     else if (h.edit !== 'end-gesture') this.status(`${h.edit} done`);
-    let text = `server ${h.ms.toFixed(1)} ms`;
-    if (t0 !== undefined) {
-      const total = performance.now() - t0;
-      if (h.edit === 'drag' || h.edit === 'parameters') {
-        this.latencies.push({ edit: h.edit, ms: total, server: h.ms });
-        try { performance.measure(`${h.edit}-to-pixels`, { start: t0, end: performance.now() }); } catch (_) { /* old browsers */ }
-      }
-      text += ` · on screen ${total.toFixed(1)} ms`;
-    }
-    $('timing').textContent = text;
     this.lastChange = h;
     this.changes = (this.changes || 0) + 1;
   }

@@ -1,4 +1,5 @@
-// The side panels: transfer-function editor, F-rep editor, handles, sculpting, files.
+// The side panels: transfer-function editor, F-rep editor and parameter sliders, handles,
+// sculpting, files.
 import { Kind } from './protocol.js';
 
 const $ = (id) => document.getElementById(id);
@@ -15,6 +16,7 @@ export function setupPanels(app) {
     sceneChanged() {
       const f = app.objects.find((o) => o.kind === 'frep');
       if (f && !P.frepEdited) $('frep-src').value = f.frep.source;
+      P.frepSliders(f);
       const hm = app.handleMap();
       if (hm) $('handle-method').value = String(hm.map.method).toLowerCase();
     },
@@ -96,6 +98,45 @@ export function setupPanels(app) {
   };
   $('frep-apply').onclick = P.applyFrep;
 
+  // Sliders for the model's parameters a[1..k]: a move replaces the model with the new value
+  // (one gesture per drag of a slider, coalesced; one undo step on release).
+  let sliderGesture = null;
+  P.frepSliders = (f) => {
+    const box = $('frep-params');
+    const count = f?.frep.paramCount || 0;
+    const key = f ? `${f.id}:${count}:${f.frep.source}` : '';
+    if (sliderGesture !== null) return; // a slider is being dragged: keep it
+    if (box.dataset.key === key) {
+      for (const input of box.querySelectorAll('input')) {
+        const v = f.frep.params[input.dataset.k] ?? 0;
+        input.value = v; input.nextElementSibling.value = (+v).toPrecision(3);
+      }
+      return;
+    }
+    box.dataset.key = key; box.textContent = '';
+    for (let k = 1; k <= count; k++) {
+      const v = f.frep.params[k] ?? 0;
+      const span = Math.max(1, 2 * Math.abs(v));
+      const label = document.createElement('label');
+      label.textContent = `a[${k}] `;
+      const input = Object.assign(document.createElement('input'), { type: 'range', min: -span, max: span, step: span / 500, value: v, id: `frep-a${k}` });
+      input.dataset.k = k;
+      const out = document.createElement('output'); out.value = (+v).toPrecision(3);
+      input.oninput = () => {
+        const model = app.objects.find((o) => o.id === f.id);
+        if (!model) return;
+        if (sliderGesture === null) sliderGesture = app.newGesture();
+        const params = { ...model.frep.params, [k]: Number(input.value) };
+        out.value = Number(input.value).toPrecision(3);
+        const r = app.client.send(Kind.Command, { command: 'replace-frep', id: f.id, source: model.frep.source, params, gesture: sliderGesture });
+        app.markInput(r);
+      };
+      input.onchange = () => { if (sliderGesture !== null) { app.endGesture(sliderGesture); sliderGesture = null; } };
+      label.append(input, out);
+      box.append(label);
+    }
+  };
+
   // Handles: click to add (source = target), drag a handle's target to move it; while
   // dragging the warp is previewed on a coarse grid, at full resolution on release.
   $('handle-method').onchange = (e) => {
@@ -119,11 +160,11 @@ export function setupPanels(app) {
       app.client.send(Kind.Command, { command: 'set-recipe', id: w.id, recipe: { ...w.recipe, sampled_nodes: 17 }, gesture: g.id });
     }
   };
-  P.handleMove = (g, target) => {
+  P.handleMove = (g, target, e) => {
     if (g.handle < 0 || g.map === undefined) return;
     const h = app.handles[g.handle];
     const r = app.client.send(Kind.Command, { command: 'move-handle', map: g.map, index: g.handle, source: h.source, target, gesture: g.id });
-    performance.mark(`handle-${r}`);
+    app.markInput(r, e);
   };
   P.handleUp = (g, idx) => {
     if (g.map === undefined) return;
@@ -135,7 +176,7 @@ export function setupPanels(app) {
     }
   };
   document.addEventListener('keydown', (e) => {
-    if (app.tool !== 'handles' || (e.key !== 'Delete' && e.key !== 'Backspace') || e.target.tagName === 'INPUT' || e.target.tagName === 'TEXTAREA') return;
+    if (app.tool !== 'handles' || (e.key !== 'Delete' && e.key !== 'Backspace') || app.typing(e)) return;
     const hm = app.handleMap();
     const v = app.volume();
     if (!hm || !v) return;

@@ -4,7 +4,7 @@ export const Kind = {
   Hello: 1, ListObjects: 2, GetSlice: 3, Drag: 4, EndGesture: 5, Undo: 6, Redo: 7,
   GetVolume: 8, GetProxy: 9, GetMesh: 10, GetLattice: 11, MoveControlPoints: 12, Setup: 13,
   Probe: 14, GetTransfer: 15, Command: 16, ListDir: 17, OpenFile: 18, SaveScene: 19,
-  LoadScene: 20, Export: 21,
+  LoadScene: 20, Export: 21, GetJacobian: 22,
   Welcome: 100, Scene: 101, Changed: 102, Slice: 103, Error: 104, VolumeData: 105, Proxy: 106,
   MeshData: 107, LatticeData: 108, Probed: 109, Transfer: 110, Listing: 111, Done: 112,
 };
@@ -53,11 +53,13 @@ export class Client {
       this.ws.onclose = () => this.emit({ kind: -1, header: { message: 'connection to the studio closed' } });
       this.ws.onmessage = (ev) => {
         const f = decode(ev.data);
-        const ed = f.request && this.edits.get(f.request);
+        // A Changed is a push (frame request 0) naming the request it answers in its header.
+        const answers = f.kind === Kind.Changed ? f.header.request : f.request;
+        let ed = answers && this.edits.get(answers);
         if (ed && (f.kind === Kind.Error || (f.kind === Kind.Changed && f.header.page === this.page))) {
-          this.edits.delete(f.request);
-          if (f.kind === Kind.Error) ed.reject(Object.assign(new Error(f.header.message), { header: f.header }));
-          else ed.resolve(f);
+          this.edits.delete(answers);
+        } else {
+          ed = null;
         }
         const p = f.request && this.pending.get(f.request);
         if (p && f.kind !== Kind.Changed) {
@@ -65,7 +67,14 @@ export class Client {
           if (f.kind === Kind.Error) p.reject(Object.assign(new Error(f.header.message), { header: f.header }));
           else p.resolve(f);
         } else {
-          this.emit(f);
+          // An edit settles once the listeners have shown its result.
+          const shown = this.emit(f);
+          if (ed) {
+            shown.then(() => {
+              if (f.kind === Kind.Error) ed.reject(Object.assign(new Error(f.header.message), { header: f.header }));
+              else ed.resolve(f);
+            });
+          }
         }
       };
     });
@@ -74,9 +83,12 @@ export class Client {
     if (!this.listeners.has(kind)) this.listeners.set(kind, []);
     this.listeners.get(kind).push(fn);
   }
+  // Call the listeners of `f`; resolves once every listener's promise has settled.
   emit(f) {
-    for (const fn of this.listeners.get(f.kind) || []) fn(f);
-    for (const fn of this.listeners.get('*') || []) fn(f);
+    const done = [];
+    for (const fn of this.listeners.get(f.kind) || []) done.push(fn(f));
+    for (const fn of this.listeners.get('*') || []) done.push(fn(f));
+    return Promise.allSettled(done);
   }
   // Send without waiting for a reply (edits: their result comes as a Changed push).
   send(kind, header, payload) {
@@ -86,7 +98,8 @@ export class Client {
     this.ws.send(encode(kind, r, header, payload));
     return r;
   }
-  // Send an edit and wait for its Changed (or its Error). Not for coalesced moves.
+  // Send an edit; resolves to its Changed (rejects with its Error) once the listeners have
+  // handled it. Not for coalesced moves.
   edit(kind, header) {
     return new Promise((resolve, reject) => {
       const r = this.send(kind, header);

@@ -1,9 +1,27 @@
 // The three orthogonal slice views: window/level and a colour map applied to the server's
-// f32 slice, a crosshair shared by the views, physical position and value under the cursor,
-// and the drag gestures of the active tool.
+// f32 slice, the Jacobian overlay (the server's determinant slice, folded voxels
+// highlighted), a crosshair shared by the views, physical position and value under the
+// cursor, and the drag gestures of the active tool.
 import { Kind } from './protocol.js';
 
 const IN_PLANE = [[1, 2], [0, 2], [0, 1]];
+
+// Colour of folded voxels (Jacobian determinant J ≤ 0) in the Jacobian overlay.
+export const FOLD_RGB = [255, 0, 255];
+// |ln J| at which the overlay's tint is strongest (J = 2 or 1/2).
+const JACOBIAN_FULL = Math.LN2;
+// Strongest tint over the picture.
+const JACOBIAN_ALPHA = 0.6;
+
+// The Jacobian overlay of one determinant: [r, g, b, alpha] to blend over the picture.
+// Folding (J ≤ 0, or not finite) is opaque FOLD_RGB; expansion (J > 1) tints red,
+// compression (0 < J < 1) blue, in proportion to |ln J| up to JACOBIAN_FULL; J = 1 is clear.
+export function jacobianTint(j) {
+  if (!(j > 0) || !Number.isFinite(j)) return [FOLD_RGB[0], FOLD_RGB[1], FOLD_RGB[2], 1];
+  const l = Math.log(j);
+  const a = JACOBIAN_ALPHA * Math.min(1, Math.abs(l) / JACOBIAN_FULL);
+  return l > 0 ? [255, 60, 30, a] : [40, 110, 255, a];
+}
 
 // Physical position of a continuous index (geometry as sent by the server).
 export function physical(g, idx) {
@@ -26,9 +44,10 @@ export class SliceView {
     this.axis = axis;
     this.app = app;
     this.slice = null;
+    this.jacobian = null;
     this.off = document.createElement('canvas');
     this.loading = null;
-    this.wanted = false;
+    this.followUp = null;
     canvas.addEventListener('pointerdown', (e) => this.down(e));
     canvas.addEventListener('pointermove', (e) => this.move(e));
     canvas.addEventListener('pointerup', (e) => this.up(e));
@@ -36,27 +55,34 @@ export class SliceView {
     canvas.addEventListener('contextmenu', (e) => e.preventDefault());
   }
 
-  // Ask for the slice at the cursor; a request while one is loading runs once after it.
-  async load() {
+  // Ask for the slice at the cursor and draw it. A request while one is loading runs once
+  // after it; every caller gets a promise that settles once a slice asked for after its call
+  // is on the canvas.
+  load() {
     const app = this.app;
     const vol = app.volume();
-    if (!vol) return;
-    if (this.loading) { this.wanted = true; return this.loading; }
+    if (!vol) return Promise.resolve();
+    if (this.loading) {
+      if (!this.followUp) this.followUp = this.loading.then(() => { this.followUp = null; return this.load(); });
+      return this.followUp;
+    }
     const g = vol.volume.geometry;
     const n = g.dims[this.axis];
     const index = Math.max(0, Math.min(n - 1, Math.round(app.cursor[this.axis])));
-    this.loading = app.client.request(Kind.GetSlice, { volume: vol.id, axis: this.axis, index })
-      .then((f) => {
+    const map = app.showJacobian ? app.jacobianMap() : undefined;
+    const jac = map === undefined ? Promise.resolve(null)
+      : app.client.request(Kind.GetJacobian, { map: map.id, volume: vol.id, axis: this.axis, index });
+    this.loading = Promise.all([app.client.request(Kind.GetSlice, { volume: vol.id, axis: this.axis, index }), jac])
+      .then(([f, j]) => {
         this.slice = { ...f.header, values: new Float32Array(f.payload) };
+        this.jacobian = j ? { ...j.header, values: new Float32Array(j.payload) } : null;
+        app.jacobianShown(this);
         if (!app.window.has(vol.id)) app.window.set(vol.id, f.header.window.slice());
         app.windowChanged(false);
         this.render();
       })
       .catch((e) => app.error(e.message))
-      .finally(() => {
-        this.loading = null;
-        if (this.wanted) { this.wanted = false; this.load(); }
-      });
+      .finally(() => { this.loading = null; });
     return this.loading;
   }
 
@@ -74,6 +100,16 @@ export class SliceView {
       t = Number.isFinite(t) ? Math.max(0, Math.min(255, Math.round(t))) : 0;
       const c = lut[t];
       d[4 * i] = c[0]; d[4 * i + 1] = c[1]; d[4 * i + 2] = c[2]; d[4 * i + 3] = 255;
+    }
+    const jac = this.jacobian;
+    if (jac && jac.values.length === s.values.length) {
+      for (let i = 0; i < jac.values.length; i++) {
+        const [r, g, b, a] = jacobianTint(jac.values[i]);
+        if (a === 0) continue;
+        d[4 * i] = Math.round(d[4 * i] * (1 - a) + r * a);
+        d[4 * i + 1] = Math.round(d[4 * i + 1] * (1 - a) + g * a);
+        d[4 * i + 2] = Math.round(d[4 * i + 2] * (1 - a) + b * a);
+      }
     }
     return img;
   }

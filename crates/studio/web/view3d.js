@@ -1,6 +1,6 @@
 // The 3D view (WebGL2): slice-based volume rendering on the server's cube-cutting proxy
 // geometry (McPhail ch. 2; polygons back to front, premultiplied blending), meshes, and the
-// lattice and handle overlays; orbit (left drag), pan (right or shift drag), zoom (wheel),
+// lattice and handle overlays, the deformed grid, the tool-radius sphere; orbit (left drag), pan (right or shift drag), zoom (wheel),
 // preset views.
 import { Kind } from './protocol.js';
 
@@ -42,6 +42,58 @@ void main() { gl_Position = mvp * vec4(pos, 1.0); gl_PointSize = size; }`;
 const FS_FLAT = `#version 300 es
 precision highp float; uniform vec4 color; out vec4 o; void main() { o = color; }`;
 
+// Segments per great circle of the tool-radius sphere.
+export const SPHERE_SEGMENTS = 64;
+// Colour of the tool-radius sphere (RGBA, 0‥1).
+export const SPHERE_RGBA = [80 / 255, 200 / 255, 1, 1];
+
+// The tool-radius sphere as line segments: three great circles (in the xy, yz and zx planes)
+// of radius `r` around `c`, SPHERE_SEGMENTS each, as pairs of endpoints (flat xyz).
+export function sphereLines(c, r) {
+  const out = [];
+  const pt = (plane, t) => {
+    const u = r * Math.cos(t), v = r * Math.sin(t);
+    return plane === 0 ? [c[0] + u, c[1] + v, c[2]] : plane === 1 ? [c[0], c[1] + u, c[2] + v] : [c[0] + v, c[1], c[2] + u];
+  };
+  for (let plane = 0; plane < 3; plane++) for (let k = 0; k < SPHERE_SEGMENTS; k++) {
+    out.push(...pt(plane, 2 * Math.PI * k / SPHERE_SEGMENTS), ...pt(plane, 2 * Math.PI * (k + 1) / SPHERE_SEGMENTS));
+  }
+  return new Float32Array(out);
+}
+
+// Lines per axis direction of the deformed grid (a GRID_LINES × GRID_LINES bundle along each
+// axis) and samples along each line.
+export const GRID_LINES = 5;
+export const GRID_SAMPLES = 33;
+// Colour of the deformed grid (RGBA, 0‥1).
+export const GRID_RGBA = [1, 1, 0.4, 1];
+
+// The undeformed grid in the box [lo, hi]: for each axis a, GRID_LINES² lines along a, each
+// GRID_SAMPLES points from lo to hi (flat xyz, line after line).
+export function gridPoints(lo, hi) {
+  const out = [];
+  const at = (a, t) => lo[a] + (hi[a] - lo[a]) * t;
+  for (let a = 0; a < 3; a++) {
+    const [b, c] = [(a + 1) % 3, (a + 2) % 3];
+    for (let i = 0; i < GRID_LINES; i++) for (let j = 0; j < GRID_LINES; j++) {
+      for (let k = 0; k < GRID_SAMPLES; k++) {
+        const p = [0, 0, 0];
+        p[a] = at(a, k / (GRID_SAMPLES - 1));
+        p[b] = at(b, (i + 0.5) / GRID_LINES);
+        p[c] = at(c, (j + 0.5) / GRID_LINES);
+        out.push(p);
+      }
+    }
+  }
+  return out;
+}
+
+// Proxy planes while the user interacts (a drag, an orbit, a spin): software GL draws every
+// plane over the whole view, so fewer planes keep the page responsive; the full count is
+// drawn again INTERACTIVE_REFINE_MS after the last interaction.
+export const INTERACTIVE_SLICES = 48;
+const INTERACTIVE_REFINE_MS = 400;
+
 export class View3D {
   constructor(canvas, app) {
     this.canvas = canvas;
@@ -57,7 +109,7 @@ export class View3D {
     this.proxy = null; this.proxyBusy = false; this.proxyWanted = false;
     this.frames = 0;
     this.selected = new Set();
-    this.showVolume = true; this.showLattice = true;
+    this.showVolume = true; this.showLattice = true; this.showGrid = false;
     canvas.addEventListener('pointerdown', (e) => this.down(e));
     canvas.addEventListener('pointermove', (e) => this.move(e));
     canvas.addEventListener('pointerup', (e) => this.up(e));
@@ -160,7 +212,8 @@ export class View3D {
     if (this.proxyBusy) { this.proxyWanted = true; return; }
     this.proxyBusy = true;
     const forward = this.forward();
-    this.app.client.request(Kind.GetProxy, { volume: this.volumeId, forward, slices: this.slices })
+    const planes = this.lod ? Math.min(this.slices, INTERACTIVE_SLICES) : this.slices;
+    this.app.client.request(Kind.GetProxy, { volume: this.volumeId, forward, slices: planes })
       .then((f) => {
         const gl = this.gl;
         const nv = f.header.vertices, ni = f.header.indices;
@@ -176,8 +229,8 @@ export class View3D {
         gl.bufferData(gl.ELEMENT_ARRAY_BUFFER, new Uint32Array(f.payload, nv * 24, ni), gl.DYNAMIC_DRAW);
         gl.bindVertexArray(null);
         const extent = this.box ? Math.abs(dot(sub(this.box[1], this.box[0]), forward)) + Math.hypot(...sub(this.box[1], this.box[0])) : 1;
-        this.proxy = { vao, vb, ib, count: ni, spacing: Math.hypot(...sub(this.box[1], this.box[0])) / this.slices, extent };
-        this.draw();
+        this.proxy = { vao, vb, ib, count: ni, planes, spacing: Math.hypot(...sub(this.box[1], this.box[0])) / planes, extent };
+        this.redraw();
       })
       .catch((e) => this.app.error(e.message))
       .finally(() => { this.proxyBusy = false; if (this.proxyWanted) { this.proxyWanted = false; this.requestProxy(); } });
@@ -200,10 +253,32 @@ export class View3D {
     gl.bindVertexArray(null);
     m.count = nt * 3; m.color = color || [0.85, 0.75, 0.55];
     this.meshes.set(id, m);
-    this.draw();
+    this.redraw();
   }
 
-  dropMesh(id) { this.meshes.delete(id); this.draw(); }
+  dropMesh(id) { this.meshes.delete(id); this.redraw(); }
+
+  // The deformed grid: the lines of gridPoints over the volume's box, mapped by `map` (the
+  // server's Probe), drawn as line strips. Without a map or with the grid off, nothing.
+  async setGrid(map) {
+    const gl = this.gl; if (!gl) return;
+    if (!this.showGrid || map === undefined || !this.box) { this.grid = null; this.redraw(); return; }
+    const pts = gridPoints(this.box[0], this.box[1]);
+    const f = await this.app.client.request(Kind.Probe, { map, points: pts });
+    const images = new Float32Array(f.payload);
+    const lines = [];
+    const per = GRID_SAMPLES;
+    for (let l = 0; l < pts.length / per; l++) for (let k = 0; k + 1 < per; k++) lines.push(l * per + k, l * per + k + 1);
+    const g = this.grid || { vao: gl.createVertexArray(), vb: gl.createBuffer(), ib: gl.createBuffer() };
+    gl.bindVertexArray(g.vao);
+    gl.bindBuffer(gl.ARRAY_BUFFER, g.vb); gl.bufferData(gl.ARRAY_BUFFER, images, gl.DYNAMIC_DRAW);
+    gl.enableVertexAttribArray(0); gl.vertexAttribPointer(0, 3, gl.FLOAT, false, 0, 0);
+    gl.bindBuffer(gl.ELEMENT_ARRAY_BUFFER, g.ib); gl.bufferData(gl.ELEMENT_ARRAY_BUFFER, new Uint32Array(lines), gl.DYNAMIC_DRAW);
+    gl.bindVertexArray(null);
+    Object.assign(g, { points: images, count: lines.length, map });
+    this.grid = g;
+    this.redraw();
+  }
 
   // Lattice points and edges, or handle arrows (from an overlay frame).
   setOverlay(f) {
@@ -229,11 +304,28 @@ export class View3D {
     gl.bindVertexArray(null);
     Object.assign(o, { points: pts, count: pts.length / 3, lines: lines.length, kind: f.header.kind, map: f.header.map });
     this.overlay = o;
-    this.draw();
+    this.redraw();
   }
 
+  // The camera moved: new proxy geometry, and a redraw.
   changed() {
+    this.interact();
     this.requestProxy();
+    this.redraw();
+  }
+
+  // The user interacts: draw with INTERACTIVE_SLICES planes until INTERACTIVE_REFINE_MS
+  // after the last call, then with the full count again.
+  interact() {
+    const was = this.lod;
+    this.lod = true;
+    clearTimeout(this.refineTimer);
+    this.refineTimer = setTimeout(() => { this.lod = false; this.requestProxy(); }, INTERACTIVE_REFINE_MS);
+    if (!was) this.requestProxy();
+  }
+
+  // Draw in the next frame (once, however often asked).
+  redraw() {
     if (!this.rafPending) { this.rafPending = true; requestAnimationFrame(() => { this.rafPending = false; this.draw(); }); }
   }
 
@@ -279,6 +371,30 @@ export class View3D {
       gl.bindVertexArray(this.proxy.vao);
       gl.drawElements(gl.TRIANGLES, this.proxy.count, gl.UNSIGNED_INT, 0);
       gl.depthMask(true);
+    }
+    if (this.grid && this.showGrid) {
+      gl.disable(gl.DEPTH_TEST); gl.disable(gl.BLEND);
+      gl.useProgram(this.progFlat);
+      gl.uniformMatrix4fv(gl.getUniformLocation(this.progFlat, 'mvp'), false, mvp);
+      gl.uniform4fv(gl.getUniformLocation(this.progFlat, 'color'), GRID_RGBA);
+      gl.bindVertexArray(this.grid.vao);
+      gl.drawElements(gl.LINES, this.grid.count, gl.UNSIGNED_INT, 0);
+      gl.enable(gl.DEPTH_TEST);
+    }
+    // The tool radius of a drag or sculpt, around the cursor, over everything.
+    if ((this.app.tool === 'drag' || this.app.tool === 'sculpt') && this.app.volume()) {
+      if (!this.sphere) this.sphere = { vao: gl.createVertexArray(), vb: gl.createBuffer() };
+      const lines = sphereLines(this.app.cursorPhysical(), this.app.radius);
+      gl.bindVertexArray(this.sphere.vao);
+      gl.bindBuffer(gl.ARRAY_BUFFER, this.sphere.vb);
+      gl.bufferData(gl.ARRAY_BUFFER, lines, gl.DYNAMIC_DRAW);
+      gl.enableVertexAttribArray(0); gl.vertexAttribPointer(0, 3, gl.FLOAT, false, 0, 0);
+      gl.disable(gl.DEPTH_TEST); gl.disable(gl.BLEND);
+      gl.useProgram(this.progFlat);
+      gl.uniformMatrix4fv(gl.getUniformLocation(this.progFlat, 'mvp'), false, mvp);
+      gl.uniform4fv(gl.getUniformLocation(this.progFlat, 'color'), SPHERE_RGBA);
+      gl.drawArrays(gl.LINES, 0, lines.length / 3);
+      gl.enable(gl.DEPTH_TEST);
     }
     gl.bindVertexArray(null);
     this.frames++;
@@ -345,7 +461,8 @@ export class View3D {
       const s = c.dist * Math.tan(c.fov / 2) * 2 / this.canvas.height;
       const tx = e.clientX - this.start[0], ty = e.clientY - this.start[1];
       const points = [...this.origin].map(([k, p]) => [k, ...[0, 1, 2].map((i) => p[i] + (tx * right[i] - ty * up[i]) * s)]);
-      this.app.moveControlPoints(this.overlay.map, this.gesture, points);
+      this.interact();
+      this.app.moveControlPoints(this.overlay.map, this.gesture, points, e);
       return;
     }
     this.changed();
@@ -361,7 +478,7 @@ export class View3D {
     return new Promise((resolve) => {
       const t0 = performance.now(); const f0 = this.frames;
       const step = () => {
-        this.cam.yaw += 0.03; this.requestProxy(); this.draw();
+        this.cam.yaw += 0.03; this.interact(); this.requestProxy(); this.draw();
         if (performance.now() - t0 < ms) requestAnimationFrame(step);
         else resolve((this.frames - f0) / ((performance.now() - t0) / 1000));
       };

@@ -26,9 +26,14 @@ pub struct Args {
     #[arg(long, default_value_t = 128)]
     pub size: usize,
     /// Set up True's direct manipulation on the first volume: an identity cubic B-spline
-    /// lattice of N³ control points, the push-forward through it and its isosurface at 127.
+    /// lattice of N³ control points, the push-forward through it and its isosurface at
+    /// --level.
     #[arg(long, value_name = "N")]
     pub lattice: Option<usize>,
+    /// The isosurface level of --lattice, in the volume's values (127: the phantoms' surface;
+    /// e.g. 300 for bone in a CT in Hounsfield units).
+    #[arg(long, default_value_t = 127.0, allow_negative_numbers = true)]
+    pub level: f64,
     /// Largest upload, bytes.
     #[arg(long, default_value_t = DEFAULT_UPLOAD_LIMIT)]
     pub upload_limit: usize,
@@ -48,11 +53,16 @@ pub fn run(args: &Args) -> anyhow::Result<()> {
             args.phantom.is_some() || !args.files.is_empty(),
             "--lattice needs a volume: give a file or --phantom"
         );
+        anyhow::ensure!(
+            args.level.is_finite(),
+            "--level {} must be a finite number",
+            args.level
+        );
         // The first object is the first volume opened.
         setups.push(Setup::DirectManipulation {
             volume: 1,
             counts,
-            level: 127.0,
+            level: args.level,
         });
     }
     let roots = if args.roots.is_empty() {
