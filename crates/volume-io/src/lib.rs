@@ -11,6 +11,10 @@
 //! | a folder, `.dcm`, `.dicom`, `.ima` (or the `DICM` preamble) | DICOM series and multi-frame files (read only) | [`dicom`] |
 //! | `.raw` | headerless voxels, described by a [`raw::RawSpec`] | [`raw`] |
 //!
+//! Vector images with three components per voxel (displacement fields: NIfTI with
+//! `intent_code` 1007 and `dim[5] = 3`, MetaImage with `ElementNumberOfChannels = 3`) are read
+//! and written by [`vector`]; the volume readers refuse them by name.
+//!
 //! Every reader returns the volume in volmorph's convention (see [`volmorph_volume::Geometry`]: ITK
 //! physical space, x fastest) and refuses malformed input with a [`VolumeError`] — never a
 //! panic, and never an allocation larger than the header's checked size. Every writer goes
@@ -49,6 +53,7 @@ pub mod nifti;
 pub mod nrrd;
 pub mod raw;
 mod text_header;
+pub mod vector;
 pub mod vti;
 pub mod vtk;
 
