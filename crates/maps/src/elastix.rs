@@ -119,7 +119,10 @@ impl Entries {
             None => Ok(false),
             Some((_, t)) if t.eq_ignore_ascii_case("true") => Ok(true),
             Some((_, t)) if t.eq_ignore_ascii_case("false") => Ok(false),
-            Some((l, t)) => Err(bad(l, format!("({name} \"{t}\"): expected \"true\" or \"false\""))),
+            Some((l, t)) => Err(bad(
+                l,
+                format!("({name} \"{t}\"): expected \"true\" or \"false\""),
+            )),
         }
     }
 }
@@ -166,8 +169,8 @@ fn entries(text: &str) -> Result<Entries, MapError> {
 fn strip_comment(line: &str) -> &str {
     let mut quoted = false;
     let b = line.as_bytes();
-    for i in 0..b.len() {
-        match b[i] {
+    for (i, &c) in b.iter().enumerate() {
+        match c {
             b'"' => quoted = !quoted,
             b'/' if !quoted && b.get(i + 1) == Some(&b'/') => return &line[..i],
             _ => {}
@@ -262,7 +265,10 @@ pub fn parse_elastix(text: &str) -> Result<(AnyMap, Option<String>), MapError> {
     {
         return Err(bad(
             l,
-            format!("NumberOfParameters {n:?}, but TransformParameters has {}", p.len()),
+            format!(
+                "NumberOfParameters {n:?}, but TransformParameters has {}",
+                p.len()
+            ),
         ));
     }
     let count = |want: usize| {
@@ -357,7 +363,10 @@ fn bspline(e: &Entries, p: &[f64], pl: usize) -> Result<AnyMap, MapError> {
             DMat3::from_cols_array(&cols)
         }
         Some((l, v)) => {
-            return Err(bad(l, format!("GridDirection has {} values, not 9", v.len())));
+            return Err(bad(
+                l,
+                format!("GridDirection has {} values, not 9", v.len()),
+            ));
         }
     };
     let n = size.to_array().map(|s| s as usize);
@@ -509,26 +518,35 @@ mod tests {
         let (m, init) = parse_elastix(text).unwrap();
         assert!(init.is_none());
         let c = DVec3::new(10.0, -5.0, 2.5);
-        let r = DMat3::from_rotation_z(0.3) * DMat3::from_rotation_x(0.1) * DMat3::from_rotation_y(-0.2);
+        let r = DMat3::from_rotation_z(0.3)
+            * DMat3::from_rotation_x(0.1)
+            * DMat3::from_rotation_y(-0.2);
         for x in [DVec3::ZERO, DVec3::new(3.0, 4.0, -7.0)] {
-            assert!(close(m.apply(x), r * (x - c) + c + DVec3::new(1.0, 2.0, 3.0)));
+            assert!(close(
+                m.apply(x),
+                r * (x - c) + c + DVec3::new(1.0, 2.0, 3.0)
+            ));
         }
         // The centre moves by the translation only.
         assert!(close(m.apply(c), c + DVec3::new(1.0, 2.0, 3.0)));
         let zyx = text.replace("(ComputeZYX \"false\")", "(ComputeZYX \"true\")");
         let (m, _) = parse_elastix(&zyx).unwrap();
-        let r = DMat3::from_rotation_z(0.3) * DMat3::from_rotation_y(-0.2) * DMat3::from_rotation_x(0.1);
+        let r = DMat3::from_rotation_z(0.3)
+            * DMat3::from_rotation_y(-0.2)
+            * DMat3::from_rotation_x(0.1);
         let x = DVec3::new(3.0, 4.0, -7.0);
-        assert!(close(m.apply(x), r * (x - c) + c + DVec3::new(1.0, 2.0, 3.0)));
+        assert!(close(
+            m.apply(x),
+            r * (x - c) + c + DVec3::new(1.0, 2.0, 3.0)
+        ));
     }
 
     #[test]
     fn similarity_and_affine_transforms_follow_itk() {
         // A versor of 90° about z: (0, 0, sin 45°).
         let s = std::f64::consts::FRAC_1_SQRT_2;
-        let text = format!(
-            "(Transform \"SimilarityTransform\")\n(TransformParameters 0 0 {s} 1 0 0 2)\n"
-        );
+        let text =
+            format!("(Transform \"SimilarityTransform\")\n(TransformParameters 0 0 {s} 1 0 0 2)\n");
         let (m, _) = parse_elastix(&text).unwrap();
         assert!(close(m.apply(DVec3::X), DVec3::new(1.0, 2.0, 0.0)));
         let text = "(Transform \"AffineTransform\")\n\
@@ -536,20 +554,23 @@ mod tests {
                     (CenterOfRotationPoint 1 0 0)\n";
         let (m, _) = parse_elastix(text).unwrap();
         // 2 (x − 1) + 1 along x, then + z.
-        assert!(close(m.apply(DVec3::new(3.0, 5.0, 0.0)), DVec3::new(5.0, 5.0, 1.0)));
+        assert!(close(
+            m.apply(DVec3::new(3.0, 5.0, 0.0)),
+            DVec3::new(5.0, 5.0, 1.0)
+        ));
     }
 
     #[test]
     fn bspline_transform_reads_as_the_itk_lattice() {
-        // 4×4×4 control points, one moved: its displacement appears at its location.
-        let mut p = vec![0.0; 3 * 64];
-        let node = 1 + 4 * (2 + 4 * 1);
+        // 5×5×5 control points, one moved: its displacement appears at its location.
+        let mut p = vec![0.0; 3 * 125];
+        let node = 1 + 5 * 2 + 25; // control point (1, 2, 1)
         p[node] = 0.5; // x displacement
-        p[128 + node] = -0.25; // z displacement
+        p[250 + node] = -0.25; // z displacement
         let params: Vec<String> = p.iter().map(|v| v.to_string()).collect();
         let text = format!(
-            "(Transform \"BSplineTransform\")\n(NumberOfParameters 192)\n\
-             (TransformParameters {})\n(GridSize 4 4 4)\n(GridIndex 0 0 0)\n\
+            "(Transform \"BSplineTransform\")\n(NumberOfParameters 375)\n\
+             (TransformParameters {})\n(GridSize 5 5 5)\n(GridIndex 0 0 0)\n\
              (GridSpacing 2 2 2)\n(GridOrigin -2 -2 -2)\n\
              (GridDirection 1 0 0 0 1 0 0 0 1)\n(BSplineTransformSplineOrder 3)\n\
              (UseCyclicTransform \"false\")\n",
@@ -558,11 +579,14 @@ mod tests {
         let (m, _) = parse_elastix(&text).unwrap();
         assert!(matches!(m, AnyMap::Lattice(_)));
         // The cubic B-spline weights at a node: 1/6, 4/6, 1/6. At grid index (1, 2, 1)
-        // (x = (0, 2, 0)), the moved control point has weight (4/6)³.
+        // (x = (0, 2, 0)), the moved control point has weight (4/6)³, the others none.
         let x = DVec3::new(0.0, 2.0, 0.0);
         let w = (4.0f64 / 6.0).powi(3);
-        assert!(close(m.apply(x), x + DVec3::new(0.5 * w, 0.0, -0.25 * w)), "{}", m.apply(x));
-        let short = text.replace("(NumberOfParameters 192)\n", "").replace(" 0\n(GridSize", "\n(GridSize");
+        let want = x + DVec3::new(0.5 * w, 0.0, -0.25 * w);
+        assert!((m.apply(x) - want).length() < 1e-12, "{}", m.apply(x));
+        let short = text
+            .replace("(NumberOfParameters 375)\n", "")
+            .replace(" 0)\n(GridSize", ")\n(GridSize");
         assert!(parse_elastix(&short).is_err());
     }
 

@@ -58,7 +58,12 @@ fn matrices(bytes: &[u8]) -> Result<Vec<Matrix>, MapError> {
             .get(pos..pos + 20)
             .ok_or_else(|| bad(format!("truncated matrix header at byte {at}")))?;
         let word = |i: usize, be: bool| {
-            let b = [head[4 * i], head[4 * i + 1], head[4 * i + 2], head[4 * i + 3]];
+            let b = [
+                head[4 * i],
+                head[4 * i + 1],
+                head[4 * i + 2],
+                head[4 * i + 3],
+            ];
             if be {
                 i32::from_be_bytes(b)
             } else {
@@ -110,7 +115,9 @@ fn matrices(bytes: &[u8]) -> Result<Vec<Matrix>, MapError> {
         }
         let n = rows as usize * cols as usize;
         if n > MAX_VALUES {
-            return Err(bad(format!("byte {at}: {n} values, more than {MAX_VALUES}")));
+            return Err(bad(format!(
+                "byte {at}: {n} values, more than {MAX_VALUES}"
+            )));
         }
         pos += 20;
         let name_bytes = bytes
@@ -263,8 +270,15 @@ mod tests {
         ];
         let c = [10.0f32, 20.0, -5.0];
         let map = parse_mat(&ants_bytes(&p, c)).unwrap();
-        let m = DMat3::from_cols_array(&p[..9].iter().map(|&v| f64::from(v)).collect::<Vec<_>>()
-            .try_into().unwrap()).transpose();
+        let m = DMat3::from_cols_array(
+            &p[..9]
+                .iter()
+                .map(|&v| f64::from(v))
+                .collect::<Vec<_>>()
+                .try_into()
+                .unwrap(),
+        )
+        .transpose();
         let t = DVec3::new(3.0, -2.0, 0.5);
         let cv = DVec3::new(10.0, 20.0, -5.0);
         for x in [DVec3::ZERO, DVec3::new(1.0, -4.0, 7.0)] {
@@ -290,7 +304,9 @@ mod tests {
         for name_len in [ITK_AFFINE_TYPE.len() + 1, 6] {
             let n = i32::from_le_bytes(bytes[pos + 4..pos + 8].try_into().unwrap()) as usize;
             let words: Vec<i32> = (0..5)
-                .map(|i| i32::from_le_bytes(bytes[pos + 4 * i..pos + 4 * i + 4].try_into().unwrap()))
+                .map(|i| {
+                    i32::from_le_bytes(bytes[pos + 4 * i..pos + 4 * i + 4].try_into().unwrap())
+                })
                 .collect();
             for (i, w) in words.iter().enumerate() {
                 let w = if i == 0 { 1000 } else { *w };
@@ -313,7 +329,10 @@ mod tests {
 
     #[test]
     fn malformed_mat_files_are_refused() {
-        let good = ants_bytes(&[1.0, 0.0, 0.0, 0.0, 1.0, 0.0, 0.0, 0.0, 1.0, 0.0, 0.0, 0.0], [0.0; 3]);
+        let good = ants_bytes(
+            &[1.0, 0.0, 0.0, 0.0, 1.0, 0.0, 0.0, 0.0, 1.0, 0.0, 0.0, 0.0],
+            [0.0; 3],
+        );
         for cut in [0, 10, 25, good.len() - 1] {
             assert!(parse_mat(&good[..cut]).is_err(), "cut {cut}");
         }
@@ -324,12 +343,9 @@ mod tests {
         let mut two = good.clone();
         two.extend_from_slice(&good);
         assert!(matches!(parse_mat(&two), Err(MapError::Unsupported(_))));
-        let lattice = volmorph_lattice::BSplineLattice::uniform_cubic_around(
-            DVec3::ZERO,
-            DVec3::ONE,
-            [4; 3],
-        )
-        .unwrap();
+        let lattice =
+            volmorph_lattice::BSplineLattice::uniform_cubic_around(DVec3::ZERO, DVec3::ONE, [4; 3])
+                .unwrap();
         assert!(to_mat_bytes(&AnyMap::Lattice(lattice)).is_err());
     }
 }

@@ -415,10 +415,12 @@ pub(crate) fn decode_values_f64(
 ) -> Result<Vec<f64>, VolumeError> {
     let vt = spec.voxel_type;
     volmorph_io::checked_len(&[n], vt.size().max(8))?;
-    Ok(volmorph_volume::with_voxel_type!(vt, T => decode_typed::<T>(input, spec, n)?
+    Ok(
+        volmorph_volume::with_voxel_type!(vt, T => decode_typed::<T>(input, spec, n)?
         .into_iter()
         .map(|v| v.to_f64())
-        .collect()))
+        .collect()),
+    )
 }
 
 fn decode_typed<T: AsciiVoxel>(

@@ -151,11 +151,7 @@ mod tests {
         g.spacing = DVec3::new(1.5, 2.0, 0.75);
         g.origin = DVec3::new(-10.0, 4.0, 7.25);
         let (s, c) = 0.3f64.sin_cos();
-        g.direction = DMat3::from_cols(
-            DVec3::new(c, s, 0.0),
-            DVec3::new(-s, c, 0.0),
-            DVec3::Z,
-        );
+        g.direction = DMat3::from_cols(DVec3::new(c, s, 0.0), DVec3::new(-s, c, 0.0), DVec3::Z);
         let vectors = (0..g.len())
             .map(|i| DVec3::new(i as f64 * 0.1, -(i as f64), 1.0 / (1.0 + i as f64)))
             .collect();
@@ -180,7 +176,10 @@ mod tests {
                     // NIfTI keeps geometry in f32.
                     let tol = if name.starts_with("f.nii") { 1e-5 } else { 0.0 };
                     assert!(
-                        (back.geometry.origin - im.geometry.origin).abs().max_element() <= tol
+                        (back.geometry.origin - im.geometry.origin)
+                            .abs()
+                            .max_element()
+                            <= tol
                     );
                     assert!(
                         (back.geometry.direction - im.geometry.direction)

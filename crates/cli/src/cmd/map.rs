@@ -47,7 +47,11 @@ pub struct FieldArgs {
     /// The map (any map file).
     pub map: PathBuf,
     /// The grid of this reference volume (dims, spacing, origin, direction).
-    #[arg(long, value_name = "VOLUME", required_unless_present = "output_geometry")]
+    #[arg(
+        long,
+        value_name = "VOLUME",
+        required_unless_present = "output_geometry"
+    )]
     pub reference: Option<PathBuf>,
     /// The grid NX,NY,NZ;SX,SY,SZ;OX,OY,OZ[;D00,D01,…,D22] (as `warp --output-geometry`).
     #[arg(long, value_name = "GEOMETRY", conflicts_with = "reference",
@@ -165,7 +169,9 @@ pub fn run(cmd: &Command) -> anyhow::Result<()> {
             let grid = match (&a.reference, &a.output_geometry) {
                 (_, Some(g)) => **g,
                 (Some(path), None) => *volmorph_volume_io::read(path)
-                    .with_context(|| format!("cannot read the reference volume {}", path.display()))?
+                    .with_context(|| {
+                        format!("cannot read the reference volume {}", path.display())
+                    })?
                     .geometry(),
                 (None, None) => anyhow::bail!("give --reference VOLUME or --output-geometry"),
             };
