@@ -370,7 +370,7 @@ fn data_spec(meta: &Meta, detached: bool) -> DataSpec {
         encoded_len: meta.compressed_size,
         exact: false,
     };
-    let spec = if detached && meta.header_size > 0 {
+    if detached && meta.header_size > 0 {
         let skip = meta.header_size as u64;
         match meta.encoding {
             // HeaderSize counts bytes of the data file itself, before any decompression.
@@ -385,8 +385,7 @@ fn data_spec(meta: &Meta, detached: bool) -> DataSpec {
         }
     } else {
         spec
-    };
-    spec
+    }
 }
 
 /// The vectors of a 3-channel image (`ElementNumberOfChannels = 3`, interleaved), in f64.
