@@ -9,6 +9,17 @@ applies the same file (`volmorph map apply`) and its own JSON form of the map. T
 distance between SimpleITK's and volmorph's mapped points must be at most 1e-9 of the box
 diagonal (rounding of the 17-digit text), for every file.
 
+Then the other transform files:
+
+* Displacement fields: `volmorph map field M --reference V -o F` (`.nii.gz` and `.mha`, of the
+  composite above, on an oblique reference grid SimpleITK wrote) read by SimpleITK as a
+  `DisplacementFieldTransform`, applied to points inside the grid, near its border and outside
+  it (where ITK's displacement is zero), against volmorph applying the same field file; and a
+  field SimpleITK computed (`TransformToDisplacementField` of the B-spline transform) read by
+  volmorph. Same tolerance (f64 values).
+* ITK/ANTs MATLAB `.mat`: an affine with a centre written by SimpleITK (`WriteTransform`) read
+  by volmorph, and the affine volmorph writes read by SimpleITK.
+
 Usage:  python3 scripts/transform_peer_check.py [--volmorph target/release/volmorph]
 Exits 0 with a SKIP message when SimpleITK is not installed or the binary is missing; 1 when a
 check fails.
@@ -102,8 +113,99 @@ def main() -> int:
             good = err <= REL_TOL * diag and moved > 1e-3 * diag
             print(("PASS  " if good else "FAIL  ") + line)
             ok &= good
+        ok &= check_fields_and_mat(sitk, vm, t, rng, diag, lo, hi)
     print("PASS" if ok else "FAIL")
     return 0 if ok else 1
+
+
+def apply_file(vm: Path, t: Path, mapfile: Path, pts: np.ndarray) -> np.ndarray:
+    np.savetxt(t / "fp.txt", pts, fmt="%.17g")
+    run(vm, "map", "apply", mapfile, t / "fp.txt", "-o", t / "fq.txt")
+    return np.loadtxt(t / "fq.txt", comments="#", ndmin=2)[:, :3]
+
+
+def report(name: str, ours: np.ndarray, theirs: np.ndarray, pts: np.ndarray, tol: float) -> bool:
+    err = float(np.max(np.linalg.norm(ours - theirs, axis=1)))
+    moved = float(np.max(np.linalg.norm(theirs - pts, axis=1)))
+    good = err <= tol and moved > 0.0
+    print(("PASS  " if good else "FAIL  ")
+          + f"{name}: largest |volmorph − SimpleITK| = {err:.2e} (points moved up to {moved:.3g})")
+    return good
+
+
+def check_fields_and_mat(sitk, vm: Path, t: Path, rng, diag: float, lo, hi) -> bool:
+    ok = True
+    tol = REL_TOL * diag
+    # An oblique reference grid written by SimpleITK, covering the lattice box.
+    ref = sitk.Image(20, 18, 16, sitk.sitkFloat32)
+    ang = 0.2
+    c, s = np.cos(ang), np.sin(ang)
+    d = np.array([[c, -s, 0.0], [s, c, 0.0], [0.0, 0.0, 1.0]])
+    ref.SetDirection(tuple(d.flatten()))
+    ref.SetSpacing(tuple(((hi - lo) / np.array([17.0, 15.0, 13.0])).tolist()))
+    ref.SetOrigin(tuple(lo.tolist()))
+    sitk.WriteImage(ref, str(t / "ref.nii.gz"))
+    # The reference as volmorph reads it (NIfTI keeps geometry in f32).
+    back = sitk.ReadImage(str(t / "ref.nii.gz"))
+    size = np.array(back.GetSize(), dtype=float)
+    for field in ["f.nii.gz", "f.mha"]:
+        run(vm, "map", "field", t / "al.tfm", "--reference", t / "ref.nii.gz", "-o", t / field)
+        img = sitk.ReadImage(str(t / field))
+        if img.GetNumberOfComponentsPerPixel() != 3:
+            print(f"FAIL  {field}: SimpleITK reads {img.GetNumberOfComponentsPerPixel()} components")
+            ok = False
+            continue
+        dft = sitk.DisplacementFieldTransform(sitk.Cast(img, sitk.sitkVectorFloat64))
+        # Continuous indices inside, within half a voxel outside, and beyond.
+        ci = rng.uniform(-2.0, size + 1.0, (2000, 3))
+        pts = np.array([img.TransformContinuousIndexToPhysicalPoint(tuple(q)) for q in ci])
+        theirs = np.array([dft.TransformPoint(tuple(q)) for q in pts])
+        ours = apply_file(vm, t, t / field, pts)
+        ok &= report(f"displacement field {field} (volmorph map field) read as a map", ours,
+                     theirs, pts, tol)
+        # The field agrees with the composite at the grid nodes.
+        nodes = np.array([img.TransformIndexToPhysicalPoint((int(i), int(j), int(k)))
+                          for i, j, k in rng.integers(0, size, (300, 3))])
+        comp = sitk.ReadTransform(str(t / "al.tfm"))
+        exact = np.array([comp.TransformPoint(tuple(q)) for q in nodes])
+        viafield = np.array([dft.TransformPoint(tuple(q)) for q in nodes])
+        ok &= report(f"{field} at its nodes (SimpleITK) vs the composite .tfm", viafield, exact,
+                     nodes, tol)
+    # A field SimpleITK computed, read by volmorph.
+    bs = sitk.ReadTransform(str(t / "l.tfm"))
+    tdf = sitk.TransformToDisplacementFieldFilter()
+    tdf.SetReferenceImage(ref)
+    tdf.SetOutputPixelType(sitk.sitkVectorFloat64)
+    sf = tdf.Execute(bs)
+    sitk.WriteImage(sf, str(t / "sitk_field.nii.gz"))
+    sitk.WriteImage(sf, str(t / "sitk_field.mha"))
+    dft = sitk.DisplacementFieldTransform(sitk.Cast(sitk.ReadImage(str(t / "sitk_field.mha")),
+                                                    sitk.sitkVectorFloat64))
+    ci = rng.uniform(-1.0, size, (1000, 3))
+    pts = np.array([ref.TransformContinuousIndexToPhysicalPoint(tuple(q)) for q in ci])
+    theirs = np.array([dft.TransformPoint(tuple(q)) for q in pts])
+    for name in ["sitk_field.nii.gz", "sitk_field.mha"]:
+        ours = apply_file(vm, t, t / name, pts)
+        ok &= report(f"SimpleITK's displacement field {name} read by volmorph", ours, theirs,
+                     pts, tol)
+    # MATLAB .mat: SimpleITK's affine with a centre read by volmorph, and back.
+    aff = sitk.AffineTransform(3)
+    aff.SetMatrix((1.05, 0.1, 0.0, -0.08, 0.97, 0.02, 0.01, 0.0, 1.1))
+    aff.SetTranslation((1.5, -2.0, 0.7))
+    aff.SetCenter(tuple(((lo + hi) / 2).tolist()))
+    sitk.WriteTransform(aff, str(t / "sitk_affine.mat"))
+    pts = rng.uniform(lo, hi, (500, 3))
+    theirs = np.array([aff.TransformPoint(tuple(q)) for q in pts])
+    ours = apply_file(vm, t, t / "sitk_affine.mat", pts)
+    ok &= report("SimpleITK's affine .mat (with centre) read by volmorph", ours, theirs, pts, tol)
+    (t / "id.json").write_text(json.dumps({"version": 1, "kind": "identity"}))
+    run(vm, "map", "compose", t / "a.json", t / "id.json", "-o", t / "a.mat")
+    mat = sitk.ReadTransform(str(t / "a.mat"))
+    theirs = np.array([mat.TransformPoint(tuple(q)) for q in pts])
+    ours = apply_file(vm, t, t / "a.json", pts)
+    ok &= report(f"volmorph's affine .mat read by SimpleITK ({mat.GetName()})", ours, theirs,
+                 pts, tol)
+    return ok
 
 
 if __name__ == "__main__":

@@ -10,6 +10,8 @@ use volmorph_lattice::BSplineLattice;
 use volmorph_trivariate::GeometryMap;
 use volmorph_volume::Geometry;
 
+use crate::field::DisplacementField;
+
 /// Every kind of space map, as one value that can be stored, written to a file (JSON, and ITK
 /// `.tfm` where ITK has the same transform) and applied. Each variant keeps its own direction
 /// convention (see the variant's type); [`AnyMap`] itself adds none.
@@ -44,8 +46,13 @@ pub enum AnyMap {
     Bump(BumpMap),
     /// A trivariate NURBS geometry acting on its placement box.
     Geometry(GeometryMap),
-    /// A map sampled on a grid and interpolated trilinearly (a dense displacement field).
+    /// A map sampled on a grid and interpolated trilinearly, extended outside the grid by a
+    /// constant displacement.
     Sampled(SampledMap),
+    /// A dense displacement field `x ↦ x + d(x)` as ITK's `DisplacementFieldTransform`
+    /// (trilinear, zero displacement beyond half a voxel outside its grid; see
+    /// [`crate::field`]).
+    DisplacementField(DisplacementField),
     /// The maps in list order, the first applied first.
     Compose(Vec<AnyMap>),
     /// The numerical inverse (Newton) of a map.
@@ -67,6 +74,7 @@ impl AnyMap {
             AnyMap::Bump(_) => "bump",
             AnyMap::Geometry(_) => "nurbs-geometry",
             AnyMap::Sampled(_) => "sampled",
+            AnyMap::DisplacementField(_) => "displacement-field",
             AnyMap::Compose(_) => "compose",
             AnyMap::Inverse(_) => "inverse",
         }
@@ -110,6 +118,18 @@ impl AnyMap {
             AnyMap::Sampled(s) => {
                 let [nx, ny, nz] = s.grid().dims;
                 format!("sampled map, {nx}×{ny}×{nz} nodes")
+            }
+            AnyMap::DisplacementField(f) => {
+                let [nx, ny, nz] = f.grid().dims;
+                let max = f
+                    .displacements()
+                    .iter()
+                    .map(|d| d.length())
+                    .fold(0.0, f64::max);
+                format!(
+                    "displacement field, {nx}×{ny}×{nz} nodes, largest displacement {}",
+                    volmorph_io::fmt_f64(max)
+                )
             }
             AnyMap::Compose(ms) => format!(
                 "composition of {} maps: {}",
@@ -189,6 +209,7 @@ impl AnyMap {
             AnyMap::Bump(m) => m,
             AnyMap::Geometry(m) => m,
             AnyMap::Sampled(m) => m,
+            AnyMap::DisplacementField(m) => m,
             AnyMap::Compose(_) => self,
             AnyMap::Inverse(m) => m.as_ref(),
         }
@@ -285,6 +306,7 @@ from_map!(
     BumpMap => Bump,
     GeometryMap => Geometry,
     SampledMap => Sampled,
+    DisplacementField => DisplacementField,
 );
 
 impl From<Identity> for AnyMap {

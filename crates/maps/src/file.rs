@@ -1,12 +1,16 @@
 //! Map files, by extension: `.json` (the map JSON of [`crate::json`], which includes the
-//! lattice JSON), `.tfm` / `.txt` (ITK text transforms, [`crate::itk`]) and `.bxf`
-//! (plastimatch B-spline lattices).
+//! lattice JSON), `.tfm` / `.txt` (ITK text transforms, [`crate::itk`]; a `.txt` whose first
+//! entry is an elastix `(Name value …)` line is an elastix transform parameter file,
+//! [`crate::elastix`]), `.mat` (ITK/ANTs MATLAB transforms, [`crate::itk_mat`]), `.bxf`
+//! (plastimatch B-spline lattices) and `.nii`, `.nii.gz`, `.mha`, `.mhd` (ITK displacement
+//! fields, [`crate::field`]).
 
 use std::path::Path;
 
 use volmorph_lattice::formats::bxf;
 
-use crate::{AnyMap, MapError, itk};
+use crate::field::DisplacementField;
+use crate::{AnyMap, MapError, elastix, itk, itk_mat};
 
 /// Largest map file read, in bytes (1 GiB of text: a 2²⁵-node sampled map). Checked against
 /// the file's size before reading it.
@@ -21,14 +25,33 @@ pub enum MapFormat {
     ItkTfm,
     /// plastimatch B-spline (`.bxf`).
     Bxf,
+    /// ITK MATLAB transform, as ANTs writes affine transforms (`.mat`).
+    ItkMat,
+    /// elastix transform parameter file (`.txt` starting with a `(Name value …)` entry; read
+    /// only).
+    Elastix,
+    /// ITK displacement field: a 3-component vector image (`.nii`, `.nii.gz`, `.mha`,
+    /// `.mhd`).
+    DisplacementField,
 }
 
 impl MapFormat {
-    /// The format of `path`, by its extension (case-insensitive).
+    /// The format of `path`, by its extension (case-insensitive). A `.txt` file is an ITK
+    /// transform here; [`read_map`] tells an elastix parameter file by its content.
     ///
     /// # Errors
     /// [`MapError::Unsupported`] for another extension, naming the ones known.
     pub fn of(path: &Path) -> Result<Self, MapError> {
+        let name = path
+            .file_name()
+            .map(|e| e.to_string_lossy().to_ascii_lowercase())
+            .unwrap_or_default();
+        if [".nii", ".nii.gz", ".mha", ".mhd"]
+            .iter()
+            .any(|e| name.ends_with(e))
+        {
+            return Ok(Self::DisplacementField);
+        }
         let ext = path
             .extension()
             .map(|e| e.to_string_lossy().to_ascii_lowercase())
@@ -37,22 +60,23 @@ impl MapFormat {
             "json" => Ok(Self::Json),
             "tfm" | "txt" => Ok(Self::ItkTfm),
             "bxf" => Ok(Self::Bxf),
-            "h5" | "hdf5" | "mat" => Err(MapError::Unsupported(format!(
-                "{}: binary ITK transform files (.{ext}) are not read; save the transform as \
-                 text (.tfm)",
+            "mat" => Ok(Self::ItkMat),
+            "h5" | "hdf5" => Err(MapError::Unsupported(format!(
+                "{}: HDF5 ITK transform files (.{ext}) are not read; save the transform as \
+                 text (.tfm) or MATLAB (.mat)",
                 path.display()
             ))),
             _ => Err(MapError::Unsupported(format!(
-                "{}: unknown map file extension; use .json, .tfm, .txt or .bxf",
+                "{}: unknown map file extension; use .json, .tfm, .txt (ITK or elastix), .mat, \
+                 .bxf, or a displacement field .nii, .nii.gz, .mha, .mhd",
                 path.display()
             ))),
         }
     }
 }
 
-/// Read the whole text file at `path`, refusing files over [`MAX_MAP_FILE_BYTES`] before
-/// reading.
-fn read_text(path: &Path) -> Result<String, MapError> {
+/// Read the whole file at `path`, refusing files over `max` bytes before reading.
+fn read_bytes(path: &Path, max: u64) -> Result<Vec<u8>, MapError> {
     let os = |e| volmorph_io::IoError::os(path, e);
     let meta = std::fs::metadata(path).map_err(os)?;
     if !meta.is_file() {
@@ -61,14 +85,20 @@ fn read_text(path: &Path) -> Result<String, MapError> {
             path.display()
         )));
     }
-    if meta.len() > MAX_MAP_FILE_BYTES {
+    if meta.len() > max {
         return Err(MapError::Invalid(format!(
-            "{} is {} bytes, more than the {MAX_MAP_FILE_BYTES} bytes a map file may have",
+            "{} is {} bytes, more than the {max} bytes a map file of this kind may have",
             path.display(),
             meta.len()
         )));
     }
-    let bytes = std::fs::read(path).map_err(os)?;
+    Ok(std::fs::read(path).map_err(os)?)
+}
+
+/// Read the whole text file at `path`, refusing files over [`MAX_MAP_FILE_BYTES`] before
+/// reading.
+pub(crate) fn read_text(path: &Path) -> Result<String, MapError> {
+    let bytes = read_bytes(path, MAX_MAP_FILE_BYTES)?;
     String::from_utf8(bytes).map_err(|e| {
         MapError::Invalid(format!(
             "{} is not UTF-8 text (invalid byte at offset {})",
@@ -86,11 +116,69 @@ pub fn read_map(path: &Path) -> Result<AnyMap, MapError> {
     let read = || -> Result<AnyMap, MapError> {
         match MapFormat::of(path)? {
             MapFormat::Json => AnyMap::from_json(&read_text(path)?),
-            MapFormat::ItkTfm => itk::parse_tfm(&read_text(path)?),
+            MapFormat::ItkTfm | MapFormat::Elastix => {
+                let text = read_text(path)?;
+                if elastix::looks_like_elastix(&text) {
+                    elastix::read_elastix(path, &text)
+                } else {
+                    itk::parse_tfm(&text)
+                }
+            }
             MapFormat::Bxf => Ok(AnyMap::Lattice(bxf::parse_bxf(&read_text(path)?)?)),
+            MapFormat::ItkMat => {
+                let bytes = read_bytes(path, MAX_MAT_FILE_BYTES)?;
+                itk_mat::parse_mat(&bytes)
+            }
+            MapFormat::DisplacementField => {
+                let (image, _) = volmorph_volume_io::vector::read_vector(path)
+                    .map_err(|e| MapError::Invalid(e.to_string()))?;
+                Ok(AnyMap::DisplacementField(DisplacementField::from_image(
+                    image,
+                )?))
+            }
         }
     };
     read().map_err(|e| e.at(path))
+}
+
+/// Largest `.mat` transform file read, in bytes (a MATLAB file of a few parameter vectors).
+pub const MAX_MAT_FILE_BYTES: u64 = 1 << 20;
+
+/// Write the displacement field of `map` on `grid` (`d(x) = map(x) − x` at every node, see
+/// [`DisplacementField::from_map`]) as an ITK vector image at `path` (`.nii`, `.nii.gz`,
+/// `.mha`, `.mhd`) of `precision`; returns the field written.
+///
+/// # Errors
+/// [`MapError::Unsupported`] for another extension; the sampling errors of
+/// [`DisplacementField::from_map`]; I/O errors; every error names `path`.
+pub fn write_field(
+    path: &Path,
+    map: &AnyMap,
+    grid: volmorph_volume::Geometry,
+    precision: volmorph_volume_io::vector::VectorPrecision,
+) -> Result<DisplacementField, MapError> {
+    let write = || -> Result<DisplacementField, MapError> {
+        volmorph_volume_io::vector::vector_format(path)
+            .map_err(|e| MapError::Unsupported(e.to_string()))?;
+        let field = DisplacementField::from_map(map, grid)?;
+        write_field_image(path, &field, precision)?;
+        Ok(field)
+    };
+    write().map_err(|e| e.at(path))
+}
+
+fn write_field_image(
+    path: &Path,
+    field: &DisplacementField,
+    precision: volmorph_volume_io::vector::VectorPrecision,
+) -> Result<(), MapError> {
+    volmorph_volume_io::vector::write_vector(
+        path,
+        &field.to_image(),
+        precision,
+        &volmorph_volume_io::WriteOptions::default(),
+    )
+    .map_err(|e| MapError::Invalid(e.to_string()))
 }
 
 /// The text of `map` in `format`.
@@ -109,6 +197,11 @@ pub fn map_to_string(map: &AnyMap, format: MapFormat) -> Result<String, MapError
                 other.kind()
             ))),
         },
+        MapFormat::ItkMat | MapFormat::Elastix | MapFormat::DisplacementField => {
+            Err(MapError::Unsupported(
+                "this format is not text written by map_to_string (see write_map)".into(),
+            ))
+        }
     }
 }
 
@@ -118,7 +211,33 @@ pub fn map_to_string(map: &AnyMap, format: MapFormat) -> Result<String, MapError
 /// As [`map_to_string`], and I/O errors, as [`MapError::File`] naming `path`.
 pub fn write_map(path: &Path, map: &AnyMap) -> Result<(), MapError> {
     let write = || -> Result<(), MapError> {
-        let text = map_to_string(map, MapFormat::of(path)?)?;
+        let format = MapFormat::of(path)?;
+        match (format, map) {
+            (MapFormat::DisplacementField, AnyMap::DisplacementField(f)) => {
+                return write_field_image(
+                    path,
+                    f,
+                    volmorph_volume_io::vector::VectorPrecision::F64,
+                );
+            }
+            (MapFormat::DisplacementField, other) => {
+                return Err(MapError::Unsupported(format!(
+                    "a {} map has no grid of its own: sample it as a displacement field on a \
+                     reference grid (volmorph map field MAP --reference VOLUME -o FIELD)",
+                    other.kind()
+                )));
+            }
+            (MapFormat::ItkMat, m) => {
+                let bytes = itk_mat::to_mat_bytes(m)?;
+                return volmorph_io::write_atomic(path, |w| {
+                    use std::io::Write;
+                    w.write_all(&bytes)
+                        .map_err(|e| MapError::Io(volmorph_io::IoError::os(path, e)))
+                });
+            }
+            _ => {}
+        }
+        let text = map_to_string(map, format)?;
         volmorph_io::write_atomic(path, |w| {
             use std::io::Write;
             w.write_all(text.as_bytes())

@@ -14,8 +14,9 @@
 //!   [`AnyMap::Compose`] (list order, first first) is therefore written in reverse order, and
 //!   read back into list order.
 //!
-//! Other transform types (Euler, versor, similarity, displacement fields, HDF5 or MATLAB
-//! files) are refused with [`MapError::Unsupported`] naming the type.
+//! Other transform types (Euler, versor, similarity, displacement fields, HDF5 files) are
+//! refused with [`MapError::Unsupported`] naming the type. MATLAB `.mat` files hold the same
+//! transforms in binary ([`crate::itk_mat`]).
 
 use glam::{DMat3, DVec3};
 use volmorph_deform::Affine;
@@ -33,12 +34,13 @@ pub const ITK_COMPOSITE_TYPE: &str = "CompositeTransform_double_3_3";
 /// Largest number of transforms read from one file.
 const MAX_TRANSFORMS: usize = 64;
 
-/// One `Transform:` block of a transform file.
-struct Block {
-    line: usize,
-    kind: String,
-    params: Option<(usize, String)>,
-    fixed: Option<(usize, String)>,
+/// One `Transform:` block of a transform file: its line, type name, and the lines and text
+/// of its `Parameters` and `FixedParameters`.
+pub(crate) struct Block {
+    pub(crate) line: usize,
+    pub(crate) kind: String,
+    pub(crate) params: Option<(usize, String)>,
+    pub(crate) fixed: Option<(usize, String)>,
 }
 
 /// The ITK transform file of `map`.
@@ -95,14 +97,17 @@ fn block_of(map: &AnyMap) -> Result<String, MapError> {
     }
 }
 
+/// ITK's 12 parameters of an affine map with centre 0: the matrix row-major, then the
+/// translation.
+pub(crate) fn affine_parameters(a: &Affine) -> [f64; 12] {
+    let mut p = [0.0; 12];
+    p[..9].copy_from_slice(&a.matrix.transpose().to_cols_array());
+    p[9..].copy_from_slice(&a.offset.to_array());
+    p
+}
+
 fn affine_block(a: &Affine) -> String {
-    let r = a.matrix.transpose();
-    let params: Vec<String> = r
-        .to_cols_array()
-        .iter()
-        .chain(a.offset.to_array().iter())
-        .map(|v| fmt_f64(*v))
-        .collect();
+    let params: Vec<String> = affine_parameters(a).iter().map(|v| fmt_f64(*v)).collect();
     format!(
         "Transform: {ITK_AFFINE_TYPE}\nParameters: {}\nFixedParameters: 0 0 0\n",
         params.join(" ")
@@ -210,7 +215,8 @@ fn numbers(field: &Option<(usize, String)>, what: &str, line: usize) -> Result<V
         .collect()
 }
 
-fn map_of(b: &Block) -> Result<AnyMap, MapError> {
+/// The map of one non-composite transform block.
+pub(crate) fn map_of(b: &Block) -> Result<AnyMap, MapError> {
     let kind = b.kind.as_str();
     let is = |prefix: &str| {
         kind.strip_prefix(prefix)

@@ -17,6 +17,7 @@
 //! | `bump` | `center`, `inner`, `outer`, `matrix`, `offset` |
 //! | `nurbs-geometry` | `model` (a trivariate volume file's JSON object), `box`: `{"min": p, "max": p}` |
 //! | `sampled` | `grid` (`dims`, `spacing`, `origin`, `direction` rows), `positions` (x fastest) |
+//! | `displacement-field` | `grid` (as `sampled`), `displacements` (x fastest, physical units): `x ↦ x + d(x)`, zero beyond half a voxel outside the grid (ITK's `DisplacementFieldTransform`) |
 //! | `compose` | `maps`: applied in list order, the first first |
 //! | `inverse` | `map`, optional `tolerance` (physical units), `max_iterations` |
 //!
@@ -341,6 +342,13 @@ impl AnyMap {
                     }),
                 )?
             }
+            AnyMap::DisplacementField(f) => tagged(
+                "displacement-field",
+                json!({
+                    "grid": GridJson::from(f.grid()),
+                    "displacements": points(f.displacements()),
+                }),
+            )?,
             AnyMap::Compose(ms) => json!({
                 "kind": "compose",
                 "maps": ms.iter().map(AnyMap::to_json_value).collect::<Result<Vec<_>, _>>()?,
@@ -534,6 +542,20 @@ impl AnyMap {
                 let grid = s.grid.geometry();
                 AnyMap::Sampled(SampledMap::from_positions(grid, vecs(&s.positions))?)
             }
+            "displacement-field" => {
+                #[derive(Deserialize)]
+                #[serde(deny_unknown_fields)]
+                struct FieldJson {
+                    grid: GridJson,
+                    displacements: Vec<[f64; 3]>,
+                }
+                let f: FieldJson =
+                    serde_json::from_value(body()).map_err(parse("displacement-field"))?;
+                AnyMap::DisplacementField(crate::field::DisplacementField::new(
+                    f.grid.geometry(),
+                    vecs(&f.displacements),
+                )?)
+            }
             "compose" => {
                 let maps = obj.get("maps").and_then(Value::as_array).ok_or_else(|| {
                     MapError::Invalid("compose: missing \"maps\" (a list)".into())
@@ -582,7 +604,7 @@ impl AnyMap {
             other => {
                 return Err(MapError::Invalid(format!(
                     "unknown map kind {other:?} (known: identity, affine, bspline-lattice, mls, \
-                     frame-mls, thin-plate, wendland, bump, nurbs-geometry, sampled, compose, \
+                     frame-mls, thin-plate, wendland, bump, nurbs-geometry, sampled, displacement-field, compose, \
                      inverse)"
                 )));
             }

@@ -6,8 +6,10 @@
 //!   sampled maps, compositions and numerical inverses. It is a
 //!   [`SpaceMap`](volmorph_deform::SpaceMap) that keeps each kind's fast paths.
 //! * [`json`] — the tagged, versioned JSON form of every kind; [`itk`] — ITK text transforms
-//!   for the kinds ITK has (affine, B-spline, composite); [`file`](mod@file) — map files by extension
-//!   ([`read_map`], [`write_map`]).
+//!   for the kinds ITK has (affine, B-spline, composite); [`itk_mat`] — ITK/ANTs MATLAB `.mat`
+//!   transforms; [`elastix`] — elastix transform parameter files and their chains;
+//!   [`field`] — ITK displacement fields (vector images) as maps; [`file`](mod@file) — map
+//!   files by extension ([`read_map`], [`write_map`], [`write_field`]).
 //! * [`from_handles`] — the map a handle set builds ([`handle_map`]), in either direction.
 //! * [`live`] — the kinds linear in their parameters as one [`LiveMap`] for the live-edit
 //!   engines.
@@ -30,15 +32,19 @@
 //! ```
 
 mod any;
+pub mod elastix;
 mod error;
+pub mod field;
 pub mod file;
 pub mod from_handles;
 pub mod itk;
+pub mod itk_mat;
 pub mod json;
 pub mod live;
 
 pub use any::AnyMap;
 pub use error::MapError;
-pub use file::{MapFormat, read_map, write_map};
+pub use field::DisplacementField;
+pub use file::{MapFormat, read_map, write_field, write_map};
 pub use from_handles::{HandleDirection, HandleMethod, HandleOptions, handle_map};
 pub use live::LiveMap;

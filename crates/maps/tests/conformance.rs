@@ -200,6 +200,14 @@ fn sampled(identity: bool) -> SampledMap {
     SampledMap::from_map(&l, grid).unwrap()
 }
 
+fn field(identity: bool) -> volmorph_maps::DisplacementField {
+    let grid = Geometry::new([12, 11, 10])
+        .with_origin(LO * 1.3)
+        .with_spacing((HI - LO) * 1.3 / DVec3::new(11.0, 10.0, 9.0));
+    let l = lattice(if identity { 0.0 } else { 1.5 }, false);
+    volmorph_maps::DisplacementField::from_map(&l, grid).unwrap()
+}
+
 /// 60 handles (a flat subset would take the translation-only trend, see `wendland_flat`).
 fn wendland(identity: bool) -> WendlandMap {
     let (s, t) = handles(60, 16);
@@ -354,6 +362,14 @@ space_map_conformance!(
     suite(
         || AnyMap::Sampled(sampled(false)),
         || AnyMap::Sampled(sampled(true)),
+        1e-6
+    )
+);
+space_map_conformance!(
+    displacement_field,
+    suite(
+        || AnyMap::DisplacementField(field(false)),
+        || AnyMap::DisplacementField(field(true)),
         1e-6
     )
 );

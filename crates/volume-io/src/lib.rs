@@ -12,6 +12,10 @@
 //! | a `.ome.zarr` (or `.zarr`) folder | OME-Zarr: NGFF v0.4 on Zarr v2, v0.5 on Zarr v3, pyramids, box reads | [`omezarr`] |
 //! | `.raw` | headerless voxels, described by a [`raw::RawSpec`] | [`raw`] |
 //!
+//! Vector images with three components per voxel (displacement fields: NIfTI with
+//! `intent_code` 1007 and `dim[5] = 3`, MetaImage with `ElementNumberOfChannels = 3`) are read
+//! and written by [`vector`]; the volume readers refuse them by name.
+//!
 //! Every reader returns the volume in volmorph's convention (see [`volmorph_volume::Geometry`]: ITK
 //! physical space, x fastest) and refuses malformed input with a [`VolumeError`] — never a
 //! panic, and never an allocation larger than the header's checked size. Every writer goes
@@ -51,6 +55,7 @@ pub mod nrrd;
 pub mod omezarr;
 pub mod raw;
 mod text_header;
+pub mod vector;
 pub mod vti;
 pub mod vtk;
 

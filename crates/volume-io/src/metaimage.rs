@@ -78,6 +78,8 @@ fn err(msg: impl Into<String>) -> VolumeError {
 struct Meta {
     geometry: Geometry,
     voxel_type: VoxelType,
+    /// `ElementNumberOfChannels` (values per voxel, interleaved).
+    channels: usize,
     big_endian: bool,
     encoding: Encoding,
     compressed_size: Option<u64>,
@@ -261,10 +263,8 @@ fn parse_header(bytes: &[u8], complete: bool) -> Result<Meta, VolumeError> {
         Some(v) => text_header::parse_size(FMT, "ElementNumberOfChannels", v)?,
         None => 1,
     };
-    if channels != 1 {
-        return Err(VolumeError::Unsupported(format!(
-            "MetaImage with ElementNumberOfChannels = {channels} (only scalar images)"
-        )));
+    if channels == 0 {
+        return Err(err("ElementNumberOfChannels = 0"));
     }
     let et = get("ElementType").ok_or_else(|| err("missing the ElementType key"))?;
     let voxel_type = parse_element_type(et)?;
@@ -322,6 +322,7 @@ fn parse_header(bytes: &[u8], complete: bool) -> Result<Meta, VolumeError> {
     Ok(Meta {
         geometry,
         voxel_type,
+        channels,
         big_endian,
         encoding,
         compressed_size,
@@ -332,7 +333,25 @@ fn parse_header(bytes: &[u8], complete: bool) -> Result<Meta, VolumeError> {
     })
 }
 
+/// Refuse a multi-channel image where a scalar volume is read.
+fn require_scalar(meta: &Meta) -> Result<(), VolumeError> {
+    if meta.channels != 1 {
+        return Err(VolumeError::Unsupported(format!(
+            "MetaImage with ElementNumberOfChannels = {}: a vector image (e.g. a displacement \
+             field) is read as a map, not as a volume",
+            meta.channels
+        )));
+    }
+    Ok(())
+}
+
 fn decode(meta: &Meta, input: Input<'_>, detached: bool) -> Result<AnyVolume, VolumeError> {
+    require_scalar(meta)?;
+    text_header::decode(input, &data_spec(meta, detached), meta.geometry)
+}
+
+/// Where and how the data of `meta` are stored.
+fn data_spec(meta: &Meta, detached: bool) -> DataSpec {
     let start = if !detached {
         Start::Offset(meta.data_offset as u64)
     } else if meta.header_size == -1 {
@@ -351,7 +370,7 @@ fn decode(meta: &Meta, input: Input<'_>, detached: bool) -> Result<AnyVolume, Vo
         encoded_len: meta.compressed_size,
         exact: false,
     };
-    let spec = if detached && meta.header_size > 0 {
+    if detached && meta.header_size > 0 {
         let skip = meta.header_size as u64;
         match meta.encoding {
             // HeaderSize counts bytes of the data file itself, before any decompression.
@@ -366,8 +385,66 @@ fn decode(meta: &Meta, input: Input<'_>, detached: bool) -> Result<AnyVolume, Vo
         }
     } else {
         spec
+    }
+}
+
+/// The vectors of a 3-channel image (`ElementNumberOfChannels = 3`, interleaved), in f64.
+fn decode_vectors(
+    meta: &Meta,
+    input: Input<'_>,
+    detached: bool,
+) -> Result<Vec<DVec3>, VolumeError> {
+    if meta.channels != 3 {
+        return Err(VolumeError::Unsupported(format!(
+            "a displacement field has 3 components per voxel \
+             (ElementNumberOfChannels = 3), this image has {}",
+            meta.channels
+        )));
+    }
+    meta.geometry.validate()?;
+    let n = volmorph_io::checked_len(&meta.geometry.dims, 3 * 8)?;
+    let values = text_header::decode_values_f64(input, &data_spec(meta, detached), 3 * n)?;
+    let vectors: Vec<DVec3> = values
+        .chunks_exact(3)
+        .map(|c| DVec3::new(c[0], c[1], c[2]))
+        .collect();
+    if let Some((i, _)) = vectors.iter().enumerate().find(|(_, v)| !v.is_finite()) {
+        return Err(err(format!(
+            "vector {i} of the displacement field is not finite"
+        )));
+    }
+    Ok(vectors)
+}
+
+/// Read a single-file 3-channel MetaImage (`.mha`) from memory: its geometry and vectors
+/// (x fastest; components as stored, ITK's physical LPS frame).
+///
+/// # Errors
+/// As [`read_bytes`]; [`VolumeError::Unsupported`] for an image without exactly 3 channels;
+/// [`VolumeError::Format`] for a non-finite vector.
+pub fn read_vector_bytes(bytes: &[u8]) -> Result<(Geometry, Vec<DVec3>, Header), VolumeError> {
+    let meta = parse_header(bytes, bytes.len() <= text_header::MAX_HEADER_BYTES)?;
+    text_header::require_attached(FMT, meta.data_file.as_deref())?;
+    let v = decode_vectors(&meta, Input::Bytes(bytes), false)?;
+    Ok((meta.geometry, v, meta.header))
+}
+
+/// Read a 3-channel `.mha` / `.mhd` (see [`read_vector_bytes`]).
+pub(crate) fn read_vector(
+    path: &Path,
+    options: &ReadOptions,
+) -> Result<(Geometry, Vec<DVec3>, Header), VolumeError> {
+    let (prefix, len) = text_header::read_prefix(path)?;
+    let meta = parse_header(&prefix, prefix.len() as u64 == len)?;
+    let v = match &meta.data_file {
+        None => decode_vectors(&meta, Input::File(path), false)?,
+        Some(name) => {
+            let data =
+                text_header::existing_data_file(FMT, "ElementDataFile", path, name, options)?;
+            decode_vectors(&meta, Input::File(&data), true).map_err(|e| e.at(&data))?
+        }
     };
-    text_header::decode(input, &spec, meta.geometry)
+    Ok((meta.geometry, v, meta.header))
 }
 
 /// Read a single-file MetaImage (`.mha`, `ElementDataFile = LOCAL`) from memory.
@@ -431,7 +508,23 @@ fn join(v: &[f64]) -> String {
 }
 
 fn header_text(volume: &AnyVolume, compressed_size: Option<u64>, data_file: &str) -> String {
-    let g = volume.geometry();
+    header_text_for(
+        volume.geometry(),
+        volume.voxel_type(),
+        1,
+        compressed_size,
+        data_file,
+    )
+}
+
+/// The header of an image on `g` with `channels` values of type `t` per voxel.
+fn header_text_for(
+    g: &Geometry,
+    t: VoxelType,
+    channels: usize,
+    compressed_size: Option<u64>,
+    data_file: &str,
+) -> String {
     let mut s = String::with_capacity(512);
     s.push_str("ObjectType = Image\nNDims = 3\nBinaryData = True\n");
     s.push_str("BinaryDataByteOrderMSB = False\n");
@@ -459,20 +552,24 @@ fn header_text(volume: &AnyVolume, compressed_size: Option<u64>, data_file: &str
         "DimSize = {} {} {}\n",
         g.dims[0], g.dims[1], g.dims[2]
     ));
-    s.push_str(&format!(
-        "ElementType = {}\n",
-        element_type_name(volume.voxel_type())
-    ));
+    if channels > 1 {
+        s.push_str(&format!("ElementNumberOfChannels = {channels}\n"));
+    }
+    s.push_str(&format!("ElementType = {}\n", element_type_name(t)));
     s.push_str(&format!("ElementDataFile = {data_file}\n"));
     s
 }
 
-fn zlib(volume: &AnyVolume, options: &WriteOptions, w: impl Write) -> std::io::Result<u64> {
+fn zlib(
+    data: &dyn Fn(&mut dyn Write) -> std::io::Result<()>,
+    options: &WriteOptions,
+    w: impl Write,
+) -> std::io::Result<u64> {
     let mut enc = flate2::write::ZlibEncoder::new(
         CountingWriter { inner: w, count: 0 },
         text_header::level(options.level),
     );
-    text_header::write_voxels(&mut enc, volume, false)?;
+    data(&mut enc)?;
     let mut c = enc.finish()?;
     c.flush()?;
     Ok(c.count)
@@ -484,6 +581,53 @@ pub(crate) fn write(
     options: &WriteOptions,
 ) -> Result<(), VolumeError> {
     volume.geometry().validate()?;
+    write_payload(
+        path,
+        options,
+        &|size, name| header_text(volume, size, name),
+        &|w| text_header::write_voxels(w, volume, false),
+    )
+}
+
+/// Write a 3-channel image (`ElementNumberOfChannels = 3`, the components interleaved) of
+/// `f32` or `f64` (`voxel_type`), inline (`.mha`) or detached (`.mhd`) as [`write`] does.
+pub(crate) fn write_vector(
+    path: &Path,
+    geometry: &Geometry,
+    vectors: &[DVec3],
+    voxel_type: VoxelType,
+    options: &WriteOptions,
+) -> Result<(), VolumeError> {
+    geometry.validate()?;
+    let data = |w: &mut dyn Write| -> std::io::Result<()> {
+        if voxel_type == VoxelType::F32 {
+            let v: Vec<f32> = vectors
+                .iter()
+                .flat_map(|v| v.to_array())
+                .map(|x| x as f32)
+                .collect();
+            text_header::write_values(w, &v, false)
+        } else {
+            let v: Vec<f64> = vectors.iter().flat_map(|v| v.to_array()).collect();
+            text_header::write_values(w, &v, false)
+        }
+    };
+    write_payload(
+        path,
+        options,
+        &|size, name| header_text_for(geometry, voxel_type, 3, size, name),
+        &data,
+    )
+}
+
+/// Write a header (`header(compressed size, data file name)`) and its data (`data`), inline
+/// or detached by the name of `path`, compressed per `options`.
+fn write_payload(
+    path: &Path,
+    options: &WriteOptions,
+    header: &dyn Fn(Option<u64>, &str) -> String,
+    data: &dyn Fn(&mut dyn Write) -> std::io::Result<()>,
+) -> Result<(), VolumeError> {
     let os = os_err(path);
     let data_ext = if options.compress { "zraw" } else { "raw" };
     if is_detached_name(path) {
@@ -493,31 +637,28 @@ pub(crate) fn write(
             &DATA_EXTS,
             |w| {
                 if options.compress {
-                    Ok(Some(zlib(volume, options, w).map_err(&os)?))
+                    Ok(Some(zlib(data, options, w).map_err(&os)?))
                 } else {
-                    text_header::write_voxels(w, volume, false).map_err(&os)?;
+                    data(w).map_err(&os)?;
                     Ok(None)
                 }
             },
-            |w, data_name, size| {
-                w.write_all(header_text(volume, size, data_name).as_bytes())
-                    .map_err(&os)
-            },
+            |w, data_name, size| w.write_all(header(size, data_name).as_bytes()).map_err(&os),
         )
         .map(drop)
     } else if options.compress {
         let mut buf = Vec::new();
-        let size = zlib(volume, options, &mut buf).map_err(&os)?;
-        let text = header_text(volume, Some(size), "LOCAL");
+        let size = zlib(data, options, &mut buf).map_err(&os)?;
+        let text = header(Some(size), "LOCAL");
         volmorph_io::write_atomic::<VolumeError, _>(path, |w| {
             w.write_all(text.as_bytes()).map_err(&os)?;
             w.write_all(&buf).map_err(&os)
         })
     } else {
-        let text = header_text(volume, None, "LOCAL");
+        let text = header(None, "LOCAL");
         volmorph_io::write_atomic::<VolumeError, _>(path, |w| {
             w.write_all(text.as_bytes()).map_err(&os)?;
-            text_header::write_voxels(w, volume, false).map_err(&os)
+            data(w).map_err(&os)
         })
     }
 }

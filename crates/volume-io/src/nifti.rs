@@ -671,6 +671,9 @@ struct Layout {
     offset: usize,
     /// Number of 3-D frames (`dim[4]` of a 4-D image; 1 otherwise).
     frames: usize,
+    /// Components per voxel: `dim[5]` of a vector image (`intent_code` 1006/1007 with
+    /// `dim = [5, nx, ny, nz, 1, c]`, as ITK writes vector images), 1 otherwise.
+    components: usize,
 }
 
 impl Layout {
@@ -754,6 +757,14 @@ fn validate(h: &RawHeader) -> Result<Layout, VolumeError> {
     } else {
         1
     };
+    // ITK's vector images: dim = [5, nx, ny, nz, 1, c] with a vector intent; the c
+    // components are stored one after another (planar), each a whole 3-D volume.
+    let mut components = 1;
+    if realdim == 5 && h.dim[4] == 1 && matches!(h.intent_code, 1006 | 1007) {
+        components = usize::try_from(h.dim[5])
+            .map_err(|_| err(format!("dim[5] = {} overflows", h.dim[5])))?;
+        realdim = 3;
+    }
     if realdim > 3 {
         let what = if matches!(h.intent_code, 1005 | 1007) && ndim_file >= 5 && h.dim[5] > 1 {
             format!(
@@ -792,7 +803,7 @@ fn validate(h: &RawHeader) -> Result<Layout, VolumeError> {
             .map_err(|_| err(format!("dim[{}] = {} overflows", a + 1, h.dim[a + 1])))?;
     }
     let len = checked_len(&dims, voxel_type.size())?;
-    checked_len(&[len, frames], voxel_type.size())?;
+    checked_len(&[len, frames, components], voxel_type.size())?;
     let offset = if let Some(w) = &h.wide {
         if w.vox_offset < WRITE2_VOX_OFFSET as i64 {
             return Err(err(format!(
@@ -860,6 +871,7 @@ fn validate(h: &RawHeader) -> Result<Layout, VolumeError> {
         len,
         offset,
         frames,
+        components,
     })
 }
 
@@ -1722,14 +1734,13 @@ where
     })
 }
 
-/// Parse a header from a stream positioned at byte 0, then read the voxels. `file_len` is the
-/// size of a plain file (lets a short file be refused before anything is allocated); `None`
-/// means a gzip stream, which is decoded to its end after the data so that its CRC is checked.
-fn read_stream<R: Read>(
+/// The validated header of a stream positioned at byte 0, left positioned at the first
+/// byte of the voxel data. `file_len` is the size of a plain file (lets a short file be
+/// refused before anything is allocated); `None` means a gzip stream.
+fn read_head<R: Read>(
     r: &mut R,
     file_len: Option<u64>,
-    frame: impl Into<crate::FrameChoice>,
-) -> Result<(AnyVolume, Header, usize), VolumeError> {
+) -> Result<(RawHeader, Layout, Geometry), VolumeError> {
     let mut hb = [0u8; HEADER2_SIZE];
     let mut got = fill(r, &mut hb[..HEADER_SIZE], "header")?;
     let sizeof = [hb[0], hb[1], hb[2], hb[3]];
@@ -1744,10 +1755,10 @@ fn read_stream<R: Read>(
     };
     let h = RawHeader::parse(&hb[..got])?;
     let layout = validate(&h)?;
-    let frame = crate::choose_frame(frame, layout.frames)?;
     let geometry = itk_geometry(&h, &layout)?;
     if let Some(len) = file_len {
-        let need = layout.offset as u64 + (layout.data_bytes() as u64) * layout.frames as u64;
+        let blocks = (layout.frames * layout.components) as u64;
+        let need = layout.offset as u64 + (layout.data_bytes() as u64) * blocks;
         if (layout.offset as u64) > len {
             return Err(err(format!(
                 "vox_offset {} lies beyond the end of the file ({len} bytes)",
@@ -1756,16 +1767,43 @@ fn read_stream<R: Read>(
         }
         if need > len {
             return Err(err(format!(
-                "truncated data: {} voxels of {} need {} bytes from offset {}, the file has {}",
-                layout.len * layout.frames,
+                "truncated data: {} values of {} need {} bytes from offset {}, the file has {}",
+                layout.len * blocks as usize,
                 layout.voxel_type,
-                layout.data_bytes() * layout.frames,
+                layout.data_bytes() as u64 * blocks,
                 layout.offset,
                 len.saturating_sub(layout.offset as u64)
             )));
         }
     }
     skip(r, (layout.offset - header_len) as u64, "extensions")?;
+    Ok((h, layout, geometry))
+}
+
+/// Decode a gzip stream to its end after the data: the gzip trailer (CRC-32, size) is
+/// verified only when the decoder reaches it.
+fn finish_gzip<R: Read>(r: &mut R) -> Result<(), VolumeError> {
+    io::copy(&mut r.take(GZ_TAIL_LIMIT), &mut io::sink())
+        .map_err(|e| io_err(e, "after the voxel data"))?;
+    Ok(())
+}
+
+/// Parse a header from a stream positioned at byte 0, then read the voxels (see
+/// [`read_head`] for `file_len`).
+fn read_stream<R: Read>(
+    r: &mut R,
+    file_len: Option<u64>,
+    frame: impl Into<crate::FrameChoice>,
+) -> Result<(AnyVolume, Header, usize), VolumeError> {
+    let (h, layout, geometry) = read_head(r, file_len)?;
+    if layout.components > 1 {
+        return Err(VolumeError::Unsupported(format!(
+            "vector-valued voxels (intent_code {}, {} components in dim[5]): a vector image \
+             (e.g. a displacement field) is read as a map, not as a volume",
+            h.intent_code, layout.components
+        )));
+    }
+    let frame = crate::choose_frame(frame, layout.frames)?;
     skip(
         r,
         (layout.data_bytes() as u64) * frame as u64,
@@ -1780,11 +1818,85 @@ fn read_stream<R: Read>(
         rescale,
     )?);
     if file_len.is_none() {
-        // The gzip trailer (CRC-32, size) is verified only when the decoder reaches it.
-        io::copy(&mut r.take(GZ_TAIL_LIMIT), &mut io::sink())
-            .map_err(|e| io_err(e, "after the voxel data"))?;
+        finish_gzip(r)?;
     }
     Ok((volume, h.fields(), layout.frames))
+}
+
+/// Read the three components of a vector image (planar, one 3-D block per component) into
+/// interleaved vectors, rescaled by `scl_slope`/`scl_inter` as ITK does.
+fn read_vector_stream<R: Read>(
+    r: &mut R,
+    file_len: Option<u64>,
+) -> Result<(Geometry, Vec<DVec3>, Header), VolumeError> {
+    let (h, layout, geometry) = read_head(r, file_len)?;
+    if layout.components != 3 || layout.frames != 1 {
+        return Err(VolumeError::Unsupported(format!(
+            "a displacement field has 3 components per voxel in one 3-D frame; this file has \
+             {} component{} (dim[5], intent_code {}) and {} frame{} (dim[4])",
+            layout.components,
+            if layout.components == 1 { "" } else { "s" },
+            h.intent_code,
+            layout.frames,
+            if layout.frames == 1 { "" } else { "s" },
+        )));
+    }
+    let mut vectors = volmorph_io::try_vec("displacement field vectors", layout.len, DVec3::ZERO)
+        .map_err(VolumeError::from)?;
+    let (slope, inter) = rescale_of(&h).unwrap_or((1.0, 0.0));
+    let be = h.big_endian;
+    let checked = file_len.is_some();
+    for c in 0..3 {
+        volmorph_volume::with_voxel_type!(layout.voxel_type, T => {
+            let data = read_typed::<T, _>(r, &layout, be, checked)?;
+            vectors
+                .par_iter_mut()
+                .zip(data.par_iter())
+                .for_each(|(v, x)| v[c] = x.to_f64() * slope + inter);
+        });
+    }
+    if file_len.is_none() {
+        finish_gzip(r)?;
+    }
+    if let Some((i, _)) = vectors.iter().enumerate().find(|(_, v)| !v.is_finite()) {
+        return Err(err(format!(
+            "vector {i} of the displacement field is not finite"
+        )));
+    }
+    Ok((geometry, vectors, h.fields()))
+}
+
+/// Read a NIfTI vector image (ITK's layout: `dim = [5, nx, ny, nz, 1, 3]`, `intent_code`
+/// 1007 `NIFTI_INTENT_VECTOR` or 1006 `NIFTI_INTENT_DISPVECT`, the three components stored
+/// one 3-D block after another) held in memory, plain or gzip-compressed, into its ITK
+/// geometry (LPS, as for volumes) and its vectors, x fastest. The vector components are
+/// taken as they are stored: ITK stores them in its physical (LPS) frame and does not convert
+/// them between RAS and LPS, nor does volmorph.
+///
+/// # Errors
+/// As [`read_frame_bytes`]; [`VolumeError::Unsupported`] for an image that does not hold
+/// three components per voxel in one 3-D frame; [`VolumeError::Format`] for a non-finite
+/// vector.
+pub fn read_vector_bytes(bytes: &[u8]) -> Result<(Geometry, Vec<DVec3>, Header), VolumeError> {
+    if is_gzip(bytes) {
+        read_vector_stream(&mut MultiGzDecoder::new(bytes), None)
+    } else {
+        read_vector_stream(&mut &bytes[..], Some(bytes.len() as u64))
+    }
+}
+
+/// Read a `.nii` / `.nii.gz` vector image (see [`read_vector_bytes`]).
+pub(crate) fn read_vector(path: &Path) -> Result<(Geometry, Vec<DVec3>, Header), VolumeError> {
+    let os = crate::text_header::os_err(path);
+    let file = volmorph_io::open_regular(path)?;
+    let len = file.metadata().map_err(os)?.len();
+    let mut br = BufReader::with_capacity(1 << 20, file);
+    let gz = is_gzip(br.fill_buf().map_err(os)?);
+    if gz {
+        read_vector_stream(&mut MultiGzDecoder::new(br), None)
+    } else {
+        read_vector_stream(&mut br, Some(len))
+    }
 }
 
 /// Parse a complete NIfTI-1 or NIfTI-2 single file held in memory, plain or gzip-compressed
@@ -1907,8 +2019,21 @@ fn write_xform(g: &Geometry) -> Result<WriteXform, VolumeError> {
     })
 }
 
+/// `intent_code` written for vector images (`NIFTI_INTENT_VECTOR`, as ITK writes them).
+const INTENT_VECTOR: i16 = 1007;
+
 fn encode_header(v: &AnyVolume) -> Result<[u8; WRITE_VOX_OFFSET], VolumeError> {
-    let g = v.geometry();
+    encode_header_for(v.geometry(), v.voxel_type(), 1)
+}
+
+/// The NIfTI-1 header of an image on `g` with `components` values of type `t` per voxel:
+/// `dim = [3, nx, ny, nz, 1, 1, 1, 1]` for a scalar image, ITK's vector layout
+/// `dim = [5, nx, ny, nz, 1, c, 1, 1]` with `intent_code` 1007 otherwise.
+fn encode_header_for(
+    g: &Geometry,
+    t: VoxelType,
+    components: usize,
+) -> Result<[u8; WRITE_VOX_OFFSET], VolumeError> {
     g.validate()?;
     for (a, &d) in g.dims.iter().enumerate() {
         if d > i16::MAX as usize {
@@ -1919,23 +2044,26 @@ fn encode_header(v: &AnyVolume) -> Result<[u8; WRITE_VOX_OFFSET], VolumeError> {
         }
     }
     let x = write_xform(g)?;
-    let t = v.voxel_type();
     let mut b = [0u8; WRITE_VOX_OFFSET];
     let mut put = |off: usize, bytes: &[u8]| b[off..off + bytes.len()].copy_from_slice(bytes);
     put(0, &(HEADER_SIZE as i32).to_le_bytes());
     put(38, b"r"); // regular
+    let vector = components > 1;
     let dims = [
-        3i16,
+        if vector { 5 } else { 3i16 },
         g.dims[0] as i16,
         g.dims[1] as i16,
         g.dims[2] as i16,
         1,
-        1,
+        if vector { components as i16 } else { 1 },
         1,
         1,
     ];
     for (i, d) in dims.iter().enumerate() {
         put(40 + 2 * i, &d.to_le_bytes());
+    }
+    if vector {
+        put(68, &INTENT_VECTOR.to_le_bytes());
     }
     put(70, &datatype_of(t).to_le_bytes());
     put(72, &((8 * t.size()) as i16).to_le_bytes());
@@ -1993,23 +2121,34 @@ fn write_data<W: Write>(w: &mut W, v: &AnyVolume) -> io::Result<()> {
 /// in double precision (the exact direction times the spacing); the quaternion is the
 /// single-precision one ITK's rules give, so both forms describe the same grid.
 fn encode_header2(v: &AnyVolume) -> Result<Vec<u8>, VolumeError> {
-    let g = v.geometry();
+    encode_header2_for(v.geometry(), v.voxel_type(), 1)
+}
+
+/// [`encode_header_for`] as NIfTI-2.
+fn encode_header2_for(
+    g: &Geometry,
+    t: VoxelType,
+    components: usize,
+) -> Result<Vec<u8>, VolumeError> {
     g.validate()?;
     let x = write_xform(g)?;
-    let t = v.voxel_type();
     let mut b = vec![0u8; WRITE2_VOX_OFFSET];
     let mut put = |off: usize, bytes: &[u8]| b[off..off + bytes.len()].copy_from_slice(bytes);
     put(0, &(HEADER2_SIZE as i32).to_le_bytes());
     put(4, NIFTI2_MAGIC);
     put(12, &datatype_of(t).to_le_bytes());
     put(14, &((8 * t.size()) as i16).to_le_bytes());
+    let vector = components > 1;
+    if vector {
+        put(504, &i32::from(INTENT_VECTOR).to_le_bytes());
+    }
     let dims = [
-        3i64,
+        if vector { 5 } else { 3i64 },
         g.dims[0] as i64,
         g.dims[1] as i64,
         g.dims[2] as i64,
         1,
-        1,
+        if vector { components as i64 } else { 1 },
         1,
         1,
     ];
@@ -2077,6 +2216,56 @@ pub(crate) fn write(path: &Path, v: &AnyVolume, o: &WriteOptions) -> Result<(), 
         } else {
             w.write_all(&header).map_err(os)?;
             write_data(w, v).map_err(os)?;
+        }
+        Ok(())
+    })
+}
+
+/// Write a vector image in ITK's layout (see [`read_vector_bytes`]): the three components
+/// planar, as `f32` or `f64` (`voxel_type`), little-endian; gzip-compressed when the name
+/// ends in `.gz`; NIfTI-2 when a size exceeds NIfTI-1's 16-bit fields.
+pub(crate) fn write_vector(
+    path: &Path,
+    geometry: &Geometry,
+    vectors: &[DVec3],
+    voxel_type: VoxelType,
+    o: &WriteOptions,
+) -> Result<(), VolumeError> {
+    let header = if geometry.dims.iter().any(|&d| d > i16::MAX as usize) {
+        encode_header2_for(geometry, voxel_type, 3)?
+    } else {
+        encode_header_for(geometry, voxel_type, 3)?.to_vec()
+    };
+    let gz = path
+        .file_name()
+        .is_some_and(|n| n.to_string_lossy().to_ascii_lowercase().ends_with(".gz"));
+    let os = crate::text_header::os_err(path);
+    let data = |w: &mut dyn Write| -> io::Result<()> {
+        let mut buf = Vec::with_capacity(PAR_CHUNK * 8);
+        for c in 0..3 {
+            for chunk in vectors.chunks(PAR_CHUNK) {
+                buf.clear();
+                for v in chunk {
+                    if voxel_type == VoxelType::F32 {
+                        buf.extend_from_slice(&(v[c] as f32).to_le_bytes());
+                    } else {
+                        buf.extend_from_slice(&v[c].to_le_bytes());
+                    }
+                }
+                w.write_all(&buf)?;
+            }
+        }
+        Ok(())
+    };
+    write_atomic(path, |w| {
+        if gz {
+            let mut enc = GzEncoder::new(w, Compression::new(o.level.min(9)));
+            enc.write_all(&header).map_err(os)?;
+            data(&mut enc).map_err(os)?;
+            enc.finish().map_err(os)?;
+        } else {
+            w.write_all(&header).map_err(os)?;
+            data(w).map_err(os)?;
         }
         Ok(())
     })

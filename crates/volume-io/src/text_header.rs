@@ -403,6 +403,26 @@ pub(crate) fn decode(
     )
 }
 
+/// Decode `n` values described by `spec` from `input`, as f64 (multi-channel images:
+/// `n` counts every channel of every voxel).
+///
+/// # Errors
+/// As [`decode`].
+pub(crate) fn decode_values_f64(
+    input: Input<'_>,
+    spec: &DataSpec,
+    n: usize,
+) -> Result<Vec<f64>, VolumeError> {
+    let vt = spec.voxel_type;
+    volmorph_io::checked_len(&[n], vt.size().max(8))?;
+    Ok(
+        volmorph_volume::with_voxel_type!(vt, T => decode_typed::<T>(input, spec, n)?
+        .into_iter()
+        .map(|v| v.to_f64())
+        .collect()),
+    )
+}
+
 fn decode_typed<T: AsciiVoxel>(
     input: Input<'_>,
     spec: &DataSpec,
@@ -693,6 +713,18 @@ pub(crate) fn write_voxels(
     big_endian: bool,
 ) -> io::Result<()> {
     with_volume!(volume, v => write_slice(w, v.data(), big_endian))
+}
+
+/// Write `values` in the given byte order (no header).
+///
+/// # Errors
+/// The writer's I/O error.
+pub(crate) fn write_values<T: Voxel>(
+    w: &mut dyn Write,
+    values: &[T],
+    big_endian: bool,
+) -> io::Result<()> {
+    write_slice(w, values, big_endian)
 }
 
 fn write_slice<T: Voxel>(w: &mut dyn Write, data: &[T], big_endian: bool) -> io::Result<()> {

@@ -5,7 +5,9 @@ use std::path::PathBuf;
 use anyhow::Context;
 use volmorph_deform::{InverseOptions, SpaceMap};
 use volmorph_handles::handles::{read_point_list, write_point_list};
-use volmorph_maps::{AnyMap, read_map, write_map};
+use volmorph_maps::{AnyMap, read_map, write_field, write_map};
+use volmorph_volume_io::vector::VectorPrecision;
+use volmorph_warp::output::parse_geometry;
 
 /// Map subcommands.
 #[derive(Debug, clap::Subcommand)]
@@ -28,12 +30,47 @@ pub enum Command {
     /// inverse (Newton iteration at every point it is applied to) otherwise.
     #[command(after_help = "Example:\n  volmorph map invert lattice.json -o inverse.json")]
     Invert(InvertArgs),
+    /// Write a map as a dense displacement field on a reference grid, the ITK vector image
+    /// ITK's DisplacementFieldTransform, ANTs and elastix read: d(x) = map(x) − x at every
+    /// voxel of the grid, in physical (LPS) units, so T(x) = x + d(x). The map is taken in
+    /// ITK's sense of a transform: it sends points of the fixed (output) grid to points of the
+    /// moving (input) image (the pull-back of `warp --method pullback-*`).
+    #[command(
+        after_help = "Examples:\n  volmorph map field lattice.json --reference ct.nii.gz -o field.nii.gz\n  volmorph map field registration.tfm --output-geometry \"64,64,48;2,2,2;-64,-64,-48\" -o field.mha --precision f32"
+    )]
+    Field(FieldArgs),
+}
+
+/// Arguments of `volmorph map field`.
+#[derive(Debug, clap::Args)]
+pub struct FieldArgs {
+    /// The map (any map file).
+    pub map: PathBuf,
+    /// The grid of this reference volume (dims, spacing, origin, direction).
+    #[arg(
+        long,
+        value_name = "VOLUME",
+        required_unless_present = "output_geometry"
+    )]
+    pub reference: Option<PathBuf>,
+    /// The grid NX,NY,NZ;SX,SY,SZ;OX,OY,OZ[;D00,D01,…,D22] (as `warp --output-geometry`).
+    #[arg(long, value_name = "GEOMETRY", conflicts_with = "reference",
+          value_parser = boxed_geometry, allow_hyphen_values = true)]
+    pub output_geometry: Option<Box<volmorph_volume::Geometry>>,
+    /// The field (.nii, .nii.gz: NIfTI vector image, intent 1007; .mha, .mhd: MetaImage with
+    /// 3 channels).
+    #[arg(short, long)]
+    pub output: PathBuf,
+    /// Precision of the values written: f64 (ITK's DisplacementFieldTransform type) or f32
+    /// (half the size, as ANTs writes).
+    #[arg(long, default_value = "f64", value_parser = ["f64", "f32"])]
+    pub precision: String,
 }
 
 /// Arguments of `volmorph map apply`.
 #[derive(Debug, clap::Args)]
 pub struct ApplyArgs {
-    /// The map (.json, .tfm, .bxf).
+    /// The map (.json, .tfm, .txt, .mat, .bxf, or a displacement field .nii.gz/.mha).
     pub map: PathBuf,
     /// The points (.fcsv, .csv, .txt).
     pub points: PathBuf,
@@ -45,7 +82,7 @@ pub struct ApplyArgs {
 /// Arguments of `volmorph map info`.
 #[derive(Debug, clap::Args)]
 pub struct InfoArgs {
-    /// The map (.json, .tfm, .bxf).
+    /// The map (.json, .tfm, .txt, .mat, .bxf, or a displacement field .nii.gz/.mha).
     pub map: PathBuf,
     /// Print the map as volmorph map JSON too.
     #[arg(long)]
@@ -74,6 +111,11 @@ pub struct InvertArgs {
     /// Newton tolerance of a numerical inverse (physical units; default relative 1e-12).
     #[arg(long)]
     pub tolerance: Option<f64>,
+}
+
+/// [`parse_geometry`], boxed (keeps the argument structs small).
+fn boxed_geometry(s: &str) -> anyhow::Result<Box<volmorph_volume::Geometry>> {
+    Ok(Box::new(parse_geometry(s)?))
 }
 
 /// Run a map subcommand.
@@ -121,6 +163,29 @@ pub fn run(cmd: &Command) -> anyhow::Result<()> {
             let inv = map.inverse(options).context("cannot invert the map")?;
             write_map(&a.output, &inv).context("cannot write")?;
             say!("{}", inv.summary());
+        }
+        Command::Field(a) => {
+            let map = read_map(&a.map).context("cannot read the map")?;
+            let grid = match (&a.reference, &a.output_geometry) {
+                (_, Some(g)) => **g,
+                (Some(path), None) => *volmorph_volume_io::read(path)
+                    .with_context(|| {
+                        format!("cannot read the reference volume {}", path.display())
+                    })?
+                    .geometry(),
+                (None, None) => anyhow::bail!("give --reference VOLUME or --output-geometry"),
+            };
+            let precision = if a.precision == "f32" {
+                VectorPrecision::F32
+            } else {
+                VectorPrecision::F64
+            };
+            let field = write_field(&a.output, &map, grid, precision).context("cannot write")?;
+            say!(
+                "{}: {}",
+                a.output.display(),
+                AnyMap::DisplacementField(field).summary()
+            );
         }
     }
     Ok(())

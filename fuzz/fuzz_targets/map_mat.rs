@@ -1,0 +1,11 @@
+//! Fuzz the ITK/ANTs MATLAB `.mat` transform reader: any bytes must give a map or an error,
+//! never a panic, a hang or an unbounded allocation.
+#![no_main]
+
+use libfuzzer_sys::fuzz_target;
+
+fuzz_target!(|data: &[u8]| {
+    // The budget every reader checks sizes against, below libFuzzer's -rss_limit_mb.
+    volmorph_io::set_memory_limit(512 << 20);
+    let _ = volmorph_maps::itk_mat::parse_mat(data);
+});
