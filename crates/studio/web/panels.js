@@ -154,14 +154,21 @@ export function setupPanels(app) {
     if (!hm) { app.error('no handle map: press "Handles" set-up first'); return; }
     g.handle = nearest(g.p);
     g.map = hm.id;
-    const w = warpOf(hm.id);
-    if (g.handle >= 0 && w) {
-      g.warp = w;
-      app.client.send(Kind.Command, { command: 'set-recipe', id: w.id, recipe: { ...w.recipe, sampled_nodes: 17 }, gesture: g.id });
-    }
+    if (g.handle >= 0) coarse(g);
+  };
+  // While a handle is dragged its warp is previewed on a coarse grid. The warp object may not
+  // be in the object list yet when the drag begins (the list is refreshed after a set-up), so
+  // each move looks for it until it is found.
+  const coarse = (g) => {
+    if (g.warp) return;
+    const w = warpOf(g.map);
+    if (!w) return;
+    g.warp = w;
+    app.client.send(Kind.Command, { command: 'set-recipe', id: w.id, recipe: { ...w.recipe, sampled_nodes: 17 }, gesture: g.id });
   };
   P.handleMove = (g, target, e) => {
     if (g.handle < 0 || g.map === undefined) return;
+    coarse(g);
     const h = app.handles[g.handle];
     const r = app.client.send(Kind.Command, { command: 'move-handle', map: g.map, index: g.handle, source: h.source, target, gesture: g.id });
     app.markInput(r, e);
@@ -170,8 +177,9 @@ export function setupPanels(app) {
     if (g.map === undefined) return;
     if (g.handle < 0 && !g.moved) {
       app.client.send(Kind.Command, { command: 'add-handle', map: g.map, source: g.p, target: g.p });
-    } else if (g.warp) {
-      app.client.send(Kind.Command, { command: 'set-recipe', id: g.warp.id, recipe: { ...g.warp.recipe, sampled_nodes: null }, gesture: g.id });
+    } else if (g.handle >= 0) {
+      // Back to full resolution (when a coarse preview was set); the drag is one undo step.
+      if (g.warp) app.client.send(Kind.Command, { command: 'set-recipe', id: g.warp.id, recipe: { ...g.warp.recipe, sampled_nodes: null }, gesture: g.id });
       app.endGesture(g.id);
     }
   };
