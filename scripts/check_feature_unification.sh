@@ -1,25 +1,51 @@
 #!/usr/bin/env bash
-# Fails when a package that maturin builds alone (the Python extension, python/) would resolve
-# a shared dependency with other features than `cargo test --release --workspace` does. Such a
-# difference makes the wheel build recompile most of the workspace (seen: 866 s instead of
-# about 80 s in CI). The fix is to list the dependency, with the features this script prints,
-# under "Feature unification with the workspace" in python/Cargo.toml.
+# Fails when two builds that should share their compiled dependencies would resolve a shared
+# dependency with different features, so that everything above it compiles twice:
+#   * the demo's build (`cargo run --release -- demo`: the workspace's binaries, no
+#     dev-dependencies) against the test build (`cargo test --release --workspace`);
+#   * the Python extension built alone, as maturin does (`-p volmorph-python`), against the
+#     test build (seen before the fix: the wheel build took 866 s instead of about 80 s).
+# The fix is to list the dependency, with the features printed here, under "Feature
+# unification with the workspace" in python/Cargo.toml.
+#
+# Compares cargo's unit graphs (`--unit-graph`, unstable, allowed on stable by
+# RUSTC_BOOTSTRAP=1 as scripts/fuzz.sh does); nothing is compiled.
 set -euo pipefail
 cd "$(dirname "$0")/.."
-features() {
-    cargo tree --offline "$@" -f '{p}|{f}' --prefix none 2>/dev/null ||
-        cargo tree "$@" -f '{p}|{f}' --prefix none
-}
 tmp=$(mktemp -d)
 trap 'rm -rf "$tmp"' EXIT
-features -p volmorph-python -e normal,build | sed 's/ (\*)//;s/ (proc-macro)//' | sort -u >"$tmp/alone"
-features --workspace -e normal,build,dev | sed 's/ (\*)//;s/ (proc-macro)//' | sort -u >"$tmp/workspace"
-drift=$(comm -23 "$tmp/alone" "$tmp/workspace")
-if [ -n "$drift" ]; then
-    echo "python/ alone resolves these dependencies (package|features) unlike the workspace:" >&2
-    echo "$drift" >&2
-    echo "the workspace has:" >&2
-    for p in $(echo "$drift" | cut -d'|' -f1 | cut -d' ' -f1); do grep "^$p v" "$tmp/workspace" >&2; done
-    exit 1
-fi
-echo "python/ resolves its dependencies with the workspace's features"
+graph() {
+    local out="$1"
+    shift
+    RUSTC_BOOTSTRAP=1 cargo "$@" --release --unit-graph -Z unstable-options >"$out"
+}
+graph "$tmp/test.json" test --workspace --no-run
+graph "$tmp/demo.json" build --workspace --bins
+graph "$tmp/wheel.json" build -p volmorph-python --lib
+python3 - "$tmp" <<'PY'
+import json, sys
+
+def features(path):
+    units = {}
+    for u in json.load(open(path))["units"]:
+        if u["mode"] != "build" or u["target"]["kind"] == ["custom-build"]:
+            continue
+        if not u["pkg_id"].startswith("registry+"):
+            continue
+        key = (u["pkg_id"].split("#")[-1], u["target"]["name"], u.get("platform"))
+        units.setdefault(key, set()).add(tuple(sorted(u["features"])))
+    return units
+
+tmp = sys.argv[1]
+test = features(f"{tmp}/test.json")
+bad = 0
+for name in ("demo", "wheel"):
+    for key, feats in sorted(features(f"{tmp}/{name}.json").items()):
+        if key in test and feats != test[key]:
+            bad += 1
+            print(f"{name} build: {key[0]} has features {sorted(feats)}, "
+                  f"the test build {sorted(test[key])}", file=sys.stderr)
+if bad:
+    sys.exit(1)
+print("the demo, wheel and test builds resolve shared dependencies alike")
+PY
