@@ -157,6 +157,60 @@ def test_dask_on_a_local_cluster_with_two_worker_processes(tmp_path):
     assert same_bits(vm.Volume.read(str(out)).array, ref)
 
 
+def _two_worker_cluster(distributed):
+    return distributed.LocalCluster(
+        n_workers=2, threads_per_worker=1, processes=True, dashboard_address=None
+    )
+
+
+def test_dask_array_on_a_local_cluster_with_odd_chunks_and_rotated_grids():
+    da = pytest.importorskip("dask.array")
+    distributed = pytest.importorskip("distributed")
+    v = blob((23, 19, 17))  # rotated input grid
+    m = bent_lattice(v)
+    go = vm.Geometry(
+        (21, 18, 20), spacing=(1.0, 1.2, 1.5), origin=(-5.0, -6.0, -9.0), direction=ROTATION.T.tolist()
+    )
+    ref = vm.warp(v, m, "pullback-linear", geometry=go).array
+    with _two_worker_cluster(distributed) as cluster, distributed.Client(cluster) as client:
+        assert len(client.scheduler_info()["workers"]) == 2
+        src = da.from_array(v.array, chunks=(7, 5, 6))
+        w = vm.dask.warp(src, m, go, chunks=(5, 7, 3), input_geometry=v.geometry)
+        with distributed.get_task_stream(client) as ts:
+            got = client.compute(w).result()
+        # The tasks ran in both worker processes.
+        workers = {t["worker"] for t in ts.data}
+        assert len(workers) == 2, workers
+    assert same_bits(got, ref)
+
+
+def test_dask_cluster_warp_of_a_store_written_by_ome_zarr_read_back_by_zarr(tmp_path):
+    da = pytest.importorskip("dask.array")
+    distributed = pytest.importorskip("distributed")
+    zarr = pytest.importorskip("zarr")
+    pytest.importorskip("ome_zarr")
+    from ome_zarr.writer import write_image
+
+    rng = np.random.default_rng(11)
+    a = rng.integers(0, 4000, (19, 17, 13), dtype=np.uint16)
+    q = tmp_path / "peer.ome.zarr"
+    write_image(a, str(q), axes="zyx", scale={"z": 2.0, "y": 0.5, "x": 0.25})
+    v = vm.Volume.read(str(q))
+    assert same_bits(v.array, a)
+    m = bent_lattice(v, amount=0.3)
+    ref = vm.warp(v, m, "pullback-linear").array
+    out = tmp_path / "warped.ome.zarr"
+    with _two_worker_cluster(distributed) as cluster, distributed.Client(cluster):
+        w = vm.dask.warp(str(q), m, chunks=(5, 6, 7))
+        assert same_bits(w.compute(), ref)
+        vm.dask.warp(str(q), m, chunks=(7, 5, 9), output=out, zarr_version=3)
+    g = zarr.open_group(str(out), mode="r")
+    ms = _multiscales(g, 3)
+    assert same_bits(g[ms["datasets"][0]["path"]][...], ref)
+    tr = {t["type"]: t for t in ms["datasets"][0]["coordinateTransformations"]}
+    assert tr["scale"]["scale"] == [2.0, 0.5, 0.25]
+
+
 # ---- peers: zarr and ome-zarr -------------------------------------------------------------
 
 

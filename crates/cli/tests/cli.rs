@@ -38,6 +38,61 @@ fn phantom_then_info_reports_geometry_and_statistics() {
     assert!(text.contains("sform_code"), "{text}");
 }
 
+/// Every file under `dir` (recursively) whose name does not start with a dot: the chunk
+/// files of a Zarr v2 array.
+fn chunk_files(dir: &Path) -> Vec<PathBuf> {
+    let mut out = Vec::new();
+    for e in std::fs::read_dir(dir).unwrap() {
+        let p = e.unwrap().path();
+        if p.is_dir() {
+            out.extend(chunk_files(&p));
+        } else if !p.file_name().unwrap().to_string_lossy().starts_with('.') {
+            out.push(p);
+        }
+    }
+    out
+}
+
+#[test]
+fn info_no_stats_reads_only_the_metadata_of_an_ome_zarr_store() {
+    let dir = tempfile::tempdir().unwrap();
+    let mha = dir.path().join("s.mha");
+    ok(&[&"phantom", &"sphere", &"-o", &mha, &"--dims", &"20,16,12"]);
+    let z = dir.path().join("s.ome.zarr");
+    ok(&[&"convert", &mha, &z, &"--chunk", &"8,8,8"]);
+    let full = info_json(&z);
+    assert!(full["stats"].is_object(), "{full}");
+    let meta: serde_json::Value =
+        serde_json::from_str(&ok(&[&"info", &"--json", &"--no-stats", &z])).unwrap();
+    assert!(meta.get("stats").is_none(), "{meta}");
+    for k in [
+        "format",
+        "voxel_type",
+        "dims",
+        "spacing",
+        "origin",
+        "direction",
+        "header",
+    ] {
+        assert_eq!(meta[k], full[k], "{k}");
+    }
+    // Corrupt every chunk of level 0: the statistics cannot be computed any more, the
+    // metadata still can, so --no-stats opened no chunk.
+    let chunks = chunk_files(&z.join("0"));
+    assert!(
+        !chunks.is_empty() && chunks.len() <= 3 * 2 * 2,
+        "{chunks:?}"
+    );
+    for c in &chunks {
+        std::fs::write(c, b"not a compressed chunk").unwrap();
+    }
+    let err = fails(&[&"info", &z]);
+    assert!(err.contains("s.ome.zarr"), "{err}");
+    let again: serde_json::Value =
+        serde_json::from_str(&ok(&[&"info", &"--json", &"--no-stats", &z])).unwrap();
+    assert_eq!(again, meta);
+}
+
 #[test]
 fn convert_chain_through_every_format_keeps_voxels_and_geometry() {
     let dir = tempfile::tempdir().unwrap();

@@ -62,7 +62,7 @@ pub mod vtk;
 use std::path::Path;
 
 use volmorph_volume::direction::snap_direction;
-use volmorph_volume::{AnyVolume, VolumeError};
+use volmorph_volume::{AnyVolume, Geometry, VolumeError, VoxelType};
 
 /// A volume file format, as chosen by extension.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Hash)]
@@ -284,6 +284,67 @@ pub struct VolumeFile {
     pub frames: usize,
     /// The frame that was read (`0 ≤ frame < frames`).
     pub frame: usize,
+}
+
+/// What a volume file holds, without its voxels: format, voxel type, grid, header fields and
+/// frames. Returned by [`describe_with`] and [`VolumeFile::description`].
+#[derive(Debug, Clone, PartialEq)]
+pub struct VolumeDescription {
+    /// The format that was read.
+    pub format: Format,
+    /// The voxel type of the data.
+    pub voxel_type: VoxelType,
+    /// The grid (of the frame described), direction snapped as [`read_with`] snaps it.
+    pub geometry: Geometry,
+    /// The file's header fields.
+    pub header: Header,
+    /// Number of 3-D frames the file holds (1 for 3-D files).
+    pub frames: usize,
+    /// The frame described (`0 ≤ frame < frames`).
+    pub frame: usize,
+}
+
+impl VolumeFile {
+    /// The file's description (a copy of everything but the voxels).
+    #[must_use]
+    pub fn description(&self) -> VolumeDescription {
+        VolumeDescription {
+            format: self.format,
+            voxel_type: self.volume.voxel_type(),
+            geometry: *self.volume.geometry(),
+            header: self.header.clone(),
+            frames: self.frames,
+            frame: self.frame,
+        }
+    }
+}
+
+/// Describe the volume file at `path` (format, voxel type, grid, header, frames) as
+/// [`read_with`] would read it with `options`, reading as little as the format allows: an
+/// OME-Zarr store's metadata only (no chunk is opened, whatever the image's size); the other
+/// formats are read whole (their readers parse header and data together) and the voxels
+/// dropped.
+///
+/// # Errors
+/// As [`read_with`] for the other formats; for OME-Zarr as
+/// [`omezarr::OmeZarrReader::open`] (malformed metadata, a missing level), with the path,
+/// and [`VolumeError::InvalidArgument`] for a frame other than 0.
+pub fn describe_with(path: &Path, options: &ReadOptions) -> Result<VolumeDescription, VolumeError> {
+    if Format::from_path(path).ok() == Some(Format::OmeZarr) {
+        let r = omezarr::OmeZarrReader::open(path)?;
+        let frame = choose_frame(FrameChoice::of(options), 1).map_err(|e| e.at(path))?;
+        let mut geometry = *r.geometry();
+        geometry.direction = snap_direction(geometry.direction);
+        return Ok(VolumeDescription {
+            format: Format::OmeZarr,
+            voxel_type: r.voxel_type(),
+            geometry,
+            header: r.header(),
+            frames: 1,
+            frame,
+        });
+    }
+    read_with(path, options).map(|f| f.description())
 }
 
 /// The frame to read from a file holding `frames` 3-D frames (see [`FrameChoice`]).

@@ -5,7 +5,7 @@ use std::path::PathBuf;
 
 use anyhow::Context;
 use volmorph_volume::stats::Statistics;
-use volmorph_volume_io::{self as format, ReadOptions, VolumeFile};
+use volmorph_volume_io::{self as format, ReadOptions, VolumeDescription};
 
 use crate::progress;
 
@@ -19,7 +19,8 @@ pub struct Args {
     /// Also print every header field of the file.
     #[arg(long)]
     pub header: bool,
-    /// Skip the value statistics (header and geometry only).
+    /// Skip the value statistics (header and geometry only). An .ome.zarr store's metadata
+    /// alone is read then, however large the image; other formats are read whole.
     #[arg(long)]
     pub no_stats: bool,
     /// Print a JSON object instead of text (geometry in full precision; for scripts).
@@ -35,8 +36,14 @@ pub fn run(args: &Args) -> anyhow::Result<()> {
         frame: Some(format::frame_default().unwrap_or(0)),
         ..ReadOptions::default()
     };
-    let file = format::read_with(&args.input, &options).context("cannot read volume")?;
-    let stats = (!args.no_stats).then(|| Statistics::of_any(&file.volume));
+    let (file, stats) = if args.no_stats {
+        let d = format::describe_with(&args.input, &options).context("cannot read volume")?;
+        (d, None)
+    } else {
+        let f = format::read_with(&args.input, &options).context("cannot read volume")?;
+        let stats = Statistics::of_any(&f.volume);
+        (f.description(), Some(stats))
+    };
     pb.finish_and_clear();
     if args.json {
         say!("{}", json(&file, stats.as_ref()));
@@ -52,8 +59,8 @@ pub fn run(args: &Args) -> anyhow::Result<()> {
 /// The JSON object `volmorph info --json` prints: `format`, `voxel_type`, `dims`, `spacing`,
 /// `origin`, `direction` (row-major 3×3, ITK/LPS), `frames` (3-D frames in the file), `frame`
 /// (the one described), `header` (field → value) and `stats`.
-pub fn json(file: &VolumeFile, stats: Option<&Statistics>) -> serde_json::Value {
-    let g = file.volume.geometry();
+pub fn json(file: &VolumeDescription, stats: Option<&Statistics>) -> serde_json::Value {
+    let g = &file.geometry;
     let d = g.direction.transpose().to_cols_array_2d(); // rows of the direction matrix
     let header: serde_json::Map<String, serde_json::Value> = file
         .header
@@ -63,7 +70,7 @@ pub fn json(file: &VolumeFile, stats: Option<&Statistics>) -> serde_json::Value 
         .collect();
     let mut v = serde_json::json!({
         "format": file.format.name(),
-        "voxel_type": file.volume.voxel_type().name(),
+        "voxel_type": file.voxel_type.name(),
         "dims": g.dims,
         "spacing": g.spacing.to_array(),
         "origin": g.origin.to_array(),
@@ -88,15 +95,15 @@ pub fn json(file: &VolumeFile, stats: Option<&Statistics>) -> serde_json::Value 
 /// The text `volmorph info` prints.
 pub fn report(
     path: &std::path::Path,
-    file: &VolumeFile,
+    file: &VolumeDescription,
     stats: Option<&Statistics>,
     header: bool,
 ) -> String {
-    let g = file.volume.geometry();
+    let g = &file.geometry;
     let mut s = String::new();
     let _ = writeln!(s, "file:       {}", path.display());
     let _ = writeln!(s, "format:     {}", file.format.name());
-    let _ = writeln!(s, "voxel type: {}", file.volume.voxel_type());
+    let _ = writeln!(s, "voxel type: {}", file.voxel_type);
     if file.frames > 1 {
         let _ = writeln!(
             s,
