@@ -237,7 +237,7 @@ pub fn resample_into_with<T: Voxel, U: Voxel, M: SpaceMap + ?Sized>(
                 Vec::with_capacity(tx * ty * tz),
             )
         },
-        |(points, values), band| {
+        |(points, values), band| -> Result<(), WarpError> {
             progress.check()?;
             let rows = (band.rows * band.slices.len()) as u64;
             pull_band(&sampler, &to_index, map, output, tx, band, points, values)?;

@@ -470,6 +470,7 @@ fn accumulate<T: Voxel, M: SpaceMap + ?Sized>(
         let tallies: Vec<Result<SlabTally, WarpError>> = batch
             .par_iter()
             .map(|&slab| {
+                progress.check()?;
                 let t = tally_slab(input, map, output, &to_index, options.face_centres, slab);
                 progress.advance((slab.1 - slab.0) as u64);
                 t
