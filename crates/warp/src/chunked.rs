@@ -407,12 +407,14 @@ where
         &format!("warping {} chunks out of core", chunks.len()),
         chunks.len() as u64,
     );
-    chunks.par_iter().try_for_each(|&c| -> Result<(), WarpError> {
-        progress.check()?;
-        let v = pull_chunk(map, input, output, c, options, &read)?;
-        write(c, v)?;
-        progress.advance(1);
-        Ok(())
-    })?;
+    chunks
+        .par_iter()
+        .try_for_each(|&c| -> Result<(), WarpError> {
+            progress.check()?;
+            let v = pull_chunk(map, input, output, c, options, &read)?;
+            write(c, v)?;
+            progress.advance(1);
+            Ok(())
+        })?;
     Ok(progress.check()?)
 }
