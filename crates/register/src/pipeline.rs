@@ -112,7 +112,9 @@ impl Registration {
 /// where handles are selected and where the dense metric is measured.
 ///
 /// # Errors
-/// The errors of the steps: [`select_handles`], [`match_handles`], [`handle_map`], [`refine`].
+/// The errors of the steps: [`select_handles`],
+/// [`match_handles`](crate::matching::match_handles), [`handle_map`],
+/// [`refine`](crate::dense::refine).
 pub fn register(
     fixed: &Volume<f32>,
     moving: &Volume<f32>,
@@ -164,7 +166,7 @@ pub fn register_with(
 /// no handles).
 ///
 /// # Errors
-/// The errors of [`handle_map`] and [`refine`].
+/// The errors of [`handle_map`] and [`refine`](crate::dense::refine).
 pub fn solve_and_refine(
     fixed: &Volume<f32>,
     moving: &Volume<f32>,

@@ -4,7 +4,7 @@
 //! region of the plane `(a, b, c, d)·(x, 1) = 0` inside the volume, `{P(u) : (a,b,c)·P(u) + d
 //! = 0}`, and reports an attribute on it. Both follow the paper: the scalar spline `D` of
 //! [`crate::extract`] is built, its zeros are isolated by Bézier subdivision
-//! ([`isolate_roots`]), the geometry is refined over the root cells, refined further where a
+//! ([`isolate_roots`](crate::isolate_roots)), the geometry is refined over the root cells, refined further where a
 //! flatness criterion asks for it, and polygonised.
 //!
 //! # Polygonisation (crack-free by construction)
