@@ -24,13 +24,19 @@ pub fn bar(len: u64) -> ProgressBar {
 /// A spinner for work of unknown length, showing `msg`.
 pub fn spinner(msg: impl Into<std::borrow::Cow<'static, str>>) -> ProgressBar {
     let pb = ProgressBar::with_draw_target(None, target());
+    spin(&pb, msg);
+    pb.enable_steady_tick(Duration::from_millis(120));
+    pb
+}
+
+/// Turn `pb` (back) into a spinner showing `msg`, for a step of unknown length after a
+/// counted one (reading after parsing, writing after computing).
+pub fn spin(pb: &ProgressBar, msg: impl Into<std::borrow::Cow<'static, str>>) {
     pb.set_style(
         ProgressStyle::with_template("{spinner} {elapsed_precise:.dim} {msg}")
             .expect("static template"),
     );
     pb.set_message(msg);
-    pb.enable_steady_tick(Duration::from_millis(120));
-    pb
 }
 
 /// Set by `--quiet`: no bar or spinner is drawn.
@@ -50,7 +56,9 @@ fn target() -> ProgressDrawTarget {
 }
 
 /// A [`volmorph_io::Progress`] that draws on an indicatif bar: each stage a library function
-/// starts becomes the bar's message and length, with percentage and ETA.
+/// starts becomes the bar's message and length, with percentage and ETA (a stage of unknown
+/// length, total 0, turns the bar into a spinner). It never asks to stop: an interrupted
+/// command is killed, and its outputs, written atomically, are left as they were.
 pub struct Bar<'a>(pub &'a ProgressBar);
 
 impl volmorph_io::Progress for Bar<'_> {
@@ -64,9 +72,11 @@ impl volmorph_io::Progress for Bar<'_> {
                 .progress_chars("=> "),
             );
             self.0.set_length(total);
+            self.0.set_position(0);
+            self.0.set_message(label.to_string());
+        } else {
+            spin(self.0, label.to_string());
         }
-        self.0.set_position(0);
-        self.0.set_message(label.to_string());
     }
     fn advance(&self, steps: u64) {
         self.0.inc(steps);

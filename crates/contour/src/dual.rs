@@ -143,6 +143,22 @@ pub fn dual_contouring<T: Voxel>(
     level: f64,
     options: &DcOptions,
 ) -> Result<IsoSurface, ContourError> {
+    dual_contouring_with(volume, level, options, &volmorph_io::NoProgress)
+}
+
+/// [`dual_contouring`] reporting to `progress`: one stage of `2·nz − 1` steps, one per cell
+/// layer whose vertices are placed, then one per grid plane whose faces are emitted, and
+/// stopping between layers or planes when cancelled. The result equals
+/// [`dual_contouring`]'s bit for bit.
+///
+/// # Errors
+/// As [`dual_contouring`]; [`ContourError::Cancelled`] when `progress` asks to stop.
+pub fn dual_contouring_with<T: Voxel>(
+    volume: &Volume<T>,
+    level: f64,
+    options: &DcOptions,
+    progress: &dyn volmorph_io::Progress,
+) -> Result<IsoSurface, ContourError> {
     let rule = VertexRule::new(options)?;
     let (field, flip) = Field::new(volume, level, options.inside_below)?;
     let dc = Dual {
@@ -151,7 +167,7 @@ pub fn dual_contouring<T: Voxel>(
         rule,
         flip,
     };
-    dc.extract()
+    dc.extract(progress)
 }
 
 /// [`dual_contouring`] for a volume whose voxel type is known only at run time.
@@ -164,6 +180,19 @@ pub fn dual_contouring_any(
     options: &DcOptions,
 ) -> Result<IsoSurface, ContourError> {
     with_volume!(volume, v => dual_contouring(v, level, options))
+}
+
+/// [`dual_contouring_with`] for a volume whose voxel type is known only at run time.
+///
+/// # Errors
+/// As [`dual_contouring_with`].
+pub fn dual_contouring_any_with(
+    volume: &AnyVolume,
+    level: f64,
+    options: &DcOptions,
+    progress: &dyn volmorph_io::Progress,
+) -> Result<IsoSurface, ContourError> {
+    with_volume!(volume, v => dual_contouring_with(v, level, options, progress))
 }
 
 /// No vertex in this cell.
@@ -492,12 +521,27 @@ impl<T: Voxel> Dual<'_, T> {
         }
     }
 
-    fn extract(&self) -> Result<IsoSurface, ContourError> {
+    fn extract(&self, progress: &dyn volmorph_io::Progress) -> Result<IsoSurface, ContourError> {
         let f = &self.field;
+        progress.start(
+            &format!("dual contouring on {}×{}×{}", f.nx, f.ny, f.nz),
+            (2 * f.nz - 1) as u64,
+        );
         let layers: Vec<Layer> = (0..f.nz - 1)
             .into_par_iter()
-            .map_init(|| self.planes(), |p, k| self.layer(k, p))
+            .map_init(
+                || self.planes(),
+                |p, k| {
+                    if progress.is_cancelled() {
+                        return Layer::default();
+                    }
+                    let l = self.layer(k, p);
+                    progress.advance(1);
+                    l
+                },
+            )
             .collect();
+        progress.check()?;
         let mut offsets = Vec::with_capacity(layers.len() + 1);
         let mut total = 0usize;
         for l in &layers {
@@ -539,13 +583,16 @@ impl<T: Voxel> Dual<'_, T> {
                     )
                 },
                 |(p, lower, upper), k| {
+                    let mut out = Vec::new();
+                    if progress.is_cancelled() {
+                        return out;
+                    }
                     if k >= 1 {
                         fill(lower, k - 1, Some(offsets[k - 1]));
                     }
                     if k + 1 < f.nz {
                         fill(upper, k, Some(offsets[k]));
                     }
-                    let mut out = Vec::new();
                     self.faces(k, p, (lower, upper), &positions, &features, &mut out);
                     if k >= 1 {
                         fill(lower, k - 1, None);
@@ -553,10 +600,12 @@ impl<T: Voxel> Dual<'_, T> {
                     if k + 1 < f.nz {
                         fill(upper, k, None);
                     }
+                    progress.advance(1);
                     out
                 },
             )
             .collect();
+        progress.check()?;
         drop(layers);
         let triangles = per_plane.concat();
         fill_missing_normals(&positions, &triangles, &mut normals);

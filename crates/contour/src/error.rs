@@ -40,4 +40,8 @@ pub enum ContourError {
     /// Building the mesh failed (too many triangles for 32-bit face corners).
     #[error(transparent)]
     Mesh(#[from] MeshError),
+    /// The caller asked the work to stop through its [`volmorph_io::Progress`]; nothing was
+    /// written.
+    #[error("stopped on request")]
+    Cancelled(#[from] volmorph_io::Cancelled),
 }

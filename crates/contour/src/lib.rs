@@ -74,10 +74,13 @@ mod table;
 
 pub use dual::{
     DEFAULT_FEATURE_ANGLE, DcOptions, QuadDiagonal, VertexRule, clamp_to_cell, dual_contouring,
-    dual_contouring_any, flatness, quad_diagonal,
+    dual_contouring_any, dual_contouring_any_with, dual_contouring_with, flatness, quad_diagonal,
 };
 pub use qef::{DEFAULT_SINGULAR_THRESHOLD, Qef, QefSolution, symmetric_eigen};
 
 pub use error::ContourError;
-pub use marching::{EDGE_MARGIN, IsoSurface, McOptions, marching_cubes, marching_cubes_any};
+pub use marching::{
+    EDGE_MARGIN, IsoSurface, McOptions, marching_cubes, marching_cubes_any,
+    marching_cubes_any_with, marching_cubes_with,
+};
 pub use table::{mc_case_triangles, mc_corner_offset, mc_edge_corners};

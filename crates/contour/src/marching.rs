@@ -83,8 +83,23 @@ pub fn marching_cubes<T: Voxel>(
     level: f64,
     options: &McOptions,
 ) -> Result<IsoSurface, ContourError> {
+    marching_cubes_with(volume, level, options, &volmorph_io::NoProgress)
+}
+
+/// [`marching_cubes`] reporting to `progress`: one stage of `2·nz − 1` steps, one per grid
+/// plane classified and counted, then one per cell layer meshed, and stopping between
+/// planes or layers when cancelled. The result equals [`marching_cubes`]'s bit for bit.
+///
+/// # Errors
+/// As [`marching_cubes`]; [`ContourError::Cancelled`] when `progress` asks to stop.
+pub fn marching_cubes_with<T: Voxel>(
+    volume: &Volume<T>,
+    level: f64,
+    options: &McOptions,
+    progress: &dyn volmorph_io::Progress,
+) -> Result<IsoSurface, ContourError> {
     let (field, flip) = Field::new(volume, level, options.inside_below)?;
-    extract(&field, flip)
+    extract(&field, flip, progress)
 }
 
 /// [`marching_cubes`] for a volume whose voxel type is known only at run time.
@@ -97,6 +112,19 @@ pub fn marching_cubes_any(
     options: &McOptions,
 ) -> Result<IsoSurface, ContourError> {
     with_volume!(volume, v => marching_cubes(v, level, options))
+}
+
+/// [`marching_cubes_with`] for a volume whose voxel type is known only at run time.
+///
+/// # Errors
+/// As [`marching_cubes_with`].
+pub fn marching_cubes_any_with(
+    volume: &AnyVolume,
+    level: f64,
+    options: &McOptions,
+    progress: &dyn volmorph_io::Progress,
+) -> Result<IsoSurface, ContourError> {
+    with_volume!(volume, v => marching_cubes_with(v, level, options, progress))
 }
 
 /// Initial content of the per-plane edge index tables. Entries of uncrossed edges are never
@@ -447,6 +475,7 @@ impl<'a, T: Voxel> Field<'a, T> {
         offsets: &[usize],
         sink: &mut Sink<'_>,
         lookup: &EdgeLookup,
+        progress: &dyn volmorph_io::Progress,
     ) -> Vec<[u32; 3]> {
         let plane = self.nx * self.ny;
         let mut p = Planes {
@@ -473,6 +502,9 @@ impl<'a, T: Voxel> Field<'a, T> {
             Some(&mut *sink),
         );
         for k in layers.clone() {
+            if progress.is_cancelled() {
+                break;
+            }
             let top = k + 1;
             let owned = top < layers.end || owns_top;
             self.classify(top, &mut p.tin, &mut p.trows);
@@ -494,6 +526,7 @@ impl<'a, T: Voxel> Field<'a, T> {
             std::mem::swap(&mut p.bin, &mut p.tin);
             std::mem::swap(&mut p.brows, &mut p.trows);
             xy_count = top_count;
+            progress.advance(1);
         }
         triangles
     }
@@ -610,8 +643,16 @@ fn edge_lookup(nx: usize, flip: bool) -> EdgeLookup {
     }
 }
 
-fn extract<T: Voxel>(field: &Field<'_, T>, flip: bool) -> Result<IsoSurface, ContourError> {
+fn extract<T: Voxel>(
+    field: &Field<'_, T>,
+    flip: bool,
+    progress: &dyn volmorph_io::Progress,
+) -> Result<IsoSurface, ContourError> {
     let nz = field.nz;
+    progress.start(
+        &format!("marching cubes on {}×{}×{}", field.nx, field.ny, nz),
+        (2 * nz - 1) as u64,
+    );
     // Vertices owned by each plane, then their global numbering.
     let (plane, ny) = (field.nx * field.ny, field.ny);
     let counts: Vec<usize> = (0..nz)
@@ -626,16 +667,22 @@ fn extract<T: Voxel>(field: &Field<'_, T>, flip: bool) -> Result<IsoSurface, Con
                 )
             },
             |(lo, lo_rows, hi, hi_rows), k| {
+                if progress.is_cancelled() {
+                    return 0;
+                }
                 field.classify(k, lo, lo_rows);
-                if k + 1 < nz {
+                let n = if k + 1 < nz {
                     field.classify(k + 1, hi, hi_rows);
                     field.plane_count(lo, lo_rows, Some((hi, hi_rows)))
                 } else {
                     field.plane_count(lo, lo_rows, None)
-                }
+                };
+                progress.advance(1);
+                n
             },
         )
         .collect();
+    progress.check()?;
     let mut offsets = Vec::with_capacity(nz + 1);
     let mut total = 0usize;
     for c in &counts {
@@ -683,8 +730,11 @@ fn extract<T: Voxel>(field: &Field<'_, T>, flip: bool) -> Result<IsoSurface, Con
     let per_slab: Vec<Vec<[u32; 3]>> = sinks
         .into_par_iter()
         .filter(|(r, _, _)| !r.is_empty())
-        .map(|(range, last, mut sink)| field.slab(range, last, &offsets, &mut sink, &lookup))
+        .map(|(range, last, mut sink)| {
+            field.slab(range, last, &offsets, &mut sink, &lookup, progress)
+        })
         .collect();
+    progress.check()?;
     let triangles: Vec<[u32; 3]> = per_slab.concat();
     fill_missing_normals(&positions, &triangles, &mut normals);
     let mesh = Mesh::from_triangles(positions, &triangles)?;

@@ -126,6 +126,10 @@ pub enum DeformError {
         /// What went wrong.
         error: Box<DeformError>,
     },
+    /// The caller asked the work to stop through its [`volmorph_io::Progress`]; nothing was
+    /// written.
+    #[error("stopped on request")]
+    Cancelled(#[from] volmorph_io::Cancelled),
 }
 
 /// `", line N"` for a 1-based line, nothing for 0 (a problem of the whole file).

@@ -159,7 +159,7 @@ pub fn adaptive_ffd(
 }
 
 /// [`adaptive_ffd`] reporting one step per subdivision round to `progress` and stopping
-/// (with [`FfdError::InvalidOption`] "cancelled") when it is cancelled.
+/// (with [`FfdError::Cancelled`]) when it is cancelled.
 ///
 /// # Errors
 /// As [`adaptive_ffd`].
@@ -223,9 +223,7 @@ pub fn adaptive_ffd_with(
         if split.is_empty() {
             break;
         }
-        progress
-            .check()
-            .map_err(|c| FfdError::InvalidOption(c.to_string()))?;
+        progress.check()?;
         // Each triangle becomes at most four; positions grow by one per split edge.
         volmorph_io::check_elems(
             "adaptive subdivision",

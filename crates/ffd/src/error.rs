@@ -68,4 +68,8 @@ pub enum FfdError {
     /// Writing output failed.
     #[error("write failed: {0}")]
     Write(#[from] std::io::Error),
+    /// The caller asked the work to stop through its [`volmorph_io::Progress`]; nothing was
+    /// written.
+    #[error("stopped on request")]
+    Cancelled(#[from] volmorph_io::Cancelled),
 }

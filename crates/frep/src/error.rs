@@ -76,6 +76,10 @@ pub enum FrepError {
     /// A space map failed.
     #[error(transparent)]
     Deform(#[from] volmorph_deform::DeformError),
+    /// The caller asked the work to stop through its [`volmorph_io::Progress`]; nothing was
+    /// written.
+    #[error("stopped on request")]
+    Cancelled(#[from] volmorph_io::Cancelled),
 }
 
 impl FrepError {

@@ -54,7 +54,7 @@ pub fn sample(field: &dyn Field, geometry: &Geometry) -> Result<Volume<f32>, Fre
 }
 
 /// [`sample`] reporting one step per z-layer to `progress`; when it is cancelled the
-/// remaining layers are skipped and [`FrepError::InvalidArgument`] "cancelled" is returned.
+/// remaining layers are skipped and [`FrepError::Cancelled`] is returned.
 ///
 /// # Errors
 /// As [`sample`].
@@ -108,9 +108,7 @@ pub fn sample_with(
             });
         }
     }
-    progress
-        .check()
-        .map_err(|c| FrepError::InvalidArgument(format!("grid sampling {c}")))?;
+    progress.check()?;
     check_nan(field, geometry, &data)?;
     Ok(Volume::new(*geometry, data)?)
 }

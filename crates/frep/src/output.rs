@@ -23,7 +23,9 @@ use std::path::{Path, PathBuf};
 
 use glam::DVec3;
 use rayon::prelude::*;
-use volmorph_contour::{DcOptions, IsoSurface, McOptions, dual_contouring, marching_cubes};
+use volmorph_contour::{
+    DcOptions, IsoSurface, McOptions, dual_contouring_with, marching_cubes_with,
+};
 use volmorph_render::shading::{Lighting, linear_to_srgb8, srgb8_to_linear};
 use volmorph_render::{Aabb, Camera, Ray, RgbaImage, Shading, write_png_rgba};
 use volmorph_volume::Geometry;
@@ -67,7 +69,24 @@ pub fn mesh(
     geometry: &Geometry,
     options: &MeshOptions,
 ) -> Result<IsoSurface, FrepError> {
-    let mut vol = grid::sample(field, geometry)?;
+    mesh_with(field, geometry, options, &volmorph_io::NoProgress)
+}
+
+/// [`mesh`] reporting to `progress`: two stages, the sampling of [`grid::sample_with`] (one
+/// step per z-layer) and the extraction (as [`volmorph_contour::marching_cubes_with`] or
+/// [`volmorph_contour::dual_contouring_with`]), stopping when cancelled. The result equals
+/// [`mesh`]'s bit for bit.
+///
+/// # Errors
+/// As [`mesh`]; [`FrepError::Cancelled`] (or [`FrepError::Contour`] wrapping
+/// [`volmorph_contour::ContourError::Cancelled`]) when `progress` asks to stop.
+pub fn mesh_with(
+    field: &dyn Field,
+    geometry: &Geometry,
+    options: &MeshOptions,
+    progress: &dyn volmorph_io::Progress,
+) -> Result<IsoSurface, FrepError> {
+    let mut vol = grid::sample_with(field, geometry, progress)?;
     if options.close {
         let [nx, ny, nz] = vol.dims();
         for (n, v) in vol.data_mut().iter_mut().enumerate() {
@@ -78,8 +97,12 @@ pub fn mesh(
         }
     }
     Ok(match options.method {
-        MeshMethod::MarchingCubes => marching_cubes(&vol, 0.0, &McOptions::default())?,
-        MeshMethod::DualContouring => dual_contouring(&vol, 0.0, &DcOptions::default())?,
+        MeshMethod::MarchingCubes => {
+            marching_cubes_with(&vol, 0.0, &McOptions::default(), progress)?
+        }
+        MeshMethod::DualContouring => {
+            dual_contouring_with(&vol, 0.0, &DcOptions::default(), progress)?
+        }
     })
 }
 
@@ -234,8 +257,23 @@ pub fn render(
     camera: &Camera,
     options: &RenderOptions,
 ) -> Result<RgbaImage, FrepError> {
+    render_with(field, camera, options, &volmorph_io::NoProgress)
+}
+
+/// [`render`] reporting to `progress`: one stage whose steps are the picture's rows,
+/// stopping between rows when cancelled. The result equals [`render`]'s bit for bit.
+///
+/// # Errors
+/// As [`render`]; [`FrepError::Cancelled`] when `progress` asks to stop.
+pub fn render_with(
+    field: &dyn Field,
+    camera: &Camera,
+    options: &RenderOptions,
+    progress: &dyn volmorph_io::Progress,
+) -> Result<RgbaImage, FrepError> {
     let bbox = options.validate()?;
     let (w, h) = (camera.width(), camera.height());
+    progress.start(&format!("ray casting {w}×{h}"), u64::from(h));
     let mut img = RgbaImage::new(w, h, options.background)?;
     let lighting = options.shading.for_camera(camera)?;
     let color = options.color.map(srgb8_to_linear);
@@ -243,6 +281,9 @@ pub fn render(
         .par_chunks_mut(w as usize)
         .enumerate()
         .for_each(|(y, row)| {
+            if progress.is_cancelled() {
+                return;
+            }
             let mut sc = IntervalScratch::default();
             for (x, px) in row.iter_mut().enumerate() {
                 let ray = camera.ray(x as u32, y as u32);
@@ -258,7 +299,9 @@ pub fn render(
                     *px = shade(field, ray.at(t), ray.dir, &lighting, color);
                 }
             }
+            progress.advance(1);
         });
+    progress.check()?;
     Ok(img)
 }
 
@@ -358,25 +401,71 @@ pub fn render_animation(
     dir: &Path,
     prefix: &str,
 ) -> Result<Vec<PathBuf>, FrepError> {
+    render_animation_with(
+        frames,
+        field_at,
+        camera,
+        options,
+        dir,
+        prefix,
+        &volmorph_io::NoProgress,
+    )
+}
+
+/// [`render_animation`] reporting to `progress`: one stage of `frames × height` steps (the
+/// rows of every frame). When cancelled it stops between rows and removes the frames it had
+/// already written, so a cancelled call leaves no output. The frames equal
+/// [`render_animation`]'s bit for bit.
+///
+/// # Errors
+/// As [`render_animation`]; [`FrepError::Cancelled`] when `progress` asks to stop.
+pub fn render_animation_with(
+    frames: usize,
+    field_at: &dyn Fn(f64) -> Result<Box<dyn Field>, FrepError>,
+    camera: &Camera,
+    options: &RenderOptions,
+    dir: &Path,
+    prefix: &str,
+    progress: &dyn volmorph_io::Progress,
+) -> Result<Vec<PathBuf>, FrepError> {
     if frames == 0 {
         return Err(FrepError::InvalidArgument(
             "an animation needs at least one frame".into(),
         ));
     }
+    progress.start(
+        &format!("rendering {frames} frames"),
+        (frames as u64).saturating_mul(u64::from(camera.height())),
+    );
+    let rows = volmorph_io::Within(progress);
     let mut out = Vec::with_capacity(frames);
-    for i in 0..frames {
-        let t = if frames == 1 {
-            0.0
-        } else {
-            i as f64 / (frames - 1) as f64
-        };
-        let field = field_at(t)?;
-        let img = render(field.as_ref(), camera, options)?;
-        let path = dir.join(format!("{prefix}{i:04}.png"));
-        write_png_rgba(&path, &img)?;
-        out.push(path);
+    let mut go = || -> Result<(), FrepError> {
+        for i in 0..frames {
+            let t = if frames == 1 {
+                0.0
+            } else {
+                i as f64 / (frames - 1) as f64
+            };
+            let field = field_at(t)?;
+            let img = render_with(field.as_ref(), camera, options, &rows)?;
+            let path = dir.join(format!("{prefix}{i:04}.png"));
+            write_png_rgba(&path, &img)?;
+            out.push(path);
+        }
+        Ok(())
+    };
+    match go() {
+        Ok(()) => Ok(out),
+        Err(e @ FrepError::Cancelled(_)) => {
+            for p in &out {
+                // Best effort: a frame that cannot be removed is left, the error still says
+                // the animation was cancelled.
+                let _ = std::fs::remove_file(p);
+            }
+            Err(e)
+        }
+        Err(e) => Err(e),
     }
-    Ok(out)
 }
 
 #[cfg(test)]

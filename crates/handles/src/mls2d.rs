@@ -615,6 +615,35 @@ pub fn warp_rgba(
     deformed: &[DVec2],
     background: [u8; 4],
 ) -> Result<Vec<[u8; 4]>, DeformError> {
+    warp_rgba_with(
+        width,
+        height,
+        pixels,
+        nx,
+        ny,
+        deformed,
+        background,
+        &volmorph_io::NoProgress,
+    )
+}
+
+/// [`warp_rgba`] reporting to `progress`: one stage whose steps are the grid's rows of quads
+/// (`ny − 1`), stopping between rows when cancelled. The result equals [`warp_rgba`]'s bit
+/// for bit.
+///
+/// # Errors
+/// As [`warp_rgba`]; [`DeformError::Cancelled`] when `progress` asks to stop.
+#[allow(clippy::too_many_arguments)]
+pub fn warp_rgba_with(
+    width: u32,
+    height: u32,
+    pixels: &[[u8; 4]],
+    nx: usize,
+    ny: usize,
+    deformed: &[DVec2],
+    background: [u8; 4],
+    progress: &dyn volmorph_io::Progress,
+) -> Result<Vec<[u8; 4]>, DeformError> {
     let (w, h) = (width as usize, height as usize);
     volmorph_deform::map::check_len(w * h, pixels.len())?;
     let src = image_grid(width, height, nx, ny)?;
@@ -640,7 +669,12 @@ pub fn warp_rgba(
         }
         o
     };
+    progress.start(
+        &format!("deforming a {width}×{height} picture"),
+        (ny - 1) as u64,
+    );
     for j in 0..ny - 1 {
+        progress.check()?;
         for i in 0..nx - 1 {
             let q = [
                 deformed[i + nx * j],
@@ -672,7 +706,9 @@ pub fn warp_rgba(
                 }
             }
         }
+        progress.advance(1);
     }
+    progress.check()?;
     Ok(out)
 }
 
@@ -1048,6 +1084,34 @@ pub fn warp_picture(
     alpha: f64,
     grid: usize,
 ) -> Result<PictureWarp, DeformError> {
+    warp_picture_with(
+        width,
+        height,
+        pixels,
+        set,
+        kind,
+        alpha,
+        grid,
+        &volmorph_io::NoProgress,
+    )
+}
+
+/// [`warp_picture`] reporting to `progress` as [`warp_rgba_with`] does (the grid's map is
+/// evaluated first, without steps). The result equals [`warp_picture`]'s bit for bit.
+///
+/// # Errors
+/// As [`warp_picture`]; [`DeformError::Cancelled`] when `progress` asks to stop.
+#[allow(clippy::too_many_arguments)]
+pub fn warp_picture_with(
+    width: u32,
+    height: u32,
+    pixels: &[[u8; 4]],
+    set: &crate::HandleSet,
+    kind: Mls2dKind,
+    alpha: f64,
+    grid: usize,
+    progress: &dyn volmorph_io::Progress,
+) -> Result<PictureWarp, DeformError> {
     if set.dim != 2 {
         return Err(DeformError::InvalidHandles(
             "picture deformation needs 2D handles (pixel coordinates [x, y]); the set has 3D \
@@ -1065,7 +1129,7 @@ pub fn warp_picture(
     let mut targets: Vec<DVec2> = set.points.iter().map(|p| v2(p.1)).collect();
     targets.extend(set.segments.iter().flat_map(|s| [v2(s.1[0]), v2(s.1[1])]));
     let handles = Mls2dHandles::new(&points, &segments, alpha)?;
-    fill_picture(width, height, pixels, grid, |verts, deformed| {
+    fill_picture(width, height, pixels, grid, progress, |verts, deformed| {
         let plan = handles.plan(verts, kind)?;
         plan.deform(&targets, deformed)
     })
@@ -1087,6 +1151,22 @@ pub fn warp_picture_tps(
     set: &crate::HandleSet,
     grid: usize,
 ) -> Result<PictureWarp, DeformError> {
+    warp_picture_tps_with(width, height, pixels, set, grid, &volmorph_io::NoProgress)
+}
+
+/// [`warp_picture_tps`] reporting to `progress` as [`warp_rgba_with`] does. The result
+/// equals [`warp_picture_tps`]'s bit for bit.
+///
+/// # Errors
+/// As [`warp_picture_tps`]; [`DeformError::Cancelled`] when `progress` asks to stop.
+pub fn warp_picture_tps_with(
+    width: u32,
+    height: u32,
+    pixels: &[[u8; 4]],
+    set: &crate::HandleSet,
+    grid: usize,
+    progress: &dyn volmorph_io::Progress,
+) -> Result<PictureWarp, DeformError> {
     if set.dim != 2 {
         return Err(DeformError::InvalidHandles(
             "picture deformation needs 2D handles (pixel coordinates [x, y]); the set has 3D \
@@ -1095,7 +1175,7 @@ pub fn warp_picture_tps(
         ));
     }
     let spline = tps_2d(set)?;
-    fill_picture(width, height, pixels, grid, |verts, deformed| {
+    fill_picture(width, height, pixels, grid, progress, |verts, deformed| {
         for (v, d) in verts.iter().zip(deformed.iter_mut()) {
             let mut u = [0.0; 2];
             spline.eval([v.x, v.y], &mut u);
@@ -1137,6 +1217,7 @@ fn fill_picture(
     height: u32,
     pixels: &[[u8; 4]],
     grid: usize,
+    progress: &dyn volmorph_io::Progress,
     deform: impl FnOnce(&[DVec2], &mut [DVec2]) -> Result<(), DeformError>,
 ) -> Result<PictureWarp, DeformError> {
     if grid < 2 {
@@ -1152,7 +1233,8 @@ fn fill_picture(
     let mut deformed = vec![DVec2::ZERO; verts.len()];
     deform(&verts, &mut deformed)?;
     let fold_fraction = fold_fraction(nx, ny, &deformed);
-    let pixels = warp_rgba(width, height, pixels, nx, ny, &deformed, [0; 4])?;
+    progress.check()?;
+    let pixels = warp_rgba_with(width, height, pixels, nx, ny, &deformed, [0; 4], progress)?;
     Ok(PictureWarp {
         pixels,
         grid: (nx, ny),

@@ -339,7 +339,7 @@ impl WendlandMap {
     /// support or negative smoothing; [`DeformError::NonFinite`] for a non-finite coordinate;
     /// [`DeformError::Io`] when the sparse system would exceed the memory budget;
     /// [`DeformError::Singular`] when the factorisation fails (coincident sources);
-    /// [`DeformError::Io`] wrapping [`volmorph_io::Cancelled`] when cancelled.
+    /// [`DeformError::Cancelled`] when cancelled.
     pub fn with_support(
         sources: &[DVec3],
         targets: &[DVec3],
@@ -518,7 +518,7 @@ impl WendlandMap {
 }
 
 fn cancelled(c: volmorph_io::Cancelled) -> DeformError {
-    DeformError::InvalidHandles(format!("handle deformation {c}"))
+    DeformError::Cancelled(c)
 }
 
 impl SpaceMap for WendlandMap {

@@ -28,7 +28,7 @@ pub use budget::{
     MEMORY_LIMIT_ENV, Num, check_bytes, check_elems, human_bytes, memory_limit, set_memory_limit,
     try_vec, try_with_capacity,
 };
-pub use progress::{Cancelled, NoProgress, Progress};
+pub use progress::{Cancelled, Counter, NoProgress, Progress, Within, is_cancelled_error};
 
 /// Error produced by the helpers in this crate.
 #[derive(Debug, thiserror::Error)]

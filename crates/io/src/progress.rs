@@ -55,6 +55,36 @@ pub struct NoProgress;
 
 impl Progress for NoProgress {}
 
+/// Forwards [`Progress::advance`] and [`Progress::is_cancelled`] to the wrapped progress but
+/// drops [`Progress::start`]: a sub-task whose steps the caller has already counted in its
+/// own stage (e.g. the rows of each frame of an animation, announced once as
+/// `frames × rows`).
+#[derive(Clone, Copy)]
+pub struct Within<'a>(pub &'a dyn Progress);
+
+impl Progress for Within<'_> {
+    fn advance(&self, steps: u64) {
+        self.0.advance(steps);
+    }
+    fn is_cancelled(&self) -> bool {
+        self.0.is_cancelled()
+    }
+}
+
+/// `true` when `error` or any error in its [`source`](std::error::Error::source) chain is
+/// [`Cancelled`]: front-ends use it to tell a stop the user asked for from a failure.
+#[must_use]
+pub fn is_cancelled_error(error: &(dyn std::error::Error + 'static)) -> bool {
+    let mut e = Some(error);
+    while let Some(x) = e {
+        if x.is::<Cancelled>() {
+            return true;
+        }
+        e = x.source();
+    }
+    false
+}
+
 /// Counts steps and stages; cancellable from another thread (see [`Counter::cancel`]), or
 /// automatically once a number of steps is reached (see [`Counter::cancel_after`]).
 #[derive(Debug, Default)]
@@ -91,6 +121,12 @@ impl Counter {
     #[must_use]
     pub fn stages(&self) -> Vec<(String, u64)> {
         self.stages.lock().map(|s| s.clone()).unwrap_or_default()
+    }
+    /// The sum of the totals announced by the stages started so far (a finished call that
+    /// reports exactly has [`Counter::steps`] equal to this).
+    #[must_use]
+    pub fn announced(&self) -> u64 {
+        self.stages().iter().map(|s| s.1).sum()
     }
 }
 
@@ -129,5 +165,29 @@ mod tests {
         d.cancel();
         assert!(d.is_cancelled());
         assert!(NoProgress.check().is_ok());
+        assert_eq!(d.announced(), 0);
+    }
+
+    #[test]
+    fn within_forwards_steps_but_not_stages() {
+        let c = Counter::cancel_after(5);
+        c.start("outer", 8);
+        let w = Within(&c);
+        w.start("inner", 100);
+        w.advance(5);
+        assert_eq!(c.steps(), 5);
+        assert_eq!(c.announced(), 8);
+        assert!(w.is_cancelled());
+    }
+
+    #[test]
+    fn cancelled_is_found_in_a_source_chain() {
+        #[derive(Debug, thiserror::Error)]
+        #[error("outer")]
+        struct Outer(#[source] Cancelled);
+        assert!(is_cancelled_error(&Outer(Cancelled)));
+        assert!(is_cancelled_error(&Cancelled));
+        let other = std::io::Error::other("x");
+        assert!(!is_cancelled_error(&other));
     }
 }

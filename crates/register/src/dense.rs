@@ -60,7 +60,7 @@ use crate::error::{non_negative, positive};
 use crate::image::{LinearImage, pyramid, same_grid};
 use crate::matching::Correspondence;
 use crate::metrics::{JointHistogram, value_range};
-use crate::optimize::{LbfgsOptions, minimise};
+use crate::optimize::{LbfgsOptions, minimise, minimise_with};
 
 /// Samples per parallel task.
 const CHUNK: usize = 8192;
@@ -789,6 +789,33 @@ pub fn refine(
     mask: Option<&Volume<u8>>,
     options: &DenseOptions,
 ) -> Result<DenseResult, RegisterError> {
+    refine_with(
+        fixed,
+        moving,
+        initial,
+        constraints,
+        mask,
+        options,
+        &volmorph_io::NoProgress,
+    )
+}
+
+/// [`refine`] reporting to `progress`: one stage of `levels × iterations` steps, one per
+/// L-BFGS iteration of every pyramid level (the iterations a level does not need are
+/// counted when it converges), stopping between iterations when cancelled. The result
+/// equals [`refine`]'s bit for bit.
+///
+/// # Errors
+/// As [`refine`]; [`RegisterError::Cancelled`] when `progress` asks to stop.
+pub fn refine_with(
+    fixed: &Volume<f32>,
+    moving: &Volume<f32>,
+    initial: &dyn SpaceMap,
+    constraints: &[Correspondence],
+    mask: Option<&Volume<u8>>,
+    options: &DenseOptions,
+    progress: &dyn volmorph_io::Progress,
+) -> Result<DenseResult, RegisterError> {
     let spacing = positive("grid_spacing", options.grid_spacing)?;
     if options.levels == 0 || options.levels > 6 {
         return Err(RegisterError::option("levels", "must be 1…6"));
@@ -833,7 +860,12 @@ pub fn refine(
     let mut lat = lattice_on(&g0, regions)?;
     let mut reports = Vec::new();
     let voxel_spacing = g0.spacing.element_sum() / 3.0;
+    progress.start(
+        &format!("dense refinement, {} levels", fp.len()),
+        (fp.len() as u64).saturating_mul(options.iterations as u64),
+    );
     for level in (0..fp.len()).rev() {
+        progress.check()?;
         let samples = samples_of(&fp[level], mask, options.max_samples);
         if level != fp.len() - 1 {
             lat = subdivide(&lat)?;
@@ -920,7 +952,7 @@ pub fn refine(
             relative_tolerance: 1e-6,
             max_line_search: 12,
         };
-        let r = minimise(&mut x, &opts, |x, g| problem.evaluate(x, g));
+        let r = minimise_with(&mut x, &opts, |x, g| problem.evaluate(x, g), progress)?;
         problem.set_points(&x)?;
         lat = problem.lat;
         reports.push(DenseLevel {
@@ -933,6 +965,7 @@ pub fn refine(
             cost_end: r.end,
         });
     }
+    progress.check()?;
     Ok(DenseResult {
         correction: lat,
         levels: reports,

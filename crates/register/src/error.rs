@@ -48,6 +48,10 @@ pub enum RegisterError {
     /// A file operation failed.
     #[error(transparent)]
     Io(#[from] volmorph_io::IoError),
+    /// The caller asked the work to stop through its [`volmorph_io::Progress`]; nothing was
+    /// written.
+    #[error("stopped on request")]
+    Cancelled(#[from] volmorph_io::Cancelled),
 }
 
 impl RegisterError {

@@ -757,6 +757,30 @@ pub fn match_handles(
     initial: Option<&dyn SpaceMap>,
     options: &MatchOptions,
 ) -> Result<Vec<Correspondence>, RegisterError> {
+    match_handles_with(
+        fixed,
+        moving,
+        sources,
+        initial,
+        options,
+        &volmorph_io::NoProgress,
+    )
+}
+
+/// [`match_handles`] reporting to `progress`: one stage of `levels × sources` steps, one per
+/// handle matched at every pyramid level, stopping between handles when cancelled. The
+/// result equals [`match_handles`]'s bit for bit.
+///
+/// # Errors
+/// As [`match_handles`]; [`RegisterError::Cancelled`] when `progress` asks to stop.
+pub fn match_handles_with(
+    fixed: &Volume<f32>,
+    moving: &Volume<f32>,
+    sources: &[DVec3],
+    initial: Option<&dyn SpaceMap>,
+    options: &MatchOptions,
+    progress: &dyn volmorph_io::Progress,
+) -> Result<Vec<Correspondence>, RegisterError> {
     options.validate()?;
     if sources.is_empty() {
         return Err(RegisterError::TooLittle("no handles to match".into()));
@@ -768,16 +792,30 @@ pub fn match_handles(
         None => sources.to_vec(),
     };
     let mut corr: Vec<Correspondence> = Vec::new();
+    progress.start(
+        &format!(
+            "matching {} handles over {} levels",
+            sources.len(),
+            fp.len()
+        ),
+        (fp.len() as u64).saturating_mul(sources.len() as u64),
+    );
     for level in (0..fp.len()).rev() {
         let f = LinearImage::new(&fp[level]);
         let m = LinearImage::new(&mp[level.min(mp.len() - 1)]);
         let step = fp[level].geometry().index_to_physical_matrix();
         let subvoxel = options.subvoxel && level == 0;
-        let found: Vec<LevelMatch> = sources
+        let found: Result<Vec<LevelMatch>, volmorph_io::Cancelled> = sources
             .par_iter()
             .zip(targets.par_iter())
-            .map(|(&p, &q)| match_one(&f, &m, step, p, q, options, subvoxel))
+            .map(|(&p, &q)| {
+                progress.check()?;
+                let r = match_one(&f, &m, step, p, q, options, subvoxel);
+                progress.advance(1);
+                Ok(r)
+            })
             .collect();
+        let found = found?;
         corr = sources
             .iter()
             .zip(&found)
@@ -824,6 +862,7 @@ pub fn match_handles(
             })
             .collect();
     }
+    progress.check()?;
     fit_frames(&mut corr, options.neighbours);
     Ok(corr)
 }

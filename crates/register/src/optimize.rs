@@ -44,10 +44,33 @@ fn dot(a: &[f64], b: &[f64]) -> f64 {
 
 /// Minimise `f` from `x` (updated in place). `f(x, grad)` returns the objective and writes
 /// its gradient into `grad` (same length as `x`).
-pub fn minimise<F>(x: &mut [f64], options: &LbfgsOptions, mut f: F) -> LbfgsReport
+pub fn minimise<F>(x: &mut [f64], options: &LbfgsOptions, f: F) -> LbfgsReport
 where
     F: FnMut(&[f64], &mut [f64]) -> f64,
 {
+    match minimise_with(x, options, f, &volmorph_io::NoProgress) {
+        Ok(r) => r,
+        Err(volmorph_io::Cancelled) => unreachable!("NoProgress never cancels"),
+    }
+}
+
+/// [`minimise`] advancing `progress` by one step per iteration, and by the iterations left
+/// of [`LbfgsOptions::iterations`] when it stops early, so every call advances exactly
+/// `options.iterations` steps (the caller announces the stage). Checks for cancellation
+/// before each iteration; `x` then holds the last accepted iterate.
+///
+/// # Errors
+/// [`volmorph_io::Cancelled`] when `progress` asks to stop.
+pub fn minimise_with<F>(
+    x: &mut [f64],
+    options: &LbfgsOptions,
+    mut f: F,
+    progress: &dyn volmorph_io::Progress,
+) -> Result<LbfgsReport, volmorph_io::Cancelled>
+where
+    F: FnMut(&[f64], &mut [f64]) -> f64,
+{
+    progress.check()?;
     let n = x.len();
     let mut g = vec![0.0; n];
     let mut fx = f(x, &mut g);
@@ -60,6 +83,10 @@ where
     let mut g_new = vec![0.0; n];
     let mut iters = 0;
     for it in 0..options.iterations {
+        if it > 0 {
+            progress.advance(1);
+            progress.check()?;
+        }
         iters = it + 1;
         // Two-loop recursion: d = −H g.
         let mut q = g.clone();
@@ -150,12 +177,14 @@ where
             break;
         }
     }
-    LbfgsReport {
+    // Iteration `iters` (if any) is done but not yet reported; the rest were not needed.
+    progress.advance((options.iterations - iters.saturating_sub(1).min(options.iterations)) as u64);
+    Ok(LbfgsReport {
         start,
         end: fx,
         iterations: iters,
         evaluations: evals,
-    }
+    })
 }
 
 #[cfg(test)]

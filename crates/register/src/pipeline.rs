@@ -40,8 +40,8 @@ use volmorph_warp::jacobian::FoldingReport;
 use volmorph_warp::pullback::{ResampleOptions, resample};
 
 use crate::RegisterError;
-use crate::dense::{DenseOptions, Refined, fit_to_map, lattice_on, refine};
-use crate::matching::{Correspondence, MatchOptions, MatchStatus, match_handles};
+use crate::dense::{DenseOptions, Refined, fit_to_map, lattice_on, refine_with};
+use crate::matching::{Correspondence, MatchOptions, MatchStatus, match_handles_with};
 use crate::metrics::{ImageMetrics, compare};
 use crate::quality::{
     LandmarkUnits, OverlayOptions, TreStats, anterior_camera, read_landmarks, render_overlay,
@@ -112,26 +112,47 @@ impl Registration {
 /// where handles are selected and where the dense metric is measured.
 ///
 /// # Errors
-/// The errors of the steps: [`select_handles`], [`match_handles`], [`handle_map`], [`refine`].
+/// The errors of the steps: [`select_handles`],
+/// [`match_handles`](crate::matching::match_handles), [`handle_map`],
+/// [`refine`](crate::dense::refine).
 pub fn register(
     fixed: &Volume<f32>,
     moving: &Volume<f32>,
     mask: Option<&Volume<u8>>,
     o: &RegisterOptions,
 ) -> Result<Registration, RegisterError> {
+    register_with(fixed, moving, mask, o, &volmorph_io::NoProgress)
+}
+
+/// [`register`] reporting to `progress`: the stages of [`match_handles_with`] (handles per
+/// level) and [`solve_and_refine_with`], stopping when cancelled. The result equals
+/// [`register`]'s bit for bit (timings aside).
+///
+/// # Errors
+/// As [`register`]; [`RegisterError::Cancelled`] when `progress` asks to stop.
+pub fn register_with(
+    fixed: &Volume<f32>,
+    moving: &Volume<f32>,
+    mask: Option<&Volume<u8>>,
+    o: &RegisterOptions,
+    progress: &dyn volmorph_io::Progress,
+) -> Result<Registration, RegisterError> {
     let t0 = Instant::now();
+    progress.start("selecting handles", 0);
     let handles = select_handles(fixed, mask, &o.select)?;
+    progress.check()?;
     let t1 = Instant::now();
     let sources: Vec<DVec3> = handles.iter().map(|h| h.position).collect();
-    let correspondences = match_handles(fixed, moving, &sources, None, &o.matching)?;
+    let correspondences = match_handles_with(fixed, moving, &sources, None, &o.matching, progress)?;
     let t2 = Instant::now();
-    let mut reg = solve_and_refine(
+    let mut reg = solve_and_refine_with(
         fixed,
         moving,
         mask,
         correspondences,
         &o.solve,
         o.dense.as_ref(),
+        progress,
     )?;
     reg.handles = handles;
     reg.timings.select = (t1 - t0).as_secs_f64();
@@ -145,7 +166,7 @@ pub fn register(
 /// no handles).
 ///
 /// # Errors
-/// The errors of [`handle_map`] and [`refine`].
+/// The errors of [`handle_map`] and [`refine`](crate::dense::refine).
 pub fn solve_and_refine(
     fixed: &Volume<f32>,
     moving: &Volume<f32>,
@@ -154,11 +175,48 @@ pub fn solve_and_refine(
     solve: &SolveOptions,
     dense: Option<&DenseOptions>,
 ) -> Result<Registration, RegisterError> {
+    solve_and_refine_with(
+        fixed,
+        moving,
+        mask,
+        correspondences,
+        solve,
+        dense,
+        &volmorph_io::NoProgress,
+    )
+}
+
+/// [`solve_and_refine`] reporting to `progress`: a stage of unknown length while the handle
+/// map is solved, then the stage of [`refine_with`]; stopping when cancelled. The result
+/// equals [`solve_and_refine`]'s bit for bit (timings aside).
+///
+/// # Errors
+/// As [`solve_and_refine`]; [`RegisterError::Cancelled`] when `progress` asks to stop.
+pub fn solve_and_refine_with(
+    fixed: &Volume<f32>,
+    moving: &Volume<f32>,
+    mask: Option<&Volume<u8>>,
+    correspondences: Vec<Correspondence>,
+    solve: &SolveOptions,
+    dense: Option<&DenseOptions>,
+    progress: &dyn volmorph_io::Progress,
+) -> Result<Registration, RegisterError> {
     let t0 = Instant::now();
+    progress.check()?;
+    progress.start("solving the handle map", 0);
     let hm = handle_map(&correspondences, solve)?;
+    progress.check()?;
     let t1 = Instant::now();
     let dense = match dense {
-        Some(d) => Some(refine(fixed, moving, &hm, &correspondences, mask, d)?),
+        Some(d) => Some(refine_with(
+            fixed,
+            moving,
+            &hm,
+            &correspondences,
+            mask,
+            d,
+            progress,
+        )?),
         None => None,
     };
     let t2 = Instant::now();
@@ -658,8 +716,37 @@ pub fn register_files(
     out_dir: &Path,
     o: &RegisterOptions,
 ) -> Result<RegisterReport, RegisterError> {
+    register_files_with(
+        fixed_path,
+        moving_path,
+        mask_path,
+        landmarks,
+        out_dir,
+        o,
+        &volmorph_io::NoProgress,
+    )
+}
+
+/// [`register_files`] reporting to `progress` as [`register_with`] does, then a stage of
+/// unknown length while the outputs are written. When cancelled before the outputs are
+/// written, `out_dir` is left untouched.
+///
+/// # Errors
+/// As [`register_files`]; [`RegisterError::Cancelled`] when `progress` asks to stop.
+pub fn register_files_with(
+    fixed_path: &Path,
+    moving_path: &Path,
+    mask_path: Option<&Path>,
+    landmarks: Option<&LandmarkFiles>,
+    out_dir: &Path,
+    o: &RegisterOptions,
+    progress: &dyn volmorph_io::Progress,
+) -> Result<RegisterReport, RegisterError> {
+    progress.start("reading the scans", 0);
     let (fixed, moving, mask) = read_inputs(fixed_path, moving_path, mask_path)?;
-    let reg = register(&fixed, &moving, mask.as_ref(), o)?;
+    let reg = register_with(&fixed, &moving, mask.as_ref(), o, progress)?;
+    progress.check()?;
+    progress.start(&format!("writing {}", out_dir.display()), 0);
     let spacing = o.dense.map_or(10.0, |d| d.grid_spacing);
     let inputs = (fixed_path, &fixed, &moving, mask.as_ref());
     finish(inputs, landmarks, out_dir, &reg, spacing)
@@ -681,9 +768,43 @@ pub fn solve_files(
     solve: &SolveOptions,
     dense: Option<&DenseOptions>,
 ) -> Result<RegisterReport, RegisterError> {
+    solve_files_with(
+        fixed_path,
+        moving_path,
+        correspondences,
+        mask_path,
+        landmarks,
+        out_dir,
+        solve,
+        dense,
+        &volmorph_io::NoProgress,
+    )
+}
+
+/// [`solve_files`] reporting to `progress` as [`solve_and_refine_with`] does, then a stage of
+/// unknown length while the outputs are written. When cancelled before the outputs are
+/// written, `out_dir` is left untouched.
+///
+/// # Errors
+/// As [`solve_files`]; [`RegisterError::Cancelled`] when `progress` asks to stop.
+#[allow(clippy::too_many_arguments)]
+pub fn solve_files_with(
+    fixed_path: &Path,
+    moving_path: &Path,
+    correspondences: &Path,
+    mask_path: Option<&Path>,
+    landmarks: Option<&LandmarkFiles>,
+    out_dir: &Path,
+    solve: &SolveOptions,
+    dense: Option<&DenseOptions>,
+    progress: &dyn volmorph_io::Progress,
+) -> Result<RegisterReport, RegisterError> {
+    progress.start("reading the scans", 0);
     let (fixed, moving, mask) = read_inputs(fixed_path, moving_path, mask_path)?;
     let corr = read_correspondences(correspondences)?;
-    let reg = solve_and_refine(&fixed, &moving, mask.as_ref(), corr, solve, dense)?;
+    let reg = solve_and_refine_with(&fixed, &moving, mask.as_ref(), corr, solve, dense, progress)?;
+    progress.check()?;
+    progress.start(&format!("writing {}", out_dir.display()), 0);
     let spacing = dense.map_or(10.0, |d| d.grid_spacing);
     let inputs = (fixed_path, &fixed, &moving, mask.as_ref());
     finish(inputs, landmarks, out_dir, &reg, spacing)

@@ -60,6 +60,10 @@ pub enum SculptError {
     /// A size check failed.
     #[error(transparent)]
     Io(#[from] IoError),
+    /// The caller asked the work to stop through its [`volmorph_io::Progress`]; nothing was
+    /// written.
+    #[error("stopped on request")]
+    Cancelled(#[from] volmorph_io::Cancelled),
 }
 
 impl SculptError {

@@ -74,6 +74,21 @@ pub struct JobReport {
 /// [`SculptError::InvalidOption`] for an invalid pose, step, region, or a job with nothing
 /// to do; as [`SculptDocument::apply`] otherwise.
 pub fn run_job(base: &Mesh, job: &Job<'_>) -> Result<JobReport, SculptError> {
+    run_job_with(base, job, &volmorph_io::NoProgress)
+}
+
+/// [`run_job`] reporting to `progress`: one stage with a step per phase (checking the
+/// meshes, building the tri-dexel, the tool edit if any, the smoothing if any, collecting
+/// the mesh), stopping between phases when cancelled. The result equals [`run_job`]'s
+/// (timings aside).
+///
+/// # Errors
+/// As [`run_job`]; [`SculptError::Cancelled`] when `progress` asks to stop.
+pub fn run_job_with(
+    base: &Mesh,
+    job: &Job<'_>,
+    progress: &dyn volmorph_io::Progress,
+) -> Result<JobReport, SculptError> {
     if job.tool.is_none() && job.smooth.is_none() {
         return Err(SculptError::option(
             "job",
@@ -81,6 +96,8 @@ pub fn run_job(base: &Mesh, job: &Job<'_>) -> Result<JobReport, SculptError> {
             "a tool edit, a smoothing region or both",
         ));
     }
+    let phases = 3 + u64::from(job.tool.is_some()) + u64::from(job.smooth.is_some());
+    progress.start("sculpting", phases);
     let mut steps = Vec::new();
     let t = Instant::now();
     let soup = closed_soup(base, "base")?;
@@ -89,6 +106,8 @@ pub fn run_job(base: &Mesh, job: &Job<'_>) -> Result<JobReport, SculptError> {
         None => None,
     };
     steps.push(("check meshes", t.elapsed()));
+    progress.advance(1);
+    progress.check()?;
     let (mut lo, mut hi) = soup.bounds().ok_or(SculptError::InvalidMesh {
         role: "base",
         reason: "it has no triangles".into(),
@@ -121,6 +140,8 @@ pub fn run_job(base: &Mesh, job: &Job<'_>) -> Result<JobReport, SculptError> {
     let t = Instant::now();
     let mut doc = SculptDocument::from_soup(&soup, grid, job.options)?;
     steps.push(("build tri-dexel", t.elapsed()));
+    progress.advance(1);
+    progress.check()?;
     let mut edits = Vec::new();
     if let (Some(edit), Some(tool)) = (&job.tool, tool) {
         let poses = poses_of(edit);
@@ -136,6 +157,8 @@ pub fn run_job(base: &Mesh, job: &Job<'_>) -> Result<JobReport, SculptError> {
         steps.push(("contour", s.timings.contour));
         steps.push(("stitch", s.timings.stitch));
         edits.push(("tool", s));
+        progress.advance(1);
+        progress.check()?;
     }
     if let Some(region) = &job.smooth {
         let rec = doc.apply(&Edit::Smooth(*region))?;
@@ -144,10 +167,13 @@ pub fn run_job(base: &Mesh, job: &Job<'_>) -> Result<JobReport, SculptError> {
         steps.push(("contour (smooth)", s.timings.contour));
         steps.push(("stitch (smooth)", s.timings.stitch));
         edits.push(("smooth", s));
+        progress.advance(1);
+        progress.check()?;
     }
     let t = Instant::now();
     let mesh = doc.mesh()?;
     steps.push(("collect mesh", t.elapsed()));
+    progress.advance(1);
     Ok(JobReport {
         mesh,
         grid,

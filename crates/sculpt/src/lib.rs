@@ -110,7 +110,7 @@ pub use error::SculptError;
 pub use exact::FRACTION_BITS;
 pub use grid::{GRID_OFFSET, Grid, MAX_GRID_POINTS, MIN_GRID_POINTS, PointBox, transverse};
 pub use interval::{Op, combine, inside_at, is_clean};
-pub use job::{DEFAULT_GRID_POINTS, JOB_MARGIN, Job, JobReport, ToolEdit, run_job};
+pub use job::{DEFAULT_GRID_POINTS, JOB_MARGIN, Job, JobReport, ToolEdit, run_job, run_job_with};
 pub use peel::{
     Crossing, DepthPeelImage, MAX_VIEW_PIXELS, PerspectiveView, TriangleSoup, depth_peel_axis,
     depth_peel_perspective,

@@ -3,12 +3,15 @@
 //! * [`Rng`] — the one seeded pseudo-random generator of the test suites and benches.
 //! * [`conformance`] — the suite every space map runs ([`space_map_conformance!`]) and the
 //!   extra checks of maps linear in their parameters ([`linear_map_conformance!`]).
+//! * [`progress`] — the contract of every `_with(…, progress)` function: steps reach the
+//!   announced totals, cancellation returns an error carrying `Cancelled`.
 //!
 //! This crate is a dev-dependency of the libraries' tests and benches, and a dependency of
 //! `volmorph-bench` only (the benchmark set-ups, whose random inputs it draws); no library
 //! depends on it.
 
 pub mod conformance;
+pub mod progress;
 mod rng;
 
 pub use conformance::Conformance;

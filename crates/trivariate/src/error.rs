@@ -108,6 +108,10 @@ pub enum TrivariateError {
         /// Smallest distance reached.
         residual: f64,
     },
+    /// The caller asked the work to stop through its [`volmorph_io::Progress`]; nothing was
+    /// written.
+    #[error("stopped on request")]
+    Cancelled(#[from] volmorph_io::Cancelled),
 }
 
 /// Attach a context to a spline-layer error. The context is converted to a `String` only

@@ -232,6 +232,20 @@ pub fn isolate_roots(
     d: &TensorBSpline<3>,
     options: &RootOptions,
 ) -> Result<Vec<RootCell>, TrivariateError> {
+    isolate_roots_with(d, options, &volmorph_io::NoProgress)
+}
+
+/// [`isolate_roots`] reporting to `progress`: one stage whose steps are the Bézier
+/// elements searched, stopping between elements when cancelled. The result equals
+/// [`isolate_roots`]'s.
+///
+/// # Errors
+/// As [`isolate_roots`]; [`TrivariateError::Cancelled`] when `progress` asks to stop.
+pub fn isolate_roots_with(
+    d: &TensorBSpline<3>,
+    options: &RootOptions,
+    progress: &dyn volmorph_io::Progress,
+) -> Result<Vec<RootCell>, TrivariateError> {
     if d.dim() != 1 {
         return Err(TrivariateError::InvalidArgument(format!(
             "root isolation needs a scalar spline, got {} components",
@@ -258,11 +272,19 @@ pub fn isolate_roots(
         .fold(0.0f64, |m, v| m.max(v.abs()));
     let eps = options.epsilon * scale;
     let pieces = d.bezier_pieces().map_err(ctx("Bézier extraction"))?;
+    progress.start("isolating the roots", pieces.len() as u64);
     let found: Result<Vec<Vec<RootCell>>, TrivariateError> = pieces
         .into_par_iter()
-        .map(|p| search(p, eps, options.max_depth))
+        .map(|p| {
+            progress.check()?;
+            let r = search(p, eps, options.max_depth);
+            progress.advance(1);
+            r
+        })
         .collect();
-    Ok(found?.into_iter().flatten().collect())
+    let found = found?;
+    progress.check()?;
+    Ok(found.into_iter().flatten().collect())
 }
 
 #[cfg(test)]

@@ -66,6 +66,22 @@ pub fn least_squares<const N: usize>(
     dim: usize,
     data: &[f64],
 ) -> Result<TensorBSpline<N>, TrivariateError> {
+    least_squares_with(knots, sites, dim, data, &volmorph_io::NoProgress)
+}
+
+/// [`least_squares`] advancing `progress` by one step per axis solved (`N` steps; the
+/// caller announces the stage) and stopping between axes when cancelled. The result equals
+/// [`least_squares`]'s bit for bit.
+///
+/// # Errors
+/// As [`least_squares`]; [`TrivariateError::Cancelled`] when `progress` asks to stop.
+pub fn least_squares_with<const N: usize>(
+    knots: [KnotVector; N],
+    sites: [&[f64]; N],
+    dim: usize,
+    data: &[f64],
+    progress: &dyn volmorph_io::Progress,
+) -> Result<TensorBSpline<N>, TrivariateError> {
     if dim == 0 {
         return Err(TrivariateError::InvalidArgument(
             "dim must be positive".into(),
@@ -102,6 +118,7 @@ pub fn least_squares<const N: usize>(
     }
     let mut cur = data.to_vec();
     for a in 0..N {
+        progress.check()?;
         let kv = &knots[a];
         let n = kv.num_basis();
         let m = sizes[a];
@@ -127,6 +144,7 @@ pub fn least_squares<const N: usize>(
         }
         cur = next;
         sizes[a] = n;
+        progress.advance(1);
     }
     TensorBSpline::new(knots, dim, cur).map_err(ctx("least-squares fit"))
 }
@@ -202,6 +220,23 @@ pub fn fit_sampled_volume(
     counts: [usize; 3],
     name: &str,
 ) -> Result<SampledFit, TrivariateError> {
+    fit_sampled_volume_with(volume, order, counts, name, &volmorph_io::NoProgress)
+}
+
+/// [`fit_sampled_volume`] reporting to `progress`: one stage of 3 steps (interpolation: the
+/// geometry, the collocation factorisations, the attribute's solve; least squares: one per
+/// axis solved), stopping between steps when cancelled. The result equals
+/// [`fit_sampled_volume`]'s bit for bit.
+///
+/// # Errors
+/// As [`fit_sampled_volume`]; [`TrivariateError::Cancelled`] when `progress` asks to stop.
+pub fn fit_sampled_volume_with(
+    volume: &volmorph_volume::Volume<f64>,
+    order: usize,
+    counts: [usize; 3],
+    name: &str,
+    progress: &dyn volmorph_io::Progress,
+) -> Result<SampledFit, TrivariateError> {
     let g = volume.geometry();
     let dims = g.dims;
     if dims.iter().any(|&d| d < 2) {
@@ -236,6 +271,13 @@ pub fn fit_sampled_volume(
         KnotVector::clamped_uniform(degree, counts[2], [0.0, 1.0]).map_err(ctx("knots"))?,
     ];
     let data = volume.data();
+    progress.start(
+        &format!(
+            "fitting {}×{}×{} control points",
+            counts[0], counts[1], counts[2]
+        ),
+        3,
+    );
     if counts == dims {
         // Per axis, the spline on the attribute's knots with value m at Greville point m.
         let mut coefficient: [Vec<f64>; 3] = Default::default();
@@ -255,7 +297,15 @@ pub fn fit_sampled_volume(
             }
         }
         let geometry = TensorBSpline::new(knots.clone(), 3, pts).map_err(ctx("geometry"))?;
-        let attribute = interpolate(knots, 1, data)?;
+        progress.advance(1);
+        progress.check()?;
+        let interpolator = Interpolator::greville(knots).map_err(ctx("Greville interpolation"))?;
+        progress.advance(1);
+        progress.check()?;
+        let attribute = interpolator
+            .fit(1, data)
+            .map_err(ctx("Greville interpolation"))?;
+        progress.advance(1);
         return Ok(SampledFit {
             model: crate::Aggregate::new(geometry)?.with_attribute(name, attribute)?,
             kind: SampledFitKind::Interpolation,
@@ -283,7 +333,8 @@ pub fn fit_sampled_volume(
             .map(|i| i as f64 / (dims[a] - 1) as f64)
             .collect()
     });
-    let attribute = least_squares(knots, [&sites[0], &sites[1], &sites[2]], 1, data)?;
+    let attribute =
+        least_squares_with(knots, [&sites[0], &sites[1], &sites[2]], 1, data, progress)?;
     Ok(SampledFit {
         model: crate::Aggregate::new(geometry)?.with_attribute(name, attribute)?,
         kind: SampledFitKind::LeastSquares,

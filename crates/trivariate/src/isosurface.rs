@@ -4,7 +4,7 @@
 //! region of the plane `(a, b, c, d)·(x, 1) = 0` inside the volume, `{P(u) : (a,b,c)·P(u) + d
 //! = 0}`, and reports an attribute on it. Both follow the paper: the scalar spline `D` of
 //! [`crate::extract`] is built, its zeros are isolated by Bézier subdivision
-//! ([`isolate_roots`]), the geometry is refined over the root cells, refined further where a
+//! ([`isolate_roots`](crate::isolate_roots)), the geometry is refined over the root cells, refined further where a
 //! flatness criterion asks for it, and polygonised.
 //!
 //! # Polygonisation (crack-free by construction)
@@ -57,7 +57,7 @@ use volmorph_spline::{BasisTable, BezierCell, KnotVector, TensorBSpline};
 
 use crate::error::ctx;
 use crate::extract::{
-    RootOptions, check_plane, isolate_roots, isosurface_function, plane_function,
+    RootOptions, check_plane, isolate_roots_with, isosurface_function, plane_function,
 };
 use crate::{AggregateVolume, TrivariateError};
 
@@ -84,6 +84,10 @@ pub const VERTEX_RESIDUAL: f64 = 1e-13;
 /// Largest number of Newton/bisection steps per vertex: bisection alone halves the bracket
 /// each step, so 200 steps reach the f64 resolution of any edge.
 const MAX_VERTEX_STEPS: usize = 200;
+
+/// Crossing edges solved per progress step (and per parallel task) when placing vertices:
+/// enough Newton solves that one progress update per chunk costs nothing measurable.
+const VERTEX_CHUNK: usize = 256;
 
 /// Options of [`isosurface`] and [`slice()`].
 #[derive(Debug, Clone, Copy, PartialEq)]
@@ -424,6 +428,22 @@ pub fn isosurface(
     level: f64,
     options: &PolygonizeOptions,
 ) -> Result<ZeroSetMesh, TrivariateError> {
+    isosurface_with(volume, attribute, level, options, &volmorph_io::NoProgress)
+}
+
+/// [`isosurface`] reporting to `progress` in three stages (root isolation per Bézier
+/// element, the lattice's cell layers, the vertices placed in chunks), stopping between
+/// steps when cancelled. The result equals [`isosurface`]'s bit for bit.
+///
+/// # Errors
+/// As [`isosurface`]; [`TrivariateError::Cancelled`] when `progress` asks to stop.
+pub fn isosurface_with(
+    volume: &AggregateVolume,
+    attribute: &str,
+    level: f64,
+    options: &PolygonizeOptions,
+    progress: &dyn volmorph_io::Progress,
+) -> Result<ZeroSetMesh, TrivariateError> {
     let a = volume
         .attribute(attribute)
         .ok_or_else(|| TrivariateError::UnknownAttribute(attribute.to_owned()))?;
@@ -437,7 +457,15 @@ pub fn isosurface(
         let (lo, hi) = control_range(a);
         if hi > lo { hi - lo } else { 1.0 }
     };
-    polygonize(volume, &d, target, range, Some(attribute), options)
+    polygonize(
+        volume,
+        &d,
+        target,
+        range,
+        Some(attribute),
+        options,
+        progress,
+    )
 }
 
 /// Mesh the region of the plane `{x : (a, b, c, d)·(x, 1) = 0}` inside `volume` (see the
@@ -454,6 +482,20 @@ pub fn slice(
     attribute: Option<&str>,
     options: &PolygonizeOptions,
 ) -> Result<ZeroSetMesh, TrivariateError> {
+    slice_with(volume, plane, attribute, options, &volmorph_io::NoProgress)
+}
+
+/// [`slice()`] reporting to `progress` as [`isosurface_with`] does.
+///
+/// # Errors
+/// As [`slice()`]; [`TrivariateError::Cancelled`] when `progress` asks to stop.
+pub fn slice_with(
+    volume: &AggregateVolume,
+    plane: [f64; 4],
+    attribute: Option<&str>,
+    options: &PolygonizeOptions,
+    progress: &dyn volmorph_io::Progress,
+) -> Result<ZeroSetMesh, TrivariateError> {
     check_plane(plane)?;
     if let Some(name) = attribute {
         let s = volume
@@ -465,7 +507,7 @@ pub fn slice(
     let d = plane_function(g, plane)?;
     let scale = plane[..3].iter().map(|v| v * v).sum::<f64>().sqrt() * diagonal(g);
     let target = Target::Plane { geometry: g, plane };
-    polygonize(volume, &d, target, scale, attribute, options)
+    polygonize(volume, &d, target, scale, attribute, options, progress)
 }
 
 fn check_scalar(name: &str, s: &TensorBSpline<3>) -> Result<(), TrivariateError> {
@@ -694,6 +736,7 @@ fn polygonize(
     residual_scale: f64,
     attribute: Option<&str>,
     options: &PolygonizeOptions,
+    progress: &dyn volmorph_io::Progress,
 ) -> Result<ZeroSetMesh, TrivariateError> {
     let geometry = volume.geometry();
     let diag = diagonal(geometry);
@@ -716,7 +759,7 @@ fn polygonize(
         }
         None => None,
     };
-    let roots = isolate_roots(d, &options.roots)?;
+    let roots = isolate_roots_with(d, &options.roots, progress)?;
 
     // 1. Elements of the merged breakpoints, and the Bézier pieces of D and P on them.
     let mut bps: [Vec<f64>; 3] =
@@ -766,8 +809,12 @@ fn polygonize(
         let need: Result<Vec<(usize, [usize; 3])>, TrivariateError> = (0..nelem)
             .into_par_iter()
             .filter(|&e| active[e])
-            .map(|e| Ok((e, element_steps(&gp[e], &dp[e], tolerance)?)))
+            .map(|e| {
+                progress.check()?;
+                Ok((e, element_steps(&gp[e], &dp[e], tolerance)?))
+            })
             .collect();
+        progress.check()?;
         for (e, n) in need? {
             let idx = [
                 e % counts[0],
@@ -812,6 +859,7 @@ fn polygonize(
     let tables: [BasisTable; 3] = tables
         .try_into()
         .map_err(|_| TrivariateError::InvalidArgument("lattice basis tables".into()))?;
+    progress.check()?;
     let mut values = vec![0.0; nodes];
     d.eval_grid_into(&tables, &mut values, None)
         .map_err(ctx("lattice evaluation"))?;
@@ -819,10 +867,18 @@ fn polygonize(
     // Marching cubes over the cells, one z layer per task; edges keyed by (node, axis).
     let (nx, ny) = (dims[0], dims[1]);
     let node = |i: usize, j: usize, k: usize| i + nx * (j + ny * k);
-    let triangles: Vec<[u64; 3]> = (0..dims[2].saturating_sub(1))
+    let layers = dims[2].saturating_sub(1);
+    progress.start(
+        &format!("polygonising a {}×{}×{} lattice", dims[0], dims[1], dims[2]),
+        layers as u64,
+    );
+    let triangles: Vec<[u64; 3]> = (0..layers)
         .into_par_iter()
         .flat_map_iter(|k| {
             let mut out = Vec::new();
+            if progress.is_cancelled() {
+                return out;
+            }
             for j in 0..ny - 1 {
                 for i in 0..nx - 1 {
                     let mut case = 0u8;
@@ -845,27 +901,42 @@ fn polygonize(
                     }
                 }
             }
+            progress.advance(1);
             out
         })
         .collect();
+    progress.check()?;
 
     // 5. One vertex per crossed edge.
     let mut edges: Vec<u64> = triangles.iter().flatten().copied().collect();
     edges.par_sort_unstable();
     edges.dedup();
     let ftol = VERTEX_RESIDUAL * residual_scale;
-    let vparams: Result<Vec<[f64; 3]>, TrivariateError> = edges
-        .par_iter()
-        .map(|&key| {
-            let key = key as usize;
-            let (n, axis) = (key / 3, key % 3);
-            let idx = [n % nx, (n / nx) % ny, n / (nx * ny)];
-            let u0 = [params[0][idx[0]], params[1][idx[1]], params[2][idx[2]]];
-            let t1 = params[axis][idx[axis] + 1];
-            solve_vertex(target, u0, axis, t1, ftol)
+    progress.start(
+        &format!("placing {} vertices", edges.len()),
+        edges.len().div_ceil(VERTEX_CHUNK) as u64,
+    );
+    let vparams: Result<Vec<Vec<[f64; 3]>>, TrivariateError> = edges
+        .par_chunks(VERTEX_CHUNK)
+        .map(|chunk| {
+            progress.check()?;
+            let solved = chunk
+                .iter()
+                .map(|&key| {
+                    let key = key as usize;
+                    let (n, axis) = (key / 3, key % 3);
+                    let idx = [n % nx, (n / nx) % ny, n / (nx * ny)];
+                    let u0 = [params[0][idx[0]], params[1][idx[1]], params[2][idx[2]]];
+                    let t1 = params[axis][idx[axis] + 1];
+                    solve_vertex(target, u0, axis, t1, ftol)
+                })
+                .collect();
+            progress.advance(1);
+            solved
         })
         .collect();
-    let vparams = vparams?;
+    let vparams: Vec<[f64; 3]> = vparams?.concat();
+    progress.check()?;
     let positions: Result<Vec<DVec3>, TrivariateError> = vparams
         .par_iter()
         .map(|&u| volume.point(u).map(DVec3::from_array))

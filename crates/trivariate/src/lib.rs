@@ -55,10 +55,14 @@ pub use aggregate::{
 pub use error::TrivariateError;
 pub use eval::{EvalMethod, VolumeEvaluator};
 pub use examples::{GRIN_ATTRIBUTE, GrinLensSpec, ParaxialFocus, grin_lens, paraxial_focus};
-pub use extract::{RootCell, RootOptions, isolate_roots, isosurface_function, plane_function};
+pub use extract::{
+    RootCell, RootOptions, isolate_roots, isolate_roots_with, isosurface_function, plane_function,
+};
 pub use format::{AnyAggregate, load, load_volume, save};
 pub use invert::{InversionOptions, invert};
-pub use isosurface::{Coloring, PolygonizeOptions, ZeroSetMesh, isosurface, slice};
+pub use isosurface::{
+    Coloring, PolygonizeOptions, ZeroSetMesh, isosurface, isosurface_with, slice, slice_with,
+};
 pub use modeling::{extrude, revolve, rule};
 pub use optics::{
     OpticalPath, OpticsOptions, PathMethod, draw_paths, refract, trace_optical_path,

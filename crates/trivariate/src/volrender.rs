@@ -507,8 +507,8 @@ impl<'a> VolumeRenderer<'a> {
     /// stopping when it is cancelled.
     ///
     /// # Errors
-    /// As [`VolumeRenderer::render_image`]; [`TrivariateError::InvalidArgument`] saying
-    /// "cancelled" when `progress` asks to stop.
+    /// As [`VolumeRenderer::render_image`]; [`TrivariateError::Cancelled`] when `progress`
+    /// asks to stop.
     pub fn render_image_with(
         &self,
         camera: &Camera,
@@ -539,9 +539,7 @@ impl<'a> VolumeRenderer<'a> {
                     *px = premultiplied_to_pixel(c.color, c.opacity);
                 }
                 progress.advance(1);
-                progress
-                    .check()
-                    .map_err(|c| TrivariateError::InvalidArgument(c.to_string()))
+                Ok(progress.check()?)
             })?;
         Ok(img)
     }

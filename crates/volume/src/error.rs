@@ -64,6 +64,10 @@ pub enum VolumeError {
         /// What went wrong.
         error: Box<VolumeError>,
     },
+    /// The caller asked the work to stop through its [`volmorph_io::Progress`]; nothing was
+    /// written.
+    #[error("stopped on request")]
+    Cancelled(#[from] volmorph_io::Cancelled),
 }
 
 impl VolumeError {

@@ -351,9 +351,24 @@ fn ramp(sdf: f64, scale: f64) -> u8 {
 /// # Errors
 /// As [`geometry`]; also if the `f32` volume would exceed the allocation limit.
 pub fn signed_distance(ph: Phantom, dims: [usize; 3]) -> Result<Volume<f32>, VolumeError> {
+    signed_distance_with(ph, dims, &volmorph_io::NoProgress)
+}
+
+/// [`signed_distance`] reporting to `progress`: one stage whose steps are the z-slices,
+/// stopping between slices when cancelled. The result equals [`signed_distance`]'s bit for
+/// bit.
+///
+/// # Errors
+/// As [`signed_distance`]; [`VolumeError::Cancelled`] when `progress` asks to stop.
+pub fn signed_distance_with(
+    ph: Phantom,
+    dims: [usize; 3],
+    progress: &dyn volmorph_io::Progress,
+) -> Result<Volume<f32>, VolumeError> {
     let g = geometry(dims)?;
     volmorph_io::checked_len(&dims, size_of::<f32>())?;
-    sample(ph, g, |d| d as f32)
+    progress.start(&format!("{} signed distance", ph.name()), dims[2] as u64);
+    sample(ph, g, |d| d as f32, progress)
 }
 
 /// The phantom as True's unsigned-byte density model (§5.1) on [`geometry`]`(dims)`: 255
@@ -364,9 +379,23 @@ pub fn signed_distance(ph: Phantom, dims: [usize; 3]) -> Result<Volume<f32>, Vol
 /// # Errors
 /// As [`geometry`].
 pub fn density(ph: Phantom, dims: [usize; 3]) -> Result<Volume<u8>, VolumeError> {
+    density_with(ph, dims, &volmorph_io::NoProgress)
+}
+
+/// [`density`] reporting to `progress`: one stage whose steps are the z-slices, stopping
+/// between slices when cancelled. The result equals [`density`]'s bit for bit.
+///
+/// # Errors
+/// As [`density`]; [`VolumeError::Cancelled`] when `progress` asks to stop.
+pub fn density_with(
+    ph: Phantom,
+    dims: [usize; 3],
+    progress: &dyn volmorph_io::Progress,
+) -> Result<Volume<u8>, VolumeError> {
     let g = geometry(dims)?;
     let scale = 127.5 / ramp_width(&g);
-    sample(ph, g, |d| ramp(d, scale))
+    progress.start(&format!("{} density", ph.name()), dims[2] as u64);
+    sample(ph, g, |d| ramp(d, scale), progress)
 }
 
 /// Evaluate `map(sdf)` at every voxel centre of the axis-aligned grid `g`. The phantom is
@@ -375,21 +404,23 @@ fn sample<T: Voxel>(
     ph: Phantom,
     g: Geometry,
     map: impl Fn(f64) -> T + Sync,
+    progress: &dyn volmorph_io::Progress,
 ) -> Result<Volume<T>, VolumeError> {
     match ph {
-        Phantom::Sphere => sample_with(g, sphere_sdf, map),
-        Phantom::Torus => sample_with(g, torus_sdf, map),
-        Phantom::RoundedBox => sample_with(g, rounded_box_sdf, map),
-        Phantom::ClayBlock => sample_with(g, clay::sdf, map),
-        Phantom::Teapot => sample_with(g, teapot::sdf, map),
-        Phantom::Tree => sample_with(g, tree::sdf, map),
+        Phantom::Sphere => sample_sdf(g, sphere_sdf, map, progress),
+        Phantom::Torus => sample_sdf(g, torus_sdf, map, progress),
+        Phantom::RoundedBox => sample_sdf(g, rounded_box_sdf, map, progress),
+        Phantom::ClayBlock => sample_sdf(g, clay::sdf, map, progress),
+        Phantom::Teapot => sample_sdf(g, teapot::sdf, map, progress),
+        Phantom::Tree => sample_sdf(g, tree::sdf, map, progress),
     }
 }
 
-fn sample_with<T: Voxel>(
+fn sample_sdf<T: Voxel>(
     g: Geometry,
     sdf: impl Fn(DVec3) -> f64 + Sync,
     map: impl Fn(f64) -> T + Sync,
+    progress: &dyn volmorph_io::Progress,
 ) -> Result<Volume<T>, VolumeError> {
     // Per-axis voxel-centre coordinates, bit-identical to `Geometry::index_to_physical` for an
     // identity direction (the off-diagonal products are +0).
@@ -399,7 +430,13 @@ fn sample_with<T: Voxel>(
             .collect()
     };
     let (xs, ys, zs) = (axis(0), axis(1), axis(2));
-    Volume::from_fn(g, |i, j, k| map(sdf(DVec3::new(xs[i], ys[j], zs[k]))))
+    let v = Volume::from_fn_with(
+        g,
+        |i, j, k| map(sdf(DVec3::new(xs[i], ys[j], zs[k]))),
+        progress,
+    )?;
+    progress.check()?;
+    Ok(v)
 }
 
 /// [`Phantom::Sphere`].

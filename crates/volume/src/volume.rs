@@ -55,8 +55,36 @@ impl<T: Voxel> Volume<T> {
         Ok(v)
     }
 
+    /// [`Volume::from_fn`] advancing `progress` by one step per z-slice filled (the caller
+    /// announces the stage); slices are skipped once `progress` is cancelled, so the caller
+    /// must check [`volmorph_io::Progress::check`] before using the volume.
+    ///
+    /// # Errors
+    /// As [`Volume::from_fn`].
+    pub fn from_fn_with<F>(
+        geometry: Geometry,
+        f: F,
+        progress: &dyn volmorph_io::Progress,
+    ) -> Result<Self, VolumeError>
+    where
+        F: Fn(usize, usize, usize) -> T + Sync,
+    {
+        let mut v = Self::filled(geometry, T::default())?;
+        v.par_fill_with_progress(f, progress);
+        Ok(v)
+    }
+
     /// Overwrite every voxel with `f(i, j, k)`, in parallel over z-slices.
     pub fn par_fill_with<F>(&mut self, f: F)
+    where
+        F: Fn(usize, usize, usize) -> T + Sync,
+    {
+        self.par_fill_with_progress(f, &volmorph_io::NoProgress);
+    }
+
+    /// [`Volume::par_fill_with`] advancing `progress` by one step per z-slice; once
+    /// `progress` is cancelled the remaining slices are left as they were.
+    pub fn par_fill_with_progress<F>(&mut self, f: F, progress: &dyn volmorph_io::Progress)
     where
         F: Fn(usize, usize, usize) -> T + Sync,
     {
@@ -65,11 +93,15 @@ impl<T: Voxel> Volume<T> {
             .par_chunks_mut(nx * ny)
             .enumerate()
             .for_each(|(k, slab)| {
+                if progress.is_cancelled() {
+                    return;
+                }
                 for (j, row) in slab.chunks_exact_mut(nx).enumerate() {
                     for (i, v) in row.iter_mut().enumerate() {
                         *v = f(i, j, k);
                     }
                 }
+                progress.advance(1);
             });
     }
 

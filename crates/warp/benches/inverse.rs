@@ -1,14 +1,18 @@
 //! Pull-back through the inverse of a moved 9×9×9 cubic lattice (Newton per voxel, row
 //! coherent) on 128³ and 256³ `f32` volumes with trilinear interpolation, and the Jacobian
-//! determinant map of the same lattice on a 256³ grid (separable derivative tables).
+//! determinant map of the same lattice on a 256³ grid (separable derivative tables). The
+//! `counted` cases run the same work reporting to a `volmorph_io::Counter` (one atomic add
+//! and one cancellation poll per task of rows), to show what progress costs.
 
 use criterion::{Criterion, criterion_group, criterion_main};
 use glam::DVec3;
 use volmorph_lattice::BSplineLattice;
 use volmorph_volume::sample::Interpolation;
 use volmorph_volume::{Geometry, Volume};
-use volmorph_warp::inverse::{InverseResampleOptions, pullback_through_inverse};
-use volmorph_warp::jacobian::jacobian_determinant;
+use volmorph_warp::inverse::{
+    InverseResampleOptions, pullback_through_inverse, pullback_through_inverse_with,
+};
+use volmorph_warp::jacobian::{jacobian_determinant, jacobian_determinant_with};
 
 /// A 9×9×9 lattice over `[-1, n + 1]³` with its central 3×3×3 control points moved by up to
 /// 4% of the box (a fifth of a cell): injective, as a modelling edit would be.
@@ -54,6 +58,13 @@ fn bench(c: &mut Criterion) {
                     .expect("inverse pull-back")
             });
         });
+        g.bench_function(format!("linear_{n}^3_counted"), |b| {
+            b.iter(|| {
+                let count = volmorph_io::Counter::new();
+                pullback_through_inverse_with::<f32, f32, _>(&input, &lat, &grid, &options, &count)
+                    .expect("inverse pull-back")
+            });
+        });
     }
     g.finish();
 
@@ -63,6 +74,12 @@ fn bench(c: &mut Criterion) {
     j.sample_size(10);
     j.bench_function("determinant", |b| {
         b.iter(|| jacobian_determinant(&lat, &grid).expect("jacobian"));
+    });
+    j.bench_function("determinant_counted", |b| {
+        b.iter(|| {
+            let count = volmorph_io::Counter::new();
+            jacobian_determinant_with(&lat, &grid, &count).expect("jacobian")
+        });
     });
     j.finish();
 }

@@ -10,10 +10,10 @@ use volmorph_volume::sample::Interpolation;
 use volmorph_volume::{AnyVolume, Geometry, Volume, with_volume};
 
 use crate::WarpError;
-use crate::inverse::{InverseReport, InverseResampleOptions, pullback_through_inverse_any};
-use crate::pullback::{ResampleOptions, resample_any};
+use crate::inverse::{InverseReport, InverseResampleOptions, pullback_through_inverse_any_with};
+use crate::pullback::{ResampleOptions, resample_any_with};
 use crate::pushforward::{
-    AntialiasOptions, PushForwardStats, push_forward_antialiased, push_forward_nearest,
+    AntialiasOptions, PushForwardStats, push_forward_antialiased_with, push_forward_nearest_with,
 };
 
 /// How a warp applies its map; the name says the direction.
@@ -189,6 +189,30 @@ pub fn warp_volume(
     method: WarpMethod,
     options: &WarpOptions,
 ) -> Result<WarpOutput, WarpError> {
+    warp_volume_with(
+        input,
+        map,
+        output,
+        method,
+        options,
+        &volmorph_io::NoProgress,
+    )
+}
+
+/// [`warp_volume`] reporting to `progress` (one stage: the output's rows for the pull-back
+/// methods, the input's z-slices for the push-forward ones) and stopping when cancelled.
+/// The result equals [`warp_volume`]'s bit for bit.
+///
+/// # Errors
+/// As [`warp_volume`]; [`WarpError::Cancelled`] when `progress` asks to stop.
+pub fn warp_volume_with(
+    input: &AnyVolume,
+    map: &dyn SpaceMap,
+    output: &Geometry,
+    method: WarpMethod,
+    options: &WarpOptions,
+    progress: &dyn volmorph_io::Progress,
+) -> Result<WarpOutput, WarpError> {
     let sampled = match options.sampled_nodes {
         None => None,
         Some(n) if n >= 2 => {
@@ -220,7 +244,7 @@ pub fn warp_volume(
                 ));
             }
             with_volume!(input, v => {
-                let r = push_forward_nearest(v, map, output)?;
+                let r = push_forward_nearest_with(v, map, output, progress)?;
                 out.push_stats = Some(r.stats);
                 out.volume = AnyVolume::from(r.volume);
             });
@@ -231,7 +255,7 @@ pub fn warp_volume(
                 ..AntialiasOptions::default()
             };
             with_volume!(input, v => {
-                let r = push_forward_antialiased(v, map, output, &aa)?;
+                let r = push_forward_antialiased_with(v, map, output, &aa, progress)?;
                 out.push_stats = Some(r.stats);
                 out.volume = AnyVolume::from(r.volume);
             });
@@ -240,7 +264,7 @@ pub fn warp_volume(
             let interpolation = m.interpolation().unwrap_or(Interpolation::Linear);
             let o = InverseResampleOptions::new(interpolation, options.background)
                 .with_mask(options.mask);
-            let r = pullback_through_inverse_any(input, map, output, &o)?;
+            let r = pullback_through_inverse_any_with(input, map, output, &o, progress)?;
             out.volume = r.volume;
             out.inverse_report = Some(r.report);
             out.mask = r.mask;
@@ -248,7 +272,7 @@ pub fn warp_volume(
         m => {
             let interpolation = m.interpolation().unwrap_or(Interpolation::Linear);
             let o = ResampleOptions::new(interpolation, options.background);
-            out.volume = resample_any(input, map, output, &o)?;
+            out.volume = resample_any_with(input, map, output, &o, progress)?;
         }
     }
     Ok(out)

@@ -367,9 +367,54 @@ where
     R: Fn(IndexBox) -> Result<AnyVolume, WarpError> + Sync,
     W: Fn(IndexBox, AnyVolume) -> Result<(), WarpError> + Sync,
 {
+    warp_chunked_with(
+        map,
+        input,
+        output,
+        chunks,
+        options,
+        read,
+        write,
+        &volmorph_io::NoProgress,
+    )
+}
+
+/// [`warp_chunked`] reporting to `progress`: one stage whose steps are the chunks, each
+/// advanced once written; when cancelled no further chunk is started (chunks already handed
+/// to `write` stay written, so the caller discards its partial output, as the OME-Zarr
+/// writer's staging folder is discarded when it is dropped unfinished).
+///
+/// # Errors
+/// As [`warp_chunked`]; [`WarpError::Cancelled`] when `progress` asks to stop.
+#[allow(clippy::too_many_arguments)]
+pub fn warp_chunked_with<M, R, W>(
+    map: &M,
+    input: &Geometry,
+    output: &Geometry,
+    chunks: &[IndexBox],
+    options: &ResampleOptions,
+    read: R,
+    write: W,
+    progress: &dyn volmorph_io::Progress,
+) -> Result<(), WarpError>
+where
+    M: SpaceMap + ?Sized,
+    R: Fn(IndexBox) -> Result<AnyVolume, WarpError> + Sync,
+    W: Fn(IndexBox, AnyVolume) -> Result<(), WarpError> + Sync,
+{
     check_chunkable(options)?;
-    chunks.par_iter().try_for_each(|&c| {
-        let v = pull_chunk(map, input, output, c, options, &read)?;
-        write(c, v)
-    })
+    progress.start(
+        &format!("warping {} chunks out of core", chunks.len()),
+        chunks.len() as u64,
+    );
+    chunks
+        .par_iter()
+        .try_for_each(|&c| -> Result<(), WarpError> {
+            progress.check()?;
+            let v = pull_chunk(map, input, output, c, options, &read)?;
+            write(c, v)?;
+            progress.advance(1);
+            Ok(())
+        })?;
+    Ok(progress.check()?)
 }

@@ -71,4 +71,8 @@ pub enum WarpError {
     /// array would exceed the allocation limit).
     #[error(transparent)]
     Volume(#[from] VolumeError),
+    /// The caller asked the work to stop through its [`volmorph_io::Progress`]; nothing was
+    /// written.
+    #[error("stopped on request")]
+    Cancelled(#[from] volmorph_io::Cancelled),
 }

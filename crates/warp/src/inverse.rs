@@ -248,11 +248,34 @@ pub fn pullback_through_inverse<T: Voxel, U: Voxel, M: SpaceMap + ?Sized>(
     output: &Geometry,
     options: &InverseResampleOptions,
 ) -> Result<InverseResample<Volume<U>>, WarpError> {
+    pullback_through_inverse_with(input, map, output, options, &volmorph_io::NoProgress)
+}
+
+/// [`pullback_through_inverse`] reporting to `progress`: one stage whose steps are the
+/// output's rows (`ny · nz`), advanced per task of whole rows, stopping between tasks when
+/// cancelled. The result equals [`pullback_through_inverse`]'s bit for bit.
+///
+/// # Errors
+/// As [`pullback_through_inverse`]; [`WarpError::Cancelled`] when `progress` asks to stop.
+pub fn pullback_through_inverse_with<T: Voxel, U: Voxel, M: SpaceMap + ?Sized>(
+    input: &Volume<T>,
+    map: &M,
+    output: &Geometry,
+    options: &InverseResampleOptions,
+    progress: &dyn volmorph_io::Progress,
+) -> Result<InverseResample<Volume<U>>, WarpError> {
     let len = checked_output_len::<U>(output)?;
     let mut data = vec![U::default(); len];
     let mut mask = options.mask.then(|| vec![MASK_CONVERGED; len]);
-    let report =
-        pullback_through_inverse_into(input, map, output, options, &mut data, mask.as_deref_mut())?;
+    let report = pullback_through_inverse_into_with(
+        input,
+        map,
+        output,
+        options,
+        &mut data,
+        mask.as_deref_mut(),
+        progress,
+    )?;
     let geometry_error = |source: VolumeError| WarpError::Geometry {
         what: "output grid",
         source,
@@ -282,6 +305,33 @@ pub fn pullback_through_inverse_into<T: Voxel, U: Voxel, M: SpaceMap + ?Sized>(
     options: &InverseResampleOptions,
     out: &mut [U],
     mask: Option<&mut [u8]>,
+) -> Result<InverseReport, WarpError> {
+    pullback_through_inverse_into_with(
+        input,
+        map,
+        output,
+        options,
+        out,
+        mask,
+        &volmorph_io::NoProgress,
+    )
+}
+
+/// [`pullback_through_inverse_into`] reporting to `progress` as
+/// [`pullback_through_inverse_with`] does; when cancelled, `out` and `mask` hold an
+/// unspecified mix of old and new values.
+///
+/// # Errors
+/// As [`pullback_through_inverse_into`]; [`WarpError::Cancelled`] when `progress` asks to
+/// stop.
+pub fn pullback_through_inverse_into_with<T: Voxel, U: Voxel, M: SpaceMap + ?Sized>(
+    input: &Volume<T>,
+    map: &M,
+    output: &Geometry,
+    options: &InverseResampleOptions,
+    out: &mut [U],
+    mask: Option<&mut [u8]>,
+    progress: &dyn volmorph_io::Progress,
 ) -> Result<InverseReport, WarpError> {
     output.validate().map_err(|source| WarpError::Geometry {
         what: "output grid",
@@ -317,6 +367,10 @@ pub fn pullback_through_inverse_into<T: Voxel, U: Voxel, M: SpaceMap + ?Sized>(
         fill: U::from_f64(options.fill),
     };
     let [nx, ny, nz] = output.dims;
+    progress.start(
+        &format!("pull-back through the inverse onto {nx}×{ny}×{nz}"),
+        (ny * nz) as u64,
+    );
     if output.is_empty() {
         return Ok(InverseReport::default());
     }
@@ -334,8 +388,17 @@ pub fn pullback_through_inverse_into<T: Voxel, U: Voxel, M: SpaceMap + ?Sized>(
         .par_chunks_mut(chunk)
         .zip(mask_chunks.into_par_iter())
         .enumerate()
-        .map(|(t, (rows, mask))| walker.rows(t * rows_per_task, rows, mask))
+        .map(|(t, (rows, mask))| {
+            if progress.is_cancelled() {
+                return InverseReport::default();
+            }
+            let n = (rows.len() / nx) as u64;
+            let r = walker.rows(t * rows_per_task, rows, mask);
+            progress.advance(n);
+            r
+        })
         .reduce(InverseReport::default, InverseReport::merge);
+    progress.check()?;
     Ok(report)
 }
 
@@ -350,23 +413,39 @@ pub fn pullback_through_inverse_any<M: SpaceMap + ?Sized>(
     output: &Geometry,
     options: &InverseResampleOptions,
 ) -> Result<InverseResample<AnyVolume>, WarpError> {
+    pullback_through_inverse_any_with(input, map, output, options, &volmorph_io::NoProgress)
+}
+
+/// [`pullback_through_inverse_any`] reporting to `progress` as
+/// [`pullback_through_inverse_with`] does.
+///
+/// # Errors
+/// As [`pullback_through_inverse_with`].
+pub fn pullback_through_inverse_any_with<M: SpaceMap + ?Sized>(
+    input: &AnyVolume,
+    map: &M,
+    output: &Geometry,
+    options: &InverseResampleOptions,
+    progress: &dyn volmorph_io::Progress,
+) -> Result<InverseResample<AnyVolume>, WarpError> {
     fn same_type<T: Voxel, M: SpaceMap + ?Sized>(
         v: &Volume<T>,
         map: &M,
         output: &Geometry,
         options: &InverseResampleOptions,
+        progress: &dyn volmorph_io::Progress,
     ) -> Result<InverseResample<AnyVolume>, WarpError>
     where
         AnyVolume: From<Volume<T>>,
     {
-        let r = pullback_through_inverse::<T, T, M>(v, map, output, options)?;
+        let r = pullback_through_inverse_with::<T, T, M>(v, map, output, options, progress)?;
         Ok(InverseResample {
             volume: AnyVolume::from(r.volume),
             report: r.report,
             mask: r.mask,
         })
     }
-    volmorph_volume::with_volume!(input, v => same_type(v, map, output, options))
+    volmorph_volume::with_volume!(input, v => same_type(v, map, output, options, progress))
 }
 
 /// Everything one z-slice task needs.

@@ -52,6 +52,20 @@ pub fn jacobian_determinant<M: SpaceMap + ?Sized>(
     map: &M,
     grid: &Geometry,
 ) -> Result<Volume<f32>, WarpError> {
+    jacobian_determinant_with(map, grid, &volmorph_io::NoProgress)
+}
+
+/// [`jacobian_determinant`] reporting to `progress`: one stage whose steps are the grid's
+/// z-slices, advanced slab by slab, stopping between slabs when cancelled. The result
+/// equals [`jacobian_determinant`]'s bit for bit.
+///
+/// # Errors
+/// As [`jacobian_determinant`]; [`WarpError::Cancelled`] when `progress` asks to stop.
+pub fn jacobian_determinant_with<M: SpaceMap + ?Sized>(
+    map: &M,
+    grid: &Geometry,
+    progress: &dyn volmorph_io::Progress,
+) -> Result<Volume<f32>, WarpError> {
     let geometry_error = |source: VolumeError| WarpError::Geometry {
         what: "Jacobian grid",
         source,
@@ -60,7 +74,7 @@ pub fn jacobian_determinant<M: SpaceMap + ?Sized>(
     let len = volmorph_io::checked_len(&grid.dims, std::mem::size_of::<f32>())
         .map_err(|e| geometry_error(VolumeError::Io(e)))?;
     let mut data = vec![0.0f32; len];
-    jacobian_determinant_into(map, grid, &mut data)?;
+    jacobian_determinant_into_with(map, grid, &mut data, progress)?;
     Volume::new(*grid, data).map_err(geometry_error)
 }
 
@@ -74,6 +88,20 @@ pub fn jacobian_determinant_into<M: SpaceMap + ?Sized>(
     map: &M,
     grid: &Geometry,
     out: &mut [f32],
+) -> Result<(), WarpError> {
+    jacobian_determinant_into_with(map, grid, out, &volmorph_io::NoProgress)
+}
+
+/// [`jacobian_determinant_into`] reporting to `progress` as [`jacobian_determinant_with`]
+/// does.
+///
+/// # Errors
+/// As [`jacobian_determinant_into`]; [`WarpError::Cancelled`] when `progress` asks to stop.
+pub fn jacobian_determinant_into_with<M: SpaceMap + ?Sized>(
+    map: &M,
+    grid: &Geometry,
+    out: &mut [f32],
+    progress: &dyn volmorph_io::Progress,
 ) -> Result<(), WarpError> {
     grid.validate().map_err(|source| WarpError::Geometry {
         what: "Jacobian grid",
@@ -92,11 +120,16 @@ pub fn jacobian_determinant_into<M: SpaceMap + ?Sized>(
     let [nx, ny, nz] = grid.dims;
     let plane = nx * ny;
     let slab_nz = (SLAB_POINTS / plane).clamp(1, nz);
+    progress.start(
+        &format!("Jacobian determinants on {nx}×{ny}×{nz}"),
+        nz as u64,
+    );
     out.par_chunks_mut(plane * slab_nz)
         .enumerate()
         .try_for_each_init(
             Vec::new,
             |buf: &mut Vec<DMat3>, (s, chunk)| -> Result<(), WarpError> {
+                progress.check()?;
                 let slab = Geometry {
                     dims: [nx, ny, chunk.len() / plane],
                     origin: grid.index_to_physical(DVec3::new(0.0, 0.0, (s * slab_nz) as f64)),
@@ -108,9 +141,11 @@ pub fn jacobian_determinant_into<M: SpaceMap + ?Sized>(
                 for (o, m) in chunk.iter_mut().zip(buf.iter()) {
                     *o = m.determinant() as f32;
                 }
+                progress.advance((chunk.len() / plane) as u64);
                 Ok(())
             },
-        )
+        )?;
+    Ok(progress.check()?)
 }
 
 /// Summary of a Jacobian determinant map: how much of it folds (`J ≤ 0`) and the range and mean

@@ -137,9 +137,26 @@ pub fn resample<T: Voxel, U: Voxel, M: SpaceMap + ?Sized>(
     output: &Geometry,
     options: &ResampleOptions,
 ) -> Result<Volume<U>, WarpError> {
+    resample_with(input, map, output, options, &volmorph_io::NoProgress)
+}
+
+/// [`resample`] reporting to `progress`: one stage whose steps are the output's rows
+/// (`ny · nz`), advanced band by band, and stopping between bands when cancelled. The
+/// result equals [`resample`]'s bit for bit.
+///
+/// # Errors
+/// As [`resample`]; [`WarpError::Cancelled`] when `progress` asks to stop (no volume is
+/// returned).
+pub fn resample_with<T: Voxel, U: Voxel, M: SpaceMap + ?Sized>(
+    input: &Volume<T>,
+    map: &M,
+    output: &Geometry,
+    options: &ResampleOptions,
+    progress: &dyn volmorph_io::Progress,
+) -> Result<Volume<U>, WarpError> {
     let len = checked_output_len::<U>(output)?;
     let mut data = vec![U::default(); len];
-    resample_into(input, map, output, options, &mut data)?;
+    resample_into_with(input, map, output, options, &mut data, progress)?;
     Volume::new(*output, data).map_err(|source| WarpError::Geometry {
         what: "output grid",
         source,
@@ -159,6 +176,22 @@ pub fn resample_into<T: Voxel, U: Voxel, M: SpaceMap + ?Sized>(
     options: &ResampleOptions,
     out: &mut [U],
 ) -> Result<(), WarpError> {
+    resample_into_with(input, map, output, options, out, &volmorph_io::NoProgress)
+}
+
+/// [`resample_into`] reporting to `progress` as [`resample_with`] does. When cancelled,
+/// `out` holds an unspecified mix of old and new values.
+///
+/// # Errors
+/// As [`resample_into`]; [`WarpError::Cancelled`] when `progress` asks to stop.
+pub fn resample_into_with<T: Voxel, U: Voxel, M: SpaceMap + ?Sized>(
+    input: &Volume<T>,
+    map: &M,
+    output: &Geometry,
+    options: &ResampleOptions,
+    out: &mut [U],
+    progress: &dyn volmorph_io::Progress,
+) -> Result<(), WarpError> {
     output.validate().map_err(|source| WarpError::Geometry {
         what: "output grid",
         source,
@@ -176,6 +209,10 @@ pub fn resample_into<T: Voxel, U: Voxel, M: SpaceMap + ?Sized>(
     // One parallel task per band of `TILE[1]` rows × `TILE[2]` slices: the band's piece of
     // each slice is contiguous in `out`, and the band is processed tile by tile along x.
     let [nx, ny, nz] = output.dims;
+    progress.start(
+        &format!("pull-back resampling onto {nx}×{ny}×{nz}"),
+        (ny * nz) as u64,
+    );
     let [tx, ty, tz] = [TILE[0].min(nx), TILE[1].min(ny), TILE[2].min(nz)];
     let mut bands: Vec<Band<'_, U>> = Vec::with_capacity(ny.div_ceil(ty) * nz.div_ceil(tz));
     for (s, slab) in out.chunks_mut(nx * ny * tz).enumerate() {
@@ -200,10 +237,15 @@ pub fn resample_into<T: Voxel, U: Voxel, M: SpaceMap + ?Sized>(
                 Vec::with_capacity(tx * ty * tz),
             )
         },
-        |(points, values), band| {
-            pull_band(&sampler, &to_index, map, output, tx, band, points, values)
+        |(points, values), band| -> Result<(), WarpError> {
+            progress.check()?;
+            let rows = (band.rows * band.slices.len()) as u64;
+            pull_band(&sampler, &to_index, map, output, tx, band, points, values)?;
+            progress.advance(rows);
+            Ok(())
         },
-    )
+    )?;
+    Ok(progress.check()?)
 }
 
 /// Rows `start[0] .. start[0] + rows` of slices `start[1] ..` of the output: one piece of
@@ -272,6 +314,20 @@ pub fn resample_any<M: SpaceMap + ?Sized>(
     resample_any_to(input, map, output, options, input.voxel_type())
 }
 
+/// [`resample_any`] reporting to `progress` as [`resample_with`] does.
+///
+/// # Errors
+/// As [`resample_with`].
+pub fn resample_any_with<M: SpaceMap + ?Sized>(
+    input: &AnyVolume,
+    map: &M,
+    output: &Geometry,
+    options: &ResampleOptions,
+    progress: &dyn volmorph_io::Progress,
+) -> Result<AnyVolume, WarpError> {
+    resample_any_to_with(input, map, output, options, input.voxel_type(), progress)
+}
+
 /// Pull-back resampling of a run-time-typed volume into voxel type `to` (values convert with
 /// [`Voxel::from_f64`]: integer types round, saturate and take 0 for NaN). See [`resample`].
 ///
@@ -284,8 +340,23 @@ pub fn resample_any_to<M: SpaceMap + ?Sized>(
     options: &ResampleOptions,
     to: VoxelType,
 ) -> Result<AnyVolume, WarpError> {
+    resample_any_to_with(input, map, output, options, to, &volmorph_io::NoProgress)
+}
+
+/// [`resample_any_to`] reporting to `progress` as [`resample_with`] does.
+///
+/// # Errors
+/// As [`resample_with`].
+pub fn resample_any_to_with<M: SpaceMap + ?Sized>(
+    input: &AnyVolume,
+    map: &M,
+    output: &Geometry,
+    options: &ResampleOptions,
+    to: VoxelType,
+    progress: &dyn volmorph_io::Progress,
+) -> Result<AnyVolume, WarpError> {
     volmorph_volume::with_voxel_type!(to, U => volmorph_volume::with_volume!(input, v => {
-        resample::<_, U, M>(v, map, output, options).map(AnyVolume::from)
+        resample_with::<_, U, M>(v, map, output, options, progress).map(AnyVolume::from)
     }))
 }
 

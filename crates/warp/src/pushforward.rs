@@ -249,6 +249,21 @@ pub fn push_forward_nearest<T: Voxel, M: SpaceMap + ?Sized>(
     map: &M,
     output: &Geometry,
 ) -> Result<PushForward<T>, WarpError> {
+    push_forward_nearest_with(input, map, output, &volmorph_io::NoProgress)
+}
+
+/// [`push_forward_nearest`] reporting to `progress`: one stage whose steps are the input's
+/// z-slices, advanced slab by slab, stopping between slabs when cancelled. The result
+/// equals [`push_forward_nearest`]'s bit for bit.
+///
+/// # Errors
+/// As [`push_forward_nearest`]; [`WarpError::Cancelled`] when `progress` asks to stop.
+pub fn push_forward_nearest_with<T: Voxel, M: SpaceMap + ?Sized>(
+    input: &Volume<T>,
+    map: &M,
+    output: &Geometry,
+    progress: &dyn volmorph_io::Progress,
+) -> Result<PushForward<T>, WarpError> {
     output.validate().map_err(output_geometry)?;
     let to_index = ToIndex::new(output);
     let [nxo, nyo, nzo] = output.dims;
@@ -262,7 +277,9 @@ pub fn push_forward_nearest<T: Voxel, M: SpaceMap + ?Sized>(
     let slab_list = slabs(g.dims);
     let max_slab = slab_list.iter().map(|s| s.1 - s.0).max().unwrap_or(0);
     let mut images = try_filled(plane * max_slab, DVec3::ZERO, "mapped points")?;
+    progress.start("nearest push-forward", g.dims[2] as u64);
     for (k0, k1) in slab_list {
+        progress.check()?;
         let grid = offset_grid(g, DVec3::new(0.0, 0.0, k0 as f64), [nx, ny, k1 - k0]);
         let images = &mut images[..grid.len()];
         map.apply_grid(&grid, images)
@@ -296,7 +313,9 @@ pub fn push_forward_nearest<T: Voxel, M: SpaceMap + ?Sized>(
                 *w = true;
             }
         }
+        progress.advance((k1 - k0) as u64);
     }
+    progress.check()?;
     let volume = Volume::new(*output, out).map_err(output_geometry)?;
     Ok(PushForward { volume, stats })
 }
@@ -329,7 +348,23 @@ pub fn push_forward_antialiased<T: Voxel, M: SpaceMap + ?Sized>(
     output: &Geometry,
     options: &AntialiasOptions,
 ) -> Result<PushForward<T>, WarpError> {
-    let (acc, stats) = accumulate(input, map, output, options)?;
+    push_forward_antialiased_with(input, map, output, options, &volmorph_io::NoProgress)
+}
+
+/// [`push_forward_antialiased`] reporting to `progress`: one stage whose steps are the
+/// input's z-slices, advanced slab by slab, stopping between windows of slabs when
+/// cancelled. The result equals [`push_forward_antialiased`]'s bit for bit.
+///
+/// # Errors
+/// As [`push_forward_antialiased`]; [`WarpError::Cancelled`] when `progress` asks to stop.
+pub fn push_forward_antialiased_with<T: Voxel, M: SpaceMap + ?Sized>(
+    input: &Volume<T>,
+    map: &M,
+    output: &Geometry,
+    options: &AntialiasOptions,
+    progress: &dyn volmorph_io::Progress,
+) -> Result<PushForward<T>, WarpError> {
+    let (acc, stats) = accumulate(input, map, output, options, progress)?;
     finish(acc, stats, output, options)
 }
 
@@ -344,7 +379,22 @@ pub fn push_forward_antialiased_f32<T: Voxel, M: SpaceMap + ?Sized>(
     output: &Geometry,
     options: &AntialiasOptions,
 ) -> Result<PushForward<f32>, WarpError> {
-    let (acc, stats) = accumulate(input, map, output, options)?;
+    push_forward_antialiased_f32_with(input, map, output, options, &volmorph_io::NoProgress)
+}
+
+/// [`push_forward_antialiased_f32`] reporting to `progress` as
+/// [`push_forward_antialiased_with`] does.
+///
+/// # Errors
+/// As [`push_forward_antialiased_with`].
+pub fn push_forward_antialiased_f32_with<T: Voxel, M: SpaceMap + ?Sized>(
+    input: &Volume<T>,
+    map: &M,
+    output: &Geometry,
+    options: &AntialiasOptions,
+    progress: &dyn volmorph_io::Progress,
+) -> Result<PushForward<f32>, WarpError> {
+    let (acc, stats) = accumulate(input, map, output, options, progress)?;
     finish(acc, stats, output, options)
 }
 
@@ -400,6 +450,7 @@ fn accumulate<T: Voxel, M: SpaceMap + ?Sized>(
     map: &M,
     output: &Geometry,
     options: &AntialiasOptions,
+    progress: &dyn volmorph_io::Progress,
 ) -> Result<(Vec<[f32; 2]>, PushForwardStats), WarpError> {
     output.validate().map_err(output_geometry)?;
     if !options.background.is_finite() {
@@ -413,10 +464,17 @@ fn accumulate<T: Voxel, M: SpaceMap + ?Sized>(
     // Slabs run in parallel in windows of one slab per thread; each window's tallies are
     // added in slab order, so the sums never depend on the thread count.
     let window = rayon::current_num_threads().max(1);
+    progress.start("antialiased push-forward", input.geometry().dims[2] as u64);
     for batch in slab_list.chunks(window) {
+        progress.check()?;
         let tallies: Vec<Result<SlabTally, WarpError>> = batch
             .par_iter()
-            .map(|&slab| tally_slab(input, map, output, &to_index, options.face_centres, slab))
+            .map(|&slab| {
+                progress.check()?;
+                let t = tally_slab(input, map, output, &to_index, options.face_centres, slab);
+                progress.advance((slab.1 - slab.0) as u64);
+                t
+            })
             .collect();
         for tally in tallies {
             let tally = tally?;
@@ -436,6 +494,7 @@ fn accumulate<T: Voxel, M: SpaceMap + ?Sized>(
                 });
         }
     }
+    progress.check()?;
     Ok((acc, stats))
 }
 

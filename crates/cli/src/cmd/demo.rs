@@ -365,7 +365,7 @@ fn gallery(args: &Args, index: &mut String) -> anyhow::Result<usize> {
             let suffix = if kind == Kind::Sdf { "_sdf" } else { "" };
             let stem = format!("{}{suffix}", model.name());
             pb.set_message(stem.clone());
-            let vol = make(model, dims, kind)?;
+            let vol = make(model, dims, kind, &volmorph_io::NoProgress)?;
             format::write(&dir.join(format!("{stem}.nii.gz")), &vol).context("cannot write")?;
             let _ = writeln!(
                 index,

@@ -177,8 +177,9 @@ pub fn run(a: &Args) -> anyhow::Result<()> {
         .to_string();
     let t = Instant::now();
     let mut last = None;
+    let bar = progress::Bar(&pb);
+    volmorph_io::Progress::start(&bar, "dragging", steps.len() as u64);
     for (n, (grabbed, targets)) in steps.iter().enumerate() {
-        pb.set_message(format!("dragging ({}/{})", n + 1, steps.len()));
         let change = scene
             .apply(Command::DragPoints {
                 map: l,
@@ -195,9 +196,10 @@ pub fn run(a: &Args) -> anyhow::Result<()> {
             scene.export(w, &frame).context("cannot write a frame")?;
         }
         last = change.drag;
+        volmorph_io::Progress::advance(&bar, 1);
     }
     let elapsed = t.elapsed();
-    pb.set_message(format!("writing {}", a.output.display()));
+    progress::spin(&pb, format!("writing {}", a.output.display()));
     scene.export(w, &a.output).context("cannot write")?;
     if let Some(path) = &a.lattice_out {
         scene.export(l, path).context("cannot write the lattice")?;

@@ -7,10 +7,11 @@ use std::path::{Path, PathBuf};
 
 use anyhow::{Context, bail};
 use glam::DVec3;
-use volmorph_frep::grid::{box_geometry, isotropic_box_geometry, sample, sample_with};
+use volmorph_frep::grid::{box_geometry, isotropic_box_geometry, sample_with};
 use volmorph_frep::mapping::{Schedule, morph};
 use volmorph_frep::output::{
-    MeshMethod, MeshOptions, RenderOptions, SurfaceSummary, mesh, render, render_animation,
+    MeshMethod, MeshOptions, RenderOptions, SurfaceSummary, mesh_with, render_animation_with,
+    render_with,
 };
 use volmorph_frep::reconstruct::{SectionBlend, SectionStack, femur_sections};
 use volmorph_frep::{CompileOptions, Field, Shape, Tape, compile_source};
@@ -305,7 +306,7 @@ fn eval(a: &EvalArgs) -> anyhow::Result<()> {
     let t0 = std::time::Instant::now();
     let vol = sample_with(&tape, &g, &progress::Bar(&pb)).context("cannot sample the model")?;
     let dt = t0.elapsed();
-    pb.set_message(format!("writing {}", a.output.display()));
+    progress::spin(&pb, format!("writing {}", a.output.display()));
     format::write(&a.output, &AnyVolume::from(vol.clone()))
         .with_context(|| format!("cannot write {}", a.output.display()))?;
     pb.finish_and_clear();
@@ -325,14 +326,15 @@ fn mesh_cmd(a: &MeshArgs) -> anyhow::Result<()> {
     let b = bounds(&a.common.bounds)?;
     let g = grid_geometry(a.grid, b)?;
     let shape = load(&a.model, &params(&a.common.params)?)?;
-    let pb = progress::spinner(format!("meshing {}", a.model.display()));
+    let pb = progress::bar(0);
     let tape = Tape::new(&shape);
     let options = MeshOptions {
         method: a.method.into(),
         close: a.close,
     };
-    let surface = mesh(&tape, &g, &options).context("cannot extract the surface")?;
-    pb.set_message(format!("writing {}", a.output.display()));
+    let surface = mesh_with(&tape, &g, &options, &progress::Bar(&pb))
+        .context("cannot extract the surface")?;
+    progress::spin(&pb, format!("writing {}", a.output.display()));
     let summary = write_surface(&surface.mesh, &a.output, a.ascii)?;
     pb.finish_and_clear();
     say!("{summary}");
@@ -380,13 +382,14 @@ fn sections_cmd(a: &SectionsArgs) -> anyhow::Result<()> {
     let g = isotropic_box_geometry(lo, hi, a.grid, MAX_GRID).context("--grid")?;
     let dims = g.dims;
     if meshio::MeshFormat::from_path(&a.output).is_ok() {
-        let pb = progress::spinner(format!("meshing {name}"));
+        let pb = progress::bar(0);
         let options = MeshOptions {
             method: a.method.into(),
             close: true,
         };
-        let surface = mesh(&stack, &g, &options).context("cannot extract the surface")?;
-        pb.set_message(format!("writing {}", a.output.display()));
+        let surface = mesh_with(&stack, &g, &options, &progress::Bar(&pb))
+            .with_context(|| format!("cannot extract the surface of {name}"))?;
+        progress::spin(&pb, format!("writing {}", a.output.display()));
         let summary = write_surface(&surface.mesh, &a.output, a.ascii)?;
         pb.finish_and_clear();
         say!(
@@ -397,9 +400,10 @@ fn sections_cmd(a: &SectionsArgs) -> anyhow::Result<()> {
             dims[2],
         );
     } else {
-        let pb = progress::spinner(format!("sampling {name}"));
-        let vol = sample(&stack, &g).context("cannot sample the reconstruction")?;
-        pb.set_message(format!("writing {}", a.output.display()));
+        let pb = progress::bar(0);
+        let vol = sample_with(&stack, &g, &progress::Bar(&pb))
+            .with_context(|| format!("cannot sample {name}"))?;
+        progress::spin(&pb, format!("writing {}", a.output.display()));
         format::write(&a.output, &AnyVolume::from(vol))
             .with_context(|| format!("cannot write {}", a.output.display()))?;
         pb.finish_and_clear();
@@ -427,7 +431,7 @@ fn render_cmd(a: &RenderArgs) -> anyhow::Result<()> {
     let b = bounds(&a.common.bounds)?;
     let cam = camera(&a.view, b)?;
     let shape = load(&a.model, &params(&a.common.params)?)?;
-    let pb = progress::spinner(format!("ray casting {}", a.model.display()));
+    let pb = progress::bar(0);
     let tape = Tape::new(&shape);
     let options = RenderOptions {
         bounds_min: b.0,
@@ -435,8 +439,9 @@ fn render_cmd(a: &RenderArgs) -> anyhow::Result<()> {
         ..RenderOptions::default()
     };
     let t0 = std::time::Instant::now();
-    let img = render(&tape, &cam, &options).context("cannot render")?;
+    let img = render_with(&tape, &cam, &options, &progress::Bar(&pb)).context("cannot render")?;
     let dt = t0.elapsed();
+    progress::spin(&pb, format!("writing {}", a.output.display()));
     write_png_rgba(&a.output, &img)
         .with_context(|| format!("cannot write {}", a.output.display()))?;
     pb.finish_and_clear();
@@ -472,12 +477,20 @@ fn morph_cmd(a: &MorphArgs) -> anyhow::Result<()> {
         bounds_max: b.1,
         ..RenderOptions::default()
     };
-    let pb = progress::spinner(format!("rendering {} frames", a.frames));
+    let pb = progress::bar(0);
     let field_at = |t: f64| -> Result<Box<dyn Field>, volmorph_frep::FrepError> {
         Ok(Box::new(Tape::new(&morph(&f, &g, t, schedule))))
     };
-    let paths = render_animation(a.frames, &field_at, &cam, &options, &a.output, "frame")
-        .context("cannot render the animation")?;
+    let paths = render_animation_with(
+        a.frames,
+        &field_at,
+        &cam,
+        &options,
+        &a.output,
+        "frame",
+        &progress::Bar(&pb),
+    )
+    .context("cannot render the animation")?;
     pb.finish_and_clear();
     say!(
         "{} frames written to {} ({} … {})",

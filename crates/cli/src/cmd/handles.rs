@@ -17,13 +17,13 @@ use anyhow::{Context, bail};
 use volmorph_deform::{SampledMap, SpaceMap};
 use volmorph_handles::Weighting;
 use volmorph_handles::handles::{HandleSet, read_point_list, write_point_list};
-use volmorph_handles::mls2d::{Mls2dKind, warp_picture, warp_picture_tps};
+use volmorph_handles::mls2d::{Mls2dKind, warp_picture_tps_with, warp_picture_with};
 use volmorph_maps::{HandleDirection, HandleMethod, HandleOptions, handle_map};
 use volmorph_render::RgbaImage;
 use volmorph_render::{read_png, write_png_rgba};
 use volmorph_scene::files::{FileKind, kind_of};
 use volmorph_volume_io as format;
-use volmorph_warp::apply::{WarpMethod, WarpOptions, warp_volume};
+use volmorph_warp::apply::{WarpMethod, WarpOptions, warp_volume_with};
 use volmorph_warp::jacobian::FoldingReport;
 
 use crate::progress;
@@ -245,17 +245,23 @@ fn warp(a: &WarpArgs) -> anyhow::Result<()> {
         HandleDirection::TargetsToSources,
     )
     .context("cannot build the pull-back deformation (targets → sources)")?;
-    pb.set_message("warping");
     let options = WarpOptions {
         background: a.default,
         mask: false,
         sampled_nodes: (!a.exact).then_some(a.grid),
     };
-    let out = warp_volume(&vol, &map, &grid, WarpMethod::PullbackLinear, &options)
-        .with_context(|| format!("cannot warp {}", a.input.display()))?;
+    let out = warp_volume_with(
+        &vol,
+        &map,
+        &grid,
+        WarpMethod::PullbackLinear,
+        &options,
+        &progress::Bar(&pb),
+    )
+    .with_context(|| format!("cannot warp {}", a.input.display()))?;
     let coarse = SampledMap::covering(&grid, grid.dims.map(|d| a.grid.min(d).max(1)))?;
     let report = FoldingReport::of_map(&map, &coarse)?;
-    pb.set_message(format!("writing {}", a.output.display()));
+    progress::spin(&pb, format!("writing {}", a.output.display()));
     format::write(&a.output, &out.volume).context("cannot write")?;
     pb.finish_and_clear();
     say!(
@@ -331,6 +337,7 @@ pub enum Kind2d {
 pub fn run_mls2d(a: &Mls2dArgs) -> anyhow::Result<()> {
     let set = HandleSet::read(&a.handles)
         .with_context(|| format!("cannot read the handles {}", a.handles.display()))?;
+    let pb = progress::spinner(format!("reading {}", a.input.display()));
     let img = read_png(&a.input).context("cannot read the picture")?;
     let (w, h) = (img.width(), img.height());
     let kind = match a.method {
@@ -339,13 +346,16 @@ pub fn run_mls2d(a: &Mls2dArgs) -> anyhow::Result<()> {
         Kind2d::Rigid => Some(Mls2dKind::Rigid),
         Kind2d::Tps => None,
     };
+    let bar = progress::Bar(&pb);
     let out = match kind {
-        Some(kind) => warp_picture(w, h, img.pixels(), &set, kind, a.alpha, a.grid),
-        None => warp_picture_tps(w, h, img.pixels(), &set, a.grid),
+        Some(kind) => warp_picture_with(w, h, img.pixels(), &set, kind, a.alpha, a.grid, &bar),
+        None => warp_picture_tps_with(w, h, img.pixels(), &set, a.grid, &bar),
     }
     .context("cannot deform the picture")?;
+    progress::spin(&pb, format!("writing {}", a.output.display()));
     write_png_rgba(&a.output, &RgbaImage::from_pixels(w, h, out.pixels)?)
         .context("cannot write the picture")?;
+    pb.finish_and_clear();
     say!(
         "deformed {w}×{h} picture by {} handles on a {}×{} grid; {:.3}% of the grid folds \
          (Jacobian <= 0)",

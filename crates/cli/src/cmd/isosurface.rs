@@ -4,7 +4,7 @@
 use std::path::PathBuf;
 
 use anyhow::Context;
-use volmorph_contour::{DcOptions, McOptions, dual_contouring_any, marching_cubes_any};
+use volmorph_contour::{DcOptions, McOptions, dual_contouring_any_with, marching_cubes_any_with};
 use volmorph_mesh::{self as mesh, MeshWriteOptions};
 use volmorph_volume_io as format;
 
@@ -47,26 +47,28 @@ pub enum Algorithm {
 pub fn run(args: &Args) -> anyhow::Result<()> {
     let pb = progress::spinner(format!("reading {}", args.input.display()));
     let vol = format::read(&args.input).context("cannot read volume")?;
-    pb.set_message("extracting the surface");
+    let bar = progress::Bar(&pb);
     let surface = match args.method {
-        Algorithm::MarchingCubes => marching_cubes_any(
+        Algorithm::MarchingCubes => marching_cubes_any_with(
             &vol,
             args.level,
             &McOptions {
                 inside_below: args.inside_below,
             },
+            &bar,
         ),
-        Algorithm::DualContouring => dual_contouring_any(
+        Algorithm::DualContouring => dual_contouring_any_with(
             &vol,
             args.level,
             &DcOptions {
                 inside_below: args.inside_below,
                 ..DcOptions::default()
             },
+            &bar,
         ),
     }
     .with_context(|| format!("cannot extract the surface of {}", args.input.display()))?;
-    pb.set_message(format!("writing {}", args.output.display()));
+    progress::spin(&pb, format!("writing {}", args.output.display()));
     let opts = MeshWriteOptions {
         binary: !args.ascii,
         ..MeshWriteOptions::default()

@@ -8,8 +8,8 @@ use anyhow::{Context, bail};
 use volmorph_render::Colormap;
 use volmorph_trivariate::{
     AggregateVolume, Coloring, PolygonizeOptions, ZeroSetMesh,
-    fit::{SampledFitKind, fit_sampled_volume},
-    isosurface, load_volume, save, slice,
+    fit::{SampledFitKind, fit_sampled_volume_with},
+    isosurface_with, load_volume, save, slice_with,
 };
 use volmorph_volume_io as format;
 
@@ -210,9 +210,15 @@ fn fit_cmd(args: &FitArgs) -> anyhow::Result<()> {
         Some(s) => counts(s)?,
         None => dims,
     };
-    pb.set_message("fitting");
-    let fit = fit_sampled_volume(&vol.to_typed::<f64>(), args.order, n, &args.name)
-        .with_context(|| format!("cannot fit {}", args.input.display()))?;
+    let fit = fit_sampled_volume_with(
+        &vol.to_typed::<f64>(),
+        args.order,
+        n,
+        &args.name,
+        &progress::Bar(&pb),
+    )
+    .with_context(|| format!("cannot fit {}", args.input.display()))?;
+    progress::spin(&pb, format!("writing {}", args.output.display()));
     save(&args.output, &fit.model).context("cannot write the model")?;
     pb.finish_and_clear();
     let how = match fit.kind {
@@ -338,11 +344,12 @@ fn slice_cmd(args: &SliceArgs) -> anyhow::Result<()> {
     let plane: [f64; 4] = numbers(&args.plane, "--plane")?;
     let model = load(&args.model)?;
     let pb = progress::spinner("slicing".to_owned());
-    let z = slice(
+    let z = slice_with(
         &model,
         plane,
         args.attribute.as_deref(),
         &options(&args.mesh),
+        &progress::Bar(&pb),
     )
     .context("cannot slice the model")?;
     pb.finish_and_clear();
@@ -356,8 +363,14 @@ fn isosurface_cmd(args: &IsosurfaceArgs) -> anyhow::Result<()> {
         inside_below: args.inside_below,
         ..options(&args.mesh)
     };
-    let mut z = isosurface(&model, &args.attribute, args.level, &opts)
-        .context("cannot extract the isosurface")?;
+    let mut z = isosurface_with(
+        &model,
+        &args.attribute,
+        args.level,
+        &opts,
+        &progress::Bar(&pb),
+    )
+    .context("cannot extract the isosurface")?;
     if let Some(name) = &args.color_by {
         z.report_attribute(&model, name)
             .context("cannot colour the surface")?;

@@ -47,18 +47,23 @@ pub fn run(args: &Args) -> anyhow::Result<()> {
     if dims.iter().any(|&n| n > 4096) {
         bail!("dims {dims:?} are larger than 4096 per axis");
     }
-    let pb = progress::spinner(format!("computing {} {dims:?}", model.name()));
-    let vol = make(model, dims, args.kind)?;
-    pb.set_message(format!("writing {}", args.output.display()));
+    let pb = progress::bar(0);
+    let vol = make(model, dims, args.kind, &progress::Bar(&pb))?;
+    progress::spin(&pb, format!("writing {}", args.output.display()));
     format::write(&args.output, &vol).context("cannot write")?;
     pb.finish_and_clear();
     Ok(())
 }
 
-/// The phantom volume of the given kind.
-pub fn make(model: Phantom, dims: [usize; 3], kind: Kind) -> anyhow::Result<AnyVolume> {
+/// The phantom volume of the given kind, reporting one step per z-slice to `progress`.
+pub fn make(
+    model: Phantom,
+    dims: [usize; 3],
+    kind: Kind,
+    progress: &dyn volmorph_io::Progress,
+) -> anyhow::Result<AnyVolume> {
     Ok(match kind {
-        Kind::Density => phantom::density(model, dims)?.into(),
-        Kind::Sdf => phantom::signed_distance(model, dims)?.into(),
+        Kind::Density => phantom::density_with(model, dims, progress)?.into(),
+        Kind::Sdf => phantom::signed_distance_with(model, dims, progress)?.into(),
     })
 }

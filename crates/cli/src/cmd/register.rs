@@ -9,7 +9,9 @@ use volmorph_register::dense::{DenseOptions, Metric};
 use volmorph_register::lungs::LungOptions;
 use volmorph_register::matching::MatchOptions;
 use volmorph_register::phantom::{KnownDeformationOptions, LungPhantomOptions};
-use volmorph_register::pipeline::{LandmarkFiles, RegisterOptions, register_files, solve_files};
+use volmorph_register::pipeline::{
+    LandmarkFiles, RegisterOptions, register_files_with, solve_files_with,
+};
 use volmorph_register::quality::LandmarkUnits;
 use volmorph_register::select::SelectOptions;
 use volmorph_register::solve::SolveOptions;
@@ -393,8 +395,16 @@ pub fn run(c: &Command) -> anyhow::Result<()> {
             };
             let pb = progress::spinner(format!("registering {} to {}", m.display(), f.display()));
             let landmarks = a.landmarks.files()?;
-            let r = register_files(f, m, a.mask.as_deref(), landmarks.as_ref(), out, &o)
-                .context("registration failed")?;
+            let r = register_files_with(
+                f,
+                m,
+                a.mask.as_deref(),
+                landmarks.as_ref(),
+                out,
+                &o,
+                &progress::Bar(&pb),
+            )
+            .context("registration failed")?;
             pb.finish_and_clear();
             say!("{r}\nwrote {} files to {}", r.files.len(), out.display());
         }
@@ -414,7 +424,8 @@ pub fn run(c: &Command) -> anyhow::Result<()> {
             say!("{s}");
         }
         Some(Step::Solve(a)) => {
-            let r = solve_files(
+            let pb = progress::spinner(format!("solving {}", a.correspondences.display()));
+            let r = solve_files_with(
                 &a.fixed,
                 &a.moving,
                 &a.correspondences,
@@ -423,7 +434,9 @@ pub fn run(c: &Command) -> anyhow::Result<()> {
                 &a.output,
                 &a.map.solve(),
                 a.map.dense().as_ref(),
+                &progress::Bar(&pb),
             )?;
+            pb.finish_and_clear();
             say!(
                 "{r}\nwrote {} files to {}",
                 r.files.len(),

@@ -229,7 +229,7 @@ pub fn run(a: &Args) -> anyhow::Result<()> {
         };
         pb.set_message("rendering");
         let pics = ComparePictures::new(&source, &target, m, spec, QualityOptions::default())?;
-        let frames = timed(a.repeat, pics.frame_count(), |i| pics.frame(i))?;
+        let frames = timed(&pb, a.repeat, pics.frame_count(), |i| pics.frame(i))?;
         let what = format!("{} against {}", pair[0].display(), pair[1].display());
         (frames, what)
     } else {
@@ -244,7 +244,7 @@ pub fn run(a: &Args) -> anyhow::Result<()> {
                 .write(p)
                 .with_context(|| format!("cannot write {}", p.display()))?;
         }
-        let frames = timed(a.repeat, pics.frame_count(), |i| pics.frame(i))?;
+        let frames = timed(&pb, a.repeat, pics.frame_count(), |i| pics.frame(i))?;
         let (visible, bricks) = pics.renderer().visible_bricks();
         let what = format!(
             "{} ({}, step {:.3}, {visible} of {bricks} bricks visible{})",
@@ -258,7 +258,7 @@ pub fn run(a: &Args) -> anyhow::Result<()> {
         );
         (frames, what)
     };
-    pb.set_message("writing");
+    progress::spin(&pb, "writing");
     let (images, median) = frames;
     if many {
         std::fs::create_dir_all(&a.output)
@@ -284,23 +284,32 @@ pub fn run(a: &Args) -> anyhow::Result<()> {
 }
 
 /// Render `frames` pictures; with `repeat > 1` render frame 0 that many times as well. Returns
-/// the pictures and the median seconds per picture.
+/// the pictures and the median seconds per picture. `pb` counts the pictures.
 fn timed(
+    pb: &indicatif::ProgressBar,
     repeat: usize,
     frames: usize,
     render: impl Fn(usize) -> Result<RgbaImage, volmorph_render::RenderError>,
 ) -> anyhow::Result<(Vec<RgbaImage>, f64)> {
+    use volmorph_io::Progress;
+    let bar = progress::Bar(pb);
+    bar.start(
+        &format!("rendering {frames} picture(s)"),
+        (frames + repeat.saturating_sub(1)) as u64,
+    );
     let mut times = Vec::new();
     let mut images = Vec::with_capacity(frames);
     for i in 0..frames {
         let t = Instant::now();
         images.push(render(i).context("cannot render")?);
         times.push(t.elapsed().as_secs_f64());
+        bar.advance(1);
     }
     for _ in 1..repeat {
         let t = Instant::now();
         render(0).context("cannot render")?;
         times.push(t.elapsed().as_secs_f64());
+        bar.advance(1);
     }
     times.sort_by(f64::total_cmp);
     Ok((images, times[times.len() / 2]))

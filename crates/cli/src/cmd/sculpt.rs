@@ -8,7 +8,7 @@ use anyhow::{Context, bail};
 use glam::DVec3;
 use volmorph_mesh as mesh;
 use volmorph_sculpt::{
-    DEFAULT_GRID_POINTS, Job, Op, SculptOptions, SmoothRegion, Stroke, ToolEdit, run_job,
+    DEFAULT_GRID_POINTS, Job, Op, SculptOptions, SmoothRegion, Stroke, ToolEdit, run_job_with,
 };
 
 use crate::progress;
@@ -85,13 +85,12 @@ pub fn run(args: &Args) -> anyhow::Result<()> {
         None => None,
     };
     let read = t.elapsed();
-    pb.set_message("sculpting");
     let op = match args.op {
         OpArg::Add => Op::Add,
         OpArg::Subtract => Op::Subtract,
         OpArg::Intersect => Op::Intersect,
     };
-    let report = run_job(
+    let report = run_job_with(
         &base,
         &Job {
             tool: Some(ToolEdit {
@@ -104,9 +103,10 @@ pub fn run(args: &Args) -> anyhow::Result<()> {
             grid_points: args.grid,
             options: SculptOptions::default(),
         },
+        &progress::Bar(&pb),
     )
     .with_context(|| format!("cannot sculpt {}", args.mesh.display()))?;
-    pb.set_message(format!("writing {}", args.output.display()));
+    progress::spin(&pb, format!("writing {}", args.output.display()));
     let t = std::time::Instant::now();
     mesh::write(&args.output, &report.mesh).context("cannot write")?;
     let written = t.elapsed();

@@ -5,8 +5,8 @@ use std::path::PathBuf;
 use anyhow::Context;
 use volmorph_maps::read_map;
 use volmorph_volume_io as format;
-use volmorph_warp::apply::{WarpMethod, WarpOptions, warp_volume};
-use volmorph_warp::jacobian::{FoldingReport, jacobian_determinant};
+use volmorph_warp::apply::{WarpMethod, WarpOptions, warp_volume_with};
+use volmorph_warp::jacobian::{FoldingReport, jacobian_determinant_with};
 use volmorph_warp::output::{OutputGrid, Padding, parse_geometry};
 
 use crate::progress;
@@ -131,12 +131,12 @@ pub fn run(a: &Args) -> anyhow::Result<()> {
         sampled_nodes: a.sampled,
     };
     let grid = a.grid.resolve(vol.geometry())?;
-    let out = warp_volume(&vol, &map, &grid, a.method, &options)
+    let out = warp_volume_with(&vol, &map, &grid, a.method, &options, &progress::Bar(&pb))
         .with_context(|| format!("cannot warp {}", a.input.display()))?;
     if let Some(r) = out.inverse_report.filter(|r| !r.is_clean()) {
         pb.suspend(|| eprintln!("volmorph: warning: {r}"));
     }
-    pb.set_message(format!("writing {}", a.output.display()));
+    progress::spin(&pb, format!("writing {}", a.output.display()));
     format::write(&a.output, &out.volume).context("cannot write")?;
     if let (Some(path), Some(mask)) = (&a.nonconverged_mask, out.mask) {
         format::write(path, &mask.into()).context("cannot write the mask")?;
@@ -163,7 +163,7 @@ fn out_of_core(a: &Args) -> bool {
 fn run_out_of_core(a: &Args) -> anyhow::Result<()> {
     use volmorph_volume_io::omezarr::{OmeZarrReader, OmeZarrWriter, ZarrWriteOptions};
     use volmorph_warp::WarpError;
-    use volmorph_warp::chunked::warp_chunked;
+    use volmorph_warp::chunked::warp_chunked_with;
     use volmorph_warp::pullback::ResampleOptions;
     if a.nonconverged_mask.is_some() || a.sampled.is_some() {
         anyhow::bail!(
@@ -199,8 +199,7 @@ fn run_out_of_core(a: &Args) -> anyhow::Result<()> {
         .context("cannot write")?;
     let resample = ResampleOptions::new(interpolation, a.default);
     let chunks = writer.chunk_boxes();
-    pb.set_message(format!("warping {} chunks ({})", chunks.len(), a.method));
-    warp_chunked(
+    warp_chunked_with(
         &map,
         reader.geometry(),
         &grid,
@@ -208,9 +207,13 @@ fn run_out_of_core(a: &Args) -> anyhow::Result<()> {
         &resample,
         |b| reader.read_box(b).map_err(WarpError::from),
         |b, v| writer.write_chunk(b, &v).map_err(WarpError::from),
+        &progress::Bar(&pb),
     )
     .with_context(|| format!("cannot warp {}", a.input.display()))?;
-    pb.set_message(format!("writing the pyramid of {}", a.output.display()));
+    progress::spin(
+        &pb,
+        format!("writing the pyramid of {}", a.output.display()),
+    );
     writer.finish().context("cannot write")?;
     pb.finish_and_clear();
     say!(
@@ -248,10 +251,9 @@ pub fn run_jacobian(a: &JacobianArgs) -> anyhow::Result<()> {
         .context("cannot read the grid volume")?
         .geometry();
     let map = read_map(&a.map).context("cannot read the map")?;
-    pb.set_message("Jacobian determinants");
-    let det = jacobian_determinant(&map, &grid)?;
+    let det = jacobian_determinant_with(&map, &grid, &progress::Bar(&pb))?;
     let report = FoldingReport::of(det.data());
-    pb.set_message(format!("writing {}", a.output.display()));
+    progress::spin(&pb, format!("writing {}", a.output.display()));
     format::write(&a.output, &det.into()).context("cannot write")?;
     if let Some(path) = &a.map_out {
         volmorph_maps::write_map(path, &map).context("cannot write the map")?;
