@@ -344,6 +344,16 @@ fn march(field: &dyn Field, ray: &Ray, ta: f64, tb: f64, steps: usize) -> Option
     None
 }
 
+/// The time `t = i/(frames − 1)` of frame `i` of an animation of `frames` (`t = 0` for a single
+/// frame).
+fn frame_time(i: usize, frames: usize) -> f64 {
+    if frames == 1 {
+        0.0
+    } else {
+        i as f64 / (frames - 1) as f64
+    }
+}
+
 /// Render `frames` pictures of `field_at(t)` for `t = i/(frames − 1)` (`t = 0` for a single
 /// frame) and write them as `dir/{prefix}{i:04}.png`; returns the paths in order.
 ///
@@ -365,18 +375,37 @@ pub fn render_animation(
     }
     let mut out = Vec::with_capacity(frames);
     for i in 0..frames {
-        let t = if frames == 1 {
-            0.0
-        } else {
-            i as f64 / (frames - 1) as f64
-        };
-        let field = field_at(t)?;
+        let field = field_at(frame_time(i, frames))?;
         let img = render(field.as_ref(), camera, options)?;
         let path = dir.join(format!("{prefix}{i:04}.png"));
         write_png_rgba(&path, &img)?;
         out.push(path);
     }
     Ok(out)
+}
+
+/// The pictures of [`render_animation`] kept in memory instead of written, in order (for a
+/// single animation file, e.g. `volmorph_render::write_animation`).
+///
+/// # Errors
+/// [`FrepError::InvalidArgument`] for zero frames, errors of `field_at` and [`render`].
+pub fn render_frames(
+    frames: usize,
+    field_at: &dyn Fn(f64) -> Result<Box<dyn Field>, FrepError>,
+    camera: &Camera,
+    options: &RenderOptions,
+) -> Result<Vec<RgbaImage>, FrepError> {
+    if frames == 0 {
+        return Err(FrepError::InvalidArgument(
+            "an animation needs at least one frame".into(),
+        ));
+    }
+    (0..frames)
+        .map(|i| {
+            let field = field_at(frame_time(i, frames))?;
+            render(field.as_ref(), camera, options)
+        })
+        .collect()
 }
 
 #[cfg(test)]
