@@ -161,7 +161,7 @@ pub fn draw_text(
             let gx = x + k as i64 * i64::from(GLYPH_WIDTH + GLYPH_SPACING) * s;
             rows.iter().enumerate().flat_map(move |(r, bits)| {
                 (0..GLYPH_WIDTH).filter_map(move |c| {
-                    (bits >> (GLYPH_WIDTH - 1 - c) & 1 == 1)
+                    ((bits >> (GLYPH_WIDTH - 1 - c)) & 1 == 1)
                         .then_some((gx + i64::from(c) * s, y + r as i64 * s))
                 })
             })

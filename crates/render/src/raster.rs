@@ -686,7 +686,7 @@ mod tests {
                 &style1(),
             )
             .unwrap();
-            let c = img.get(20, 20).unwrap();
+            let c = img.get(20, 20).unwrap().map(u32::from);
             assert!(c[0] > 100 && c[0] > 3 * c[1] && c[0] > 3 * c[2], "{c:?}");
         }
         // Per triangle: the two halves of the square take their own colours.
@@ -700,8 +700,8 @@ mod tests {
         )
         .unwrap();
         // Triangle 0 is below the diagonal (x > y in model space: lower right on screen).
-        let g = img.get(28, 28).unwrap();
-        let b = img.get(12, 12).unwrap();
+        let g = img.get(28, 28).unwrap().map(u32::from);
+        let b = img.get(12, 12).unwrap().map(u32::from);
         assert!(g[1] > 2 * g[0] && g[1] > 2 * g[2], "{g:?}");
         assert!(b[2] > 2 * b[0] && b[2] > 2 * b[1], "{b:?}");
         // Vertex colours interpolate: red on the left, blue on the right.
