@@ -92,8 +92,8 @@ fn slice_labels_follow_the_direction_matrix_and_the_size_the_spacing() {
         &"--interpolation",
         &"nearest",
     ]);
-    let e = read_png(&e).unwrap();
-    assert_eq!((e.width(), e.height()), (300, 150));
+    let img = read_png(&e).unwrap();
+    assert_eq!((img.width(), img.height()), (300, 150));
     let err = fails(&[&"slice", &plain, &"-o", &e, &"--zoom", &"0"]);
     assert!(err.contains("zoom"), "{err}");
 }

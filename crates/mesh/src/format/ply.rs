@@ -476,7 +476,7 @@ fn find_roles(h: &Header) -> Result<Roles, MeshError> {
 /// with fewer than three vertices or an index outside the vertices;
 /// [`MeshError::TooLarge`] beyond the 32-bit limits.
 pub fn read_ply_bytes(bytes: &[u8]) -> Result<Mesh, MeshError> {
-    read_ply_bytes_with_colors(bytes).map(|(m, _)| m)
+    read_ply(bytes, false).map(|(m, _)| m)
 }
 
 /// Parse a PLY file as [`read_ply_bytes`] does, and also its colours: the vertex element's
@@ -487,8 +487,18 @@ pub fn read_ply_bytes(bytes: &[u8]) -> Result<Mesh, MeshError> {
 /// # Errors
 /// As [`read_ply_bytes`], and [`MeshError::Parse`] for a colour value that is not finite.
 pub fn read_ply_bytes_with_colors(bytes: &[u8]) -> Result<(Mesh, Option<MeshColors>), MeshError> {
+    read_ply(bytes, true)
+}
+
+/// The PLY reader; colour properties are read only when `colors` is set (otherwise they are
+/// skipped like any other property).
+fn read_ply(bytes: &[u8], colors: bool) -> Result<(Mesh, Option<MeshColors>), MeshError> {
     let h = parse_header(bytes)?;
-    let roles = find_roles(&h)?;
+    let mut roles = find_roles(&h)?;
+    if !colors {
+        roles.vertex_rgb = None;
+        roles.face_rgb = None;
+    }
     let nv = roles.vertex.map_or(0, |v| h.elements[v].count);
     crate::mesh::check_vertex_count(nv)?;
     let data = &bytes[h.data_start..];
