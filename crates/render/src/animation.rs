@@ -28,9 +28,14 @@ use crate::png_file::{MAX_APNG_FRAMES, write_apng};
 /// sampled evenly. NeuQuant itself looks at one pixel in [`GIF_NEUQUANT_SAMPLE_FACTOR`].
 pub const GIF_TRAINING_PIXELS: usize = 1 << 20;
 
-/// NeuQuant's sampling factor for GIF palettes: 10, the speed/quality compromise its author
-/// and the `gif` crate recommend (1 = best, 30 = fastest).
+/// NeuQuant's sampling factor for GIF palettes of long animations: 10, the speed/quality
+/// compromise its author and the `gif` crate recommend (1 = best, 30 = fastest). Samples of at
+/// most [`GIF_FULL_QUALITY_PIXELS`] pixels are learned at factor 1 (every pixel), where the
+/// network would otherwise see too few pixels to settle.
 pub const GIF_NEUQUANT_SAMPLE_FACTOR: i32 = 10;
+
+/// Largest sample (pixels) learned at NeuQuant's best sampling factor 1 (2¹⁸).
+pub const GIF_FULL_QUALITY_PIXELS: usize = 1 << 18;
 
 /// Colour that transparent parts of frames are composited over in a GIF (white).
 pub const GIF_BACKGROUND: [u8; 3] = [255, 255, 255];
@@ -146,7 +151,12 @@ fn quantise(frames: &[Vec<[u8; 3]>]) -> (Vec<u8>, Vec<Vec<u8>>) {
     for c in frames.iter().flatten().step_by(stride) {
         sample.extend_from_slice(&[c[0], c[1], c[2], 255]);
     }
-    let nq = color_quant::NeuQuant::new(GIF_NEUQUANT_SAMPLE_FACTOR, 256, &sample);
+    let factor = if sample.len() / 4 <= GIF_FULL_QUALITY_PIXELS {
+        1
+    } else {
+        GIF_NEUQUANT_SAMPLE_FACTOR
+    };
+    let nq = color_quant::NeuQuant::new(factor, 256, &sample);
     let palette = nq.color_map_rgb();
     let mut cache: HashMap<[u8; 3], u8> = HashMap::new();
     let indices = frames
