@@ -28,6 +28,9 @@ use super::text::{
 use crate::error::Location;
 use crate::{Mesh, MeshError, MeshFormat};
 
+/// A mesh and its vertex colours, if every vertex had one.
+pub type MeshAndColors = (Mesh, Option<Vec<[u8; 3]>>);
+
 fn err(line: usize, message: impl Into<String>) -> MeshError {
     MeshError::parse(MeshFormat::Obj, Location::Line(line), message)
 }
@@ -48,7 +51,7 @@ pub fn read_obj_bytes(bytes: &[u8]) -> Result<Mesh, MeshError> {
 ///
 /// # Errors
 /// As [`read_obj_bytes`].
-pub fn read_obj_bytes_with_colors(bytes: &[u8]) -> Result<(Mesh, Option<Vec<[u8; 3]>>), MeshError> {
+pub fn read_obj_bytes_with_colors(bytes: &[u8]) -> Result<MeshAndColors, MeshError> {
     let mut p = ObjParser::default();
     for (line_no, raw) in Lines::new(bytes, 1) {
         p.line(line_no, raw)?;
@@ -79,7 +82,7 @@ pub fn read_obj_stream(r: &mut dyn std::io::BufRead) -> Result<Mesh, MeshError> 
 /// As [`read_obj_stream`].
 pub fn read_obj_stream_with_colors(
     r: &mut dyn std::io::BufRead,
-) -> Result<(Mesh, Option<Vec<[u8; 3]>>), MeshError> {
+) -> Result<MeshAndColors, MeshError> {
     let mut p = ObjParser::default();
     let mut line: Vec<u8> = Vec::new();
     let mut line_no = 0usize;
@@ -257,7 +260,7 @@ impl ObjParser {
         Ok(())
     }
 
-    fn finish_with_colors(self) -> Result<(Mesh, Option<Vec<[u8; 3]>>), MeshError> {
+    fn finish_with_colors(self) -> Result<MeshAndColors, MeshError> {
         let (b, max_index) = (self.b, self.max_index);
         let colors = (!self.uncoloured && !self.colors.is_empty()).then_some(self.colors);
         if max_index.0 > b.positions.len() as u64 {
