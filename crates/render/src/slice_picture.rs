@@ -51,7 +51,7 @@ pub enum PixelAspect {
     Voxel,
 }
 
-/// How large [`render_slice`] draws a slice (see the [module documentation](self)).
+/// How large [`render_slice`] draws a slice (the rules are on [`slice_picture_size`]).
 #[derive(Debug, Clone, Copy, PartialEq, Default)]
 pub enum SliceSize {
     /// One pixel per smallest spacing (or voxel), enlarged to a longer side of at least
@@ -106,8 +106,14 @@ impl Default for SliceStyle {
     }
 }
 
-/// The picture size `(width, height)` in pixels of `slice` drawn with `aspect` and `size`
-/// (rules in the [module documentation](self)).
+/// The picture size `(width, height)` in pixels of `slice` drawn with `aspect` and `size`.
+///
+/// With [`PixelAspect::Physical`] the picture has the slice's physical aspect ratio
+/// (`width · spacing₁ : height · spacing₂`), with [`PixelAspect::Voxel`] square voxels.
+/// [`SliceSize::Auto`]: one pixel per smallest spacing (per voxel), enlarged so the longer side
+/// is at least [`DEFAULT_LONG_SIDE`]; [`SliceSize::LongSide`]`(n)`: the longer side is `n`;
+/// [`SliceSize::Zoom`]`(f)`: `f` pixels per smallest spacing (per voxel). Sides are rounded to
+/// whole pixels.
 ///
 /// # Errors
 /// [`RenderError::InvalidArgument`] for an empty slice, a pixel spacing that is not finite and
