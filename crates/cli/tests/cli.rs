@@ -164,13 +164,19 @@ fn slice_writes_a_png_of_the_expected_size() {
     let png = dir.path().join("cut.png");
     ok(&[&"phantom", &"teapot", &"-o", &src, &"--dims", &"24,20,10"]);
     ok(&[
-        &"slice", &src, &"-o", &png, &"--axis", &"y", &"--index", &"9.5",
+        &"slice", &src, &"-o", &png, &"--axis", &"y", &"--index", &"9.5", &"--zoom", &"1",
     ]);
     let bytes = std::fs::read(&png).unwrap();
     assert_eq!(&bytes[..8], b"\x89PNG\r\n\x1a\n");
     let w = u32::from_be_bytes(bytes[16..20].try_into().unwrap());
     let h = u32::from_be_bytes(bytes[20..24].try_into().unwrap());
     assert_eq!((w, h), (24, 10), "a Y slice is nx wide and nz high");
+    // By default the longer side is enlarged to 512 pixels.
+    ok(&[&"slice", &src, &"-o", &png, &"--axis", &"y"]);
+    let bytes = std::fs::read(&png).unwrap();
+    let w = u32::from_be_bytes(bytes[16..20].try_into().unwrap());
+    let h = u32::from_be_bytes(bytes[20..24].try_into().unwrap());
+    assert_eq!(w.max(h), 512);
     ok(&[
         &"slice",
         &src,
@@ -1511,7 +1517,17 @@ fn mls2d_deforms_a_picture_and_reports_folds() {
     ok(&[&"phantom", &"sphere", &"-o", &vol, &"--dims", &"40,30,8"]);
     let png = dir.path().join("slice.png");
     ok(&[
-        &"slice", &vol, &"-o", &png, &"--axis", &"z", &"--index", &"4",
+        &"slice",
+        &vol,
+        &"-o",
+        &png,
+        &"--axis",
+        &"z",
+        &"--index",
+        &"4",
+        &"--zoom",
+        &"1",
+        &"--no-labels",
     ]);
     let h = dir.path().join("h2.json");
     std::fs::write(

@@ -292,7 +292,17 @@ fn mls2d_thin_plate_method_deforms_a_picture() {
     ok(&[&"phantom", &"teapot", &"--size", &"40", &"-o", &vol]);
     let png = d.join("s.png");
     ok(&[
-        &"slice", &vol, &"-o", &png, &"--axis", &"z", &"--index", &"20",
+        &"slice",
+        &vol,
+        &"-o",
+        &png,
+        &"--axis",
+        &"z",
+        &"--index",
+        &"20",
+        &"--zoom",
+        &"1",
+        &"--no-labels",
     ]);
     let h = d.join("h.json");
     std::fs::write(

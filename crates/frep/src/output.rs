@@ -387,6 +387,16 @@ fn march(field: &dyn Field, ray: &Ray, ta: f64, tb: f64, steps: usize) -> Option
     None
 }
 
+/// The time `t = i/(frames − 1)` of frame `i` of an animation of `frames` (`t = 0` for a single
+/// frame).
+fn frame_time(i: usize, frames: usize) -> f64 {
+    if frames == 1 {
+        0.0
+    } else {
+        i as f64 / (frames - 1) as f64
+    }
+}
+
 /// Render `frames` pictures of `field_at(t)` for `t = i/(frames − 1)` (`t = 0` for a single
 /// frame) and write them as `dir/{prefix}{i:04}.png`; returns the paths in order.
 ///
@@ -441,12 +451,7 @@ pub fn render_animation_with(
     let mut out = Vec::with_capacity(frames);
     let mut go = || -> Result<(), FrepError> {
         for i in 0..frames {
-            let t = if frames == 1 {
-                0.0
-            } else {
-                i as f64 / (frames - 1) as f64
-            };
-            let field = field_at(t)?;
+            let field = field_at(frame_time(i, frames))?;
             let img = render_with(field.as_ref(), camera, options, &rows)?;
             let path = dir.join(format!("{prefix}{i:04}.png"));
             write_png_rgba(&path, &img)?;
@@ -466,6 +471,55 @@ pub fn render_animation_with(
         }
         Err(e) => Err(e),
     }
+}
+
+/// The pictures of [`render_animation`] kept in memory instead of written, in order (for a
+/// single animation file, e.g. `volmorph_render::write_animation`).
+///
+/// # Errors
+/// [`FrepError::InvalidArgument`] for zero frames, errors of `field_at` and [`render`].
+pub fn render_frames(
+    frames: usize,
+    field_at: &dyn Fn(f64) -> Result<Box<dyn Field>, FrepError>,
+    camera: &Camera,
+    options: &RenderOptions,
+) -> Result<Vec<RgbaImage>, FrepError> {
+    if frames == 0 {
+        return Err(FrepError::InvalidArgument(
+            "an animation needs at least one frame".into(),
+        ));
+    }
+    render_frames_with(frames, field_at, camera, options, &volmorph_io::NoProgress)
+}
+
+/// [`render_frames`] reporting one step per picture row to `progress` (the total announced
+/// is `frames × camera height`), and stopping with [`FrepError::Cancelled`] when asked.
+///
+/// # Errors
+/// As [`render_frames`], and [`FrepError::Cancelled`].
+pub fn render_frames_with(
+    frames: usize,
+    field_at: &dyn Fn(f64) -> Result<Box<dyn Field>, FrepError>,
+    camera: &Camera,
+    options: &RenderOptions,
+    progress: &dyn volmorph_io::Progress,
+) -> Result<Vec<RgbaImage>, FrepError> {
+    if frames == 0 {
+        return Err(FrepError::InvalidArgument(
+            "an animation needs at least one frame".into(),
+        ));
+    }
+    progress.start(
+        &format!("rendering {frames} frames"),
+        (frames as u64).saturating_mul(u64::from(camera.height())),
+    );
+    let rows = volmorph_io::Within(progress);
+    (0..frames)
+        .map(|i| {
+            let field = field_at(frame_time(i, frames))?;
+            render_with(field.as_ref(), camera, options, &rows)
+        })
+        .collect()
 }
 
 #[cfg(test)]

@@ -49,10 +49,12 @@ mod validate;
 
 pub use error::{Location, MeshError};
 pub use format::{
-    MeshFormat, MeshWriteOptions, read, read_bytes, to_bytes, write, write_to, write_with,
+    MeshColors, MeshFormat, MeshWriteOptions, read, read_bytes, read_with_colors, to_bytes, write,
+    write_to, write_with,
 };
 pub use format::{
-    obj::read_obj_bytes, off::read_off_bytes, ply::read_ply_bytes, stl::read_stl_bytes,
+    obj::read_obj_bytes, off::read_off_bytes, ply::read_ply_bytes, ply::read_ply_bytes_with_colors,
+    stl::read_stl_bytes,
 };
 pub use hash::{FastMap, MixHasher};
 pub use mesh::{Faces, MAX_ELEMENTS, Mesh};

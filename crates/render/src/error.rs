@@ -1,6 +1,6 @@
 use volmorph_io::IoError;
 
-/// Errors of image construction, intensity mapping, cameras and PNG I/O.
+/// Errors of image construction, intensity mapping, cameras, PNG I/O and GIF output.
 #[derive(Debug, thiserror::Error)]
 pub enum RenderError {
     /// Creating, renaming or reading a file failed, or a size is impossible (the message names
@@ -41,6 +41,9 @@ pub enum RenderError {
     /// The PNG decoder failed (corrupt, truncated or unsupported file).
     #[error("PNG decoding failed: {0}")]
     PngDecode(#[from] png::DecodingError),
+    /// The GIF encoder failed.
+    #[error("GIF encoding failed: {0}")]
+    GifEncode(#[from] gif::EncodingError),
     /// An error attributed to a file path.
     ///
     /// Displays as `path: error`; the inner error is part of the message, not a separate

@@ -7,6 +7,7 @@
 //! * [`Window`] — window/level intensity mapping ([`Window::auto`]: the automatic window);
 //!   [`Colormap`] — grey, hot, viridis, turbo and Moreland's cool-warm as 256-entry tables; [`render_scalar`] / [`ScalarStyle`] turn an
 //!   f32 field into colour (NaN colour, diverging centre).
+//! * [`write_animation`] — animated PNG or GIF by extension ([`animation`]).
 //! * [`write_png_rgba`], [`write_png_rgb`], [`write_png_grey8`], [`write_png_grey16`] (atomic
 //!   writes) and [`read_png`] (any PNG to RGBA8).
 //! * [`Camera`] — pinhole and orthographic projections with pixel-centre rays and their
@@ -18,10 +19,15 @@
 //!   light); [`shading`] also holds the sRGB conversions every renderer uses.
 //! * [`draw`] — lines, markers and rectangles for handle overlays.
 //! * [`render_triangles`] — z-buffered, shaded pictures of triangle meshes ([`ShadeStyle`]).
-//! * [`render_slice`] — pictures of volume slices ([`SliceStyle`]).
+//! * [`render_slice`] — pictures of volume slices ([`SliceStyle`]): physical aspect, a
+//!   readable default size ([`slice_picture_size`]), bilinear resampling, and orientation
+//!   labels ([`OrientationLabels`]).
+//! * [`annotate`] — the built-in bitmap font and the R/L/A/P/S/I orientation labels.
 //!
 //! Geometry is f64 ([`glam::DVec3`]); image values are f32; colours are 8-bit sRGB-coded.
 
+pub mod animation;
+pub mod annotate;
 mod camera;
 mod colormap;
 pub mod cubecut;
@@ -42,6 +48,8 @@ pub mod transfer;
 pub mod view;
 mod window;
 
+pub use animation::{AnimationFormat, write_animation, write_gif};
+pub use annotate::OrientationLabels;
 pub use camera::{BOX_FILL, Camera, FIT_MARGIN, Framing, Projection};
 pub use colormap::{Colormap, LUT_SIZE, Lut, ScalarStyle, render_scalar, render_scalar_with};
 pub use cubecut::{CutMethod, ProxyBox, ProxyGeometry, Slicing};
@@ -60,9 +68,14 @@ pub use png_file::{
     write_png_grey16, write_png_rgb, write_png_rgba,
 };
 pub use quality::{QUALITY_UNITS_ACROSS, QualityOptions, render_quality};
-pub use raster::{MAX_SUPERSAMPLE, ShadeStyle, render_triangles};
+pub use raster::{
+    MAX_SUPERSAMPLE, ShadeStyle, SurfaceColors, render_triangles, render_triangles_with_colors,
+};
 pub use shading::{Lighting, Shading};
-pub use slice_picture::{SliceStyle, render_slice};
+pub use slice_picture::{
+    DEFAULT_LONG_SIDE, Interpolation, MAX_SLICE_SIDE, PixelAspect, SliceSize, SliceStyle,
+    render_slice, slice_picture_size,
+};
 pub use transfer::{TransferFunction, TransferPreset};
 pub use view::{DEFAULT_FOV_Y, Orbit, UpAxis, view_camera};
 pub use window::{AUTO_WINDOW_PERCENTILES, Window};

@@ -140,7 +140,70 @@ pub fn render_triangles(
     normals: Option<&[DVec3]>,
     style: &ShadeStyle,
 ) -> Result<RgbaImage, RenderError> {
+    render_triangles_with_colors(
+        camera,
+        positions,
+        triangles,
+        normals,
+        SurfaceColors::Uniform,
+        style,
+    )
+}
+
+/// Colours of the surface drawn by [`render_triangles_with_colors`] (8-bit sRGB).
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub enum SurfaceColors<'a> {
+    /// [`ShadeStyle::front`] on front faces and [`ShadeStyle::back`] on back faces.
+    Uniform,
+    /// One colour per vertex (same length as the positions), interpolated across each
+    /// triangle in linear light (perspective-correct); both sides of a face take it.
+    PerVertex(&'a [[u8; 3]]),
+    /// One colour per triangle (same length as the triangles); both sides take it.
+    PerTriangle(&'a [[u8; 3]]),
+}
+
+/// [`render_triangles`] with the surface coloured by `colors`: attribute colours of a mesh
+/// (for instance a colour-mapped cut written as PLY) shaded by the same model. With vertex or
+/// triangle colours both sides of a face show the colour (a cut plane seen from behind still
+/// shows its attribute); the shading is unchanged.
+///
+/// # Errors
+/// As [`render_triangles`], and [`RenderError::InvalidArgument`] when `colors` does not hold
+/// one colour per vertex or triangle.
+pub fn render_triangles_with_colors(
+    camera: &Camera,
+    positions: &[DVec3],
+    triangles: &[[u32; 3]],
+    normals: Option<&[DVec3]>,
+    colors: SurfaceColors<'_>,
+    style: &ShadeStyle,
+) -> Result<RgbaImage, RenderError> {
     style.validate()?;
+    let lin =
+        |c: &[[u8; 3]]| -> Vec<[f64; 3]> { c.iter().map(|c| c.map(srgb8_to_linear)).collect() };
+    let colors = match colors {
+        SurfaceColors::Uniform => LinearColors::Uniform,
+        SurfaceColors::PerVertex(c) => {
+            if c.len() != positions.len() {
+                return Err(RenderError::invalid(format!(
+                    "{} vertex colours for {} vertices",
+                    c.len(),
+                    positions.len()
+                )));
+            }
+            LinearColors::PerVertex(lin(c))
+        }
+        SurfaceColors::PerTriangle(c) => {
+            if c.len() != triangles.len() {
+                return Err(RenderError::invalid(format!(
+                    "{} triangle colours for {} triangles",
+                    c.len(),
+                    triangles.len()
+                )));
+            }
+            LinearColors::PerTriangle(lin(c))
+        }
+    };
     if let Some(n) = normals
         && n.len() != positions.len()
     {
@@ -238,9 +301,8 @@ pub fn render_triangles(
                     (y0, rows, swu),
                     band,
                     &mut depth,
-                    positions,
-                    triangles,
-                    normals,
+                    (positions, triangles, normals),
+                    &colors,
                     &shader,
                 );
             }
@@ -296,6 +358,13 @@ fn pixel_span(lo: f64, hi: f64, n: usize) -> Option<(usize, usize)> {
     (a <= b).then_some((a as usize, b as usize))
 }
 
+/// Surface colours in linear light.
+enum LinearColors {
+    Uniform,
+    PerVertex(Vec<[f64; 3]>),
+    PerTriangle(Vec<[f64; 3]>),
+}
+
 /// The shading model resolved for the picture's camera, and the face colours in linear light.
 struct Shader {
     lighting: Lighting,
@@ -315,11 +384,10 @@ impl Shader {
         })
     }
 
-    /// Linear colour of the surface seen at sample `(x, y)` of the picture with normal `n`,
-    /// front-facing or not.
-    fn shade(&self, x: f64, y: f64, n: DVec3, front: bool) -> [f32; 4] {
+    /// Linear colour of the surface of linear base colour `base` seen at sample `(x, y)` of
+    /// the picture with normal `n`.
+    fn shade(&self, x: f64, y: f64, n: DVec3, base: [f64; 3]) -> [f32; 4] {
         let to_viewer = -self.camera.ray_at(x, y).dir;
-        let base = if front { self.front } else { self.back };
         let c = self.lighting.shade(base, n, to_viewer);
         [c[0] as f32, c[1] as f32, c[2] as f32, 1.0]
     }
@@ -332,9 +400,8 @@ fn raster_triangle(
     (y0, rows, width): (usize, usize, usize),
     band: &mut [[f32; 4]],
     depth: &mut [f64],
-    positions: &[DVec3],
-    triangles: &[[u32; 3]],
-    normals: Option<&[DVec3]>,
+    (positions, triangles, normals): (&[DVec3], &[[u32; 3]], Option<&[DVec3]>),
+    colors: &LinearColors,
     shader: &Shader,
 ) {
     let [a, b, c] = t.v;
@@ -356,6 +423,15 @@ fn raster_triangle(
         (p1 - p0).cross(p2 - p0)
     };
     let vn = normals.map(|n| tri.map(|v| n[v as usize]));
+    let uniform = if front { shader.front } else { shader.back };
+    let flat = match colors {
+        LinearColors::PerTriangle(c) => c[t.index as usize],
+        _ => uniform,
+    };
+    let vc = match colors {
+        LinearColors::PerVertex(c) => Some(tri.map(|v| c[v as usize])),
+        _ => None,
+    };
     for y in r0.max(y0)..=r1 {
         let py = y as f64 + 0.5;
         let row = (y - y0) * width;
@@ -383,7 +459,11 @@ fn raster_triangle(
                 None => face_normal,
             }
             .normalize_or(-shader.camera.forward());
-            band[slot] = shader.shade(p.0, p.1, n, front);
+            let base = match vc {
+                Some([c0, c1, c2]) => [0, 1, 2].map(|k| m0 * c0[k] + m1 * c1[k] + m2 * c2[k]),
+                None => flat,
+            };
+            band[slot] = shader.shade(p.0, p.1, n, base);
         }
     }
 }
@@ -582,5 +662,73 @@ mod tests {
         let fill = s1.get(3, 12).unwrap();
         let bg = style1().background;
         assert!(s4.pixels().iter().any(|&c| c != fill && c != bg));
+    }
+
+    #[test]
+    fn vertex_and_triangle_colours_are_drawn_shaded_on_both_sides() {
+        let cam = ortho(40, 40, 4.0);
+        let p = [
+            DVec3::new(-1.0, -1.0, 0.0),
+            DVec3::new(1.0, -1.0, 0.0),
+            DVec3::new(1.0, 1.0, 0.0),
+            DVec3::new(-1.0, 1.0, 0.0),
+        ];
+        let front = [[0, 1, 2], [0, 2, 3]];
+        let back = [[0, 2, 1], [0, 3, 2]];
+        let red = [[230, 20, 20]; 4];
+        for tris in [front, back] {
+            let img = render_triangles_with_colors(
+                &cam,
+                &p,
+                &tris,
+                None,
+                SurfaceColors::PerVertex(&red),
+                &style1(),
+            )
+            .unwrap();
+            let c = img.get(20, 20).unwrap().map(u32::from);
+            assert!(c[0] > 100 && c[0] > 3 * c[1] && c[0] > 3 * c[2], "{c:?}");
+        }
+        // Per triangle: the two halves of the square take their own colours.
+        let img = render_triangles_with_colors(
+            &cam,
+            &p,
+            &front,
+            None,
+            SurfaceColors::PerTriangle(&[[20, 200, 20], [20, 20, 200]]),
+            &style1(),
+        )
+        .unwrap();
+        // Triangle 0 is below the diagonal (x > y in model space: lower right on screen).
+        let g = img.get(28, 28).unwrap().map(u32::from);
+        let b = img.get(12, 12).unwrap().map(u32::from);
+        assert!(g[1] > 2 * g[0] && g[1] > 2 * g[2], "{g:?}");
+        assert!(b[2] > 2 * b[0] && b[2] > 2 * b[1], "{b:?}");
+        // Vertex colours interpolate: red on the left, blue on the right.
+        let lr = [[255, 0, 0], [0, 0, 255], [0, 0, 255], [255, 0, 0]];
+        let img = render_triangles_with_colors(
+            &cam,
+            &p,
+            &front,
+            None,
+            SurfaceColors::PerVertex(&lr),
+            &style1(),
+        )
+        .unwrap();
+        let (l, r) = (img.get(12, 20).unwrap(), img.get(28, 20).unwrap());
+        assert!(l[0] > l[2] && r[2] > r[0], "{l:?} {r:?}");
+        // Uniform colours are the plain renderer's.
+        assert_eq!(
+            render_triangles_with_colors(&cam, &p, &front, None, SurfaceColors::Uniform, &style1())
+                .unwrap(),
+            render_triangles(&cam, &p, &front, None, &style1()).unwrap()
+        );
+        // Wrong lengths are errors.
+        for c in [
+            SurfaceColors::PerVertex(&red[..3]),
+            SurfaceColors::PerTriangle(&red[..1]),
+        ] {
+            assert!(render_triangles_with_colors(&cam, &p, &front, None, c, &style1()).is_err());
+        }
     }
 }

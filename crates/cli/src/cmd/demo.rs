@@ -24,7 +24,7 @@ use anyhow::{Context, bail};
 use clap::ValueEnum as _;
 use glam::DVec3;
 use volmorph_deform::SpaceMap;
-use volmorph_render::{Colormap, Window};
+use volmorph_render::{Colormap, OrientationLabels, Window};
 use volmorph_scene::teapot::{DEMO_LATTICE_COUNTS, SPOUT_TARGET};
 use volmorph_scene::{Command, NewObject, ObjectId, Recipe, Scene, SurfaceMethod, TeapotSession};
 use volmorph_volume::phantom::{self, Phantom};
@@ -397,9 +397,19 @@ fn gallery(args: &Args, index: &mut String) -> anyhow::Result<usize> {
 
 fn write_slice_png(vol: &AnyVolume, axis: Axis, kind: Kind, png: &Path) -> anyhow::Result<()> {
     let s = slice::extract(vol, axis, SlicePosition::Index(middle(vol, axis)))?;
+    let labels = Some(OrientationLabels::for_slice(
+        vol.geometry().direction,
+        axis,
+    )?);
     match kind {
-        Kind::Density => write_picture(png, &s, None, Colormap::Grey),
+        Kind::Density => write_picture(png, &s, None, Colormap::Grey, labels),
         // Distances in model units: ±0.3 around the surface, blue inside, red outside.
-        Kind::Sdf => write_picture(png, &s, Some(Window::new(0.0, 0.6)?), Colormap::CoolWarm),
+        Kind::Sdf => write_picture(
+            png,
+            &s,
+            Some(Window::new(0.0, 0.6)?),
+            Colormap::CoolWarm,
+            labels,
+        ),
     }
 }

@@ -11,12 +11,15 @@ use volmorph_frep::grid::{box_geometry, isotropic_box_geometry, sample_with};
 use volmorph_frep::mapping::{Schedule, morph};
 use volmorph_frep::output::{
     MeshMethod, MeshOptions, RenderOptions, SurfaceSummary, mesh_with, render_animation_with,
-    render_with,
+    render_frames_with, render_with,
 };
 use volmorph_frep::reconstruct::{SectionBlend, SectionStack, femur_sections};
 use volmorph_frep::{CompileOptions, Field, Shape, Tape, compile_source};
 use volmorph_mesh::{self as meshio, MeshWriteOptions};
-use volmorph_render::{Camera, DEFAULT_FOV_Y, Framing, Projection, UpAxis, write_png_rgba};
+use volmorph_render::{
+    AnimationFormat, Camera, DEFAULT_FOV_Y, Framing, Projection, UpAxis, write_animation,
+    write_png_rgba,
+};
 use volmorph_volume::AnyVolume;
 use volmorph_volume_io as format;
 
@@ -47,9 +50,10 @@ pub enum Command {
         after_help = "Example:\n  volmorph frep render gear.hf -o gear.png --size 640x480 --view 30,35"
     )]
     Render(RenderArgs),
-    /// Animate the metamorphosis of one model into another (numbered PNG frames).
+    /// Animate the metamorphosis of one model into another (an animated PNG or GIF, or a
+    /// folder of numbered PNG frames).
     #[command(
-        after_help = "Example:\n  volmorph frep morph s1_sphere.hf s5_twist.hf --schedule smoothstep --frames 24 -o frames/"
+        after_help = "Examples:\n  volmorph frep morph s1_sphere.hf s5_twist.hf --schedule smoothstep --frames 24 -o morph.gif\n  volmorph frep morph s1_sphere.hf s5_twist.hf --frames 24 -o morph.png --delay 80\n  volmorph frep morph s1_sphere.hf s5_twist.hf --frames 24 -o frames/\n\nOutput by extension: .png or .apng an animated PNG (full colour), .gif an animated GIF\n(256 colours, one palette for all frames), anything else a folder of frame0000.png …"
     )]
     Morph(MorphArgs),
     /// Reconstruct a solid from planar cross-sections (contours at heights z) by
@@ -173,9 +177,13 @@ pub struct MorphArgs {
     /// Number of frames (t = 0 … 1).
     #[arg(long, default_value_t = 10)]
     pub frames: usize,
-    /// Output folder for `frame0000.png` …
+    /// Output: an animation file (.png/.apng animated PNG, .gif animated GIF) or a folder for
+    /// `frame0000.png` …
     #[arg(short, long)]
     pub output: PathBuf,
+    /// Milliseconds per frame of an animation file (a GIF rounds to 10 ms).
+    #[arg(long, default_value_t = 100, value_parser = clap::value_parser!(u32).range(1..=65535))]
+    pub delay: u32,
     #[command(flatten)]
     pub view: View,
     #[command(flatten)]
@@ -470,8 +478,6 @@ fn morph_cmd(a: &MorphArgs) -> anyhow::Result<()> {
     let p = params(&a.common.params)?;
     let f = load(&a.from, &p)?;
     let g = load(&a.to, &p)?;
-    std::fs::create_dir_all(&a.output)
-        .with_context(|| format!("cannot create {}", a.output.display()))?;
     let options = RenderOptions {
         bounds_min: b.0,
         bounds_max: b.1,
@@ -481,6 +487,26 @@ fn morph_cmd(a: &MorphArgs) -> anyhow::Result<()> {
     let field_at = |t: f64| -> Result<Box<dyn Field>, volmorph_frep::FrepError> {
         Ok(Box::new(Tape::new(&morph(&f, &g, t, schedule))))
     };
+    if let Some(format) = AnimationFormat::from_path(&a.output) {
+        let images = render_frames_with(a.frames, &field_at, &cam, &options, &progress::Bar(&pb))
+            .context("cannot render the animation")?;
+        progress::spin(&pb, format!("writing {}", a.output.display()));
+        write_animation(&a.output, &images, a.delay).context("cannot write the animation")?;
+        pb.finish_and_clear();
+        say!(
+            "{} frames written to {} ({})",
+            images.len(),
+            a.output.display(),
+            match format {
+                AnimationFormat::Apng => "animated PNG",
+                AnimationFormat::Gif => "animated GIF",
+            }
+        );
+        return Ok(());
+    }
+    crate::args::refuse_picture_extension(&a.output)?;
+    std::fs::create_dir_all(&a.output)
+        .with_context(|| format!("cannot create {}", a.output.display()))?;
     let paths = render_animation_with(
         a.frames,
         &field_at,

@@ -21,7 +21,7 @@ pub enum Command {
         after_help = "Examples:\n  volmorph mesh convert dragon.ply.gz dragon.stl\n  volmorph mesh convert part.stl part.ply --ascii"
     )]
     Convert(ConvertArgs),
-    /// Write a shaded PNG picture of a mesh.
+    /// Write a shaded PNG picture of a mesh, in the colours it stores (PLY, OBJ) if any.
     #[command(
         after_help = "Examples:\n  volmorph mesh render teapot.ply -o teapot.png --view iso\n  volmorph mesh render bunny.obj -o bunny.png --size 1024x768 --view 30,20 --up y\n\nViews: AZIMUTH,ELEVATION in degrees about the up axis (z up: azimuth 0 looks from +x, 90\nfrom +y; y up: 0 from +z, 90 from +x), or front, side, top, iso."
     )]
@@ -46,6 +46,10 @@ pub struct RenderArgs {
     /// Picture size in pixels, WIDTHxHEIGHT.
     #[arg(long, default_value = "800x600", value_parser = picture::size)]
     pub size: (u32, u32),
+    /// Draw in the default clay colour even when the file stores colours (PLY red green blue
+    /// per vertex or face, OBJ `v x y z r g b`), which are drawn otherwise.
+    #[arg(long)]
+    pub no_colors: bool,
 }
 
 /// Arguments of `volmorph mesh info`.
@@ -115,12 +119,14 @@ fn convert(a: &ConvertArgs) -> anyhow::Result<()> {
 
 fn render(a: &RenderArgs) -> anyhow::Result<()> {
     let pb = progress::spinner(format!("reading {}", a.input.display()));
-    let m = mesh::read(&a.input).context("cannot read mesh")?;
+    let (m, colors) = mesh::read_with_colors(&a.input).context("cannot read mesh")?;
     pb.set_message("drawing");
     let what = a.input.display().to_string();
     let orbit = crate::args::view(&a.view, a.up).context("--view")?;
     let cam = picture::orbit_camera(&orbit, picture::bounds(&m, &what)?, a.size)?;
-    picture::write_mesh_png(&a.output, &m, None, &cam)?;
+    let colors = if a.no_colors { None } else { colors };
+    picture::write_colored_mesh_png(&a.output, &m, None, colors.as_ref(), &cam)
+        .with_context(|| format!("cannot draw {what}"))?;
     pb.finish_and_clear();
     Ok(())
 }

@@ -5,10 +5,10 @@ use std::path::Path;
 
 use anyhow::Context;
 use glam::DVec3;
-use volmorph_mesh::Mesh;
+use volmorph_mesh::{Mesh, MeshColors};
 use volmorph_render::{
-    Camera, DEFAULT_FOV_Y, Framing, Orbit, Projection, ShadeStyle, UpAxis, render_triangles,
-    write_png_rgba,
+    Camera, DEFAULT_FOV_Y, Framing, Orbit, Projection, ShadeStyle, SurfaceColors, UpAxis,
+    render_triangles_with_colors, write_png_rgba,
 };
 
 /// Named directions a picture looks from, for models with z up (`volmorph_render`'s named
@@ -78,7 +78,40 @@ pub fn write_mesh_png(
     normals: Option<&[DVec3]>,
     camera: &Camera,
 ) -> anyhow::Result<()> {
+    write_colored_mesh_png(path, mesh, normals, None, camera)
+}
+
+/// [`write_mesh_png`] with the mesh's own colours (per vertex, or per face: every fan
+/// triangle of a face takes its colour) instead of the default clay and blue when `colors`
+/// is given.
+///
+/// # Errors
+/// If the colours do not match the mesh, or the picture cannot be drawn or written.
+pub fn write_colored_mesh_png(
+    path: &Path,
+    mesh: &Mesh,
+    normals: Option<&[DVec3]>,
+    colors: Option<&MeshColors>,
+    camera: &Camera,
+) -> anyhow::Result<()> {
     let triangles: Vec<[u32; 3]> = mesh.fan_triangles().collect();
+    if let Some(c) = colors {
+        c.check(mesh)?;
+    }
+    let per_triangle: Vec<[u8; 3]>;
+    let surface = match colors {
+        None => SurfaceColors::Uniform,
+        Some(MeshColors::PerVertex(c)) => SurfaceColors::PerVertex(c),
+        Some(MeshColors::PerFace(c)) => {
+            // Fan triangles come face by face, `len − 2` per face.
+            per_triangle = mesh
+                .faces()
+                .zip(c)
+                .flat_map(|(f, &c)| std::iter::repeat_n(c, f.len().saturating_sub(2)))
+                .collect();
+            SurfaceColors::PerTriangle(&per_triangle)
+        }
+    };
     let computed;
     let normals = match normals {
         Some(n) => n,
@@ -87,11 +120,12 @@ pub fn write_mesh_png(
             &computed
         }
     };
-    let img = render_triangles(
+    let img = render_triangles_with_colors(
         camera,
         mesh.positions(),
         &triangles,
         Some(normals),
+        surface,
         &ShadeStyle::default(),
     )?;
     write_png_rgba(path, &img).with_context(|| format!("cannot write {}", path.display()))?;

@@ -16,8 +16,9 @@ use anyhow::{Context, bail};
 use volmorph_deform::{Identity, SpaceMap};
 use volmorph_maps::{AnyMap, HandleDirection, handle_map, read_map};
 use volmorph_render::{
-    CameraKind, ClipPlane, ComparePictures, DvrVolume, PictureMode, PictureSpec, QualityOptions,
-    RgbaImage, TransferChoice, UpAxis, VolumePictures, write_apng, write_png_rgba,
+    AnimationFormat, CameraKind, ClipPlane, ComparePictures, DvrVolume, PictureMode, PictureSpec,
+    QualityOptions, RgbaImage, TransferChoice, UpAxis, VolumePictures, write_animation, write_apng,
+    write_png_rgba,
 };
 use volmorph_volume_io as format;
 
@@ -50,8 +51,8 @@ pub struct Args {
     /// Volume to render (omit with --compare).
     #[arg(required_unless_present = "compare")]
     pub input: Option<PathBuf>,
-    /// Output: a .png picture, or with --frames N > 1 a folder for frame0000.png … and the
-    /// animated turntable.png.
+    /// Output: a .png picture; with --frames N > 1 an animation file (.png/.apng animated PNG,
+    /// .gif animated GIF) or else a folder for frame0000.png … and the animated turntable.png.
     #[arg(short, long)]
     pub output: PathBuf,
     /// Transfer function: auto (ct-bone for CT, mri otherwise), a preset (ct-bone,
@@ -110,7 +111,7 @@ pub struct Args {
     /// Frames of a turntable (a full turn about the up axis).
     #[arg(long, default_value_t = 1)]
     pub frames: usize,
-    /// Milliseconds per turntable frame in the animated PNG.
+    /// Milliseconds per turntable frame in the animation (a GIF rounds to 10 ms).
     #[arg(long, default_value_t = 80)]
     pub delay: u32,
     /// Render the picture this many times and report the median time (benchmarking).
@@ -260,7 +261,10 @@ pub fn run(a: &Args) -> anyhow::Result<()> {
     };
     progress::spin(&pb, "writing");
     let (images, median) = frames;
-    if many {
+    if many && AnimationFormat::from_path(&a.output).is_some() {
+        write_animation(&a.output, &images, a.delay).context("cannot write the animation")?;
+    } else if many {
+        crate::args::refuse_picture_extension(&a.output)?;
         std::fs::create_dir_all(&a.output)
             .with_context(|| format!("cannot create {}", a.output.display()))?;
         for (i, img) in images.iter().enumerate() {

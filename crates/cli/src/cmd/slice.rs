@@ -1,9 +1,13 @@
-//! `volmorph slice`: a PNG picture of an axis-aligned slice.
+//! `volmorph slice`: a PNG picture of an axis-aligned slice, at a readable size with the
+//! physical aspect ratio and orientation labels (drawn by `volmorph_render::render_slice`).
 
 use std::path::{Path, PathBuf};
 
 use anyhow::Context;
-use volmorph_render::{Colormap, SliceStyle, Window, render_slice, write_png_rgba};
+use volmorph_render::{
+    Colormap, Interpolation, OrientationLabels, PixelAspect, SliceSize, SliceStyle, Window,
+    render_slice, write_png_rgba,
+};
 use volmorph_volume::AnyVolume;
 use volmorph_volume::slice::{self, Axis, Slice, SlicePosition};
 use volmorph_volume_io as format;
@@ -34,12 +38,33 @@ pub struct Args {
     /// Colour map: grey, hot, viridis, turbo, cool-warm.
     #[arg(long, default_value = "grey")]
     pub colormap: String,
-    /// Draw pixels with the physical aspect ratio (resamples anisotropic voxels).
+    /// Square pixels per voxel instead of the physical aspect ratio (which honours anisotropic
+    /// spacing and is the default).
     #[arg(long)]
-    pub physical_aspect: bool,
-    /// Integer magnification (nearest neighbour).
-    #[arg(long, default_value_t = 1, value_parser = clap::value_parser!(u32).range(1..=64))]
-    pub scale: u32,
+    pub voxel_aspect: bool,
+    /// Length of the picture's longer side in pixels. Default: one pixel per smallest voxel
+    /// spacing, enlarged to at least 512 pixels.
+    #[arg(long, conflicts_with = "zoom", value_parser = clap::value_parser!(u32).range(1..=16384))]
+    pub size: Option<u32>,
+    /// Pixels per smallest voxel spacing (per voxel with --voxel-aspect), e.g. 1 for the
+    /// slice's own size.
+    #[arg(long, visible_alias = "scale")]
+    pub zoom: Option<f64>,
+    /// Resampling of voxels to pixels: linear (bilinear, smooth) or nearest (blocky).
+    #[arg(long, value_enum, default_value_t = Resample::Linear)]
+    pub interpolation: Resample,
+    /// Leave out the orientation labels (R/L, A/P, S/I from the direction matrix) at the edges.
+    #[arg(long)]
+    pub no_labels: bool,
+}
+
+/// Resampling choices of `--interpolation`.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, clap::ValueEnum)]
+pub enum Resample {
+    /// Bilinear.
+    Linear,
+    /// Nearest voxel.
+    Nearest,
 }
 
 fn parse_axis(s: &str) -> Result<Axis, String> {
@@ -69,11 +94,32 @@ pub fn run(args: &Args) -> anyhow::Result<()> {
     };
     let s = slice::extract(&vol, args.axis, pos)
         .with_context(|| format!("cannot take the slice of {}", args.input.display()))?;
+    let labels = if args.no_labels {
+        None
+    } else {
+        Some(OrientationLabels::for_slice(
+            vol.geometry().direction,
+            args.axis,
+        )?)
+    };
     let style = SliceStyle {
         window,
         colormap,
-        physical_aspect: args.physical_aspect,
-        scale: args.scale,
+        aspect: if args.voxel_aspect {
+            PixelAspect::Voxel
+        } else {
+            PixelAspect::Physical
+        },
+        size: match (args.size, args.zoom) {
+            (Some(n), _) => SliceSize::LongSide(n),
+            (None, Some(z)) => SliceSize::Zoom(z),
+            (None, None) => SliceSize::Auto,
+        },
+        interpolation: match args.interpolation {
+            Resample::Linear => Interpolation::Linear,
+            Resample::Nearest => Interpolation::Nearest,
+        },
+        labels,
     };
     let img = render_slice(&s, &style)?;
     write_png_rgba(&args.output, &img).context("cannot write")?;
@@ -91,19 +137,21 @@ pub fn middle(vol: &AnyVolume, axis: Axis) -> f64 {
     ((n - 1) / 2) as f64
 }
 
-/// Write the picture of `s` to `path` at twice its size with the physical aspect ratio
-/// and the automatic window unless `window` is given (used by the demo).
+/// Write the picture of `s` to `path` as `volmorph slice` draws it by default (physical
+/// aspect, automatic size, bilinear, orientation `labels` if given) with the automatic window
+/// unless `window` is given (used by the demo).
 pub fn write_picture(
     path: &Path,
     s: &Slice,
     window: Option<Window>,
     colormap: Colormap,
+    labels: Option<OrientationLabels>,
 ) -> anyhow::Result<()> {
     let style = SliceStyle {
         window,
         colormap,
-        physical_aspect: true,
-        scale: 2,
+        labels,
+        ..SliceStyle::default()
     };
     write_png_rgba(path, &render_slice(s, &style)?).context("cannot write")
 }

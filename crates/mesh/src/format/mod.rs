@@ -179,6 +179,74 @@ pub fn read(path: &Path) -> Result<Mesh, MeshError> {
     run().map_err(|e| e.at(path))
 }
 
+/// Colours a mesh file stores with its geometry (8-bit sRGB), as
+/// [`read_with_colors`] returns them.
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub enum MeshColors {
+    /// One colour per vertex, in vertex order.
+    PerVertex(Vec<[u8; 3]>),
+    /// One colour per face (polygon), in face order.
+    PerFace(Vec<[u8; 3]>),
+}
+
+impl MeshColors {
+    /// Check that there is one colour per vertex (or face) of `mesh`.
+    ///
+    /// # Errors
+    /// [`MeshError::InvalidProperty`] naming both counts otherwise.
+    pub fn check(&self, mesh: &Mesh) -> Result<(), MeshError> {
+        let (got, want, what) = match self {
+            Self::PerVertex(c) => (c.len(), mesh.vertex_count(), "vertices"),
+            Self::PerFace(c) => (c.len(), mesh.face_count(), "faces"),
+        };
+        if got != want {
+            return Err(MeshError::InvalidProperty(format!(
+                "{got} colours for {want} {what}"
+            )));
+        }
+        Ok(())
+    }
+}
+
+/// Read a mesh file as [`read`] does, together with the colours it stores: PLY vertex or face
+/// `red green blue` properties ([`ply::read_ply_bytes_with_colors`]), OBJ `v x y z r g b`
+/// vertex colours ([`obj::read_obj_bytes_with_colors`]); `None` when the file has none (STL and
+/// OFF colours are not read).
+///
+/// # Errors
+/// As [`read`].
+pub fn read_with_colors(path: &Path) -> Result<(Mesh, Option<MeshColors>), MeshError> {
+    let run = || {
+        let format = MeshFormat::from_path(path)?;
+        match format {
+            MeshFormat::Obj => {
+                let file = volmorph_io::open_regular(path)?;
+                let mut r = std::io::BufReader::with_capacity(1 << 16, file);
+                let gz = volmorph_io::is_gzip(
+                    std::io::BufRead::fill_buf(&mut r)
+                        .map_err(|e| volmorph_io::IoError::os(path, e))?,
+                );
+                let (m, c) = if gz {
+                    let dec = flate2::read::MultiGzDecoder::new(r);
+                    obj::read_obj_stream_with_colors(&mut std::io::BufReader::with_capacity(
+                        1 << 16,
+                        dec,
+                    ))?
+                } else {
+                    obj::read_obj_stream_with_colors(&mut r)?
+                };
+                Ok((m, c.map(MeshColors::PerVertex)))
+            }
+            MeshFormat::Ply => {
+                let bytes = volmorph_io::read_maybe_gz(path)?;
+                ply::read_ply_bytes_with_colors(&bytes)
+            }
+            _ => read(path).map(|m| (m, None)),
+        }
+    };
+    run().map_err(|e| e.at(path))
+}
+
 /// Parse a mesh from bytes in `format`, decompressing them first if they are gzip data.
 ///
 /// # Errors

@@ -1,6 +1,8 @@
 //! Wavefront OBJ, geometry only.
 //!
-//! **Read.** `v x y z [w] [r g b]` gives a position (`w` and vertex colours are ignored).
+//! **Read.** `v x y z [w] [r g b]` gives a position (`w` is ignored). The vertex colours of
+//! `v x y z r g b` (channels in `[0, 1]`, scaled to 8 bits) are returned by
+//! [`read_obj_bytes_with_colors`] when every vertex has them.
 //! `f` (and the old `fo`) gives a polygon whose vertices are written `i`, `i/t`, `i//n` or
 //! `i/t/n`; only the position index `i` is used. Indices are 1-based; negative indices count
 //! back from the most recent vertex (`-1` is the last one defined so far). Index 0, an index
@@ -26,6 +28,9 @@ use super::text::{
 use crate::error::Location;
 use crate::{Mesh, MeshError, MeshFormat};
 
+/// A mesh and its vertex colours, if every vertex had one.
+pub type MeshAndColors = (Mesh, Option<Vec<[u8; 3]>>);
+
 fn err(line: usize, message: impl Into<String>) -> MeshError {
     MeshError::parse(MeshFormat::Obj, Location::Line(line), message)
 }
@@ -37,11 +42,21 @@ fn err(line: usize, message: impl Into<String>) -> MeshError {
 /// index outside the vertices, or a face with fewer than three vertices;
 /// [`MeshError::TooLarge`] beyond the 32-bit limits.
 pub fn read_obj_bytes(bytes: &[u8]) -> Result<Mesh, MeshError> {
+    read_obj_bytes_with_colors(bytes).map(|(m, _)| m)
+}
+
+/// Parse an OBJ file as [`read_obj_bytes`] does, and also its vertex colours: the `r g b` of
+/// `v x y z r g b` lines, each channel in `[0, 1]` scaled by 255 and rounded (clamped), when
+/// **every** vertex has them; `None` otherwise.
+///
+/// # Errors
+/// As [`read_obj_bytes`].
+pub fn read_obj_bytes_with_colors(bytes: &[u8]) -> Result<MeshAndColors, MeshError> {
     let mut p = ObjParser::default();
     for (line_no, raw) in Lines::new(bytes, 1) {
         p.line(line_no, raw)?;
     }
-    p.finish()
+    p.finish_with_colors()
 }
 
 /// Longest OBJ line read from a stream (16 MiB): a polygon with a million corners still fits;
@@ -58,6 +73,16 @@ pub const MAX_STREAM_LINE: usize = 16 << 20;
 /// As [`read_obj_bytes`]; [`MeshError::Io`] when reading fails or a line is longer than
 /// [`MAX_STREAM_LINE`].
 pub fn read_obj_stream(r: &mut dyn std::io::BufRead) -> Result<Mesh, MeshError> {
+    read_obj_stream_with_colors(r).map(|(m, _)| m)
+}
+
+/// [`read_obj_stream`] with the vertex colours of [`read_obj_bytes_with_colors`].
+///
+/// # Errors
+/// As [`read_obj_stream`].
+pub fn read_obj_stream_with_colors(
+    r: &mut dyn std::io::BufRead,
+) -> Result<MeshAndColors, MeshError> {
     let mut p = ObjParser::default();
     let mut line: Vec<u8> = Vec::new();
     let mut line_no = 0usize;
@@ -117,13 +142,17 @@ pub fn read_obj_stream(r: &mut dyn std::io::BufRead) -> Result<Mesh, MeshError> 
             break;
         }
     }
-    p.finish()
+    p.finish_with_colors()
 }
 
 /// The OBJ statements seen so far.
 #[derive(Default)]
 struct ObjParser {
     b: Builder,
+    /// Colour of every vertex so far, while every vertex had one (`v x y z r g b`).
+    colors: Vec<[u8; 3]>,
+    /// A vertex without colour was seen: the file's colours are not used.
+    uncoloured: bool,
     /// Largest positive (1-based) index seen, and its line: positive indices may in
     /// principle refer forward, so they are checked against the final vertex count.
     max_index: (u64, usize),
@@ -133,6 +162,8 @@ impl ObjParser {
     fn line(&mut self, line_no: usize, raw: &[u8]) -> Result<(), MeshError> {
         let b = &mut self.b;
         let max_index = &mut self.max_index;
+        let colors = &mut self.colors;
+        let uncoloured = &mut self.uncoloured;
         let line = match raw.iter().position(|&c| c == b'#') {
             Some(n) => &raw[..n],
             None => raw,
@@ -153,6 +184,31 @@ impl ObjParser {
                     })?;
                 }
                 b.push_vertex(DVec3::from_array(c))?;
+                if !*uncoloured {
+                    // Exactly three more numbers: r g b in [0, 1].
+                    let mut rgb = [0.0f64; 3];
+                    let mut n = 0usize;
+                    let mut numbers = true;
+                    for t in words.by_ref() {
+                        if n == 3 {
+                            n = 4;
+                            break;
+                        }
+                        match parse_f64(t) {
+                            Some(v) if v.is_finite() => rgb[n] = v,
+                            _ => numbers = false,
+                        }
+                        n += 1;
+                    }
+                    let to8 = |c: f64| (c * 255.0).round().clamp(0.0, 255.0) as u8;
+                    match (n, numbers) {
+                        (3, true) => colors.push(rgb.map(to8)),
+                        _ => {
+                            *uncoloured = true;
+                            *colors = Vec::new();
+                        }
+                    }
+                }
             }
             b"f" | b"fo" => {
                 let start = b.indices.len();
@@ -204,8 +260,9 @@ impl ObjParser {
         Ok(())
     }
 
-    fn finish(self) -> Result<Mesh, MeshError> {
+    fn finish_with_colors(self) -> Result<MeshAndColors, MeshError> {
         let (b, max_index) = (self.b, self.max_index);
+        let colors = (!self.uncoloured && !self.colors.is_empty()).then_some(self.colors);
         if max_index.0 > b.positions.len() as u64 {
             return Err(err(
                 max_index.1,
@@ -216,7 +273,7 @@ impl ObjParser {
                 ),
             ));
         }
-        Ok(b.finish())
+        Ok((b.finish(), colors))
     }
 }
 

@@ -8,7 +8,9 @@
 //! The `face` element's list property `vertex_indices` (or `vertex_index`) gives the polygons;
 //! its count and index types may be any integer type (a float index must be integral). Every
 //! other element and property — normals, colours, texture coordinates, `edge`, `material`,
-//! lists — is skipped, by its declared size in binary files. `comment` and `obj_info` lines
+//! lists — is skipped, by its declared size in binary files, except that
+//! [`read_ply_bytes_with_colors`] also returns the `red green blue` colour channels of the
+//! vertex or face element. `comment` and `obj_info` lines
 //! are ignored. A file without a `face` element is a point cloud (a mesh without faces).
 //! Data after the last declared element is ignored.
 //!
@@ -35,7 +37,7 @@ use super::text::{
     Tokens, parse_f32, parse_f64, parse_i64, show, write_f32, write_f64, write_face_indices,
 };
 use crate::error::Location;
-use crate::{Mesh, MeshError, MeshFormat};
+use crate::{Mesh, MeshColors, MeshError, MeshFormat};
 
 /// Encoding of a PLY file.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
@@ -331,6 +333,88 @@ struct Roles {
     face: Option<usize>,
     /// Property index of the face index list.
     face_list: usize,
+    /// Property indices of the colour channels in the vertex element, if it has all three.
+    vertex_rgb: Option<[usize; 3]>,
+    /// Property indices of the colour channels in the face element, if it has all three.
+    face_rgb: Option<[usize; 3]>,
+}
+
+/// Names of the red, green and blue channel properties, in order of preference.
+const CHANNEL_NAMES: [[&str; 3]; 3] = [
+    ["red", "r", "diffuse_red"],
+    ["green", "g", "diffuse_green"],
+    ["blue", "b", "diffuse_blue"],
+];
+
+/// Property indices of the scalar `red green blue` channels of `el` (or `r g b`,
+/// `diffuse_red …`), if all three are there.
+fn find_rgb(el: &Element) -> Option<[usize; 3]> {
+    let mut out = [0usize; 3];
+    for (k, names) in CHANNEL_NAMES.iter().enumerate() {
+        out[k] = names.iter().find_map(|n| {
+            el.props
+                .iter()
+                .position(|p| p.name == *n && matches!(p.kind, Kind::Scalar(_)))
+        })?;
+    }
+    Some(out)
+}
+
+/// An 8-bit channel from a colour property value of type `s`: integers are taken as 0‥=255
+/// (clamped; 16-bit ones scaled by 255/65535), floats as 0‥=1 (scaled by 255 and rounded).
+/// `None` for a value that is not finite.
+fn channel(s: Scalar, v: f64) -> Option<u8> {
+    if !v.is_finite() {
+        return None;
+    }
+    let c = match s {
+        Scalar::F32 | Scalar::F64 => v * 255.0,
+        Scalar::U16 | Scalar::I16 => v * 255.0 / 65535.0,
+        _ => v,
+    };
+    Some(c.round().clamp(0.0, 255.0) as u8)
+}
+
+/// Colour channels gathered while reading one element.
+struct ColorSink {
+    /// Property indices of red, green, blue.
+    props: [usize; 3],
+    colors: Vec<[u8; 3]>,
+    current: [u8; 3],
+}
+
+impl ColorSink {
+    fn new(props: Option<[usize; 3]>) -> Option<Self> {
+        props.map(|props| Self {
+            props,
+            colors: Vec::new(),
+            current: [0; 3],
+        })
+    }
+
+    /// Record property `pi` of type `s` with value `v`; false for a non-finite channel.
+    #[inline]
+    fn take(&mut self, pi: usize, s: Scalar, v: f64) -> bool {
+        match self.props.iter().position(|&p| p == pi) {
+            Some(k) => match channel(s, v) {
+                Some(c) => {
+                    self.current[k] = c;
+                    true
+                }
+                None => false,
+            },
+            None => true,
+        }
+    }
+
+    #[inline]
+    fn wants(&self, pi: usize) -> bool {
+        self.props.contains(&pi)
+    }
+
+    fn end_item(&mut self) {
+        self.colors.push(self.current);
+    }
 }
 
 fn find_roles(h: &Header) -> Result<Roles, MeshError> {
@@ -340,6 +424,8 @@ fn find_roles(h: &Header) -> Result<Roles, MeshError> {
         xyz: [0; 3],
         face: None,
         face_list: 0,
+        vertex_rgb: None,
+        face_rgb: None,
     };
     for (ei, el) in h.elements.iter().enumerate() {
         if el.name == "vertex" {
@@ -355,8 +441,10 @@ fn find_roles(h: &Header) -> Result<Roles, MeshError> {
                 }
                 roles.xyz[k] = pi;
             }
+            roles.vertex_rgb = find_rgb(el);
         } else if el.name == "face" {
             roles.face = Some(ei);
+            roles.face_rgb = find_rgb(el);
             let pi = el
                 .props
                 .iter()
@@ -388,8 +476,29 @@ fn find_roles(h: &Header) -> Result<Roles, MeshError> {
 /// with fewer than three vertices or an index outside the vertices;
 /// [`MeshError::TooLarge`] beyond the 32-bit limits.
 pub fn read_ply_bytes(bytes: &[u8]) -> Result<Mesh, MeshError> {
+    read_ply(bytes, false).map(|(m, _)| m)
+}
+
+/// Parse a PLY file as [`read_ply_bytes`] does, and also its colours: the vertex element's
+/// `red green blue` properties (also named `r g b` or `diffuse_red …`) when it has all three,
+/// else the face element's; `None` when neither has them. Integer channels are taken as
+/// 0‥=255 (clamped; 16-bit ones scaled), float channels as 0‥=1.
+///
+/// # Errors
+/// As [`read_ply_bytes`], and [`MeshError::Parse`] for a colour value that is not finite.
+pub fn read_ply_bytes_with_colors(bytes: &[u8]) -> Result<(Mesh, Option<MeshColors>), MeshError> {
+    read_ply(bytes, true)
+}
+
+/// The PLY reader; colour properties are read only when `colors` is set (otherwise they are
+/// skipped like any other property).
+fn read_ply(bytes: &[u8], colors: bool) -> Result<(Mesh, Option<MeshColors>), MeshError> {
     let h = parse_header(bytes)?;
-    let roles = find_roles(&h)?;
+    let mut roles = find_roles(&h)?;
+    if !colors {
+        roles.vertex_rgb = None;
+        roles.face_rgb = None;
+    }
     let nv = roles.vertex.map_or(0, |v| h.elements[v].count);
     crate::mesh::check_vertex_count(nv)?;
     let data = &bytes[h.data_start..];
@@ -425,10 +534,19 @@ fn read_binary(
     data: &[u8],
     base: usize,
     big: bool,
-) -> Result<Mesh, MeshError> {
+) -> Result<(Mesh, Option<MeshColors>), MeshError> {
     let mut b = Builder::new();
+    let mut vcol = ColorSink::new(roles.vertex_rgb);
+    let mut fcol = ColorSink::new(roles.face_rgb);
     let nv = roles.vertex.map_or(0, |v| h.elements[v].count);
     let mut pos = 0usize;
+    let bad_color = |pos: usize, what: &str, item: usize| {
+        MeshError::parse(
+            MeshFormat::Ply,
+            Location::Byte(base + pos),
+            format!("{what} {item} has a colour channel that is not a finite number"),
+        )
+    };
     let trunc = |pos: usize, what: String| {
         MeshError::parse(
             MeshFormat::Ply,
@@ -473,10 +591,34 @@ fn read_binary(
                         tys[k] = s;
                     }
                 }
+                // Offset and type of each colour channel.
+                let col = vcol.as_ref().map(|sink| {
+                    sink.props.map(|pi| {
+                        let off: usize = el.props[..pi]
+                            .iter()
+                            .map(|p| match p.kind {
+                                Kind::Scalar(s) => s.size(),
+                                Kind::List { .. } => 0,
+                            })
+                            .sum();
+                        match el.props[pi].kind {
+                            Kind::Scalar(s) => (off, s),
+                            Kind::List { .. } => (off, Scalar::U8),
+                        }
+                    })
+                });
                 b.positions.reserve_exact(el.count);
-                for item in data[pos..pos + need].chunks_exact(stride) {
+                for (n, item) in data[pos..pos + need].chunks_exact(stride).enumerate() {
                     let c = |k: usize| tys[k].read_f64(&item[offs[k]..], big);
                     b.positions.push(DVec3::new(c(0), c(1), c(2)));
+                    if let (Some(sink), Some(col)) = (vcol.as_mut(), col) {
+                        let mut rgb = [0u8; 3];
+                        for (k, &(off, t)) in col.iter().enumerate() {
+                            rgb[k] = channel(t, t.read_f64(&item[off..], big))
+                                .ok_or_else(|| bad_color(pos + n * stride, "vertex", n))?;
+                        }
+                        sink.colors.push(rgb);
+                    }
                 }
             }
             pos += need;
@@ -510,6 +652,19 @@ fn read_binary(
                             .ok_or_else(|| trunc(pos, format!("{} {item}", el.name)))?;
                         if is_vertex && let Some(k) = roles.xyz.iter().position(|&x| x == pi) {
                             xyz[k] = s.read_f64(bytes, big);
+                        }
+                        let sink = if is_vertex {
+                            vcol.as_mut()
+                        } else if is_face {
+                            fcol.as_mut()
+                        } else {
+                            None
+                        };
+                        if let Some(sink) = sink
+                            && sink.wants(pi)
+                            && !sink.take(pi, s, s.read_f64(bytes, big))
+                        {
+                            return Err(bad_color(pos, &el.name, item));
                         }
                         pos += s.size();
                     }
@@ -559,13 +714,19 @@ fn read_binary(
             }
             if is_vertex {
                 b.positions.push(DVec3::from_array(xyz));
+                if let Some(sink) = vcol.as_mut() {
+                    sink.end_item();
+                }
             }
             if is_face {
                 b.end_face()?;
+                if let Some(sink) = fcol.as_mut() {
+                    sink.end_item();
+                }
             }
         }
     }
-    Ok(b.finish())
+    Ok((b.finish(), pick_colors(vcol, fcol)))
 }
 
 fn need<'a>(t: &mut Tokens<'a>, el: &Element, item: usize) -> Result<&'a [u8], MeshError> {
@@ -581,8 +742,14 @@ fn need<'a>(t: &mut Tokens<'a>, el: &Element, item: usize) -> Result<&'a [u8], M
     })
 }
 
-fn read_ascii(h: &Header, roles: &Roles, data: &[u8]) -> Result<Mesh, MeshError> {
+fn read_ascii(
+    h: &Header,
+    roles: &Roles,
+    data: &[u8],
+) -> Result<(Mesh, Option<MeshColors>), MeshError> {
     let mut b = Builder::new();
+    let mut vcol = ColorSink::new(roles.vertex_rgb);
+    let mut fcol = ColorSink::new(roles.face_rgb);
     let nv = roles.vertex.map_or(0, |v| h.elements[v].count);
     let mut t = Tokens::new(data, h.data_line);
     let err = |line: usize, m: String| MeshError::parse(MeshFormat::Ply, Location::Line(line), m);
@@ -618,6 +785,22 @@ fn read_ascii(h: &Header, roles: &Roles, data: &[u8]) -> Result<Mesh, MeshError>
                                     ),
                                 )
                             })?;
+                        }
+                        let sink = if is_vertex {
+                            vcol.as_mut()
+                        } else if is_face {
+                            fcol.as_mut()
+                        } else {
+                            None
+                        };
+                        if let Some(sink) = sink
+                            && sink.wants(pi)
+                            && !s.parse_value(tok).is_some_and(|v| sink.take(pi, s, v))
+                        {
+                            return Err(err(
+                                t.line,
+                                format!("bad colour value '{}' for {} {item}", show(tok), el.name),
+                            ));
                         }
                     }
                     Kind::List { count, item: it } => {
@@ -665,13 +848,28 @@ fn read_ascii(h: &Header, roles: &Roles, data: &[u8]) -> Result<Mesh, MeshError>
             }
             if is_vertex {
                 b.positions.push(DVec3::from_array(xyz));
+                if let Some(sink) = vcol.as_mut() {
+                    sink.end_item();
+                }
             }
             if is_face {
                 b.end_face()?;
+                if let Some(sink) = fcol.as_mut() {
+                    sink.end_item();
+                }
             }
         }
     }
-    Ok(b.finish())
+    Ok((b.finish(), pick_colors(vcol, fcol)))
+}
+
+/// The colours read: per vertex when the vertex element had them, else per face.
+fn pick_colors(vertex: Option<ColorSink>, face: Option<ColorSink>) -> Option<MeshColors> {
+    match (vertex, face) {
+        (Some(v), _) => Some(MeshColors::PerVertex(v.colors)),
+        (None, Some(f)) => Some(MeshColors::PerFace(f.colors)),
+        (None, None) => None,
+    }
 }
 
 /// Values of one extra PLY property, one per element (vertex or face).
