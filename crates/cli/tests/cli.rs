@@ -164,7 +164,17 @@ fn slice_writes_a_png_of_the_expected_size() {
     let png = dir.path().join("cut.png");
     ok(&[&"phantom", &"teapot", &"-o", &src, &"--dims", &"24,20,10"]);
     ok(&[
-        &"slice", &src, &"-o", &png, &"--axis", &"y", &"--index", &"9.5", &"--zoom", &"1",
+        &"slice",
+        &src,
+        &"-o",
+        &png,
+        &"--axis",
+        &"y",
+        &"--index",
+        &"9.5",
+        &"--zoom",
+        &"1",
+        &"--voxel-aspect",
     ]);
     let bytes = std::fs::read(&png).unwrap();
     assert_eq!(&bytes[..8], b"\x89PNG\r\n\x1a\n");
