@@ -280,7 +280,28 @@ class App {
   }
 
   // A Change: refresh what it names; time an edit from its input event to the pixels.
+  //
+  // Changes are handled concurrently, and a light one (an end of gesture) can finish before a
+  // heavy one that arrived earlier. `lastChange` follows the server's order: it is the newest
+  // change that, with every change before it, has been handled (or failed).
   async onChanged(f) {
+    const seq = this.changeSeq = (this.changeSeq || 0) + 1;
+    try {
+      await this.applyChanged(f);
+    } finally {
+      this.settled = this.settled || new Map();
+      this.settled.set(seq, f.header);
+      this.handledSeq = this.handledSeq || 0;
+      while (this.settled.has(this.handledSeq + 1)) {
+        this.handledSeq += 1;
+        this.lastChange = this.settled.get(this.handledSeq);
+        this.settled.delete(this.handledSeq);
+      }
+      this.changes = (this.changes || 0) + 1;
+    }
+  }
+
+  async applyChanged(f) {
     const h = f.header;
     const mine = h.page === this.page;
     const t0 = mine ? this.inputAt.get(h.request) : undefined;
@@ -327,8 +348,6 @@ class App {
     const errs = h.errors.map((e) => `${e.object}: ${e.message}`).join('; ');
     if (errs) this.error(errs);
     else if (h.edit !== 'end-gesture') this.status(`${h.edit} done`);
-    this.lastChange = h;
-    this.changes = (this.changes || 0) + 1;
   }
 }
 
