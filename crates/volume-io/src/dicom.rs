@@ -333,7 +333,167 @@ struct Scanned {
     frames: u32,
 }
 
+/// How much of a file [`check_declared_lengths_of_file`] reads: the elements before the
+/// pixel data of any real image fit well inside it.
+const LENGTH_SCAN_PREFIX: u64 = 64 << 20;
+
+/// Refuse a DICOM stream in which an element declares a defined value length longer than the
+/// bytes that remain (`total` is the whole stream's length; `bytes` may be a prefix of it).
+/// dicom-rs sizes a value's buffer from the declared length before reading it, so a forged
+/// length of a few GiB in a 1 KB file would be allocated and zeroed: this walk runs first.
+///
+/// It reads the preamble (when `DICM` is at 128), the explicit little-endian meta group, and
+/// the data set in the transfer syntax the meta group names (implicit or explicit VR, little
+/// or big endian), descending into sequences and items; deflated data sets are not walked
+/// (their lengths refer to the inflated stream). A stream that ends early simply ends the
+/// walk: the parser reports it. With `until_pixel_data`, the walk stops at (7FE0,0010).
+fn check_declared_lengths(
+    bytes: &[u8],
+    total: u64,
+    until_pixel_data: bool,
+    what: &str,
+) -> Result<(), VolumeError> {
+    let mut pos: usize = if bytes.len() >= 132 && &bytes[128..132] == b"DICM" {
+        132
+    } else {
+        0
+    };
+    let u16_at = |p: usize, be: bool| -> Option<u16> {
+        let b: [u8; 2] = bytes.get(p..p + 2)?.try_into().ok()?;
+        Some(if be {
+            u16::from_be_bytes(b)
+        } else {
+            u16::from_le_bytes(b)
+        })
+    };
+    let u32_at = |p: usize, be: bool| -> Option<u32> {
+        let b: [u8; 4] = bytes.get(p..p + 4)?.try_into().ok()?;
+        Some(if be {
+            u32::from_be_bytes(b)
+        } else {
+            u32::from_le_bytes(b)
+        })
+    };
+    let long_vr = |vr: &[u8]| {
+        matches!(
+            vr,
+            b"OB"
+                | b"OD"
+                | b"OF"
+                | b"OL"
+                | b"OV"
+                | b"OW"
+                | b"SQ"
+                | b"SV"
+                | b"UC"
+                | b"UN"
+                | b"UR"
+                | b"UT"
+                | b"UV"
+        )
+    };
+    let mut syntax = String::new();
+    let mut in_meta = true;
+    loop {
+        // The meta group is explicit VR little endian; the data set follows its syntax.
+        let (explicit, be) = if in_meta {
+            (true, false)
+        } else {
+            match syntax.trim_end_matches(['\0', ' ']) {
+                "1.2.840.10008.1.2" => (false, false),
+                "1.2.840.10008.1.2.2" => (true, true),
+                "1.2.840.10008.1.2.1.99" => return Ok(()),
+                _ => (true, false),
+            }
+        };
+        let (Some(group), Some(elem)) = (u16_at(pos, be), u16_at(pos + 2, be)) else {
+            return Ok(());
+        };
+        if in_meta && group != 0x0002 {
+            in_meta = false;
+            continue;
+        }
+        if until_pixel_data && (group, elem) == (0x7FE0, 0x0010) {
+            return Ok(());
+        }
+        let (len, value_at, is_sq) = if group == 0xFFFE {
+            // Item, item delimiter, sequence delimiter: a 4-byte length, no VR.
+            let Some(len) = u32_at(pos + 4, be) else {
+                return Ok(());
+            };
+            // An item's content is walked like a data set.
+            (len, pos + 8, true)
+        } else if explicit {
+            let Some(vr) = bytes.get(pos + 4..pos + 6) else {
+                return Ok(());
+            };
+            if long_vr(vr) {
+                let Some(len) = u32_at(pos + 8, be) else {
+                    return Ok(());
+                };
+                (len, pos + 12, vr == b"SQ")
+            } else {
+                let Some(len) = u16_at(pos + 6, be) else {
+                    return Ok(());
+                };
+                (u32::from(len), pos + 8, false)
+            }
+        } else {
+            let Some(len) = u32_at(pos + 4, be) else {
+                return Ok(());
+            };
+            let tag = dicom_object::Tag(group, elem);
+            let sq = StandardDataDictionary
+                .by_tag(tag)
+                .is_some_and(|e| e.vr().relaxed() == VR::SQ);
+            (len, pos + 8, sq)
+        };
+        if len == u32::MAX || is_sq {
+            // Undefined length (sequences, encapsulated pixel data) or a sequence or item of
+            // defined length: walk into it.
+            if len != u32::MAX {
+                let remain = total.saturating_sub(value_at as u64);
+                if u64::from(len) > remain {
+                    return Err(err(format!(
+                        "{what}: element ({group:04X},{elem:04X}) declares {len} bytes, but only {remain} remain"
+                    )));
+                }
+            }
+            pos = value_at;
+            continue;
+        }
+        let remain = total.saturating_sub(value_at as u64);
+        if u64::from(len) > remain {
+            return Err(err(format!(
+                "{what}: element ({group:04X},{elem:04X}) declares {len} bytes, but only {remain} remain"
+            )));
+        }
+        if in_meta && (group, elem) == (0x0002, 0x0010) {
+            let v = bytes.get(value_at..value_at + len as usize).unwrap_or(&[]);
+            syntax = String::from_utf8_lossy(v).into_owned();
+        }
+        pos = value_at + len as usize;
+    }
+}
+
+/// [`check_declared_lengths`] on the first [`LENGTH_SCAN_PREFIX`] bytes of a file.
+fn check_declared_lengths_of_file(path: &Path, until_pixel_data: bool) -> Result<(), VolumeError> {
+    use std::io::Read as _;
+    let what = path.display().to_string();
+    let file = std::fs::File::open(path).map_err(|e| err(format!("{what}: {e}")))?;
+    let total = file
+        .metadata()
+        .map_err(|e| err(format!("{what}: {e}")))?
+        .len();
+    let mut prefix = Vec::new();
+    file.take(LENGTH_SCAN_PREFIX)
+        .read_to_end(&mut prefix)
+        .map_err(|e| err(format!("{what}: {e}")))?;
+    check_declared_lengths(&prefix, total, until_pixel_data, &what)
+}
+
 fn open_header(path: &Path) -> Option<DefaultDicomObject> {
+    check_declared_lengths_of_file(path, true).ok()?;
     let mut obj = OpenFileOptions::new()
         .read_until(tags::PIXEL_DATA)
         .open_file(path)
@@ -343,6 +503,7 @@ fn open_header(path: &Path) -> Option<DefaultDicomObject> {
 }
 
 fn open_full(path: &Path) -> Result<DefaultDicomObject, VolumeError> {
+    check_declared_lengths_of_file(path, false)?;
     let mut obj = OpenFileOptions::new()
         .open_file(path)
         .map_err(|e| err(format!("{}: {e}", path.display())))?;
@@ -546,6 +707,7 @@ fn read_multiframe(path: &Path) -> Result<(AnyVolume, Header), VolumeError> {
 /// [`VolumeError::Io`] when the pixel matrix exceeds the memory budget.
 pub fn read_bytes(bytes: &[u8]) -> Result<(AnyVolume, Header), VolumeError> {
     let what = "DICOM data";
+    check_declared_lengths(bytes, bytes.len() as u64, false, what)?;
     let open = || {
         OpenFileOptions::new()
             .read_preamble(dicom_object::file::ReadPreamble::Auto)
@@ -1200,5 +1362,32 @@ mod tests {
         // The true count still reads.
         let (v, _) = read_bytes(&with_frame_count("pydicom_rtdose.dcm", "3")).unwrap();
         assert_eq!(v.geometry().dims[2], 3);
+    }
+
+    /// Fuzz `dicom` (oom-cc4cec7e…): a 998-byte file whose ImagePositionPatient declares a
+    /// 4.1 GB value made the parser allocate and zero that much (4 GB resident) before
+    /// failing. Declared lengths are now checked against the bytes that remain first.
+    #[test]
+    fn forged_value_length_is_refused_before_allocating() {
+        let path = Path::new(env!("CARGO_MANIFEST_DIR"))
+            .join("tests/corpus/peers/forged_value_length.dcm");
+        let bytes = std::fs::read(&path).unwrap();
+        let e = read_bytes(&bytes).unwrap_err().to_string();
+        assert!(e.contains("(0020,0032) declares 4110417936 bytes"), "{e}");
+        // The file path refuses it too, before the parser.
+        assert!(check_declared_lengths_of_file(&path, false).is_err());
+        assert!(check_declared_lengths_of_file(&path, true).is_err());
+        // Real files pass the walk, through to their pixel data.
+        for name in ["pydicom_rtdose.dcm", "pydicom_enhanced_ct.dcm"] {
+            let p = Path::new(env!("CARGO_MANIFEST_DIR"))
+                .join("tests/corpus/peers")
+                .join(name);
+            check_declared_lengths_of_file(&p, false).unwrap();
+            let b = std::fs::read(&p).unwrap();
+            // Cut into the pixel data: the declared length no longer fits.
+            let cut = &b[..b.len() - 10];
+            let e = check_declared_lengths(cut, cut.len() as u64, false, name).unwrap_err();
+            assert!(e.to_string().contains("(7FE0,0010)"), "{name}: {e}");
+        }
     }
 }
