@@ -26,7 +26,9 @@
 use volmorph_spline::{KnotVector, TensorBSpline};
 
 use crate::error::ctx;
-use crate::{AggregateCurve, AggregateSurface, AggregateVolume, TrivariateError, extrude, revolve};
+use crate::{
+    Aggregate, AggregateCurve, AggregateSurface, AggregateVolume, TrivariateError, extrude, revolve,
+};
 
 /// Name of the refractive-index attribute of [`grin_lens`].
 pub const GRIN_ATTRIBUTE: &str = "eta";
@@ -132,6 +134,42 @@ pub fn grin_lens(spec: &GrinLensSpec) -> Result<AggregateVolume, TrivariateError
     let curve = AggregateCurve::new(line)?.with_attribute(GRIN_ATTRIBUTE, index)?;
     let disk: AggregateSurface = revolve(&curve, [0.0; 3], [0.0, 0.0, 1.0], std::f64::consts::TAU)?;
     extrude(&disk, [0.0, 0.0, spec.thickness])
+}
+
+/// A tricubic volume of `n³` control points (clamped uniform knots on [0, 1]): a box bent and
+/// twisted along w, carrying the wavy scalar attribute `f` ≈ squared distance from
+/// (0.5, 0.45, 0.5). The fixture of the isosurface and slice benches and tests.
+///
+/// # Errors
+/// [`TrivariateError::Spline`] when `n` is below 4 (a cubic needs four control points).
+pub fn twisted_box(n: usize) -> Result<AggregateVolume, TrivariateError> {
+    let kv = KnotVector::clamped_uniform(3, n, [0.0, 1.0]).map_err(ctx("twisted box knots"))?;
+    let g = kv.greville();
+    let mut pts = Vec::with_capacity(n * n * n * 3);
+    let mut vals = Vec::with_capacity(n * n * n);
+    for &w in &g {
+        for &v in &g {
+            for &u in &g {
+                let ang = 0.6 * w;
+                let (x, y) = (u - 0.5, v - 0.5);
+                pts.extend([
+                    x * ang.cos() - y * ang.sin() + 0.15 * (3.0 * w).sin(),
+                    x * ang.sin() + y * ang.cos(),
+                    w + 0.1 * (4.0 * u).sin(),
+                ]);
+                vals.push(
+                    (u - 0.5).powi(2)
+                        + (v - 0.45).powi(2)
+                        + (w - 0.5).powi(2)
+                        + 0.02 * (9.0 * u).sin() * (7.0 * v).cos(),
+                );
+            }
+        }
+    }
+    let k = [kv.clone(), kv.clone(), kv];
+    let geo = TensorBSpline::new(k.clone(), 3, pts).map_err(ctx("twisted box geometry"))?;
+    let attr = TensorBSpline::new(k, 1, vals).map_err(ctx("twisted box attribute"))?;
+    Aggregate::new(geo)?.with_attribute("f", attr)
 }
 
 #[cfg(test)]

@@ -2,47 +2,17 @@
 //! progress the same result as without, bit for bit.
 
 use glam::DVec3;
-use volmorph_spline::{KnotVector, TensorBSpline};
 use volmorph_testkit::progress;
 use volmorph_trivariate::fit::{fit_sampled_volume, fit_sampled_volume_with};
 use volmorph_trivariate::{
-    Aggregate, AggregateVolume, PolygonizeOptions, TrivariateError, isosurface, isosurface_with,
-    slice, slice_with,
+    AggregateVolume, PolygonizeOptions, TrivariateError, isosurface, isosurface_with, slice,
+    slice_with,
 };
 use volmorph_volume::{Geometry, Volume};
 
 /// A tricubic volume of `n³` control points: a bent, twisted box with a wavy attribute.
 fn model(n: usize) -> AggregateVolume {
-    let kv = KnotVector::clamped_uniform(3, n, [0.0, 1.0]).unwrap();
-    let g = kv.greville();
-    let mut pts = Vec::with_capacity(n * n * n * 3);
-    let mut vals = Vec::with_capacity(n * n * n);
-    for &w in &g {
-        for &v in &g {
-            for &u in &g {
-                let ang = 0.6 * w;
-                let (x, y) = (u - 0.5, v - 0.5);
-                pts.extend([
-                    x * ang.cos() - y * ang.sin() + 0.15 * (3.0 * w).sin(),
-                    x * ang.sin() + y * ang.cos(),
-                    w + 0.1 * (4.0 * u).sin(),
-                ]);
-                vals.push(
-                    (u - 0.5).powi(2)
-                        + (v - 0.45).powi(2)
-                        + (w - 0.5).powi(2)
-                        + 0.02 * (9.0 * u).sin() * (7.0 * v).cos(),
-                );
-            }
-        }
-    }
-    let k = [kv.clone(), kv.clone(), kv];
-    let geo = TensorBSpline::new(k.clone(), 3, pts).unwrap();
-    let attr = TensorBSpline::new(k, 1, vals).unwrap();
-    Aggregate::new(geo)
-        .unwrap()
-        .with_attribute("f", attr)
-        .unwrap()
+    volmorph_trivariate::examples::twisted_box(n).unwrap()
 }
 
 #[test]
