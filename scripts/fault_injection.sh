@@ -24,7 +24,8 @@ fi
 
 VM="${1:-}"
 if [ -z "$VM" ]; then
-    cargo build --release -q -p volmorph-cli || exit 1
+    # The whole workspace, so dependency features match the README's builds (no rebuilds).
+    cargo build --release -q --workspace --bin volmorph || exit 1
     VM="${CARGO_TARGET_DIR:-target}/release/volmorph"
 fi
 VM="$(cd "$(dirname "$VM")" && pwd)/$(basename "$VM")"

@@ -15,6 +15,12 @@
 #                   no sanitizer; `address` also checks the dependencies' unsafe code, at
 #                   about 2x the build and run time.
 #   FUZZ_JOBS       parallel fuzzing processes per target (default 1).
+#   FUZZ_PARALLEL   targets fuzzed at the same time (default: the number of cores). Each
+#                   libFuzzer process is single-threaded, so on 2 cores two targets run side
+#                   by side in the time of one.
+#   FUZZ_BUILD_ONLY 1: install cargo-fuzz when asked (FUZZ_INSTALL=1), build every target,
+#                   and stop without fuzzing (what .ci/run starts in the background early, so
+#                   the instrumented build overlaps the sections that leave cores idle).
 #
 # Each target starts from its saved corpus (fuzz/corpus/TARGET, not in git) plus the seed
 # files of the readers' test corpora. Builds with debug assertions (overflow checks on).
@@ -48,6 +54,10 @@ targets="${*:-$all}"
 start=$(date +%s)
 cargo fuzz build "${FLAGS[@]}"
 echo "fuzz: targets built in $(($(date +%s) - start)) s"
+if [ "${FUZZ_BUILD_ONLY:-0}" = "1" ]; then
+    exit 0
+fi
+PARALLEL="${FUZZ_PARALLEL:-$(nproc)}"
 
 # Seed files per target: the test corpora of the readers and peer-written fixtures.
 seeds_of() {
@@ -61,30 +71,53 @@ seeds_of() {
     esac 2>/dev/null || true
 }
 
-ok=0
-bad=0
-for t in $targets; do
-    corpus="fuzz/corpus/$t"
+# One target: fuzz it from its corpus and write "ok" or "FAILED" into STATUS_DIR/TARGET.
+fuzz_one() {
+    local t="$1" corpus="fuzz/corpus/$1"
     mkdir -p "$corpus"
     for f in $(seeds_of "$t"); do
         [ -f "$f" ] && cp -n "$f" "$corpus/seed-$(basename "$f")"
     done
     # -jobs makes libFuzzer fork workers logging to fuzz-N.log files: only when asked for.
-    par=()
+    local par=()
     if [ "$JOBS" -gt 1 ]; then
         par=(-jobs="$JOBS" -workers="$JOBS")
     fi
     if cargo fuzz run "${FLAGS[@]}" "$t" "$corpus" -- \
         -max_total_time="$SECS" -rss_limit_mb=2048 -timeout=10 "${par[@]}" \
         -print_final_stats=1 >"fuzz/$t.log" 2>&1; then
-        ok=$((ok + 1))
+        local runs
         runs=$(sed -n 's/^stat::number_of_executed_units: *//p' "fuzz/$t.log" | tail -1)
         echo "fuzz $t: ok (${SECS} s, ${runs:-?} inputs)"
+        echo ok >"$STATUS_DIR/$t"
     else
-        bad=$((bad + 1))
         echo "fuzz $t: FAILED (see fuzz/$t.log and fuzz/artifacts/$t/)"
         tail -30 "fuzz/$t.log"
+        echo FAILED >"$STATUS_DIR/$t"
+    fi
+}
+
+STATUS_DIR=$(mktemp -d)
+trap 'rm -rf "$STATUS_DIR"' EXIT
+start=$(date +%s)
+running=0
+for t in $targets; do
+    if [ "$running" -ge "$PARALLEL" ]; then
+        wait -n || true
+        running=$((running - 1))
+    fi
+    fuzz_one "$t" &
+    running=$((running + 1))
+done
+wait
+ok=0
+bad=0
+for t in $targets; do
+    if [ "$(cat "$STATUS_DIR/$t" 2>/dev/null)" = ok ]; then
+        ok=$((ok + 1))
+    else
+        bad=$((bad + 1))
     fi
 done
-echo "fuzz: $ok passed, $bad failed"
+echo "fuzz: $ok passed, $bad failed ($PARALLEL at a time, $(($(date +%s) - start)) s)"
 [ "$bad" -eq 0 ]

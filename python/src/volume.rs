@@ -101,7 +101,8 @@ impl PyGeometry {
         if let Some(d) = direction {
             g.direction = mat3("direction", d)?;
         }
-        g.validate().map_err(|e| input(format!("geometry: {e}")))?;
+        g.validate_unbounded()
+            .map_err(|e| input(format!("geometry: {e}")))?;
         Ok(Self { inner: g })
     }
 

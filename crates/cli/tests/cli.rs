@@ -93,6 +93,52 @@ fn info_no_stats_reads_only_the_metadata_of_an_ome_zarr_store() {
     assert_eq!(again, meta);
 }
 
+/// `info --no-stats` of a declared store larger than the memory budget was refused: opening
+/// the metadata checked the whole grid against the budget, although nothing is read.
+#[test]
+fn info_no_stats_opens_a_store_larger_than_the_memory_budget() {
+    let dir = tempfile::tempdir().unwrap();
+    let mha = dir.path().join("s.mha");
+    ok(&[&"phantom", &"sphere", &"-o", &mha, &"--dims", &"20,16,12"]);
+    let z = dir.path().join("s.ome.zarr");
+    ok(&[
+        &"convert",
+        &mha,
+        &z,
+        &"--chunk",
+        &"8,8,8",
+        &"--levels",
+        &"1",
+    ]);
+    // Declare level 0 as 4096³ u8 (64 GiB), four times a 16 GiB budget; no chunk is added.
+    let zarray = z.join("0").join(".zarray");
+    let mut meta: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(&zarray).unwrap()).unwrap();
+    assert_eq!(meta["shape"], serde_json::json!([12, 16, 20]), "{meta}");
+    meta["shape"] = serde_json::json!([4096, 4096, 4096]);
+    std::fs::write(&zarray, meta.to_string()).unwrap();
+    let info: serde_json::Value = serde_json::from_str(&ok(&[
+        &"--memory-limit",
+        &"16G",
+        &"info",
+        &"--json",
+        &"--no-stats",
+        &z,
+    ]))
+    .unwrap();
+    assert_eq!(
+        info["dims"],
+        serde_json::json!([4096, 4096, 4096]),
+        "{info}"
+    );
+    // Reading it whole is still refused before allocating, naming the store.
+    let err = fails(&[&"--memory-limit", &"16G", &"info", &z]);
+    assert!(
+        err.contains("s.ome.zarr") && err.contains("memory"),
+        "{err}"
+    );
+}
+
 #[test]
 fn convert_chain_through_every_format_keeps_voxels_and_geometry() {
     let dir = tempfile::tempdir().unwrap();

@@ -540,7 +540,7 @@ impl OmeZarrReader {
             let geometry = Geometry::new(dims)
                 .with_spacing(DVec3::from_array(ds.scale))
                 .with_origin(DVec3::from_array(ds.translation));
-            geometry.validate()?;
+            geometry.validate_unbounded()?;
             Ok(Self {
                 path: path.to_path_buf(),
                 array,
@@ -755,7 +755,7 @@ impl OmeZarrWriter {
         options: &ZarrWriteOptions,
     ) -> Result<Self, VolumeError> {
         let go = || -> Result<Self, VolumeError> {
-            geometry.validate()?;
+            geometry.validate_unbounded()?;
             if geometry.direction != DMat3::IDENTITY {
                 return Err(VolumeError::Unsupported(format!(
                     "{FORMAT} has no direction matrix (OME-NGFF stores scale and translation \

@@ -70,20 +70,48 @@ impl Geometry {
         self.len() == 0
     }
 
-    /// Check that the geometry describes a usable grid: every dim ≥ 1 and the voxel count
-    /// fits in memory limits, spacing finite and > 0, origin finite, direction finite and
-    /// non-singular (|det| > 1e-12; it need not be orthonormal, as in ITK).
+    /// Check that the geometry describes a grid that can be held in memory: everything
+    /// [`validate_unbounded`](Self::validate_unbounded) checks, and a voxel count within the
+    /// memory budget ([`volmorph_io::memory_limit`], at one byte per voxel: the least any
+    /// voxel type needs).
+    ///
+    /// # Errors
+    /// [`VolumeError::Geometry`] naming the offending field; [`VolumeError::Io`] with
+    /// [`volmorph_io::IoError::Budget`] for a grid over the memory budget.
+    pub fn validate(&self) -> Result<(), VolumeError> {
+        self.validate_unbounded()?;
+        volmorph_io::checked_len(&self.dims, 1)?;
+        Ok(())
+    }
+
+    /// Check that the geometry describes a usable grid of any size: every dim ≥ 1 and the
+    /// voxel count representable (`usize`), spacing finite and > 0, origin finite, direction
+    /// finite and non-singular (|det| > 1e-12; it need not be orthonormal, as in ITK).
+    ///
+    /// This is the check for grids that are never held whole: metadata of a chunked store,
+    /// the input and output grids of an out-of-core or Dask warp (each chunk is checked
+    /// against the memory budget when it is allocated).
     ///
     /// # Errors
     /// [`VolumeError::Geometry`] naming the offending field.
-    pub fn validate(&self) -> Result<(), VolumeError> {
+    pub fn validate_unbounded(&self) -> Result<(), VolumeError> {
         if self.dims.contains(&0) {
             return Err(VolumeError::Geometry(format!(
                 "dims {:?} contain a zero",
                 self.dims
             )));
         }
-        volmorph_io::checked_len(&self.dims, 1)?;
+        if self
+            .dims
+            .iter()
+            .try_fold(1usize, |n, &d| n.checked_mul(d))
+            .is_none()
+        {
+            return Err(VolumeError::Geometry(format!(
+                "dims {:?}: the voxel count overflows",
+                self.dims
+            )));
+        }
         if !(self.spacing.is_finite() && self.spacing.min_element() > 0.0) {
             return Err(VolumeError::Geometry(format!(
                 "spacing {:?} must be finite and positive",
@@ -271,6 +299,31 @@ mod tests {
                 .is_err()
         );
         assert!(Geometry::new([usize::MAX / 2, 4, 4]).validate().is_err());
+        assert!(
+            Geometry::new([usize::MAX / 2, 4, 4])
+                .validate_unbounded()
+                .is_err()
+        );
+    }
+
+    /// `info --no-stats` of a declared 16384³ OME-Zarr store, and out-of-core warps of it,
+    /// were refused because opening the metadata checked the whole grid against the memory
+    /// budget.
+    #[test]
+    fn grids_over_the_memory_budget_are_valid_when_never_held_whole() {
+        let huge = Geometry::new([16384; 3]);
+        let err = huge.validate().unwrap_err();
+        assert!(
+            matches!(err, VolumeError::Io(volmorph_io::IoError::Budget { .. })),
+            "{err}"
+        );
+        huge.validate_unbounded().unwrap();
+        assert!(
+            Geometry::new([16384; 3])
+                .with_spacing(DVec3::new(1.0, -1.0, 1.0))
+                .validate_unbounded()
+                .is_err()
+        );
     }
 
     #[test]

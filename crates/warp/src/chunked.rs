@@ -76,10 +76,12 @@ pub fn check_chunkable(options: &ResampleOptions) -> Result<(), WarpError> {
 }
 
 fn check_chunk(output: &Geometry, chunk: IndexBox) -> Result<(), WarpError> {
-    output.validate().map_err(|source| WarpError::Geometry {
-        what: "output grid",
-        source,
-    })?;
+    output
+        .validate_unbounded()
+        .map_err(|source| WarpError::Geometry {
+            what: "output grid",
+            source,
+        })?;
     if chunk.is_empty() || (0..3).any(|a| chunk.end[a] > output.dims[a]) {
         return Err(WarpError::InvalidOption(format!(
             "chunk {:?}..{:?} is empty or outside the output grid's {:?} voxels",
@@ -120,10 +122,12 @@ pub fn chunk_indices<M: SpaceMap + ?Sized>(
     chunk: IndexBox,
 ) -> Result<Vec<DVec3>, WarpError> {
     check_chunk(output, chunk)?;
-    input.validate().map_err(|source| WarpError::Geometry {
-        what: "input grid",
-        source,
-    })?;
+    input
+        .validate_unbounded()
+        .map_err(|source| WarpError::Geometry {
+            what: "input grid",
+            source,
+        })?;
     let to_index = IndexMap::new(input);
     let cd = [0, 1, 2].map(|a| chunk.end[a] - chunk.start[a]);
     let n = cd[0] * cd[1] * cd[2];

@@ -225,3 +225,37 @@ fn chunked_pullback_refuses_cubic_and_mirror() {
     };
     assert!(chunk_preimage(&map, &g, &g, outside, &ResampleOptions::default()).is_err());
 }
+
+/// Chunks of a 16384³ store (4 TiB of u8 voxels, far over any memory budget) were refused:
+/// the whole input and output grids were checked against the budget although only one chunk
+/// and its preimage are ever held.
+#[test]
+fn chunks_of_grids_larger_than_the_memory_budget_are_warped() {
+    let huge = Geometry::new([16384; 3]).with_spacing(DVec3::splat(0.5));
+    assert!(huge.validate().is_err(), "the grid is over the budget");
+    let shift = volmorph_deform::Affine::translation(DVec3::new(3.0, -2.0, 1.5));
+    let chunk = IndexBox {
+        start: [8000, 9000, 10000],
+        end: [8016, 9008, 10004],
+    };
+    let opts = ResampleOptions::default();
+    let pre = chunk_preimage(&shift, &huge, &huge, chunk, &opts).unwrap();
+    assert!(pre.len() < 64 * 64 * 64, "{pre:?}");
+    // The chunk read through its preimage: a ramp in x, so the warped chunk is the ramp
+    // shifted by 6 voxels (3 mm at 0.5 mm).
+    let v = pull_chunk(&shift, &huge, &huge, chunk, &opts, |b| {
+        let g = chunk_geometry(&huge, b);
+        let data: Vec<f32> = (0..b.len())
+            .map(|i| (b.start[0] + i % g.dims[0]) as f32)
+            .collect();
+        Ok(AnyVolume::from(Volume::new(g, data).unwrap()))
+    })
+    .unwrap();
+    let AnyVolume::F32(v) = v else {
+        panic!("f32 in, f32 out")
+    };
+    for (i, &x) in v.data().iter().enumerate() {
+        let want = (chunk.start[0] + i % 16 + 6) as f32;
+        assert!((x - want).abs() < 1e-3, "voxel {i}: {x} against {want}");
+    }
+}
