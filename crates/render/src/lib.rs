@@ -18,7 +18,9 @@
 //! * [`Shading`] — the one shading model (Blinn–Phong, light in the camera frame, linear
 //!   light); [`shading`] also holds the sRGB conversions every renderer uses.
 //! * [`draw`] — lines, markers and rectangles for handle overlays.
-//! * [`render_triangles`] — z-buffered, shaded pictures of triangle meshes ([`ShadeStyle`]).
+//! * [`render_triangles`] — z-buffered, shaded pictures of triangle meshes ([`ShadeStyle`]);
+//!   [`render_mesh`] / [`write_mesh_png`] for a [`volmorph_mesh::Mesh`] with its colours,
+//!   through [`Orbit::mesh_camera`].
 //! * [`render_slice`] — pictures of volume slices ([`SliceStyle`]): physical aspect, a
 //!   readable default size ([`slice_picture_size`]), bilinear resampling, and orientation
 //!   labels ([`OrientationLabels`]).
@@ -37,6 +39,7 @@ pub mod dvr;
 mod error;
 mod geometry;
 mod image;
+pub mod mesh_picture;
 pub mod octree;
 pub mod picture;
 mod png_file;
@@ -60,6 +63,7 @@ pub use geometry::{Aabb, Ray};
 pub use image::{
     MAX_IMAGE_PIXELS, RgbaImage, ScalarImage, blend_over, finite_range, luma709, psnr,
 };
+pub use mesh_picture::{render_mesh, write_mesh_png};
 pub use picture::{
     CameraKind, ComparePictures, PictureMode, PictureSpec, TransferChoice, VolumePictures,
 };

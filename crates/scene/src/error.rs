@@ -63,6 +63,9 @@ pub enum SceneError {
     /// A sculpting edit failed (the sculpt object is unchanged).
     #[error(transparent)]
     Sculpt(#[from] volmorph_sculpt::SculptError),
+    /// A picture could not be drawn or written (the message names the file).
+    #[error(transparent)]
+    Render(#[from] volmorph_render::RenderError),
     /// Reading or writing a file failed.
     #[error(transparent)]
     Io(#[from] volmorph_io::IoError),

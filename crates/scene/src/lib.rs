@@ -63,6 +63,7 @@
 //! ```
 
 mod command;
+pub mod demo;
 mod derived;
 mod error;
 pub mod files;

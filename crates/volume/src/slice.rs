@@ -96,6 +96,23 @@ pub enum SlicePosition {
     Physical(f64),
 }
 
+impl SlicePosition {
+    /// The middle plane along `axis` of a grid of `dims` voxels: the index `(n − 1) / 2`
+    /// rounded down to a whole plane (the lower of the two middle planes for an even count
+    /// `n`; 0 for `n ≤ 1`), so the slice is a plane of voxels, not an interpolation.
+    ///
+    /// ```
+    /// use volmorph_volume::slice::{Axis, SlicePosition};
+    /// assert_eq!(SlicePosition::middle([8, 9, 1], Axis::X), SlicePosition::Index(3.0));
+    /// assert_eq!(SlicePosition::middle([8, 9, 1], Axis::Y), SlicePosition::Index(4.0));
+    /// assert_eq!(SlicePosition::middle([8, 9, 1], Axis::Z), SlicePosition::Index(0.0));
+    /// ```
+    #[must_use]
+    pub fn middle(dims: [usize; 3], axis: Axis) -> Self {
+        Self::Index((dims[axis.index()].saturating_sub(1) / 2) as f64)
+    }
+}
+
 /// A 2-D picture cut from a volume (see the [module documentation](self) for its layout).
 #[derive(Debug, Clone, PartialEq)]
 pub struct Slice {

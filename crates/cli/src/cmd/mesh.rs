@@ -123,9 +123,12 @@ fn render(a: &RenderArgs) -> anyhow::Result<()> {
     pb.set_message("drawing");
     let what = a.input.display().to_string();
     let orbit = crate::args::view(&a.view, a.up).context("--view")?;
-    let cam = picture::orbit_camera(&orbit, picture::bounds(&m, &what)?, a.size)?;
+    let bounds = m
+        .bounding_box()
+        .with_context(|| format!("{what} has no vertices to draw"))?;
+    let cam = orbit.mesh_camera(bounds, a.size)?;
     let colors = if a.no_colors { None } else { colors };
-    picture::write_colored_mesh_png(&a.output, &m, None, colors.as_ref(), &cam)
+    volmorph_render::write_mesh_png(&a.output, &m, None, colors.as_ref(), &cam)
         .with_context(|| format!("cannot draw {what}"))?;
     pb.finish_and_clear();
     Ok(())

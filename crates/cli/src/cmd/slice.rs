@@ -1,15 +1,14 @@
 //! `volmorph slice`: a PNG picture of an axis-aligned slice, at a readable size with the
 //! physical aspect ratio and orientation labels (drawn by `volmorph_render::render_slice`).
 
-use std::path::{Path, PathBuf};
+use std::path::PathBuf;
 
 use anyhow::Context;
 use volmorph_render::{
     Colormap, Interpolation, OrientationLabels, PixelAspect, SliceSize, SliceStyle, Window,
     render_slice, write_png_rgba,
 };
-use volmorph_volume::AnyVolume;
-use volmorph_volume::slice::{self, Axis, Slice, SlicePosition};
+use volmorph_volume::slice::{self, Axis, SlicePosition};
 use volmorph_volume_io as format;
 
 use crate::args;
@@ -82,7 +81,7 @@ pub fn run(args: &Args) -> anyhow::Result<()> {
     let pos = match (args.index, args.position) {
         (Some(i), _) => SlicePosition::Index(i),
         (None, Some(p)) => SlicePosition::Physical(p),
-        (None, None) => SlicePosition::Index(middle(&vol, args.axis)),
+        (None, None) => SlicePosition::middle(vol.geometry().dims, args.axis),
     };
     let colormap: Colormap = args.colormap.parse()?;
     let window = match &args.window {
@@ -124,34 +123,4 @@ pub fn run(args: &Args) -> anyhow::Result<()> {
     let img = render_slice(&s, &style)?;
     write_png_rgba(&args.output, &img).context("cannot write")?;
     Ok(())
-}
-
-/// Middle index along `axis`.
-pub fn middle(vol: &AnyVolume, axis: Axis) -> f64 {
-    let d = vol.geometry().dims;
-    let n = match axis {
-        Axis::X => d[0],
-        Axis::Y => d[1],
-        Axis::Z => d[2],
-    };
-    ((n - 1) / 2) as f64
-}
-
-/// Write the picture of `s` to `path` as `volmorph slice` draws it by default (physical
-/// aspect, automatic size, bilinear, orientation `labels` if given) with the automatic window
-/// unless `window` is given (used by the demo).
-pub fn write_picture(
-    path: &Path,
-    s: &Slice,
-    window: Option<Window>,
-    colormap: Colormap,
-    labels: Option<OrientationLabels>,
-) -> anyhow::Result<()> {
-    let style = SliceStyle {
-        window,
-        colormap,
-        labels,
-        ..SliceStyle::default()
-    };
-    write_png_rgba(path, &render_slice(s, &style)?).context("cannot write")
 }
