@@ -44,7 +44,7 @@ mod voxel;
 pub use error::VolumeError;
 pub use geometry::Geometry;
 pub use index_box::IndexBox;
-pub use volume::{AnyVolume, Volume};
+pub use volume::{AnyVolume, AnyVolumeRef, Volume, VolumeRef};
 pub use voxel::{Voxel, VoxelType};
 
 /// Re-export of the vector types used in the public API.
