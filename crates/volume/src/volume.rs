@@ -568,7 +568,7 @@ pub enum AnyVolumeRef<'a> {
 /// (as [`with_volume!`] for owned volumes).
 ///
 /// ```
-/// use volmorph_volume::{AnyVolume, AnyVolumeRef, Geometry, Volume, with_volume_ref};
+/// use volmorph_volume::{AnyVolume, Geometry, Volume, with_volume_ref};
 /// let any = AnyVolume::from(Volume::filled(Geometry::new([2, 2, 2]), 7u16).unwrap());
 /// let n = with_volume_ref!(any.view(), v => v.len());
 /// assert_eq!(n, 8);
@@ -647,6 +647,35 @@ mod tests {
             })
         ));
         assert!(Volume::new(Geometry::new([2, 0, 4]), Vec::<u8>::new()).is_err());
+    }
+
+    #[test]
+    fn views_borrow_the_voxels_and_check_their_length() {
+        let mut g = Geometry::new([2, 3, 4]);
+        g.spacing = DVec3::new(0.5, 1.0, 2.0);
+        let data: Vec<f32> = (0..24u8).map(f32::from).collect();
+        let owned = Volume::new(g, data.clone()).unwrap();
+        let view = VolumeRef::from_slice(g, &data).unwrap();
+        // Same voxels and geometry, read from the caller's buffer in place.
+        assert_eq!(view.data().as_ptr(), data.as_ptr());
+        assert_eq!(view, owned.view());
+        assert_eq!(view[[1, 2, 3]], owned[[1, 2, 3]]);
+        assert_eq!(view.get(1, 0, 2), owned.get(1, 0, 2));
+        assert_eq!(view.z_slice(3), owned.z_slice(3));
+        assert_eq!(view.to_owned_volume(), owned);
+        let any = AnyVolume::from(owned.clone());
+        assert_eq!(any.view(), AnyVolumeRef::from(view));
+        assert_eq!(any.view().voxel_type(), VoxelType::F32);
+        assert_eq!(any.view().to_owned_volume(), any);
+        assert!(matches!(
+            VolumeRef::from_slice(g, &data[..23]),
+            Err(VolumeError::LengthMismatch {
+                expected: 24,
+                got: 23,
+                ..
+            })
+        ));
+        assert!(VolumeRef::<u8>::from_slice(Geometry::new([0, 1, 1]), &[]).is_err());
     }
 
     #[test]
