@@ -133,18 +133,17 @@ pub fn warp_timed<'py>(
             "background must be finite, got {background}"
         )));
     }
-    let input_volume = volume.to_rust(py)?;
     let out_geometry = geometry.map_or(volume.geometry(), |g| g.inner);
     let options = WarpOptions {
         background,
         mask,
         sampled_nodes: sampled,
     };
-    let (out, seconds) = py.detach(|| {
+    let (out, seconds) = volume.with_view(py, |input_volume| {
         let t = std::time::Instant::now();
-        let out = warp_volume(&input_volume, &map.inner, &out_geometry, method, &options);
+        let out = warp_volume(input_volume, &map.inner, &out_geometry, method, &options);
         (out, t.elapsed().as_secs_f64())
-    });
+    })?;
     let out = out.map_err(|e| to_py(WarpError::new_err, &e))?;
     let v = Bound::new(py, PyVolume::from_rust(py, out.volume)?)?.into_any();
     match out.mask {

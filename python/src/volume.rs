@@ -6,9 +6,11 @@
 //! direction is a 3×3 matrix whose column `c` is the unit physical direction of index axis
 //! `c` (ITK's `GetDirection` read row by row).
 //!
-//! Copies: a `Volume` keeps the numpy array it was made from (no copy). A computation copies
-//! the voxels once into the Rust buffer it reads; results move from Rust into numpy without
-//! a copy (`PyArray::from_vec`).
+//! Copies: a `Volume` keeps the numpy array it was made from (no copy). A warp reads the
+//! numpy buffer in place ([`PyVolume::with_view`]: a readonly borrow held across the call
+//! with the GIL released); the other computations copy the voxels once into the Rust buffer
+//! they read ([`PyVolume::to_rust`]); results move from Rust into numpy without a copy
+//! (`PyArray::from_vec`).
 
 use glam::{DMat3, DVec3};
 use numpy::{
@@ -17,7 +19,9 @@ use numpy::{
 };
 use pyo3::prelude::*;
 use pyo3::types::PyAny;
-use volmorph_volume::{AnyVolume, Geometry, Volume as RVolume, with_volume};
+use volmorph_volume::{
+    AnyVolume, AnyVolumeRef, Geometry, Volume as RVolume, VolumeRef, with_volume,
+};
 
 use crate::error::{FileError, input, to_py};
 
@@ -214,7 +218,56 @@ where
     Ok(Some(AnyVolume::from(v)))
 }
 
+/// Run `f` on the voxels of `array` read in place, with the GIL released, if its dtype is
+/// `T`. The readonly borrow (which makes other Rust borrowers of the array fail rather than
+/// write) is held until `f` returns.
+fn typed_view<T, R, F>(array: &Bound<'_, PyAny>, g: Geometry, f: F) -> PyResult<Result<R, F>>
+where
+    T: Element + volmorph_volume::Voxel,
+    for<'a> AnyVolumeRef<'a>: From<VolumeRef<'a, T>>,
+    R: Send,
+    F: for<'a> FnOnce(AnyVolumeRef<'a>) -> R + Send,
+{
+    let Ok(a) = array.cast::<PyArray3<T>>() else {
+        return Ok(Err(f));
+    };
+    let r = a.readonly();
+    let s = r
+        .as_slice()
+        .map_err(|_| input("the array must be C-contiguous"))?;
+    let v = VolumeRef::from_slice(g, s).map_err(|e| input(e.to_string()))?;
+    Ok(Ok(array.py().detach(move || f(AnyVolumeRef::from(v)))))
+}
+
 impl PyVolume {
+    /// Run `f` with the GIL released on the voxels read in place from the numpy array (no
+    /// copy; see the module docs). The array stays borrowed readonly while `f` runs; Python
+    /// code of other threads must not write it meanwhile (numpy has no lock for that).
+    ///
+    /// # Errors
+    /// An `InputError` if the array changed layout since it was checked.
+    pub fn with_view<R, F>(&self, py: Python<'_>, f: F) -> PyResult<R>
+    where
+        R: Send,
+        F: for<'a> FnOnce(AnyVolumeRef<'a>) -> R + Send,
+    {
+        let a = self.array.bind(py);
+        let g = self.geometry;
+        let f = typed_view::<u8, R, F>(a, g, f)?;
+        let f = match f {
+            Ok(r) => return Ok(r),
+            Err(f) => f,
+        };
+        macro_rules! try_types {
+            ($f:ident; $($t:ty),*) => {$(
+                let $f = match typed_view::<$t, R, F>(a, g, $f)? { Ok(r) => return Ok(r), Err(f) => f };
+            )*};
+        }
+        try_types!(f; i8, u16, i16, u32, i32, f32, f64);
+        let _ = f;
+        Err(input(format!("unsupported dtype; one of {DTYPES}")))
+    }
+
     /// Check `array` (a numpy array, 3-D, C-contiguous, a supported dtype) against `g`.
     fn checked(array: &Bound<'_, PyAny>, g: Geometry) -> PyResult<Self> {
         let a = array.cast::<PyUntypedArray>().map_err(|_| {

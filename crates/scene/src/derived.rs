@@ -639,7 +639,7 @@ impl Derived {
             mask: false,
             sampled_nodes,
         };
-        let out = warp_volume(source, map, &grid, method, &options)?;
+        let out = warp_volume(source.view(), map, &grid, method, &options)?;
         self.output = Some(DerivedOutput::Volume(Arc::new(out.volume)));
         let all = IndexBox::all(grid.dims);
         Ok(Dirty {

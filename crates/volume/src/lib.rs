@@ -4,7 +4,8 @@
 //!   `physical = origin + direction · (spacing ⊙ index)`, x fastest in memory.
 //! * [`direction`] — the one tolerance and orthonormalisation (polar factor) applied to every
 //!   direction matrix that enters volmorph.
-//! * [`Volume<T>`] — a typed voxel array on a [`Geometry`]; [`AnyVolume`] when the type is only
+//! * [`Volume<T>`] — a typed voxel array on a [`Geometry`] (owned; [`VolumeRef`] borrows the
+//!   voxels from a caller's buffer); [`AnyVolume`] / [`AnyVolumeRef`] when the type is only
 //!   known at run time (files).
 //! * [`Voxel`] / [`VoxelType`] — the supported voxel types and their conversions.
 //! * [`sample`] — nearest, trilinear and prefiltered cubic B-spline interpolation at
@@ -44,7 +45,7 @@ mod voxel;
 pub use error::VolumeError;
 pub use geometry::Geometry;
 pub use index_box::IndexBox;
-pub use volume::{AnyVolume, Volume};
+pub use volume::{AnyVolume, AnyVolumeRef, Volume, VolumeRef};
 pub use voxel::{Voxel, VoxelType};
 
 /// Re-export of the vector types used in the public API.

@@ -239,8 +239,8 @@ impl<'a> Sampler<'a> {
     /// [`VolumeError::Io`] if the coefficient array would exceed
     /// the memory budget ([`volmorph_io::memory_limit`]); [`VolumeError::Unsupported`] if a foreign [`Voxel`]
     /// implementation does not have the memory layout of the type its `TYPE` names.
-    pub fn new<T: Voxel>(
-        volume: &'a Volume<T>,
+    pub fn new<T: Voxel, D: AsRef<[T]>>(
+        volume: &'a Volume<T, D>,
         interpolation: Interpolation,
         boundary: Boundary,
     ) -> Result<Self, VolumeError> {
@@ -848,7 +848,9 @@ fn prefilter_blocks<C: Voxel>(blocks: &mut [&mut [C]], prev: &mut Vec<f64>) {
 /// along i (rows, from the source voxels through a reusable `f64` line buffer), j (rows of
 /// each z-slab as blocks) and k (column tiles of the xy-planes as blocks), each pass in
 /// parallel.
-fn bspline_coefficients<T: Voxel, C: Voxel>(volume: &Volume<T>) -> Result<Vec<C>, VolumeError> {
+fn bspline_coefficients<T: Voxel, C: Voxel, D: AsRef<[T]>>(
+    volume: &Volume<T, D>,
+) -> Result<Vec<C>, VolumeError> {
     let [nx, ny, nz] = volume.dims();
     let len = volmorph_io::checked_len(&[nx, ny, nz], std::mem::size_of::<C>())?;
     let mut coef = vec![C::default(); len];

@@ -1,3 +1,5 @@
+use std::marker::PhantomData;
+
 use rayon::prelude::*;
 
 use crate::{Geometry, VolumeError, Voxel, VoxelType};
@@ -6,10 +8,61 @@ use crate::{Geometry, VolumeError, Voxel, VoxelType};
 ///
 /// Invariant: `data.len() == geometry.len()` and the geometry is valid
 /// ([`Geometry::validate`]). Data is stored x fastest (see [`Geometry::offset`]).
+///
+/// `D` is the voxel storage: an owned `Vec<T>` (the default, `Volume<T>`) or a borrowed
+/// `&[T]` ([`VolumeRef`], made with [`Volume::view`] or [`VolumeRef::from_slice`]). Every
+/// read-only operation, and every computation that only reads its input (samplers, warps),
+/// accepts either, so a caller that holds voxels in a foreign buffer (a numpy array) passes
+/// them without a copy.
 #[derive(Debug, Clone, PartialEq)]
-pub struct Volume<T> {
+pub struct Volume<T, D = Vec<T>> {
     geometry: Geometry,
-    data: Vec<T>,
+    data: D,
+    voxel: PhantomData<T>,
+}
+
+/// A volume that borrows its voxels (`&[T]`); `Copy`, and as cheap to pass as a reference.
+pub type VolumeRef<'a, T> = Volume<T, &'a [T]>;
+
+impl<T: Voxel, D: AsRef<[T]> + Copy> Copy for Volume<T, D> {}
+
+impl<'a, T: Voxel> VolumeRef<'a, T> {
+    /// Borrow `data` as the voxels of `geometry` (no copy).
+    ///
+    /// # Errors
+    /// As [`Volume::new`]: [`VolumeError::Geometry`] if the geometry is invalid,
+    /// [`VolumeError::LengthMismatch`] if `data` does not hold exactly one value per voxel.
+    pub fn from_slice(geometry: Geometry, data: &'a [T]) -> Result<Self, VolumeError> {
+        check_len(&geometry, data.len())?;
+        Ok(Self {
+            geometry,
+            data,
+            voxel: PhantomData,
+        })
+    }
+
+    /// Copy the voxels into an owned volume.
+    #[must_use]
+    pub fn to_owned_volume(&self) -> Volume<T> {
+        Volume {
+            geometry: self.geometry,
+            data: self.data.to_vec(),
+            voxel: PhantomData,
+        }
+    }
+}
+
+/// Check `geometry` and that it holds `len` voxels.
+fn check_len(geometry: &Geometry, len: usize) -> Result<(), VolumeError> {
+    geometry.validate()?;
+    if len != geometry.len() {
+        return Err(VolumeError::LengthMismatch {
+            dims: geometry.dims,
+            expected: geometry.len(),
+            got: len,
+        });
+    }
+    Ok(())
 }
 
 impl<T: Voxel> Volume<T> {
@@ -19,15 +72,12 @@ impl<T: Voxel> Volume<T> {
     /// [`VolumeError::Geometry`] if the geometry is invalid, [`VolumeError::LengthMismatch`] if
     /// `data` does not hold exactly one value per voxel.
     pub fn new(geometry: Geometry, data: Vec<T>) -> Result<Self, VolumeError> {
-        geometry.validate()?;
-        if data.len() != geometry.len() {
-            return Err(VolumeError::LengthMismatch {
-                dims: geometry.dims,
-                expected: geometry.len(),
-                got: data.len(),
-            });
-        }
-        Ok(Self { geometry, data })
+        check_len(&geometry, data.len())?;
+        Ok(Self {
+            geometry,
+            data,
+            voxel: PhantomData,
+        })
     }
 
     /// A volume with every voxel set to `value`.
@@ -39,6 +89,7 @@ impl<T: Voxel> Volume<T> {
         Ok(Self {
             data: vec![value; geometry.len()],
             geometry,
+            voxel: PhantomData,
         })
     }
 
@@ -105,10 +156,44 @@ impl<T: Voxel> Volume<T> {
             });
     }
 
+    /// Mutable voxels, x fastest.
+    pub fn data_mut(&mut self) -> &mut [T] {
+        &mut self.data
+    }
+
+    /// Take the voxel buffer.
+    #[must_use]
+    pub fn into_data(self) -> Vec<T> {
+        self.data
+    }
+
+    /// Mutable voxel `(i, j, k)`, or `None` outside the grid.
+    #[inline]
+    pub fn get_mut(&mut self, i: usize, j: usize, k: usize) -> Option<&mut T> {
+        if self.geometry.contains_index(i, j, k) {
+            let o = self.geometry.offset(i, j, k);
+            Some(&mut self.data[o])
+        } else {
+            None
+        }
+    }
+}
+
+impl<T: Voxel, D: AsRef<[T]>> Volume<T, D> {
     /// The physical geometry.
     #[must_use]
     pub fn geometry(&self) -> &Geometry {
         &self.geometry
+    }
+
+    /// A borrowed view of the voxels (no copy); what the read-only computations take.
+    #[must_use]
+    pub fn view(&self) -> VolumeRef<'_, T> {
+        Volume {
+            geometry: self.geometry,
+            data: self.data.as_ref(),
+            voxel: PhantomData,
+        }
     }
 
     /// Replace the geometry, keeping the voxels (dims must stay the same).
@@ -136,30 +221,19 @@ impl<T: Voxel> Volume<T> {
     /// Number of voxels.
     #[must_use]
     pub fn len(&self) -> usize {
-        self.data.len()
+        self.data.as_ref().len()
     }
 
     /// Always `false` for a valid volume (dims are ≥ 1); present for API symmetry.
     #[must_use]
     pub fn is_empty(&self) -> bool {
-        self.data.is_empty()
+        self.data.as_ref().is_empty()
     }
 
     /// The voxels, x fastest.
     #[must_use]
     pub fn data(&self) -> &[T] {
-        &self.data
-    }
-
-    /// Mutable voxels, x fastest.
-    pub fn data_mut(&mut self) -> &mut [T] {
-        &mut self.data
-    }
-
-    /// Take the voxel buffer.
-    #[must_use]
-    pub fn into_data(self) -> Vec<T> {
-        self.data
+        self.data.as_ref()
     }
 
     /// Voxel `(i, j, k)`, or `None` outside the grid.
@@ -168,25 +242,14 @@ impl<T: Voxel> Volume<T> {
     pub fn get(&self, i: usize, j: usize, k: usize) -> Option<T> {
         self.geometry
             .contains_index(i, j, k)
-            .then(|| self.data[self.geometry.offset(i, j, k)])
-    }
-
-    /// Mutable voxel `(i, j, k)`, or `None` outside the grid.
-    #[inline]
-    pub fn get_mut(&mut self, i: usize, j: usize, k: usize) -> Option<&mut T> {
-        if self.geometry.contains_index(i, j, k) {
-            let o = self.geometry.offset(i, j, k);
-            Some(&mut self.data[o])
-        } else {
-            None
-        }
+            .then(|| self.data.as_ref()[self.geometry.offset(i, j, k)])
     }
 
     /// The z-slice `k` as a contiguous `nx·ny` slice, or `None` if `k` is out of range.
     #[must_use]
     pub fn z_slice(&self, k: usize) -> Option<&[T]> {
         let n = self.geometry.dims[0] * self.geometry.dims[1];
-        self.data.get(k * n..(k + 1) * n)
+        self.data.as_ref().get(k * n..(k + 1) * n)
     }
 
     /// Apply `f` to every voxel, producing a volume of another type on the same geometry.
@@ -194,7 +257,8 @@ impl<T: Voxel> Volume<T> {
     pub fn map<U: Voxel, F: Fn(T) -> U + Sync>(&self, f: F) -> Volume<U> {
         Volume {
             geometry: self.geometry,
-            data: self.data.par_iter().map(|&v| f(v)).collect(),
+            data: self.data.as_ref().par_iter().map(|&v| f(v)).collect(),
+            voxel: PhantomData,
         }
     }
 
@@ -211,7 +275,7 @@ impl<T: Voxel> Volume<T> {
     }
 }
 
-impl<T: Voxel> std::ops::Index<[usize; 3]> for Volume<T> {
+impl<T: Voxel, D: AsRef<[T]>> std::ops::Index<[usize; 3]> for Volume<T, D> {
     type Output = T;
     /// # Panics
     /// If the index is outside the grid.
@@ -221,7 +285,7 @@ impl<T: Voxel> std::ops::Index<[usize; 3]> for Volume<T> {
             "voxel ({i}, {j}, {k}) outside dims {:?}",
             self.geometry.dims
         );
-        &self.data[self.geometry.offset(i, j, k)]
+        &self.data.as_ref()[self.geometry.offset(i, j, k)]
     }
 }
 
@@ -341,6 +405,12 @@ macro_rules! any_from {
 any_from!(u8 => U8, i8 => I8, u16 => U16, i16 => I16, u32 => U32, i32 => I32, f32 => F32, f64 => F64);
 
 impl AnyVolume {
+    /// A borrowed view of the voxels (no copy); see [`AnyVolumeRef`].
+    #[must_use]
+    pub fn view(&self) -> AnyVolumeRef<'_> {
+        with_volume!(self, v => AnyVolumeRef::from(v.view()))
+    }
+
     /// The run-time voxel type.
     #[must_use]
     pub fn voxel_type(&self) -> VoxelType {
@@ -476,6 +546,89 @@ impl AnyVolume {
     }
 }
 
+/// A borrowed [`AnyVolume`]: the voxels of one run-time type, read in place (`&[T]`).
+///
+/// What the read-only computations of run-time-typed volumes take (warps, isosurfaces);
+/// `&AnyVolume` converts to it without a copy ([`AnyVolume::view`], `From`), and so does a
+/// [`VolumeRef`] over a foreign buffer.
+#[derive(Debug, Clone, Copy, PartialEq)]
+#[allow(missing_docs)] // one variant per VoxelType, named alike
+pub enum AnyVolumeRef<'a> {
+    U8(VolumeRef<'a, u8>),
+    I8(VolumeRef<'a, i8>),
+    U16(VolumeRef<'a, u16>),
+    I16(VolumeRef<'a, i16>),
+    U32(VolumeRef<'a, u32>),
+    I32(VolumeRef<'a, i32>),
+    F32(VolumeRef<'a, f32>),
+    F64(VolumeRef<'a, f64>),
+}
+
+/// Run `$body` with `$v` bound to the typed [`VolumeRef`] inside an [`AnyVolumeRef`]
+/// (as [`with_volume!`] for owned volumes).
+///
+/// ```
+/// use volmorph_volume::{AnyVolume, Geometry, Volume, with_volume_ref};
+/// let any = AnyVolume::from(Volume::filled(Geometry::new([2, 2, 2]), 7u16).unwrap());
+/// let n = with_volume_ref!(any.view(), v => v.len());
+/// assert_eq!(n, 8);
+/// ```
+#[macro_export]
+macro_rules! with_volume_ref {
+    ($any:expr, $v:ident => $body:expr) => {
+        match $any {
+            $crate::AnyVolumeRef::U8($v) => $body,
+            $crate::AnyVolumeRef::I8($v) => $body,
+            $crate::AnyVolumeRef::U16($v) => $body,
+            $crate::AnyVolumeRef::I16($v) => $body,
+            $crate::AnyVolumeRef::U32($v) => $body,
+            $crate::AnyVolumeRef::I32($v) => $body,
+            $crate::AnyVolumeRef::F32($v) => $body,
+            $crate::AnyVolumeRef::F64($v) => $body,
+        }
+    };
+}
+
+macro_rules! any_ref_from {
+    ($($t:ty => $tag:ident),*) => {$(
+        impl<'a> From<VolumeRef<'a, $t>> for AnyVolumeRef<'a> {
+            fn from(v: VolumeRef<'a, $t>) -> Self { AnyVolumeRef::$tag(v) }
+        }
+    )*};
+}
+any_ref_from!(u8 => U8, i8 => I8, u16 => U16, i16 => I16, u32 => U32, i32 => I32, f32 => F32, f64 => F64);
+
+impl<'a> From<&'a AnyVolume> for AnyVolumeRef<'a> {
+    fn from(v: &'a AnyVolume) -> Self {
+        v.view()
+    }
+}
+
+impl AnyVolumeRef<'_> {
+    /// The run-time voxel type.
+    #[must_use]
+    pub fn voxel_type(&self) -> VoxelType {
+        with_volume_ref!(self, v => v_type(v))
+    }
+
+    /// The physical geometry.
+    #[must_use]
+    pub fn geometry(&self) -> &Geometry {
+        with_volume_ref!(self, v => v.geometry())
+    }
+
+    /// Copy the voxels into an owned [`AnyVolume`].
+    #[must_use]
+    pub fn to_owned_volume(&self) -> AnyVolume {
+        with_volume_ref!(self, v => AnyVolume::from(v.to_owned_volume()))
+    }
+}
+
+/// The voxel type of a typed volume.
+fn v_type<T: Voxel, D>(_: &Volume<T, D>) -> VoxelType {
+    T::TYPE
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -494,6 +647,35 @@ mod tests {
             })
         ));
         assert!(Volume::new(Geometry::new([2, 0, 4]), Vec::<u8>::new()).is_err());
+    }
+
+    #[test]
+    fn views_borrow_the_voxels_and_check_their_length() {
+        let mut g = Geometry::new([2, 3, 4]);
+        g.spacing = DVec3::new(0.5, 1.0, 2.0);
+        let data: Vec<f32> = (0..24u8).map(f32::from).collect();
+        let owned = Volume::new(g, data.clone()).unwrap();
+        let view = VolumeRef::from_slice(g, &data).unwrap();
+        // Same voxels and geometry, read from the caller's buffer in place.
+        assert_eq!(view.data().as_ptr(), data.as_ptr());
+        assert_eq!(view, owned.view());
+        assert_eq!(view[[1, 2, 3]], owned[[1, 2, 3]]);
+        assert_eq!(view.get(1, 0, 2), owned.get(1, 0, 2));
+        assert_eq!(view.z_slice(3), owned.z_slice(3));
+        assert_eq!(view.to_owned_volume(), owned);
+        let any = AnyVolume::from(owned.clone());
+        assert_eq!(any.view(), AnyVolumeRef::from(view));
+        assert_eq!(any.view().voxel_type(), VoxelType::F32);
+        assert_eq!(any.view().to_owned_volume(), any);
+        assert!(matches!(
+            VolumeRef::from_slice(g, &data[..23]),
+            Err(VolumeError::LengthMismatch {
+                expected: 24,
+                got: 23,
+                ..
+            })
+        ));
+        assert!(VolumeRef::<u8>::from_slice(Geometry::new([0, 1, 1]), &[]).is_err());
     }
 
     #[test]

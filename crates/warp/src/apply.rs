@@ -7,7 +7,7 @@ use std::str::FromStr;
 
 use volmorph_deform::{SampledMap, SpaceMap};
 use volmorph_volume::sample::Interpolation;
-use volmorph_volume::{AnyVolume, Geometry, Volume, with_volume};
+use volmorph_volume::{AnyVolume, AnyVolumeRef, Geometry, Volume, with_volume_ref};
 
 use crate::WarpError;
 use crate::inverse::{InverseReport, InverseResampleOptions, pullback_through_inverse_any_with};
@@ -178,12 +178,15 @@ pub struct WarpOutput {
 /// Warp `input` onto the grid `output` through `map` by `method` (see [`WarpMethod`] for the
 /// direction each method reads the map in).
 ///
+/// `input` is read in place: an `&AnyVolume` or any [`AnyVolumeRef`] (voxels borrowed from a
+/// foreign buffer) is accepted, and neither is copied.
+///
 /// # Errors
 /// [`WarpError::InvalidOption`] for a non-zero background with
 /// [`WarpMethod::PushforwardNearest`] or fewer than 2 sampled nodes; the errors of the
 /// underlying warp ([`WarpError::Geometry`], [`WarpError::MapOnGrid`], …).
-pub fn warp_volume(
-    input: &AnyVolume,
+pub fn warp_volume<'a>(
+    input: impl Into<AnyVolumeRef<'a>>,
     map: &dyn SpaceMap,
     output: &Geometry,
     method: WarpMethod,
@@ -205,8 +208,8 @@ pub fn warp_volume(
 ///
 /// # Errors
 /// As [`warp_volume`]; [`WarpError::Cancelled`] when `progress` asks to stop.
-pub fn warp_volume_with(
-    input: &AnyVolume,
+pub fn warp_volume_with<'a>(
+    input: impl Into<AnyVolumeRef<'a>>,
     map: &dyn SpaceMap,
     output: &Geometry,
     method: WarpMethod,
@@ -230,50 +233,51 @@ pub fn warp_volume_with(
         Some(s) => s,
         None => map,
     };
-    let mut out = WarpOutput {
-        volume: input.clone(),
-        inverse_report: None,
-        mask: None,
-        push_stats: None,
-    };
-    match method {
+    let input: AnyVolumeRef<'_> = input.into();
+    let (mut inverse_report, mut mask, mut push_stats) = (None, None, None);
+    let volume = match method {
         WarpMethod::PushforwardNearest => {
             if options.background != 0.0 {
                 return Err(WarpError::InvalidOption(
                     "a background is not used by pushforward-nearest (holes stay 0)".into(),
                 ));
             }
-            with_volume!(input, v => {
-                let r = push_forward_nearest_with(v, map, output, progress)?;
-                out.push_stats = Some(r.stats);
-                out.volume = AnyVolume::from(r.volume);
-            });
+            with_volume_ref!(input, v => {
+                let r = push_forward_nearest_with(&v, map, output, progress)?;
+                push_stats = Some(r.stats);
+                AnyVolume::from(r.volume)
+            })
         }
         WarpMethod::PushforwardAntialiased => {
             let aa = AntialiasOptions {
                 background: options.background,
                 ..AntialiasOptions::default()
             };
-            with_volume!(input, v => {
-                let r = push_forward_antialiased_with(v, map, output, &aa, progress)?;
-                out.push_stats = Some(r.stats);
-                out.volume = AnyVolume::from(r.volume);
-            });
+            with_volume_ref!(input, v => {
+                let r = push_forward_antialiased_with(&v, map, output, &aa, progress)?;
+                push_stats = Some(r.stats);
+                AnyVolume::from(r.volume)
+            })
         }
         m if m.is_inverse() => {
             let interpolation = m.interpolation().unwrap_or(Interpolation::Linear);
             let o = InverseResampleOptions::new(interpolation, options.background)
                 .with_mask(options.mask);
             let r = pullback_through_inverse_any_with(input, map, output, &o, progress)?;
-            out.volume = r.volume;
-            out.inverse_report = Some(r.report);
-            out.mask = r.mask;
+            inverse_report = Some(r.report);
+            mask = r.mask;
+            r.volume
         }
         m => {
             let interpolation = m.interpolation().unwrap_or(Interpolation::Linear);
             let o = ResampleOptions::new(interpolation, options.background);
-            out.volume = resample_any_with(input, map, output, &o, progress)?;
+            resample_any_with(input, map, output, &o, progress)?
         }
-    }
-    Ok(out)
+    };
+    Ok(WarpOutput {
+        volume,
+        inverse_report,
+        mask,
+        push_stats,
+    })
 }

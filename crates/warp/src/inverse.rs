@@ -69,7 +69,7 @@ use rayon::prelude::*;
 use volmorph_deform::SpaceMap;
 use volmorph_deform::inverse::{Lu3, PointInverse, first_order_guess, newton};
 use volmorph_volume::sample::{Boundary, Interpolation, Sampler};
-use volmorph_volume::{AnyVolume, Geometry, Volume, VolumeError, Voxel};
+use volmorph_volume::{AnyVolume, AnyVolumeRef, Geometry, Volume, VolumeError, Voxel};
 
 use crate::WarpError;
 use crate::pullback::{IndexMap, ResampleOptions, checked_output_len};
@@ -243,7 +243,7 @@ pub struct InverseResample<V> {
 /// within the memory budget ([`volmorph_io::memory_limit`]); [`WarpError::InvalidOption`] for a tolerance
 /// that is not a finite number > 0; [`WarpError::Volume`] if the sampler cannot be built.
 pub fn pullback_through_inverse<T: Voxel, U: Voxel, M: SpaceMap + ?Sized>(
-    input: &Volume<T>,
+    input: &Volume<T, impl AsRef<[T]> + Sync>,
     map: &M,
     output: &Geometry,
     options: &InverseResampleOptions,
@@ -258,7 +258,7 @@ pub fn pullback_through_inverse<T: Voxel, U: Voxel, M: SpaceMap + ?Sized>(
 /// # Errors
 /// As [`pullback_through_inverse`]; [`WarpError::Cancelled`] when `progress` asks to stop.
 pub fn pullback_through_inverse_with<T: Voxel, U: Voxel, M: SpaceMap + ?Sized>(
-    input: &Volume<T>,
+    input: &Volume<T, impl AsRef<[T]> + Sync>,
     map: &M,
     output: &Geometry,
     options: &InverseResampleOptions,
@@ -299,7 +299,7 @@ pub fn pullback_through_inverse_with<T: Voxel, U: Voxel, M: SpaceMap + ?Sized>(
 /// `mask` does not have one entry per voxel of `output`, and the errors of
 /// [`pullback_through_inverse`].
 pub fn pullback_through_inverse_into<T: Voxel, U: Voxel, M: SpaceMap + ?Sized>(
-    input: &Volume<T>,
+    input: &Volume<T, impl AsRef<[T]> + Sync>,
     map: &M,
     output: &Geometry,
     options: &InverseResampleOptions,
@@ -325,7 +325,7 @@ pub fn pullback_through_inverse_into<T: Voxel, U: Voxel, M: SpaceMap + ?Sized>(
 /// As [`pullback_through_inverse_into`]; [`WarpError::Cancelled`] when `progress` asks to
 /// stop.
 pub fn pullback_through_inverse_into_with<T: Voxel, U: Voxel, M: SpaceMap + ?Sized>(
-    input: &Volume<T>,
+    input: &Volume<T, impl AsRef<[T]> + Sync>,
     map: &M,
     output: &Geometry,
     options: &InverseResampleOptions,
@@ -421,15 +421,15 @@ pub fn pullback_through_inverse_any<M: SpaceMap + ?Sized>(
 ///
 /// # Errors
 /// As [`pullback_through_inverse_with`].
-pub fn pullback_through_inverse_any_with<M: SpaceMap + ?Sized>(
-    input: &AnyVolume,
+pub fn pullback_through_inverse_any_with<'a, M: SpaceMap + ?Sized>(
+    input: impl Into<AnyVolumeRef<'a>>,
     map: &M,
     output: &Geometry,
     options: &InverseResampleOptions,
     progress: &dyn volmorph_io::Progress,
 ) -> Result<InverseResample<AnyVolume>, WarpError> {
     fn same_type<T: Voxel, M: SpaceMap + ?Sized>(
-        v: &Volume<T>,
+        v: &Volume<T, &[T]>,
         map: &M,
         output: &Geometry,
         options: &InverseResampleOptions,
@@ -445,7 +445,7 @@ pub fn pullback_through_inverse_any_with<M: SpaceMap + ?Sized>(
             mask: r.mask,
         })
     }
-    volmorph_volume::with_volume!(input, v => same_type(v, map, output, options, progress))
+    volmorph_volume::with_volume_ref!(input.into(), v => same_type(&v, map, output, options, progress))
 }
 
 /// Everything one z-slice task needs.

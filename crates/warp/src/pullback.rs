@@ -69,7 +69,7 @@ use glam::{DMat3, DVec3};
 use rayon::prelude::*;
 use volmorph_deform::SpaceMap;
 use volmorph_volume::sample::{Boundary, Interpolation, Sampler};
-use volmorph_volume::{AnyVolume, Geometry, Volume, VolumeError, Voxel, VoxelType};
+use volmorph_volume::{AnyVolume, AnyVolumeRef, Geometry, Volume, VolumeError, Voxel, VoxelType};
 
 use crate::WarpError;
 
@@ -132,7 +132,7 @@ impl ResampleOptions {
 /// fails; [`WarpError::Volume`] if the sampler cannot be built (cubic coefficient array over
 /// the allocation limit).
 pub fn resample<T: Voxel, U: Voxel, M: SpaceMap + ?Sized>(
-    input: &Volume<T>,
+    input: &Volume<T, impl AsRef<[T]> + Sync>,
     map: &M,
     output: &Geometry,
     options: &ResampleOptions,
@@ -148,7 +148,7 @@ pub fn resample<T: Voxel, U: Voxel, M: SpaceMap + ?Sized>(
 /// As [`resample`]; [`WarpError::Cancelled`] when `progress` asks to stop (no volume is
 /// returned).
 pub fn resample_with<T: Voxel, U: Voxel, M: SpaceMap + ?Sized>(
-    input: &Volume<T>,
+    input: &Volume<T, impl AsRef<[T]> + Sync>,
     map: &M,
     output: &Geometry,
     options: &ResampleOptions,
@@ -170,7 +170,7 @@ pub fn resample_with<T: Voxel, U: Voxel, M: SpaceMap + ?Sized>(
 /// [`WarpError::Geometry`] if `output` is invalid, [`WarpError::BufferLength`] if
 /// `out.len()` is not `output`'s voxel count, and the errors of [`resample`].
 pub fn resample_into<T: Voxel, U: Voxel, M: SpaceMap + ?Sized>(
-    input: &Volume<T>,
+    input: &Volume<T, impl AsRef<[T]> + Sync>,
     map: &M,
     output: &Geometry,
     options: &ResampleOptions,
@@ -185,7 +185,7 @@ pub fn resample_into<T: Voxel, U: Voxel, M: SpaceMap + ?Sized>(
 /// # Errors
 /// As [`resample_into`]; [`WarpError::Cancelled`] when `progress` asks to stop.
 pub fn resample_into_with<T: Voxel, U: Voxel, M: SpaceMap + ?Sized>(
-    input: &Volume<T>,
+    input: &Volume<T, impl AsRef<[T]> + Sync>,
     map: &M,
     output: &Geometry,
     options: &ResampleOptions,
@@ -318,13 +318,14 @@ pub fn resample_any<M: SpaceMap + ?Sized>(
 ///
 /// # Errors
 /// As [`resample_with`].
-pub fn resample_any_with<M: SpaceMap + ?Sized>(
-    input: &AnyVolume,
+pub fn resample_any_with<'a, M: SpaceMap + ?Sized>(
+    input: impl Into<AnyVolumeRef<'a>>,
     map: &M,
     output: &Geometry,
     options: &ResampleOptions,
     progress: &dyn volmorph_io::Progress,
 ) -> Result<AnyVolume, WarpError> {
+    let input = input.into();
     resample_any_to_with(input, map, output, options, input.voxel_type(), progress)
 }
 
@@ -347,16 +348,16 @@ pub fn resample_any_to<M: SpaceMap + ?Sized>(
 ///
 /// # Errors
 /// As [`resample_with`].
-pub fn resample_any_to_with<M: SpaceMap + ?Sized>(
-    input: &AnyVolume,
+pub fn resample_any_to_with<'a, M: SpaceMap + ?Sized>(
+    input: impl Into<AnyVolumeRef<'a>>,
     map: &M,
     output: &Geometry,
     options: &ResampleOptions,
     to: VoxelType,
     progress: &dyn volmorph_io::Progress,
 ) -> Result<AnyVolume, WarpError> {
-    volmorph_volume::with_voxel_type!(to, U => volmorph_volume::with_volume!(input, v => {
-        resample_with::<_, U, M>(v, map, output, options, progress).map(AnyVolume::from)
+    volmorph_volume::with_voxel_type!(to, U => volmorph_volume::with_volume_ref!(input.into(), v => {
+        resample_with::<_, U, M>(&v, map, output, options, progress).map(AnyVolume::from)
     }))
 }
 

@@ -245,7 +245,7 @@ fn round_index(x: f64, n: usize) -> Option<usize> {
 /// [`WarpError::MapOnGrid`] if the map's grid evaluation fails,
 /// [`WarpError::Allocation`] if a working buffer cannot be allocated.
 pub fn push_forward_nearest<T: Voxel, M: SpaceMap + ?Sized>(
-    input: &Volume<T>,
+    input: &Volume<T, impl AsRef<[T]> + Sync>,
     map: &M,
     output: &Geometry,
 ) -> Result<PushForward<T>, WarpError> {
@@ -259,7 +259,7 @@ pub fn push_forward_nearest<T: Voxel, M: SpaceMap + ?Sized>(
 /// # Errors
 /// As [`push_forward_nearest`]; [`WarpError::Cancelled`] when `progress` asks to stop.
 pub fn push_forward_nearest_with<T: Voxel, M: SpaceMap + ?Sized>(
-    input: &Volume<T>,
+    input: &Volume<T, impl AsRef<[T]> + Sync>,
     map: &M,
     output: &Geometry,
     progress: &dyn volmorph_io::Progress,
@@ -343,7 +343,7 @@ pub fn push_forward_nearest_with<T: Voxel, M: SpaceMap + ?Sized>(
 /// [`WarpError::MapOnGrid`] if the map's grid evaluation fails,
 /// [`WarpError::Allocation`] if a working buffer cannot be allocated.
 pub fn push_forward_antialiased<T: Voxel, M: SpaceMap + ?Sized>(
-    input: &Volume<T>,
+    input: &Volume<T, impl AsRef<[T]> + Sync>,
     map: &M,
     output: &Geometry,
     options: &AntialiasOptions,
@@ -358,7 +358,7 @@ pub fn push_forward_antialiased<T: Voxel, M: SpaceMap + ?Sized>(
 /// # Errors
 /// As [`push_forward_antialiased`]; [`WarpError::Cancelled`] when `progress` asks to stop.
 pub fn push_forward_antialiased_with<T: Voxel, M: SpaceMap + ?Sized>(
-    input: &Volume<T>,
+    input: &Volume<T, impl AsRef<[T]> + Sync>,
     map: &M,
     output: &Geometry,
     options: &AntialiasOptions,
@@ -374,7 +374,7 @@ pub fn push_forward_antialiased_with<T: Voxel, M: SpaceMap + ?Sized>(
 /// # Errors
 /// As [`push_forward_antialiased`].
 pub fn push_forward_antialiased_f32<T: Voxel, M: SpaceMap + ?Sized>(
-    input: &Volume<T>,
+    input: &Volume<T, impl AsRef<[T]> + Sync>,
     map: &M,
     output: &Geometry,
     options: &AntialiasOptions,
@@ -388,7 +388,7 @@ pub fn push_forward_antialiased_f32<T: Voxel, M: SpaceMap + ?Sized>(
 /// # Errors
 /// As [`push_forward_antialiased_with`].
 pub fn push_forward_antialiased_f32_with<T: Voxel, M: SpaceMap + ?Sized>(
-    input: &Volume<T>,
+    input: &Volume<T, impl AsRef<[T]> + Sync>,
     map: &M,
     output: &Geometry,
     options: &AntialiasOptions,
@@ -446,7 +446,7 @@ struct SlabTally {
 
 /// Tally `[V, W]` per output voxel over all input slabs, combined in slab order.
 fn accumulate<T: Voxel, M: SpaceMap + ?Sized>(
-    input: &Volume<T>,
+    input: &Volume<T, impl AsRef<[T]> + Sync>,
     map: &M,
     output: &Geometry,
     options: &AntialiasOptions,
@@ -538,7 +538,7 @@ fn union(a: (f64, f64), b: (f64, f64)) -> (f64, f64) {
 
 /// Tally the input slab `k0..k1` into a buffer over the output z-planes it reaches.
 fn tally_slab<T: Voxel, M: SpaceMap + ?Sized>(
-    input: &Volume<T>,
+    input: &Volume<T, impl AsRef<[T]> + Sync>,
     map: &M,
     output: &Geometry,
     to_index: &ToIndex,
