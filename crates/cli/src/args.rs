@@ -100,34 +100,14 @@ pub fn view(s: &str, up: volmorph_render::UpAxis) -> anyhow::Result<volmorph_ren
     Ok(volmorph_render::Orbit::parse(s, up)?)
 }
 
-/// Picture and video extensions that look like an animation file but that volmorph cannot
-/// write; an output folder of frames with one of them is refused rather than created.
-const UNWRITABLE_ANIMATION_EXTENSIONS: [&str; 11] = [
-    "jpg", "jpeg", "tif", "tiff", "webp", "bmp", "mp4", "mov", "avi", "mkv", "webm",
-];
-
 /// Refuse `path` as a folder of frames when its extension names a picture or video format
-/// that is not written (`.jpg`, `.mp4`, …): the user meant a file, and would otherwise get a
-/// folder of that name.
+/// that is not written (`.jpg`, `.mp4`, …); see [`volmorph_render::check_frames_folder`].
 ///
 /// # Errors
 /// When the extension is one of those formats; the message names the path and the formats
 /// that are written.
 pub fn refuse_picture_extension(path: &std::path::Path) -> anyhow::Result<()> {
-    let ext = path
-        .extension()
-        .and_then(|e| e.to_str())
-        .map(str::to_ascii_lowercase);
-    if let Some(ext) = ext
-        && UNWRITABLE_ANIMATION_EXTENSIONS.contains(&ext.as_str())
-    {
-        anyhow::bail!(
-            "{}: .{ext} animations are not written; use .png or .apng (animated PNG), .gif, or a \
-             folder for numbered frames",
-            path.display()
-        );
-    }
-    Ok(())
+    Ok(volmorph_render::check_frames_folder(path)?)
 }
 
 #[cfg(test)]

@@ -54,6 +54,42 @@ pub struct CompileOptions {
     pub object: Option<String>,
 }
 
+impl CompileOptions {
+    /// Parse one parameter override `aN=VALUE` (`N` ≥ 1, the 1-based index of the model's
+    /// parameter array `a[N]`; `VALUE` a finite number; spaces around either are ignored)
+    /// into the key and value of [`CompileOptions::params`].
+    ///
+    /// ```
+    /// use volmorph_frep::CompileOptions;
+    /// assert_eq!(CompileOptions::parse_param("a2 = 0.5").unwrap(), (2, 0.5));
+    /// assert!(CompileOptions::parse_param("a0=1").is_err());
+    /// ```
+    ///
+    /// # Errors
+    /// [`FrepError::InvalidArgument`] naming `text` when there is no `=`, the name is not
+    /// `a1`, `a2`, …, or the value is not a finite number.
+    pub fn parse_param(text: &str) -> Result<(usize, f64), FrepError> {
+        let bad = |why: &str| FrepError::InvalidArgument(format!("parameter {text}: {why}"));
+        let Some((k, v)) = text.split_once('=') else {
+            return Err(bad("expected aN=VALUE, e.g. a1=0.5"));
+        };
+        let idx: usize = k
+            .trim()
+            .strip_prefix('a')
+            .and_then(|n| n.parse().ok())
+            .filter(|&n: &usize| n >= 1)
+            .ok_or_else(|| bad("the name must be a1, a2, …"))?;
+        let val: f64 = v
+            .trim()
+            .parse()
+            .map_err(|_| bad(&format!("{:?} is not a number", v.trim())))?;
+        if !val.is_finite() {
+            return Err(bad("the value must be finite"));
+        }
+        Ok((idx, val))
+    }
+}
+
 /// Parse and compile model source text.
 ///
 /// # Errors

@@ -51,6 +51,19 @@ pub struct SelectOptions {
     pub min_relative_strength: f64,
 }
 
+impl SelectOptions {
+    /// At most `count` handles at least `radius` mm apart, every other option at its
+    /// [`Default`] (8 mm border margin, Sobel-residual enhancement, 2 % minimum strength).
+    #[must_use]
+    pub fn with_count_radius(count: usize, radius: f64) -> Self {
+        Self {
+            count,
+            radius,
+            ..Self::default()
+        }
+    }
+}
+
 impl Default for SelectOptions {
     fn default() -> Self {
         Self {

@@ -27,6 +27,21 @@ pub struct SolveOptions {
     pub handle: HandleOptions,
 }
 
+impl SolveOptions {
+    /// `method` with thin-plate `smoothing` (0 interpolates; used by thin-plate methods
+    /// only), every other handle option at its [`HandleOptions::default`].
+    #[must_use]
+    pub fn with_method(method: HandleMethod, smoothing: f64) -> Self {
+        Self {
+            method,
+            handle: HandleOptions {
+                smoothing,
+                ..HandleOptions::default()
+            },
+        }
+    }
+}
+
 impl Default for SolveOptions {
     fn default() -> Self {
         Self {

@@ -61,6 +61,46 @@ impl AnimationFormat {
             _ => None,
         }
     }
+
+    /// What the format is called in messages: "animated PNG" or "animated GIF".
+    #[must_use]
+    pub fn description(self) -> &'static str {
+        match self {
+            Self::Apng => "animated PNG",
+            Self::Gif => "animated GIF",
+        }
+    }
+}
+
+/// Picture and video extensions that look like an animation file but that volmorph cannot
+/// write; an output folder of frames with one of them is refused rather than created
+/// ([`check_frames_folder`]).
+pub const UNWRITABLE_ANIMATION_EXTENSIONS: [&str; 11] = [
+    "jpg", "jpeg", "tif", "tiff", "webp", "bmp", "mp4", "mov", "avi", "mkv", "webm",
+];
+
+/// Refuse `path` as a folder of numbered frames when its extension (case-insensitive) names
+/// a picture or video format in [`UNWRITABLE_ANIMATION_EXTENSIONS`] (`.jpg`, `.mp4`, …): the
+/// user meant a file, and would otherwise get a folder of that name. Paths whose extension
+/// [`AnimationFormat::from_path`] knows are written as files and never reach this check.
+///
+/// # Errors
+/// [`RenderError::InvalidArgument`] naming the path and the formats that are written.
+pub fn check_frames_folder(path: &Path) -> Result<(), RenderError> {
+    let ext = path
+        .extension()
+        .and_then(|e| e.to_str())
+        .map(str::to_ascii_lowercase);
+    if let Some(ext) = ext
+        && UNWRITABLE_ANIMATION_EXTENSIONS.contains(&ext.as_str())
+    {
+        return Err(RenderError::invalid(format!(
+            "{}: .{ext} animations are not written; use .png or .apng (animated PNG), .gif, or a \
+             folder for numbered frames",
+            path.display()
+        )));
+    }
+    Ok(())
 }
 
 /// Write `frames` (all the same size) as one animation file at `path` in the format its

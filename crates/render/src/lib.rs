@@ -51,7 +51,10 @@ pub mod transfer;
 pub mod view;
 mod window;
 
-pub use animation::{AnimationFormat, write_animation, write_gif};
+pub use animation::{
+    AnimationFormat, UNWRITABLE_ANIMATION_EXTENSIONS, check_frames_folder, write_animation,
+    write_gif,
+};
 pub use annotate::OrientationLabels;
 pub use camera::{BOX_FILL, Camera, FIT_MARGIN, Framing, Projection};
 pub use colormap::{Colormap, LUT_SIZE, Lut, ScalarStyle, render_scalar, render_scalar_with};

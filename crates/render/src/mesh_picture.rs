@@ -9,8 +9,8 @@ use glam::DVec3;
 use volmorph_mesh::{Mesh, MeshColors};
 
 use crate::{
-    Camera, DEFAULT_FOV_Y, Framing, Orbit, Projection, RenderError, RgbaImage, ShadeStyle,
-    SurfaceColors, render_triangles_with_colors, write_png_rgba,
+    Camera, Framing, Orbit, RenderError, RgbaImage, ShadeStyle, SurfaceColors,
+    render_triangles_with_colors, write_png_rgba,
 };
 
 impl Orbit {
@@ -23,17 +23,9 @@ impl Orbit {
     pub fn mesh_camera(
         &self,
         bounds: (DVec3, DVec3),
-        (width, height): (u32, u32),
+        size: (u32, u32),
     ) -> Result<Camera, RenderError> {
-        self.camera(
-            bounds,
-            Projection::Perspective {
-                fov_y: DEFAULT_FOV_Y,
-            },
-            Framing::Box,
-            width,
-            height,
-        )
+        self.perspective_camera(bounds, Framing::Box, size)
     }
 }
 

@@ -224,6 +224,41 @@ impl Orbit {
             (width, height),
         )
     }
+
+    /// The camera of ray-cast model pictures (F-rep shapes, NURBS volumes): perspective with
+    /// [`DEFAULT_FOV_Y`], looking from this orbit at the box `[min, max]` (world units) with
+    /// its bounding sphere framed ([`Framing::Sphere`], so the model stays in frame from every
+    /// direction and the frames of a morph or turntable do not jump), for a `width × height`
+    /// picture in pixels.
+    ///
+    /// # Errors
+    /// As [`Orbit::camera`]: an empty or non-finite box, or an invalid picture size.
+    pub fn model_camera(
+        &self,
+        bounds: (DVec3, DVec3),
+        size: (u32, u32),
+    ) -> Result<Camera, RenderError> {
+        self.perspective_camera(bounds, Framing::Sphere, size)
+    }
+
+    /// This orbit's perspective camera with [`DEFAULT_FOV_Y`] on `bounds`, framed by
+    /// `framing`: the presets [`Orbit::model_camera`] and [`Orbit::mesh_camera`].
+    pub(crate) fn perspective_camera(
+        &self,
+        bounds: (DVec3, DVec3),
+        framing: Framing,
+        (width, height): (u32, u32),
+    ) -> Result<Camera, RenderError> {
+        self.camera(
+            bounds,
+            Projection::Perspective {
+                fov_y: DEFAULT_FOV_Y,
+            },
+            framing,
+            width,
+            height,
+        )
+    }
 }
 
 impl fmt::Display for Orbit {

@@ -5,7 +5,7 @@ use std::path::PathBuf;
 
 use anyhow::{Context, bail};
 use glam::DVec3;
-use volmorph_render::{DEFAULT_FOV_Y, Framing, Projection, Shading, UpAxis, write_png_rgba};
+use volmorph_render::{Shading, UpAxis, write_png_rgba};
 use volmorph_trivariate::{
     AggregateVolume, GRIN_ATTRIBUTE, GrinLensSpec, OpticsOptions, RayFan, RayTracer, RenderOptions,
     TraceOptions, TransferFunction, VolumeRenderer, grin_lens, load_volume,
@@ -126,10 +126,7 @@ pub fn run_render(a: &RenderArgs) -> anyhow::Result<()> {
     }
     let renderer = VolumeRenderer::new(&model, &tracer, &a.attribute, transfer, options)?;
     let orbit = crate::args::view(&a.view, a.up).context("--view")?;
-    let perspective = Projection::Perspective {
-        fov_y: DEFAULT_FOV_Y,
-    };
-    let cam = orbit.camera(bounds(&tracer), perspective, Framing::Sphere, w, h)?;
+    let cam = orbit.model_camera(bounds(&tracer), (w, h))?;
     let pb = progress::bar(0);
     let t0 = std::time::Instant::now();
     let img = renderer
