@@ -19,9 +19,7 @@ use numpy::{
 };
 use pyo3::prelude::*;
 use pyo3::types::PyAny;
-use volmorph_volume::{
-    AnyVolume, AnyVolumeRef, Geometry, Volume as RVolume, VolumeRef, with_volume,
-};
+use volmorph_volume::{AnyVolume, AnyVolumeRef, Geometry, VolumeRef, with_volume};
 
 use crate::error::{FileError, input, to_py};
 
@@ -193,31 +191,6 @@ pub struct PyVolume {
 /// Names of the accepted dtypes, for messages.
 const DTYPES: &str = "uint8, int8, uint16, int16, uint32, int32, float32, float64";
 
-/// Copy a typed numpy array into a Rust volume on `g` if its dtype is `T`.
-fn typed<T: Element + volmorph_volume::Voxel>(
-    array: &Bound<'_, PyAny>,
-    g: Geometry,
-) -> PyResult<Option<AnyVolume>>
-where
-    AnyVolume: From<RVolume<T>>,
-{
-    let Ok(a) = array.cast::<PyArray3<T>>() else {
-        return Ok(None);
-    };
-    let r = a.readonly();
-    let s = r
-        .as_slice()
-        .map_err(|_| input("the array must be C-contiguous"))?;
-    volmorph_io::check_elems(
-        "the volume's Rust copy",
-        s.len() as u64,
-        std::mem::size_of::<T>() as u64,
-    )
-    .map_err(|e| to_py(FileError::new_err, &e))?;
-    let v = RVolume::new(g, s.to_vec()).map_err(|e| input(e.to_string()))?;
-    Ok(Some(AnyVolume::from(v)))
-}
-
 /// Run `f` on the voxels of `array` read in place, with the GIL released, if its dtype is
 /// `T`. The readonly borrow (which makes other Rust borrowers of the array fail rather than
 /// write) is held until `f` returns.
@@ -253,18 +226,17 @@ impl PyVolume {
     {
         let a = self.array.bind(py);
         let g = self.geometry;
-        let f = typed_view::<u8, R, F>(a, g, f)?;
-        let f = match f {
-            Ok(r) => return Ok(r),
-            Err(f) => f,
-        };
+        // Each dtype in turn: `f` comes back unused when the array is not of that type.
         macro_rules! try_types {
             ($f:ident; $($t:ty),*) => {$(
-                let $f = match typed_view::<$t, R, F>(a, g, $f)? { Ok(r) => return Ok(r), Err(f) => f };
+                let $f = match typed_view::<$t, R, F>(a, g, $f)? {
+                    Ok(r) => return Ok(r),
+                    Err(f) => f,
+                };
             )*};
         }
-        try_types!(f; i8, u16, i16, u32, i32, f32, f64);
-        let _ = f;
+        try_types!(f; u8, i8, u16, i16, u32, i32, f32, f64);
+        drop(f);
         Err(input(format!("unsupported dtype; one of {DTYPES}")))
     }
 
@@ -310,21 +282,22 @@ impl PyVolume {
         })
     }
 
-    /// The voxels copied into a Rust volume (one copy; see the module docs).
+    /// The voxels copied into a Rust volume (one copy, read through [`PyVolume::with_view`];
+    /// see the module docs).
     ///
     /// # Errors
-    /// An `InputError` if the array changed layout since (it cannot: the check is kept for
-    /// arrays resized in place).
+    /// A `FileError` if the copy exceeds the memory budget; an `InputError` if the array
+    /// changed layout since it was checked.
     pub fn to_rust(&self, py: Python<'_>) -> PyResult<AnyVolume> {
-        let a = self.array.bind(py);
-        let g = self.geometry;
-        macro_rules! try_types {
-            ($($t:ty),*) => {$(
-                if let Some(v) = typed::<$t>(a, g)? { return Ok(v); }
-            )*};
-        }
-        try_types!(u8, i8, u16, i16, u32, i32, f32, f64);
-        Err(input(format!("unsupported dtype; one of {DTYPES}")))
+        self.with_view(py, |v| {
+            volmorph_io::check_elems(
+                "the volume's Rust copy",
+                v.geometry().len() as u64,
+                v.voxel_type().size() as u64,
+            )
+            .map(|_| v.to_owned_volume())
+        })?
+        .map_err(|e| to_py(FileError::new_err, &e))
     }
 
     /// Move a Rust volume into a new Volume (no copy of the voxels).

@@ -37,10 +37,8 @@ use volmorph_volume::{AnyVolume, Volume};
 use volmorph_warp::apply::{WarpMethod, WarpOptions, warp_volume};
 use volmorph_warp::jacobian::FoldingReport;
 
-use crate::teapot::{DEMO_LATTICE_COUNTS, SPOUT_TARGET};
-use crate::{
-    Command, NewObject, ObjectId, Recipe, Scene, SceneError, SurfaceMethod, TeapotSession,
-};
+use crate::teapot::{DEMO_LATTICE_COUNTS, SPOUT_TARGET, add_computed};
+use crate::{NewObject, ObjectId, Recipe, SceneError, SurfaceMethod, TeapotSession};
 
 /// Isovalue of the u8 density models (True 1992 §5.1: the object at 127 of 255,
 /// [`phantom::ISO_VALUE`]); the demo's isosurfaces are taken there.
@@ -204,18 +202,6 @@ pub const TEAPOT_FILES: [(&str, &str); 12] = [
     ),
 ];
 
-/// Apply an add command and return the new object's id, failing when its computation failed.
-fn add(scene: &mut Scene, name: &str, object: NewObject) -> Result<ObjectId, SceneError> {
-    let change = scene.apply(Command::Add {
-        name: name.into(),
-        object,
-    })?;
-    if let Some((_, e)) = change.errors.first() {
-        return Err(SceneError::invalid(format!("cannot compute {name}: {e}")));
-    }
-    Ok(change.added[0])
-}
-
 /// The marching-cubes isosurface of `volume` at [`DEMO_LEVEL`], object above the level.
 fn isosurface(volume: ObjectId) -> NewObject {
     NewObject::Derived(Recipe::Isosurface {
@@ -271,10 +257,10 @@ pub fn run_teapot_demo(
     } = session;
     stage("isosurfaces and Jacobian");
     let before = timings.time("marching cubes, before", || {
-        add(&mut scene, "surface before", isosurface(t))
+        add_computed(&mut scene, "surface before", isosurface(t))
     })?;
-    let after = add(&mut scene, "surface after", isosurface(warped))?;
-    let jacobian = add(
+    let after = add_computed(&mut scene, "surface after", isosurface(warped))?;
+    let jacobian = add_computed(
         &mut scene,
         "Jacobian",
         NewObject::Derived(Recipe::Jacobian { map: l, grid: t }),

@@ -59,16 +59,7 @@ impl TeapotSession {
     pub fn with(density: Volume<u8>, lattice: BSplineLattice) -> Result<Self, SceneError> {
         let grid = *density.geometry();
         let mut scene = Scene::new();
-        let mut add = |name: &str, object| -> Result<ObjectId, SceneError> {
-            let change = scene.apply(Command::Add {
-                name: name.into(),
-                object,
-            })?;
-            if let Some((_, e)) = change.errors.first() {
-                return Err(SceneError::Invalid(format!("cannot compute {name}: {e}")));
-            }
-            Ok(change.added[0])
-        };
+        let mut add = |name: &str, object| add_computed(&mut scene, name, object);
         let teapot = add("teapot", NewObject::Volume(AnyVolume::from(density)))?;
         let lattice = add("lattice", NewObject::Map(AnyMap::Lattice(lattice)))?;
         let warped = add(
@@ -102,4 +93,21 @@ impl TeapotSession {
             options: DragOptions::with_radius(TOOL_RADIUS),
         }
     }
+}
+
+/// Apply an add command and return the new object's id; [`SceneError::Invalid`] naming the
+/// object when its computation failed (a derived object whose engine reported an error).
+pub(crate) fn add_computed(
+    scene: &mut Scene,
+    name: &str,
+    object: NewObject,
+) -> Result<ObjectId, SceneError> {
+    let change = scene.apply(Command::Add {
+        name: name.into(),
+        object,
+    })?;
+    if let Some((_, e)) = change.errors.first() {
+        return Err(SceneError::Invalid(format!("cannot compute {name}: {e}")));
+    }
+    Ok(change.added[0])
 }
