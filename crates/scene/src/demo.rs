@@ -226,7 +226,7 @@ fn isosurface(volume: ObjectId) -> NewObject {
 /// commands (lattice, warp, isosurface, Jacobian, drag); [`SceneError::Invalid`] when a
 /// derived object cannot be computed, the isosurface is empty, or undo/redo find nothing;
 /// [`SceneError::Render`] for an invalid picture size or a picture that cannot be written;
-/// the errors of [`Scene::export`] and [`Scene::save`] naming the file.
+/// the errors of [`Scene::export`](crate::Scene::export) and [`Scene::save`](crate::Scene::save) naming the file.
 pub fn run_teapot_demo(
     out: &Path,
     size: usize,
