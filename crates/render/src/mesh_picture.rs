@@ -14,7 +14,7 @@ use crate::{
 };
 
 impl Orbit {
-    /// The camera of mesh pictures: perspective with [`DEFAULT_FOV_Y`], looking from this
+    /// The camera of mesh pictures: perspective with [`DEFAULT_FOV_Y`](crate::DEFAULT_FOV_Y), looking from this
     /// orbit at the box `[min, max]` (physical units), framed tightly ([`Framing::Box`]), for a
     /// `width × height` picture in pixels.
     ///
