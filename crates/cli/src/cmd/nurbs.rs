@@ -48,7 +48,7 @@ pub enum Command {
     /// Trace light rays bent by a refractive-index attribute (gradient-index optics) and draw
     /// their paths.
     #[command(
-        after_help = "Examples:\n  volmorph nurbs trace-optics --example grin-lens --rays 11 -o grin.png --paths grin.obj\n  volmorph nurbs trace-optics lens.json --attribute eta --direction 0,0,1 -o rays.png"
+        after_help = "Examples:\n  volmorph nurbs trace-optics --example grin-lens --rays 11 -o grin.png --paths grin.obj\n  volmorph nurbs trace-optics --example grin-lens --method rk45 --step 0.05 --tolerance 1e-10 -o grin.png\n  volmorph nurbs trace-optics --example grin-lens --method ray-equation --step 0.002 -o grin_euler.png\n  volmorph nurbs trace-optics lens.json --attribute eta --direction 0,0,1 -o rays.png\n\nThe grin-lens example also traces a probe ray at 0.02 of the radius and prints its back focal\ndistance against the exact trace (the meridional ray ODE in z, integrated by RK4 with\nRichardson extrapolation) and the paraxial formula."
     )]
     TraceOptics(nurbs_trace::TraceOpticsArgs),
     /// Write a built-in trivariate model as JSON.

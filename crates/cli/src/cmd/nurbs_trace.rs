@@ -7,9 +7,10 @@ use anyhow::{Context, bail};
 use glam::DVec3;
 use volmorph_render::{Shading, UpAxis, write_png_rgba};
 use volmorph_trivariate::{
-    AggregateVolume, GRIN_ATTRIBUTE, GrinLensSpec, OpticsOptions, RayFan, RayTracer, RenderOptions,
-    TraceOptions, TransferFunction, VolumeRenderer, grin_lens, load_volume,
-    measured_back_focal_distance, paraxial_focus, save, side_view, write_paths_obj,
+    AggregateVolume, GRIN_ATTRIBUTE, GrinLensSpec, OpticsOptions, PathMethod, RayFan, RayTracer,
+    RenderOptions, TraceOptions, TransferFunction, VolumeRenderer, exact_back_focal_distance,
+    grin_lens, load_volume, measured_back_focal_distance, paraxial_focus, save, side_view,
+    write_paths_obj,
 };
 
 use crate::progress;
@@ -80,6 +81,24 @@ pub struct TraceOpticsArgs {
     /// Also write the paths as OBJ polylines.
     #[arg(long)]
     pub paths: Option<PathBuf>,
+    /// How rays are followed inside: `rk45` (the ray equation d/ds(η dr/ds) = ∇η integrated
+    /// by Dormand–Prince 5(4) with error control), `ray-equation` (Snell's construction with
+    /// the index the ray equation implies, first order) or `snell` (the paper's literal
+    /// stepping, first order).
+    #[arg(long, default_value = "rk45", value_parser = path_method)]
+    pub method: PathMethod,
+    /// Largest step in model units (the stepwise methods' step where the index is nearly
+    /// uniform; the cap of rk45's adaptive steps). Default: model diagonal / 400.
+    #[arg(long)]
+    pub step: Option<f64>,
+    /// Local error tolerance of rk45 (relative to the model diagonal for positions and to
+    /// the index for the optical momentum).
+    #[arg(long, default_value_t = volmorph_trivariate::optics::DEFAULT_TOLERANCE)]
+    pub tolerance: f64,
+}
+
+fn path_method(s: &str) -> Result<PathMethod, String> {
+    PathMethod::parse(s).map_err(|e| e.to_string())
 }
 
 /// Arguments of `volmorph nurbs example`.
@@ -169,7 +188,19 @@ pub fn run_trace_optics(a: &TraceOpticsArgs) -> anyhow::Result<()> {
         bail!("model has no attribute {:?}", a.attribute);
     }
     let tracer = RayTracer::new(&model, TraceOptions::default()).context("cannot prepare model")?;
-    let opts = OpticsOptions::for_diagonal(tracer.diagonal());
+    let mut opts = OpticsOptions::for_diagonal(tracer.diagonal());
+    opts.method = a.method;
+    if let Some(step) = a.step {
+        if !(step.is_finite() && step > 0.0) {
+            bail!("--step {step}: must be finite and > 0");
+        }
+        opts.max_step = step;
+        opts.min_step = opts.min_step.min(step);
+    }
+    if !(a.tolerance.is_finite() && a.tolerance > 0.0) {
+        bail!("--tolerance {}: must be finite and > 0", a.tolerance);
+    }
+    opts.tolerance = a.tolerance;
     let fan = if example {
         RayFan::grin_meridian(&spec, a.rays)?
     } else {
@@ -188,10 +219,20 @@ pub fn run_trace_optics(a: &TraceOpticsArgs) -> anyhow::Result<()> {
     if let Some(p) = &a.paths {
         write_paths_obj(p, &paths).with_context(|| format!("cannot write {}", p.display()))?;
     }
+    let steps: usize = paths.iter().map(|p| p.steps).sum();
+    let rejected: usize = paths.iter().map(|p| p.rejected_steps).sum();
+    let control = match opts.method {
+        PathMethod::Rk45 => format!(
+            "tolerance {:e}, steps ≤ {:.5}: {steps} steps ({rejected} rejected)",
+            opts.tolerance, opts.max_step
+        ),
+        _ => format!("step ≤ {:.5}: {steps} steps", opts.max_step),
+    };
     say!(
-        "traced {} rays through {:?} → {}",
+        "traced {} rays through {:?} by {} ({control}) → {}",
         paths.len(),
         a.attribute,
+        opts.method.name(),
         a.output.display()
     );
     if example {
@@ -209,12 +250,22 @@ pub fn run_trace_optics(a: &TraceOpticsArgs) -> anyhow::Result<()> {
             focus.effective_focal_length
         );
         match measured {
-            Some((r0, bfd)) => say!(
-                "measured back focal distance {bfd:.5} (ray at height {r0:.4}), {:+.2} % from \
-                 paraxial",
-                100.0 * (bfd - focus.back_focal_distance) / focus.back_focal_distance
-            ),
-            None => say!("no off-axis ray left the lens; use --rays 2 or more"),
+            Some(m) => {
+                let exact = exact_back_focal_distance(&spec, m.height)?;
+                let bfd = m.back_focal_distance;
+                let rel = |x: f64| 100.0 * (bfd - x) / x;
+                say!(
+                    "measured back focal distance {bfd:.8} (ray at height {:.4}, {} steps by \
+                     {}): {:+.2e} % from the exact trace {:.8}, {:+.4} % from paraxial",
+                    m.height,
+                    m.steps,
+                    opts.method.name(),
+                    rel(exact.back_focal_distance),
+                    exact.back_focal_distance,
+                    rel(focus.back_focal_distance)
+                );
+            }
+            None => say!("the probe ray did not leave the lens towards the axis"),
         }
     }
     Ok(())
