@@ -45,18 +45,18 @@ fig martin-cohen "§5.1 / Fig. 3" "isosurface density = 127 and the planar cut y
 fig martin-cohen "§5.2" "volume rendering of the lens's index (transfer: blue → yellow as η rises) and of the teapot's fitted density (shaded)" \
     martin_cohen/render_lens.png martin_cohen/render_teapot.png
 
-# §5.4: several volumes in one picture. A second lens modelled beside the teapot (the recipe
-# with its profile and axis moved by 2.2 along x); every ray passes through both volumes and
-# their samples are composited by depth.
+# §5.4: several volumes in one picture. The lens modelled again with its axis at x = 1.4,
+# z from −0.5 to 0.5, in front of the teapot's spout side as seen from +x; every ray passes
+# through both volumes and their samples are composited by depth.
 cat > "$C/lens_moved_recipe.json" <<'JSON'
 {
   "format": "volmorph-nurbs-recipe",
   "version": 1,
   "steps": [
-    { "curve":   { "name": "profile", "degree": 1, "points": [[2.2, 0, 0], [3.2, 0, 0]] } },
+    { "curve":   { "name": "profile", "degree": 1, "points": [[1.4, 0, -0.5], [2.4, 0, -0.5]] } },
     { "attach":  { "name": "graded", "to": "profile", "attribute": "eta",
                    "spline": { "degree": 2, "values": [1.5, 1.5, 1.125] } } },
-    { "revolve": { "name": "disk", "of": "graded", "axis_point": [2.2, 0, 0],
+    { "revolve": { "name": "disk", "of": "graded", "axis_point": [1.4, 0, -0.5],
                    "axis_direction": [0, 0, 1], "angle_degrees": 360 } },
     { "extrude": { "name": "lens", "of": "disk", "direction": [0, 0, 1] } }
   ],
@@ -64,24 +64,26 @@ cat > "$C/lens_moved_recipe.json" <<'JSON'
 }
 JSON
 "$VOLMORPH" nurbs model "$C/lens_moved_recipe.json" -o "$C/lens_moved.json" >/dev/null
-"$VOLMORPH" nurbs render "$C/teapot.json" --add "$C/lens_moved.json" \
-    --attribute density --attribute eta \
-    --transfer '0:0,0,0,0;100:0,0,0,0;140:0.9,0.5,0.2,0.9;255:1,1,0.9,1' \
-    --transfer '1.1:0,0.2,0.6,0.05;1.5:0.3,0.8,1,0.6' \
-    --view 60,20 --size 360x240 -o "$C/scene_two_volumes.png" >/dev/null
-fig martin-cohen "§5.4" "two volumes in one picture (the §5.4 TraceRay loop): the fitted teapot (density) and a moved GRIN lens (index), each with its own transfer function; where one is in front of the other the rays composite both in depth order" \
-    martin_cohen/scene_two_volumes.png martin_cohen/lens_moved_recipe.json
+for view in 15 90; do
+    "$VOLMORPH" nurbs render "$C/teapot.json" --add "$C/lens_moved.json" \
+        --attribute density --attribute eta \
+        --transfer '0:0,0,0,0;100:0,0,0,0;140:0.9,0.5,0.2,0.9;255:1,1,0.9,1' \
+        --transfer '1.1:0,0.2,0.6,0.3;1.5:0.3,0.8,1,0.9' \
+        --view "$view,20" --size 300x250 -o "$C/scene_two_volumes_$view.png" >/dev/null
+done
+fig martin-cohen "§5.4" "two volumes in one picture (the §5.4 TraceRay loop), each with its own attribute and transfer function: the fitted teapot (density, orange-white) and a second GRIN lens (index, translucent blue) modelled at x = 1.4; from azimuth 15° the lens is in front and the teapot is seen through it, from 90° they stand side by side" \
+    martin_cohen/scene_two_volumes_15.png martin_cohen/scene_two_volumes_90.png martin_cohen/lens_moved_recipe.json
 
 # §5.3 / Fig. 5: rays through the graded index, and the back focal distance by each method
 # against the exact trace (the meridional ray ODE) and the paraxial formula.
 "$VOLMORPH" nurbs trace-optics --example grin-lens --rays 11 --size 640x400 \
-    -o "$C/fig5_grin_rays.png" > "$C/fig5_focus.txt"
+    -o "$C/fig5_grin_rays.png" | sed "s|$C/||" > "$C/fig5_focus.txt"
 for m in ray-equation snell; do
     "$VOLMORPH" nurbs trace-optics --example grin-lens --rays 1 --method "$m" --size 64x40 \
-        -o "$C/tmp.png" | grep -E '^(traced|measured)' >> "$C/fig5_focus.txt"
+        -o "$C/tmp.png" | grep -E '^(traced|measured)' | sed "s|$C/||" >> "$C/fig5_focus.txt"
 done
 "$VOLMORPH" nurbs trace-optics --example grin-lens --rays 1 --method ray-equation --step 0.001 \
-    --size 64x40 -o "$C/tmp.png" | grep -E '^(traced|measured)' >> "$C/fig5_focus.txt"
+    --size 64x40 -o "$C/tmp.png" | grep -E '^(traced|measured)' | sed "s|$C/||" >> "$C/fig5_focus.txt"
 fig martin-cohen "§5.3 / Fig. 5" "11 parallel rays bent by the GRIN lens (n = 1.5(1 − 0.25 r²)) and meeting near the focus; the text lists the probe ray's back focal distance by rk45 (default), the ray-equation form (default step and 0.001) and the paper's literal Snell stepping, against the exact trace and the paraxial value" \
     martin_cohen/fig5_grin_rays.png martin_cohen/fig5_focus.txt
 

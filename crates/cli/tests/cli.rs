@@ -2110,8 +2110,14 @@ fn nurbs_trace_optics_grin_lens_reports_focal_length_and_writes_paths() {
     );
     // The measured distance is printed with its deviations from the exact trace and from the
     // paraxial formula (spherical aberration at the probe height: about −0.013 %).
-    assert!(percent_before(&text, "% from the exact trace").abs() < 0.05, "{text}");
-    assert!(percent_before(&text, "% from paraxial").abs() < 2.0, "{text}");
+    assert!(
+        percent_before(&text, "% from the exact trace").abs() < 0.05,
+        "{text}"
+    );
+    assert!(
+        percent_before(&text, "% from paraxial").abs() < 2.0,
+        "{text}"
+    );
     let img = volmorph_render_png_size(&png);
     assert_eq!(img, (120, 80));
     let obj_text = std::fs::read_to_string(&obj).unwrap();
@@ -2461,25 +2467,49 @@ fn nurbs_trace_optics_methods_report_their_control_and_accuracy() {
     // Loose tolerance, no step cap: few steps, still close.
     let text = run(&["--step", "10", "--tolerance", "1e-6"]);
     assert!(text.contains("tolerance 1e-6"), "{text}");
-    assert!(percent_before(&text, "% from the exact trace").abs() < 0.05, "{text}");
+    assert!(
+        percent_before(&text, "% from the exact trace").abs() < 0.05,
+        "{text}"
+    );
     // The first-order forms, with their step.
     let text = run(&["--method", "ray-equation", "--step", "0.005"]);
     assert!(text.contains("by ray-equation (step ≤ 0.00500"), "{text}");
     let re = percent_before(&text, "% from the exact trace");
     assert!(re > 0.05 && re < 0.3, "{text}");
     let text = run(&["--method", "snell"]);
-    assert!(percent_before(&text, "% from the exact trace") > 5.0, "{text}");
+    assert!(
+        percent_before(&text, "% from the exact trace") > 5.0,
+        "{text}"
+    );
     // An unknown method is a usage error (clap: exit status 2) naming the choices.
-    let out = volmorph(&[&"nurbs", &"trace-optics", &"--example", &"grin-lens", &"--method", &"euler", &"-o", &png]);
+    let out = volmorph(&[
+        &"nurbs",
+        &"trace-optics",
+        &"--example",
+        &"grin-lens",
+        &"--method",
+        &"euler",
+        &"-o",
+        &png,
+    ]);
     let err = String::from_utf8_lossy(&out.stderr);
-    assert!(!out.status.success() && err.contains("snell, ray-equation or rk45"), "{err}");
+    assert!(
+        !out.status.success() && err.contains("snell, ray-equation or rk45"),
+        "{err}"
+    );
     for bad in [
         ["--tolerance", "0"],
         ["--step", "0"],
         ["--tolerance", "nan"],
     ] {
-        let mut args: Vec<&dyn AsRef<std::ffi::OsStr>> =
-            vec![&"nurbs", &"trace-optics", &"--example", &"grin-lens", &"-o", &png];
+        let mut args: Vec<&dyn AsRef<std::ffi::OsStr>> = vec![
+            &"nurbs",
+            &"trace-optics",
+            &"--example",
+            &"grin-lens",
+            &"-o",
+            &png,
+        ];
         args.push(&bad[0]);
         args.push(&bad[1]);
         let err = fails(&args);
@@ -2497,13 +2527,23 @@ fn nurbs_model_builds_the_grin_lens_example_from_its_recipe() {
     ok(&[&"nurbs", &"example", &"grin-lens", &"-o", &lens]);
     ok(&[&"nurbs", &"example", &"grin-lens-recipe", &"-o", &recipe]);
     let text = ok(&[&"nurbs", &"model", &recipe, &"-o", &built]);
-    assert!(text.contains("built a volume with attributes [\"eta\"]"), "{text}");
-    assert_eq!(std::fs::read(&lens).unwrap(), std::fs::read(&built).unwrap());
+    assert!(
+        text.contains("built a volume with attributes [\"eta\"]"),
+        "{text}"
+    );
+    assert_eq!(
+        std::fs::read(&lens).unwrap(),
+        std::fs::read(&built).unwrap()
+    );
     // The recipe documented in the README builds the same file.
-    let documented = Path::new(env!("CARGO_MANIFEST_DIR")).join("../../docs/nurbs/grin_lens_recipe.json");
+    let documented =
+        Path::new(env!("CARGO_MANIFEST_DIR")).join("../../docs/nurbs/grin_lens_recipe.json");
     let built2 = d.join("built2.json");
     ok(&[&"nurbs", &"model", &documented, &"-o", &built2]);
-    assert_eq!(std::fs::read(&lens).unwrap(), std::fs::read(&built2).unwrap());
+    assert_eq!(
+        std::fs::read(&lens).unwrap(),
+        std::fs::read(&built2).unwrap()
+    );
     // A bad field: the message names the file and the JSON path; nothing is written.
     let bad = d.join("bad_recipe.json");
     let text = std::fs::read_to_string(&recipe)
@@ -2513,7 +2553,10 @@ fn nurbs_model_builds_the_grin_lens_example_from_its_recipe() {
     std::fs::write(&bad, text).unwrap();
     let out = d.join("never.json");
     let err = fails(&[&"nurbs", &"model", &bad, &"-o", &out]);
-    assert!(err.contains("bad_recipe.json") && err.contains("steps[2].revolve.angle_degrees"), "{err}");
+    assert!(
+        err.contains("bad_recipe.json") && err.contains("steps[2].revolve.angle_degrees"),
+        "{err}"
+    );
     std::fs::write(&bad, r#"{"format": "volmorph-nurbs-recipe", "version": 1, "steps": [{"curve": {"name": "p", "degree": "x", "points": []}}], "result": "p"}"#).unwrap();
     let err = fails(&[&"nurbs", &"model", &bad, &"-o", &out]);
     assert!(err.contains("steps[0].curve.degree"), "{err}");
@@ -2591,10 +2634,24 @@ fn nurbs_render_composites_several_models_in_one_picture() {
     assert_eq!(volmorph_render_png_size(&ab), (40, 24));
     // Attribute or transfer lists that do not match the models are refused.
     let err = fails(&[
-        &"nurbs", &"render", &a, &"--add", &b, &"--add", &a, &"--attribute", &"d", &"--attribute",
-        &"d", &"-o", &ab,
+        &"nurbs",
+        &"render",
+        &a,
+        &"--add",
+        &b,
+        &"--add",
+        &a,
+        &"--attribute",
+        &"d",
+        &"--attribute",
+        &"d",
+        &"-o",
+        &ab,
     ]);
-    assert!(err.contains("--attribute given 2 times for 3 models"), "{err}");
+    assert!(
+        err.contains("--attribute given 2 times for 3 models"),
+        "{err}"
+    );
 }
 
 #[test]
@@ -2609,7 +2666,11 @@ fn feng_forward_mapping_warps_the_mesh_and_the_identity_forms_do_not() {
             .lines()
             .filter_map(|l| l.strip_prefix("v "))
             .map(|l| {
-                let v: Vec<f64> = l.split_whitespace().take(3).map(|t| t.parse().unwrap()).collect();
+                let v: Vec<f64> = l
+                    .split_whitespace()
+                    .take(3)
+                    .map(|t| t.parse().unwrap())
+                    .collect();
                 [v[0], v[1], v[2]]
             })
             .collect()
@@ -2617,8 +2678,18 @@ fn feng_forward_mapping_warps_the_mesh_and_the_identity_forms_do_not() {
     let run = |form: &str| {
         let out = d.join(format!("{form}.obj"));
         ok(&[
-            &"ffd", &cube, &"--init", &form, &"--degree", &"2,2,1", &"--size", &"4,4,2", &"--mode",
-            &"uniform:2", &"-o", &out,
+            &"ffd",
+            &cube,
+            &"--init",
+            &form,
+            &"--degree",
+            &"2,2,1",
+            &"--size",
+            &"4,4,2",
+            &"--mode",
+            &"uniform:2",
+            &"-o",
+            &out,
         ]);
         verts(&out)
     };
@@ -2644,18 +2715,46 @@ fn feng_forward_mapping_warps_the_mesh_and_the_identity_forms_do_not() {
     // lattice init says which form it wrote; --init and --lattice exclude each other.
     let lat = d.join("fwd.json");
     let text = ok(&[
-        &"lattice", &"init", &"--mesh", &cube, &"--form", &"forward", &"--degree", &"2,2,1",
-        &"--size", &"4,4,2", &"-o", &lat,
+        &"lattice",
+        &"init",
+        &"--mesh",
+        &cube,
+        &"--form",
+        &"forward",
+        &"--degree",
+        &"2,2,1",
+        &"--size",
+        &"4,4,2",
+        &"-o",
+        &lat,
     ]);
     assert!(text.contains("forward-mapped (not the identity"), "{text}");
     let out = d.join("x.obj");
-    let o = volmorph(&[&"ffd", &cube, &"--lattice", &lat, &"--init", &"forward", &"-o", &out]);
+    let o = volmorph(&[
+        &"ffd",
+        &cube,
+        &"--lattice",
+        &lat,
+        &"--init",
+        &"forward",
+        &"-o",
+        &out,
+    ]);
     let err = String::from_utf8_lossy(&o.stderr);
     assert!(!o.status.success() && err.contains("--init"), "{err}");
     assert!(!out.exists());
     // The lattice file gives the same warp as --init forward.
     let via_file = d.join("via_file.obj");
-    ok(&[&"ffd", &cube, &"--lattice", &lat, &"--mode", &"uniform:2", &"-o", &via_file]);
+    ok(&[
+        &"ffd",
+        &cube,
+        &"--lattice",
+        &lat,
+        &"--mode",
+        &"uniform:2",
+        &"-o",
+        &via_file,
+    ]);
     assert_eq!(verts(&via_file), warped);
 }
 
@@ -2668,8 +2767,16 @@ fn tps_kernels_interpolate_differ_and_round_trip_through_map_json() {
     for i in 0..3 {
         for j in 0..3 {
             for k in 0..2 {
-                let p = [f64::from(i), f64::from(j), f64::from(k) + 0.1 * f64::from(i * j)];
-                let q = [p[0] + 0.1 * p[1], p[1] - 0.05 * p[2] * p[0], p[2] + 0.2 * (p[0] - 1.0).powi(2)];
+                let p = [
+                    f64::from(i),
+                    f64::from(j),
+                    f64::from(k) + 0.1 * f64::from(i * j),
+                ];
+                let q = [
+                    p[0] + 0.1 * p[1],
+                    p[1] - 0.05 * p[2] * p[0],
+                    p[2] + 0.2 * (p[0] - 1.0).powi(2),
+                ];
                 pairs.push((p, q));
             }
         }
@@ -2681,18 +2788,34 @@ fn tps_kernels_interpolate_differ_and_round_trip_through_map_json() {
         .collect();
     std::fs::write(&h, format!(r#"{{"points": [{}]}}"#, json.join(", "))).unwrap();
     let src = d.join("src.txt");
-    let text: String = pairs.iter().map(|(p, _)| format!("{} {} {}\n", p[0], p[1], p[2])).collect();
+    let text: String = pairs
+        .iter()
+        .map(|(p, _)| format!("{} {} {}\n", p[0], p[1], p[2]))
+        .collect();
     std::fs::write(&src, text).unwrap();
     let probe = d.join("probe.txt");
     std::fs::write(&probe, "0.5 0.5 0.5\n1.7 0.2 1.3\n2.5 2.5 -0.5\n").unwrap();
     let read = |p: &Path| -> Vec<f64> {
-        std::fs::read_to_string(p).unwrap().split_whitespace().map(|t| t.parse().unwrap()).collect()
+        std::fs::read_to_string(p)
+            .unwrap()
+            .split_whitespace()
+            .map(|t| t.parse().unwrap())
+            .collect()
     };
     let apply = |kernel: &str, pts: &Path, name: &str| {
         let out = d.join(name);
         ok(&[
-            &"handles", &"apply", &pts, &"--handles", &h, &"--method", &"tps", &"--kernel", &kernel,
-            &"-o", &out,
+            &"handles",
+            &"apply",
+            &pts,
+            &"--handles",
+            &h,
+            &"--method",
+            &"tps",
+            &"--kernel",
+            &kernel,
+            &"-o",
+            &out,
         ]);
         read(&out)
     };
@@ -2705,7 +2828,11 @@ fn tps_kernels_interpolate_differ_and_round_trip_through_map_json() {
     }
     let pr = apply("r", &probe, "pr.txt");
     let pl = apply("r2logr", &probe, "pl.txt");
-    let diff = pr.iter().zip(&pl).map(|(a, b)| (a - b).abs()).fold(0.0, f64::max);
+    let diff = pr
+        .iter()
+        .zip(&pl)
+        .map(|(a, b)| (a - b).abs())
+        .fold(0.0, f64::max);
     assert!(diff > 1e-3, "{diff}");
     // The kernel is a field of the thin-plate map JSON: a file written by hand with it maps
     // like the handles.
@@ -2726,17 +2853,39 @@ fn tps_kernels_interpolate_differ_and_round_trip_through_map_json() {
     for (a, b) in read(&out).iter().zip(&pl) {
         assert!((a - b).abs() < 1e-12, "{a} vs {b}");
     }
-    let bad = std::fs::read_to_string(&map).unwrap().replace("r2logr", "r3");
+    let bad = std::fs::read_to_string(&map)
+        .unwrap()
+        .replace("r2logr", "r3");
     std::fs::write(&map, bad).unwrap();
     let err = fails(&[&"map", &"apply", &map, &probe, &"-o", &out]);
     assert!(err.contains("r3"), "{err}");
     // The kernel choice belongs to tps; mls2d (2-D) takes only r² log r.
     let err = fails(&[
-        &"handles", &"apply", &probe, &"--handles", &h, &"--method", &"rigid", &"--kernel",
-        &"r2logr", &"-o", &out,
+        &"handles",
+        &"apply",
+        &probe,
+        &"--handles",
+        &h,
+        &"--method",
+        &"rigid",
+        &"--kernel",
+        &"r2logr",
+        &"-o",
+        &out,
     ]);
     assert!(err.contains("--kernel"), "{err}");
     let png = d.join("p.png");
-    let err = fails(&[&"mls2d", &png, &"--handles", &h, &"--method", &"tps", &"--kernel", &"r", &"-o", &out]);
+    let err = fails(&[
+        &"mls2d",
+        &png,
+        &"--handles",
+        &h,
+        &"--method",
+        &"tps",
+        &"--kernel",
+        &"r",
+        &"-o",
+        &out,
+    ]);
     assert!(err.contains("r² log r"), "{err}");
 }
