@@ -503,12 +503,16 @@ impl Medium<'_> {
         let tol = self.options.tolerance;
         let scale_r = tol * self.tracer.diagonal();
         let scale_p = tol * last.eta.min(s.eta);
-        let mut err: f64 = 0.0;
-        for c in 0..6 {
-            let e = h * (0..7).map(|j| DP_E[j] * ks[j][c]).sum::<f64>();
-            let sc = if c < 3 { scale_r } else { scale_p };
-            err = err.max(e.abs() / sc);
+        let mut e = [0.0; 6];
+        for (k, w) in ks.iter().zip(DP_E) {
+            for (ec, kc) in e.iter_mut().zip(k) {
+                *ec += w * kc;
+            }
         }
+        let err = e.iter().enumerate().fold(0.0f64, |m, (c, ec)| {
+            let sc = if c < 3 { scale_r } else { scale_p };
+            m.max((h * ec).abs() / sc)
+        });
         Ok(Some(DpStep {
             y: ys,
             sample: last,

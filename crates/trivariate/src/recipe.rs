@@ -6,7 +6,7 @@
 //! `result` is the model. This is §3's modeling hierarchy written down: a geometry curve, an
 //! attribute combined with it into an aggregate curve, the aggregate swept into a surface and
 //! the surface into a volume, every attribute carried along (ruled with itself by a
-//! one-operand operator, ruled across by [`rule`](crate::rule)), and attributes edited
+//! one-operand operator, ruled across by [`rule`](crate::rule())), and attributes edited
 //! explicitly at any level.
 //!
 //! # Format (version 1)

@@ -29,6 +29,10 @@
 //!    surfaces of rising attribute face the regions of lower value. [`VolumeRenderer::render_ray`]
 //!    has no camera and is never shaded.
 //!
+//! [`SceneRenderer`] renders several volumes in one picture (§5.4): each ray is walked
+//! through every volume as above and the samples of all of them are composited front to back
+//! by depth.
+//!
 //! Colours are linear RGB throughout: transfer-function colours are linear, compositing is in
 //! linear light, and [`VolumeRenderer::render_image`] encodes pixels to sRGB.
 //! [`RayColor::opacity`] is `1 − T`; [`RayColor::color`] is `C_acc` (premultiplied by opacity).
