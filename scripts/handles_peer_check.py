@@ -2,8 +2,10 @@
 """Compare volmorph's handle-driven maps with independent implementations.
 
 * 3D thin-plate / biharmonic volume spline (`volmorph handles apply --method tps`) against
-  scipy.interpolate.RBFInterpolator with the same kernel (G(r) = r in 3D, scipy's "linear",
-  whose sign convention -r gives the same interpolant) and a degree-1 polynomial;
+  scipy.interpolate.RBFInterpolator with the same kernel and a degree-1 polynomial, for both
+  kernels: `--kernel r` (G(r) = r, the 3-D biharmonic; scipy's "linear", whose sign
+  convention -r gives the same interpolant) and `--kernel r2logr` (G(r) = r^2 log r, the
+  thesis's; scipy's "thin_plate_spline");
 * 3D affine moving least squares (`--method affine`, weights 1/|p - v|^2) against `molesq`
   (weights 1/(|p - v|^2 + eps), the same to rounding away from the handles).
 
@@ -36,7 +38,7 @@ def find_binary(explicit):
     return shutil.which("volmorph")
 
 
-def run_apply(binary, method, src, dst, probes, workdir):
+def run_apply(binary, method, src, dst, probes, workdir, extra=()):
     handles = {
         "points": [
             {"source": [float(v) for v in s], "target": [float(v) for v in t]}
@@ -52,7 +54,8 @@ def run_apply(binary, method, src, dst, probes, workdir):
         for p in probes:
             f.write("%r %r %r\n" % (float(p[0]), float(p[1]), float(p[2])))
     subprocess.run(
-        [binary, "handles", "apply", ppath, "--handles", hpath, "--method", method, "-o", opath],
+        [binary, "handles", "apply", ppath, "--handles", hpath, "--method", method, "-o", opath]
+        + list(extra),
         check=True,
         stdout=subprocess.DEVNULL,
     )
@@ -97,16 +100,19 @@ def main():
             dst = src + rng.normal(0.0, 6.0, size=(n, 3))
             probes = np.vstack([rng.uniform(-70.0, 70.0, size=(200, 3)), src[:3] + 0.5])
 
-            # Thin-plate / biharmonic spline of the displacement.
-            ours = run_apply(binary, "tps", src, dst, probes, work)
-            rbf = RBFInterpolator(src, dst - src, kernel="linear", degree=1)
-            ref = probes + rbf(probes)
-            e = rel_err(ours, ref)
-            worst = max(worst, e)
-            ok = e <= TOLERANCE
-            failed |= not ok
-            print("tps    n=%4d  max rel diff vs scipy RBFInterpolator: %.3e  %s"
-                  % (n, e, "ok" if ok else "FAIL"))
+            # Thin-plate / biharmonic spline of the displacement, both kernels.
+            for kernel, scipy_kernel in (("r", "linear"), ("r2logr", "thin_plate_spline")):
+                if n < 4:
+                    continue
+                ours = run_apply(binary, "tps", src, dst, probes, work, ["--kernel", kernel])
+                rbf = RBFInterpolator(src, dst - src, kernel=scipy_kernel, degree=1)
+                ref = probes + rbf(probes)
+                e = rel_err(ours, ref)
+                worst = max(worst, e)
+                ok = e <= TOLERANCE
+                failed |= not ok
+                print("tps %-6s n=%4d  max rel diff vs scipy RBFInterpolator(%s): %.3e  %s"
+                      % (kernel, n, scipy_kernel, e, "ok" if ok else "FAIL"))
 
             if Transformer is not None and n >= 4:
                 ours = run_apply(binary, "affine", src, dst, probes, work)

@@ -109,7 +109,7 @@ enum Command {
     /// Free-form deformation of a polygon mesh: vertices only, after uniform or adaptive
     /// subdivision, or exactly as trimmed Bézier surfaces (STEP or tessellated).
     #[command(
-        after_help = "Examples:\n  volmorph lattice init --mesh cube.obj --degree 2,2,2 --size 4,4,4 -o cube_lattice.json\n  volmorph ffd cube.obj --lattice moved.json --mode accurate -o cube.step\n  volmorph ffd bunny.obj --lattice moved.json --mode adaptive:0.01 -o bunny_adaptive.ply"
+        after_help = "Examples:\n  volmorph lattice init --mesh cube.obj --degree 2,2,2 --size 4,4,4 -o cube_lattice.json\n  volmorph ffd cube.obj --lattice moved.json --mode accurate -o cube.step\n  volmorph ffd bunny.obj --lattice moved.json --mode adaptive:0.01 -o bunny_adaptive.ply\n  volmorph ffd part.obj --init forward --degree 2,2,1 --size 4,4,2 --mode vertex -o warped.obj   # Feng Fig. 2b: the forward mapping warps before any edit\n  volmorph ffd part.obj --init end-interpolating --degree 2,2,1 --size 4,4,2 --mode accurate -o same.step   # Fig. 2d: the identity"
     )]
     Ffd(cmd::ffd::Args),
     /// B-spline lattice (space map) tasks.
@@ -124,7 +124,7 @@ enum Command {
     Handles(cmd::handles::Command),
     /// Deform a picture with 2D moving least squares through point and segment handles.
     #[command(
-        after_help = "Example:\n  volmorph mls2d face.png --handles smile.json -o smiling.png --method rigid\n  volmorph mls2d face.png --handles smile.json -o smiling_tps.png --method tps\n\nHandles: {\"points\": [{\"source\": [x, y], \"target\": [x, y]}], \"segments\": [{\"source\": [[x, y], [x, y]], \"target\": [[x, y], [x, y]]}]}\nin pixel coordinates (x right, y down)."
+        after_help = "Example:\n  volmorph mls2d face.png --handles smile.json -o smiling.png --method rigid\n  volmorph mls2d face.png --handles smile.json -o smiling_tps.png --method tps   # kernel r² log r (--kernel r2logr, the only 2-D one)\n\nHandles: {\"points\": [{\"source\": [x, y], \"target\": [x, y]}], \"segments\": [{\"source\": [[x, y], [x, y]], \"target\": [[x, y], [x, y]]}]}\nin pixel coordinates (x right, y down)."
     )]
     Mls2d(cmd::handles::Mls2dArgs),
     /// Polygon mesh tasks.
@@ -152,7 +152,7 @@ enum Command {
     Sculpt(cmd::sculpt::Args),
     /// Register two scans: handles, correspondences, deformation, quality, lungs, ventilation.
     #[command(
-        after_help = "Examples:\n  volmorph register inhale.nii.gz exhale.nii.gz -o out --handles 300 --radius 10 --method frames --dense --landmarks lm_in.txt,lm_ex.txt\n  volmorph register select inhale.nii.gz -o handles.txt"
+        after_help = "Examples:\n  volmorph register inhale.nii.gz exhale.nii.gz -o out --handles 300 --radius 10 --method frames --dense --landmarks lm_in.txt,lm_ex.txt\n  volmorph register inhale.nii.gz exhale.nii.gz -o out_tps --method tps --kernel r2logr   # thin-plate with the thesis's r² log r kernel (default r)\n  volmorph register select inhale.nii.gz -o handles.txt"
     )]
     Register(cmd::register::Command),
     /// Time the warps and isosurface extractors on built-in inputs, against their targets.

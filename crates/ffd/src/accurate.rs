@@ -837,13 +837,36 @@ impl TrimmedModel {
                     q.iter().map(|p| p[0]).sum::<f64>() / q.len() as f64,
                     q.iter().map(|p| p[1]).sum::<f64>() / q.len() as f64,
                 ];
+                // The fan's error budget is relative to the whole sub-polygon, so a sliver
+                // fan triangle (marching-cubes meshes have many) is not refined to the
+                // rounding noise of its own vanishing area.
+                let fan = |i: usize| (c, q[i], q[(i + 1) % q.len()]);
+                let whole: f64 = (0..q.len())
+                    .map(|i| {
+                        let (x, y, z) = fan(i);
+                        tri_area(surf, x, y, z).abs()
+                    })
+                    .sum();
+                let floor = AREA_TOLERANCE * whole;
                 (0..q.len())
-                    .map(|i| tri_area_adaptive(surf, c, q[i], q[(i + 1) % q.len()], 0))
+                    .map(|i| {
+                        let (x, y, z) = fan(i);
+                        tri_area_adaptive(surf, x, y, z, floor, 0, &mut 0)
+                    })
                     .sum::<f64>()
             })
             .sum()
     }
 }
+
+/// Relative accuracy of [`TrimmedModel::surface_area`]'s adaptive quadrature: a triangle is
+/// split until its 4-piece sum agrees with the whole to this fraction of itself or of the
+/// sub-polygon it belongs to (8×8 Gauss–Legendre per piece; below ~1e-13 the comparison
+/// measures rounding).
+const AREA_TOLERANCE: f64 = 1e-12;
+
+/// Deepest subdivision of [`tri_area_adaptive`] (4⁶ pieces).
+const AREA_MAX_DEPTH: u32 = 6;
 
 fn tri_area(surf: &BezierSurface, a: [f64; 2], b: [f64; 2], c: [f64; 2]) -> f64 {
     // Collapsed square: x = a + u (b − a) + u v (c − b), Jacobian u·|det|.
@@ -864,24 +887,33 @@ fn tri_area(surf: &BezierSurface, a: [f64; 2], b: [f64; 2], c: [f64; 2]) -> f64 
     sum * det
 }
 
+/// Area of the image of the parameter triangle `(a, b, c)`, split in four until the pieces'
+/// sum agrees with the whole within [`AREA_TOLERANCE`] of itself or within `floor` (absolute),
+/// at most [`AREA_MAX_DEPTH`] levels; `calls` counts the [`tri_area`] evaluations.
 fn tri_area_adaptive(
     surf: &BezierSurface,
     a: [f64; 2],
     b: [f64; 2],
     c: [f64; 2],
+    floor: f64,
     depth: u32,
+    calls: &mut usize,
 ) -> f64 {
     let whole = tri_area(surf, a, b, c);
     let mid = |p: [f64; 2], q: [f64; 2]| [0.5 * (p[0] + q[0]), 0.5 * (p[1] + q[1])];
     let (ab, bc, ca) = (mid(a, b), mid(b, c), mid(c, a));
     let parts = [(a, ab, ca), (ab, b, bc), (ca, bc, c), (ab, bc, ca)];
     let split: f64 = parts.iter().map(|&(x, y, z)| tri_area(surf, x, y, z)).sum();
-    if depth >= 6 || (split - whole).abs() <= 1e-12 * split.abs().max(f64::MIN_POSITIVE) {
+    *calls += 5;
+    let tol = (AREA_TOLERANCE * split.abs())
+        .max(floor)
+        .max(f64::MIN_POSITIVE);
+    if depth >= AREA_MAX_DEPTH || (split - whole).abs() <= tol {
         return split;
     }
     parts
         .iter()
-        .map(|&(x, y, z)| tri_area_adaptive(surf, x, y, z, depth + 1))
+        .map(|&(x, y, z)| tri_area_adaptive(surf, x, y, z, floor, depth + 1, calls))
         .sum()
 }
 
@@ -892,4 +924,79 @@ fn tri_area_adaptive(
 pub fn accurate_ffd(mesh: &Mesh, lattice: &BSplineLattice) -> Result<TrimmedModel, FfdError> {
     let plan = Arc::new(AccuratePlan::new(mesh, lattice)?);
     plan.deform(lattice)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// The paraboloid `z = x² + y²` over `[0, 1]²` as a biquadratic Bézier surface.
+    fn paraboloid() -> BezierSurface {
+        let mut cp = Vec::new();
+        for j in 0..3 {
+            for i in 0..3 {
+                let (x, y) = (f64::from(i) / 2.0, f64::from(j) / 2.0);
+                // Bernstein coefficients of x² on [0, 1]: 0, 0, 1.
+                let zx = if i == 2 { 1.0 } else { 0.0 };
+                let zy = if j == 2 { 1.0 } else { 0.0 };
+                cp.push(DVec3::new(x, y, zx + zy));
+            }
+        }
+        BezierSurface {
+            degrees: [2, 2],
+            rect: [[0.0, 1.0], [0.0, 1.0]],
+            control_points: cp,
+        }
+    }
+
+    /// Regression: a sliver triangle (marching-cubes meshes have many) was refined to the
+    /// full depth, 4⁶ pieces, because its relative tolerance measured rounding noise of its
+    /// vanishing area; a 5k-triangle torus took minutes. The error budget is now relative to
+    /// the sub-polygon.
+    #[test]
+    fn sliver_fan_triangles_are_not_refined_to_rounding_noise() {
+        let s = paraboloid();
+        let sliver = ([0.2, 0.2], [0.8, 0.5], [0.5, 0.35 + 1e-13]);
+        let mut calls = 0;
+        let a = tri_area_adaptive(&s, sliver.0, sliver.1, sliver.2, 1e-12, 0, &mut calls);
+        assert_eq!(calls, 5, "one level");
+        assert!(a.abs() < 1e-12);
+        // Without the polygon's floor the old test refines much deeper.
+        let mut old = 0;
+        tri_area_adaptive(&s, sliver.0, sliver.1, sliver.2, 0.0, 0, &mut old);
+        assert!(old > 5, "{old}");
+        // Full triangles keep their accuracy: the floor of a polygon of area ~1.6 changes the
+        // square's area by less than 1e-12 relative.
+        let (p, q, r, t) = ([0.0, 0.0], [1.0, 0.0], [1.0, 1.0], [0.0, 1.0]);
+        let area = |floor: f64| {
+            tri_area_adaptive(&s, p, q, r, floor, 0, &mut 0)
+                + tri_area_adaptive(&s, p, r, t, floor, 0, &mut 0)
+        };
+        let (with_floor, without) = (area(AREA_TOLERANCE * 1.6), area(0.0));
+        assert!(((with_floor - without) / without).abs() < 1e-12);
+        // ∫∫ √(1 + 4x² + 4y²) over the unit square ≈ 1.86145 (independent 2-D Simpson sum).
+        let n = 400;
+        let h = 1.0 / f64::from(n);
+        let w = |k: i32| {
+            if k == 0 || k == n {
+                1.0
+            } else if k % 2 == 1 {
+                4.0
+            } else {
+                2.0
+            }
+        };
+        let mut simpson = 0.0;
+        for i in 0..=n {
+            for j in 0..=n {
+                let (x, y) = (f64::from(i) * h, f64::from(j) * h);
+                simpson += w(i) * w(j) * (1.0 + 4.0 * x * x + 4.0 * y * y).sqrt();
+            }
+        }
+        simpson *= h * h / 9.0;
+        assert!(
+            (with_floor - simpson).abs() < 1e-9,
+            "{with_floor} vs {simpson}"
+        );
+    }
 }

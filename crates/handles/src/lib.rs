@@ -26,5 +26,5 @@ pub mod wendland;
 pub use bump::BumpMap;
 pub use handles::HandleSet;
 pub use mls::{AffineMls, Frame, FrameMls, RigidMls, SimilarityMls, Weighting};
-pub use volume_spline::{ThinPlateMap, VolumeSpline, VolumeSplineSystem};
+pub use volume_spline::{ThinPlateMap, TpsKernel, VolumeSpline, VolumeSplineSystem};
 pub use wendland::WendlandMap;

@@ -19,7 +19,20 @@
 //! | 3   | `r`               | biharmonic volume spline   |
 //!
 //! i.e. `G = r^(2m−D) ln r` for even `D` and `r^(2m−D)` for odd `D`, plus the linear polynomial
-//! (`k = D + 1` terms). The coefficients solve the symmetric, indefinite `(N + D + 1)²` system
+//! (`k = D + 1` terms). These are the default kernels ([`TpsKernel::biharmonic`]).
+//!
+//! # Kernels in 3-D ([`TpsKernel`])
+//!
+//! In three dimensions the true biharmonic kernel — the fundamental solution of `Δ²` in ℝ³,
+//! whose interpolant minimises the bending energy `∫ |∇²U|²` over ℝ³ — is `r`
+//! ([`TpsKernel::R`], the default). Bookstein's and McPhail's thin-plate spline (thesis §5.4.1:
+//! "a d-dimensional thin-plate spline is the fundamental solution to the biharmonic equation
+//! with the form U(r) = r² ln r") uses the 2-D kernel in 3-D as well
+//! ([`TpsKernel::R2LogR`]); that is not the 3-D biharmonic Green's function, but `r² ln r` is
+//! conditionally positive definite of order 2 in every dimension, so with the linear
+//! polynomial the same system has a unique solution that interpolates (a polyharmonic
+//! spline, smoother near the handles and growing faster away from them). Both are offered in
+//! 3-D; in 2-D only `r² ln r` is the biharmonic kernel, and `r` is refused there. The coefficients solve the symmetric, indefinite `(N + D + 1)²` system
 //!
 //! ```text
 //! ⎡ Φ + σλI   P ⎤ ⎡ λ ⎤   ⎡ δ ⎤        Φ_ij = G(‖P_i − P_j‖),  P_i = (1, P_i)
@@ -30,7 +43,7 @@
 //! minimal bending energy `∫ |∇ᵐU|²`. With the smoothing parameter `λ = 0` the spline
 //! interpolates, `U(P_i) = δ_i`; with `λ > 0` it is the smoothing spline minimising
 //! `Σ |U(P_i) − δ_i|² + λ·E(U)` (energy in the kernel's normalisation), which no longer passes
-//! through the values. `σ = +1` for `D = 2` and `σ = −1` for `D = 3` is the sign that makes
+//! through the values. `σ = +1` for `r² ln r` and `σ = −1` for `r` is the sign that makes
 //! `σΦ` conditionally positive definite, so `λ ≥ 0` always smooths.
 //!
 //! # Solving
@@ -109,6 +122,89 @@ pub const MIN_POLYNOMIAL_CONDITION: f64 = 1e-12;
 /// factorising; a larger one means the factorisation broke down (singular system).
 const MAX_RELATIVE_RESIDUAL: f64 = 1e-8;
 
+/// The radial kernel `G(r)` of a volume spline (see the [module docs](self#kernels-in-3-d-tpskernel)).
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, Default)]
+pub enum TpsKernel {
+    /// `G(r) = r`: the biharmonic Green's function in 3-D (the default there).
+    #[default]
+    R,
+    /// `G(r) = r² ln r` (0 at 0): the 2-D biharmonic Green's function (the only kernel in
+    /// 2-D), and Bookstein's / McPhail's thin-plate kernel in 3-D.
+    R2LogR,
+}
+
+impl TpsKernel {
+    /// The biharmonic kernel of dimension `D`: `r² ln r` for `D = 2`, `r` otherwise.
+    #[must_use]
+    pub const fn biharmonic<const D: usize>() -> Self {
+        if D == 2 { Self::R2LogR } else { Self::R }
+    }
+
+    /// The kernel's name: `r` or `r2logr`.
+    #[must_use]
+    pub fn name(self) -> &'static str {
+        match self {
+            Self::R => "r",
+            Self::R2LogR => "r2logr",
+        }
+    }
+
+    /// The kernel named `name` ([`TpsKernel::name`]).
+    ///
+    /// # Errors
+    /// [`DeformError::Unsupported`] naming the known kernels.
+    pub fn parse(name: &str) -> Result<Self, DeformError> {
+        match name {
+            "r" => Ok(Self::R),
+            "r2logr" => Ok(Self::R2LogR),
+            other => Err(DeformError::Unsupported(format!(
+                "thin-plate kernel {other:?} is not r (the 3-D biharmonic) or r2logr"
+            ))),
+        }
+    }
+
+    /// `G(r)`.
+    #[inline]
+    #[must_use]
+    pub fn green(self, r: f64) -> f64 {
+        match self {
+            Self::R => r,
+            Self::R2LogR => {
+                if r > 0.0 {
+                    r * r * r.ln()
+                } else {
+                    0.0
+                }
+            }
+        }
+    }
+
+    /// `G'(r)/r`, the factor in `∇ₓ G(‖x − P‖) = (G'(r)/r)·(x − P)`: `1/r` for `r` (0 at
+    /// `r = 0`, where `G` has a cusp and the one-sided gradient is taken as zero), `2 ln r + 1`
+    /// for `r² ln r` (0 at `r = 0`, where the gradient vanishes).
+    #[inline]
+    #[must_use]
+    pub fn gradient_factor(self, r: f64) -> f64 {
+        if r <= 0.0 {
+            return 0.0;
+        }
+        match self {
+            Self::R => 1.0 / r,
+            Self::R2LogR => 2.0 * r.ln() + 1.0,
+        }
+    }
+
+    /// Sign `σ` making `σ·G` conditionally positive definite of order ≤ 2 (see the
+    /// [module docs](self)).
+    #[must_use]
+    pub const fn sign(self) -> f64 {
+        match self {
+            Self::R => -1.0,
+            Self::R2LogR => 1.0,
+        }
+    }
+}
+
 /// Green's function `G(r)` of the biharmonic operator in dimension `D` (`m = 2`): `r² ln r`
 /// for `D = 2` (with `G(0) = 0`), `r` for `D = 3`. Other `D` return NaN (rejected earlier by
 /// [`VolumeSplineSystem::new`]).
@@ -116,46 +212,20 @@ const MAX_RELATIVE_RESIDUAL: f64 = 1e-8;
 #[must_use]
 pub fn green<const D: usize>(r: f64) -> f64 {
     match D {
-        2 => {
-            if r > 0.0 {
-                r * r * r.ln()
-            } else {
-                0.0
-            }
-        }
-        3 => r,
+        2 | 3 => TpsKernel::biharmonic::<D>().green(r),
         _ => f64::NAN,
     }
 }
 
-/// `G'(r)/r`, the factor in `∇ₓ G(‖x − P‖) = (G'(r)/r)·(x − P)`: `2 ln r + 1` for `D = 2`
-/// (0 at `r = 0`, where the gradient vanishes), `1/r` for `D = 3` (0 at `r = 0`, where `G` has a
-/// cusp and the one-sided gradient is taken as zero).
+/// `G'(r)/r` of [`green`] ([`TpsKernel::gradient_factor`] of the dimension's biharmonic
+/// kernel); NaN for `D` other than 2 and 3.
 #[inline]
 #[must_use]
 pub fn green_gradient_factor<const D: usize>(r: f64) -> f64 {
     match D {
-        2 => {
-            if r > 0.0 {
-                2.0 * r.ln() + 1.0
-            } else {
-                0.0
-            }
-        }
-        3 => {
-            if r > 0.0 {
-                1.0 / r
-            } else {
-                0.0
-            }
-        }
+        2 | 3 => TpsKernel::biharmonic::<D>().gradient_factor(r),
         _ => f64::NAN,
     }
-}
-
-/// Sign making `σ·G` conditionally positive definite (see the [module docs](self)).
-const fn kernel_sign<const D: usize>() -> f64 {
-    if D == 3 { -1.0 } else { 1.0 }
 }
 
 /// The factorised volume-spline system of a fixed set of centres; see the
@@ -169,6 +239,8 @@ pub struct VolumeSplineSystem<const D: usize> {
     frame: Arc<Normalised<D>>,
     /// Smoothing λ (normalised units).
     smoothing: f64,
+    /// The radial kernel.
+    kernel: TpsKernel,
     /// Null-space factorisation of the `(N + D + 1)²` matrix.
     factor: NullSpaceFactor,
 }
@@ -417,6 +489,25 @@ impl<const D: usize> VolumeSplineSystem<D> {
     /// * [`DeformError::Io`] if the `(N + D + 1)²` matrix would exceed the allocation limit;
     /// * [`DeformError::Singular`] if the factorisation breaks down regardless.
     pub fn new(centres: &[[f64; D]], smoothing: f64) -> Result<Self, DeformError> {
+        Self::with_kernel(centres, smoothing, TpsKernel::biharmonic::<D>())
+    }
+
+    /// As [`new`](Self::new) with the radial kernel `kernel` (see the
+    /// [module docs](self#kernels-in-3-d-tpskernel)).
+    ///
+    /// # Errors
+    /// As [`new`](Self::new), plus [`DeformError::Unsupported`] for [`TpsKernel::R`] in 2-D
+    /// (not the 2-D biharmonic kernel).
+    pub fn with_kernel(
+        centres: &[[f64; D]],
+        smoothing: f64,
+        kernel: TpsKernel,
+    ) -> Result<Self, DeformError> {
+        if D == 2 && kernel == TpsKernel::R {
+            return Err(DeformError::Unsupported(
+                "in 2-D the biharmonic kernel is r² log r (r2logr); r is the 3-D one".into(),
+            ));
+        }
         if D != 2 && D != 3 {
             return Err(DeformError::Unsupported(format!(
                 "volume splines are defined here for dimension 2 and 3, not {D}"
@@ -456,14 +547,15 @@ impl<const D: usize> VolumeSplineSystem<D> {
         check_separation(&frame.centres)?;
         check_polynomial_rank(&frame.centres)?;
 
-        let sigma = kernel_sign::<D>();
+        let sigma = kernel.sign();
         // The kernel block in full (both triangles) and the polynomial block.
         let c = &frame.centres;
+        let kind = kernel;
         let mut kernel = Mat::<f64>::zeros(n, n);
         for j in 0..n {
             kernel[(j, j)] = sigma * smoothing;
             for i in j + 1..n {
-                let g = green::<D>(dist(&c[i], &c[j]));
+                let g = kind.green(dist(&c[i], &c[j]));
                 kernel[(i, j)] = g;
                 kernel[(j, i)] = g;
             }
@@ -481,6 +573,7 @@ impl<const D: usize> VolumeSplineSystem<D> {
             centres: centres.to_vec(),
             frame,
             smoothing,
+            kernel: kind,
             factor,
         };
         system.check_factorisation(&a)?;
@@ -496,7 +589,7 @@ impl<const D: usize> VolumeSplineSystem<D> {
         let xn = self.frame.map(x);
         let mut rhs = Mat::<f64>::zeros(n + D + 1, 1);
         for (i, c) in self.frame.centres.iter().enumerate() {
-            rhs[(i, 0)] = green::<D>(dist(&xn, c));
+            rhs[(i, 0)] = self.kernel.green(dist(&xn, c));
         }
         rhs[(n, 0)] = 1.0;
         for a in 0..D {
@@ -574,6 +667,12 @@ impl<const D: usize> VolumeSplineSystem<D> {
         self.smoothing
     }
 
+    /// The radial kernel the system was built with.
+    #[must_use]
+    pub fn kernel(&self) -> TpsKernel {
+        self.kernel
+    }
+
     /// Solve for the spline through `values`: row-major `N × value_dim` (`values[i·V + c]` is
     /// component `c` at centre `i`). Cost: two triangular solves per component, `O(N²·V)`.
     ///
@@ -583,6 +682,7 @@ impl<const D: usize> VolumeSplineSystem<D> {
     pub fn solve(&self, values: &[f64], value_dim: usize) -> Result<VolumeSpline<D>, DeformError> {
         let mut spline = VolumeSpline {
             frame: Arc::clone(&self.frame),
+            kernel: self.kernel,
             value_dim,
             weights: Vec::new(),
             polynomial: Vec::new(),
@@ -634,6 +734,7 @@ impl<const D: usize> VolumeSplineSystem<D> {
             }
         }
         self.factor.solve_in_place(rhs.as_mut());
+        spline.kernel = self.kernel;
         spline.value_dim = value_dim;
         spline.weights.clear();
         spline.weights.resize(n * value_dim, 0.0);
@@ -681,6 +782,7 @@ impl<const D: usize> VolumeSplineSystem<D> {
 #[derive(Debug, Clone)]
 pub struct VolumeSpline<const D: usize> {
     frame: Arc<Normalised<D>>,
+    kernel: TpsKernel,
     value_dim: usize,
     /// `N × V`, row-major, in normalised coordinates.
     weights: Vec<f64>,
@@ -725,7 +827,7 @@ impl<const D: usize> VolumeSpline<D> {
             *o = s;
         }
         for (p, w) in self.frame.centres.iter().zip(self.weights.chunks_exact(v)) {
-            let g = green::<D>(dist(&xn, p));
+            let g = self.kernel.green(dist(&xn, p));
             for (o, &wc) in out.iter_mut().zip(w) {
                 *o += g * wc;
             }
@@ -749,8 +851,8 @@ impl<const D: usize> VolumeSpline<D> {
         }
         for (p, w) in self.frame.centres.iter().zip(self.weights.chunks_exact(v)) {
             let r = dist(&xn, p);
-            let g = green::<D>(r);
-            let gf = green_gradient_factor::<D>(r);
+            let g = self.kernel.green(r);
+            let gf = self.kernel.gradient_factor(r);
             for c in 0..m {
                 out[c] += g * w[c];
                 for a in 0..D {
@@ -806,18 +908,39 @@ impl VolumeSpline<3> {
         let mut ax = [0.0f64; 4];
         let mut ay = [0.0f64; 4];
         let mut az = [0.0f64; 4];
-        for blk in &self.packed {
-            let mut r = [0.0f64; 4];
-            for l in 0..4 {
-                let dx = xn[0] - blk[l];
-                let dy = xn[1] - blk[4 + l];
-                let dz = xn[2] - blk[8 + l];
-                r[l] = (dx * dx + dy * dy + dz * dz).sqrt();
+        match self.kernel {
+            TpsKernel::R => {
+                for blk in &self.packed {
+                    let mut r = [0.0f64; 4];
+                    for l in 0..4 {
+                        let dx = xn[0] - blk[l];
+                        let dy = xn[1] - blk[4 + l];
+                        let dz = xn[2] - blk[8 + l];
+                        r[l] = (dx * dx + dy * dy + dz * dz).sqrt();
+                    }
+                    for l in 0..4 {
+                        ax[l] += r[l] * blk[12 + l];
+                        ay[l] += r[l] * blk[16 + l];
+                        az[l] += r[l] * blk[20 + l];
+                    }
+                }
             }
-            for l in 0..4 {
-                ax[l] += r[l] * blk[12 + l];
-                ay[l] += r[l] * blk[16 + l];
-                az[l] += r[l] * blk[20 + l];
+            TpsKernel::R2LogR => {
+                for blk in &self.packed {
+                    let mut g = [0.0f64; 4];
+                    for l in 0..4 {
+                        let dx = xn[0] - blk[l];
+                        let dy = xn[1] - blk[4 + l];
+                        let dz = xn[2] - blk[8 + l];
+                        let r = (dx * dx + dy * dy + dz * dz).sqrt();
+                        g[l] = TpsKernel::R2LogR.green(r);
+                    }
+                    for l in 0..4 {
+                        ax[l] += g[l] * blk[12 + l];
+                        ay[l] += g[l] * blk[16 + l];
+                        az[l] += g[l] * blk[20 + l];
+                    }
+                }
             }
         }
         DVec3::new(
@@ -956,9 +1079,32 @@ impl ThinPlateMap {
     /// As [`VolumeSplineSystem::new`], plus [`DeformError::InvalidHandles`] if the two lists
     /// differ in length and [`DeformError::NonFinite`] for a NaN target.
     pub fn new(sources: &[DVec3], targets: &[DVec3], smoothing: f64) -> Result<Self, DeformError> {
+        Self::with_kernel(sources, targets, smoothing, TpsKernel::R)
+    }
+
+    /// As [`new`](Self::new) with the radial kernel `kernel`: [`TpsKernel::R`] (the 3-D
+    /// biharmonic, the default) or [`TpsKernel::R2LogR`] (the thesis's `r² ln r`); see the
+    /// [module docs](self#kernels-in-3-d-tpskernel).
+    ///
+    /// # Errors
+    /// As [`new`](Self::new).
+    pub fn with_kernel(
+        sources: &[DVec3],
+        targets: &[DVec3],
+        smoothing: f64,
+        kernel: TpsKernel,
+    ) -> Result<Self, DeformError> {
         let centres: Vec<[f64; 3]> = sources.iter().map(|p| p.to_array()).collect();
-        let system = Arc::new(VolumeSplineSystem::<3>::new(&centres, smoothing)?);
+        let system = Arc::new(VolumeSplineSystem::<3>::with_kernel(
+            &centres, smoothing, kernel,
+        )?);
         Self::with_system(system, targets)
+    }
+
+    /// The radial kernel.
+    #[must_use]
+    pub fn kernel(&self) -> TpsKernel {
+        self.system.kernel()
     }
 
     /// Build on an existing factorisation (shared, e.g. between the maps of several target
@@ -977,6 +1123,7 @@ impl ThinPlateMap {
             .collect();
         let spline = VolumeSpline {
             frame: Arc::clone(&system.frame),
+            kernel: system.kernel(),
             value_dim: 3,
             weights: vec![0.0; 3 * sources.len()],
             polynomial: vec![0.0; 12],
@@ -1150,7 +1297,8 @@ impl LinearMap for ThinPlateMap {
     fn same_structure(&self, other: &Self) -> bool {
         Arc::ptr_eq(&self.system, &other.system)
             || (self.sources == other.sources
-                && self.system.smoothing() == other.system.smoothing())
+                && self.system.smoothing() == other.system.smoothing()
+                && self.system.kernel() == other.system.kernel())
     }
 }
 
@@ -1164,6 +1312,81 @@ mod tests {
         (0..n)
             .map(|_| std::array::from_fn(|_| rng.range(-5.0, 15.0)))
             .collect()
+    }
+
+    #[test]
+    fn both_3d_kernels_interpolate_and_differ() {
+        let mut rng = Rng::new(31);
+        let src: Vec<DVec3> = (0..25)
+            .map(|_| {
+                DVec3::new(
+                    rng.range(-5.0, 5.0),
+                    rng.range(-5.0, 5.0),
+                    rng.range(-5.0, 5.0),
+                )
+            })
+            .collect();
+        let dst: Vec<DVec3> = src
+            .iter()
+            .map(|p| {
+                *p + DVec3::new(
+                    rng.range(-1.0, 1.0),
+                    rng.range(-1.0, 1.0),
+                    rng.range(-1.0, 1.0),
+                )
+            })
+            .collect();
+        let r = ThinPlateMap::with_kernel(&src, &dst, 0.0, TpsKernel::R).unwrap();
+        let l = ThinPlateMap::with_kernel(&src, &dst, 0.0, TpsKernel::R2LogR).unwrap();
+        assert_eq!((r.kernel(), l.kernel()), (TpsKernel::R, TpsKernel::R2LogR));
+        for (p, q) in src.iter().zip(&dst) {
+            assert!((r.apply(*p) - *q).length() < 1e-9);
+            assert!((l.apply(*p) - *q).length() < 1e-9);
+        }
+        // Away from the handles the two splines differ (by a good fraction of the motion).
+        let x = DVec3::new(0.3, -0.2, 0.1);
+        let d = (r.apply(x) - l.apply(x)).length();
+        assert!(d > 1e-3, "{d}");
+        // The batch path (packed, vectorised) agrees with the point path for r² ln r.
+        let pts: Vec<DVec3> = (0..50)
+            .map(|i| DVec3::splat(f64::from(i) * 0.1 - 2.0))
+            .collect();
+        let mut out = vec![DVec3::ZERO; pts.len()];
+        l.apply_batch(&pts, &mut out).unwrap();
+        for (p, o) in pts.iter().zip(&out) {
+            let (v, _) = l.apply_with_jacobian(*p);
+            assert!((v - *o).length() < 1e-12);
+        }
+        // An affine motion is reproduced by both kernels (the linear part absorbs it).
+        let a = DMat3::from_cols_array(&[1.1, 0.1, 0.0, -0.2, 0.9, 0.05, 0.0, 0.3, 1.2]);
+        let moved: Vec<DVec3> = src.iter().map(|p| a * *p + DVec3::X).collect();
+        for k in [TpsKernel::R, TpsKernel::R2LogR] {
+            let m = ThinPlateMap::with_kernel(&src, &moved, 0.0, k).unwrap();
+            assert!((m.apply(x) - (a * x + DVec3::X)).length() < 1e-9, "{k:?}");
+        }
+        // r is not the 2-D kernel.
+        let c2 = random_points::<2>(8, 5);
+        assert!(VolumeSplineSystem::<2>::with_kernel(&c2, 0.0, TpsKernel::R).is_err());
+        assert_eq!(TpsKernel::parse("r2logr").unwrap(), TpsKernel::R2LogR);
+        assert!(TpsKernel::parse("r3").is_err());
+        // Gradients of r² ln r against central differences.
+        let c3 = random_points::<3>(15, 6);
+        let sys = VolumeSplineSystem::<3>::with_kernel(&c3, 0.0, TpsKernel::R2LogR).unwrap();
+        let vals: Vec<f64> = (0..15).map(|i| (0.4 * f64::from(i)).sin()).collect();
+        let sp = sys.solve(&vals, 1).unwrap();
+        let x = [1.0, 2.0, -3.0];
+        let (mut u, mut g) = ([0.0], [[0.0; 3]]);
+        sp.eval_with_gradient(x, &mut u, &mut g);
+        for a in 0..3 {
+            let h = 1e-5;
+            let (mut xp, mut xm) = (x, x);
+            xp[a] += h;
+            xm[a] -= h;
+            let (mut up, mut um) = ([0.0], [0.0]);
+            sp.eval(xp, &mut up);
+            sp.eval(xm, &mut um);
+            assert!((g[0][a] - (up[0] - um[0]) / (2.0 * h)).abs() < 1e-6);
+        }
     }
 
     #[test]

@@ -335,6 +335,29 @@ pub enum FengForm {
     EndInterpolating,
     /// Uniform unclamped knots with the scaling step (§3.1.2).
     Uniform,
+    /// The forward-mapping baseline of Fig. 2b (§3.1.1): the end-interpolating knots with
+    /// evenly spaced control points, which warps the object before any control point moves
+    /// ([`BSplineLattice::feng_forward_around`]).
+    Forward,
+}
+
+impl FengForm {
+    /// The form's name on the command line: `end-interpolating`, `uniform` or `forward`.
+    #[must_use]
+    pub fn name(self) -> &'static str {
+        match self {
+            Self::EndInterpolating => "end-interpolating",
+            Self::Uniform => "uniform",
+            Self::Forward => "forward",
+        }
+    }
+
+    /// Whether the initial volume is the identity on its box (every form but
+    /// [`FengForm::Forward`]).
+    #[must_use]
+    pub fn is_identity(self) -> bool {
+        !matches!(self, Self::Forward)
+    }
 }
 
 /// Validate a box given by corner and extent.
@@ -637,6 +660,58 @@ impl BSplineLattice {
         })
     }
 
+    /// Feng et al.'s **forward-mapping** initial volume (2002 §3.1.1, Fig. 2b), the baseline the
+    /// identity forms replace: the object is embedded by the linear map `L` from its bounding
+    /// box `[min, max]` onto the parametric domain — here the domain *is* the box (frame
+    /// origin 0, spacing 1, axes `I`), so `L` is the identity and a point's local coordinates
+    /// are its coordinates — and the volume is end-interpolating (clamped knots with the
+    /// uniform interior knots of [`BSplineLattice::feng_end_interpolating_around`]) with its
+    /// control points **evenly** spaced, `x_i = min + i (max − min)/(n − 1)`.
+    ///
+    /// B-splines reproduce `x` only from the Greville abscissae `ξ_i` (the control points of
+    /// the identity form, Eq. 2), so this volume moves every point by
+    ///
+    /// ```text
+    /// d(x) = Σ_i N_i(x) (x_i − ξ_i)        (per axis)
+    /// ```
+    ///
+    /// before any control point is edited: the paper's "warp in the deformation". Eq. 2's
+    /// gaps between Greville abscissae grow from `h/k` at each end to `h` inside, while the
+    /// even gaps are constant, so every even point below the centre lies above its Greville
+    /// abscissa and every one above it below (`x_i − ξ_i` has the sign of `centre − ξ_i`):
+    /// points are pulled towards the centre plane of each axis. The box faces (where the
+    /// volume interpolates its end control points) and, by symmetry, the centre planes stay;
+    /// an axis with `n = k + 1` (a Bézier axis, whose Greville abscissae are even) is not
+    /// warped at all.
+    ///
+    /// # Errors
+    /// As [`BSplineLattice::feng_uniform_around`].
+    pub fn feng_forward_around(
+        min: DVec3,
+        max: DVec3,
+        degrees: [usize; 3],
+        counts: [usize; 3],
+    ) -> Result<Self, DeformError> {
+        let identity = Self::feng_end_interpolating_around(min, max, degrees, counts)?;
+        let even: Vec<Vec<f64>> = (0..3)
+            .map(|a| {
+                let n = counts[a];
+                (0..n)
+                    .map(|i| min[a] + i as f64 * (max[a] - min[a]) / (n - 1) as f64)
+                    .collect()
+            })
+            .collect();
+        let mut pts = Vec::with_capacity(check_net_size(counts)?);
+        for z in &even[2] {
+            for y in &even[1] {
+                for x in &even[0] {
+                    pts.push(DVec3::new(*x, *y, *z));
+                }
+            }
+        }
+        Self::from_parts(identity.frame, identity.spline.knots().clone(), &pts)
+    }
+
     /// Assemble a lattice from its parts: `control_points` in physical coordinates, index `i`
     /// fastest, one per basis function of `knots`.
     ///
@@ -715,6 +790,7 @@ impl BSplineLattice {
                 Self::feng_end_interpolating_around(lo, hi, degrees, counts)
             }
             FengForm::Uniform => Self::feng_uniform_around(lo, hi, degrees, counts),
+            FengForm::Forward => Self::feng_forward_around(lo, hi, degrees, counts),
         }
     }
 

@@ -732,6 +732,106 @@ fn feng_initial_volumes_are_the_identity_with_eq2_spacing() {
     );
 }
 
+/// Cox–de Boor recursion, written out here independently of `volmorph_spline` (the last
+/// basis function is 1 at the right end of a clamped vector).
+fn cox_de_boor(knots: &[f64], i: usize, p: usize, u: f64) -> f64 {
+    let last = knots[knots.len() - 1];
+    if p == 0 {
+        let (a, b) = (knots[i], knots[i + 1]);
+        return if (a <= u && u < b) || (u == last && b == last && a < b) {
+            1.0
+        } else {
+            0.0
+        };
+    }
+    let mut v = 0.0;
+    let d1 = knots[i + p] - knots[i];
+    if d1 > 0.0 {
+        v += (u - knots[i]) / d1 * cox_de_boor(knots, i, p - 1, u);
+    }
+    let d2 = knots[i + p + 1] - knots[i + 1];
+    if d2 > 0.0 {
+        v += (knots[i + p + 1] - u) / d2 * cox_de_boor(knots, i + 1, p - 1, u);
+    }
+    v
+}
+
+/// Feng 2002 §3.1.1, Fig. 2b: the forward-mapped end-interpolating volume with evenly spaced
+/// control points does not reproduce the object (the identity forms do): every point moves by
+/// `d(x) = Σ N_i(x)(x_i − ξ_i)` per axis, towards the centre plane, zero on the faces and on a
+/// Bézier axis.
+#[test]
+fn feng_forward_mapping_warps_by_the_predicted_displacement() {
+    use volmorph_lattice::FengForm;
+    let (min, max) = (DVec3::new(-2.0, 1.0, 3.5), DVec3::new(4.0, 2.5, 9.0));
+    let extent = max - min;
+    let centre = 0.5 * (min + max);
+    let pts = box_points(min, DMat3::IDENTITY, extent, 300, 23);
+    // Fig. 2's volume (degree 2×2×1, lattice 4×4×2) and two richer ones.
+    for (degrees, counts) in [
+        ([2, 2, 1], [4, 4, 2]),
+        ([2, 3, 2], [6, 5, 3]),
+        ([3, 1, 2], [7, 2, 5]),
+    ] {
+        let fwd = BSplineLattice::feng_around_model(min, max, degrees, counts, FengForm::Forward)
+            .unwrap();
+        let end = BSplineLattice::feng_around_model(
+            min,
+            max,
+            degrees,
+            counts,
+            FengForm::EndInterpolating,
+        )
+        .unwrap();
+        assert_eq!(fwd.knots(), end.knots());
+        let mut largest: f64 = 0.0;
+        for &p in &pts {
+            assert!(
+                (end.apply(p) - p).length() < 1e-12,
+                "identity form moves {p}"
+            );
+            let q = fwd.apply(p);
+            for a in 0..3 {
+                let knots = fwd.knots()[a].knots();
+                let (k, n) = (degrees[a], counts[a]);
+                let predicted: f64 = (0..n)
+                    .map(|i| {
+                        let even = min[a] + i as f64 * extent[a] / (n - 1) as f64;
+                        let greville = knots[i + 1..=i + k].iter().sum::<f64>() / k as f64;
+                        cox_de_boor(knots, i, k, p[a]) * (even - greville)
+                    })
+                    .sum();
+                let d = q[a] - p[a];
+                assert!(
+                    (d - predicted).abs() < 1e-12,
+                    "{degrees:?} axis {a}: {d} vs {predicted}"
+                );
+                // Towards the centre plane, never past it.
+                assert!(
+                    d * (centre[a] - p[a]).signum() >= -1e-12,
+                    "axis {a} at {p}: {d}"
+                );
+                assert!(d.abs() <= (centre[a] - p[a]).abs() + 1e-12);
+                if n == k + 1 {
+                    assert!(d.abs() < 1e-12, "a Bézier axis is not warped");
+                }
+                largest = largest.max(d.abs());
+            }
+        }
+        // The warp is visible: a few percent of the extent.
+        assert!(
+            largest > 0.01 * extent.min_element(),
+            "{degrees:?}: {largest}"
+        );
+        // The faces stay (end interpolation).
+        for c in [min, max, DVec3::new(min.x, max.y, min.z)] {
+            assert!((fwd.apply(c) - c).length() < 1e-12);
+        }
+    }
+    assert_eq!(FengForm::Forward.name(), "forward");
+    assert!(!FengForm::Forward.is_identity() && FengForm::Uniform.is_identity());
+}
+
 /// The batch kernel agrees with `apply` inside, on and outside the box, for several degrees
 /// and frames.
 #[test]

@@ -3,8 +3,8 @@
 
 use volmorph_deform::DeformError;
 use volmorph_handles::{
-    AffineMls, Frame, FrameMls, HandleSet, RigidMls, SimilarityMls, ThinPlateMap, Weighting,
-    WendlandMap,
+    AffineMls, Frame, FrameMls, HandleSet, RigidMls, SimilarityMls, ThinPlateMap, TpsKernel,
+    Weighting, WendlandMap,
 };
 
 use crate::AnyMap;
@@ -19,7 +19,8 @@ pub enum HandleMethod {
     Similarity,
     /// Rigid moving least squares (rotation only; at least 3 point handles).
     Rigid,
-    /// Thin-plate / biharmonic volume spline (at least 4 point handles, not all on one plane).
+    /// Thin-plate / biharmonic volume spline (at least 4 point handles, not all on one plane;
+    /// kernel [`HandleOptions::kernel`]).
     Tps,
     /// Frame-based moving least squares (frame handles).
     Frames,
@@ -71,6 +72,9 @@ pub struct HandleOptions {
     /// [`volmorph_handles::wendland::DEFAULT_NEIGHBOURS`] other handles within reach of each
     /// ([`volmorph_handles::wendland::default_support`]).
     pub support: Option<f64>,
+    /// Radial kernel of the thin-plate spline (`tps`): [`TpsKernel::R`], the 3-D biharmonic
+    /// (the default), or [`TpsKernel::R2LogR`], the thesis's `r² ln r`.
+    pub kernel: TpsKernel,
 }
 
 impl Default for HandleOptions {
@@ -80,6 +84,7 @@ impl Default for HandleOptions {
             beta: 1.0,
             smoothing: 0.0,
             support: None,
+            kernel: TpsKernel::R,
         }
     }
 }
@@ -128,7 +133,12 @@ pub fn handle_map(
         HandleMethod::Affine => AnyMap::AffineMls(AffineMls::new(&s, &t, w)?),
         HandleMethod::Similarity => AnyMap::SimilarityMls(SimilarityMls::new(&s, &t, w)?),
         HandleMethod::Rigid => AnyMap::RigidMls(RigidMls::new(&s, &t, w)?),
-        HandleMethod::Tps => AnyMap::ThinPlate(ThinPlateMap::new(&s, &t, options.smoothing)?),
+        HandleMethod::Tps => AnyMap::ThinPlate(ThinPlateMap::with_kernel(
+            &s,
+            &t,
+            options.smoothing,
+            options.kernel,
+        )?),
         HandleMethod::Wendland => AnyMap::Wendland(WendlandMap::with_support(
             &s,
             &t,

@@ -12,7 +12,7 @@
 //! | `bspline-lattice` | the lattice form of `volmorph_lattice::json` |
 //! | `mls` | `method` (`affine`, `similarity`, `rigid`), `weighting`, `sources`, `targets` |
 //! | `frame-mls` | `beta`, `weighting`, `sources`, `targets`: frames `{"origin": p, "axes": [a0, a1, a2]}` (axis vectors) |
-//! | `thin-plate` | `smoothing`, `sources`, `targets` |
+//! | `thin-plate` | `smoothing`, `kernel` (`r`: the 3-D biharmonic `G(r) = r`, the default when absent; `r2logr`: the thesis's `r² ln r`), `sources`, `targets` |
 //! | `wendland` | `support` (radius, physical units), `smoothing`, `sources`, `targets` |
 //! | `bump` | `center`, `inner`, `outer`, `matrix`, `offset` |
 //! | `nurbs-geometry` | `model` (a trivariate volume file's JSON object), `box`: `{"min": p, "max": p}` |
@@ -30,8 +30,8 @@ use serde_json::{Value, json};
 use volmorph_deform::inverse::Inverse;
 use volmorph_deform::{Affine, InverseOptions, SampledMap};
 use volmorph_handles::{
-    AffineMls, BumpMap, Frame, FrameMls, RigidMls, SimilarityMls, ThinPlateMap, Weighting,
-    WendlandMap,
+    AffineMls, BumpMap, Frame, FrameMls, RigidMls, SimilarityMls, ThinPlateMap, TpsKernel,
+    Weighting, WendlandMap,
 };
 use volmorph_lattice::BSplineLattice;
 use volmorph_trivariate::{AnyAggregate, GeometryMap};
@@ -109,8 +109,15 @@ struct FrameMlsJson {
 #[serde(deny_unknown_fields)]
 struct ThinPlateJson {
     smoothing: f64,
+    /// `r` or `r2logr`; absent in files written before kernels were selectable (then `r`).
+    #[serde(default = "default_kernel")]
+    kernel: String,
     sources: Vec<[f64; 3]>,
     targets: Vec<[f64; 3]>,
+}
+
+fn default_kernel() -> String {
+    TpsKernel::R.name().to_owned()
 }
 
 #[derive(Serialize, Deserialize)]
@@ -294,6 +301,7 @@ impl AnyMap {
                 "thin-plate",
                 ThinPlateJson {
                     smoothing: m.system().smoothing(),
+                    kernel: m.kernel().name().to_owned(),
                     sources: points(m.sources()),
                     targets: points(m.targets()),
                 },
@@ -475,10 +483,11 @@ impl AnyMap {
             "thin-plate" => {
                 let m: ThinPlateJson =
                     serde_json::from_value(body()).map_err(parse("thin-plate"))?;
-                AnyMap::ThinPlate(ThinPlateMap::new(
+                AnyMap::ThinPlate(ThinPlateMap::with_kernel(
                     &vecs(&m.sources),
                     &vecs(&m.targets),
                     m.smoothing,
+                    TpsKernel::parse(&m.kernel)?,
                 )?)
             }
             "wendland" => {

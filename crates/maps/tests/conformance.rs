@@ -229,6 +229,13 @@ fn tps(identity: bool) -> ThinPlateMap {
     ThinPlateMap::new(&s, if identity { &s } else { &t }, 0.0).unwrap()
 }
 
+/// The thin-plate map with the thesis's `r² ln r` kernel (its JSON keeps the kernel).
+fn tps_r2logr(identity: bool) -> ThinPlateMap {
+    let (s, t) = handles(20, 15);
+    let t = if identity { s.clone() } else { t };
+    ThinPlateMap::with_kernel(&s, &t, 0.0, volmorph_handles::TpsKernel::R2LogR).unwrap()
+}
+
 space_map_conformance!(
     affine_map,
     suite(
@@ -330,6 +337,14 @@ space_map_conformance!(
     suite(
         || AnyMap::ThinPlate(tps(false)),
         || AnyMap::ThinPlate(tps(true)),
+        1e-5
+    )
+);
+space_map_conformance!(
+    thin_plate_r2logr,
+    suite(
+        || AnyMap::ThinPlate(tps_r2logr(false)),
+        || AnyMap::ThinPlate(tps_r2logr(true)),
         1e-5
     )
 );
@@ -459,6 +474,13 @@ linear_map_conformance!(
     live_suite(
         || LiveMap::ThinPlate(tps(false)),
         || LiveMap::ThinPlate(tps(true))
+    )
+);
+linear_map_conformance!(
+    live_thin_plate_r2logr,
+    live_suite(
+        || LiveMap::ThinPlate(tps_r2logr(false)),
+        || LiveMap::ThinPlate(tps_r2logr(true))
     )
 );
 

@@ -45,7 +45,7 @@ use std::sync::Arc;
 
 use serde::{Deserialize, Serialize};
 use serde_json::Value;
-use volmorph_handles::{HandleSet, Weighting};
+use volmorph_handles::{HandleSet, TpsKernel, Weighting};
 use volmorph_maps::{AnyMap, HandleMethod, HandleOptions};
 use volmorph_sculpt::{Grid as SculptGrid, SculptDocument, SculptOptions};
 
@@ -160,6 +160,10 @@ struct OptionsJson {
     /// the option existed).
     #[serde(default, skip_serializing_if = "Option::is_none")]
     support: Option<f64>,
+    /// The thin-plate kernel (`r2logr`); absent for the default `r` (and in projects
+    /// written before the option existed).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    kernel: Option<String>,
 }
 
 impl From<&HandleOptions> for OptionsJson {
@@ -172,13 +176,19 @@ impl From<&HandleOptions> for OptionsJson {
             beta: o.beta,
             smoothing: o.smoothing,
             support: o.support,
+            kernel: (o.kernel != TpsKernel::R).then(|| o.kernel.name().to_owned()),
         }
     }
 }
 
-impl From<OptionsJson> for HandleOptions {
-    fn from(o: OptionsJson) -> Self {
-        Self {
+impl TryFrom<OptionsJson> for HandleOptions {
+    type Error = String;
+    fn try_from(o: OptionsJson) -> Result<Self, String> {
+        let kernel = match o.kernel.as_deref() {
+            None => TpsKernel::R,
+            Some(k) => TpsKernel::parse(k).map_err(|e| e.to_string())?,
+        };
+        Ok(Self {
             weighting: match o.weighting {
                 WeightingJson::InverseDistance { alpha } => Weighting::InverseDistance { alpha },
                 WeightingJson::Gaussian { sigma } => Weighting::Gaussian { sigma },
@@ -186,7 +196,8 @@ impl From<OptionsJson> for HandleOptions {
             beta: o.beta,
             smoothing: o.smoothing,
             support: o.support,
-        }
+            kernel,
+        })
     }
 }
 
@@ -439,7 +450,11 @@ impl Scene {
                         .ok_or_else(|| project_err(path, format!("object {id}: no \"handles\"")))?;
                     let set = HandleSet::from_json(&v.to_string())?;
                     let method = o.method.unwrap_or(HandleMethod::Rigid);
-                    let options = o.options.map(HandleOptions::from).unwrap_or_default();
+                    let options = match o.options {
+                        Some(j) => HandleOptions::try_from(j)
+                            .map_err(|e| project_err(path, format!("object {id}: options: {e}")))?,
+                        None => HandleOptions::default(),
+                    };
                     Object::Map(MapObject::Handles(HandleMap::new(set, method, options)?))
                 }
                 "derived" => {

@@ -695,3 +695,73 @@ fn merge_last_undoes_a_gesture_as_one_step() {
     assert_eq!(scene.merge_last(0), 0);
     assert_eq!(scene.undo_depth(), depth + 1);
 }
+
+#[test]
+fn handle_maps_keep_their_thin_plate_kernel_through_edits_and_projects() {
+    use volmorph_deform::SpaceMap;
+    use volmorph_handles::TpsKernel;
+    let mut scene = Scene::new();
+    let thesis = HandleOptions {
+        kernel: TpsKernel::R2LogR,
+        ..HandleOptions::default()
+    };
+    // Six handles: with four (D + 1) every thin-plate map is the affine one, whatever kernel.
+    let mut set = handles();
+    set.points
+        .push((DVec3::new(0.4, 0.4, 0.1), DVec3::new(0.5, 0.35, 0.1)));
+    set.points
+        .push((DVec3::new(-0.3, 0.2, 0.4), DVec3::new(-0.3, 0.25, 0.45)));
+    let h = add(
+        &mut scene,
+        "handles",
+        NewObject::Handles {
+            set,
+            method: HandleMethod::Tps,
+            options: thesis,
+        },
+    );
+    let kernel = |scene: &Scene| match scene.map(h).unwrap() {
+        AnyMap::ThinPlate(m) => m.kernel(),
+        other => panic!("{}", other.kind()),
+    };
+    assert_eq!(kernel(&scene), TpsKernel::R2LogR);
+    let probe = DVec3::new(0.2, -0.1, 0.3);
+    let before = scene.map(h).unwrap().apply(probe);
+    // A handle edit rebuilds the map with the same kernel.
+    scene
+        .apply(Command::AddHandle {
+            map: h,
+            source: DVec3::new(0.3, 0.3, 0.3),
+            target: DVec3::new(0.35, 0.3, 0.25),
+        })
+        .unwrap();
+    assert_eq!(kernel(&scene), TpsKernel::R2LogR);
+    scene.undo().unwrap();
+    assert_eq!(scene.map(h).unwrap().apply(probe), before);
+    // The default kernel gives another map through the same handles.
+    scene
+        .apply(Command::SetHandleMethod {
+            map: h,
+            method: HandleMethod::Tps,
+            options: HandleOptions::default(),
+        })
+        .unwrap();
+    assert_eq!(kernel(&scene), TpsKernel::R);
+    assert!((scene.map(h).unwrap().apply(probe) - before).length() > 1e-6);
+    scene.undo().unwrap();
+    // A project keeps the kernel.
+    let dir = tempfile::tempdir().unwrap();
+    let path = dir.path().join("k.vmproj");
+    scene.save(&path).unwrap();
+    let text = std::fs::read_to_string(&path).unwrap();
+    assert!(text.contains("\"kernel\": \"r2logr\""), "{text}");
+    let back = Scene::load(&path).unwrap();
+    let id = back
+        .find("handles")
+        .expect("the handle map is in the project");
+    assert_eq!(back.map(id).unwrap().apply(probe), before);
+    // A bad kernel name is an error naming the project.
+    std::fs::write(&path, text.replace("\"r2logr\"", "\"r3\"")).unwrap();
+    let e = Scene::load(&path).unwrap_err().to_string();
+    assert!(e.contains("k.vmproj") && e.contains("r3"), "{e}");
+}

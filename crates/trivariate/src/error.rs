@@ -108,6 +108,16 @@ pub enum TrivariateError {
         /// Smallest distance reached.
         residual: f64,
     },
+    /// A modeling recipe is malformed or one of its steps fails ([`crate::recipe`]).
+    #[error("{source_name}: {json_path}: {message}")]
+    Recipe {
+        /// The recipe (its file name).
+        source_name: String,
+        /// JSON path of the field at fault, e.g. `steps[2].revolve.angle_degrees`.
+        json_path: String,
+        /// What is wrong.
+        message: String,
+    },
     /// The caller asked the work to stop through its [`volmorph_io::Progress`]; nothing was
     /// written.
     #[error("stopped on request")]

@@ -7,6 +7,8 @@
 //!   net, on the shared domain `[0, 1]^N` ([`aggregate`] states the conventions).
 //! * [`extrude`], [`revolve`], [`rule`] — modeling operators lifting curves to surfaces and
 //!   surfaces to volumes, carrying attributes along ([`modeling`]).
+//! * [`recipe`] — modeling recipes: curves, attributes and the §3 operators as a versioned JSON
+//!   document built into a model ([`Recipe`], [`build_recipe_file`]).
 //! * [`format`](mod@format) — the documented JSON file format with [`load`] / [`save`].
 //! * [`fit`] — interpolation at the Greville abscissae and separable least squares (§3).
 //! * [`VolumeEvaluator`] — points and first partial derivatives by knot refinement (the α
@@ -22,9 +24,12 @@
 //! * [`RayTracer`] — ray–boundary intersection (faces and `det J = 0`, Theorem 1, with
 //!   [`cone`] culling) and parameter tracking along rays (§5.2, [`raytrace`]).
 //! * [`VolumeRenderer`] — front-to-back volume rendering of an attribute through
-//!   [`TransferFunction`]s ([`volrender`]).
+//!   [`TransferFunction`]s ([`volrender`]); [`SceneRenderer`] composites several volumes,
+//!   each with its own attribute and transfer function, in one picture (§5.4).
 //! * [`trace_optical_path`] — bent rays through a refractive-index attribute (§5.3,
-//!   [`optics`]); [`grin_lens`] builds the gradient-index lens example ([`examples`]);
+//!   [`optics`]: the paper's Snell stepping, its ray-equation form, and the default adaptive
+//!   Dormand–Prince integrator of the ray equation); [`exact_back_focal_distance`] is the GRIN
+//!   lens's exact meridional trace; [`grin_lens`] builds the gradient-index lens example ([`examples`]);
 //!   [`RayFan`]s of parallel rays, the measured back focal distance and the side view of the
 //!   paths ([`ray_fan`]).
 //!
@@ -46,6 +51,7 @@ pub mod modeling;
 pub mod optics;
 pub mod ray_fan;
 pub mod raytrace;
+pub mod recipe;
 pub mod space_map;
 pub mod volrender;
 
@@ -54,7 +60,10 @@ pub use aggregate::{
 };
 pub use error::TrivariateError;
 pub use eval::{EvalMethod, VolumeEvaluator};
-pub use examples::{GRIN_ATTRIBUTE, GrinLensSpec, ParaxialFocus, grin_lens, paraxial_focus};
+pub use examples::{
+    ExactFocus, GRIN_ATTRIBUTE, GrinLensSpec, ParaxialFocus, exact_back_focal_distance, grin_lens,
+    grin_lens_recipe, paraxial_focus,
+};
 pub use extract::{
     RootCell, RootOptions, isolate_roots, isolate_roots_with, isosurface_function, plane_function,
 };
@@ -65,10 +74,13 @@ pub use isosurface::{
 };
 pub use modeling::{extrude, revolve, rule};
 pub use optics::{
-    OpticalPath, OpticsOptions, PathMethod, draw_paths, refract, trace_optical_path,
-    write_paths_obj,
+    OpticalPath, OpticsOptions, PathMethod, draw_paths, reference_options, refract,
+    trace_optical_path, write_paths_obj,
 };
-pub use ray_fan::{RayFan, measured_back_focal_distance, side_view};
+pub use ray_fan::{FocusMeasurement, RayFan, measured_back_focal_distance, side_view};
 pub use raytrace::{BoundaryHit, HitKind, RayTracer, TraceOptions, Tracked};
+pub use recipe::{Recipe, build_recipe_file, load_recipe};
 pub use space_map::GeometryMap;
-pub use volrender::{RayColor, RenderOptions, TransferFunction, TransferPoint, VolumeRenderer};
+pub use volrender::{
+    RayColor, RenderOptions, SceneRenderer, TransferFunction, TransferPoint, VolumeRenderer,
+};

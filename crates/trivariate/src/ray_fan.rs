@@ -151,11 +151,26 @@ fn meridian() -> DVec3 {
     )
 }
 
+/// A back focal distance measured by tracing one probe ray ([`measured_back_focal_distance`]).
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct FocusMeasurement {
+    /// Height of the probe ray above the axis.
+    pub height: f64,
+    /// Distance from the exit face to where the probe's exit line crosses the axis.
+    pub back_focal_distance: f64,
+    /// Steps the trace took inside the lens ([`OpticalPath::steps`]).
+    pub steps: usize,
+    /// Steps rejected by the error control ([`OpticalPath::rejected_steps`]).
+    pub rejected_steps: usize,
+}
+
 /// The back focal distance of the GRIN lens `spec` (built by
 /// [`grin_lens`](crate::grin_lens) as `model`) measured by tracing: a probe ray parallel to
-/// the axis at [`PROBE_HEIGHT`] of the radius, followed through the lens, and the distance
-/// from the exit face to where its exit line crosses the axis. Returns `(height, distance)`,
-/// or `None` when the probe does not leave the lens or leaves parallel to the axis.
+/// the axis at [`PROBE_HEIGHT`] of the radius, followed through the lens by `options`, and
+/// the distance from the exit face to where its exit line crosses the axis. `None` when the
+/// probe does not leave the lens or leaves parallel to the axis. Compare with
+/// [`exact_back_focal_distance`](crate::examples::exact_back_focal_distance) at the same
+/// height.
 ///
 /// # Errors
 /// As [`trace_optical_path`].
@@ -165,7 +180,7 @@ pub fn measured_back_focal_distance(
     attribute: &str,
     spec: &GrinLensSpec,
     options: &OpticsOptions,
-) -> Result<Option<(f64, f64)>, TrivariateError> {
+) -> Result<Option<FocusMeasurement>, TrivariateError> {
     let radial = meridian();
     let r0 = PROBE_HEIGHT * spec.radius;
     let probe = r0 * radial + DVec3::new(0.0, 0.0, -0.5 * spec.thickness);
@@ -180,7 +195,12 @@ pub fn measured_back_focal_distance(
     Ok(p.exit.and_then(|(e, v)| {
         let (e, v) = (DVec3::from_array(e), DVec3::from_array(v));
         let (re, vr) = (e.dot(radial), v.dot(radial));
-        (vr.abs() > 1e-15).then(|| (r0, e.z + (-re / vr) * v.z - spec.thickness))
+        (vr.abs() > 1e-15).then(|| FocusMeasurement {
+            height: r0,
+            back_focal_distance: e.z + (-re / vr) * v.z - spec.thickness,
+            steps: p.steps,
+            rejected_steps: p.rejected_steps,
+        })
     }))
 }
 

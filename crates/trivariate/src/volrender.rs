@@ -29,6 +29,10 @@
 //!    surfaces of rising attribute face the regions of lower value. [`VolumeRenderer::render_ray`]
 //!    has no camera and is never shaded.
 //!
+//! [`SceneRenderer`] renders several volumes in one picture (§5.4): each ray is walked
+//! through every volume as above and the samples of all of them are composited front to back
+//! by depth.
+//!
 //! Colours are linear RGB throughout: transfer-function colours are linear, compositing is in
 //! linear light, and [`VolumeRenderer::render_image`] encodes pixels to sRGB.
 //! [`RayColor::opacity`] is `1 − T`; [`RayColor::color`] is `C_acc` (premultiplied by opacity).
@@ -252,6 +256,24 @@ pub struct RayColor {
     pub samples: usize,
 }
 
+/// One sample of a walk: its depth along the ray (the start of the segment it stands for),
+/// its (lit) linear colour and the opacity of its segment.
+#[derive(Debug, Clone, Copy, PartialEq)]
+struct Sample {
+    t: f64,
+    color: [f64; 3],
+    alpha: f64,
+}
+
+/// The paper's front-to-back step: `C_acc += T·α·C`, `T ← T·(1 − α)`.
+fn composite(out: &mut RayColor, trans: &mut f64, s: &Sample) {
+    for (acc, ck) in out.color.iter_mut().zip(s.color) {
+        *acc += *trans * s.alpha * ck;
+    }
+    *trans *= 1.0 - s.alpha;
+    out.samples += 1;
+}
+
 /// Renders one attribute of an aggregate volume by the algorithm of the [module docs](self).
 #[derive(Debug, Clone)]
 pub struct VolumeRenderer<'a> {
@@ -404,6 +426,32 @@ impl<'a> VolumeRenderer<'a> {
         dir: [f64; 3],
         lighting: Option<&Lighting>,
     ) -> Result<RayColor, TrivariateError> {
+        let mut out = RayColor {
+            color: [0.0; 3],
+            opacity: 0.0,
+            samples: 0,
+        };
+        let mut trans = 1.0;
+        let min = self.options.min_transmittance;
+        self.samples(origin, dir, lighting, &mut |s| {
+            composite(&mut out, &mut trans, s);
+            trans >= min
+        })?;
+        out.opacity = 1.0 - trans;
+        Ok(out)
+    }
+
+    /// Walk the ray `origin + t·dir` and hand every sample, front to back, to `sink` (colour
+    /// lit by `lighting` when given) until `sink` returns `false`, the volume's own
+    /// transmittance falls below [`RenderOptions::min_transmittance`] (after that sample) or
+    /// [`RenderOptions::max_samples`] are taken.
+    fn samples(
+        &self,
+        origin: [f64; 3],
+        dir: [f64; 3],
+        lighting: Option<&Lighting>,
+        sink: &mut dyn FnMut(&Sample) -> bool,
+    ) -> Result<(), TrivariateError> {
         let d = check_ray(origin, dir)?;
         let geometry = VolumeEvaluator::new(self.tracer.geometry());
         let mut point = [0.0; 3];
@@ -416,11 +464,7 @@ impl<'a> VolumeRenderer<'a> {
         let mut grad = [0.0; 48];
         let mut big_val = vec![0.0; if dim > 16 { dim } else { 0 }];
         let mut big_grad = vec![0.0; if dim > 16 { 3 * dim } else { 0 }];
-        let mut out = RayColor {
-            color: [0.0; 3],
-            opacity: 0.0,
-            samples: 0,
-        };
+        let mut count = 0usize;
         let mut trans = 1.0;
         let mut after = 0.0;
         let step = self.options.step;
@@ -428,7 +472,7 @@ impl<'a> VolumeRenderer<'a> {
             let mut t = entry.t;
             let mut u = entry.params;
             loop {
-                if out.samples >= self.options.max_samples {
+                if count >= self.options.max_samples {
                     break 'walk;
                 }
                 let next_t = t + step;
@@ -467,12 +511,9 @@ impl<'a> VolumeRenderer<'a> {
                     let n = -DVec3::from_array(physical_gradient(&jac, gu));
                     c = light.shade(c, n, -DVec3::from_array(d));
                 }
-                for (acc, ck) in out.color.iter_mut().zip(c) {
-                    *acc += trans * alpha * ck;
-                }
+                count += 1;
                 trans *= 1.0 - alpha;
-                out.samples += 1;
-                if trans < self.options.min_transmittance {
+                if !sink(&Sample { t, color: c, alpha }) || trans < self.options.min_transmittance {
                     break 'walk;
                 }
                 match (next, exit) {
@@ -488,8 +529,19 @@ impl<'a> VolumeRenderer<'a> {
                 }
             }
         }
-        out.opacity = 1.0 - trans;
-        Ok(out)
+        Ok(())
+    }
+
+    /// The lighting of `camera`'s view, when the options ask for shading.
+    fn lighting(&self, camera: &Camera) -> Result<Option<Lighting>, TrivariateError> {
+        match &self.options.shading {
+            Some(s) => {
+                Ok(Some(s.for_camera(camera).map_err(|e| {
+                    TrivariateError::InvalidArgument(e.to_string())
+                })?))
+            }
+            None => Ok(None),
+        }
     }
 
     /// Render `camera`'s view: one ray per pixel centre, rows in parallel (rayon), shaded when
@@ -514,13 +566,7 @@ impl<'a> VolumeRenderer<'a> {
         camera: &Camera,
         progress: &dyn volmorph_io::Progress,
     ) -> Result<RgbaImage, TrivariateError> {
-        let lighting = match &self.options.shading {
-            Some(s) => Some(
-                s.for_camera(camera)
-                    .map_err(|e| TrivariateError::InvalidArgument(e.to_string()))?,
-            ),
-            None => None,
-        };
+        let lighting = self.lighting(camera)?;
         let (w, h) = (camera.width(), camera.height());
         progress.start("volume rendering", u64::from(h));
         let mut img = RgbaImage::new(w, h, [0, 0, 0, 0])
@@ -536,6 +582,156 @@ impl<'a> VolumeRenderer<'a> {
                     let ray = camera.ray(x, y);
                     let c =
                         self.walk(ray.origin.to_array(), ray.dir.to_array(), lighting.as_ref())?;
+                    *px = premultiplied_to_pixel(c.color, c.opacity);
+                }
+                progress.advance(1);
+                Ok(progress.check()?)
+            })?;
+        Ok(img)
+    }
+}
+
+/// Several volumes in one picture (§5.4's `TraceRay` over an environment of volumes), each
+/// with its own model, attribute, transfer function and options.
+///
+/// Each ray is walked through every volume as [`VolumeRenderer`] walks it (entry, tracked
+/// samples, exit, re-entry), and the samples of all volumes are composited front to back in
+/// the order of their depth along the ray (a stable merge: equal depths keep the order of the
+/// volumes). Where the volumes' intervals along the ray do not overlap this is exactly §5.4's
+/// loop — the nearest volume's interval is composited, then the next volume hit beyond its
+/// exit, and so on. Where intervals overlap (interpenetrating volumes) the samples interleave
+/// by depth, which is what the line-of-sight integral over the union of the volumes asks for;
+/// the paper's loop, restarting from the exit of the first volume, would skip the part of the
+/// other volume that lies in front of that exit. Compositing stops when the transmittance
+/// falls below the smallest [`RenderOptions::min_transmittance`] of the volumes; a ray that
+/// meets only one volume gets exactly that volume's [`VolumeRenderer`] colour.
+#[derive(Debug, Clone)]
+pub struct SceneRenderer<'a> {
+    parts: Vec<VolumeRenderer<'a>>,
+    min_transmittance: f64,
+}
+
+impl<'a> SceneRenderer<'a> {
+    /// A scene of `parts` (one renderer per volume).
+    ///
+    /// # Errors
+    /// [`TrivariateError::InvalidArgument`] for an empty list.
+    pub fn new(parts: Vec<VolumeRenderer<'a>>) -> Result<Self, TrivariateError> {
+        let min_transmittance = parts
+            .iter()
+            .map(|p| p.options.min_transmittance)
+            .reduce(f64::min)
+            .ok_or_else(|| {
+                TrivariateError::InvalidArgument("a scene needs at least one volume".into())
+            })?;
+        Ok(Self {
+            parts,
+            min_transmittance,
+        })
+    }
+
+    /// The volumes' renderers.
+    #[must_use]
+    pub fn parts(&self) -> &[VolumeRenderer<'a>] {
+        &self.parts
+    }
+
+    /// Smallest and largest corner of the union of the volumes' bounding boxes.
+    #[must_use]
+    pub fn bounds(&self) -> ([f64; 3], [f64; 3]) {
+        let mut lo = [f64::INFINITY; 3];
+        let mut hi = [f64::NEG_INFINITY; 3];
+        for p in &self.parts {
+            let (a, b) = p.tracer.bounds();
+            for c in 0..3 {
+                lo[c] = lo[c].min(a[c]);
+                hi[c] = hi[c].max(b[c]);
+            }
+        }
+        (lo, hi)
+    }
+
+    /// Composite the ray `origin + t·dir` through every volume (unshaded).
+    ///
+    /// # Errors
+    /// As [`VolumeRenderer::render_ray`].
+    pub fn render_ray(&self, origin: [f64; 3], dir: [f64; 3]) -> Result<RayColor, TrivariateError> {
+        let lights = vec![None; self.parts.len()];
+        self.walk(origin, dir, &lights, &mut Vec::new())
+    }
+
+    fn walk(
+        &self,
+        origin: [f64; 3],
+        dir: [f64; 3],
+        lights: &[Option<Lighting>],
+        buf: &mut Vec<(f64, usize, Sample)>,
+    ) -> Result<RayColor, TrivariateError> {
+        buf.clear();
+        for (i, (p, light)) in self.parts.iter().zip(lights).enumerate() {
+            p.samples(origin, dir, light.as_ref(), &mut |s| {
+                buf.push((s.t, i, *s));
+                true
+            })?;
+        }
+        // Stable: equal depths keep the volumes' order (and each volume's own order).
+        buf.sort_by(|a, b| a.0.total_cmp(&b.0).then(a.1.cmp(&b.1)));
+        let mut out = RayColor {
+            color: [0.0; 3],
+            opacity: 0.0,
+            samples: 0,
+        };
+        let mut trans = 1.0;
+        for (_, _, s) in buf.iter() {
+            composite(&mut out, &mut trans, s);
+            if trans < self.min_transmittance {
+                break;
+            }
+        }
+        out.opacity = 1.0 - trans;
+        Ok(out)
+    }
+
+    /// Render `camera`'s view (as [`VolumeRenderer::render_image`], each volume shaded by its
+    /// own options).
+    ///
+    /// # Errors
+    /// As [`VolumeRenderer::render_image`].
+    pub fn render_image(&self, camera: &Camera) -> Result<RgbaImage, TrivariateError> {
+        self.render_image_with(camera, &volmorph_io::NoProgress)
+    }
+
+    /// [`SceneRenderer::render_image`] reporting one step per image row to `progress` and
+    /// stopping when it is cancelled.
+    ///
+    /// # Errors
+    /// As [`VolumeRenderer::render_image_with`].
+    pub fn render_image_with(
+        &self,
+        camera: &Camera,
+        progress: &dyn volmorph_io::Progress,
+    ) -> Result<RgbaImage, TrivariateError> {
+        let lights = self
+            .parts
+            .iter()
+            .map(|p| p.lighting(camera))
+            .collect::<Result<Vec<_>, _>>()?;
+        let (w, h) = (camera.width(), camera.height());
+        progress.start("volume rendering", u64::from(h));
+        let mut img = RgbaImage::new(w, h, [0, 0, 0, 0])
+            .map_err(|e| TrivariateError::InvalidArgument(e.to_string()))?;
+        let width = w as usize;
+        img.pixels_mut()
+            .par_chunks_mut(width.max(1))
+            .enumerate()
+            .try_for_each(|(y, row)| -> Result<(), TrivariateError> {
+                let y = u32::try_from(y).unwrap_or(u32::MAX);
+                let mut buf = Vec::new();
+                for (x, px) in row.iter_mut().enumerate() {
+                    let x = u32::try_from(x).unwrap_or(u32::MAX);
+                    let ray = camera.ray(x, y);
+                    let c =
+                        self.walk(ray.origin.to_array(), ray.dir.to_array(), &lights, &mut buf)?;
                     *px = premultiplied_to_pixel(c.color, c.opacity);
                 }
                 progress.advance(1);

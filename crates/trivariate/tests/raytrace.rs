@@ -574,3 +574,134 @@ fn shading_lights_the_attribute_gradient_with_the_camera_light() {
     assert!(c[0].abs_diff(want) <= 1, "{c:?} vs {want}");
     assert!(srgb8_to_linear(c[0]) < 0.5 * srgb8_to_linear(plain[0]));
 }
+
+/// A box `[lo, lo + size]` carrying the constant attribute `d`.
+fn constant_box(lo: [f64; 3], size: [f64; 3], value: f64) -> AggregateVolume {
+    let mut g = box_geometry(size);
+    let pts: Vec<f64> = g
+        .control_points()
+        .chunks_exact(3)
+        .flat_map(|p| [p[0] + lo[0], p[1] + lo[1], p[2] + lo[2]])
+        .collect();
+    g = TensorBSpline::new(g.knots().clone(), 3, pts).unwrap();
+    AggregateVolume::new(g)
+        .unwrap()
+        .with_attribute("d", constant(value))
+        .unwrap()
+}
+
+fn flat_transfer(value: f64, color: [f64; 3], opacity: f64) -> TransferFunction {
+    TransferFunction::new(vec![TransferPoint {
+        value,
+        color,
+        opacity,
+    }])
+    .unwrap()
+}
+
+#[test]
+fn a_scene_of_separate_volumes_equals_each_volume_alone() {
+    use volmorph_render::{Camera, Projection};
+    use volmorph_trivariate::SceneRenderer;
+    let a = constant_box([0.0, 0.0, 0.0], [1.0, 1.0, 1.0], 1.0);
+    let b = constant_box([2.0, 0.2, -0.5], [1.0, 0.6, 2.0], 2.0);
+    let ta = RayTracer::new(&a, TraceOptions::default()).unwrap();
+    let tb = RayTracer::new(&b, TraceOptions::default()).unwrap();
+    let opts = RenderOptions {
+        shading: Some(volmorph_render::Shading::default()),
+        ..RenderOptions::for_diagonal(1.0)
+    };
+    let ra =
+        VolumeRenderer::new(&a, &ta, "d", flat_transfer(1.0, [1.0, 0.2, 0.1], 0.6), opts).unwrap();
+    let rb =
+        VolumeRenderer::new(&b, &tb, "d", flat_transfer(2.0, [0.1, 0.3, 1.0], 0.4), opts).unwrap();
+    // Looking down −z at both boxes, side by side in the picture.
+    let cam = Camera::look_at(
+        [1.5, 0.5, 5.0].into(),
+        [1.5, 0.5, 0.0].into(),
+        [0.0, 1.0, 0.0].into(),
+        Projection::Orthographic { view_height: 2.0 },
+        48,
+        32,
+    )
+    .unwrap();
+    let scene = SceneRenderer::new(vec![ra.clone(), rb.clone()]).unwrap();
+    let both = scene.render_image(&cam).unwrap();
+    let only_a = ra.render_image(&cam).unwrap();
+    let only_b = rb.render_image(&cam).unwrap();
+    let (mut na, mut nb) = (0, 0);
+    for y in 0..32 {
+        for x in 0..48 {
+            let (pa, pb, p) = (
+                only_a.get(x, y).unwrap(),
+                only_b.get(x, y).unwrap(),
+                both.get(x, y).unwrap(),
+            );
+            assert!(pa[3] == 0 || pb[3] == 0, "the boxes overlap at {x},{y}");
+            if pa[3] > 0 {
+                assert_eq!(p, pa, "{x},{y}");
+                na += 1;
+            } else {
+                assert_eq!(p, pb, "{x},{y}");
+                nb += usize::from(pb[3] > 0);
+            }
+        }
+    }
+    assert!(na > 50 && nb > 50, "{na} {nb}");
+    // A scene of one volume is that volume.
+    let one = SceneRenderer::new(vec![ra]).unwrap();
+    assert_eq!(one.render_image(&cam).unwrap().pixels(), only_a.pixels());
+    assert!(SceneRenderer::new(Vec::new()).is_err());
+}
+
+#[test]
+fn a_near_opaque_volume_hides_a_far_one_whatever_the_list_order() {
+    use volmorph_trivariate::SceneRenderer;
+    let near = constant_box([0.0, 0.0, 0.0], [1.0, 1.0, 1.0], 1.0);
+    let far = constant_box([-0.5, -0.5, 3.0], [2.0, 2.0, 1.0], 2.0);
+    let tn = RayTracer::new(&near, TraceOptions::default()).unwrap();
+    let tf = RayTracer::new(&far, TraceOptions::default()).unwrap();
+    let opts = RenderOptions::for_diagonal(1.0);
+    let red = [1.0, 0.0, 0.0];
+    let blue = [0.0, 0.0, 1.0];
+    let rn = VolumeRenderer::new(&near, &tn, "d", flat_transfer(1.0, red, 1.0), opts).unwrap();
+    let rf = VolumeRenderer::new(&far, &tf, "d", flat_transfer(2.0, blue, 0.5), opts).unwrap();
+    for parts in [vec![rn.clone(), rf.clone()], vec![rf.clone(), rn.clone()]] {
+        let scene = SceneRenderer::new(parts).unwrap();
+        // From below (−z) the near box is in front: opaque red only.
+        let c = scene.render_ray([0.5, 0.5, -2.0], [0.0, 0.0, 1.0]).unwrap();
+        assert_eq!(c.color, [1.0, 0.0, 0.0]);
+        assert_eq!(c.opacity, 1.0);
+        // From above (+z) the far box comes first: its blue (opacity 1 − 0.5¹), then the red
+        // box behind it fills the rest.
+        let c = scene.render_ray([0.5, 0.5, 6.0], [0.0, 0.0, -1.0]).unwrap();
+        assert!((c.color[2] - 0.5).abs() < 1e-9, "{c:?}");
+        assert!((c.color[0] - 0.5).abs() < 1e-9, "{c:?}");
+        // Beside the near box only the far one is hit.
+        let c = scene.render_ray([1.3, 1.3, -2.0], [0.0, 0.0, 1.0]).unwrap();
+        assert_eq!(c, rf.render_ray([1.3, 1.3, -2.0], [0.0, 0.0, 1.0]).unwrap());
+    }
+}
+
+#[test]
+fn interpenetrating_volumes_attenuate_by_the_whole_overlap() {
+    // Boxes z ∈ [0, 2] and z ∈ [1, 3] on one ray: Beer–Lambert over the union, whatever the
+    // sample interleaving — T = (1 − α₁)² (1 − α₂)².
+    use volmorph_trivariate::SceneRenderer;
+    let a = constant_box([0.0, 0.0, 0.0], [1.0, 1.0, 2.0], 1.0);
+    let b = constant_box([0.0, 0.0, 1.0], [1.0, 1.0, 2.0], 1.0);
+    let ta = RayTracer::new(&a, TraceOptions::default()).unwrap();
+    let tb = RayTracer::new(&b, TraceOptions::default()).unwrap();
+    let opts = RenderOptions {
+        min_transmittance: 0.0,
+        ..RenderOptions::for_diagonal(1.0)
+    };
+    let ra = VolumeRenderer::new(&a, &ta, "d", flat_transfer(1.0, [1.0; 3], 0.3), opts).unwrap();
+    let rb = VolumeRenderer::new(&b, &tb, "d", flat_transfer(1.0, [1.0; 3], 0.2), opts).unwrap();
+    let scene = SceneRenderer::new(vec![ra, rb]).unwrap();
+    let c = scene.render_ray([0.4, 0.6, -1.0], [0.0, 0.0, 1.0]).unwrap();
+    let want = 1.0 - 0.7f64.powi(2) * 0.8f64.powi(2);
+    assert!((c.opacity - want).abs() < 1e-9, "{} vs {want}", c.opacity);
+    // White light: the colour equals the opacity (premultiplied).
+    assert!((c.color[0] - want).abs() < 1e-9);
+}

@@ -9,6 +9,7 @@ use std::time::Instant;
 use anyhow::{Context, bail};
 use volmorph_ffd::accurate::AccuratePlan;
 use volmorph_ffd::{baseline, step, tessellate};
+use volmorph_lattice::BSplineLattice;
 use volmorph_lattice::formats::read_lattice;
 use volmorph_mesh as mesh;
 
@@ -20,8 +21,20 @@ pub struct Args {
     /// Input mesh (.obj, .ply, .stl, .off, optionally .gz).
     pub input: PathBuf,
     /// Lattice file (.json, .tfm, .bxf), e.g. from `volmorph lattice init --mesh`.
-    #[arg(long)]
-    pub lattice: PathBuf,
+    #[arg(long, required_unless_present = "init", conflicts_with = "init")]
+    pub lattice: Option<PathBuf>,
+    /// Instead of --lattice, deform the mesh by Feng et al.'s initial volume around its
+    /// bounding box (as `lattice init --mesh … --form`): `end-interpolating` or `uniform`
+    /// leave it unchanged (identity Jacobian), `forward` shows the warp of the forward
+    /// mapping (Fig. 2b).
+    #[arg(long, value_enum)]
+    pub init: Option<crate::cmd::lattice::Form>,
+    /// Degrees "KU,KV,KW" of the --init volume.
+    #[arg(long, default_value = "2,2,2", requires = "init", value_parser = crate::args::triple::<usize>)]
+    pub degree: [usize; 3],
+    /// Control points per axis "NU,NV,NW" of the --init volume.
+    #[arg(long, default_value = "4,4,4", requires = "init", value_parser = crate::args::triple::<usize>)]
+    pub size: [usize; 3],
     /// `vertex` (move the vertices only), `uniform:N` (N rounds of midpoint subdivision
     /// first), `adaptive:TOL` (halve edges whose deformed midpoint is off by more than TOL,
     /// model units) or `accurate` (trimmed Bézier surfaces).
@@ -85,8 +98,19 @@ pub fn run(a: &Args) -> anyhow::Result<()> {
     let pb = progress::spinner(format!("reading {}", a.input.display()));
     let m =
         mesh::read(&a.input).with_context(|| format!("cannot read mesh {}", a.input.display()))?;
-    let lattice = read_lattice(&a.lattice)
-        .with_context(|| format!("cannot read lattice {}", a.lattice.display()))?;
+    let lattice = match (&a.lattice, a.init) {
+        (Some(path), _) => {
+            read_lattice(path).with_context(|| format!("cannot read lattice {}", path.display()))?
+        }
+        (None, Some(form)) => {
+            let (lo, hi) = m
+                .bounding_box()
+                .with_context(|| format!("{} has no vertices", a.input.display()))?;
+            BSplineLattice::feng_around_model(lo, hi, a.degree, a.size, form.into())
+                .with_context(|| format!("cannot place a lattice around {}", a.input.display()))?
+        }
+        (None, None) => bail!("give --lattice L or --init FORM"),
+    };
     let step_out = is_step(&a.output);
     if step_out && !matches!(mode, Mode::Accurate) {
         bail!(

@@ -15,6 +15,7 @@ use std::path::PathBuf;
 
 use anyhow::{Context, bail};
 use volmorph_deform::{SampledMap, SpaceMap};
+use volmorph_handles::TpsKernel;
 use volmorph_handles::Weighting;
 use volmorph_handles::handles::{HandleSet, read_point_list, write_point_list};
 use volmorph_handles::mls2d::{Mls2dKind, warp_picture_tps_with, warp_picture_with};
@@ -34,7 +35,7 @@ pub enum Command {
     /// Deform a volume or a mesh (format by extension) so that source handles move to their
     /// targets, and report how much of the domain folds (Jacobian determinant <= 0).
     #[command(
-        after_help = "Examples:\n  volmorph handles warp ct.nii.gz --handles moves.json --method rigid -o ct_moved.nii.gz\n  volmorph handles warp teapot.ply --from src.fcsv --to dst.fcsv --method tps -o bent.ply\n  volmorph handles warp ct.nii.gz --handles pairs.txt --method affine --exact -o exact.nii.gz\n\nHandle files: .json {\"points\": [{\"source\": [x,y,z], \"target\": [x,y,z]}], \"frames\": [...]}\n(pairs), .txt/.xyz with 6 numbers per line (pairs), or two point lists (--from/--to,\n.fcsv Slicer markups or 3 numbers per line) paired by order."
+        after_help = "Examples:\n  volmorph handles warp ct.nii.gz --handles moves.json --method rigid -o ct_moved.nii.gz\n  volmorph handles warp teapot.ply --from src.fcsv --to dst.fcsv --method tps -o bent.ply\n  volmorph handles warp teapot.ply --from src.fcsv --to dst.fcsv --method tps --kernel r2logr -o bent_thesis.ply\n  volmorph handles warp ct.nii.gz --handles pairs.txt --method affine --exact -o exact.nii.gz\n\nHandle files: .json {\"points\": [{\"source\": [x,y,z], \"target\": [x,y,z]}], \"frames\": [...]}\n(pairs), .txt/.xyz with 6 numbers per line (pairs), or two point lists (--from/--to,\n.fcsv Slicer markups or 3 numbers per line) paired by order."
     )]
     Warp(WarpArgs),
     /// Map a list of points (forward: sources go to targets) and write them as text, one
@@ -120,6 +121,30 @@ pub struct MapArgs {
     /// average, from the handles' bounding box (see the `wendland` method).
     #[arg(long, value_name = "R")]
     pub support: Option<f64>,
+    /// Radial kernel of the thin-plate spline (tps method): r, the true 3-D biharmonic kernel
+    /// (minimal bending energy in 3-D, the default), or r2logr, r² log r as in McPhail's
+    /// thesis §5.4.1 (the 2-D biharmonic kernel used in 3-D). Both interpolate the handles.
+    #[arg(long, value_enum, default_value_t = Kernel::R)]
+    pub kernel: Kernel,
+}
+
+/// Radial kernel of the thin-plate spline.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, clap::ValueEnum)]
+pub enum Kernel {
+    /// G(r) = r: the biharmonic Green's function in 3-D.
+    R,
+    /// G(r) = r² log r: the 2-D biharmonic kernel (McPhail §5.4.1, Bookstein).
+    #[value(name = "r2logr")]
+    R2logr,
+}
+
+impl From<Kernel> for TpsKernel {
+    fn from(k: Kernel) -> Self {
+        match k {
+            Kernel::R => TpsKernel::R,
+            Kernel::R2logr => TpsKernel::R2LogR,
+        }
+    }
 }
 
 /// Arguments of `volmorph handles warp`.
@@ -201,6 +226,12 @@ pub(crate) fn options(a: &MapArgs) -> anyhow::Result<HandleOptions> {
                 bail!("--support {r}: only the wendland method has a support radius")
             }
             s => s,
+        },
+        kernel: match a.kernel {
+            Kernel::R2logr if a.method != Method::Tps => {
+                bail!("--kernel r2logr: only the tps method has a kernel choice")
+            }
+            k => k.into(),
         },
     })
 }
@@ -314,6 +345,10 @@ pub struct Mls2dArgs {
     /// Vertices per axis of the deformed grid whose quads are filled bilinearly.
     #[arg(long, default_value_t = 100)]
     pub grid: usize,
+    /// Kernel of the 2-D thin-plate spline (tps): only r2logr, r² log r, the biharmonic
+    /// kernel in 2-D (r is the 3-D one and is refused here).
+    #[arg(long, value_enum, default_value_t = Kernel::R2logr)]
+    pub kernel: Kernel,
     /// Output picture (.png), same size as the input; uncovered pixels are transparent.
     #[arg(short, long)]
     pub output: PathBuf,
@@ -335,6 +370,12 @@ pub enum Kind2d {
 
 /// Run `volmorph mls2d`.
 pub fn run_mls2d(a: &Mls2dArgs) -> anyhow::Result<()> {
+    if a.kernel == Kernel::R {
+        bail!(
+            "--kernel r: in 2-D the thin-plate (biharmonic) kernel is r² log r (r2logr); r is \
+             the 3-D biharmonic kernel"
+        );
+    }
     let set = HandleSet::read(&a.handles)
         .with_context(|| format!("cannot read the handles {}", a.handles.display()))?;
     let pb = progress::spinner(format!("reading {}", a.input.display()));

@@ -19,7 +19,7 @@ pub enum Command {
     /// et al.'s initial B-spline volume of any degree around a mesh's bounding box (identity
     /// Jacobian, parameters equal coordinates).
     #[command(
-        after_help = "Examples:\n  volmorph lattice init teapot.nii.gz --counts 9,9,9 -o lattice.json\n  volmorph lattice init --corner 0,0,0 --edge 64,0,0 --edge 20,60,0 --edge 0,-10,64 --counts 7,7,7 -o skewed.json\n  volmorph lattice init --mesh bunny.obj --degree 2,2,2 --size 6,8,6 -o bunny_lattice.json"
+        after_help = "Examples:\n  volmorph lattice init teapot.nii.gz --counts 9,9,9 -o lattice.json\n  volmorph lattice init --corner 0,0,0 --edge 64,0,0 --edge 20,60,0 --edge 0,-10,64 --counts 7,7,7 -o skewed.json\n  volmorph lattice init --mesh bunny.obj --degree 2,2,2 --size 6,8,6 -o bunny_lattice.json\n  volmorph lattice init --mesh part.obj --degree 2,2,1 --size 4,4,2 --form forward -o fig2b.json"
     )]
     Init(InitArgs),
     /// Convert a lattice file between formats (.json, .tfm, .bxf), e.g. to hand a lattice
@@ -66,7 +66,10 @@ pub struct InitArgs {
     #[arg(long, default_value = "4,4,4", requires = "mesh", value_parser = args::triple::<usize>)]
     pub size: [usize; 3],
     /// Form of the mesh lattice: the end-interpolating volume (§3.1.3, knots clamped by knot
-    /// insertion) or the uniform volume it comes from (§3.1.2).
+    /// insertion), the uniform volume it comes from (§3.1.2) — both the identity, Jacobian I
+    /// — or `forward`: the forward-mapping baseline of Fig. 2b (§3.1.1), end-interpolating
+    /// knots with evenly spaced control points, which warps the mesh before any control
+    /// point moves.
     #[arg(long, value_enum, default_value_t = Form::EndInterpolating, requires = "mesh")]
     pub form: Form,
     /// Output lattice file: .json (volmorph), .tfm (ITK BSplineTransform) or .bxf
@@ -82,6 +85,19 @@ pub enum Form {
     EndInterpolating,
     /// Uniform unclamped knots with the scaling step (§3.1.2).
     Uniform,
+    /// Clamped knots, evenly spaced control points: the forward mapping of Fig. 2b (§3.1.1),
+    /// not the identity.
+    Forward,
+}
+
+impl From<Form> for FengForm {
+    fn from(f: Form) -> Self {
+        match f {
+            Form::EndInterpolating => FengForm::EndInterpolating,
+            Form::Uniform => FengForm::Uniform,
+            Form::Forward => FengForm::Forward,
+        }
+    }
 }
 
 /// Run a lattice subcommand.
@@ -109,16 +125,22 @@ fn init(a: &InitArgs) -> anyhow::Result<()> {
         let (lo, hi) = m
             .bounding_box()
             .with_context(|| format!("{} has no vertices", path.display()))?;
-        let form = match a.form {
-            Form::EndInterpolating => FengForm::EndInterpolating,
-            Form::Uniform => FengForm::Uniform,
-        };
+        let form = FengForm::from(a.form);
         let l = BSplineLattice::feng_around_model(lo, hi, a.degree, a.size, form)
             .with_context(|| format!("cannot place a lattice around {}", path.display()))?;
         let [dx, dy, dz] = a.degree;
+        let what = if form.is_identity() {
+            "identity"
+        } else {
+            "forward-mapped (not the identity: it warps the mesh, Feng Fig. 2b)"
+        };
         (
             l,
-            format!("of degree {dx}x{dy}x{dz} around {}", path.display()),
+            format!(
+                "{what} {} volume of degree {dx}x{dy}x{dz} around {}",
+                form.name(),
+                path.display()
+            ),
         )
     } else if let Some(corner) = a.corner {
         let [s, t, u] = a.edge[..] else {
@@ -135,7 +157,10 @@ fn init(a: &InitArgs) -> anyhow::Result<()> {
         } else {
             "rectangular"
         };
-        (l, format!("on the {kind} parallelepiped at {corner}"))
+        (
+            l,
+            format!("identity lattice on the {kind} parallelepiped at {corner}"),
+        )
     } else {
         let Some(input) = &a.input else {
             bail!("give a volume or --mesh MESH");
@@ -143,10 +168,10 @@ fn init(a: &InitArgs) -> anyhow::Result<()> {
         let vol = format::read(input).context("cannot read the volume")?;
         let l = BSplineLattice::identity_on_voxels(vol.geometry(), a.counts)
             .with_context(|| format!("cannot place a lattice around {}", input.display()))?;
-        (l, format!("around {}", input.display()))
+        (l, format!("identity lattice around {}", input.display()))
     };
     write_lattice(&a.output, &lattice).context("cannot write")?;
     let [cx, cy, cz] = lattice.counts();
-    say!("identity lattice {what} with {cx}x{cy}x{cz} control points");
+    say!("{what} with {cx}x{cy}x{cz} control points");
     Ok(())
 }

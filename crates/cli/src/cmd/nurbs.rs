@@ -42,18 +42,26 @@ pub enum Command {
     /// Volume-render an attribute of a trivariate model by ray tracing (front-to-back
     /// compositing through a transfer function).
     #[command(
-        after_help = "Examples:\n  volmorph nurbs render lens.json --attribute eta -o lens.png\n  volmorph nurbs render part.json --attribute density --transfer '0:0,0,1,0;1:1,1,0,0.8' --view 30,20 --size 512x512 -o part.png"
+        after_help = "Examples:\n  volmorph nurbs render lens.json --attribute eta -o lens.png\n  volmorph nurbs render part.json --attribute density --transfer '0:0,0,1,0;1:1,1,0,0.8' --view 30,20 --size 512x512 -o part.png\n  volmorph nurbs render lens.json --add part.json --attribute eta --attribute density --transfer auto --transfer '0:0,0,1,0;1:1,1,0,0.8' -o scene.png\n\nSeveral models (--add) share one picture: each ray is walked through every volume and the\nsamples are composited front to back by depth (Martin & Cohen §5.4). --attribute and\n--transfer are given once for all models or once per model, in the order of the models."
     )]
     Render(nurbs_trace::RenderArgs),
     /// Trace light rays bent by a refractive-index attribute (gradient-index optics) and draw
     /// their paths.
     #[command(
-        after_help = "Examples:\n  volmorph nurbs trace-optics --example grin-lens --rays 11 -o grin.png --paths grin.obj\n  volmorph nurbs trace-optics lens.json --attribute eta --direction 0,0,1 -o rays.png"
+        after_help = "Examples:\n  volmorph nurbs trace-optics --example grin-lens --rays 11 -o grin.png --paths grin.obj\n  volmorph nurbs trace-optics --example grin-lens --method rk45 --step 0.05 --tolerance 1e-10 -o grin.png\n  volmorph nurbs trace-optics --example grin-lens --method ray-equation --step 0.002 -o grin_euler.png\n  volmorph nurbs trace-optics lens.json --attribute eta --direction 0,0,1 -o rays.png\n\nThe grin-lens example also traces a probe ray at 0.02 of the radius and prints its back focal\ndistance against the exact trace (the meridional ray ODE in z, integrated by RK4 with\nRichardson extrapolation) and the paraxial formula."
     )]
     TraceOptics(nurbs_trace::TraceOpticsArgs),
-    /// Write a built-in trivariate model as JSON.
-    #[command(after_help = "Example:\n  volmorph nurbs example grin-lens -o lens.json")]
+    /// Write a built-in trivariate model (or the recipe that builds it) as JSON.
+    #[command(
+        after_help = "Examples:\n  volmorph nurbs example grin-lens -o lens.json\n  volmorph nurbs example grin-lens-recipe -o lens_recipe.json\n  volmorph nurbs model lens_recipe.json -o lens2.json   # the same model as lens.json"
+    )]
     Example(nurbs_trace::ExampleArgs),
+    /// Build a model from a modeling recipe: curves, attributes, and the §3 operators
+    /// (extrude, revolve, rule, attribute edits) as versioned JSON.
+    #[command(
+        after_help = "Example:\n  volmorph nurbs model lens_recipe.json -o lens.json\n\nA recipe (see the README, \"Modeling recipes\"):\n  {\"format\": \"volmorph-nurbs-recipe\", \"version\": 1, \"result\": \"lens\", \"steps\": [\n    {\"curve\":   {\"name\": \"profile\", \"degree\": 1, \"points\": [[0,0,0], [1,0,0]]}},\n    {\"attach\":  {\"name\": \"graded\", \"to\": \"profile\", \"attribute\": \"eta\",\n                 \"spline\": {\"degree\": 2, \"values\": [1.5, 1.5, 1.125]}}},\n    {\"revolve\": {\"name\": \"disk\", \"of\": \"graded\", \"axis_point\": [0,0,0],\n                 \"axis_direction\": [0,0,1], \"angle_degrees\": 360}},\n    {\"extrude\": {\"name\": \"lens\", \"of\": \"disk\", \"direction\": [0,0,1]}}]}\nOperators: curve, model, attach, set_attribute, remove_attribute, extrude, revolve, rule.\nErrors name the file and the JSON path of the field, e.g. steps[2].revolve.angle_degrees."
+    )]
+    Model(nurbs_trace::ModelArgs),
 }
 
 /// Arguments of `volmorph nurbs fit`.
@@ -166,6 +174,7 @@ pub fn run(cmd: &Command) -> anyhow::Result<()> {
         Command::Render(a) => nurbs_trace::run_render(a),
         Command::TraceOptics(a) => nurbs_trace::run_trace_optics(a),
         Command::Example(a) => nurbs_trace::run_example(a),
+        Command::Model(a) => nurbs_trace::run_model(a),
     }
 }
 

@@ -7,9 +7,11 @@ use anyhow::{Context, bail};
 use glam::DVec3;
 use volmorph_render::{Shading, UpAxis, write_png_rgba};
 use volmorph_trivariate::{
-    AggregateVolume, GRIN_ATTRIBUTE, GrinLensSpec, OpticsOptions, RayFan, RayTracer, RenderOptions,
-    TraceOptions, TransferFunction, VolumeRenderer, grin_lens, load_volume,
-    measured_back_focal_distance, paraxial_focus, save, side_view, write_paths_obj,
+    AggregateVolume, GRIN_ATTRIBUTE, GrinLensSpec, OpticsOptions, PathMethod, RayFan, RayTracer,
+    RenderOptions, SceneRenderer, TraceOptions, TransferFunction, VolumeRenderer,
+    build_recipe_file, exact_back_focal_distance, format::AnyAggregate, grin_lens,
+    grin_lens_recipe, load_volume, measured_back_focal_distance, paraxial_focus, save, side_view,
+    write_paths_obj,
 };
 
 use crate::progress;
@@ -22,14 +24,21 @@ const MAX_RAYS: usize = 100_000;
 pub struct RenderArgs {
     /// Trivariate model (volmorph JSON, a volume with attributes).
     pub model: PathBuf,
-    /// Attribute to render (its first component drives the transfer function).
-    #[arg(long)]
-    pub attribute: String,
+    /// More models in the same picture (repeatable): rays are composited front to back
+    /// through every volume in depth order (Martin & Cohen §5.4).
+    #[arg(long = "add")]
+    pub add: Vec<PathBuf>,
+    /// Attribute to render (its first component drives the transfer function): once for
+    /// every model, or once per model in the order of the models (the positional one first,
+    /// then each --add).
+    #[arg(long, required = true)]
+    pub attribute: Vec<String>,
     /// Transfer function `value:r,g,b,opacity;…` (channels in [0, 1], opacity per unit
-    /// length, piecewise linear in the value). Default: viridis over the attribute's range
-    /// with opacity rising to 0.9.
+    /// length, piecewise linear in the value), or `auto`: viridis over the attribute's range
+    /// with opacity rising to 0.9 (the default). Once for every model or once per model, as
+    /// --attribute.
     #[arg(long)]
-    pub transfer: Option<String>,
+    pub transfer: Vec<String>,
     /// Viewing direction `azimuth,elevation` in degrees (z up: azimuth 0 looks from +x, 90
     /// from +y), or a view name (front, side, top, iso); the camera looks at the model's
     /// centre.
@@ -80,14 +89,43 @@ pub struct TraceOpticsArgs {
     /// Also write the paths as OBJ polylines.
     #[arg(long)]
     pub paths: Option<PathBuf>,
+    /// How rays are followed inside: `rk45` (the ray equation d/ds(η dr/ds) = ∇η integrated
+    /// by Dormand–Prince 5(4) with error control), `ray-equation` (Snell's construction with
+    /// the index the ray equation implies, first order) or `snell` (the paper's literal
+    /// stepping, first order).
+    #[arg(long, default_value = "rk45", value_parser = path_method)]
+    pub method: PathMethod,
+    /// Largest step in model units (the stepwise methods' step where the index is nearly
+    /// uniform; the cap of rk45's adaptive steps). Default: model diagonal / 400.
+    #[arg(long)]
+    pub step: Option<f64>,
+    /// Local error tolerance of rk45 (relative to the model diagonal for positions and to
+    /// the index for the optical momentum).
+    #[arg(long, default_value_t = volmorph_trivariate::optics::DEFAULT_TOLERANCE)]
+    pub tolerance: f64,
+}
+
+fn path_method(s: &str) -> Result<PathMethod, String> {
+    PathMethod::parse(s).map_err(|e| e.to_string())
 }
 
 /// Arguments of `volmorph nurbs example`.
 #[derive(Debug, clap::Args)]
 pub struct ExampleArgs {
-    /// Which model: `grin-lens`.
+    /// Which model: `grin-lens` (the model), or `grin-lens-recipe` (the modeling recipe that
+    /// builds it, for `volmorph nurbs model`).
     pub name: String,
     /// Output JSON.
+    #[arg(short, long)]
+    pub output: PathBuf,
+}
+
+/// Arguments of `volmorph nurbs model`.
+#[derive(Debug, clap::Args)]
+pub struct ModelArgs {
+    /// Modeling recipe (volmorph-nurbs-recipe JSON; see the README).
+    pub recipe: PathBuf,
+    /// Output model (volmorph trivariate JSON).
     #[arg(short, long)]
     pub output: PathBuf,
 }
@@ -101,35 +139,81 @@ fn bounds(tracer: &RayTracer) -> (DVec3, DVec3) {
     (DVec3::from_array(lo), DVec3::from_array(hi))
 }
 
+/// The `i`-th of `values` given once for all `n` models or once per model.
+fn per_model<'a>(
+    values: &'a [String],
+    i: usize,
+    n: usize,
+    what: &str,
+) -> anyhow::Result<Option<&'a str>> {
+    match values.len() {
+        0 => Ok(None),
+        1 => Ok(Some(&values[0])),
+        k if k == n => Ok(Some(&values[i])),
+        k => bail!("{what} given {k} times for {n} models: give it once, or once per model"),
+    }
+}
+
 /// `volmorph nurbs render`.
 ///
 /// # Errors
-/// Unreadable model, unknown attribute, bad transfer function, view or size, or an unwritable
-/// output.
+/// Unreadable model, unknown attribute, bad transfer function, view or size, attribute or
+/// transfer lists that do not match the models, or an unwritable output.
 pub fn run_render(a: &RenderArgs) -> anyhow::Result<()> {
     let (w, h) = crate::args::size(&a.size).context("--size")?;
-    let model = load(&a.model)?;
-    let transfer = match &a.transfer {
-        Some(t) => TransferFunction::parse(t).context("--transfer")?,
-        None => TransferFunction::for_attribute(&model, &a.attribute)?,
-    };
-    let tracer = RayTracer::new(&model, TraceOptions::default()).context("cannot prepare model")?;
-    let mut options = RenderOptions::for_diagonal(tracer.diagonal());
-    if let Some(step) = a.step {
-        if !(step.is_finite() && step > 0.0) {
-            bail!("--step {step}: must be finite and > 0");
+    if let Some(step) = a.step
+        && !(step.is_finite() && step > 0.0)
+    {
+        bail!("--step {step}: must be finite and > 0");
+    }
+    let paths: Vec<&PathBuf> = std::iter::once(&a.model).chain(&a.add).collect();
+    let n = paths.len();
+    let models = paths
+        .iter()
+        .map(|p| load(p))
+        .collect::<anyhow::Result<Vec<_>>>()?;
+    let tracers = paths
+        .iter()
+        .zip(&models)
+        .map(|(p, m)| {
+            RayTracer::new(m, TraceOptions::default())
+                .with_context(|| format!("cannot prepare model {}", p.display()))
+        })
+        .collect::<anyhow::Result<Vec<_>>>()?;
+    let mut parts = Vec::with_capacity(n);
+    let mut names = Vec::with_capacity(n);
+    for (i, ((path, model), tracer)) in paths.iter().zip(&models).zip(&tracers).enumerate() {
+        let attribute =
+            per_model(&a.attribute, i, n, "--attribute")?.context("--attribute is required")?;
+        let transfer = match per_model(&a.transfer, i, n, "--transfer")? {
+            None | Some("auto") => TransferFunction::for_attribute(model, attribute)
+                .with_context(|| format!("{}", path.display()))?,
+            Some(t) => TransferFunction::parse(t).context("--transfer")?,
+        };
+        let mut options = RenderOptions::for_diagonal(tracer.diagonal());
+        if let Some(step) = a.step {
+            options.step = step;
         }
-        options.step = step;
+        if a.shade {
+            options.shading = Some(Shading::default());
+        }
+        parts.push(
+            VolumeRenderer::new(model, tracer, attribute, transfer, options)
+                .with_context(|| format!("{}", path.display()))?,
+        );
+        names.push(format!(
+            "{} ({attribute:?}, step {:.4})",
+            path.display(),
+            options.step
+        ));
     }
-    if a.shade {
-        options.shading = Some(Shading::default());
-    }
-    let renderer = VolumeRenderer::new(&model, &tracer, &a.attribute, transfer, options)?;
+    let scene = SceneRenderer::new(parts)?;
     let orbit = crate::args::view(&a.view, a.up).context("--view")?;
-    let cam = orbit.model_camera(bounds(&tracer), (w, h))?;
+    let (lo, hi) = scene.bounds();
+    let cam = orbit.model_camera((DVec3::from_array(lo), DVec3::from_array(hi)), (w, h))?;
     let pb = progress::bar(0);
     let t0 = std::time::Instant::now();
-    let img = renderer
+    let img = scene
         .render_image_with(&cam, &progress::Bar(&pb))
         .context("cannot render")?;
     pb.finish_and_clear();
@@ -137,10 +221,8 @@ pub fn run_render(a: &RenderArgs) -> anyhow::Result<()> {
     write_png_rgba(&a.output, &img)
         .with_context(|| format!("cannot write {}", a.output.display()))?;
     say!(
-        "rendered {} ({w}×{h}, attribute {:?}, step {:.4}) in {:.2} s → {}",
-        a.model.display(),
-        a.attribute,
-        options.step,
+        "rendered {} ({w}×{h}) in {:.2} s → {}",
+        names.join(" + "),
         t0.elapsed().as_secs_f64(),
         a.output.display()
     );
@@ -169,7 +251,19 @@ pub fn run_trace_optics(a: &TraceOpticsArgs) -> anyhow::Result<()> {
         bail!("model has no attribute {:?}", a.attribute);
     }
     let tracer = RayTracer::new(&model, TraceOptions::default()).context("cannot prepare model")?;
-    let opts = OpticsOptions::for_diagonal(tracer.diagonal());
+    let mut opts = OpticsOptions::for_diagonal(tracer.diagonal());
+    opts.method = a.method;
+    if let Some(step) = a.step {
+        if !(step.is_finite() && step > 0.0) {
+            bail!("--step {step}: must be finite and > 0");
+        }
+        opts.max_step = step;
+        opts.min_step = opts.min_step.min(step);
+    }
+    if !(a.tolerance.is_finite() && a.tolerance > 0.0) {
+        bail!("--tolerance {}: must be finite and > 0", a.tolerance);
+    }
+    opts.tolerance = a.tolerance;
     let fan = if example {
         RayFan::grin_meridian(&spec, a.rays)?
     } else {
@@ -188,10 +282,20 @@ pub fn run_trace_optics(a: &TraceOpticsArgs) -> anyhow::Result<()> {
     if let Some(p) = &a.paths {
         write_paths_obj(p, &paths).with_context(|| format!("cannot write {}", p.display()))?;
     }
+    let steps: usize = paths.iter().map(|p| p.steps).sum();
+    let rejected: usize = paths.iter().map(|p| p.rejected_steps).sum();
+    let control = match opts.method {
+        PathMethod::Rk45 => format!(
+            "tolerance {:e}, steps ≤ {:.5}: {steps} steps ({rejected} rejected)",
+            opts.tolerance, opts.max_step
+        ),
+        _ => format!("step ≤ {:.5}: {steps} steps", opts.max_step),
+    };
     say!(
-        "traced {} rays through {:?} → {}",
+        "traced {} rays through {:?} by {} ({control}) → {}",
         paths.len(),
         a.attribute,
+        opts.method.name(),
         a.output.display()
     );
     if example {
@@ -209,12 +313,30 @@ pub fn run_trace_optics(a: &TraceOpticsArgs) -> anyhow::Result<()> {
             focus.effective_focal_length
         );
         match measured {
-            Some((r0, bfd)) => say!(
-                "measured back focal distance {bfd:.5} (ray at height {r0:.4}), {:+.2} % from \
-                 paraxial",
-                100.0 * (bfd - focus.back_focal_distance) / focus.back_focal_distance
-            ),
-            None => say!("no off-axis ray left the lens; use --rays 2 or more"),
+            Some(m) => {
+                let exact = exact_back_focal_distance(&spec, m.height)?;
+                let bfd = m.back_focal_distance;
+                // Percentages: fixed point when large, scientific when tiny.
+                let rel = |x: f64| {
+                    let p = 100.0 * (bfd - x) / x;
+                    if p.abs() >= 1e-3 {
+                        format!("{p:+.4}")
+                    } else {
+                        format!("{p:+.2e}")
+                    }
+                };
+                say!(
+                    "measured back focal distance {bfd:.8} (ray at height {:.4}, {} steps by \
+                     {}): {} % from the exact trace {:.8}, {} % from paraxial",
+                    m.height,
+                    m.steps,
+                    opts.method.name(),
+                    rel(exact.back_focal_distance),
+                    exact.back_focal_distance,
+                    rel(focus.back_focal_distance)
+                );
+            }
+            None => say!("the probe ray did not leave the lens towards the axis"),
         }
     }
     Ok(())
@@ -225,11 +347,53 @@ pub fn run_trace_optics(a: &TraceOpticsArgs) -> anyhow::Result<()> {
 /// # Errors
 /// Unknown example name or an unwritable output.
 pub fn run_example(a: &ExampleArgs) -> anyhow::Result<()> {
-    let model = match a.name.as_str() {
-        "grin-lens" => grin_lens(&GrinLensSpec::default())?,
-        other => bail!("unknown example {other:?}: the built-in example is grin-lens"),
-    };
-    save(&a.output, &model).with_context(|| format!("cannot write {}", a.output.display()))?;
+    let spec = GrinLensSpec::default();
+    match a.name.as_str() {
+        "grin-lens" => save(&a.output, &grin_lens(&spec)?),
+        "grin-lens-recipe" => {
+            let text = grin_lens_recipe(&spec)?.to_json_string()?;
+            volmorph_io::write_atomic(&a.output, |w| {
+                std::io::Write::write_all(w, text.as_bytes())
+                    .map_err(|e| volmorph_io::IoError::os(&a.output, e))
+            })
+            .map_err(volmorph_trivariate::TrivariateError::from)
+        }
+        other => {
+            bail!("unknown example {other:?}: the built-in examples are grin-lens and grin-lens-recipe")
+        }
+    }
+    .with_context(|| format!("cannot write {}", a.output.display()))?;
     say!("wrote {} → {}", a.name, a.output.display());
     Ok(())
+}
+
+/// `volmorph nurbs model`.
+///
+/// # Errors
+/// An unreadable or invalid recipe (the message names the file and the JSON path of the
+/// field), or an unwritable output.
+pub fn run_model(a: &ModelArgs) -> anyhow::Result<()> {
+    let model = build_recipe_file(&a.recipe)?;
+    let (kind, attributes) = match &model {
+        AnyAggregate::Curve(m) => ("curve", names(m.attributes())),
+        AnyAggregate::Surface(m) => ("surface", names(m.attributes())),
+        AnyAggregate::Volume(m) => ("volume", names(m.attributes())),
+    };
+    match &model {
+        AnyAggregate::Curve(m) => save(&a.output, m),
+        AnyAggregate::Surface(m) => save(&a.output, m),
+        AnyAggregate::Volume(m) => save(&a.output, m),
+    }
+    .with_context(|| format!("cannot write {}", a.output.display()))?;
+    say!(
+        "built a {kind} with attributes [{}] from {} → {}",
+        attributes.join(", "),
+        a.recipe.display(),
+        a.output.display()
+    );
+    Ok(())
+}
+
+fn names<const N: usize>(attrs: &[volmorph_trivariate::Attribute<N>]) -> Vec<String> {
+    attrs.iter().map(|a| format!("{:?}", a.name())).collect()
 }

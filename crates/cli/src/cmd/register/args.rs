@@ -8,7 +8,7 @@ use volmorph_register::pipeline::LandmarkFiles;
 use volmorph_register::quality::LandmarkUnits;
 use volmorph_register::solve::SolveOptions;
 
-use crate::cmd::handles::Method;
+use crate::cmd::handles::{Kernel, Method};
 
 /// `volmorph register`: the whole registration, or one step of it.
 #[derive(Debug, clap::Args)]
@@ -38,7 +38,7 @@ pub enum Step {
     /// Build the map from correspondences (tps, mls, frames), optionally refine it densely,
     /// and write the outputs of a registration.
     #[command(
-        after_help = "Example:\n  volmorph register solve inhale.nii.gz exhale.nii.gz --correspondences correspondences.json --method frames --dense -o out"
+        after_help = "Example:\n  volmorph register solve inhale.nii.gz exhale.nii.gz --correspondences correspondences.json --method frames --dense -o out\n  volmorph register solve inhale.nii.gz exhale.nii.gz --correspondences correspondences.json --method tps --kernel r2logr -o out_r2logr"
     )]
     Solve(SolveArgs),
     /// Overlays, Jacobian fold report, global metrics and TRE of a map.
@@ -77,6 +77,10 @@ pub struct MapOptions {
     /// Thin-plate smoothing (0 interpolates).
     #[arg(long, default_value_t = 0.0)]
     pub smoothing: f64,
+    /// Thin-plate kernel (tps): r, the true 3-D biharmonic kernel (default), or r2logr, r² log
+    /// r as in the thesis (§5.4.1).
+    #[arg(long, value_enum, default_value_t = Kernel::R)]
+    pub kernel: Kernel,
     /// Refine densely with a B-spline lattice on an intensity metric.
     #[arg(long)]
     pub dense: bool,
@@ -103,7 +107,9 @@ pub struct MapOptions {
 impl MapOptions {
     /// The handle-map options these arguments name.
     pub(super) fn solve(&self) -> SolveOptions {
-        SolveOptions::with_method(self.method.into(), self.smoothing)
+        let mut o = SolveOptions::with_method(self.method.into(), self.smoothing);
+        o.handle.kernel = self.kernel.into();
+        o
     }
 
     /// The dense refinement these arguments ask for, if any.
