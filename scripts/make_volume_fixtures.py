@@ -1,7 +1,7 @@
 #!/usr/bin/env python3
 """Write the small peer-made volume fixtures of crates/volume-io/tests/corpus/peers/.
 
-The Rust tests (crates/volume-io/tests/peer_fixtures.rs) read every file and compare with
+The Rust tests (crates/volume-io/tests/integration/peer_fixtures.rs) read every file and compare with
 `expected.json`, which holds what the peer itself reads back (geometry in ITK/LPS convention,
 direction row-major, and every voxel value in x-fastest order):
 
@@ -125,7 +125,7 @@ def nibabel_fixtures(out: Path, expected: dict) -> None:
         e["frames"] = int(full.shape[3])
         expected[f"nibabel_4d.nii.gz#{t}"] = e
     # Frame 1 alone, with the series' header (same sform/qform bytes): what every command
-    # must read from the series with --frame 1 (crates/cli/tests/realdata.rs).
+    # must read from the series with --frame 1 (crates/cli/tests/integration/realdata.rs).
     frame1 = nib.Nifti1Image(full[..., 1], back.affine, header=back.header.copy())
     nib.save(frame1, out / "nibabel_4d_frame1.nii.gz")
 

@@ -1,0 +1,12 @@
+//! The integration tests of `cli`, one module per topic, built as one test binary
+//! (one link instead of one per file keeps the test build short).
+
+mod common;
+
+mod cli;
+mod out_of_core_progress;
+mod pictures;
+mod realdata;
+mod register;
+mod scene_equals_cli;
+mod true1992;

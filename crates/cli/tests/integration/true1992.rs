@@ -1,0 +1,382 @@
+//! End-to-end tests of the True & Hughes 1992 capabilities of the `volmorph` binary: skewed
+//! lattices, padded output geometry, the drag tool (shapes, realms, curve drags) and the tree
+//! phantom.
+
+use crate::common;
+
+use common::{fails, ok, volmorph};
+
+fn json(path: &std::path::Path) -> serde_json::Value {
+    serde_json::from_str(&std::fs::read_to_string(path).unwrap()).unwrap()
+}
+
+/// A skewed lattice from `lattice init --corner --edge` is written with its frame flagged
+/// skewed, survives ITK `.tfm` both ways and is refused by `.bxf` with a clear error.
+#[test]
+fn lattice_init_on_a_parallelepiped_writes_a_skewed_lattice() {
+    let dir = tempfile::tempdir().unwrap();
+    let d = dir.path();
+    let lat = d.join("skewed.json");
+    let text = ok(&[
+        &"lattice",
+        &"init",
+        &"--corner",
+        &"-2,0,1",
+        &"--edge",
+        &"30,0,0",
+        &"--edge",
+        &"10,28,0",
+        &"--edge",
+        &"0,-6,26",
+        &"--counts",
+        &"6,5,4",
+        &"-o",
+        &lat,
+    ]);
+    assert!(text.contains("skewed"), "{text}");
+    let j = json(&lat);
+    assert_eq!(j["frame"]["skewed"], true);
+    assert_eq!(j["counts"], serde_json::json!([6, 5, 4]));
+    let tfm = d.join("skewed.tfm");
+    ok(&[&"lattice", &"convert", &lat, &"-o", &tfm]);
+    let back = d.join("back.json");
+    ok(&[&"lattice", &"convert", &tfm, &"-o", &back]);
+    let b = json(&back);
+    assert_eq!(b["frame"]["skewed"], true);
+    let flat = |v: &serde_json::Value| -> Vec<f64> {
+        v["control_points"]
+            .as_array()
+            .unwrap()
+            .iter()
+            .flat_map(|p| p.as_array().unwrap().iter().map(|x| x.as_f64().unwrap()))
+            .collect()
+    };
+    let (a, c) = (flat(&j), flat(&b));
+    assert_eq!(a.len(), c.len());
+    assert!(a.iter().zip(&c).all(|(x, y)| (x - y).abs() < 1e-9));
+    let err = fails(&[&"lattice", &"convert", &lat, &"-o", &d.join("s.bxf")]);
+    assert!(err.contains("skewed"), "{err}");
+    // Coplanar edges are a degenerate parallelepiped.
+    let err = fails(&[
+        &"lattice",
+        &"init",
+        &"--corner",
+        &"0,0,0",
+        &"--edge",
+        &"30,0,0",
+        &"--edge",
+        &"0,30,0",
+        &"--edge",
+        &"30,30,0",
+        &"-o",
+        &d.join("flat.json"),
+    ]);
+    assert!(err.contains("degenerate"), "{err}");
+}
+
+fn dims(path: &std::path::Path) -> serde_json::Value {
+    let j: serde_json::Value = serde_json::from_str(&ok(&[&"info", &"--json", &path])).unwrap();
+    j["dims"].clone()
+}
+
+fn control_points(path: &std::path::Path) -> Vec<[f64; 3]> {
+    json(path)["control_points"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .map(|p| {
+            let v: Vec<f64> = p
+                .as_array()
+                .unwrap()
+                .iter()
+                .map(|x| x.as_f64().unwrap())
+                .collect();
+            [v[0], v[1], v[2]]
+        })
+        .collect()
+}
+
+/// True 1992 §5.1 from the CLI: `--pad`, `--output-geometry` and `--like` on `warp`.
+#[test]
+fn warp_writes_padded_and_explicit_output_grids() {
+    let dir = tempfile::tempdir().unwrap();
+    let d = dir.path();
+    let src = d.join("s.nii.gz");
+    ok(&[&"phantom", &"sphere", &"--dims", &"20,16,12", &"-o", &src]);
+    let lat = d.join("l.json");
+    ok(&[
+        &"lattice",
+        &"init",
+        &src,
+        &"--counts",
+        &"5,5,5",
+        &"-o",
+        &lat,
+    ]);
+    let out = d.join("padded.nii.gz");
+    ok(&[&"warp", &src, &"--map", &lat, &"-o", &out, &"--pad", &"4"]);
+    assert_eq!(dims(&out), serde_json::json!([28, 24, 20]));
+    ok(&[
+        &"warp",
+        &src,
+        &"--map",
+        &lat,
+        &"-o",
+        &out,
+        &"--pad",
+        &"0,0,0,6,0,2",
+    ]);
+    assert_eq!(dims(&out), serde_json::json!([26, 16, 14]));
+    let g = d.join("g.nii.gz");
+    ok(&[
+        &"warp",
+        &src,
+        &"--map",
+        &lat,
+        &"-o",
+        &g,
+        &"--output-geometry",
+        &"10,11,12;0.2,0.2,0.2;-1,-1,-1",
+    ]);
+    assert_eq!(dims(&g), serde_json::json!([10, 11, 12]));
+    let like = d.join("like.nii.gz");
+    ok(&[&"warp", &src, &"--map", &lat, &"-o", &like, &"--like", &g]);
+    assert_eq!(dims(&like), serde_json::json!([10, 11, 12]));
+    let err = fails(&[&"warp", &src, &"--map", &lat, &"-o", &out, &"--pad", &"1.5"]);
+    assert!(err.contains("padding"), "{err}");
+    let err = fails(&[
+        &"warp",
+        &src,
+        &"--map",
+        &lat,
+        &"-o",
+        &out,
+        &"--pad",
+        &"100000000",
+    ]);
+    assert!(err.contains("output grid"), "{err}");
+}
+
+/// The §6 tool from the CLI: a box tool inside a realm on a padded grid; control points
+/// outside the realm stay where the identity lattice has them.
+#[test]
+fn drag_with_a_box_tool_and_a_realm_moves_only_realm_control_points() {
+    let dir = tempfile::tempdir().unwrap();
+    let d = dir.path();
+    let src = d.join("s.nii.gz");
+    ok(&[&"phantom", &"sphere", &"--dims", &"24,24,24", &"-o", &src]);
+    let identity = d.join("id.json");
+    ok(&[
+        &"lattice",
+        &"init",
+        &src,
+        &"--counts",
+        &"9,9,9",
+        &"-o",
+        &identity,
+    ]);
+    let (out, moved) = (d.join("o.nii.gz"), d.join("moved.json"));
+    ok(&[
+        &"drag",
+        &src,
+        &"--from",
+        &"0.5,0,0",
+        &"--to",
+        &"0.6,0.05,0",
+        &"--tool",
+        &"box:0.6,0.6,0.6",
+        &"--realm",
+        &"indices:4,2,2,7,6,6",
+        &"--pad",
+        &"3",
+        &"-o",
+        &out,
+        &"--lattice-out",
+        &moved,
+    ]);
+    assert_eq!(dims(&out), serde_json::json!([30, 30, 30]));
+    let (a, b) = (control_points(&identity), control_points(&moved));
+    let mut changed = 0;
+    for (n, (p, q)) in a.iter().zip(&b).enumerate() {
+        let idx = [n % 9, n / 9 % 9, n / 81];
+        let inside =
+            idx[0] >= 4 && idx[0] <= 7 && (2..=6).contains(&idx[1]) && (2..=6).contains(&idx[2]);
+        if p != q {
+            changed += 1;
+            assert!(inside, "control point {idx:?} outside the realm moved");
+        }
+    }
+    assert!(changed > 0);
+    // A bad tool is a usage error naming the option.
+    let bad = volmorph(&[
+        &"drag", &src, &"--from", &"0.5,0,0", &"--to", &"0.6,0,0", &"--tool", &"cone:1", &"-o",
+        &out,
+    ]);
+    let err = String::from_utf8_lossy(&bad.stderr);
+    assert_eq!(bad.status.code(), Some(2), "{err}");
+    assert!(err.contains("--tool") && !err.contains("panicked"), "{err}");
+    // A realm away from the dragged point leaves nothing to move: exit 1, clear message.
+    let err = fails(&[
+        &"drag",
+        &src,
+        &"--from",
+        &"0.5,0,0",
+        &"--to",
+        &"0.6,0,0",
+        &"--realm",
+        &"indices:0,0,0,1,1,1",
+        &"-o",
+        &out,
+    ]);
+    assert!(err.contains("realm"), "{err}");
+}
+
+/// §6.3 from the CLI: a curve drag writes one frame per step and ends on the goal curve.
+#[test]
+fn drag_along_a_curve_writes_every_frame_and_ends_on_the_goal() {
+    let dir = tempfile::tempdir().unwrap();
+    let d = dir.path();
+    let src = d.join("s.nii.gz");
+    ok(&[&"phantom", &"sphere", &"--dims", &"24,24,24", &"-o", &src]);
+    let (out, moved, frames) = (d.join("o.nii.gz"), d.join("m.json"), d.join("frames"));
+    let text = ok(&[
+        &"drag",
+        &src,
+        &"--start-curve",
+        &"-0.5,0,0;0,0,0;0.5,0,0",
+        &"--goal-curve",
+        &"-0.5,0.1,0;0,0.25,0;0.5,0.1,0",
+        &"--steps",
+        &"4",
+        &"--frames",
+        &frames,
+        &"-o",
+        &out,
+        &"--lattice-out",
+        &moved,
+        &"--radius",
+        &"0.8",
+    ]);
+    assert!(text.contains("curve drag of 3 points in 4 steps"), "{text}");
+    for n in 1..=4 {
+        assert!(
+            frames.join(format!("frame_{n:03}.nii.gz")).exists(),
+            "frame {n}"
+        );
+    }
+    assert!(!frames.join("frame_005.nii.gz").exists());
+    // The final lattice sends the start curve (on the undeformed model, the identity
+    // lattice's image) onto the goal curve.
+    let Ok(volmorph_maps::AnyMap::Lattice(l)) = volmorph_maps::read_map(&moved) else {
+        panic!("{} is not a lattice", moved.display());
+    };
+    use volmorph_deform::SpaceMap;
+    let start = [[-0.5, 0.0, 0.0], [0.0, 0.0, 0.0], [0.5, 0.0, 0.0]];
+    let goal = [[-0.5, 0.1, 0.0], [0.0, 0.25, 0.0], [0.5, 0.1, 0.0]];
+    for (s, g) in start.iter().zip(&goal) {
+        let p = l.apply(glam::DVec3::from_array(*s));
+        assert!(
+            (p - glam::DVec3::from_array(*g)).length() < 1e-6,
+            "{p} vs {g:?}"
+        );
+    }
+}
+
+/// McPhail Fig. 4.2 from the CLI: `mls2d --method tps` deforms a picture through its handles
+/// (the interpolation itself is tested in `volmorph_handles::mls2d`), and refuses too few.
+#[test]
+fn mls2d_thin_plate_method_deforms_a_picture() {
+    let dir = tempfile::tempdir().unwrap();
+    let d = dir.path();
+    let vol = d.join("s.nii.gz");
+    ok(&[&"phantom", &"teapot", &"--size", &"40", &"-o", &vol]);
+    let png = d.join("s.png");
+    ok(&[
+        &"slice",
+        &vol,
+        &"-o",
+        &png,
+        &"--axis",
+        &"z",
+        &"--index",
+        &"20",
+        &"--zoom",
+        &"1",
+        &"--no-labels",
+    ]);
+    let h = d.join("h.json");
+    std::fs::write(
+        &h,
+        r#"{"points": [{"source": [5, 5], "target": [7, 6]}, {"source": [34, 5], "target": [33, 7]},
+            {"source": [20, 20], "target": [24, 18]}, {"source": [5, 34], "target": [5, 34]},
+            {"source": [34, 34], "target": [34, 34]}]}"#,
+    )
+    .unwrap();
+    let out = d.join("tps.png");
+    let text = ok(&[
+        &"mls2d",
+        &png,
+        &"--handles",
+        &h,
+        &"-o",
+        &out,
+        &"--method",
+        &"tps",
+    ]);
+    assert!(text.contains("deformed") && out.exists(), "{text}");
+    assert_ne!(std::fs::read(&out).unwrap(), std::fs::read(&png).unwrap());
+    std::fs::write(&h, r#"{"points": [{"source": [5, 5], "target": [7, 6]}]}"#).unwrap();
+    let err = fails(&[
+        &"mls2d",
+        &png,
+        &"--handles",
+        &h,
+        &"-o",
+        &out,
+        &"--method",
+        &"tps",
+    ]);
+    assert!(err.contains("at least 3"), "{err}");
+}
+
+/// `jacobian` takes any map kind and writes the map it used with `--map-out`: a skewed lattice
+/// read back from the written map is the same lattice.
+#[test]
+fn jacobian_writes_the_map_it_used() {
+    let dir = tempfile::tempdir().unwrap();
+    let d = dir.path();
+    let src = d.join("s.nii.gz");
+    ok(&[&"phantom", &"sphere", &"--dims", &"12,12,12", &"-o", &src]);
+    let lat = d.join("skewed.json");
+    ok(&[
+        &"lattice",
+        &"init",
+        &"--corner",
+        &"-1.5,-1.5,-1.5",
+        &"--edge",
+        &"3,0,0",
+        &"--edge",
+        &"0.8,3,0",
+        &"--edge",
+        &"0,0,3",
+        &"--counts",
+        &"5,5,5",
+        &"-o",
+        &lat,
+    ]);
+    let (j, used) = (d.join("j.nii.gz"), d.join("used.json"));
+    let text = ok(&[
+        &"jacobian",
+        &"--map",
+        &lat,
+        &"--grid",
+        &src,
+        &"-o",
+        &j,
+        &"--map-out",
+        &used,
+    ]);
+    assert!(j.exists() && text.contains("J"), "{text}");
+    assert_eq!(control_points(&used), control_points(&lat));
+    assert_eq!(json(&used)["frame"], json(&lat)["frame"]);
+}

@@ -1,0 +1,5 @@
+//! The integration tests of `maps`, one module per topic, built as one test binary
+//! (one link instead of one per file keeps the test build short).
+
+mod conformance;
+mod fields;

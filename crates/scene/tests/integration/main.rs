@@ -1,0 +1,5 @@
+//! The integration tests of `scene`, one module per topic, built as one test binary
+//! (one link instead of one per file keeps the test build short).
+
+mod scene_commands;
+mod scene_sculpt;
