@@ -944,15 +944,19 @@ struct WarpSpec {
 }
 
 /// The voxels of box `b` of `v` (clipped to the grid), x fastest, as `f64` (exact for every
-/// voxel type).
+/// voxel type); copied row by row.
 fn take_box<T: Voxel>(v: &Volume<T>, b: &IndexBox) -> Vec<f64> {
     let [nx, ny, nz] = v.geometry().dims;
+    let (x0, x1) = (b.start[0].min(nx), b.end[0].min(nx));
     let mut out = Vec::new();
+    if x0 >= x1 {
+        return out;
+    }
+    let data = v.data();
     for k in b.start[2]..b.end[2].min(nz) {
         for j in b.start[1]..b.end[1].min(ny) {
-            for i in b.start[0]..b.end[0].min(nx) {
-                out.push(v[[i, j, k]].to_f64());
-            }
+            let row = (k * ny + j) * nx;
+            out.extend(data[row + x0..row + x1].iter().map(|x| x.to_f64()));
         }
     }
     out
@@ -961,12 +965,18 @@ fn take_box<T: Voxel>(v: &Volume<T>, b: &IndexBox) -> Vec<f64> {
 /// Write back what [`take_box`] took from box `b`.
 fn put_box<T: Voxel>(v: &mut Volume<T>, b: &IndexBox, values: &[f64]) {
     let [nx, ny, nz] = v.geometry().dims;
-    let mut it = values.iter();
+    let (x0, x1) = (b.start[0].min(nx), b.end[0].min(nx));
+    if x0 >= x1 {
+        return;
+    }
+    let mut rows = values.chunks_exact(x1 - x0);
+    let data = v.data_mut();
     for k in b.start[2]..b.end[2].min(nz) {
         for j in b.start[1]..b.end[1].min(ny) {
-            for i in b.start[0]..b.end[0].min(nx) {
-                if let Some(x) = it.next() {
-                    v[[i, j, k]] = T::from_f64(*x);
+            let row = (k * ny + j) * nx;
+            if let Some(src) = rows.next() {
+                for (d, s) in data[row + x0..row + x1].iter_mut().zip(src) {
+                    *d = T::from_f64(*s);
                 }
             }
         }

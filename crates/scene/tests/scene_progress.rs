@@ -16,10 +16,13 @@ use volmorph_scene::{
 use volmorph_volume::{AnyVolume, Geometry};
 use volmorph_warp::apply::WarpMethod;
 
+/// Per object: id, name, kind and data bytes; then the undo and redo depths.
+type Fingerprint = (Vec<(u64, String, String, Vec<u8>)>, usize, usize);
+
 /// Everything observable of a scene: per object its id, name, kind and data (volume bytes,
 /// mesh positions and faces, map JSON, model text, recipe, result and error of a derived
 /// object), and the depths of both histories.
-fn fingerprint(scene: &Scene) -> (Vec<(u64, String, String, Vec<u8>)>, usize, usize) {
+fn fingerprint(scene: &Scene) -> Fingerprint {
     let mesh_bytes = |m: &volmorph_mesh::Mesh| {
         let mut b: Vec<u8> = m
             .positions()

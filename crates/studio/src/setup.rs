@@ -27,7 +27,7 @@ pub const MAX_SETUP_HANDLES: usize = 4096;
 pub const MAX_FFD_COUNTS: usize = 64;
 
 /// Largest degree per axis of a mesh-FFD lattice: the accurate FFD's surfaces reach degree
-/// `k_u + k_v + k_w` ([`volmorph_ffd::interp::MAX_INTERPOLATION_DEGREE`] is 12).
+/// `k_u + k_v + k_w`, and `volmorph_ffd` interpolates up to degree 12.
 pub const MAX_FFD_DEGREE: usize = 4;
 
 /// A generated mesh, in the frame of the built-in models (about `[-1, 1]³`).
