@@ -22,6 +22,15 @@ use crate::maps::{PyMap, points};
 use crate::ops::{mesh_in, mesh_out};
 use crate::volume::{PyVolume, vec3};
 
+/// A recipe from a Python dict (through JSON, as project files write recipes).
+fn recipe_of<'py>(py: Python<'py>, recipe: &Bound<'py, PyAny>) -> PyResult<Recipe> {
+    let text: String = py
+        .import("json")?
+        .call_method1("dumps", (recipe,))?
+        .extract()?;
+    serde_json::from_str(&text).map_err(|e| input(format!("recipe: {e}")))
+}
+
 fn change<'py>(py: Python<'py>, c: &Change) -> PyResult<Bound<'py, PyDict>> {
     let ids = |v: &[ObjectId]| v.iter().map(|i| i.0).collect::<Vec<_>>();
     let d = PyDict::new(py);
@@ -209,24 +218,40 @@ impl PyScene {
     /// "source": id, "map": id, "method": "pullback-linear", "background": 0.0,
     /// "sampled_nodes": None, "swap_handles": False}`, `{"recipe": "isosurface", "volume": id,
     /// "level": 0.5, "inside_below": False, "method": "marching-cubes"}`, `"deformed-mesh"`,
-    /// `"frep-sampled"`, `"jacobian"`. Returns the change report.
+    /// `"frep-sampled"`, `"jacobian"`, `{"recipe": "frep-morph", "from": id, "to": id, "t": 0.5,
+    /// "schedule": "smoothstep", "grid": id}` (the metamorphosis of Savchenko–Pasko Eq. 13;
+    /// schedules `linear`, `sqrt`, `smoothstep`, `delayed:T0`). Returns the change report.
     fn add_derived<'py>(
         &self,
         py: Python<'py>,
         name: &str,
         recipe: &Bound<'py, PyAny>,
     ) -> PyResult<Bound<'py, PyDict>> {
-        let text: String = py
-            .import("json")?
-            .call_method1("dumps", (recipe,))?
-            .extract()?;
-        let recipe: Recipe =
-            serde_json::from_str(&text).map_err(|e| input(format!("recipe: {e}")))?;
+        let recipe = recipe_of(py, recipe)?;
         let c = self.run(
             py,
             Command::Add {
                 name: name.into(),
                 object: NewObject::Derived(recipe),
+            },
+        )?;
+        change(py, &c)
+    }
+
+    /// Give derived object `id` a new recipe dict (as [`add_derived`](Self::add_derived)
+    /// takes), e.g. a metamorphosis at another `t`: recomputed, one undo step.
+    fn set_recipe<'py>(
+        &self,
+        py: Python<'py>,
+        id: u64,
+        recipe: &Bound<'py, PyAny>,
+    ) -> PyResult<Bound<'py, PyDict>> {
+        let recipe = recipe_of(py, recipe)?;
+        let c = self.run(
+            py,
+            Command::SetRecipe {
+                id: ObjectId(id),
+                recipe,
             },
         )?;
         change(py, &c)

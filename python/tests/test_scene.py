@@ -109,3 +109,26 @@ def test_drag_equals_the_cli(tmp_path, cli):
     p = np.random.default_rng(0).uniform(-3, 3, size=(10, 3))
     np.testing.assert_array_equal(lat.map(p), vm.Map.load(tmp_path / "l.json").map(p))
     assert report["drag"]["moved"] > 0
+
+
+def test_metamorphosis_recipe_follows_equation_13_and_set_recipe():
+    s = vm.Scene()
+    spacing, origin = (0.15, 0.15, 0.15), (-1.2, -1.05, -0.9)
+    grid = s.add_volume("grid", vm.Volume(np.zeros((13, 15, 17), np.float32), spacing=spacing, origin=origin))
+    f = s.add_frep("ball", "b(x[3], a[1]) { b = a[1]*a[1] - x[1]*x[1] - x[2]*x[2] - x[3]*x[3]; }", {1: 0.8})
+    g = s.add_frep("slab", "c(x[3]) { c = 0.3 - x[3]*x[3]; }")
+
+    def recipe(t):
+        return {"recipe": "frep-morph", "from": f, "to": g, "t": t, "schedule": "linear", "grid": grid}
+
+    m = s.add_derived("morph", recipe(0.25))["added"][0]
+    z, y, x = np.meshgrid(*(o + h * np.arange(n) for o, h, n in zip(origin[::-1], spacing[::-1], (13, 15, 17))),
+                          indexing="ij")
+    fv, gv = 0.64 - x * x - y * y - z * z, 0.3 - z * z
+    np.testing.assert_allclose(np.asarray(s.volume(m)), 0.75 * fv + 0.25 * gv, atol=1e-6)
+    s.set_recipe(m, recipe(0.75))
+    np.testing.assert_allclose(np.asarray(s.volume(m)), 0.25 * fv + 0.75 * gv, atol=1e-6)
+    s.undo()
+    np.testing.assert_allclose(np.asarray(s.volume(m)), 0.75 * fv + 0.25 * gv, atol=1e-6)
+    with pytest.raises(vm.SceneError, match=r"\[0, 1\]"):
+        s.set_recipe(m, recipe(2.0))

@@ -49,6 +49,9 @@ use crate::subdivide::{CellIndex, KnotPlanes, PLANE_TOL_REL, Subdivision, subdiv
 
 /// Normal tolerance of the coplanarity test, `|n₁·n₂ − 1| < ε_n` (Feng et al. 2002 §3.3.2).
 pub const EPS_N: f64 = 2.2e-8;
+/// Sub-polygons grouped per progress step of [`AccuratePlan::new_with`] (the grouping is a
+/// serial loop; a step per sub-polygon would cost more than the work it reports).
+pub const PROGRESS_CHUNK: usize = 4096;
 /// Offset tolerance of the coplanarity test, `|d₁ − d₂| < ε_d`, in model-normalised units
 /// (Feng et al. 2002 §3.3.2).
 pub const EPS_D: f64 = 1.1e-6;
@@ -262,7 +265,24 @@ impl AccuratePlan {
     /// The errors of [`prepare_polygons`] and [`subdivide`]; [`FfdError::DegreeTooHigh`] when
     /// a patch would need a degree above [`MAX_INTERPOLATION_DEGREE`].
     pub fn new(mesh: &Mesh, lattice: &BSplineLattice) -> Result<Self, FfdError> {
+        Self::new_with(mesh, lattice, &volmorph_io::NoProgress)
+    }
+
+    /// [`AccuratePlan::new`] reporting to `progress` and stopping when it is cancelled. Three
+    /// stages: the knot-plane subdivision (one step), the coplanar grouping (one step per
+    /// [`PROGRESS_CHUNK`] sub-polygons, rounded up) and the tracing of trimmed faces (one step
+    /// per patch). The plan equals [`AccuratePlan::new`]'s.
+    ///
+    /// # Errors
+    /// As [`AccuratePlan::new`]; [`FfdError::Cancelled`] when `progress` asks to stop.
+    pub fn new_with(
+        mesh: &Mesh,
+        lattice: &BSplineLattice,
+        progress: &dyn volmorph_io::Progress,
+    ) -> Result<Self, FfdError> {
         let start = Instant::now();
+        progress.start("subdividing the mesh by the knot planes", 1);
+        progress.check()?;
         let prepared = prepare_polygons(mesh)?;
         let PreparedPolygons {
             positions,
@@ -311,6 +331,11 @@ impl AccuratePlan {
             })
             .collect();
         let sub = subdivide(params, &indices, &offsets, &planes, PLANE_TOL_REL * scale)?;
+        progress.advance(1);
+        progress.start(
+            "grouping coplanar sub-polygons",
+            sub.len().div_ceil(PROGRESS_CHUNK) as u64,
+        );
         let mut physical = positions;
         physical.extend(
             sub.points[physical.len()..]
@@ -323,6 +348,12 @@ impl AccuratePlan {
         let mut patches: Vec<Patch> = Vec::new();
         let mut sub_patch = vec![0u32; sub.len()];
         for s in 0..sub.len() {
+            if s % PROGRESS_CHUNK == 0 {
+                progress.check()?;
+                if s > 0 {
+                    progress.advance(1);
+                }
+            }
             let ring = sub.polygon(s);
             let cell = sub.cell[s];
             let (n, d) = source_planes[sub.source[s] as usize];
@@ -381,7 +412,11 @@ impl AccuratePlan {
                 }
             }
         }
-        let faces = trace_faces(&sub, &patches)?;
+        if !sub.is_empty() {
+            progress.advance(1);
+        }
+        progress.start("tracing trimmed faces", patches.len() as u64);
+        let faces = trace_faces(&sub, &patches, progress)?;
         let edges = collect_edges(&faces)?;
         let stats = AccurateStats {
             input_faces: mesh.face_count(),
@@ -470,6 +505,20 @@ impl AccuratePlan {
     /// [`FfdError::LatticeMismatch`] if the knots or the frame differ,
     /// [`FfdError::Inconsistent`] if an interpolation fails (degree out of range).
     pub fn deform(self: &Arc<Self>, lattice: &BSplineLattice) -> Result<TrimmedModel, FfdError> {
+        self.deform_with(lattice, &volmorph_io::NoProgress)
+    }
+
+    /// [`AccuratePlan::deform`] reporting to `progress` and stopping when it is cancelled.
+    /// Two stages: the surfaces (one step per patch) and the edge curves (one step per
+    /// edge). The model equals [`AccuratePlan::deform`]'s.
+    ///
+    /// # Errors
+    /// As [`AccuratePlan::deform`]; [`FfdError::Cancelled`] when `progress` asks to stop.
+    pub fn deform_with(
+        self: &Arc<Self>,
+        lattice: &BSplineLattice,
+        progress: &dyn volmorph_io::Progress,
+    ) -> Result<TrimmedModel, FfdError> {
         let start = Instant::now();
         if lattice.knots() != &self.knots {
             return Err(FfdError::LatticeMismatch("knot vectors differ".into()));
@@ -484,10 +533,12 @@ impl AccuratePlan {
             ctrl: &ctrl,
             frame: &self.lattice_frame,
         };
+        progress.start("interpolating Bézier surfaces", self.patches.len() as u64);
         let surfaces: Vec<BezierSurface> = self
             .patches
             .par_iter()
             .map(|p| {
+                progress.check()?;
                 let spans = self.cell_spans(p.cell);
                 let [ns, nt] = p.frame.degrees;
                 let (a, b) = (ns + 1, nt + 1);
@@ -506,6 +557,7 @@ impl AccuratePlan {
                         "cannot interpolate a surface of degrees {ns} × {nt}"
                     )));
                 }
+                progress.advance(1);
                 Ok(BezierSurface {
                     degrees: [ns, nt],
                     rect: p.rect,
@@ -519,10 +571,12 @@ impl AccuratePlan {
             .map(|&x| lattice.apply(x))
             .collect();
         let k = lattice.degree();
+        progress.start("interpolating edge curves", self.edges.len() as u64);
         let edge_curves: Vec<BezierCurve> = self
             .edges
             .par_iter()
             .map(|e| {
+                progress.check()?;
                 let (face, forward) = e.uses.first().copied().unwrap_or((0, true));
                 let pi = self.faces[face as usize].patch as usize;
                 let p = &self.patches[pi];
@@ -548,6 +602,7 @@ impl AccuratePlan {
                         "cannot interpolate an edge curve of degree {deg}"
                     )));
                 }
+                progress.advance(1);
                 Ok(BezierCurve {
                     control_points: cps,
                 })
@@ -633,12 +688,21 @@ impl CellEval<'_> {
 }
 
 /// Trace the union of each patch's sub-polygons into trimmed faces.
-fn trace_faces(sub: &Subdivision, patches: &[Patch]) -> Result<Vec<TrimmedFace>, FfdError> {
+fn trace_faces(
+    sub: &Subdivision,
+    patches: &[Patch],
+    progress: &dyn volmorph_io::Progress,
+) -> Result<Vec<TrimmedFace>, FfdError> {
     let per_patch: Vec<Vec<TrimmedFace>> = patches
         .par_iter()
         .enumerate()
-        .map(|(g, p)| trace_patch(sub, p, g as u32))
-        .collect();
+        .map(|(g, p)| {
+            progress.check()?;
+            let faces = trace_patch(sub, p, g as u32);
+            progress.advance(1);
+            Ok(faces)
+        })
+        .collect::<Result<_, FfdError>>()?;
     let faces: Vec<TrimmedFace> = per_patch.into_iter().flatten().collect();
     if faces.len() > u32::MAX as usize {
         return Err(FfdError::TooLarge("more than 2³² faces".into()));
@@ -922,8 +986,21 @@ fn tri_area_adaptive(
 /// # Errors
 /// As the two steps.
 pub fn accurate_ffd(mesh: &Mesh, lattice: &BSplineLattice) -> Result<TrimmedModel, FfdError> {
-    let plan = Arc::new(AccuratePlan::new(mesh, lattice)?);
-    plan.deform(lattice)
+    accurate_ffd_with(mesh, lattice, &volmorph_io::NoProgress)
+}
+
+/// [`accurate_ffd`] reporting the stages of [`AccuratePlan::new_with`] and
+/// [`AccuratePlan::deform_with`] to `progress` and stopping when it is cancelled.
+///
+/// # Errors
+/// As [`accurate_ffd`]; [`FfdError::Cancelled`] when `progress` asks to stop.
+pub fn accurate_ffd_with(
+    mesh: &Mesh,
+    lattice: &BSplineLattice,
+    progress: &dyn volmorph_io::Progress,
+) -> Result<TrimmedModel, FfdError> {
+    let plan = Arc::new(AccuratePlan::new_with(mesh, lattice, progress)?);
+    plan.deform_with(lattice, progress)
 }
 
 #[cfg(test)]

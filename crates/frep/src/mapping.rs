@@ -299,6 +299,19 @@ impl Schedule {
     }
 }
 
+/// The form [`Schedule::parse`] reads: `linear`, `sqrt`, `smoothstep` or `delayed:T0` (`T0`
+/// in its shortest round-trip form, so parsing the text gives the schedule back exactly).
+impl std::fmt::Display for Schedule {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        match self {
+            Schedule::Linear => f.write_str("linear"),
+            Schedule::Sqrt => f.write_str("sqrt"),
+            Schedule::Smoothstep => f.write_str("smoothstep"),
+            Schedule::Delayed { t0 } => write!(f, "delayed:{t0:?}"),
+        }
+    }
+}
+
 /// Metamorphosis at time `t` with schedule `h`: `(1 − h(t)) f + h(t) g`, exactly `f` at
 /// `t = 0` and `g` at `t = 1` for every schedule.
 #[must_use]
@@ -662,6 +675,16 @@ mod tests {
             Schedule::Delayed { t0: 0.3 }
         );
         assert!(Schedule::parse("delayed:1.5").is_err());
+        for s in [
+            Schedule::Linear,
+            Schedule::Sqrt,
+            Schedule::Smoothstep,
+            Schedule::Delayed { t0: 0.3 },
+            Schedule::Delayed { t0: 0.1 + 0.2 },
+            Schedule::Delayed { t0: 0.0 },
+        ] {
+            assert_eq!(Schedule::parse(&s.to_string()).unwrap(), s, "{s}");
+        }
     }
 
     #[test]

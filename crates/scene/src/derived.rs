@@ -1,7 +1,11 @@
 //! Derived objects: results computed from other objects and kept up to date — warped volumes,
-//! deformed meshes, isosurfaces and Jacobian maps — through the engines' incremental paths
-//! where one applies, and by full recomputation otherwise. Both give the same result (to the
-//! rounding the engines document).
+//! deformed meshes, isosurfaces, Jacobian maps, sampled F-rep models and their
+//! metamorphoses — through the engines' incremental paths where one applies, and by full
+//! recomputation otherwise. Both give the same result (to the rounding the engines document).
+//!
+//! Every update keeps what it replaced ([`Restore`]) until its command is done, so a command
+//! cancelled halfway through bringing its derived objects up to date puts each one back
+//! exactly as it was.
 
 use std::sync::Arc;
 
@@ -9,19 +13,19 @@ use glam::DVec3;
 use multiversion::multiversion;
 use rayon::prelude::*;
 use serde::{Deserialize, Serialize};
-use volmorph_contour::{DcOptions, McOptions, dual_contouring_any, marching_cubes_any};
+use volmorph_contour::{DcOptions, McOptions, dual_contouring_any_with, marching_cubes_any_with};
 use volmorph_deform::SpaceMap;
 use volmorph_deform::live::{Influence, LinearMap};
 use volmorph_frep::Tape;
-use volmorph_frep::grid::sample as frep_sample;
-use volmorph_frep::mapping::Pullback;
+use volmorph_frep::grid::sample_with as frep_sample_with;
+use volmorph_frep::mapping::{Pullback, Schedule, morph};
 use volmorph_maps::json::GridJson;
 use volmorph_maps::{AnyMap, LiveMap};
 use volmorph_mesh::Mesh;
 use volmorph_volume::{AnyVolume, Geometry, IndexBox, Volume, Voxel, with_volume};
-use volmorph_warp::apply::{WarpMethod, WarpOptions, warp_volume};
+use volmorph_warp::apply::{WarpMethod, WarpOptions, warp_volume_with};
 use volmorph_warp::incremental::IncrementalPushForward;
-use volmorph_warp::jacobian::jacobian_determinant;
+use volmorph_warp::jacobian::jacobian_determinant_with;
 use volmorph_warp::pushforward::AntialiasOptions;
 
 use crate::{MapObject, ObjectId, SceneError};
@@ -116,6 +120,25 @@ pub enum Recipe {
         /// The volume whose grid is sampled.
         grid: ObjectId,
     },
+    /// The metamorphosis of F-rep model `from` into F-rep model `to` at time `t ∈ [0, 1]`
+    /// (Savchenko–Pasko Eq. 13), sampled at the voxel centres of volume `grid` (f32, solid
+    /// where ≥ 0): `ξ = h₁(t)·f(x) + h₂(t)·g(x)` with `h₂ = h(t)` the schedule and
+    /// `h₁ = 1 − h(t)` (so `h₁(0) = 1, h₁(1) = 0, h₂(0) = 0, h₂(1) = 1`): exactly `from` at
+    /// `t = 0` and `to` at `t = 1` ([`volmorph_frep::mapping::morph`]).
+    FrepMorph {
+        /// The model at `t = 0` (`f`).
+        from: ObjectId,
+        /// The model at `t = 1` (`g`).
+        to: ObjectId,
+        /// The time, in `[0, 1]`.
+        t: f64,
+        /// The schedule `h(t)`, as [`Schedule::parse`] reads it (`linear`, `sqrt`,
+        /// `smoothstep`, `delayed:T0`).
+        #[serde(with = "schedule_name")]
+        schedule: Schedule,
+        /// The volume whose grid is sampled.
+        grid: ObjectId,
+    },
     /// The Jacobian determinant of map `map` at the voxel centres of volume `grid` (f32; ≤ 0
     /// marks folding).
     Jacobian {
@@ -137,6 +160,20 @@ mod method_name {
     pub fn deserialize<'de, D: Deserializer<'de>>(d: D) -> Result<WarpMethod, D::Error> {
         let name = String::deserialize(d)?;
         name.parse().map_err(serde::de::Error::custom)
+    }
+}
+
+mod schedule_name {
+    use serde::{Deserialize, Deserializer, Serializer};
+    use volmorph_frep::mapping::Schedule;
+
+    pub fn serialize<S: Serializer>(h: &Schedule, s: S) -> Result<S::Ok, S::Error> {
+        s.collect_str(h)
+    }
+
+    pub fn deserialize<'de, D: Deserializer<'de>>(d: D) -> Result<Schedule, D::Error> {
+        let name = String::deserialize(d)?;
+        Schedule::parse(&name).map_err(serde::de::Error::custom)
     }
 }
 
@@ -191,6 +228,7 @@ impl Recipe {
                 v.extend(*map);
                 v
             }
+            Recipe::FrepMorph { from, to, grid, .. } => vec![*from, *to, *grid],
         }
     }
 
@@ -203,7 +241,22 @@ impl Recipe {
             | Recipe::DeformedMesh { map, .. }
             | Recipe::Jacobian { map, .. } => Some(*map),
             Recipe::FrepSampled { map, .. } => *map,
-            Recipe::Isosurface { .. } => None,
+            Recipe::Isosurface { .. } | Recipe::FrepMorph { .. } => None,
+        }
+    }
+
+    /// The recipe's name in project files (the `"recipe"` tag): `warp`, `warp-onto`,
+    /// `deformed-mesh`, `isosurface`, `frep-sampled`, `frep-morph` or `jacobian`.
+    #[must_use]
+    pub fn name(&self) -> &'static str {
+        match self {
+            Recipe::Warp { .. } => "warp",
+            Recipe::WarpOnto { .. } => "warp-onto",
+            Recipe::DeformedMesh { .. } => "deformed-mesh",
+            Recipe::Isosurface { .. } => "isosurface",
+            Recipe::FrepSampled { .. } => "frep-sampled",
+            Recipe::FrepMorph { .. } => "frep-morph",
+            Recipe::Jacobian { .. } => "jacobian",
         }
     }
 
@@ -214,7 +267,8 @@ impl Recipe {
             Recipe::Warp { .. }
             | Recipe::WarpOnto { .. }
             | Recipe::Jacobian { .. }
-            | Recipe::FrepSampled { .. } => "volume",
+            | Recipe::FrepSampled { .. }
+            | Recipe::FrepMorph { .. } => "volume",
             Recipe::DeformedMesh { .. } | Recipe::Isosurface { .. } => "mesh",
         }
     }
@@ -329,6 +383,8 @@ pub(crate) struct Inputs<'a> {
     pub mesh: Option<&'a Arc<Mesh>>,
     pub map: Option<&'a MapObject>,
     pub frep: Option<&'a crate::FrepModel>,
+    /// The second model of a metamorphosis.
+    pub frep_to: Option<&'a crate::FrepModel>,
 }
 
 /// What an update changed in a derived object: voxels (for volumes) and a physical box.
@@ -405,22 +461,136 @@ fn convert_row<T: Voxel>(src: &[f32], dst: &mut [T]) {
     }
 }
 
+/// What an update of a derived object replaced, kept until its command is done so a
+/// cancelled command can put every derived object back as it was ([`Derived::restore`]).
+#[derive(Debug)]
+pub(crate) enum Restore {
+    /// A full recomputation (or a failure) replaced the result and the engine: the previous
+    /// ones, moved out (no copy).
+    State {
+        output: Option<DerivedOutput>,
+        engine: Option<Box<IncrementalPushForward<LiveMap>>>,
+        error: Option<String>,
+    },
+    /// The incremental push-forward rewrote the voxels of `voxels` in place: their previous
+    /// values (exact in `f64` for every voxel type). The engine has moved on; it is dropped
+    /// on restore (it is a cache: the next update rebuilds it).
+    Voxels {
+        voxels: IndexBox,
+        values: Vec<f64>,
+        error: Option<String>,
+    },
+    /// Nothing changed but the error (cleared).
+    Unchanged { error: Option<String> },
+    /// The incremental vertex FFD moved these vertices in place: their previous positions.
+    Vertices {
+        moved: Vec<(usize, DVec3)>,
+        error: Option<String>,
+    },
+}
+
+/// What a computation produced: a new result to put in place, or a result already updated
+/// in place (the incremental paths) with what it replaced.
+enum Update {
+    Replace {
+        output: DerivedOutput,
+        engine: Option<Box<IncrementalPushForward<LiveMap>>>,
+        dirty: Dirty,
+    },
+    InPlace {
+        dirty: Dirty,
+        restore: Restore,
+    },
+}
+
 impl Derived {
-    /// Bring the result up to date after the change `hint` of its inputs; returns what
-    /// changed. On error the previous result is kept and the error recorded.
-    pub(crate) fn update(&mut self, id: ObjectId, inputs: &Inputs<'_>, hint: &Hint) -> Dirty {
-        match self.compute(id, inputs, hint) {
-            Ok(d) => {
+    /// Bring the result up to date after the change `hint` of its inputs, reporting long
+    /// computations to `progress`; returns what changed and what to put back if the command
+    /// is cancelled later. On an error other than cancellation the previous result is kept,
+    /// the error recorded and the incremental engine dropped (the next update recomputes).
+    ///
+    /// # Errors
+    /// Only cancellation ([`SceneError::is_cancelled`]): the object is then unchanged.
+    pub(crate) fn update_with(
+        &mut self,
+        id: ObjectId,
+        inputs: &Inputs<'_>,
+        hint: &Hint,
+        progress: &dyn volmorph_io::Progress,
+    ) -> Result<(Dirty, Restore), SceneError> {
+        let error = self.error.clone();
+        match self.compute(id, inputs, hint, progress) {
+            Ok(Update::Replace {
+                output,
+                engine,
+                dirty,
+            }) => {
+                let restore = Restore::State {
+                    output: self.output.replace(output),
+                    engine: std::mem::replace(&mut self.engine, engine),
+                    error,
+                };
                 self.error = None;
-                d
+                Ok((dirty, restore))
             }
+            Ok(Update::InPlace { dirty, restore }) => {
+                self.error = None;
+                Ok((dirty, restore))
+            }
+            Err(e) if e.is_cancelled() => Err(e),
             Err(e) => {
                 self.error = Some(e.to_string());
-                Dirty {
-                    object: id,
-                    voxels: None,
-                    bounds: None,
+                let restore = Restore::State {
+                    output: self.output.clone(),
+                    engine: self.engine.take(),
+                    error,
+                };
+                Ok((
+                    Dirty {
+                        object: id,
+                        voxels: None,
+                        bounds: None,
+                    },
+                    restore,
+                ))
+            }
+        }
+    }
+
+    /// Put back what an update replaced (`restore` from [`Derived::update_with`] on this
+    /// object, the latest first when several updates ran).
+    pub(crate) fn restore(&mut self, restore: Restore) {
+        match restore {
+            Restore::State {
+                output,
+                engine,
+                error,
+            } => {
+                self.output = output;
+                self.engine = engine;
+                self.error = error;
+            }
+            Restore::Voxels {
+                voxels,
+                values,
+                error,
+            } => {
+                if let Some(DerivedOutput::Volume(out)) = &mut self.output {
+                    let out = Arc::make_mut(out);
+                    with_volume!(out, v => put_box(v, &voxels, &values));
                 }
+                self.engine = None;
+                self.error = error;
+            }
+            Restore::Unchanged { error } => self.error = error,
+            Restore::Vertices { moved, error } => {
+                if let Some(DerivedOutput::Mesh(out)) = &mut self.output {
+                    let out = Arc::make_mut(out);
+                    for (i, p) in moved {
+                        out.positions_mut()[i] = p;
+                    }
+                }
+                self.error = error;
             }
         }
     }
@@ -430,7 +600,21 @@ impl Derived {
         id: ObjectId,
         inputs: &Inputs<'_>,
         hint: &Hint,
-    ) -> Result<Dirty, SceneError> {
+        progress: &dyn volmorph_io::Progress,
+    ) -> Result<Update, SceneError> {
+        progress.check()?;
+        let volume = |grid: &Geometry, v: AnyVolume| {
+            let all = IndexBox::all(grid.dims);
+            Update::Replace {
+                output: DerivedOutput::Volume(Arc::new(v)),
+                engine: None,
+                dirty: Dirty {
+                    object: id,
+                    voxels: Some(all),
+                    bounds: physical_box(grid, &all),
+                },
+            }
+        };
         match self.recipe.clone() {
             Recipe::Warp {
                 method,
@@ -442,11 +626,14 @@ impl Derived {
                 id,
                 inputs,
                 hint,
-                method,
-                background,
-                sampled_nodes,
-                swap_handles,
-                None,
+                WarpSpec {
+                    method,
+                    background,
+                    sampled_nodes,
+                    swap_handles,
+                    onto: None,
+                },
+                progress,
             ),
             Recipe::WarpOnto {
                 method,
@@ -459,11 +646,14 @@ impl Derived {
                 id,
                 inputs,
                 hint,
-                method,
-                background,
-                sampled_nodes,
-                swap_handles,
-                Some(grid.geometry()),
+                WarpSpec {
+                    method,
+                    background,
+                    sampled_nodes,
+                    swap_handles,
+                    onto: Some(grid.geometry()),
+                },
+                progress,
             ),
             Recipe::DeformedMesh { .. } => self.deform_mesh(id, inputs, hint),
             Recipe::Isosurface {
@@ -476,10 +666,15 @@ impl Derived {
                     && b.is_empty()
                     && self.output.is_some()
                 {
-                    return Ok(Dirty {
-                        object: id,
-                        voxels: None,
-                        bounds: None,
+                    return Ok(Update::InPlace {
+                        dirty: Dirty {
+                            object: id,
+                            voxels: None,
+                            bounds: None,
+                        },
+                        restore: Restore::Unchanged {
+                            error: self.error.clone(),
+                        },
                     });
                 }
                 let vol = inputs
@@ -487,24 +682,28 @@ impl Derived {
                     .ok_or_else(|| SceneError::invalid("isosurface without a volume"))?;
                 let surface = match method {
                     SurfaceMethod::MarchingCubes => {
-                        marching_cubes_any(vol, level, &McOptions { inside_below })?
+                        marching_cubes_any_with(vol, level, &McOptions { inside_below }, progress)?
                     }
-                    SurfaceMethod::DualContouring => dual_contouring_any(
+                    SurfaceMethod::DualContouring => dual_contouring_any_with(
                         vol,
                         level,
                         &DcOptions {
                             inside_below,
                             ..DcOptions::default()
                         },
+                        progress,
                     )?,
                 };
                 let bounds = surface.mesh.bounding_box();
                 let old = self.mesh().and_then(|m| m.bounding_box());
-                self.output = Some(DerivedOutput::Mesh(Arc::new(surface.mesh)));
-                Ok(Dirty {
-                    object: id,
-                    voxels: None,
-                    bounds: union(bounds, old),
+                Ok(Update::Replace {
+                    output: DerivedOutput::Mesh(Arc::new(surface.mesh)),
+                    engine: None,
+                    dirty: Dirty {
+                        object: id,
+                        voxels: None,
+                        bounds: union(bounds, old),
+                    },
                 })
             }
             Recipe::FrepSampled { .. } => {
@@ -517,22 +716,29 @@ impl Derived {
                     .geometry();
                 let tape = Tape::new(model.shape());
                 let sampled = match inputs.map {
-                    Some(m) => frep_sample(
+                    Some(m) => frep_sample_with(
                         &Pullback {
                             field: &tape,
                             inverse: m.map(),
                         },
                         &grid,
+                        progress,
                     )?,
-                    None => frep_sample(&tape, &grid)?,
+                    None => frep_sample_with(&tape, &grid, progress)?,
                 };
-                self.output = Some(DerivedOutput::Volume(Arc::new(AnyVolume::from(sampled))));
-                let all = IndexBox::all(grid.dims);
-                Ok(Dirty {
-                    object: id,
-                    voxels: Some(all),
-                    bounds: physical_box(&grid, &all),
-                })
+                Ok(volume(&grid, AnyVolume::from(sampled)))
+            }
+            Recipe::FrepMorph { t, schedule, .. } => {
+                let (Some(from), Some(to)) = (inputs.frep, inputs.frep_to) else {
+                    return Err(SceneError::invalid("metamorphosis without its two models"));
+                };
+                let grid = *inputs
+                    .volume
+                    .ok_or_else(|| SceneError::invalid("metamorphosis without a grid"))?
+                    .geometry();
+                let tape = Tape::new(&morph(from.shape(), to.shape(), t, schedule));
+                let sampled = frep_sample_with(&tape, &grid, progress)?;
+                Ok(volume(&grid, AnyVolume::from(sampled)))
             }
             Recipe::Jacobian { .. } => {
                 let map = inputs
@@ -542,30 +748,27 @@ impl Derived {
                     .volume
                     .ok_or_else(|| SceneError::invalid("Jacobian without a grid"))?
                     .geometry();
-                let det = jacobian_determinant(map.map(), &grid)?;
-                self.output = Some(DerivedOutput::Volume(Arc::new(AnyVolume::from(det))));
-                let all = IndexBox::all(grid.dims);
-                Ok(Dirty {
-                    object: id,
-                    voxels: Some(all),
-                    bounds: physical_box(&grid, &all),
-                })
+                let det = jacobian_determinant_with(map.map(), &grid, progress)?;
+                Ok(volume(&grid, AnyVolume::from(det)))
             }
         }
     }
 
-    #[allow(clippy::too_many_arguments)]
     fn warp(
         &mut self,
         id: ObjectId,
         inputs: &Inputs<'_>,
         hint: &Hint,
-        method: WarpMethod,
-        background: f64,
-        sampled_nodes: Option<usize>,
-        swap_handles: bool,
-        onto: Option<Geometry>,
-    ) -> Result<Dirty, SceneError> {
+        spec: WarpSpec,
+        progress: &dyn volmorph_io::Progress,
+    ) -> Result<Update, SceneError> {
+        let WarpSpec {
+            method,
+            background,
+            sampled_nodes,
+            swap_handles,
+            onto,
+        } = spec;
         let source = inputs
             .volume
             .ok_or_else(|| SceneError::invalid("warp without a volume"))?;
@@ -581,20 +784,36 @@ impl Derived {
             (_, true) => None,
             (m, false) => m.map().to_live(),
         };
+        let all = IndexBox::all(grid.dims);
+        let everything = Dirty {
+            object: id,
+            voxels: Some(all),
+            bounds: physical_box(&grid, &all),
+        };
         if let (Some(live), WarpMethod::PushforwardAntialiased, None) =
             (&live, method, sampled_nodes)
         {
             if let (Hint::Parameters(changes), Some(engine), Some(DerivedOutput::Volume(out))) =
                 (hint, &mut self.engine, &mut self.output)
             {
+                // Not cancellable: an update touches only the region the moved parameters
+                // reach, the work of an interactive drag.
                 let report = engine.set_parameters(changes)?;
                 let b = report.output_box;
                 let out = Arc::make_mut(out);
+                let values = with_volume!(&*out, v => take_box(v, &b));
                 with_volume!(out, v => copy_box(engine.volume(), v, &b));
-                return Ok(Dirty {
-                    object: id,
-                    voxels: Some(b),
-                    bounds: physical_box(&grid, &b),
+                return Ok(Update::InPlace {
+                    dirty: Dirty {
+                        object: id,
+                        voxels: Some(b),
+                        bounds: physical_box(&grid, &b),
+                    },
+                    restore: Restore::Voxels {
+                        voxels: b,
+                        values,
+                        error: self.error.clone(),
+                    },
                 });
             }
             let options = AntialiasOptions {
@@ -602,20 +821,16 @@ impl Derived {
                 ..AntialiasOptions::default()
             };
             let engine = with_volume!(&**source, v => {
-                IncrementalPushForward::new(v, live.clone(), &grid, &options)?
+                IncrementalPushForward::new_with(v, live.clone(), &grid, &options, progress)?
             });
             let mut out = with_volume!(&**source, v => AnyVolume::from(blank_like(v, grid)?));
-            let all = IndexBox::all(grid.dims);
             with_volume!(&mut out, v => copy_box(engine.volume(), v, &all));
-            self.engine = Some(Box::new(engine));
-            self.output = Some(DerivedOutput::Volume(Arc::new(out)));
-            return Ok(Dirty {
-                object: id,
-                voxels: Some(all),
-                bounds: physical_box(&grid, &all),
+            return Ok(Update::Replace {
+                output: DerivedOutput::Volume(Arc::new(out)),
+                engine: Some(Box::new(engine)),
+                dirty: everything,
             });
         }
-        self.engine = None;
         let backward;
         let map: &AnyMap = match (map_object, swap_handles) {
             (MapObject::Handles(h), true) => {
@@ -639,13 +854,11 @@ impl Derived {
             mask: false,
             sampled_nodes,
         };
-        let out = warp_volume(source.view(), map, &grid, method, &options)?;
-        self.output = Some(DerivedOutput::Volume(Arc::new(out.volume)));
-        let all = IndexBox::all(grid.dims);
-        Ok(Dirty {
-            object: id,
-            voxels: Some(all),
-            bounds: physical_box(&grid, &all),
+        let out = warp_volume_with(source.view(), map, &grid, method, &options, progress)?;
+        Ok(Update::Replace {
+            output: DerivedOutput::Volume(Arc::new(out.volume)),
+            engine: None,
+            dirty: everything,
         })
     }
 
@@ -654,7 +867,7 @@ impl Derived {
         id: ObjectId,
         inputs: &Inputs<'_>,
         hint: &Hint,
-    ) -> Result<Dirty, SceneError> {
+    ) -> Result<Update, SceneError> {
         let mesh = inputs
             .mesh
             .ok_or_else(|| SceneError::invalid("deformed mesh without a mesh"))?;
@@ -683,15 +896,23 @@ impl Derived {
                 map.apply_batch(&points, &mut mapped)?;
                 let out = Arc::make_mut(out);
                 let mut dirty: Option<(DVec3, DVec3)> = None;
+                let mut moved = Vec::with_capacity(index.len());
                 for (&i, &new) in index.iter().zip(&mapped) {
                     let old = out.positions()[i];
+                    moved.push((i, old));
                     out.positions_mut()[i] = new;
                     dirty = union(dirty, Some((old.min(new), old.max(new))));
                 }
-                return Ok(Dirty {
-                    object: id,
-                    voxels: None,
-                    bounds: dirty,
+                return Ok(Update::InPlace {
+                    dirty: Dirty {
+                        object: id,
+                        voxels: None,
+                        bounds: dirty,
+                    },
+                    restore: Restore::Vertices {
+                        moved,
+                        error: self.error.clone(),
+                    },
                 });
             }
         }
@@ -701,12 +922,64 @@ impl Derived {
             out.bounding_box(),
             self.mesh().and_then(|m| m.bounding_box()),
         );
-        self.output = Some(DerivedOutput::Mesh(Arc::new(out)));
-        Ok(Dirty {
-            object: id,
-            voxels: None,
-            bounds,
+        Ok(Update::Replace {
+            output: DerivedOutput::Mesh(Arc::new(out)),
+            engine: None,
+            dirty: Dirty {
+                object: id,
+                voxels: None,
+                bounds,
+            },
         })
+    }
+}
+
+/// How a warp recipe applies its map.
+struct WarpSpec {
+    method: WarpMethod,
+    background: f64,
+    sampled_nodes: Option<usize>,
+    swap_handles: bool,
+    onto: Option<Geometry>,
+}
+
+/// The voxels of box `b` of `v` (clipped to the grid), x fastest, as `f64` (exact for every
+/// voxel type); copied row by row.
+fn take_box<T: Voxel>(v: &Volume<T>, b: &IndexBox) -> Vec<f64> {
+    let [nx, ny, nz] = v.geometry().dims;
+    let (x0, x1) = (b.start[0].min(nx), b.end[0].min(nx));
+    let mut out = Vec::new();
+    if x0 >= x1 {
+        return out;
+    }
+    let data = v.data();
+    for k in b.start[2]..b.end[2].min(nz) {
+        for j in b.start[1]..b.end[1].min(ny) {
+            let row = (k * ny + j) * nx;
+            out.extend(data[row + x0..row + x1].iter().map(|x| x.to_f64()));
+        }
+    }
+    out
+}
+
+/// Write back what [`take_box`] took from box `b`.
+fn put_box<T: Voxel>(v: &mut Volume<T>, b: &IndexBox, values: &[f64]) {
+    let [nx, ny, nz] = v.geometry().dims;
+    let (x0, x1) = (b.start[0].min(nx), b.end[0].min(nx));
+    if x0 >= x1 {
+        return;
+    }
+    let mut rows = values.chunks_exact(x1 - x0);
+    let data = v.data_mut();
+    for k in b.start[2]..b.end[2].min(nz) {
+        for j in b.start[1]..b.end[1].min(ny) {
+            let row = (k * ny + j) * nx;
+            if let Some(src) = rows.next() {
+                for (d, s) in data[row + x0..row + x1].iter_mut().zip(src) {
+                    *d = T::from_f64(*s);
+                }
+            }
+        }
     }
 }
 

@@ -69,6 +69,13 @@ pub enum SceneError {
     /// Reading or writing a file failed.
     #[error(transparent)]
     Io(#[from] volmorph_io::IoError),
+    /// The caller asked the work to stop through its [`volmorph_io::Progress`]; the scene,
+    /// its history and the files are as they were before the call.
+    #[error("cancelled")]
+    Cancelled(#[from] volmorph_io::Cancelled),
+    /// An accurate FFD or its STEP file failed.
+    #[error(transparent)]
+    Ffd(#[from] volmorph_ffd::FfdError),
     /// A project file is malformed.
     #[error("project {path}: {message}")]
     Project {
@@ -82,5 +89,13 @@ pub enum SceneError {
 impl SceneError {
     pub(crate) fn invalid(message: impl Into<String>) -> Self {
         SceneError::Invalid(message.into())
+    }
+
+    /// `true` when the error is a cancellation asked through a [`volmorph_io::Progress`]
+    /// (this variant, or a library's cancellation error anywhere in the source chain), not a
+    /// failure: front-ends report it as "cancelled", not as an error.
+    #[must_use]
+    pub fn is_cancelled(&self) -> bool {
+        matches!(self, SceneError::Cancelled(_)) || volmorph_io::is_cancelled_error(self)
     }
 }

@@ -7,9 +7,11 @@ use volmorph_handles::HandleSet;
 use volmorph_maps::{HandleMethod, HandleOptions, MapFormat, read_map, write_map};
 use volmorph_mesh::MeshFormat;
 
+use volmorph_maps::AnyMap;
+
 use crate::command::NewObject;
 use crate::object::{Object, ObjectId};
-use crate::{Scene, SceneError};
+use crate::{Recipe, Scene, SceneError};
 
 /// Largest `.hf` or `.json` file inspected or read whole (64 MiB).
 pub const MAX_TEXT_FILE_BYTES: u64 = 64 << 20;
@@ -99,6 +101,45 @@ pub fn kind_of(path: &Path) -> Result<FileKind, SceneError> {
 /// # Errors
 /// The reader's error, naming the file.
 pub fn read_object(path: &Path) -> Result<NewObject, SceneError> {
+    read_object_with(path, &volmorph_io::NoProgress)
+}
+
+/// [`read_object`] reporting one stage, `reading NAME`, of one step (the file read), and
+/// polling `progress` before and after reading. The readers do not poll it while they read,
+/// so a cancellation takes effect once the file is read: the object is dropped and
+/// [`SceneError::Cancelled`] returned.
+///
+/// # Errors
+/// As [`read_object`]; [`SceneError::Cancelled`] when `progress` asks to stop.
+pub fn read_object_with(
+    path: &Path,
+    progress: &dyn volmorph_io::Progress,
+) -> Result<NewObject, SceneError> {
+    progress.start(&format!("reading {}", file_name(path)), 1);
+    progress.check()?;
+    let object = read_any(path)?;
+    progress.advance(1);
+    progress.check()?;
+    Ok(object)
+}
+
+/// The file name of `path` for messages and progress labels (the whole path if it has none).
+pub(crate) fn file_name(path: &Path) -> String {
+    path.file_name().map_or_else(
+        || path.display().to_string(),
+        |n| n.to_string_lossy().into_owned(),
+    )
+}
+
+/// `true` for a `.step` / `.stp` path (any case): the accurate FFD's trimmed surfaces.
+#[must_use]
+pub fn is_step(path: &Path) -> bool {
+    path.extension()
+        .and_then(|e| e.to_str())
+        .is_some_and(|e| e.eq_ignore_ascii_case("step") || e.eq_ignore_ascii_case("stp"))
+}
+
+fn read_any(path: &Path) -> Result<NewObject, SceneError> {
     Ok(match kind_of(path)? {
         FileKind::Volume => NewObject::Volume(volmorph_volume_io::read(path)?),
         FileKind::Mesh => NewObject::Mesh(volmorph_mesh::read(path)?),
@@ -122,10 +163,95 @@ impl Scene {
     /// as handle JSON (`.json`) or as their map (`.tfm`), F-rep models as `.hf`, NURBS models as
     /// trivariate JSON; derived objects as their result. Written atomically.
     ///
+    ///
+    /// A deformed mesh ([`Recipe::DeformedMesh`] through a B-spline lattice) written as
+    /// `.step` / `.stp` is the **accurate** FFD of its mesh (Feng et al. 2002: trimmed Bézier
+    /// surfaces, [`volmorph_ffd::accurate`]), not the vertex FFD the scene shows: a closed
+    /// mesh gives a `MANIFOLD_SOLID_BREP`, an open one a shell-based surface model.
+    ///
     /// # Errors
     /// [`SceneError::NoObject`]; [`SceneError::Invalid`] for a derived object not computed or
-    /// a format that cannot hold the object; the writer's errors.
+    /// a format that cannot hold the object (STEP for anything but a deformed mesh through a
+    /// B-spline lattice); the writer's errors.
     pub fn export(&self, id: ObjectId, path: &Path) -> Result<(), SceneError> {
+        self.export_with(id, path, &volmorph_io::NoProgress)
+    }
+
+    /// [`Scene::export`] reporting to `progress` and stopping when it is cancelled: a STEP
+    /// file reports the stages of [`volmorph_ffd::accurate::accurate_ffd_with`], then
+    /// `writing NAME` (one step); every other format the one stage `writing NAME`. Nothing
+    /// is written when the export is cancelled.
+    ///
+    /// # Errors
+    /// As [`Scene::export`]; [`SceneError::Cancelled`] when `progress` asks to stop.
+    pub fn export_with(
+        &self,
+        id: ObjectId,
+        path: &Path,
+        progress: &dyn volmorph_io::Progress,
+    ) -> Result<(), SceneError> {
+        progress.check()?;
+        if is_step(path) {
+            let model = self.accurate_ffd_with(id, progress)?;
+            progress.start(&format!("writing {}", file_name(path)), 1);
+            progress.check()?;
+            volmorph_ffd::step::write_step(path, &model)?;
+            progress.advance(1);
+            return Ok(());
+        }
+        progress.start(&format!("writing {}", file_name(path)), 1);
+        self.write_object(id, path)?;
+        progress.advance(1);
+        Ok(())
+    }
+
+    /// The accurate FFD (Feng et al. 2002) of deformed mesh `id`: its mesh through its
+    /// B-spline lattice as trimmed Bézier surfaces, reporting the stages of
+    /// [`volmorph_ffd::accurate::accurate_ffd_with`] to `progress`.
+    ///
+    /// # Errors
+    /// [`SceneError::NoObject`]; [`SceneError::Invalid`] unless `id` is a deformed mesh whose
+    /// map is a B-spline lattice; the FFD's errors; [`SceneError::Cancelled`].
+    pub fn accurate_ffd_with(
+        &self,
+        id: ObjectId,
+        progress: &dyn volmorph_io::Progress,
+    ) -> Result<volmorph_ffd::accurate::TrimmedModel, SceneError> {
+        let entry = self.get(id)?;
+        let Object::Derived(d) = &entry.object else {
+            return Err(SceneError::invalid(format!(
+                "object {id} ({:?}) is a {}: the accurate FFD (STEP) is made from a deformed \
+                 mesh (a mesh through a B-spline lattice)",
+                entry.name,
+                entry.object.kind()
+            )));
+        };
+        let Recipe::DeformedMesh { mesh, map } = d.recipe() else {
+            return Err(SceneError::invalid(format!(
+                "object {id} ({:?}) is a {} result: the accurate FFD (STEP) is made from a \
+                 deformed mesh (a mesh through a B-spline lattice)",
+                entry.name,
+                d.recipe().name()
+            )));
+        };
+        let lattice = match self.map(*map)? {
+            AnyMap::Lattice(l) => l,
+            other => {
+                return Err(SceneError::invalid(format!(
+                    "object {id} ({:?}) deforms its mesh by a {} map: the accurate FFD (STEP) \
+                     needs a B-spline lattice",
+                    entry.name,
+                    other.kind()
+                )));
+            }
+        };
+        let mesh = self.mesh(*mesh)?;
+        Ok(volmorph_ffd::accurate::accurate_ffd_with(
+            mesh, lattice, progress,
+        )?)
+    }
+
+    fn write_object(&self, id: ObjectId, path: &Path) -> Result<(), SceneError> {
         let entry = self.get(id)?;
         match &entry.object {
             Object::Volume(_) | Object::Derived(_) if entry.object.volume().is_some() => {

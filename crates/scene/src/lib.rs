@@ -3,7 +3,8 @@
 //! A [`Scene`] holds named objects by stable [`ObjectId`]: volumes of any voxel type, meshes,
 //! F-rep models, trivariate NURBS models, maps (given whole — lattices, affine maps, NURBS
 //! geometry, compositions — or built from handles), and derived objects that know what they
-//! are computed from ([`Recipe`]: warped volumes, deformed meshes, isosurfaces, Jacobian maps).
+//! are computed from ([`Recipe`]: warped volumes, deformed meshes, isosurfaces, Jacobian maps,
+//! sampled F-rep models and their metamorphoses).
 //!
 //! * Every change is a [`Command`] applied through [`Scene::apply`]; it goes into an undo/redo
 //!   history ([`Scene::undo`], [`Scene::redo`]) and returns a [`Change`]: the objects added,
@@ -17,6 +18,12 @@
 //!   spline) updates an antialiased push-forward only where the moved parameters act, and a
 //!   deformed mesh only in the vertices there; everything else is recomputed in full. Both give
 //!   the result a full recomputation gives (to the rounding the engines document).
+//! * Long work reports to a [`volmorph_io::Progress`] and stops when it is cancelled:
+//!   [`Scene::apply_with`], [`Scene::undo_with`], [`Scene::redo_with`], [`Scene::export_with`],
+//!   [`Scene::save_with`], [`Scene::load_with`], [`files::read_object_with`]. A cancelled
+//!   command changes nothing: the derived objects it had updated are put back from what each
+//!   update replaced, its edits are undone, and the histories and next id are as before.
+//!   [`Scene::transaction`] makes several commands one undo step, or nothing.
 //! * [`Scene::save`] / [`Scene::load`] write and read a versioned project file ([`project`]);
 //!   [`Scene::export`] writes any object in any format volmorph writes; [`files::read_object`]
 //!   reads any file volmorph reads as a new object.

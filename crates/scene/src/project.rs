@@ -244,11 +244,27 @@ impl Scene {
     /// # Errors
     /// I/O errors naming the file; [`SceneError::Map`] if a map cannot be serialised.
     pub fn save(&self, path: &Path) -> Result<(), SceneError> {
+        self.save_with(path, &volmorph_io::NoProgress)
+    }
+
+    /// [`Scene::save`] reporting one stage, `saving NAME`, of one step per object, and
+    /// stopping between objects when `progress` is cancelled: the manifest is then not
+    /// written and the data files of this save are removed, so any previous project is
+    /// untouched.
+    ///
+    /// # Errors
+    /// As [`Scene::save`]; [`SceneError::Cancelled`] when `progress` asks to stop.
+    pub fn save_with(
+        &self,
+        path: &Path,
+        progress: &dyn volmorph_io::Progress,
+    ) -> Result<(), SceneError> {
+        progress.check()?;
         let folder = data_folder(path);
         std::fs::create_dir_all(&folder).map_err(|e| volmorph_io::IoError::os(&folder, e))?;
         let tag = format!("{:08x}", volmorph_io::atomic::token());
         let mut written: Vec<String> = Vec::new();
-        let result = self.save_with(path, &folder, &tag, &mut written);
+        let result = self.write_project(path, &folder, &tag, &mut written, progress);
         if result.is_err() {
             // Uncommitted: the previous manifest still names its own files.
             for name in &written {
@@ -268,12 +284,13 @@ impl Scene {
         Ok(())
     }
 
-    fn save_with(
+    fn write_project(
         &self,
         path: &Path,
         folder: &Path,
         tag: &str,
         written: &mut Vec<String>,
+        progress: &dyn volmorph_io::Progress,
     ) -> Result<(), SceneError> {
         let base = path.parent().unwrap_or(Path::new(""));
         let rel = |file: &str| -> String {
@@ -284,7 +301,12 @@ impl Scene {
                 .replace('\\', "/")
         };
         let mut objects = Vec::new();
+        progress.start(
+            &format!("saving {}", crate::files::file_name(path)),
+            self.objects().count() as u64,
+        );
         for (id, entry) in self.objects() {
+            progress.check()?;
             let mut o = ObjectJson {
                 id,
                 name: entry.name.clone(),
@@ -362,7 +384,9 @@ impl Scene {
                 }
             }
             objects.push(o);
+            progress.advance(1);
         }
+        progress.check()?;
         let manifest = Manifest {
             format: PROJECT_FORMAT.into(),
             version: PROJECT_VERSION,
@@ -382,6 +406,21 @@ impl Scene {
     /// duplicate id, a data path outside the project's folder, or a recipe reading an object
     /// that does not precede it; the errors of the data files' readers.
     pub fn load(path: &Path) -> Result<Scene, SceneError> {
+        Self::load_with(path, &volmorph_io::NoProgress)
+    }
+
+    /// [`Scene::load`] reporting one stage, `loading NAME`, of one step per object, then the
+    /// computations of derived objects saved without a result (as [`Scene::apply_with`]
+    /// reports them), and stopping when `progress` is cancelled (between objects, and inside
+    /// those computations).
+    ///
+    /// # Errors
+    /// As [`Scene::load`]; [`SceneError::Cancelled`] when `progress` asks to stop.
+    pub fn load_with(
+        path: &Path,
+        progress: &dyn volmorph_io::Progress,
+    ) -> Result<Scene, SceneError> {
+        progress.check()?;
         // Bounded by the memory budget; FIFOs and devices are refused by name.
         let bytes = volmorph_io::read_maybe_gz(path)?;
         let text = String::from_utf8(bytes)
@@ -405,7 +444,12 @@ impl Scene {
         }
         let base = path.parent().unwrap_or(Path::new(""));
         let mut scene = Scene::new();
+        progress.start(
+            &format!("loading {}", crate::files::file_name(path)),
+            m.objects.len() as u64,
+        );
         for o in m.objects {
+            progress.check()?;
             let id = o.id;
             if scene.get(id).is_ok() {
                 return Err(project_err(path, format!("object {id} appears twice")));
@@ -497,6 +541,7 @@ impl Scene {
                     object,
                 },
             );
+            progress.advance(1);
         }
         scene.set_next_id(m.next_id);
         for (id, e) in scene.objects() {
@@ -506,7 +551,7 @@ impl Scene {
                     .map_err(|e| project_err(path, e.to_string()))?;
             }
         }
-        scene.compute_missing();
+        scene.compute_missing(progress)?;
         scene.clear_history();
         Ok(scene)
     }

@@ -13,7 +13,7 @@ use volmorph_volume::{AnyVolume, IndexBox};
 use crate::SceneError;
 use crate::command::{Change, Command, NewObject};
 use crate::derived::Dirty;
-use crate::derived::{Derived, Hint, Inputs};
+use crate::derived::{Derived, Hint, Inputs, Restore};
 use crate::object::{Entry, FrepModel, HandleMap, MapObject, Object, ObjectId, SculptObject};
 
 /// Default number of commands [`Scene::undo`] can take back.
@@ -209,9 +209,39 @@ impl Scene {
     /// [`SceneError`] naming what is wrong: a missing object, an object of the wrong kind, an
     /// argument out of range, a map refusing the edit, a drag that cannot be solved.
     pub fn apply(&mut self, command: Command) -> Result<Change, SceneError> {
+        self.apply_with(command, &volmorph_io::NoProgress)
+    }
+
+    /// [`Scene::apply`] reporting the long computations it runs (full recomputations of
+    /// derived objects: warps, isosurfaces, F-rep sampling, Jacobians) to `progress`, and
+    /// stopping when `progress` is cancelled. A cancelled command changes nothing: every
+    /// object, both histories and the ids handed out next are exactly as before the call.
+    ///
+    /// # Errors
+    /// As [`Scene::apply`]; [`SceneError::Cancelled`] when `progress` asks to stop.
+    pub fn apply_with(
+        &mut self,
+        command: Command,
+        progress: &dyn volmorph_io::Progress,
+    ) -> Result<Change, SceneError> {
+        progress.check()?;
         self.pending_drag = None;
-        let edits = self.plan(command)?;
-        let (inverse, mut change) = self.run(edits.clone())?;
+        let next_id = self.next_id;
+        let edits = match self.plan(command) {
+            Ok(e) => e,
+            Err(e) => {
+                self.next_id = next_id;
+                self.pending_drag = None;
+                return Err(e);
+            }
+        };
+        let (inverse, mut change) = match self.run(edits.clone(), progress) {
+            Ok(r) => r,
+            Err(e) => {
+                self.pending_drag = None;
+                return Err(e);
+            }
+        };
         change.drag = self.pending_drag.take();
         self.undo.push(Record {
             forward: edits,
@@ -229,10 +259,23 @@ impl Scene {
     /// # Errors
     /// As [`Scene::apply`] (an undo that fails leaves the scene and both histories unchanged).
     pub fn undo(&mut self) -> Result<Option<Change>, SceneError> {
+        self.undo_with(&volmorph_io::NoProgress)
+    }
+
+    /// [`Scene::undo`] reporting to `progress` as [`Scene::apply_with`] does; cancelled, it
+    /// changes nothing.
+    ///
+    /// # Errors
+    /// As [`Scene::undo`]; [`SceneError::Cancelled`] when `progress` asks to stop.
+    pub fn undo_with(
+        &mut self,
+        progress: &dyn volmorph_io::Progress,
+    ) -> Result<Option<Change>, SceneError> {
+        progress.check()?;
         let Some(mut record) = self.undo.pop() else {
             return Ok(None);
         };
-        match self.run(record.inverse.clone()) {
+        match self.run(record.inverse.clone(), progress) {
             Ok((forward, change)) => {
                 // The inverse of the inverse performs the command again from what was kept
                 // (a sculpt edit's record) instead of recomputing it.
@@ -252,10 +295,23 @@ impl Scene {
     /// # Errors
     /// As [`Scene::undo`].
     pub fn redo(&mut self) -> Result<Option<Change>, SceneError> {
+        self.redo_with(&volmorph_io::NoProgress)
+    }
+
+    /// [`Scene::redo`] reporting to `progress` as [`Scene::apply_with`] does; cancelled, it
+    /// changes nothing.
+    ///
+    /// # Errors
+    /// As [`Scene::redo`]; [`SceneError::Cancelled`] when `progress` asks to stop.
+    pub fn redo_with(
+        &mut self,
+        progress: &dyn volmorph_io::Progress,
+    ) -> Result<Option<Change>, SceneError> {
+        progress.check()?;
         let Some(mut record) = self.redo.pop() else {
             return Ok(None);
         };
-        match self.run(record.forward.clone()) {
+        match self.run(record.forward.clone(), progress) {
             Ok((inverse, change)) => {
                 record.inverse = inverse;
                 self.undo.push(record);
@@ -291,6 +347,49 @@ impl Scene {
         }
         self.undo.push(merged);
         n
+    }
+
+    /// Run `commands` (any number of [`Scene::apply`] / [`Scene::apply_with`] calls) as one
+    /// undo step: on success the commands they applied are merged ([`Scene::merge_last`]);
+    /// on error or cancellation those commands are taken back (by their inverse edits, so a
+    /// group of additions leaves every object exactly as it was), and both histories and the
+    /// next id are restored.
+    ///
+    /// # Errors
+    /// The error `commands` returned.
+    pub fn transaction<T>(
+        &mut self,
+        commands: impl FnOnce(&mut Scene) -> Result<T, SceneError>,
+    ) -> Result<T, SceneError> {
+        let depth = self.undo.len();
+        let redo = std::mem::take(&mut self.redo);
+        let next_id = self.next_id;
+        let limit = self.undo_limit;
+        self.undo_limit = usize::MAX;
+        let result = commands(self);
+        self.undo_limit = limit;
+        let steps = self.undo.len().saturating_sub(depth);
+        match result {
+            Ok(v) => {
+                self.merge_last(steps);
+                let excess = self.undo.len().saturating_sub(limit);
+                self.undo.drain(..excess);
+                if steps == 0 {
+                    self.redo = redo;
+                }
+                Ok(v)
+            }
+            Err(e) => {
+                for _ in 0..steps {
+                    if let Some(record) = self.undo.pop() {
+                        let _ = self.run(record.inverse, &volmorph_io::NoProgress);
+                    }
+                }
+                self.redo = redo;
+                self.next_id = next_id;
+                Err(e)
+            }
+        }
     }
 
     /// Forget the undo and redo histories (e.g. after loading a project).
@@ -346,6 +445,12 @@ impl Scene {
                 other => Err(self.wrong_kind(id, "mesh", other.kind())),
             }
         };
+        let frep = |id: ObjectId| -> Result<(), SceneError> {
+            match &self.get(id)?.object {
+                Object::Frep(_) => Ok(()),
+                other => Err(self.wrong_kind(id, "F-rep model", other.kind())),
+            }
+        };
         match recipe {
             Recipe::Warp { source, map, .. } | Recipe::WarpOnto { source, map, .. } => {
                 volume(*source)?;
@@ -370,15 +475,24 @@ impl Scene {
                 self.map_object(*map).map(|_| ())
             }
             Recipe::FrepSampled { model, map, grid } => {
-                match &self.get(*model)?.object {
-                    Object::Frep(_) => {}
-                    other => return Err(self.wrong_kind(*model, "F-rep model", other.kind())),
-                }
+                frep(*model)?;
                 volume(*grid)?;
                 match map {
                     Some(m) => self.map_object(*m).map(|_| ()),
                     None => Ok(()),
                 }
+            }
+            Recipe::FrepMorph {
+                from, to, t, grid, ..
+            } => {
+                if !(0.0..=1.0).contains(t) {
+                    return Err(SceneError::invalid(format!(
+                        "metamorphosis time t = {t} must be in [0, 1]"
+                    )));
+                }
+                frep(*from)?;
+                frep(*to)?;
+                volume(*grid)
             }
         }
     }
@@ -576,26 +690,65 @@ impl Scene {
         }
     }
 
-    /// Apply `edits` in order, then bring the derived objects up to date; on error undo what
-    /// was applied. Returns the inverse edits (in the order to apply them) and the change.
-    fn run(&mut self, edits: Vec<Edit>) -> Result<(Vec<Edit>, Change), SceneError> {
+    /// Apply `edits` in order, then bring the derived objects up to date; on error or
+    /// cancellation undo what was applied (the derived objects already updated are put back
+    /// first). Returns the inverse edits (in the order to apply them) and the change.
+    fn run(
+        &mut self,
+        edits: Vec<Edit>,
+        progress: &dyn volmorph_io::Progress,
+    ) -> Result<(Vec<Edit>, Change), SceneError> {
+        let next_id = self.next_id;
         let mut inverse: Vec<Edit> = Vec::with_capacity(edits.len());
         let mut change = Change::default();
         let mut effects: BTreeMap<ObjectId, Effect> = BTreeMap::new();
+        let mut failure = None;
         for edit in edits {
+            if let Err(e) = progress.check() {
+                failure = Some(SceneError::from(e));
+                break;
+            }
             match self.apply_edit(edit, &mut change, &mut effects) {
                 Ok(inv) => inverse.push(inv),
                 Err(e) => {
-                    for inv in inverse.into_iter().rev() {
-                        let _ = self.apply_edit(inv, &mut Change::default(), &mut BTreeMap::new());
-                    }
-                    return Err(e);
+                    failure = Some(e);
+                    break;
                 }
             }
         }
         inverse.reverse();
-        self.propagate(effects, &mut change);
-        Ok((inverse, change))
+        if failure.is_none() {
+            let mut restores = Vec::new();
+            match self.propagate(effects, &mut change, progress, &mut restores) {
+                Ok(()) => return Ok((inverse, change)),
+                Err(e) => {
+                    self.restore(restores);
+                    failure = Some(e);
+                }
+            }
+        }
+        for inv in inverse {
+            let _ = self.apply_edit(inv, &mut Change::default(), &mut BTreeMap::new());
+        }
+        self.next_id = next_id;
+        Err(match failure {
+            Some(e) if e.is_cancelled() => SceneError::Cancelled(volmorph_io::Cancelled),
+            Some(e) => e,
+            None => SceneError::invalid("command failed"),
+        })
+    }
+
+    /// Put back what the derived objects' updates replaced, the latest first.
+    fn restore(&mut self, restores: Vec<(ObjectId, Restore)>) {
+        for (id, r) in restores.into_iter().rev() {
+            if let Some(Entry {
+                object: Object::Derived(d),
+                ..
+            }) = self.objects.get_mut(&id)
+            {
+                d.restore(r);
+            }
+        }
     }
 
     /// Apply one edit; returns its inverse.
@@ -758,8 +911,19 @@ impl Scene {
     }
 
     /// Bring every derived object reading a changed object up to date, in id order (inputs
-    /// are always older than their users), recording what changed.
-    fn propagate(&mut self, mut effects: BTreeMap<ObjectId, Effect>, change: &mut Change) {
+    /// are always older than their users), recording what changed in `change` and what each
+    /// update replaced in `restores` (to put back if the command does not complete).
+    ///
+    /// # Errors
+    /// Only cancellation through `progress` (checked before each update and inside the long
+    /// ones); the updates done so far are in `restores`.
+    fn propagate(
+        &mut self,
+        mut effects: BTreeMap<ObjectId, Effect>,
+        change: &mut Change,
+        progress: &dyn volmorph_io::Progress,
+        restores: &mut Vec<(ObjectId, Restore)>,
+    ) -> Result<(), SceneError> {
         let ids: Vec<ObjectId> = self.objects.keys().copied().collect();
         for id in ids {
             let Some(Entry {
@@ -791,21 +955,26 @@ impl Scene {
                 hint
             };
             let Some(hint) = hint else { continue };
+            progress.check()?;
             // Take the derived object out while its inputs (older objects) are borrowed.
             let Some(mut entry) = self.objects.remove(&id) else {
                 continue;
             };
             let result = if let Object::Derived(d) = &mut entry.object {
                 let inputs = self.inputs(&recipe);
-                let dirty = d.update(id, &inputs, &hint);
-                Some((dirty, d.error().map(str::to_owned)))
+                Some(
+                    d.update_with(id, &inputs, &hint, progress)
+                        .map(|(dirty, restore)| (dirty, restore, d.error().map(str::to_owned))),
+                )
             } else {
                 None
             };
             self.objects.insert(id, entry);
-            let Some((dirty, error)) = result else {
+            let Some(result) = result else {
                 continue;
             };
+            let (dirty, restore, error) = result?;
+            restores.push((id, restore));
             if let Some(msg) = error {
                 change.errors.push((id, msg));
             }
@@ -823,6 +992,7 @@ impl Scene {
                 effects.insert(id, Effect::Full);
             }
         }
+        Ok(())
     }
 
     fn inputs(&self, recipe: &crate::Recipe) -> Inputs<'_> {
@@ -834,24 +1004,28 @@ impl Scene {
                 mesh: None,
                 map: self.map_object(*map).ok(),
                 frep: None,
+                frep_to: None,
             },
             Recipe::DeformedMesh { mesh, map } => Inputs {
                 volume: None,
                 mesh: object(*mesh).and_then(Object::mesh),
                 map: self.map_object(*map).ok(),
                 frep: None,
+                frep_to: None,
             },
             Recipe::Isosurface { volume, .. } => Inputs {
                 volume: object(*volume).and_then(Object::volume),
                 mesh: None,
                 map: None,
                 frep: None,
+                frep_to: None,
             },
             Recipe::Jacobian { map, grid } => Inputs {
                 volume: object(*grid).and_then(Object::volume),
                 mesh: None,
                 map: self.map_object(*map).ok(),
                 frep: None,
+                frep_to: None,
             },
             Recipe::FrepSampled { model, map, grid } => Inputs {
                 volume: object(*grid).and_then(Object::volume),
@@ -861,7 +1035,21 @@ impl Scene {
                     Some(Object::Frep(f)) => Some(f),
                     _ => None,
                 },
+                frep_to: None,
             },
+            Recipe::FrepMorph { from, to, grid, .. } => {
+                let frep = |id: ObjectId| match object(id) {
+                    Some(Object::Frep(f)) => Some(f),
+                    _ => None,
+                };
+                Inputs {
+                    volume: object(*grid).and_then(Object::volume),
+                    mesh: None,
+                    map: None,
+                    frep: frep(*from),
+                    frep_to: frep(*to),
+                }
+            }
         }
     }
 
@@ -896,9 +1084,15 @@ impl Scene {
     }
 
     /// Compute every derived object that has no result yet (project loading).
-    pub(crate) fn compute_missing(&mut self) -> Change {
+    ///
+    /// # Errors
+    /// Only cancellation through `progress`.
+    pub(crate) fn compute_missing(
+        &mut self,
+        progress: &dyn volmorph_io::Progress,
+    ) -> Result<Change, SceneError> {
         let mut change = Change::default();
-        self.propagate(BTreeMap::new(), &mut change);
-        change
+        self.propagate(BTreeMap::new(), &mut change, progress, &mut Vec::new())?;
+        Ok(change)
     }
 }

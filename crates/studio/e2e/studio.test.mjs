@@ -580,3 +580,179 @@ test('files: open from the browser, drop to upload, save the scene', async () =>
   });
   assert.match(err, /must not contain/);
 });
+
+// The page's objects, undo depth and, from a fresh connection, the server's object list.
+async function sceneState() {
+  return page.evaluate(async () => {
+    const { Client, Kind } = await import('./app/protocol.js');
+    const app = window.__studio;
+    const c = await new Client(app.client.url).open();
+    await c.request(Kind.Hello, {});
+    const s = await c.request(Kind.ListObjects, {});
+    c.ws.close();
+    return { objects: s.header.objects.map((o) => [o.id, o.name, o.kind]), undo: s.header.undo, redo: s.header.redo };
+  });
+}
+
+test('a long job shows a progress bar with its stage; Cancel stops it and nothing changes', async () => {
+  const before = await sceneState();
+  await page.selectOption('#teapot-size', '512');
+  await page.click('#new-teapot');
+  // The bar appears with the library's stage and fills as the slices are sampled.
+  await page.waitForSelector('#job', { state: 'visible', timeout: 30000 });
+  await page.waitForFunction(() => document.getElementById('job-bar').value > 0, null, { timeout: 60000 });
+  assert.match(await page.textContent('#job-label'), /^teapot density \d+%$/);
+  await page.screenshot({ path: path.join(artifacts, 'progress.png') });
+  const t0 = Date.now();
+  await page.click('#job-cancel');
+  await page.waitForSelector('#job', { state: 'hidden', timeout: 30000 });
+  report.cancelToHiddenMs = Date.now() - t0;
+  assert.equal(await page.textContent('#status'), 'cancelled: nothing changed');
+  assert.deepEqual(await sceneState(), before, 'the cancelled set-up added nothing and kept the history');
+  await page.selectOption('#teapot-size', '128');
+});
+
+test('metamorphosis: a slider drag shows Eq. 13 live and undoes in one step', async () => {
+  // A second model beside the sphere of the F-rep tests: a slab |z| < a[1].
+  await page.fill('#frep-src', 'slab(x[3], a[1]) {\n  slab = a[1]*a[1] - x[3]*x[3];\n}');
+  await page.click('#frep-new');
+  await page.waitForFunction(() => window.__studio.objects.filter((o) => o.kind === 'frep').length === 2, null, { timeout: 30000 });
+  const [from, to] = await page.evaluate(() => window.__studio.objects.filter((o) => o.kind === 'frep').map((o) => o.id));
+  await page.selectOption('#morph-from', String(from));
+  await page.selectOption('#morph-to', String(to));
+  await page.selectOption('#morph-schedule', 'linear');
+  await page.click('#morph-make');
+  await page.waitForFunction(() => window.__studio.objects.some((o) => o.name === 'morph-surface'), null, { timeout: 60000 });
+  await waitIdle();
+  // The sampled morph on its middle axial slice against (1 − t)·f + t·g computed here from the
+  // two models' formulas with a[1] = 0.6: f = a[1] − |x|² (the F-rep tests' model),
+  // g = a[1]² − z².
+  const check = () => page.evaluate(async () => {
+    const { Kind } = await import('./app/protocol.js');
+    const a = window.__studio;
+    const m = a.objects.find((o) => o.recipe?.recipe === 'frep-morph');
+    const g = m.volume.geometry;
+    const f = await a.client.request(Kind.GetSlice, { volume: m.id, axis: 2 });
+    const vals = new Float32Array(f.payload);
+    const k = f.header.index, t = m.recipe.t;
+    let worst = 0;
+    for (let row = 0; row < f.header.height; row += 5) for (let col = 0; col < f.header.width; col += 5) {
+      const idx = [col, f.header.height - 1 - row, k];
+      const x = [0, 1, 2].map((c) => g.origin[c] + [0, 1, 2].reduce((s, ax) => s + g.direction[ax][c] * g.spacing[ax] * idx[ax], 0));
+      const fv = 0.6 - x[0] * x[0] - x[1] * x[1] - x[2] * x[2], gv = 0.36 - x[2] * x[2];
+      worst = Math.max(worst, Math.abs(vals[row * f.header.width + col] - ((1 - t) * fv + t * gv)));
+    }
+    return { t, worst, undo: a.undoDepth };
+  });
+  const start = await check();
+  assert.equal(start.t, 0);
+  assert.ok(start.worst < 1e-5, `t = 0: Eq. 13 off by ${start.worst}`);
+  const box = await page.locator('#morph-t').boundingBox();
+  const at = (v) => box.x + 8 + (box.width - 16) * v;
+  await page.evaluate(() => { window.__studio.latencies = []; });
+  await page.mouse.move(at(0), box.y + box.height / 2);
+  await page.mouse.down();
+  await page.mouse.move(at(0.7), box.y + box.height / 2, { steps: 8 });
+  await page.mouse.up();
+  await page.waitForFunction(() => window.__studio.lastChange?.edit === 'end-gesture', null, { timeout: 60000 });
+  await waitIdle();
+  const moved = await check();
+  const slider = await page.evaluate(() => Number(document.getElementById('morph-t').value));
+  assert.ok(moved.t > 0.4 && Math.abs(moved.t - slider) < 1e-9, `the morph is at the slider's t: ${moved.t} vs ${slider}`);
+  assert.ok(moved.worst < 1e-5, `t = ${moved.t}: Eq. 13 off by ${moved.worst}`);
+  assert.equal(moved.undo, start.undo + 1, 'the drag is one undo step');
+  const lat = await page.evaluate(() => window.__studio.latencies.filter((l) => l.edit === 'command'));
+  assert.ok(lat.length >= 1, 'the morph follows the slider while it moves');
+  report.morphSliderToPixelsMs = stats(lat.map((l) => l.ms));
+  await page.screenshot({ path: path.join(artifacts, 'morph.png') });
+  await page.keyboard.press('Control+z');
+  await page.waitForFunction(() => window.__studio.lastChange?.edit === 'undo', null, { timeout: 60000 });
+  await waitIdle();
+  const undone = await check();
+  assert.equal(undone.t, 0, 'one undo takes the whole drag back');
+  assert.ok(undone.worst < 1e-5);
+  assert.equal(await page.evaluate(() => Number(document.getElementById('morph-t').value)), 0);
+});
+
+test('mesh FFD: a dragged lattice point moves the mesh pixels; STEP export is the accurate FFD', async () => {
+  await page.click('#mesh-box');
+  await page.waitForFunction(() => window.__studio.objects.some((o) => o.name === 'box'), null, { timeout: 30000 });
+  await page.fill('#ffd-degree', '2,2,2');
+  await page.fill('#ffd-counts', '4,4,4');
+  await page.click('#ffd-place');
+  await page.waitForFunction(() => {
+    const a = window.__studio;
+    const l = a.lattice();
+    return a.objects.some((o) => o.name === 'box deformed') && l?.name === 'box lattice' && a.view3d.overlay?.map === l.id && a.view3d.meshes.size > 0;
+  }, null, { timeout: 60000 });
+  await waitIdle();
+  // Only the deformed box in the 3D view: the other meshes unchecked, the volume off.
+  const deformed = await page.evaluate(() => window.__studio.objects.find((o) => o.name === 'box deformed').id);
+  for (const id of await page.evaluate(() => [...document.querySelectorAll('#objects input[data-mesh]')].map((e) => Number(e.dataset.mesh)))) {
+    if (id !== deformed) await page.uncheck(`#objects input[data-mesh="${id}"]`);
+  }
+  await page.uncheck('#show-volume');
+  assert.deepEqual(await page.evaluate(() => [...window.__studio.view3d.meshes.keys()]), [deformed], 'the source box is drawn as its deformed mesh');
+  // The 3D view's pixels, the lattice overlay left out.
+  const shot = () => page.evaluate(() => {
+    const v = window.__studio.view3d;
+    const show = v.showLattice;
+    v.showLattice = false; v.draw(); v.showLattice = show;
+    const gl = v.gl;
+    const px = new Uint8Array(v.canvas.width * v.canvas.height * 4);
+    gl.readPixels(0, 0, v.canvas.width, v.canvas.height, gl.RGBA, gl.UNSIGNED_BYTE, px);
+    return Array.from(px);
+  });
+  const lit = (px) => { let n = 0; for (let i = 0; i < px.length; i += 4) if (px[i] + px[i + 1] + px[i + 2] > 60) n++; return n; };
+  const before = await shot();
+  assert.ok(lit(before) > 500, `the box is drawn: ${lit(before)} pixels`);
+  const mesh0 = await page.evaluate(async (id) => {
+    const { Kind } = await import('./app/protocol.js');
+    const f = await window.__studio.client.request(Kind.GetMesh, { id });
+    return Array.from(new Float32Array(f.payload, 0, 3 * f.header.vertices));
+  }, deformed);
+  // Drag the control point at the box's (+x, +y, +z) corner in the 3D view.
+  await page.selectOption('#tool', 'lattice');
+  const target = await page.evaluate(() => {
+    const v = window.__studio.view3d;
+    const { mvp } = v.matrices();
+    const k = 63;
+    const p = [0, 1, 2].map((c) => v.overlay.points[3 * k + c]);
+    const [x, y] = v.project(p, mvp);
+    const r = v.canvas.getBoundingClientRect();
+    return { p, x: r.left + x * r.width / v.canvas.width, y: r.top + y * r.height / v.canvas.height };
+  });
+  assert.deepEqual(target.p.map((c) => Math.round(c * 1000) / 1000), [0.4, 0.4, 0.4], 'Feng\'s end-interpolating lattice has its corner on the box');
+  await page.mouse.move(target.x, target.y);
+  await page.mouse.down();
+  await page.mouse.move(target.x + 45, target.y - 35, { steps: 6 });
+  await page.mouse.up();
+  await page.waitForFunction(() => window.__studio.lastChange?.edit === 'end-gesture', null, { timeout: 60000 });
+  await waitIdle();
+  const mesh1 = await page.evaluate(async (id) => {
+    const { Kind } = await import('./app/protocol.js');
+    const f = await window.__studio.client.request(Kind.GetMesh, { id });
+    return Array.from(new Float32Array(f.payload, 0, 3 * f.header.vertices));
+  }, deformed);
+  let movedVertices = 0;
+  for (let i = 0; i < mesh0.length; i += 3) if (Math.hypot(mesh0[i] - mesh1[i], mesh0[i + 1] - mesh1[i + 1], mesh0[i + 2] - mesh1[i + 2]) > 1e-3) movedVertices++;
+  assert.ok(movedVertices >= 1, 'the deformed mesh follows the control point');
+  const after = await shot();
+  let changed = 0;
+  for (let i = 0; i < before.length; i += 4) if (before[i] !== after[i] || before[i + 1] !== after[i + 1] || before[i + 2] !== after[i + 2]) changed++;
+  assert.ok(changed > 200, `only ${changed} pixels of the mesh changed`);
+  await page.check('#show-lattice');
+  await page.screenshot({ path: path.join(artifacts, 'mesh-ffd.png') });
+  // Export the accurate FFD as STEP: a download of the trimmed surfaces.
+  const [download] = await Promise.all([page.waitForEvent('download', { timeout: 120000 }), page.click('#ffd-step')]);
+  assert.equal(download.suggestedFilename(), 'box_deformed.step');
+  const text = fs.readFileSync(await download.path(), 'utf8');
+  assert.ok(text.startsWith('ISO-10303-21;') && text.trimEnd().endsWith('END-ISO-10303-21;'));
+  assert.equal((text.match(/=MANIFOLD_SOLID_BREP\(/g) || []).length, 1, 'a closed shell bounding a solid');
+  // Feng's Fig. 7: a cube in a 4×4×4 lattice of degree 2 gives 24 trimmed faces.
+  assert.equal((text.match(/=ADVANCED_FACE\(/g) || []).length, 24);
+  fs.writeFileSync(path.join(artifacts, 'box_deformed.step'), text);
+  await page.waitForFunction(() => /^exported box_deformed.step/.test(document.getElementById('status').textContent), null, { timeout: 30000 });
+  await page.check('#show-volume');
+  await page.selectOption('#tool', 'drag');
+});

@@ -90,6 +90,17 @@ impl<J: Coalesce> Queue<J> {
         }
     }
 
+    /// Take the first pending job `matches` accepts out of the queue (a job cancelled before
+    /// it started), keeping the order of the others.
+    pub fn remove(&self, matches: impl Fn(&J) -> bool) -> Option<J> {
+        let mut s = self
+            .state
+            .lock()
+            .unwrap_or_else(std::sync::PoisonError::into_inner);
+        let i = s.jobs.iter().position(matches)?;
+        s.jobs.remove(i)
+    }
+
     /// Stop: `pop` returns the remaining jobs, then `None`.
     pub fn close(&self) {
         let mut s = self
@@ -193,5 +204,30 @@ mod tests {
             });
         }
         assert_eq!(got, [2, -1, 3, 4]);
+    }
+
+    /// A pending job can be taken out; the others keep their order.
+    #[test]
+    fn removing_a_pending_job_keeps_the_others_in_order() {
+        let q = Queue::new();
+        q.push(Fake::Drag { gesture: 1, to: 1 });
+        q.push(Fake::Slow);
+        q.push(Fake::Drag { gesture: 2, to: 2 });
+        q.push(Fake::Drag { gesture: 3, to: 3 });
+        let gone = q.remove(|j| matches!(j, Fake::Drag { gesture: 2, .. }));
+        assert!(matches!(gone, Some(Fake::Drag { to: 2, .. })));
+        assert!(
+            q.remove(|j| matches!(j, Fake::Drag { gesture: 9, .. }))
+                .is_none()
+        );
+        q.close();
+        let mut got = Vec::new();
+        while let Some(j) = q.pop() {
+            got.push(match j {
+                Fake::Slow => -1,
+                Fake::Drag { to, .. } => to,
+            });
+        }
+        assert_eq!(got, [1, -1, 3]);
     }
 }

@@ -1,19 +1,215 @@
-//! The edits a page asks for, run one at a time on the editor thread through the scene's
+//! The jobs a page asks for, run one at a time on the editor thread through the scene's
 //! commands, with the moves of a gesture coalesced ([`crate::coalesce`]) and merged into one
-//! undo step when the gesture ends.
+//! undo step when the gesture ends; and their progress and cancellation ([`Running`]).
+//!
+//! Every job runs with a [`JobProgress`] (a [`volmorph_io::Progress`]) handed to the scene's
+//! `_with` calls. While it runs it is listed in [`Running`]: a page's
+//! [`Kind::Cancel`] sets its flag, and a ticker sends the page a [`Kind::Progress`] frame
+//! when the job's stage or count changed, from [`PROGRESS_DELAY`] after it started and at
+//! most every [`PROGRESS_INTERVAL`] (short jobs, a drag's moves, send none). A cancelled job
+//! changes nothing and is answered with [`Kind::Error`] `{cancelled: true}`.
 
 use std::collections::{BTreeMap, HashMap};
-use std::sync::{Arc, RwLock};
-use std::time::Instant;
+use std::path::PathBuf;
+use std::sync::atomic::{AtomicBool, AtomicU64, Ordering};
+use std::sync::{Arc, Mutex, RwLock};
+use std::time::{Duration, Instant};
 
 use glam::DVec3;
 use serde_json::{Value, json};
 use volmorph_lattice::DragOptions;
-use volmorph_scene::{Change, Command, Scene, SceneError};
+use volmorph_scene::{Change, Command, ObjectId, Scene, SceneError};
 
 use crate::coalesce::{Coalesce, Queue};
 use crate::protocol::{Frame, Kind};
 use crate::setup::Setup;
+
+/// Time after a job's start before its first [`Kind::Progress`] frame: jobs shorter than
+/// this (an interactive edit) send none.
+pub const PROGRESS_DELAY: Duration = Duration::from_millis(250);
+
+/// Least time between two [`Kind::Progress`] frames of one job (at most 10 a second).
+pub const PROGRESS_INTERVAL: Duration = Duration::from_millis(100);
+
+/// The progress of one job: the stage and steps the library reports, and the flag a
+/// [`Kind::Cancel`] sets. Cheap from any thread (atomics; a lock only when a stage starts).
+#[derive(Debug)]
+pub struct JobProgress {
+    origin: Origin,
+    started: Instant,
+    cancelled: AtomicBool,
+    stage: Mutex<(String, u64)>,
+    done: AtomicU64,
+    /// The last state sent, so an unchanged state is not sent again.
+    sent: Mutex<Option<(String, u64, u64)>>,
+}
+
+impl JobProgress {
+    /// A job of `origin`, starting now.
+    #[must_use]
+    pub fn new(origin: Origin) -> Self {
+        Self {
+            origin,
+            started: Instant::now(),
+            cancelled: AtomicBool::new(false),
+            stage: Mutex::new((String::new(), 0)),
+            done: AtomicU64::new(0),
+            sent: Mutex::new(None),
+        }
+    }
+
+    /// Ask the job to stop.
+    pub fn cancel(&self) {
+        self.cancelled.store(true, Ordering::Relaxed);
+    }
+
+    /// The [`Kind::Progress`] frame of the current state (`{request, label, done, total}`),
+    /// if the job has run for [`PROGRESS_DELAY`], has started a stage, and its state changed
+    /// since the last frame this returned.
+    fn frame(&self) -> Option<Frame> {
+        if self.started.elapsed() < PROGRESS_DELAY {
+            return None;
+        }
+        let (label, total) = self
+            .stage
+            .lock()
+            .unwrap_or_else(std::sync::PoisonError::into_inner)
+            .clone();
+        if label.is_empty() {
+            return None;
+        }
+        let done = self.done.load(Ordering::Relaxed).min(total.max(1));
+        let now = (label, done, total);
+        let mut sent = self
+            .sent
+            .lock()
+            .unwrap_or_else(std::sync::PoisonError::into_inner);
+        if sent.as_ref() == Some(&now) {
+            return None;
+        }
+        let f = Frame::new(
+            Kind::Progress,
+            0,
+            json!({"request": self.origin.request, "label": now.0, "done": now.1, "total": now.2}),
+        );
+        *sent = Some(now);
+        Some(f)
+    }
+}
+
+impl volmorph_io::Progress for JobProgress {
+    fn start(&self, label: &str, total: u64) {
+        *self
+            .stage
+            .lock()
+            .unwrap_or_else(std::sync::PoisonError::into_inner) = (label.to_owned(), total);
+        self.done.store(0, Ordering::Relaxed);
+    }
+    fn advance(&self, steps: u64) {
+        self.done.fetch_add(steps, Ordering::Relaxed);
+    }
+    fn is_cancelled(&self) -> bool {
+        self.cancelled.load(Ordering::Relaxed)
+    }
+}
+
+/// The jobs running now, by origin: found by [`Kind::Cancel`], reported by [`Running::tick`].
+#[derive(Debug)]
+pub struct Running {
+    jobs: Mutex<HashMap<(u64, u32), Arc<JobProgress>>>,
+    out: tokio::sync::broadcast::Sender<Outgoing>,
+}
+
+/// A job listed in [`Running`] while this lives.
+#[derive(Debug)]
+pub struct RunningJob {
+    running: Arc<Running>,
+    progress: Arc<JobProgress>,
+}
+
+impl RunningJob {
+    /// The job's progress (to hand to the library).
+    #[must_use]
+    pub fn progress(&self) -> &Arc<JobProgress> {
+        &self.progress
+    }
+}
+
+impl Drop for RunningJob {
+    fn drop(&mut self) {
+        let o = self.progress.origin;
+        let mut jobs = self
+            .running
+            .jobs
+            .lock()
+            .unwrap_or_else(std::sync::PoisonError::into_inner);
+        if jobs
+            .get(&(o.page, o.request))
+            .is_some_and(|p| Arc::ptr_eq(p, &self.progress))
+        {
+            jobs.remove(&(o.page, o.request));
+        }
+    }
+}
+
+impl Running {
+    /// No job yet; progress frames go out through `out`.
+    #[must_use]
+    pub fn new(out: tokio::sync::broadcast::Sender<Outgoing>) -> Self {
+        Self {
+            jobs: Mutex::new(HashMap::new()),
+            out,
+        }
+    }
+
+    /// List a job of `origin` until the returned guard is dropped. Drop the guard before
+    /// sending the job's answer: a progress frame is never sent after it.
+    #[must_use]
+    pub fn begin(self: &Arc<Self>, origin: Origin) -> RunningJob {
+        let progress = Arc::new(JobProgress::new(origin));
+        self.jobs
+            .lock()
+            .unwrap_or_else(std::sync::PoisonError::into_inner)
+            .insert((origin.page, origin.request), Arc::clone(&progress));
+        RunningJob {
+            running: Arc::clone(self),
+            progress,
+        }
+    }
+
+    /// Cancel the running job of `origin`; `false` if none runs.
+    pub fn cancel(&self, origin: Origin) -> bool {
+        let jobs = self
+            .jobs
+            .lock()
+            .unwrap_or_else(std::sync::PoisonError::into_inner);
+        match jobs.get(&(origin.page, origin.request)) {
+            Some(p) => {
+                p.cancel();
+                true
+            }
+            None => false,
+        }
+    }
+
+    /// Send each running job's page a [`Kind::Progress`] frame if its state changed (see
+    /// [`JobProgress`]); called every [`PROGRESS_INTERVAL`]. The frames are sent while the
+    /// list is locked, so none follows the answer of a job that has ended.
+    pub fn tick(&self) {
+        let jobs = self
+            .jobs
+            .lock()
+            .unwrap_or_else(std::sync::PoisonError::into_inner);
+        for p in jobs.values() {
+            if let Some(f) = p.frame() {
+                let _ = self.out.send(Outgoing {
+                    page: Some(p.origin.page),
+                    bytes: Arc::new(f.encode()),
+                });
+            }
+        }
+    }
+}
 
 /// Who asked for a job: the page and its request number (errors go back to it).
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
@@ -75,6 +271,27 @@ pub enum Work {
     Command(Box<Command>, Option<u64>),
     /// A built-in workflow (several commands).
     Setup(Setup),
+    /// Read a file (resolved inside a root) and add it as an object named after the file.
+    Open(PathBuf),
+    /// Save the scene as a project (answered with [`Kind::Done`] `{saved}`).
+    Save(PathBuf),
+    /// Replace the scene by a project (every page gets [`Kind::Scene`]; the asker
+    /// [`Kind::Done`] `{loaded}`).
+    Load(PathBuf),
+    /// Write object `id` to a file in the format of its extension ([`Kind::Done`]
+    /// `{exported}`).
+    Export(ObjectId, PathBuf),
+}
+
+/// What a job produced.
+enum Outcome {
+    /// A scene change, pushed to every page as [`Kind::Changed`].
+    Changed(Change),
+    /// A [`Kind::Done`] header for the asker.
+    Done(Value),
+    /// A project replaced the scene: [`Kind::Scene`] to every page, [`Kind::Done`] to the
+    /// asker.
+    Loaded(Value),
 }
 
 impl Coalesce for Job {
@@ -137,6 +354,7 @@ pub struct Editor {
     scene: Arc<RwLock<Scene>>,
     queue: Arc<Queue<Job>>,
     out: tokio::sync::broadcast::Sender<Outgoing>,
+    running: Arc<Running>,
     gestures: HashMap<u64, Gesture>,
     edits_run: u64,
 }
@@ -151,16 +369,19 @@ pub struct Outgoing {
 }
 
 impl Editor {
-    /// An editor over `scene`, taking jobs from `queue`.
+    /// An editor over `scene`, taking jobs from `queue` and listing the one it runs in
+    /// `running`.
     pub fn new(
         scene: Arc<RwLock<Scene>>,
         queue: Arc<Queue<Job>>,
         out: tokio::sync::broadcast::Sender<Outgoing>,
+        running: Arc<Running>,
     ) -> Self {
         Self {
             scene,
             queue,
             out,
+            running,
             gestures: HashMap::new(),
             edits_run: 0,
         }
@@ -172,15 +393,38 @@ impl Editor {
             let started = Instant::now();
             let origin = job.origin;
             let label = label(&job.work);
+            let guard = self.running.begin(origin);
+            let progress = Arc::clone(guard.progress());
             let result = {
                 let lock = Arc::clone(&self.scene);
-                let mut scene = lock.write().unwrap_or_else(|p| p.into_inner());
-                self.execute(&mut scene, job.work)
-                    .map(|c| (c, scene.undo_depth(), scene.redo_depth()))
+                if matches!(job.work, Work::Save(_) | Work::Export(..)) {
+                    // Writing files only reads the scene: pages keep reading it meanwhile.
+                    let scene = lock.read().unwrap_or_else(|p| p.into_inner());
+                    Self::write(&scene, job.work, &*progress)
+                        .map(|o| (o, scene.undo_depth(), scene.redo_depth()))
+                } else {
+                    let mut scene = lock.write().unwrap_or_else(|p| p.into_inner());
+                    self.execute(&mut scene, job.work, &*progress)
+                        .map(|o| (o, scene.undo_depth(), scene.redo_depth()))
+                }
             };
+            // No progress frame after the answer.
+            drop(guard);
             let ms = started.elapsed().as_secs_f64() * 1e3;
             match result {
-                Ok((change, undo, redo)) => {
+                Ok((Outcome::Done(h), ..)) => {
+                    self.send(Some(origin.page), Frame::new(Kind::Done, origin.request, h));
+                }
+                Ok((Outcome::Loaded(h), ..)) => {
+                    self.gestures.clear();
+                    let f = {
+                        let scene = self.scene.read().unwrap_or_else(|p| p.into_inner());
+                        crate::views::scene_frame(&scene, 0)
+                    };
+                    self.send(None, f);
+                    self.send(Some(origin.page), Frame::new(Kind::Done, origin.request, h));
+                }
+                Ok((Outcome::Changed(change), undo, redo)) => {
                     self.edits_run += 1;
                     let header = change_header(
                         &change,
@@ -209,7 +453,51 @@ impl Editor {
         });
     }
 
-    fn execute(&mut self, scene: &mut Scene, work: Work) -> Result<Change, SceneError> {
+    /// A job that writes files (it only reads the scene).
+    fn write(
+        scene: &Scene,
+        work: Work,
+        progress: &dyn volmorph_io::Progress,
+    ) -> Result<Outcome, SceneError> {
+        match work {
+            Work::Save(path) => {
+                scene.save_with(&path, progress)?;
+                Ok(Outcome::Done(json!({"saved": path.display().to_string()})))
+            }
+            Work::Export(id, path) => {
+                scene.export_with(id, &path, progress)?;
+                Ok(Outcome::Done(
+                    json!({"exported": path.display().to_string()}),
+                ))
+            }
+            _ => Err(SceneError::Invalid("not a job that writes files".into())),
+        }
+    }
+
+    fn execute(
+        &mut self,
+        scene: &mut Scene,
+        work: Work,
+        progress: &dyn volmorph_io::Progress,
+    ) -> Result<Outcome, SceneError> {
+        match work {
+            Work::Load(path) => {
+                *scene = Scene::load_with(&path, progress)?;
+                Ok(Outcome::Loaded(
+                    json!({"loaded": path.display().to_string()}),
+                ))
+            }
+            Work::Save(_) | Work::Export(..) => Self::write(scene, work, progress),
+            work => self.edit(scene, work, progress).map(Outcome::Changed),
+        }
+    }
+
+    fn edit(
+        &mut self,
+        scene: &mut Scene,
+        work: Work,
+        progress: &dyn volmorph_io::Progress,
+    ) -> Result<Change, SceneError> {
         match work {
             Work::Drag {
                 gesture,
@@ -223,12 +511,15 @@ impl Editor {
                     steps: 0,
                     depth: scene.undo_depth(),
                 });
-                let change = scene.apply(Command::DragPoints {
-                    map,
-                    grabbed: vec![g.at],
-                    targets: vec![target],
-                    options: DragOptions::with_radius(radius),
-                })?;
+                let change = scene.apply_with(
+                    Command::DragPoints {
+                        map,
+                        grabbed: vec![g.at],
+                        targets: vec![target],
+                        options: DragOptions::with_radius(radius),
+                    },
+                    progress,
+                )?;
                 g.at = target;
                 g.steps += 1;
                 Ok(change)
@@ -239,10 +530,13 @@ impl Editor {
                 changes,
             } => {
                 let depth = scene.undo_depth();
-                let change = scene.apply(Command::SetParameters {
-                    map,
-                    changes: changes.into_iter().collect(),
-                })?;
+                let change = scene.apply_with(
+                    Command::SetParameters {
+                        map,
+                        changes: changes.into_iter().collect(),
+                    },
+                    progress,
+                )?;
                 let g = self.gestures.entry(gesture).or_insert(Gesture {
                     at: DVec3::ZERO,
                     steps: 0,
@@ -260,12 +554,12 @@ impl Editor {
                 }
                 Ok(Change::default())
             }
-            Work::Undo => Ok(scene.undo()?.unwrap_or_default()),
-            Work::Redo => Ok(scene.redo()?.unwrap_or_default()),
-            Work::Command(c, None) => scene.apply(*c),
+            Work::Undo => Ok(scene.undo_with(progress)?.unwrap_or_default()),
+            Work::Redo => Ok(scene.redo_with(progress)?.unwrap_or_default()),
+            Work::Command(c, None) => scene.apply_with(*c, progress),
             Work::Command(c, Some(gesture)) => {
                 let depth = scene.undo_depth();
-                let change = scene.apply(*c)?;
+                let change = scene.apply_with(*c, progress)?;
                 self.gestures
                     .entry(gesture)
                     .or_insert(Gesture {
@@ -276,7 +570,18 @@ impl Editor {
                     .steps += 1;
                 Ok(change)
             }
-            Work::Setup(s) => s.run(scene),
+            Work::Setup(s) => s.run_with(scene, progress),
+            Work::Open(path) => {
+                let object = volmorph_scene::files::read_object_with(&path, progress)?;
+                let name = path
+                    .file_name()
+                    .map(|n| n.to_string_lossy().into_owned())
+                    .unwrap_or_default();
+                scene.apply_with(Command::Add { name, object }, progress)
+            }
+            Work::Save(_) | Work::Load(_) | Work::Export(..) => {
+                Err(SceneError::Invalid("not an edit of the scene".into()))
+            }
         }
     }
 }
@@ -290,6 +595,10 @@ fn label(work: &Work) -> &'static str {
         Work::Redo => "redo",
         Work::Command(..) => "command",
         Work::Setup(_) => "setup",
+        Work::Open(_) => "open",
+        Work::Save(_) => "save",
+        Work::Load(_) => "load",
+        Work::Export(..) => "export",
     }
 }
 
@@ -335,8 +644,8 @@ fn change_header(
     })
 }
 
-/// An [`Kind::Error`] frame for `request`: the message, and for F-rep source errors the line
-/// and column.
+/// An [`Kind::Error`] frame for `request`: the message, for F-rep source errors the line
+/// and column, and `cancelled: true` for a job stopped by [`Kind::Cancel`].
 pub fn error_frame(request: u32, e: &SceneError) -> Frame {
     let pos = match e {
         SceneError::Frep(f) => f.pos().map(|p| (p.line, p.col)),
@@ -346,9 +655,10 @@ pub fn error_frame(request: u32, e: &SceneError) -> Frame {
         Kind::Error,
         request,
         json!({
-            "message": e.to_string(),
+            "message": if e.is_cancelled() { "cancelled".to_owned() } else { e.to_string() },
             "line": pos.map(|p| p.0),
             "column": pos.map(|p| p.1),
+            "cancelled": e.is_cancelled(),
         }),
     )
 }

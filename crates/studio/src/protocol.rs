@@ -82,6 +82,9 @@ pub enum Kind {
     /// Client: the Jacobian determinant of a map on a slice of a volume's grid. Reply
     /// [`Kind::Slice`].
     GetJacobian = 22,
+    /// Client: stop the job of one of the page's requests (running or still queued). The job
+    /// answers with [`Kind::Error`] `{cancelled: true}` and changes nothing.
+    Cancel = 23,
     /// Server: the reply to [`Kind::Hello`].
     Welcome = 100,
     /// Server: the object list and history depths.
@@ -108,6 +111,10 @@ pub enum Kind {
     Listing = 111,
     /// Server: a request done (save, export, …).
     Done = 112,
+    /// Server: how far the long job of one of the page's requests has got (pushed to that
+    /// page only, at most every [`crate::jobs::PROGRESS_INTERVAL`], from
+    /// [`crate::jobs::PROGRESS_DELAY`] after the job started).
+    Progress = 113,
 }
 
 impl Kind {
@@ -138,6 +145,7 @@ impl Kind {
             20 => LoadScene,
             21 => Export,
             22 => GetJacobian,
+            23 => Cancel,
             100 => Welcome,
             101 => Scene,
             102 => Changed,
@@ -151,6 +159,7 @@ impl Kind {
             110 => Transfer,
             111 => Listing,
             112 => Done,
+            113 => Progress,
             _ => return None,
         })
     }

@@ -14,7 +14,7 @@ use std::sync::{Arc, RwLock};
 use axum::Router;
 use axum::body::{Body, Bytes};
 use axum::extract::ws::{Message, WebSocket, WebSocketUpgrade};
-use axum::extract::{DefaultBodyLimit, Path, Request, State};
+use axum::extract::{DefaultBodyLimit, Path, Query, Request, State};
 use axum::http::{HeaderMap, StatusCode, header};
 use axum::middleware::{self, Next};
 use axum::response::{IntoResponse, Response};
@@ -24,7 +24,7 @@ use tokio::sync::{broadcast, mpsc};
 use volmorph_scene::{Command, ObjectId, Scene};
 
 use crate::coalesce::Queue;
-use crate::jobs::{Editor, Job, Origin, Outgoing, Work};
+use crate::jobs::{Editor, Job, JobProgress, Origin, Outgoing, Running, Work};
 use crate::protocol::{Frame, FrameError, Kind, MAX_CLIENT_FRAME, VERSION};
 use crate::security::{self, Roots};
 use crate::views::{self, Caches, QueryError, u64_field, vec3_field};
@@ -54,6 +54,7 @@ pub(crate) struct Shared {
     pub queue: Arc<Queue<Job>>,
     pub out: broadcast::Sender<Outgoing>,
     pub caches: Caches,
+    pub running: Arc<Running>,
     pub roots: Roots,
     pub upload_dir: PathBuf,
     pub next_page: AtomicU64,
@@ -65,6 +66,7 @@ pub struct Studio {
     token: String,
     shared: Arc<Shared>,
     server: tokio::task::JoinHandle<()>,
+    ticker: tokio::task::JoinHandle<()>,
 }
 
 impl Studio {
@@ -100,6 +102,7 @@ impl Studio {
 impl Drop for Studio {
     fn drop(&mut self) {
         self.server.abort();
+        self.ticker.abort();
         self.shared.queue.close();
         let _ = std::fs::remove_dir_all(&self.shared.upload_dir);
     }
@@ -149,17 +152,27 @@ pub async fn start(config: Config) -> Result<Studio, StudioError> {
     let scene = Arc::new(RwLock::new(scene));
     let queue = Arc::new(Queue::new());
     let (out, _) = broadcast::channel(256);
+    let running = Arc::new(Running::new(out.clone()));
     let shared = Arc::new(Shared {
         port: addr.port(),
         scene: Arc::clone(&scene),
         queue: Arc::clone(&queue),
         out: out.clone(),
         caches: Caches::default(),
+        running: Arc::clone(&running),
         roots,
         upload_dir,
         next_page: AtomicU64::new(1),
     });
-    let editor = Editor::new(scene, queue, out);
+    let editor = Editor::new(scene, queue, out, Arc::clone(&running));
+    let ticker = tokio::spawn(async move {
+        let mut every = tokio::time::interval(crate::jobs::PROGRESS_INTERVAL);
+        every.set_missed_tick_behavior(tokio::time::MissedTickBehavior::Delay);
+        loop {
+            every.tick().await;
+            running.tick();
+        }
+    });
     std::thread::Builder::new()
         .name("volmorph-studio-editor".into())
         .spawn(move || editor.run())
@@ -185,6 +198,7 @@ pub async fn start(config: Config) -> Result<Studio, StudioError> {
         token,
         shared,
         server,
+        ticker,
     })
 }
 
@@ -238,9 +252,46 @@ fn asset_response(file: &str) -> Response {
     }
 }
 
-async fn download(State(s): State<Arc<Shared>>, Path((id, file)): Path<(u64, String)>) -> Response {
+/// The optional query of a download: the page and request number the export reports
+/// [`Kind::Progress`] to and is cancelled by ([`Kind::Cancel`]), as a WebSocket job is.
+#[derive(Debug, Default, serde::Deserialize)]
+struct DownloadQuery {
+    page: Option<u64>,
+    request: Option<u32>,
+}
+
+/// Cancels a job when dropped: the download's response future is dropped when the page
+/// aborts the request, and the export stops.
+struct CancelOnDrop(Arc<JobProgress>);
+
+impl Drop for CancelOnDrop {
+    fn drop(&mut self) {
+        self.0.cancel();
+    }
+}
+
+async fn download(
+    State(s): State<Arc<Shared>>,
+    Path((id, file)): Path<(u64, String)>,
+    Query(q): Query<DownloadQuery>,
+) -> Response {
     let shared = Arc::clone(&s);
+    let job = match (q.page, q.request) {
+        (Some(page), Some(request)) => Some(s.running.begin(Origin { page, request })),
+        _ => None,
+    };
+    let progress = job.as_ref().map_or_else(
+        || {
+            Arc::new(JobProgress::new(Origin {
+                page: 0,
+                request: 0,
+            }))
+        },
+        |j| Arc::clone(j.progress()),
+    );
+    let _cancel_on_drop = CancelOnDrop(Arc::clone(&progress));
     let res = tokio::task::spawn_blocking(move || -> Result<Vec<u8>, String> {
+        let _job = job;
         if file.contains('/') || file.contains('\\') || file.starts_with('.') {
             return Err(format!("file name {file:?} must be plain"));
         }
@@ -252,8 +303,14 @@ async fn download(State(s): State<Arc<Shared>>, Path((id, file)): Path<(u64, Str
         let path = dir.join(&file);
         let scene = shared.scene.read().unwrap_or_else(|p| p.into_inner());
         let r = scene
-            .export(ObjectId(id), &path)
-            .map_err(|e| e.to_string())
+            .export_with(ObjectId(id), &path, &*progress)
+            .map_err(|e| {
+                if e.is_cancelled() {
+                    "cancelled".to_owned()
+                } else {
+                    e.to_string()
+                }
+            })
             .and_then(|()| std::fs::read(&path).map_err(|e| e.to_string()));
         let _ = std::fs::remove_dir_all(&dir);
         r
@@ -374,6 +431,16 @@ fn handle(s: &Arc<Shared>, page: u64, frame: Frame, reply: &mpsc::UnboundedSende
         page,
         request: frame.request,
     };
+    if frame.kind == Kind::Cancel {
+        match u64_field(&frame.header, "request").map(|r| u32::try_from(r).unwrap_or(0)) {
+            Ok(request) => cancel(s, Origin { page, request }),
+            Err(e) => {
+                let _ = reply
+                    .send(Frame::new(Kind::Error, frame.request, json!({"message": e.0})).encode());
+            }
+        }
+        return;
+    }
     match edit_of(s, page, &frame) {
         Ok(Some(work)) => {
             s.queue.push(Job { origin, work });
@@ -395,6 +462,21 @@ fn handle(s: &Arc<Shared>, page: u64, frame: Frame, reply: &mpsc::UnboundedSende
             r.unwrap_or_else(|e| Frame::new(Kind::Error, frame.request, json!({"message": e.0})));
         let _ = reply.send(f.encode());
     });
+}
+
+/// Stop the job of `origin`: the running one is told to stop (it answers itself); a queued
+/// one is taken out of the queue and answered here. Nothing for a job that has ended.
+fn cancel(s: &Shared, origin: Origin) {
+    if s.running.cancel(origin) {
+        return;
+    }
+    if s.queue.remove(|j| j.origin == origin).is_some() {
+        let e = volmorph_scene::SceneError::Cancelled(volmorph_io::Cancelled);
+        let _ = s.out.send(Outgoing {
+            page: Some(origin.page),
+            bytes: Arc::new(crate::jobs::error_frame(origin.request, &e).encode()),
+        });
+    }
 }
 
 /// The edit a frame asks for (`None` for queries).
@@ -442,15 +524,10 @@ fn edit_of(s: &Shared, page: u64, frame: &Frame) -> Result<Option<Work>, QueryEr
             Box::new(command_json::parse(h)?),
             h.get("gesture").map(|_| gesture_key(page, h)).transpose()?,
         ),
-        Kind::OpenFile => {
-            let path = resolve(s, h)?;
-            let object = volmorph_scene::files::read_object(&path)?;
-            let name = path
-                .file_name()
-                .map(|n| n.to_string_lossy().into_owned())
-                .unwrap_or_default();
-            Work::Command(Box::new(Command::Add { name, object }), None)
-        }
+        Kind::OpenFile => Work::Open(resolve(s, h)?),
+        Kind::SaveScene => Work::Save(resolve_new(s, h)?),
+        Kind::LoadScene => Work::Load(resolve(s, h)?),
+        Kind::Export => Work::Export(ObjectId(u64_field(h, "id")?), resolve_new(s, h)?),
         _ => return Ok(None),
     }))
 }
@@ -480,21 +557,6 @@ fn resolve_new(s: &Shared, h: &Value) -> Result<PathBuf, QueryError> {
 fn query(s: &Shared, page: u64, frame: &Frame) -> Result<Frame, QueryError> {
     let h = &frame.header;
     let r = frame.request;
-    if frame.kind == Kind::LoadScene {
-        let path = resolve(s, h)?;
-        let loaded = Scene::load(&path)?;
-        *s.scene.write().unwrap_or_else(|p| p.into_inner()) = loaded;
-        let f = views::scene_frame(&s.scene.read().unwrap_or_else(|p| p.into_inner()), 0);
-        let _ = s.out.send(Outgoing {
-            page: None,
-            bytes: Arc::new(f.encode()),
-        });
-        return Ok(Frame::new(
-            Kind::Done,
-            r,
-            json!({"loaded": path.display().to_string()}),
-        ));
-    }
     let scene = s.scene.read().unwrap_or_else(|p| p.into_inner());
     match frame.kind {
         Kind::Hello => Ok(Frame::new(
@@ -536,24 +598,6 @@ fn query(s: &Shared, page: u64, frame: &Frame) -> Result<Frame, QueryError> {
                 Kind::Listing,
                 r,
                 json!({"root": h["root"], "path": h["path"], "entries": entries}),
-            ))
-        }
-        Kind::SaveScene => {
-            let path = resolve_new(s, h)?;
-            scene.save(&path)?;
-            Ok(Frame::new(
-                Kind::Done,
-                r,
-                json!({"saved": path.display().to_string()}),
-            ))
-        }
-        Kind::Export => {
-            let path = resolve_new(s, h)?;
-            scene.export(ObjectId(u64_field(h, "id")?), &path)?;
-            Ok(Frame::new(
-                Kind::Done,
-                r,
-                json!({"exported": path.display().to_string()}),
             ))
         }
         k => Err(QueryError(format!(

@@ -1,11 +1,14 @@
 //! Built-in workflows a page can start with one message, each a short sequence of scene
-//! commands merged into one undo step: a built-in model, and True's direct-manipulation set-up
-//! (an identity lattice on the volume's voxels, the antialiased push-forward through it and the
-//! isosurface of the result).
+//! commands run as one [`Scene::transaction`] (one undo step, or nothing when it fails or is
+//! cancelled): a built-in model, True's direct-manipulation set-up (an identity lattice on the
+//! volume's voxels, the antialiased push-forward through it and the isosurface of the
+//! result), McPhail's handles, a generated mesh, and Feng's mesh FFD (the identity-Jacobian
+//! lattice around a mesh and the mesh deformed through it).
 
+use glam::DVec3;
 use serde::Deserialize;
 use volmorph_handles::HandleSet;
-use volmorph_lattice::BSplineLattice;
+use volmorph_lattice::{BSplineLattice, FengForm};
 use volmorph_maps::{AnyMap, HandleMethod, HandleOptions};
 use volmorph_scene::{
     Change, Command, NewObject, ObjectId, Recipe, Scene, SceneError, SurfaceMethod,
@@ -19,6 +22,36 @@ pub const MAX_PHANTOM_SIZE: usize = 512;
 
 /// Most handles a handle set-up may place (the client frame limit allows about 20 000).
 pub const MAX_SETUP_HANDLES: usize = 4096;
+
+/// Most control points per axis of a mesh-FFD lattice (Feng's examples use at most 9).
+pub const MAX_FFD_COUNTS: usize = 64;
+
+/// Largest degree per axis of a mesh-FFD lattice: the accurate FFD's surfaces reach degree
+/// `k_u + k_v + k_w`, and `volmorph_ffd` interpolates up to degree 12.
+pub const MAX_FFD_DEGREE: usize = 4;
+
+/// A generated mesh, in the frame of the built-in models (about `[-1, 1]³`).
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Deserialize)]
+#[serde(rename_all = "kebab-case")]
+pub enum Shape {
+    /// A geodesic sphere of radius 0.5 (level 3: 1280 triangles).
+    Sphere,
+    /// The axis-aligned box `[-0.4, 0.4]³` (12 triangles).
+    Box,
+    /// A torus of radii 0.5 and 0.2 in a z plane (48 × 24 steps).
+    Torus,
+}
+
+/// Form of Feng's initial lattice.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default, Deserialize)]
+#[serde(rename_all = "kebab-case")]
+pub enum Form {
+    /// Clamped knots, outermost control points on the box faces (§3.1.3).
+    #[default]
+    EndInterpolating,
+    /// Uniform unclamped knots with the scaling step (§3.1.2).
+    Uniform,
+}
 
 /// A built-in workflow.
 #[derive(Debug, Clone, PartialEq, Deserialize)]
@@ -56,6 +89,27 @@ pub enum Setup {
         #[serde(default)]
         points: Vec<[f64; 3]>,
     },
+    /// A generated closed mesh.
+    Mesh {
+        /// Which.
+        shape: Shape,
+    },
+    /// Feng's mesh FFD (2002 §3.1, `volmorph lattice init --mesh`): the identity-Jacobian
+    /// B-spline lattice of `degree` and `counts` control points per axis around the bounding
+    /// box of mesh `mesh` (an axis where it is flat padded), and the mesh deformed through it
+    /// by vertex FFD (a derived object updated incrementally as control points move; its
+    /// accurate FFD is what a STEP export writes).
+    MeshFfd {
+        /// The mesh object (a mesh, a derived mesh or a sculpt object).
+        mesh: u64,
+        /// Degrees `[k_u, k_v, k_w]`, each 1 to [`MAX_FFD_DEGREE`].
+        degree: [usize; 3],
+        /// Control points per axis, each `degree + 1` to [`MAX_FFD_COUNTS`].
+        counts: [usize; 3],
+        /// End-interpolating (default) or uniform.
+        #[serde(default)]
+        form: Form,
+    },
 }
 
 impl Setup {
@@ -65,30 +119,36 @@ impl Setup {
     /// An unknown model, a size out of range, or a scene command's error (what was applied
     /// is taken back).
     pub fn run(self, scene: &mut Scene) -> Result<Change, SceneError> {
-        let depth = scene.undo_depth();
-        let result = self.commands(scene);
-        let steps = scene.undo_depth() - depth;
-        match result {
-            Ok(change) => {
-                scene.merge_last(steps);
-                Ok(change)
-            }
-            Err(e) => {
-                for _ in 0..steps {
-                    scene.undo()?;
-                }
-                Err(e)
-            }
-        }
+        self.run_with(scene, &volmorph_io::NoProgress)
     }
 
-    fn commands(self, scene: &mut Scene) -> Result<Change, SceneError> {
+    /// [`Setup::run`] reporting the model's sampling and the scene's computations to
+    /// `progress`, and stopping when it is cancelled: the scene is then as before.
+    ///
+    /// # Errors
+    /// As [`Setup::run`]; [`SceneError::Cancelled`].
+    pub fn run_with(
+        self,
+        scene: &mut Scene,
+        progress: &dyn volmorph_io::Progress,
+    ) -> Result<Change, SceneError> {
+        scene.transaction(|scene| self.commands(scene, progress))
+    }
+
+    fn commands(
+        self,
+        scene: &mut Scene,
+        progress: &dyn volmorph_io::Progress,
+    ) -> Result<Change, SceneError> {
         let mut all = Change::default();
         let mut add = |scene: &mut Scene, name: &str, object| -> Result<ObjectId, SceneError> {
-            let c = scene.apply(Command::Add {
-                name: name.into(),
-                object,
-            })?;
+            let c = scene.apply_with(
+                Command::Add {
+                    name: name.into(),
+                    object,
+                },
+                progress,
+            )?;
             let id = c.added[0];
             all.added.extend(c.added);
             all.modified.extend(c.modified);
@@ -112,7 +172,7 @@ impl Setup {
                         "size {size} must be 8 to {MAX_PHANTOM_SIZE} voxels per axis"
                     )));
                 }
-                let vol = phantom::density(ph, [size; 3])?;
+                let vol = phantom::density_with(ph, [size; 3], progress)?;
                 add(scene, &model, NewObject::Volume(AnyVolume::from(vol)))?;
             }
             Setup::DirectManipulation {
@@ -206,6 +266,61 @@ impl Setup {
                         sampled_nodes: None,
                         swap_handles: true,
                     }),
+                )?;
+            }
+            Setup::Mesh { shape } => {
+                use volmorph_mesh::shapes;
+                let (name, mesh) = match shape {
+                    Shape::Sphere => ("sphere", shapes::icosphere(3, 0.5, DVec3::ZERO)?),
+                    Shape::Box => (
+                        "box",
+                        shapes::cuboid(DVec3::splat(-0.4), DVec3::splat(0.4))?,
+                    ),
+                    Shape::Torus => ("torus", shapes::torus(0.5, 0.2, 48, 24, DVec3::ZERO)?),
+                };
+                add(scene, name, NewObject::Mesh(mesh))?;
+            }
+            Setup::MeshFfd {
+                mesh,
+                degree,
+                counts,
+                form,
+            } => {
+                let m = ObjectId(mesh);
+                for a in 0..3 {
+                    if !(1..=MAX_FFD_DEGREE).contains(&degree[a]) {
+                        return Err(SceneError::Invalid(format!(
+                            "degree {} on axis {a} must be 1 to {MAX_FFD_DEGREE}",
+                            degree[a]
+                        )));
+                    }
+                    if !(degree[a] + 1..=MAX_FFD_COUNTS).contains(&counts[a]) {
+                        return Err(SceneError::Invalid(format!(
+                            "{} control points on axis {a} must be {} (degree + 1) to \
+                             {MAX_FFD_COUNTS}",
+                            counts[a],
+                            degree[a] + 1
+                        )));
+                    }
+                }
+                let (lo, hi) = scene.mesh(m)?.bounding_box().ok_or_else(|| {
+                    SceneError::Invalid(format!("mesh {m} has no vertices to place a lattice"))
+                })?;
+                let form = match form {
+                    Form::EndInterpolating => FengForm::EndInterpolating,
+                    Form::Uniform => FengForm::Uniform,
+                };
+                let lattice = BSplineLattice::feng_around_model(lo, hi, degree, counts, form)?;
+                let name = scene.get(m)?.name.clone();
+                let l = add(
+                    scene,
+                    &format!("{name} lattice"),
+                    NewObject::Map(AnyMap::Lattice(lattice)),
+                )?;
+                add(
+                    scene,
+                    &format!("{name} deformed"),
+                    NewObject::Derived(Recipe::DeformedMesh { mesh: m, map: l }),
                 )?;
             }
         }

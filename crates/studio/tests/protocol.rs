@@ -659,3 +659,217 @@ async fn jacobian_slices_and_point_lists_agree_with_the_scene() {
     .await;
     assert!(e.header["message"].as_str().unwrap().contains("point 1"));
 }
+
+/// A long job (a 512³ teapot sampled) sends its page Progress frames — its request, the
+/// library's stage and counts, no faster than 10 a second — and a Cancel stops it: it is
+/// answered by an Error `{cancelled: true}`, no Changed, and the scene (objects and both
+/// histories) is as before. A queued job is cancelled before it starts. A short edit sends
+/// no Progress at all.
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn a_long_job_reports_progress_and_cancel_leaves_the_scene_unchanged() {
+    let dir = tempfile::tempdir().unwrap();
+    let s = studio(dir.path(), 1 << 20).await;
+    let mut ws = connect(&s).await;
+    let before = ask(&mut ws, Kind::ListObjects, 2, json!({})).await.header;
+    send(
+        &mut ws,
+        Kind::Setup,
+        50,
+        json!({"setup": "phantom", "model": "teapot", "size": 512}),
+    )
+    .await;
+    let started = std::time::Instant::now();
+    let mut progress = Vec::new();
+    while progress.len() < 4 {
+        let f = recv(&mut ws).await.expect("connection closed");
+        assert!(
+            f.kind != Kind::Changed && f.kind != Kind::Error,
+            "the job ended before it was cancelled: {:?}",
+            f.header
+        );
+        if f.kind == Kind::Progress {
+            progress.push((started.elapsed(), f.header));
+        }
+    }
+    let first = progress[0].0;
+    assert!(
+        first >= volmorph_studio::jobs::PROGRESS_DELAY,
+        "first progress after {first:?}"
+    );
+    for w in progress.windows(2) {
+        let gap = w[1].0 - w[0].0;
+        assert!(
+            gap >= std::time::Duration::from_millis(80),
+            "frames {gap:?} apart"
+        );
+        let (a, b) = (&w[0].1, &w[1].1);
+        assert!(b["done"].as_u64() >= a["done"].as_u64(), "{a} then {b}");
+    }
+    for (_, h) in &progress {
+        assert_eq!(h["request"], 50);
+        assert_eq!(h["label"], "teapot density");
+        assert_eq!(h["total"], 512);
+        assert!(h["done"].as_u64().unwrap() <= 512);
+    }
+    send(&mut ws, Kind::Cancel, 51, json!({"request": 50})).await;
+    let at = std::time::Instant::now();
+    loop {
+        let f = recv(&mut ws).await.expect("connection closed");
+        assert_ne!(f.kind, Kind::Changed, "a cancelled job changes nothing");
+        if f.kind == Kind::Error {
+            assert_eq!(f.request, 50);
+            assert_eq!(f.header["cancelled"], true, "{}", f.header);
+            assert_eq!(f.header["message"], "cancelled");
+            break;
+        }
+    }
+    assert!(
+        at.elapsed() < std::time::Duration::from_secs(10),
+        "the job stopped {:?} after Cancel",
+        at.elapsed()
+    );
+    let after = ask(&mut ws, Kind::ListObjects, 3, json!({})).await.header;
+    assert_eq!(after, before);
+    // A queued job: cancelled before it starts, answered at once; then the running one.
+    let big = json!({"setup": "phantom", "model": "teapot", "size": 512});
+    send(&mut ws, Kind::Setup, 60, big).await;
+    send(
+        &mut ws,
+        Kind::Setup,
+        61,
+        json!({"setup": "phantom", "model": "sphere", "size": 16}),
+    )
+    .await;
+    send(&mut ws, Kind::Cancel, 62, json!({"request": 61})).await;
+    send(&mut ws, Kind::Cancel, 63, json!({"request": 60})).await;
+    let mut cancelled = Vec::new();
+    while cancelled.len() < 2 {
+        let f = recv(&mut ws).await.expect("connection closed");
+        assert_ne!(f.kind, Kind::Changed, "{}", f.header);
+        if f.kind == Kind::Error {
+            assert_eq!(f.header["cancelled"], true, "{}", f.header);
+            cancelled.push(f.request);
+        }
+    }
+    cancelled.sort_unstable();
+    assert_eq!(cancelled, [60, 61]);
+    assert_eq!(
+        ask(&mut ws, Kind::ListObjects, 4, json!({})).await.header,
+        before
+    );
+    // A short edit: its Changed, and no Progress before it.
+    send(
+        &mut ws,
+        Kind::MoveControlPoints,
+        70,
+        json!({"gesture": 9, "map": 2, "points": [[171, 0.1, 0.1, 0.1]]}),
+    )
+    .await;
+    loop {
+        let f = recv(&mut ws).await.expect("connection closed");
+        assert_ne!(f.kind, Kind::Progress, "a short edit sends no progress");
+        if f.kind == Kind::Changed {
+            assert_eq!(f.header["request"], 70);
+            break;
+        }
+    }
+}
+
+/// The mesh FFD set-up: Feng's identity lattice around a generated box with the page's
+/// degrees and counts, and the deformed mesh; a control point moved deforms the mesh; the
+/// STEP download of the deformed mesh is the accurate FFD with the Fig. 7 cube's 24 faces on
+/// a closed shell; bad degrees are refused naming the axis.
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn mesh_ffd_setup_moves_the_mesh_and_downloads_its_step() {
+    let dir = tempfile::tempdir().unwrap();
+    let s = studio(dir.path(), 1 << 20).await;
+    let mut ws = connect(&s).await;
+    send(
+        &mut ws,
+        Kind::Setup,
+        2,
+        json!({"setup": "mesh", "shape": "box"}),
+    )
+    .await;
+    let c = recv_kind(&mut ws, Kind::Changed).await;
+    let mesh = c.header["added"][0].as_u64().unwrap();
+    send(
+        &mut ws,
+        Kind::Setup,
+        3,
+        json!({"setup": "mesh-ffd", "mesh": mesh, "degree": [2, 2, 5], "counts": [4, 4, 9]}),
+    )
+    .await;
+    let e = reply(&mut ws, 3).await;
+    assert_eq!(e.kind, Kind::Error);
+    assert!(
+        e.header["message"].as_str().unwrap().contains("axis 2"),
+        "{}",
+        e.header
+    );
+    send(
+        &mut ws,
+        Kind::Setup,
+        4,
+        json!({"setup": "mesh-ffd", "mesh": mesh, "degree": [2, 2, 2], "counts": [4, 4, 4]}),
+    )
+    .await;
+    let c = recv_kind(&mut ws, Kind::Changed).await;
+    let (lattice, deformed) = (
+        c.header["added"][0].as_u64().unwrap(),
+        c.header["added"][1].as_u64().unwrap(),
+    );
+    let l = ask(&mut ws, Kind::GetLattice, 5, json!({"map": lattice})).await;
+    assert_eq!(l.header["counts"], json!([4, 4, 4]));
+    let pts = read_f32(&l.payload);
+    // End-interpolating: the corner control points are the box's corners.
+    assert_eq!(&pts[..3], &[-0.4f32, -0.4, -0.4]);
+    assert_eq!(&pts[63 * 3..], &[0.4f32, 0.4, 0.4]);
+    let m0 = ask(&mut ws, Kind::GetMesh, 6, json!({"id": deformed})).await;
+    send(
+        &mut ws,
+        Kind::MoveControlPoints,
+        7,
+        json!({"gesture": 1, "map": lattice, "points": [[63, 0.7, 0.6, 0.5]]}),
+    )
+    .await;
+    let c = recv_kind(&mut ws, Kind::Changed).await;
+    assert!(
+        c.header["modified"]
+            .as_array()
+            .unwrap()
+            .contains(&json!(deformed))
+    );
+    let m1 = ask(&mut ws, Kind::GetMesh, 8, json!({"id": deformed})).await;
+    let (a, b) = (
+        read_f32(&m0.payload[..8 * 12]),
+        read_f32(&m1.payload[..8 * 12]),
+    );
+    // The box's corner at the moved control point follows it; the opposite one stays.
+    let corner = |v: &[f32], p: [f32; 3]| {
+        (0..8).find(|&i| (0..3).all(|c| (v[3 * i + c] - p[c]).abs() < 1e-6))
+    };
+    let far = corner(&a, [0.4, 0.4, 0.4]).expect("the box has its corner");
+    assert_eq!(&b[3 * far..3 * far + 3], &[0.7f32, 0.6, 0.5]);
+    let near = corner(&a, [-0.4, -0.4, -0.4]).unwrap();
+    assert_eq!(&b[3 * near..3 * near + 3], &[-0.4f32, -0.4, -0.4]);
+    // The STEP download.
+    let t = s.token();
+    let get = format!(
+        "GET /{t}/download/{deformed}/bent.step?page=1&request=9 HTTP/1.1\r\nHost: {}\r\nConnection: close\r\n\r\n",
+        s.addr()
+    );
+    let mut conn = tokio::net::TcpStream::connect(s.addr()).await.unwrap();
+    conn.write_all(get.as_bytes()).await.unwrap();
+    let mut body = Vec::new();
+    conn.read_to_end(&mut body).await.unwrap();
+    let text = String::from_utf8_lossy(&body);
+    assert!(
+        text.starts_with("HTTP/1.1 200"),
+        "{}",
+        &text[..text.len().min(300)]
+    );
+    assert_eq!(text.matches("=ADVANCED_FACE(").count(), 24);
+    assert_eq!(text.matches("=MANIFOLD_SOLID_BREP(").count(), 1);
+    assert!(text.contains("END-ISO-10303-21;"));
+}

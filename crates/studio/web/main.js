@@ -11,6 +11,9 @@ const $ = (id) => document.getElementById(id);
 // (`volmorph_lattice::json::LATTICE_JSON_KIND`; PROTOCOL.md).
 export const LATTICE_KIND = 'bspline-lattice';
 
+// Colour of deformed meshes in the 3D view (RGB, 0‥1), apart from other meshes.
+export const DEFORMED_RGB = [0.45, 0.75, 0.95];
+
 // A key typed into a text field (not a shortcut): text areas and inputs other than sliders,
 // check boxes and buttons.
 export function typing(e) {
@@ -30,6 +33,16 @@ class App {
     this.inputAt = new Map();
     this.handles = [];
     this.colormap = 'grey';
+    // Long jobs of this page: request → {label, done, total} from Progress frames.
+    this.jobs = new Map();
+    // Requests already answered (a late Progress frame of one is ignored), and the abort
+    // controllers of downloads.
+    this.answered = new Set();
+    this.aborts = new Map();
+    // The lattice whose control points the 3D view shows and drags (null: the first).
+    this.activeLattice = null;
+    // Meshes the 3D view leaves out (unchecked in the object list).
+    this.hiddenMeshes = new Set();
   }
 
   async start() {
@@ -46,6 +59,8 @@ class App {
     this.client.on(Kind.Scene, (f) => this.setScene(f.header));
     this.client.on(Kind.Error, (f) => this.error(f.header.message, f.header));
     this.client.on(-1, (f) => this.error(f.header.message));
+    this.client.on(Kind.Progress, (f) => this.onProgress(f.header));
+    this.client.onAnswered = (r) => this.jobEnded(r);
     this.slices = [new SliceView($('slice-x'), 0, this), new SliceView($('slice-y'), 1, this), new SliceView($('slice-z'), 2, this)];
     this.view3d = new View3D($('view3d'), this);
     this.bind();
@@ -73,7 +88,8 @@ class App {
     $('colormap').onchange = (e) => { this.colormap = e.target.value; this.redrawSlices(); };
     $('wl-lo').onchange = $('wl-hi').onchange = () => this.setWindow([Number($('wl-lo').value), Number($('wl-hi').value)]);
     $('wl-auto').onclick = () => { const v = this.volume(); if (v) { this.window.delete(v.id); this.reloadSlices(); } };
-    $('new-teapot').onclick = () => this.client.send(Kind.Setup, { setup: 'phantom', model: 'teapot', size: 128 });
+    $('new-teapot').onclick = () => this.client.send(Kind.Setup, { setup: 'phantom', model: 'teapot', size: Number($('teapot-size').value) });
+    $('job-cancel').onclick = () => this.cancelJob(Number($('job-cancel').dataset.request));
     $('setup-handles').onclick = () => {
       const v = this.volume();
       if (v) this.client.send(Kind.Setup, { setup: 'handles', volume: v.id, method: $('handle-method').value });
@@ -90,11 +106,96 @@ class App {
   }
 
   status(m) { $('status').textContent = m; $('status').className = ''; }
-  error(m) { $('status').textContent = m; $('status').className = 'error'; }
+  // A failure, shown in red; a job stopped by Cancel is not a failure.
+  error(m, h) {
+    const cancelled = h?.cancelled || m === 'cancelled';
+    $('status').textContent = cancelled ? 'cancelled: nothing changed' : m;
+    $('status').className = cancelled ? 'cancelled' : 'error';
+  }
+
+  // Progress of a long job of this page: the bar shows the newest job running.
+  onProgress(h) {
+    if (this.answered.has(h.request)) return;
+    this.jobs.set(h.request, h);
+    this.showJob();
+  }
+
+  jobEnded(r) {
+    this.answered.add(r);
+    if (this.answered.size > 4096) this.answered.delete(this.answered.values().next().value);
+    this.aborts.delete(r);
+    if (this.jobs.delete(r)) this.showJob();
+  }
+
+  showJob() {
+    const last = [...this.jobs.entries()].pop();
+    $('job').hidden = !last;
+    if (!last) return;
+    const [r, h] = last;
+    $('job-label').textContent = h.total ? `${h.label} ${Math.round(100 * h.done / h.total)}%` : h.label;
+    const bar = $('job-bar');
+    if (h.total) bar.value = h.done / h.total; else bar.removeAttribute('value');
+    $('job-cancel').dataset.request = r;
+  }
+
+  // Stop job `r`: the server answers it with a cancelled Error and changes nothing.
+  cancelJob(r) {
+    if (!r) return;
+    this.aborts.get(r)?.abort();
+    this.client.send(Kind.Cancel, { request: r });
+  }
+
+  // Download object `id` exported as `name` (format by extension), reporting progress and
+  // cancellable like a job; resolves to the bytes (or null when cancelled).
+  async download(id, name) {
+    const r = this.client.reserve();
+    const abort = new AbortController();
+    this.aborts.set(r, abort);
+    try {
+      const res = await fetch(`download/${id}/${encodeURIComponent(name)}?page=${this.page}&request=${r}`, { signal: abort.signal });
+      if (!res.ok) throw new Error(`export of ${name} failed: ${await res.text()}`);
+      const bytes = await res.arrayBuffer();
+      const a = document.createElement('a');
+      a.href = URL.createObjectURL(new Blob([bytes], { type: 'application/octet-stream' }));
+      a.download = name;
+      document.body.append(a); a.click(); a.remove();
+      setTimeout(() => URL.revokeObjectURL(a.href), 10000);
+      this.status(`exported ${name} (${bytes.byteLength} bytes)`);
+      return bytes;
+    } catch (e) {
+      if (e.name === 'AbortError' || /cancelled/.test(e.message)) { this.error('cancelled'); return null; }
+      this.error(e.message);
+      return null;
+    } finally {
+      this.jobEnded(r);
+    }
+  }
 
   byId(id) { return this.objects.find((o) => o.id === id); }
   volume() { return this.byId(this.layer); }
-  lattice() { return this.objects.find((o) => o.map && o.map.kind === LATTICE_KIND); }
+  // The lattice the 3D view shows and drags: the one made active (a mesh-FFD lattice), else
+  // the first.
+  lattice() {
+    const all = this.objects.filter((o) => o.map && o.map.kind === LATTICE_KIND);
+    return all.find((o) => o.id === this.activeLattice) || all[0];
+  }
+  // The lattice a slice drag moves: the map of the shown volume's warp, else lattice().
+  volumeLattice() {
+    const m = this.byId(this.volume()?.recipe?.map);
+    return m?.map?.kind === LATTICE_KIND ? m : this.lattice();
+  }
+  setActiveLattice(id) {
+    this.activeLattice = id;
+    const l = this.lattice();
+    if (l) this.loadOverlay(l.id).catch((e) => this.error(e.message));
+    for (const li of document.querySelectorAll('#objects li')) li.classList.toggle('active', Number(li.dataset.id) === l?.id);
+  }
+  // Meshes the 3D view draws: not those hidden, nor the source of a deformed mesh (the
+  // deformed one is drawn in its place).
+  shownMeshes() {
+    const sources = new Set(this.objects.filter((o) => o.recipe?.recipe === 'deformed-mesh').map((o) => o.recipe.mesh));
+    return this.objects.filter((o) => o.mesh && !sources.has(o.id) && !this.hiddenMeshes.has(o.id));
+  }
   // The newest handle map (the one a handle set-up made last).
   handleMap() { return this.objects.filter((o) => o.map && o.map.kind === 'handles').pop(); }
   lut() { return this.luts[this.colormap]; }
@@ -136,9 +237,17 @@ class App {
     const sel = $('layer'); sel.textContent = '';
     for (const o of s.objects) {
       const li = document.createElement('li');
-      li.textContent = `${o.id} ${o.name} (${o.kind}${o.recipe ? ' ' + o.recipe.recipe : ''})`;
+      if (o.mesh) {
+        const eye = Object.assign(document.createElement('input'), { type: 'checkbox', checked: !this.hiddenMeshes.has(o.id), title: 'show in the 3D view' });
+        eye.dataset.mesh = o.id;
+        eye.onchange = () => { if (eye.checked) this.hiddenMeshes.delete(o.id); else this.hiddenMeshes.add(o.id); this.syncMeshes(); };
+        li.append(eye);
+      }
+      li.append(`${o.id} ${o.name} (${o.kind}${o.recipe ? ' ' + o.recipe.recipe : ''})`);
       li.dataset.id = o.id;
-      if (o.error) li.classList.add('error');
+      if (o.error) { li.classList.add('error'); li.title = o.error; }
+      // A lattice clicked becomes the one the 3D view shows and drags.
+      if (o.map?.kind === LATTICE_KIND) li.onclick = (e) => { if (e.target === li) this.setActiveLattice(o.id); };
       ul.append(li);
       if (o.volume) sel.add(new Option(`${o.id} ${o.name}`, o.id));
     }
@@ -148,12 +257,22 @@ class App {
       if (pick) await this.showLayer(pick.id);
     }
     if (this.layer !== undefined) sel.value = this.layer;
-    const meshes = s.objects.filter((o) => o.mesh);
-    for (const id of [...this.view3d.meshes.keys()]) if (!meshes.some((m) => m.id === id)) this.view3d.dropMesh(id);
-    for (const m of meshes) if (!this.view3d.meshes.has(m.id)) this.view3d.setMesh(m.id).catch((e) => this.error(e.message));
-    for (const over of [this.lattice(), this.handleMap()]) if (over) this.loadOverlay(over.id);
+    if (this.activeLattice !== null && !this.byId(this.activeLattice)) this.activeLattice = null;
+    const active = this.lattice();
+    for (const li of ul.children) li.classList.toggle('active', Number(li.dataset.id) === active?.id);
+    this.syncMeshes();
+    for (const over of [this.lattice(), this.handleMap()]) if (over) this.loadOverlay(over.id).catch((e) => this.error(e.message));
     this.panels?.sceneChanged();
   }
+
+  // The 3D view draws exactly the shown meshes (deformed meshes in their own colour).
+  syncMeshes() {
+    const meshes = this.shownMeshes();
+    for (const id of [...this.view3d.meshes.keys()]) if (!meshes.some((m) => m.id === id)) this.view3d.dropMesh(id);
+    for (const m of meshes) if (!this.view3d.meshes.has(m.id)) this.view3d.setMesh(m.id, this.meshColor(m)).catch((e) => this.error(e.message));
+  }
+
+  meshColor(o) { return o.recipe?.recipe === 'deformed-mesh' ? DEFORMED_RGB : undefined; }
 
   async showLayer(id) {
     const v = this.byId(id);
@@ -172,7 +291,7 @@ class App {
 
   async loadOverlay(id) {
     const f = await this.client.request(Kind.GetLattice, { map: id });
-    if (f.header.kind === 'lattice' || !this.lattice()) this.view3d.setOverlay(f);
+    if (f.header.kind === 'lattice' ? f.header.map === this.lattice()?.id : !this.lattice()) this.view3d.setOverlay(f);
     if (f.header.kind === 'handles') {
       const p = new Float32Array(f.payload);
       this.handles = [];
@@ -242,7 +361,7 @@ class App {
     this.g.moved = true;
     this.view3d.interact();
     if (this.tool === 'drag') {
-      const l = this.lattice();
+      const l = this.volumeLattice();
       if (!l) { this.error('no lattice: press "Lattice + warp" first'); return; }
       const r = this.client.send(Kind.Drag, { gesture: this.g.id, map: l.id, start: this.g.p, target, radius: this.radius });
       this.markInput(r, e);
@@ -315,6 +434,9 @@ class App {
       // A set-up that made a warped volume shows it.
       const warp = h.added.map((id) => this.byId(id)).find((o) => o?.recipe?.recipe === 'warp');
       if (h.edit === 'setup' && warp) { $('layer').value = warp.id; await this.showLayer(warp.id); }
+      // A mesh-FFD set-up of this page: its lattice is the one the 3D view shows and drags.
+      const ffd = h.added.map((id) => this.byId(id)).find((o) => o?.recipe?.recipe === 'deformed-mesh');
+      if (h.edit === 'setup' && ffd && h.page === this.page) this.setActiveLattice(ffd.recipe.map);
     } else if (h.edit === 'command') {
       // A command that added or removed nothing (a recipe, a handle, a model's text) changes
       // only the objects' descriptions: refresh them while the pictures reload.
@@ -338,10 +460,11 @@ class App {
       });
     jobs.push(slices, timed);
     if (this.view3d.showGrid && (touched.has(this.jacobianMap()?.id) || structural)) jobs.push(this.refreshGrid());
+    const shown = new Set(this.shownMeshes().map((m) => m.id));
     for (const id of touched) {
       const o = this.byId(id);
-      if (o?.mesh) jobs.push(this.view3d.setMesh(id).catch(() => {}));
-      if (o?.map) jobs.push(this.loadOverlay(id).catch(() => {}));
+      if (o?.mesh && shown.has(id)) jobs.push(this.view3d.setMesh(id, this.meshColor(o)).catch((e) => this.error(e.message)));
+      if (o?.map) jobs.push(this.loadOverlay(id).catch((e) => this.error(e.message)));
     }
     if (t0 === undefined) $('timing').textContent = `server ${h.ms.toFixed(1)} ms`;
     await Promise.all(jobs);

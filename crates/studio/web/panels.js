@@ -17,6 +17,8 @@ export function setupPanels(app) {
       const f = app.objects.find((o) => o.kind === 'frep');
       if (f && !P.frepEdited) $('frep-src').value = f.frep.source;
       P.frepSliders(f);
+      P.morphChanged();
+      P.ffdChanged();
       const hm = app.handleMap();
       if (hm) $('handle-method').value = String(hm.map.method).toLowerCase();
     },
@@ -97,6 +99,105 @@ export function setupPanels(app) {
     }
   };
   $('frep-apply').onclick = P.applyFrep;
+  // Another model from the text (the two ends of a metamorphosis are two models).
+  $('frep-new').onclick = async () => {
+    $('frep-error').textContent = '';
+    try {
+      const n = app.objects.filter((o) => o.kind === 'frep').length + 1;
+      await app.client.edit(Kind.Command, { command: 'add-frep', name: `model ${n}`, source: $('frep-src').value, params: { 1: 0.6 } });
+      app.status('model added');
+    } catch (e) {
+      const h = e.header || {};
+      $('frep-error').textContent = h.line ? `line ${h.line}, column ${h.column}: ${e.message}` : e.message;
+    }
+  };
+
+  // Metamorphosis (Savchenko–Pasko Eq. 13): two models, a schedule and the time t. The
+  // morph is a derived object (recipe frep-morph) sampled on the shown volume's grid, with its
+  // zero isosurface; the slider sets t (a drag of it is one gesture: one undo step).
+  const fill = (sel, items, label) => {
+    const keep = sel.value;
+    sel.textContent = '';
+    for (const o of items) sel.add(new Option(label(o), o.id));
+    if (items.some((o) => String(o.id) === keep)) sel.value = keep;
+  };
+  const morphObject = () => app.objects.filter((o) => o.recipe?.recipe === 'frep-morph').pop();
+  let morphGesture = null;
+  P.morphChanged = () => {
+    const models = app.objects.filter((o) => o.kind === 'frep');
+    fill($('morph-from'), models, (o) => `${o.id} ${o.name}`);
+    fill($('morph-to'), models, (o) => `${o.id} ${o.name}`);
+    if ($('morph-to').value === $('morph-from').value && models.length > 1) $('morph-to').value = models[models.length - 1].id;
+    const m = morphObject();
+    if (m && morphGesture === null) {
+      $('morph-t').value = m.recipe.t; $('morph-t-out').value = (+m.recipe.t).toFixed(2);
+      $('morph-schedule').value = m.recipe.schedule;
+    }
+  };
+  $('morph-make').onclick = async () => {
+    const grid = app.volume();
+    const from = Number($('morph-from').value), to = Number($('morph-to').value);
+    try {
+      if (!grid) throw new Error('open or make a volume first: the metamorphosis is sampled on its grid');
+      if (!from || !to || from === to) throw new Error('choose two different F-rep models ("New model" adds one)');
+      const t = Number($('morph-t').value);
+      const c = await app.client.edit(Kind.Command, { command: 'add-derived', name: 'morph', recipe: { recipe: 'frep-morph', from, to, t, schedule: $('morph-schedule').value, grid: grid.id } });
+      await app.client.edit(Kind.Command, { command: 'add-derived', name: 'morph-surface', recipe: { recipe: 'isosurface', volume: c.header.added[0], level: 0, inside_below: false, method: 'marching-cubes' } });
+      app.status('metamorphosis made');
+    } catch (e) { app.error(e.message, e.header); }
+  };
+  const setMorph = (changes, gesture) => {
+    const m = morphObject();
+    if (!m) { app.error('no metamorphosis: press "Morph" first'); return null; }
+    return app.client.send(Kind.Command, { command: 'set-recipe', id: m.id, recipe: { ...m.recipe, ...changes }, ...(gesture === undefined ? {} : { gesture }) });
+  };
+  $('morph-t').oninput = (e) => {
+    if (!morphObject()) return;
+    if (morphGesture === null) morphGesture = app.newGesture();
+    $('morph-t-out').value = Number($('morph-t').value).toFixed(2);
+    const r = setMorph({ t: Number($('morph-t').value) }, morphGesture);
+    if (r) app.markInput(r, e);
+  };
+  $('morph-t').onchange = () => { if (morphGesture !== null) { app.endGesture(morphGesture); morphGesture = null; } };
+  $('morph-schedule').onchange = () => { if (morphObject()) setMorph({ schedule: $('morph-schedule').value }); };
+
+  // Mesh FFD (Feng 2002): a mesh (opened or generated), Feng's identity-Jacobian lattice
+  // around it (degree, control points and form chosen here), its control points dragged with
+  // the Lattice points tool (the vertex FFD follows live), and the accurate FFD exported as
+  // STEP.
+  P.ffdChanged = () => {
+    const meshes = app.objects.filter((o) => o.mesh && o.recipe?.recipe !== 'deformed-mesh');
+    fill($('ffd-mesh'), meshes, (o) => `${o.id} ${o.name}`);
+  };
+  for (const shape of ['sphere', 'box', 'torus']) {
+    $(`mesh-${shape}`).onclick = () => app.client.edit(Kind.Setup, { setup: 'mesh', shape })
+      .then((c) => { $('ffd-mesh').value = c.header.added[0]; app.status(`${shape} added`); })
+      .catch((e) => app.error(e.message, e.header));
+  }
+  const triple = (id) => {
+    const v = $(id).value.split(',').map((x) => Number(x.trim()));
+    if (v.length !== 3 || !v.every((x) => Number.isInteger(x) && x > 0)) throw new Error(`${id.replace('ffd-', '')}: three whole numbers, e.g. 2,2,2`);
+    return v;
+  };
+  $('ffd-place').onclick = async () => {
+    try {
+      const mesh = Number($('ffd-mesh').value);
+      if (!mesh) throw new Error('open or make a mesh first');
+      await app.client.edit(Kind.Setup, { setup: 'mesh-ffd', mesh, degree: triple('ffd-degree'), counts: triple('ffd-counts'), form: $('ffd-form').value });
+      $('tool').value = 'lattice'; app.tool = 'lattice';
+      app.status('lattice placed: drag its points in the 3D view');
+    } catch (e) { app.error(e.message, e.header); }
+  };
+  // The deformed mesh of the chosen mesh (the newest), exported as its accurate FFD.
+  P.deformedMesh = () => {
+    const mesh = Number($('ffd-mesh').value);
+    return app.objects.filter((o) => o.recipe?.recipe === 'deformed-mesh' && (!mesh || o.recipe.mesh === mesh)).pop();
+  };
+  $('ffd-step').onclick = () => {
+    const d = P.deformedMesh();
+    if (!d) { app.error('no deformed mesh: press "Place lattice" first'); return; }
+    P.lastStep = app.download(d.id, `${d.name.replace(/[^A-Za-z0-9_.-]+/g, '_')}.step`);
+  };
 
   // Sliders for the model's parameters a[1..k]: a move replaces the model with the new value
   // (one gesture per drag of a slider, coalesced; one undo step on release).

@@ -4,9 +4,10 @@ export const Kind = {
   Hello: 1, ListObjects: 2, GetSlice: 3, Drag: 4, EndGesture: 5, Undo: 6, Redo: 7,
   GetVolume: 8, GetProxy: 9, GetMesh: 10, GetLattice: 11, MoveControlPoints: 12, Setup: 13,
   Probe: 14, GetTransfer: 15, Command: 16, ListDir: 17, OpenFile: 18, SaveScene: 19,
-  LoadScene: 20, Export: 21, GetJacobian: 22,
+  LoadScene: 20, Export: 21, GetJacobian: 22, Cancel: 23,
   Welcome: 100, Scene: 101, Changed: 102, Slice: 103, Error: 104, VolumeData: 105, Proxy: 106,
   MeshData: 107, LatticeData: 108, Probed: 109, Transfer: 110, Listing: 111, Done: 112,
+  Progress: 113,
 };
 const enc = new TextEncoder();
 const dec = new TextDecoder();
@@ -55,6 +56,8 @@ export class Client {
         const f = decode(ev.data);
         // A Changed is a push (frame request 0) naming the request it answers in its header.
         const answers = f.kind === Kind.Changed ? f.header.request : f.request;
+        // Every answer to one of this page's requests ends its job (its progress bar).
+        if (answers && f.kind !== Kind.Progress && (f.kind !== Kind.Changed || f.header.page === this.page)) this.onAnswered?.(answers);
         let ed = answers && this.edits.get(answers);
         if (ed && (f.kind === Kind.Error || (f.kind === Kind.Changed && f.header.page === this.page))) {
           this.edits.delete(answers);
@@ -106,6 +109,8 @@ export class Client {
       this.edits.set(r, { resolve, reject });
     });
   }
+  // A request number for a job that does not go through the socket (a download).
+  reserve() { return this.next++; }
   request(kind, header, payload) {
     const r = this.next++;
     return new Promise((resolve, reject) => {

@@ -365,6 +365,24 @@ impl<M: LinearMap + Clone> IncrementalPushForward<M> {
         output: &Geometry,
         options: &AntialiasOptions,
     ) -> Result<Self, WarpError> {
+        Self::new_with(source, map, output, options, &volmorph_io::NoProgress)
+    }
+
+    /// [`IncrementalPushForward::new`] reporting to `progress` and stopping when it is
+    /// cancelled: a stage "mapping voxel centres" of one step, then "antialiased
+    /// push-forward" whose steps are the output's z-planes, advanced slab by slab. The engine
+    /// equals [`IncrementalPushForward::new`]'s bit for bit.
+    ///
+    /// # Errors
+    /// As [`IncrementalPushForward::new`]; [`WarpError::Cancelled`] when `progress` asks to
+    /// stop.
+    pub fn new_with<T: Voxel>(
+        source: &Volume<T>,
+        map: M,
+        output: &Geometry,
+        options: &AntialiasOptions,
+        progress: &dyn volmorph_io::Progress,
+    ) -> Result<Self, WarpError> {
         output.validate().map_err(output_geometry)?;
         if !options.background.is_finite() {
             return Err(WarpError::Background(options.background));
@@ -392,6 +410,8 @@ impl<M: LinearMap + Clone> IncrementalPushForward<M> {
             .for_each(|(d, s)| *d = s.to_f64() as f32);
         let to_index = ToIndex::new(output);
         let mut centres = try_filled(clen, DVec3::ZERO, "voxel-centre images")?;
+        progress.start("mapping voxel centres", 1);
+        progress.check()?;
         let grid = offset_grid(&g, DVec3::splat(-1.0), cdims);
         map.apply_grid(&grid, &mut centres)
             .map_err(|source| WarpError::MapOnGrid {
@@ -402,6 +422,8 @@ impl<M: LinearMap + Clone> IncrementalPushForward<M> {
             .par_iter_mut()
             .with_min_len(4096)
             .for_each(|p| *p = to_index.apply(*p));
+        progress.advance(1);
+        progress.check()?;
         let mut status = Vec::new();
         status
             .try_reserve_exact(source.len())
@@ -439,7 +461,9 @@ impl<M: LinearMap + Clone> IncrementalPushForward<M> {
         engine.insane = engine.centres.par_iter().filter(|p| !sane(**p)).count();
         engine.refresh_blocks(&all, None);
         engine.reset_statuses(&all, engine.insane == 0);
-        engine.recompute(&everything, &all);
+        progress.start("antialiased push-forward", output.dims[2] as u64);
+        engine.recompute(&everything, &all, progress);
+        progress.check()?;
         engine.stats = engine.count(&all);
         Ok(engine)
     }
@@ -597,7 +621,7 @@ impl<M: LinearMap + Clone> IncrementalPushForward<M> {
         self.refresh_blocks(&redo, Some(&segments));
         self.insane = self.insane.saturating_sub(hulls.replaced_insane) + hulls.new_insane;
         self.reset_statuses(&redo, self.insane == 0);
-        self.recompute(&touched, &redo);
+        self.recompute(&touched, &redo, &volmorph_io::NoProgress);
         let after = self.count(&redo);
         self.map = map;
         self.stats = PushForwardStats {
@@ -801,7 +825,12 @@ impl<M: LinearMap + Clone> IncrementalPushForward<M> {
     /// it and any number of threads.
     ///
     /// The scratch tallies hold a cell per output voxel, so any region fits.
-    fn recompute(&mut self, region: &Region, redo: &Region) {
+    ///
+    /// Each slab advances `progress` by its planes; a slab that starts once `progress` is
+    /// cancelled is skipped (its tallies stay zero), so a cancelled recomputation leaves the
+    /// region incomplete: only [`IncrementalPushForward::new_with`] passes a cancellable
+    /// progress, and it drops the engine.
+    fn recompute(&mut self, region: &Region, redo: &Region, progress: &dyn volmorph_io::Progress) {
         let len = region.len();
         if region.is_empty() || self.scratch.len() < len {
             return;
@@ -848,6 +877,9 @@ impl<M: LinearMap + Clone> IncrementalPushForward<M> {
         let z0 = region.lo[2];
         let all_sane = self.insane == 0;
         work.into_par_iter().for_each(|(slab, buf, vol)| {
+            if progress.is_cancelled() {
+                return;
+            }
             // The scratch is all zeros between recomputations (cleared as it is read).
             let corner = |d: [usize; 3]| {
                 DVec3::new(
@@ -907,6 +939,7 @@ impl<M: LinearMap + Clone> IncrementalPushForward<M> {
                     }
                 }
             }
+            progress.advance(slab.dims[2] as u64);
         });
     }
 }

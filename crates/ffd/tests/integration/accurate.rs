@@ -308,3 +308,23 @@ fn tessellation_is_watertight_and_within_tolerance() {
     assert!(fine.signed_volume() > 0.0);
     assert!(volmorph_ffd::tessellate::tessellate(&model, 0.0).is_err());
 }
+
+/// The accurate FFD with progress keeps the progress contract (steps reach the announced
+/// totals; cancelled after one step and after half of them it stops with `Cancelled`) and
+/// gives the model of the plain call.
+#[test]
+fn accurate_ffd_with_progress_reports_cancels_and_equals_the_plain_call() {
+    let mesh = sphere(10, 1.0, DVec3::new(0.1, -0.2, 0.3));
+    let (lo, hi) = mesh.bounding_box().unwrap();
+    let mut lat =
+        BSplineLattice::feng_end_interpolating_around(lo, hi, [2, 2, 2], [5, 6, 5]).unwrap();
+    jiggle(&mut lat, 0.1, 5);
+    let plain = accurate_ffd(&mesh, &lat).unwrap();
+    let counted = volmorph_testkit::progress::check(|p| {
+        volmorph_ffd::accurate::accurate_ffd_with(&mesh, &lat, p)
+    });
+    assert_eq!(counted.surfaces, plain.surfaces);
+    assert_eq!(counted.edge_curves, plain.edge_curves);
+    assert_eq!(counted.images, plain.images);
+    assert_eq!(counted.plan.faces(), plain.plan.faces());
+}

@@ -196,3 +196,29 @@ fn chunked_warp_reports_chunks_and_stops_writing_when_cancelled() {
     assert!(matches!(e, WarpError::Cancelled(_)), "{e}");
     assert!(*count.lock().unwrap() < chunks.len());
 }
+
+/// The incremental engine's construction (the full antialiased push-forward the scene's
+/// warps start from) reports the output's planes, stops when cancelled, and builds the
+/// engine of the plain call bit for bit.
+#[test]
+fn incremental_engine_construction_reports_planes_and_cancels() {
+    use volmorph_warp::incremental::IncrementalPushForward;
+    use volmorph_warp::pushforward::AntialiasOptions;
+    // Tall, so the planes are cut into more slabs than there are threads.
+    let g = Geometry::new([12, 12, 2000]);
+    let input = source(g);
+    let map = bent(&g, 0.8);
+    let o = AntialiasOptions::default();
+    let plain = IncrementalPushForward::new(&input, map.clone(), &g, &o).unwrap();
+    let with =
+        progress::check(|p| IncrementalPushForward::new_with(&input, map.clone(), &g, &o, p));
+    let bits = |v: &Volume<f32>| v.data().iter().map(|x| x.to_bits()).collect::<Vec<_>>();
+    assert_eq!(bits(plain.volume()), bits(with.volume()));
+    assert_eq!(plain.stats(), with.stats());
+    let c = volmorph_io::Counter::new();
+    IncrementalPushForward::new_with(&input, map, &g, &o, &c).unwrap();
+    assert_eq!(
+        c.stages()[1],
+        ("antialiased push-forward".to_string(), 2000)
+    );
+}
