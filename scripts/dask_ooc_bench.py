@@ -1,16 +1,20 @@
 #!/usr/bin/env python3
-"""Out-of-core and Dask benchmarks of chunked pull-back warps (issue 20 targets).
+"""Out-of-core and Dask benchmarks of chunked warps, pull-back and push-forward (issue 20).
 
     python3 scripts/dask_ooc_bench.py make PATH [--size 1024] [--chunk 64]
         Write a SIZE³ uint16 OME-Zarr (v0.4) test volume to PATH chunk by chunk (never the
         whole volume in memory), and the moved 9×9×9 lattice beside it (PATH.lattice.json).
-    python3 scripts/dask_ooc_bench.py ooc PATH [--volmorph BIN] [--repeat 3]
-        The out-of-core CLI warp of the store (`volmorph warp PATH --lattice … -o OUT.ome.zarr`)
-        under /usr/bin/time -v: wall time and peak resident memory (target ≤ 1 GiB), against
-        the in-memory CLI warp of the central half-size crop (written once as PATH.crop.mha),
-        both in voxels per second (target: out of core ≥ 50 % of in memory).
-    python3 scripts/dask_ooc_bench.py dask PATH [--workers 1 2] [--chunk 64]
-        Time `volmorph.dask.warp` of the store on a distributed.LocalCluster with 1 and 2
+    python3 scripts/dask_ooc_bench.py ooc PATH [--volmorph BIN] [--repeat 3] [--method M]
+                                          [--compare crop|whole]
+        The out-of-core CLI warp of the store (`volmorph warp PATH --lattice … --method M
+        -o OUT.ome.zarr`) under /usr/bin/time -v: wall time and peak resident memory (target
+        ≤ 1 GiB), against the in-memory CLI warp with the same method of the central
+        half-size crop (written once as PATH.crop.mha) or, with `--compare whole`, of the
+        whole volume (written once as PATH.mha), both in voxels per second (target: out of
+        core ≥ 50 % of in memory). With `--compare whole` the two results are also compared
+        voxel for voxel (the chunked warp is bit for bit the in-memory one).
+    python3 scripts/dask_ooc_bench.py dask PATH [--workers 1 2] [--chunk 64] [--method M]
+        Time `volmorph.dask.warp` (method M) of the store on a distributed.LocalCluster with 1 and 2
         single-threaded worker processes (target: 2 workers ≥ 1.6× one). Each run computes
         the whole warped volume (the graph cloned with fresh keys, so nothing is reused
         from an earlier run) and only its sum is gathered to the client.
@@ -80,18 +84,29 @@ def ooc(a, vm, np):
     lattice = base + ".lattice.json"
     geometry, _, _ = vm._volmorph.zarr_info(a.path)
     n = geometry.shape
-    crop = base + ".crop.mha"
-    if not os.path.exists(crop):
-        lo = tuple(s // 4 for s in n)
-        hi = tuple(l + s // 2 for l, s in zip(lo, n))
-        vm._volmorph.zarr_read_box(a.path, lo, hi).write(crop)
-    out_z, out_m = base + ".warped.ome.zarr", base + ".crop.warped.mha"
-    runs = {"out-of-core": [], "in-memory crop": []}
+    if a.compare == "whole":
+        ref = base + ".mha"
+        if not os.path.exists(ref):
+            subprocess.run([exe, "-q", "convert", a.path, ref], check=True)
+        ref_voxels = int(np.prod(n))
+    else:
+        ref = base + ".crop.mha"
+        if not os.path.exists(ref):
+            lo = tuple(s // 4 for s in n)
+            hi = tuple(l + s // 2 for l, s in zip(lo, n))
+            vm._volmorph.zarr_read_box(a.path, lo, hi).write(ref)
+        ref_voxels = int(np.prod([s // 2 for s in n]))
+    out_z, out_m = base + ".warped.ome.zarr", base + "." + a.compare + ".warped.mha"
+    method = ["--method", a.method]
+    mem = "in-memory " + a.compare
+    runs = {"out-of-core": [], mem: []}
     for _ in range(a.repeat):
         shutil.rmtree(out_z, ignore_errors=True)
-        runs["out-of-core"].append(timed([exe, "-q", "warp", a.path, "--lattice", lattice, "-o", out_z]))
-        runs["in-memory crop"].append(timed([exe, "-q", "warp", crop, "--lattice", lattice, "-o", out_m]))
-    voxels = {"out-of-core": int(np.prod(n)), "in-memory crop": int(np.prod([s // 2 for s in n]))}
+        runs["out-of-core"].append(
+            timed([exe, "-q", "warp", a.path, "--lattice", lattice, *method, "-o", out_z])
+        )
+        runs[mem].append(timed([exe, "-q", "warp", ref, "--lattice", lattice, *method, "-o", out_m]))
+    voxels = {"out-of-core": int(np.prod(n)), mem: ref_voxels}
     rate = {}
     for k, rs in runs.items():
         wall = statistics.median(w for w, _ in rs)
@@ -103,12 +118,20 @@ def ooc(a, vm, np):
             f"{rss / 2**20:.0f} MiB"
         )
     peak = max(r for _, r in runs["out-of-core"])
-    ratio = rate["out-of-core"] / rate["in-memory crop"]
+    ratio = rate["out-of-core"] / rate[mem]
     print(
-        f"out-of-core peak RSS {peak / 2**20:.0f} MiB (target ≤ {TARGET_RSS_BYTES / 2**20:.0f} MiB); "
-        f"throughput {100 * ratio:.0f} % of the in-memory crop's (target ≥ "
-        f"{100 * TARGET_OOC_RATIO:.0f} %); load {os.getloadavg()}"
+        f"{a.method}: out-of-core peak RSS {peak / 2**20:.0f} MiB (target ≤ "
+        f"{TARGET_RSS_BYTES / 2**20:.0f} MiB); throughput {100 * ratio:.0f} % of the {mem}'s "
+        f"(target ≥ {100 * TARGET_OOC_RATIO:.0f} %); load {os.getloadavg()}"
     )
+    if a.compare == "whole":
+        same = np.array_equal(vm.Volume.read(out_m).array, vm.Volume.read(out_z).array)
+        print(f"out-of-core result {'equals' if same else 'DIFFERS FROM'} the in-memory one")
+        if not same:
+            return 1
+    if not a.keep:
+        shutil.rmtree(out_z, ignore_errors=True)
+        os.remove(out_m)
     return 0
 
 
@@ -126,7 +149,10 @@ def dask_scaling(a, vm, np):
         with distributed.LocalCluster(
             n_workers=nw, threads_per_worker=1, processes=True, dashboard_address=None
         ) as cluster, distributed.Client(cluster) as client:
-            w = vm.dask.warp(a.path, lat, chunks=(a.chunk,) * 3)
+            t = time.perf_counter()
+            w = vm.dask.warp(a.path, lat, chunks=(a.chunk,) * 3, method=a.method)
+            # A push-forward is planned here, on the client (one pass of the map over the input).
+            print(f"{a.method}, {nw} worker(s): graph built in {time.perf_counter() - t:.2f} s")
             c = a.chunk
             # Warm-up (imports, the map parsed once per worker): one chunk per worker.
             client.compute(clone(w)[: c * nw, :c, :c].sum()).result()
@@ -138,7 +164,10 @@ def dask_scaling(a, vm, np):
                 client.compute(clone(w).sum()).result()
                 times.append(time.perf_counter() - t)
             results[nw] = statistics.median(times)
-            print(f"{nw} worker(s): median {results[nw]:.2f} s over {a.repeat} runs {times}")
+            print(
+                f"{a.method}, {nw} worker(s): median {results[nw]:.2f} s over {a.repeat} runs "
+                f"{times}; load {os.getloadavg()}"
+            )
     if 1 in results and 2 in results:
         print(
             f"speed-up 2 vs 1 workers: {results[1] / results[2]:.2f}× (target ≥ "
@@ -157,6 +186,18 @@ def main() -> int:
     ap.add_argument("--workers", type=int, nargs="+", default=[1, 2])
     ap.add_argument("--repeat", type=int, default=3)
     ap.add_argument("--volmorph", help="the volmorph binary (default: $VOLMORPH, then PATH)")
+    ap.add_argument(
+        "--method",
+        default="pullback-linear",
+        help="warp method (pullback-linear|nearest, pushforward-antialiased|nearest)",
+    )
+    ap.add_argument(
+        "--compare",
+        choices=["crop", "whole"],
+        default="crop",
+        help="ooc: the in-memory reference warps the central half-size crop or the whole volume",
+    )
+    ap.add_argument("--keep", action="store_true", help="ooc: keep the warped outputs")
     a = ap.parse_args()
     try:
         import numpy as np

@@ -1,4 +1,4 @@
-//! Chunked pull-back and OME-Zarr stores, the Rust half of `volmorph.dask`.
+//! Chunked pull-back and push-forward and OME-Zarr stores, the Rust half of `volmorph.dask`.
 //!
 //! Boxes cross this boundary in numpy order: `start` and `stop` are `(z, y, x)` voxel indices
 //! (half-open), as dask slices them. Each call is one library call
@@ -7,15 +7,15 @@
 use std::path::PathBuf;
 
 use pyo3::prelude::*;
-use volmorph_volume::sample::Interpolation;
 use volmorph_volume::{IndexBox, VoxelType};
 use volmorph_volume_io::omezarr::{
     self, OmeZarrReader, OmeZarrWriter, ZarrVersion, ZarrWriteOptions,
 };
 use volmorph_warp::apply::WarpMethod;
+use volmorph_warp::chunked::push::{self, PushMethod, PushSource};
 use volmorph_warp::chunked::{
-    chunk_geometry, chunk_indices, chunk_preimage as preimage, preimage_box, pull_chunk,
-    sample_chunk,
+    ChunkGrid, ChunkedMethod, chunk_geometry, chunk_indices, chunk_preimage as preimage,
+    preimage_box, pull_chunk, sample_chunk,
 };
 use volmorph_warp::pullback::ResampleOptions;
 
@@ -25,24 +25,45 @@ use crate::volume::{PyGeometry, PyVolume};
 
 type Zyx = (usize, usize, usize);
 
-/// The pull-back options of `method` (`pullback-linear` or `pullback-nearest`).
-fn options(method: &str, background: f64) -> PyResult<ResampleOptions> {
+/// The chunked form of `method` with `background`: the library's one policy
+/// ([`ChunkedMethod::new`]).
+fn chunked_method(method: &str, background: f64) -> PyResult<ChunkedMethod> {
     let m: WarpMethod = method
         .parse()
         .map_err(|e: volmorph_warp::WarpError| to_py(crate::error::InputError::new_err, &e))?;
-    if !background.is_finite() {
-        return Err(input(format!(
-            "background must be finite, got {background}"
-        )));
+    ChunkedMethod::new(m, background).map_err(|e| to_py(crate::error::InputError::new_err, &e))
+}
+
+/// How `method` with `background` runs chunk by chunk: `"pullback"` (`chunk_preimage`, then
+/// `warp_chunk` or `warp_zarr_chunk` per chunk) or `"push"` (`push_plan`, then `push_chunk` or
+/// `push_zarr_chunk` per chunk). The library's one policy of what chunks
+/// ([`ChunkedMethod::new`]); raises `InputError` naming the methods that do.
+#[pyfunction]
+#[pyo3(signature = (method, background=0.0))]
+pub fn chunked_kind(method: &str, background: f64) -> PyResult<&'static str> {
+    Ok(match chunked_method(method, background)? {
+        ChunkedMethod::Pullback(_) => "pullback",
+        ChunkedMethod::Push(_) => "push",
+    })
+}
+
+/// The pull-back options of `method` (`pullback-linear` or `pullback-nearest`).
+fn options(method: &str, background: f64) -> PyResult<ResampleOptions> {
+    match chunked_method(method, background)? {
+        ChunkedMethod::Pullback(o) => Ok(o),
+        ChunkedMethod::Push(_) => Err(input(format!(
+            "{method} is a push-forward: plan it with push_plan and run push_chunk or \
+             push_zarr_chunk"
+        ))),
     }
-    match m.interpolation().filter(|_| m.is_pullback()) {
-        Some(i @ (Interpolation::Linear | Interpolation::Nearest)) => {
-            Ok(ResampleOptions::new(i, background))
-        }
-        _ => Err(input(format!(
-            "chunked warps are pull-backs with linear or nearest interpolation \
-             (pullback-linear, pullback-nearest), not {method}: cubic B-splines prefilter \
-             the whole volume and push-forwards scatter across chunks"
+}
+
+/// The push-forward of `method` (`pushforward-antialiased` or `pushforward-nearest`).
+fn push_method(method: &str, background: f64) -> PyResult<PushMethod> {
+    match chunked_method(method, background)? {
+        ChunkedMethod::Push(m) => Ok(m),
+        ChunkedMethod::Pullback(_) => Err(input(format!(
+            "{method} is a pull-back: use chunk_preimage and warp_chunk or warp_zarr_chunk"
         ))),
     }
 }
@@ -178,6 +199,163 @@ pub fn warp_zarr_chunk(
             |b| reader.read_box(b).map_err(volmorph_warp::WarpError::from),
         )
         .map_err(|e| e.to_string())
+    });
+    let out = out.map_err(WarpError::new_err)?;
+    PyVolume::from_rust(py, out)
+}
+
+/// A box `(start, stop)` in numpy order.
+type ZyxBox = (Zyx, Zyx);
+
+/// One source of a push-forward chunk: `(slab, input box, output box)`, boxes `(z, y, x)`.
+type PySource = (usize, ZyxBox, ZyxBox);
+
+fn to_sources(sources: &[PySource]) -> Vec<PushSource> {
+    sources
+        .iter()
+        .map(|&(slab, (a, b), (c, d))| PushSource {
+            slab,
+            input: index_box(a, b),
+            output: index_box(c, d),
+        })
+        .collect()
+}
+
+/// Plan the chunked push-forward of an input on `input_geometry` through `map` onto
+/// `output_geometry` cut into `chunks` (dask's normalised chunks: the chunk lengths along z,
+/// y and x). Returns, for every output chunk, `(block index (z, y, x), input box or None,
+/// sources)`: the box of the input the chunk reads (`(start, stop)`, `(z, y, x)`; `None` when
+/// nothing reaches it) and its sources `(slab, input box, output box)` in slab order, to hand
+/// to `push_chunk` or `push_zarr_chunk`. One evaluation of the map over the input, in
+/// parallel threads, with the GIL released.
+#[pyfunction]
+#[pyo3(signature = (map, input_geometry, output_geometry, chunks, method="pushforward-antialiased", background=0.0))]
+#[allow(clippy::type_complexity)]
+pub fn push_plan(
+    py: Python<'_>,
+    map: &PyMap,
+    input_geometry: PyGeometry,
+    output_geometry: PyGeometry,
+    chunks: (Vec<usize>, Vec<usize>, Vec<usize>),
+    method: &str,
+    background: f64,
+) -> PyResult<Vec<(Zyx, Option<ZyxBox>, Vec<PySource>)>> {
+    let m = push_method(method, background)?;
+    let grid = ChunkGrid::from_sizes([chunks.2, chunks.1, chunks.0])
+        .map_err(|e| to_py(crate::error::InputError::new_err, &e))?;
+    let plan = py
+        .detach(|| {
+            push::plan_push(
+                &map.inner,
+                &input_geometry.inner,
+                &output_geometry.inner,
+                &m,
+                &grid,
+            )
+        })
+        .map_err(|e| to_py(WarpError::new_err, &e))?;
+    Ok((0..grid.len())
+        .map(|c| {
+            let p = grid.position(c);
+            let b = plan.input_box(c);
+            let sources = plan
+                .sources(c)
+                .iter()
+                .map(|s| (s.slab, zyx(s.input), zyx(s.output)))
+                .collect();
+            ((p[2], p[1], p[0]), (!b.is_empty()).then(|| zyx(b)), sources)
+        })
+        .collect())
+}
+
+/// Push forward the output chunk `start..stop` of `output_geometry` from `region`, the
+/// voxels of the input box starting at `region_start` (`(z, y, x)`), which must be the
+/// chunk's input box from `push_plan` (or the one voxel at the origin when it has none), with
+/// the chunk's `sources` from `push_plan`. The result equals the same voxels of
+/// `warp(volume, map, method, output_geometry)` bit for bit.
+#[pyfunction]
+#[pyo3(signature = (region, region_start, sources, map, input_geometry, output_geometry, start, stop, method="pushforward-antialiased", background=0.0))]
+#[allow(clippy::too_many_arguments)]
+pub fn push_chunk(
+    py: Python<'_>,
+    region: &PyVolume,
+    region_start: Zyx,
+    sources: Vec<PySource>,
+    map: &PyMap,
+    input_geometry: PyGeometry,
+    output_geometry: PyGeometry,
+    start: Zyx,
+    stop: Zyx,
+    method: &str,
+    background: f64,
+) -> PyResult<PyVolume> {
+    let m = push_method(method, background)?;
+    let data = region.to_rust(py)?;
+    let sources = to_sources(&sources);
+    let rs = [region_start.2, region_start.1, region_start.0];
+    let out = py.detach(|| -> Result<_, String> {
+        push::push_chunk(
+            &map.inner,
+            &input_geometry.inner,
+            &output_geometry.inner,
+            &m,
+            index_box(start, stop),
+            &sources,
+            |want| {
+                let have = data.geometry().dims;
+                let given = IndexBox {
+                    start: rs,
+                    end: [0, 1, 2].map(|a| rs[a] + have[a]),
+                };
+                if given != want {
+                    return Err(volmorph_warp::WarpError::InvalidOption(format!(
+                        "the region (start {region_start:?}, shape {:?}) is not the chunk's \
+                         input box {:?}",
+                        (have[2], have[1], have[0]),
+                        zyx(want)
+                    )));
+                }
+                Ok(data)
+            },
+        )
+        .map_err(|e| crate::error::chain(&e))
+    });
+    let out = out.map_err(WarpError::new_err)?;
+    PyVolume::from_rust(py, out)
+}
+
+/// Push forward the output chunk `start..stop` of `output_geometry` from resolution `level`
+/// of the OME-Zarr image at `path`, reading only the chunk's input box, with the chunk's
+/// `sources` from `push_plan`.
+#[pyfunction]
+#[pyo3(signature = (path, sources, map, output_geometry, start, stop, method="pushforward-antialiased", background=0.0, level=0))]
+#[allow(clippy::too_many_arguments)]
+pub fn push_zarr_chunk(
+    py: Python<'_>,
+    path: PathBuf,
+    sources: Vec<PySource>,
+    map: &PyMap,
+    output_geometry: PyGeometry,
+    start: Zyx,
+    stop: Zyx,
+    method: &str,
+    background: f64,
+    level: usize,
+) -> PyResult<PyVolume> {
+    let m = push_method(method, background)?;
+    let sources = to_sources(&sources);
+    let out = py.detach(|| -> Result<_, String> {
+        let reader = OmeZarrReader::open_level(&path, level).map_err(|e| e.to_string())?;
+        push::push_chunk(
+            &map.inner,
+            reader.geometry(),
+            &output_geometry.inner,
+            &m,
+            index_box(start, stop),
+            &sources,
+            |b| reader.read_box(b).map_err(volmorph_warp::WarpError::from),
+        )
+        .map_err(|e| crate::error::chain(&e))
     });
     let out = out.map_err(WarpError::new_err)?;
     PyVolume::from_rust(py, out)

@@ -44,6 +44,10 @@ fn _volmorph(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add_function(wrap_pyfunction!(chunked::chunk_preimage, m)?)?;
     m.add_function(wrap_pyfunction!(chunked::warp_chunk, m)?)?;
     m.add_function(wrap_pyfunction!(chunked::warp_zarr_chunk, m)?)?;
+    m.add_function(wrap_pyfunction!(chunked::chunked_kind, m)?)?;
+    m.add_function(wrap_pyfunction!(chunked::push_plan, m)?)?;
+    m.add_function(wrap_pyfunction!(chunked::push_chunk, m)?)?;
+    m.add_function(wrap_pyfunction!(chunked::push_zarr_chunk, m)?)?;
     m.add_function(wrap_pyfunction!(chunked::zarr_info, m)?)?;
     m.add_function(wrap_pyfunction!(chunked::zarr_read_box, m)?)?;
     m.add_function(wrap_pyfunction!(chunked::zarr_store_chunk, m)?)?;

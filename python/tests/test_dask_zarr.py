@@ -88,6 +88,31 @@ def test_cli_out_of_core_warp_equals_in_memory_warp(tmp_path, cli):
     assert r.returncode != 0 and "pullback-linear" in r.stderr
 
 
+def test_cli_out_of_core_push_forward_equals_the_in_memory_cli_warp(tmp_path, cli):
+    v = axis_aligned((26, 23, 21))
+    m = bent_lattice(v, amount=2.5)
+    mha = tmp_path / "in.mha"  # MetaImage keeps the geometry exactly
+    v.write(str(mha))
+    src = tmp_path / "in.ome.zarr"
+    subprocess.run([cli, "convert", str(mha), str(src), "--chunk", "9,7,5"], check=True)
+    lat = tmp_path / "m.json"
+    m.save(str(lat))
+    for method, extra in [
+        ("pushforward-antialiased", ["--pad", "2", "--default", "1.5"]),
+        ("pushforward-nearest", []),
+    ]:
+        args = ["warp", "--lattice", str(lat), "--method", method, *extra]
+        in_memory = tmp_path / f"{method}.mha"
+        subprocess.run([cli, *args, str(mha), "-o", str(in_memory)], check=True)
+        out = tmp_path / f"{method}.ome.zarr"
+        subprocess.run(
+            [cli, *args, str(src), "-o", str(out), "--chunk", "5,11,7"], check=True
+        )
+        a, b = vm.Volume.read(str(in_memory)), vm.Volume.read(str(out))
+        assert same_bits(b.array, a.array), method
+        assert b.spacing == a.spacing and b.origin == a.origin
+
+
 # ---- Dask ---------------------------------------------------------------------------------
 
 
@@ -182,6 +207,97 @@ def test_dask_array_on_a_local_cluster_with_odd_chunks_and_rotated_grids():
         workers = {t["worker"] for t in ts.data}
         assert len(workers) == 2, workers
     assert same_bits(got, ref)
+
+
+# ---- Push-forward on Dask ----------------------------------------------------------------
+
+
+def padded_rotated_output():
+    """An output grid rotated against the input's, larger than the input's image: its corner
+    chunks receive nothing (they are the background)."""
+    return vm.Geometry(
+        (29, 24, 27), spacing=(1.1, 1.3, 1.6), origin=(-14.0, -16.0, -24.0),
+        direction=ROTATION.T.tolist(),
+    )
+
+
+def test_dask_push_forward_is_bit_identical_on_odd_chunks_with_rotated_and_padded_grids():
+    da = pytest.importorskip("dask.array")
+    v = blob((23, 19, 17))  # rotated input grid
+    m = bent_lattice(v, amount=2.5)
+    go = padded_rotated_output()
+    src = da.from_array(v.array, chunks=(7, 5, 6))
+    for method, background in [("pushforward-antialiased", 3.5), ("pushforward-nearest", 0.0)]:
+        ref = vm.warp(v, m, method, geometry=go, background=background).array
+        plan = vm.dask.push_plan(m, v.geometry, go, ((5,) * 5 + (4,), (7,) * 3 + (3,), (9,) * 3))
+        assert any(b is None for _, b, _ in plan), "some chunk must receive nothing"
+        for chunks in [(5, 7, 9), (29, 24, 27), (4, 11, 3)]:
+            w = vm.dask.warp(
+                src, m, go, chunks=chunks, input_geometry=v.geometry, method=method,
+                background=background,
+            )
+            assert w.dtype == ref.dtype
+            assert same_bits(w.compute(scheduler="threads"), ref), (method, chunks)
+
+
+def test_dask_push_forward_refuses_what_does_not_chunk():
+    da = pytest.importorskip("dask.array")
+    v = blob((8, 7, 6))
+    m = bent_lattice(v)
+    src = da.from_array(v.array, chunks=4)
+    with pytest.raises(vm.InputError, match="holes stay 0"):
+        vm.dask.warp(src, m, input_geometry=v.geometry, method="pushforward-nearest", background=1)
+    with pytest.raises(vm.InputError, match="pushforward-antialiased"):
+        vm.dask.warp(src, m, input_geometry=v.geometry, method="inverse-linear")
+    with pytest.raises(vm.InputError, match="pull-back"):
+        vm.dask.push_plan(m, v.geometry, v.geometry, ((4, 4), (4, 3), (6,)), "pullback-linear")
+
+
+def test_dask_push_forward_of_an_ome_zarr_store_reads_boxes_and_writes_a_store(tmp_path):
+    pytest.importorskip("dask.array")
+    v = axis_aligned((22, 19, 18))
+    m = bent_lattice(v, amount=2.5)
+    p = tmp_path / "in.ome.zarr"
+    v.write(str(p))
+    ref = vm.warp(v, m, "pushforward-antialiased").array
+    w = vm.dask.warp(str(p), m, chunks=(6, 7, 5), method="pushforward-antialiased")
+    # One task per output chunk, no other tasks.
+    assert len(w.__dask_graph__()) == np.prod([len(c) for c in w.chunks])
+    assert same_bits(w.compute(scheduler="threads"), ref)
+    out = tmp_path / "out.ome.zarr"
+    vm.dask.warp(str(p), m, chunks=(8, 8, 8), output=out, method="pushforward-antialiased")
+    assert same_bits(vm.Volume.read(str(out)).array, ref)
+
+
+def test_dask_push_forward_on_a_local_cluster_with_two_worker_processes(tmp_path):
+    da = pytest.importorskip("dask.array")
+    distributed = pytest.importorskip("distributed")
+    v = blob((23, 19, 17), np.uint16)  # rotated input grid
+    m = bent_lattice(v, amount=2.5)
+    go = padded_rotated_output()
+    ref = vm.warp(v, m, "pushforward-antialiased", geometry=go, background=2.0).array
+    a = axis_aligned((21, 18, 19))
+    ma = bent_lattice(a, amount=2.5)
+    p = tmp_path / "in.ome.zarr"
+    a.write(str(p))
+    ref_zarr = vm.warp(a, ma, "pushforward-antialiased").array
+    with _two_worker_cluster(distributed) as cluster, distributed.Client(cluster) as client:
+        assert len(client.scheduler_info()["workers"]) == 2
+        src = da.from_array(v.array, chunks=(7, 5, 6))
+        w = vm.dask.warp(
+            src, m, go, chunks=(5, 7, 9), input_geometry=v.geometry,
+            method="pushforward-antialiased", background=2.0,
+        )
+        with distributed.get_task_stream(client) as ts:
+            got = client.compute(w).result()
+        # The tasks ran in both worker processes.
+        workers = {t["worker"] for t in ts.data}
+        assert len(workers) == 2, workers
+        got_zarr = client.compute(
+            vm.dask.warp(str(p), ma, chunks=(5, 6, 7), method="pushforward-antialiased")
+        ).result()
+    assert same_bits(got, ref)
+    assert same_bits(got_zarr, ref_zarr)
 
 
 def test_dask_cluster_warp_of_a_store_written_by_ome_zarr_read_back_by_zarr(tmp_path):

@@ -248,6 +248,41 @@ def warp_zarr_chunk(
     background: float = 0.0,
     level: int = 0,
 ) -> Volume: ...
+_Box = Tuple[_Zyx, _Zyx]
+_PushSource = Tuple[int, _Box, _Box]
+
+def chunked_kind(method: str, background: float = 0.0) -> str: ...
+def push_plan(
+    map: Map,
+    input_geometry: Geometry,
+    output_geometry: Geometry,
+    chunks: Tuple[Sequence[int], Sequence[int], Sequence[int]],
+    method: str = "pushforward-antialiased",
+    background: float = 0.0,
+) -> List[Tuple[_Zyx, Optional[_Box], List[_PushSource]]]: ...
+def push_chunk(
+    region: Volume,
+    region_start: _Zyx,
+    sources: Sequence[_PushSource],
+    map: Map,
+    input_geometry: Geometry,
+    output_geometry: Geometry,
+    start: _Zyx,
+    stop: _Zyx,
+    method: str = "pushforward-antialiased",
+    background: float = 0.0,
+) -> Volume: ...
+def push_zarr_chunk(
+    path: _Path,
+    sources: Sequence[_PushSource],
+    map: Map,
+    output_geometry: Geometry,
+    start: _Zyx,
+    stop: _Zyx,
+    method: str = "pushforward-antialiased",
+    background: float = 0.0,
+    level: int = 0,
+) -> Volume: ...
 def zarr_info(path: _Path, level: int = 0) -> Tuple[Geometry, str, _Zyx]: ...
 def zarr_read_box(path: _Path, start: _Zyx, stop: _Zyx, level: int = 0) -> Volume: ...
 def zarr_store_chunk(staging: _Path, start: _Zyx, data: Volume) -> None: ...

@@ -91,7 +91,7 @@ enum Command {
     /// Warp a volume through any map (lattice, handle map, NURBS geometry, composition, ITK
     /// transform).
     #[command(
-        after_help = "Examples:\n  volmorph warp ct.nii.gz --map moved.json -o warped.nii.gz --method pullback-cubic\n  volmorph warp model.nii.gz --map ffd.json -o deformed.nii.gz --method inverse-linear --nonconverged-mask failed.nii.gz\n  volmorph warp ct.nii.gz --map registration.tfm -o resampled.nii.gz\n  volmorph warp teapot.nii.gz --map bent.json -o bent.nii.gz --method pushforward-antialiased --pad 8\n  volmorph warp ct.nii.gz --map moved.json -o on_ref.nii.gz --like reference.nii.gz\n  volmorph warp cells.ome.zarr --lattice moved.json -o warped.ome.zarr   (out of core, chunk by chunk)"
+        after_help = "Examples:\n  volmorph warp ct.nii.gz --map moved.json -o warped.nii.gz --method pullback-cubic\n  volmorph warp model.nii.gz --map ffd.json -o deformed.nii.gz --method inverse-linear --nonconverged-mask failed.nii.gz\n  volmorph warp ct.nii.gz --map registration.tfm -o resampled.nii.gz\n  volmorph warp teapot.nii.gz --map bent.json -o bent.nii.gz --method pushforward-antialiased --pad 8\n  volmorph warp ct.nii.gz --map moved.json -o on_ref.nii.gz --like reference.nii.gz\n  volmorph warp cells.ome.zarr --lattice moved.json -o warped.ome.zarr   (out of core, chunk by chunk)\n  volmorph warp ct.ome.zarr --map ffd.json -o deformed.ome.zarr --method pushforward-antialiased --pad 16   (out of core)"
     )]
     Warp(cmd::warp::Args),
     /// Drag points of a volume to new places, or a start curve onto a goal curve in steps; the

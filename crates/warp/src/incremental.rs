@@ -25,8 +25,10 @@
 //!    six neighbours' (face centres are averages), so the voxels whose boxes change are the
 //!    influenced centres dilated by one voxel, clipped to the source.
 //! 3. **Remap.** The influenced centre images are re-evaluated with the new map through
-//!    [`SpaceMap::apply_grid`](volmorph_deform::SpaceMap::apply_grid) on the sub-grid they form (the evaluation a full push-forward
-//!    uses) and stored, in one pass that also bounds the redone voxels' old and new boxes.
+//!    [`SpaceMap::apply_grid`](volmorph_deform::SpaceMap::apply_grid) on the fixed tiles
+//!    every push-forward evaluates them on (whole tiles of 64 × 64 points one plane deep, so
+//!    the images have the bits of a full evaluation) and stored, in one pass that also
+//!    bounds the redone voxels' old and new boxes.
 //!    Every output voxel those boxes overlap may change; no other can.
 //! 4. **Recompute the changed output region.** True erases the old boxes of the redone
 //!    voxels and adds their new ones. Here the tallies `[V, W]` of the output voxels in the
@@ -45,9 +47,9 @@
 //! Every output voxel sums its contributions in one fixed order (source voxels in index
 //! order), whatever region is recomputed and however the work is split over threads, so
 //! results are bit for bit the same for any number of threads, and after any sequence of
-//! edits the volume is the one a new engine built with the current map holds, up to
-//! the rounding of centre images evaluated on a sub-grid instead of the whole grid (about
-//! 1e-14 relative). It equals
+//! edits the volume is, bit for bit, the one a new engine built with the current map holds
+//! (centre images are evaluated on the same fixed tiles whatever region is redone). It
+//! equals
 //! [`push_forward_antialiased_f32`](crate::pushforward::push_forward_antialiased_f32) with
 //! the current map and the same options up to the `f32` accumulation of the latter
 //! (about 1e-6 relative; the engine sums in `f64`).
@@ -110,9 +112,10 @@ use volmorph_deform::live::{Influence, LinearMap, changed_parameters};
 use volmorph_volume::{Geometry, IndexBox, Volume, Voxel};
 
 use crate::WarpError;
+use crate::centres::PointGrid;
 use crate::pushforward::{
-    AntialiasOptions, FaceCentres, PushForwardStats, ToIndex, normalise, offset_grid,
-    output_geometry, try_filled,
+    AntialiasOptions, FaceCentres, PushForwardStats, ToIndex, normalise, output_geometry,
+    try_filled,
 };
 use crate::tally::{Region, Voxels, reaches_grid, row, splat, vmax, vmin};
 
@@ -412,12 +415,11 @@ impl<M: LinearMap + Clone> IncrementalPushForward<M> {
         let mut centres = try_filled(clen, DVec3::ZERO, "voxel-centre images")?;
         progress.start("mapping voxel centres", 1);
         progress.check()?;
-        let grid = offset_grid(&g, DVec3::splat(-1.0), cdims);
-        map.apply_grid(&grid, &mut centres)
-            .map_err(|source| WarpError::MapOnGrid {
-                grid: "voxel-centre",
-                source,
-            })?;
+        let all = Region {
+            lo: [0; 3],
+            dims: cdims,
+        };
+        PointGrid::centres(g.dims).eval_box(&map, &g, &all, &mut centres)?;
         centres
             .par_iter_mut()
             .with_min_len(4096)
@@ -575,25 +577,18 @@ impl<M: LinearMap + Clone> IncrementalPushForward<M> {
             redo.lo[a] = lo;
             redo.dims[a] = hi.saturating_sub(lo);
         }
-        // New centre images of the influenced box (margin coordinates m = source index + 1),
-        // in physical space.
-        let sub = offset_grid(
-            &self.source,
-            DVec3::new(
-                influenced.lo[0] as f64 - 1.0,
-                influenced.lo[1] as f64 - 1.0,
-                influenced.lo[2] as f64 - 1.0,
-            ),
-            influenced.dims,
-        );
+        // New centre images of the influenced box (margin coordinates m = source index + 1,
+        // the indices of the centre grid), in physical space, on the tiles every push-forward
+        // evaluates them on: the very bits a new engine or the full push-forward holds.
         let len = influenced.len();
         reserve(&mut self.fresh, len, "voxel-centre images")?;
         self.fresh.resize(len, DVec3::ZERO);
-        map.apply_grid(&sub, &mut self.fresh[..len])
-            .map_err(|source| WarpError::MapOnGrid {
-                grid: "voxel-centre",
-                source,
-            })?;
+        PointGrid::centres(self.source.dims).eval_box(
+            &map,
+            &self.source,
+            &influenced,
+            &mut self.fresh[..len],
+        )?;
         // Everything that can fail is done: commit.
         let before = self.count(&redo);
         // The redone voxels' boxes, old and new, lie between the centre images they read:

@@ -21,6 +21,7 @@
 //! * [`jacobian`] — determinant maps of a map on a grid, and folding statistics.
 
 pub mod apply;
+mod centres;
 pub mod chunked;
 mod error;
 pub mod incremental;

@@ -29,7 +29,9 @@
 //!   or from mapping the three face-centre grids, each offset by half a voxel along one axis
 //!   ([`FaceCentres::Mapped`], three evaluations per voxel). Either way the map is evaluated
 //!   through its grid entry point [`SpaceMap::apply_grid`] (lattices use their table-driven
-//!   fast path), never pointwise six times per voxel.
+//!   fast path), never pointwise six times per voxel, on fixed tiles of 64 × 64 points one
+//!   plane deep (`centres::TILE`), so that a chunk of the output can recompute any part of
+//!   the evaluation with the same bits ([`crate::chunked::push`]).
 //! * **Normalisation (True §5.4, verbatim rule).** Per output voxel the weights `W = Σ w` and
 //!   weighted values `V = Σ w·d` are tallied; then `d = V / W` where `W ≥ 1` (overlapping
 //!   bounding boxes), and `d = V` where `W < 1` — "the portion left uncovered \[counts\] as
@@ -42,7 +44,8 @@
 //!   [`PushForwardStats::non_finite`]; it contributes nothing.
 //! * Work is split into input z-slabs whose size depends only on the input dimensions, and
 //!   the slabs' contributions are combined in slab order, so results are bit-identical for
-//!   any number of rayon threads.
+//!   any number of rayon threads, and [`crate::chunked::push`] reproduces them chunk by
+//!   chunk.
 //!
 //! ```
 //! use glam::DVec3;
@@ -67,7 +70,8 @@ use volmorph_deform::SpaceMap;
 use volmorph_volume::{Geometry, Volume, VolumeError, Voxel};
 
 use crate::WarpError;
-use crate::tally::{Region, Voxels, cell_range, splat, tally_averaged};
+use crate::centres::PointGrid;
+use crate::tally::{FaceImages, Region, Voxels, cell_range, tally_averaged, tally_mapped};
 
 /// Input voxels per slab (rounded to whole z-slices, at least one slice). Fixed, so the slab
 /// partition — and with it the order of floating-point sums — never depends on the thread
@@ -202,7 +206,7 @@ pub(crate) fn try_filled<V: Clone>(
 }
 
 /// Slabs of whole input z-slices: `(k0, k1)` half-open ranges, size fixed by the dims.
-fn slabs(dims: [usize; 3]) -> Vec<(usize, usize)> {
+pub(crate) fn slabs(dims: [usize; 3]) -> Vec<(usize, usize)> {
     let plane = dims[0].saturating_mul(dims[1]).max(1);
     let step = (SLAB_VOXELS / plane).max(1);
     (0..dims[2])
@@ -214,7 +218,7 @@ fn slabs(dims: [usize; 3]) -> Vec<(usize, usize)> {
 /// Nearest output index along one axis of continuous index `x` (ties go up), or `None`
 /// outside `0..n`.
 #[inline]
-fn round_index(x: f64, n: usize) -> Option<usize> {
+pub(crate) fn round_index(x: f64, n: usize) -> Option<usize> {
     let r = (x + 0.5).floor();
     // `n as f64` is exact for any size a validated geometry allows.
     if r >= 0.0 && r < n as f64 {
@@ -277,16 +281,16 @@ pub fn push_forward_nearest_with<T: Voxel, M: SpaceMap + ?Sized>(
     let slab_list = slabs(g.dims);
     let max_slab = slab_list.iter().map(|s| s.1 - s.0).max().unwrap_or(0);
     let mut images = try_filled(plane * max_slab, DVec3::ZERO, "mapped points")?;
+    let centres = PointGrid::centres(g.dims);
     progress.start("nearest push-forward", g.dims[2] as u64);
     for (k0, k1) in slab_list {
         progress.check()?;
-        let grid = offset_grid(g, DVec3::new(0.0, 0.0, k0 as f64), [nx, ny, k1 - k0]);
-        let images = &mut images[..grid.len()];
-        map.apply_grid(&grid, images)
-            .map_err(|source| WarpError::MapOnGrid {
-                grid: "voxel-centre",
-                source,
-            })?;
+        let bx = Region {
+            lo: [1, 1, k0 + 1],
+            dims: [nx, ny, k1 - k0],
+        };
+        let images = &mut images[..bx.len()];
+        centres.eval_box(map, g, &bx, images)?;
         let values = &data[k0 * plane..k1 * plane];
         for (&p, &v) in images.iter().zip(values) {
             if !p.is_finite() {
@@ -431,7 +435,7 @@ fn finish<U: Voxel>(
 /// call per voxel, from SSE4.1 on a few inline instructions. Both give the same bits (the
 /// same IEEE operations; Rust never contracts a multiply and an add).
 #[multiversion(targets("x86_64+avx2+fma"))]
-fn normalise_into<U: Voxel>(src: &[[f32; 2]], dst: &mut [U], background: f64) {
+pub(crate) fn normalise_into<U: Voxel>(src: &[[f32; 2]], dst: &mut [U], background: f64) {
     for (d, &[v, w]) in dst.iter_mut().zip(src) {
         *d = U::from_f64(normalise(f64::from(v), f64::from(w), background));
     }
@@ -498,17 +502,23 @@ fn accumulate<T: Voxel, M: SpaceMap + ?Sized>(
     Ok((acc, stats))
 }
 
-/// Evaluate `map` on the points of `grid`, convert the images to output indices and return
-/// them with the span `(min z, max z)` of the finite ones (`(+∞, −∞)` if none).
-fn face_images<M: SpaceMap + ?Sized>(
+/// Evaluate `map` on the points of box `bx` of `grid` (tile by tile, see
+/// [`crate::centres`]), convert the images to output indices and return them with the span
+/// `(min z, max z)` of the finite ones (`(+∞, −∞)` if none).
+pub(crate) fn images<M: SpaceMap + ?Sized>(
     map: &M,
-    grid: &Geometry,
+    input: &Geometry,
+    grid: &PointGrid,
+    bx: &Region,
     to_index: &ToIndex,
-    name: &'static str,
 ) -> Result<(Vec<DVec3>, (f64, f64)), WarpError> {
-    let mut pts = try_filled(grid.len(), DVec3::ZERO, "mapped points")?;
-    map.apply_grid(grid, &mut pts)
-        .map_err(|source| WarpError::MapOnGrid { grid: name, source })?;
+    let mut pts = volmorph_io::try_vec("mapped points", bx.len(), DVec3::ZERO).map_err(|_| {
+        WarpError::Allocation {
+            what: "mapped points",
+            bytes: bx.len().saturating_mul(std::mem::size_of::<DVec3>()),
+        }
+    })?;
+    grid.eval_box(map, input, bx, &mut pts)?;
     // Convert to output indices and take the z span of the finite images in the same pass
     // (min/max are order-independent, so the span does not depend on the thread count).
     let span = pts
@@ -548,52 +558,42 @@ fn tally_slab<T: Voxel, M: SpaceMap + ?Sized>(
     let g = input.geometry();
     let [nx, ny, _] = g.dims;
     let nk = k1 - k0;
-    let kf = k0 as f64;
     let values = &input.data()[k0 * nx * ny..k1 * nx * ny];
     match faces {
         FaceCentres::Mapped => {
-            let gx = offset_grid(g, DVec3::new(-0.5, 0.0, kf), [nx + 1, ny, nk]);
-            let gy = offset_grid(g, DVec3::new(0.0, -0.5, kf), [nx, ny + 1, nk]);
-            let gz = offset_grid(g, DVec3::new(0.0, 0.0, kf - 0.5), [nx, ny, nk + 1]);
-            let (fx, sx) = face_images(map, &gx, to_index, "x-face")?;
-            let (fy, sy) = face_images(map, &gy, to_index, "y-face")?;
-            let (fz, sz) = face_images(map, &gz, to_index, "z-face")?;
+            let face = |a: usize| {
+                let mut dims = [nx, ny, nk];
+                dims[a] += 1;
+                let bx = Region {
+                    lo: [0, 0, k0],
+                    dims,
+                };
+                images(map, g, &PointGrid::faces(a, g.dims), &bx, to_index)
+            };
+            let (fx, sx) = face(0)?;
+            let (fy, sy) = face(1)?;
+            let (fz, sz) = face(2)?;
             let span = union(union(sx, sy), sz);
             let (region, mut data) = slab_buffer(output, span)?;
-            let out = output.dims;
-            let mut stats = PushForwardStats::default();
-            let mut n = 0usize;
-            for kk in 0..nk {
-                for j in 0..ny {
-                    for i in 0..nx {
-                        let d = values[n].to_f64();
-                        n += 1;
-                        let bx = (nx + 1) * (j + ny * kk) + i;
-                        let by = nx * (j + (ny + 1) * kk) + i;
-                        let bz = nx * (j + ny * kk) + i;
-                        let pts = [
-                            fx[bx],
-                            fx[bx + 1],
-                            fy[by],
-                            fy[by + nx],
-                            fz[bz],
-                            fz[bz + nx * ny],
-                        ];
-                        if !pts.iter().all(|p| p.is_finite()) {
-                            stats.non_finite += 1;
-                            continue;
-                        }
-                        let (lo, hi) = pts[1..]
-                            .iter()
-                            .fold((pts[0], pts[0]), |(lo, hi), p| (lo.min(*p), hi.max(*p)));
-                        if splat(lo, hi, d, 1.0, out, &region, &mut data) {
-                            stats.mapped += 1;
-                        } else {
-                            stats.outside += 1;
-                        }
-                    }
-                }
-            }
+            let faces = FaceImages {
+                x: &fx,
+                y: &fy,
+                z: &fz,
+                dims: [nx, ny, nk],
+            };
+            let all = Region {
+                lo: [0; 3],
+                dims: [nx, ny, nk],
+            };
+            let stats = tally_mapped(
+                values,
+                [nx, ny, nk],
+                &all,
+                &faces,
+                output.dims,
+                &region,
+                &mut data,
+            );
             Ok(SlabTally {
                 z0: region.lo[2],
                 data,
@@ -602,13 +602,12 @@ fn tally_slab<T: Voxel, M: SpaceMap + ?Sized>(
         }
         FaceCentres::AveragedCentres => {
             // Voxel centres with a one-voxel margin: index (i, j, k) of the slab is entry
-            // (i + 1, j + 1, k + 1) of this grid.
-            let gc = offset_grid(
-                g,
-                DVec3::new(-1.0, -1.0, kf - 1.0),
-                [nx + 2, ny + 2, nk + 2],
-            );
-            let (c, span) = face_images(map, &gc, to_index, "voxel-centre")?;
+            // (i + 1, j + 1, k + 1) of this box.
+            let bx = Region {
+                lo: [0, 0, k0],
+                dims: [nx + 2, ny + 2, nk + 2],
+            };
+            let (c, span) = images(map, g, &PointGrid::centres(g.dims), &bx, to_index)?;
             // The face averages lie within the span of the centres.
             let (region, mut data) = slab_buffer(output, span)?;
             let src = Voxels {

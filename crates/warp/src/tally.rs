@@ -554,6 +554,83 @@ pub(crate) fn tally_averaged<'a, T: Voxel, C: Cell>(
     stats
 }
 
+/// The face-centre images (output index space) of a box of input voxels of `dims`: `x` on
+/// `(dims₀ + 1) × dims₁ × dims₂` points (voxel `i` has x-faces `i` and `i + 1`), `y` on
+/// `dims₀ × (dims₁ + 1) × dims₂`, `z` on `dims₀ × dims₁ × (dims₂ + 1)`, x fastest.
+pub(crate) struct FaceImages<'a> {
+    /// Images of the faces normal to x.
+    pub x: &'a [DVec3],
+    /// Images of the faces normal to y.
+    pub y: &'a [DVec3],
+    /// Images of the faces normal to z.
+    pub z: &'a [DVec3],
+    /// Voxels of the box per axis.
+    pub dims: [usize; 3],
+}
+
+impl FaceImages<'_> {
+    /// The proxy box of voxel `(i, j, k)` of the box: the bounds of its six face images, or
+    /// `None` if one is NaN or infinite (or lies outside the arrays).
+    #[inline(always)]
+    pub fn bounds(&self, i: usize, j: usize, k: usize) -> Option<(DVec3, DVec3)> {
+        let [nx, ny, _] = self.dims;
+        let bx = (nx + 1) * (j + ny * k) + i;
+        let by = nx * (j + (ny + 1) * k) + i;
+        let bz = nx * (j + ny * k) + i;
+        let pts = [
+            *self.x.get(bx)?,
+            *self.x.get(bx + 1)?,
+            *self.y.get(by)?,
+            *self.y.get(by + nx)?,
+            *self.z.get(bz)?,
+            *self.z.get(bz + nx * ny)?,
+        ];
+        if !pts.iter().all(|p| p.is_finite()) {
+            return None;
+        }
+        Some(
+            pts[1..]
+                .iter()
+                .fold((pts[0], pts[0]), |(lo, hi), p| (lo.min(*p), hi.max(*p))),
+        )
+    }
+}
+
+/// Tally the boxes of the input voxels in `vbox` (value-array indices into `values` of
+/// `vdims`) whose face images are `faces` (over `vbox`'s voxels), in index order, into `buf`
+/// over `region` of an output grid of `out` dims (the mapped face centres of
+/// [`FaceCentres::Mapped`](crate::pushforward::FaceCentres::Mapped)).
+pub(crate) fn tally_mapped<T: Voxel, C: Cell>(
+    values: &[T],
+    vdims: [usize; 3],
+    vbox: &Region,
+    faces: &FaceImages<'_>,
+    out: [usize; 3],
+    region: &Region,
+    buf: &mut [C],
+) -> PushForwardStats {
+    let mut stats = PushForwardStats::default();
+    let [vx, vy, _] = vdims;
+    for k in 0..vbox.dims[2] {
+        for j in 0..vbox.dims[1] {
+            let first = vbox.lo[0] + vx * (vbox.lo[1] + j + vy * (vbox.lo[2] + k));
+            for i in 0..vbox.dims[0] {
+                let (Some(v), Some((lo, hi))) = (values.get(first + i), faces.bounds(i, j, k))
+                else {
+                    stats.non_finite += 1;
+                    continue;
+                };
+                if splat(lo, hi, v.to_f64(), 1.0, out, region, buf) {
+                    stats.mapped += 1;
+                } else {
+                    stats.outside += 1;
+                }
+            }
+        }
+    }
+    stats
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;

@@ -105,7 +105,9 @@ pub struct Args {
     #[arg(long, value_name = "PATH")]
     pub nonconverged_mask: Option<PathBuf>,
     /// OME-Zarr to OME-Zarr only: chunk shape of the output "CX,CY,CZ" (default: the
-    /// input's). The warp runs out of core, one output chunk at a time.
+    /// input's). The warp runs out of core, one output chunk at a time (pullback-linear,
+    /// pullback-nearest, pushforward-antialiased, pushforward-nearest; bit for bit the
+    /// in-memory result).
     #[arg(long, value_name = "CX,CY,CZ")]
     pub chunk: Option<String>,
 }
@@ -157,31 +159,24 @@ fn out_of_core(a: &Args) -> bool {
     is_ome_zarr_path(&a.input) && is_ome_zarr_path(&a.output)
 }
 
-/// OME-Zarr to OME-Zarr: [`volmorph_warp::chunked::warp_chunked`] over the output's chunks,
-/// each reading only its preimage box of the input store; the output store (with its
-/// pyramid) appears only when complete.
+/// OME-Zarr to OME-Zarr: [`volmorph_warp::chunked::warp_chunks_with`] over the output's
+/// chunks (pull-back or push-forward, as [`ChunkedMethod::new`] allows), each reading only
+/// its box of the input store; the output store (with its pyramid) appears only when
+/// complete.
+///
+/// [`ChunkedMethod::new`]: volmorph_warp::chunked::ChunkedMethod::new
 fn run_out_of_core(a: &Args) -> anyhow::Result<()> {
     use volmorph_volume_io::omezarr::{OmeZarrReader, OmeZarrWriter, ZarrWriteOptions};
     use volmorph_warp::WarpError;
-    use volmorph_warp::chunked::warp_chunked_with;
-    use volmorph_warp::pullback::ResampleOptions;
+    use volmorph_warp::chunked::{ChunkGrid, ChunkedMethod, warp_chunks_with};
     if a.nonconverged_mask.is_some() || a.sampled.is_some() {
         anyhow::bail!(
             "--nonconverged-mask and --sampled are not available for out-of-core \
              (OME-Zarr to OME-Zarr) warps"
         );
     }
-    use volmorph_volume::sample::Interpolation;
-    let interpolation = a.method.interpolation().filter(|i| {
-        a.method.is_pullback() && matches!(i, Interpolation::Linear | Interpolation::Nearest)
-    });
-    let Some(interpolation) = interpolation else {
-        anyhow::bail!(
-            "out-of-core (OME-Zarr to OME-Zarr) warps are pull-backs: use --method \
-             pullback-linear or pullback-nearest (not {})",
-            a.method
-        );
-    };
+    let method = ChunkedMethod::new(a.method, a.default)
+        .context("out-of-core (OME-Zarr to OME-Zarr) warp")?;
     let pb = progress::spinner(format!("opening {}", a.input.display()));
     let reader = OmeZarrReader::open(&a.input).context("cannot read the volume")?;
     let map = read_map(&a.map).context("cannot read the map")?;
@@ -197,14 +192,13 @@ fn run_out_of_core(a: &Args) -> anyhow::Result<()> {
     };
     let writer = OmeZarrWriter::create(&a.output, &grid, reader.voxel_type(), &options)
         .context("cannot write")?;
-    let resample = ResampleOptions::new(interpolation, a.default);
-    let chunks = writer.chunk_boxes();
-    warp_chunked_with(
+    let chunks = ChunkGrid::regular(grid.dims, writer.chunk())?;
+    let stats = warp_chunks_with(
         &map,
         reader.geometry(),
         &grid,
         &chunks,
-        &resample,
+        &method,
         |b| reader.read_box(b).map_err(WarpError::from),
         |b, v| writer.write_chunk(b, &v).map_err(WarpError::from),
         &progress::Bar(&pb),
@@ -217,11 +211,15 @@ fn run_out_of_core(a: &Args) -> anyhow::Result<()> {
     writer.finish().context("cannot write")?;
     pb.finish_and_clear();
     say!(
-        "warped {} by {} ({}, out of core, {} chunks)",
+        "warped {} by {} ({}, out of core, {} chunks{})",
         a.input.display(),
         map.summary(),
         a.method,
-        chunks.len()
+        chunks.len(),
+        stats.map_or(String::new(), |s| format!(
+            "; input voxels: {} mapped, {} outside, {} non-finite",
+            s.mapped, s.outside, s.non_finite
+        ))
     );
     Ok(())
 }

@@ -1,10 +1,15 @@
-//! Chunk-by-chunk pull-back for volumes that do not fit in memory (OME-Zarr stores, Dask).
+//! Chunk-by-chunk warps for volumes that do not fit in memory (OME-Zarr stores, Dask): the
+//! pull-back here, the push-forward in [`push`].
+//!
+//! Which methods run chunk by chunk is decided in one place, [`ChunkedMethod::new`]; the
+//! command line and `volmorph.dask` both ask it, and [`warp_chunks_with`] runs either kind
+//! over a [`ChunkGrid`] of the output.
 //!
 //! # Direction
 //!
 //! As [`pullback`](crate::pullback): output voxel `x` takes the input's value at `map(x)`.
 //!
-//! # How a chunk is computed
+//! # How a pull-back chunk is computed
 //!
 //! The output grid is cut into boxes of voxels (chunks, [`IndexBox`]). For one chunk:
 //!
@@ -35,8 +40,10 @@
 //! Cubic B-spline interpolation samples coefficients prefiltered over the *whole* input (an
 //! infinite-support recursive filter), so a box of the input cannot reproduce it; it is
 //! refused ([`WarpError::Unsupported`]), as is [`Boundary::Mirror`] (a point outside the
-//! input reflects to a place the box need not contain). Push-forward across chunks is
-//! designed in `docs/chunked-pushforward.md` and not implemented here.
+//! input reflects to a place the box need not contain). The push-forward (both methods) runs
+//! chunk by chunk through [`push`] (design and costs in `docs/chunked-pushforward.md`); the
+//! pull-back through the inverse (Newton per voxel, with a cubic prefilter for its cubic
+//! kind) does not.
 
 use glam::DVec3;
 use rayon::prelude::*;
@@ -45,7 +52,13 @@ use volmorph_volume::sample::{Boundary, Interpolation, Sampler};
 use volmorph_volume::{AnyVolume, Geometry, IndexBox, Volume, Voxel};
 
 use crate::WarpError;
+use crate::apply::WarpMethod;
 use crate::pullback::{IndexMap, ResampleOptions, TILE};
+use crate::pushforward::{AntialiasOptions, PushForwardStats};
+
+pub mod push;
+
+use push::PushMethod;
 
 /// Voxels added on every side of a chunk's preimage box beyond the kernel's own support
 /// (one voxel for linear, the rounding neighbour for nearest). The box is computed from the
@@ -53,6 +66,246 @@ use crate::pullback::{IndexMap, ResampleOptions, TILE};
 /// box a superset of the stencil under any tie-breaking of the kernels' floor at integer
 /// indices (a linear stencil at an exact integer reads `i` and `i + 1`).
 pub const PREIMAGE_MARGIN: usize = 1;
+
+/// A warp method that runs chunk by chunk, with its options: the one policy of which
+/// [`WarpMethod`]s the out-of-core command line and `volmorph.dask` accept.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub enum ChunkedMethod {
+    /// Pull-back with linear or nearest interpolation (see the [module docs](self)).
+    Pullback(ResampleOptions),
+    /// Push-forward, antialiased or nearest ([`push`]).
+    Push(PushMethod),
+}
+
+impl ChunkedMethod {
+    /// The chunked form of `method` with `background` (the value of output voxels nothing
+    /// reaches): `pullback-linear` and `pullback-nearest` (constant boundary),
+    /// `pushforward-antialiased` (True's averaged face centres, the default of the in-memory
+    /// warp) and `pushforward-nearest` (background 0 only, as in
+    /// [`warp_volume`](crate::apply::warp_volume)). The result of every one equals the
+    /// in-memory [`warp_volume`](crate::apply::warp_volume) with the same method bit for bit.
+    ///
+    /// # Errors
+    /// [`WarpError::Background`] for a non-finite background; [`WarpError::InvalidOption`]
+    /// for a non-zero background with `pushforward-nearest`; [`WarpError::Unsupported`] for
+    /// the cubic pull-back and the inverse methods, naming the supported ones.
+    pub fn new(method: WarpMethod, background: f64) -> Result<Self, WarpError> {
+        if !background.is_finite() {
+            return Err(WarpError::Background(background));
+        }
+        match method {
+            WarpMethod::PullbackLinear => Ok(Self::Pullback(ResampleOptions::new(
+                Interpolation::Linear,
+                background,
+            ))),
+            WarpMethod::PullbackNearest => Ok(Self::Pullback(ResampleOptions::new(
+                Interpolation::Nearest,
+                background,
+            ))),
+            WarpMethod::PushforwardAntialiased => {
+                Ok(Self::Push(PushMethod::Antialiased(AntialiasOptions {
+                    background,
+                    ..AntialiasOptions::default()
+                })))
+            }
+            WarpMethod::PushforwardNearest if background != 0.0 => Err(WarpError::InvalidOption(
+                "a background is not used by pushforward-nearest (holes stay 0)".into(),
+            )),
+            WarpMethod::PushforwardNearest => Ok(Self::Push(PushMethod::Nearest)),
+            WarpMethod::PullbackCubic
+            | WarpMethod::InverseNearest
+            | WarpMethod::InverseLinear
+            | WarpMethod::InverseCubic => Err(WarpError::Unsupported(
+                "chunked (out-of-core, Dask) warps support pullback-linear, pullback-nearest, \
+                 pushforward-antialiased and pushforward-nearest: cubic B-splines prefilter \
+                 the whole input, and the inverse methods are not chunked",
+            )),
+        }
+    }
+}
+
+/// The chunks of an output grid as a tensor grid (the chunking of OME-Zarr stores and dask
+/// arrays): along each axis `a` the chunk boundaries `0 = b₀ < b₁ < … < b_m = dims[a]`, and
+/// the chunks are the products of the per-axis intervals, numbered x fastest
+/// (`cx + counts[0]·(cy + counts[1]·cz)`).
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub struct ChunkGrid {
+    bounds: [Vec<usize>; 3],
+}
+
+impl ChunkGrid {
+    /// A grid of `dims` voxels cut into `chunk`-sized chunks from index 0 (the last chunk
+    /// along an axis is shorter when `chunk` does not divide `dims`).
+    ///
+    /// # Errors
+    /// [`WarpError::InvalidOption`] for a zero chunk edge or dimension.
+    pub fn regular(dims: [usize; 3], chunk: [usize; 3]) -> Result<Self, WarpError> {
+        if chunk.contains(&0) || dims.contains(&0) {
+            return Err(WarpError::InvalidOption(format!(
+                "chunk shape {chunk:?} of a {dims:?} grid: every edge and dimension must be \
+                 at least 1"
+            )));
+        }
+        Self::from_sizes([0, 1, 2].map(|a| {
+            (0..dims[a])
+                .step_by(chunk[a])
+                .map(|s| chunk[a].min(dims[a] - s))
+                .collect()
+        }))
+    }
+
+    /// A grid whose chunks along axis `a` have the lengths `sizes[a]` in order (dask's
+    /// `chunks`, reversed to x, y, z).
+    ///
+    /// # Errors
+    /// [`WarpError::InvalidOption`] for an axis without chunks or a chunk of length 0.
+    pub fn from_sizes(sizes: [Vec<usize>; 3]) -> Result<Self, WarpError> {
+        let mut bounds: [Vec<usize>; 3] = Default::default();
+        for a in 0..3 {
+            if sizes[a].is_empty() || sizes[a].contains(&0) {
+                return Err(WarpError::InvalidOption(format!(
+                    "chunk sizes {:?} along axis {a}: need at least one chunk, none of \
+                     length 0",
+                    sizes[a]
+                )));
+            }
+            let mut b = Vec::with_capacity(sizes[a].len() + 1);
+            b.push(0usize);
+            for &n in &sizes[a] {
+                let next = b[b.len() - 1].checked_add(n).ok_or_else(|| {
+                    WarpError::InvalidOption(format!("chunk sizes along axis {a} overflow"))
+                })?;
+                b.push(next);
+            }
+            bounds[a] = b;
+        }
+        Ok(Self { bounds })
+    }
+
+    /// Voxels of the chunked grid per axis.
+    #[must_use]
+    pub fn dims(&self) -> [usize; 3] {
+        [0, 1, 2].map(|a| self.bounds[a].last().copied().unwrap_or(0))
+    }
+
+    /// Chunks per axis.
+    #[must_use]
+    pub fn counts(&self) -> [usize; 3] {
+        [0, 1, 2].map(|a| self.bounds[a].len().saturating_sub(1))
+    }
+
+    /// Number of chunks.
+    #[must_use]
+    pub fn len(&self) -> usize {
+        self.counts().iter().product()
+    }
+
+    /// `true` if the grid has no chunk (never, for a grid built by the constructors).
+    #[must_use]
+    pub fn is_empty(&self) -> bool {
+        self.len() == 0
+    }
+
+    /// The number of chunk `[cx, cy, cz]` (x fastest).
+    #[must_use]
+    pub fn index_of(&self, c: [usize; 3]) -> usize {
+        let n = self.counts();
+        c[0] + n[0] * (c[1] + n[1] * c[2])
+    }
+
+    /// The per-axis position `[cx, cy, cz]` of chunk number `index`.
+    #[must_use]
+    pub fn position(&self, index: usize) -> [usize; 3] {
+        let n = self.counts();
+        [index % n[0], (index / n[0]) % n[1], index / (n[0] * n[1])]
+    }
+
+    /// The voxels of chunk number `index` (an empty box past the last chunk).
+    #[must_use]
+    pub fn chunk(&self, index: usize) -> IndexBox {
+        if index >= self.len() {
+            return IndexBox::default();
+        }
+        let c = self.position(index);
+        IndexBox {
+            start: [0, 1, 2].map(|a| self.bounds[a][c[a]]),
+            end: [0, 1, 2].map(|a| self.bounds[a][c[a] + 1]),
+        }
+    }
+
+    /// Every chunk, in number order.
+    #[must_use]
+    pub fn boxes(&self) -> Vec<IndexBox> {
+        (0..self.len()).map(|c| self.chunk(c)).collect()
+    }
+
+    /// Per axis, the chunk position of every voxel index.
+    pub(crate) fn owners(&self) -> [Vec<u32>; 3] {
+        [0, 1, 2].map(|a| {
+            let b = &self.bounds[a];
+            let mut o = Vec::with_capacity(b.last().copied().unwrap_or(0));
+            for (c, w) in b.windows(2).enumerate() {
+                o.extend(std::iter::repeat_n(c as u32, w[1] - w[0]));
+            }
+            o
+        })
+    }
+}
+
+/// Warp `input` (read box by box through `read`) onto `output`, chunk by chunk over
+/// `chunks`, by `method`, handing each chunk to `write` with its box. The pull-back runs
+/// [`warp_chunked_with`]; the push-forward plans with [`push::plan_push_with`] (one stage of
+/// progress) and runs [`push::push_chunked_with`] (a second stage), and its statistics are
+/// returned. The union of the written chunks equals the in-memory
+/// [`warp_volume`](crate::apply::warp_volume) with the same method bit for bit.
+///
+/// # Errors
+/// [`WarpError::InvalidOption`] if `chunks` does not cover `output`; the errors of the
+/// functions named above; [`WarpError::Cancelled`] when `progress` asks to stop (chunks
+/// already written stay written; the caller discards its partial output).
+#[allow(clippy::too_many_arguments)]
+pub fn warp_chunks_with<M, R, W>(
+    map: &M,
+    input: &Geometry,
+    output: &Geometry,
+    chunks: &ChunkGrid,
+    method: &ChunkedMethod,
+    read: R,
+    write: W,
+    progress: &dyn volmorph_io::Progress,
+) -> Result<Option<PushForwardStats>, WarpError>
+where
+    M: SpaceMap + ?Sized,
+    R: Fn(IndexBox) -> Result<AnyVolume, WarpError> + Sync,
+    W: Fn(IndexBox, AnyVolume) -> Result<(), WarpError> + Sync,
+{
+    if chunks.dims() != output.dims {
+        return Err(WarpError::InvalidOption(format!(
+            "the chunks cover {:?} voxels, the output grid has {:?}",
+            chunks.dims(),
+            output.dims
+        )));
+    }
+    match method {
+        ChunkedMethod::Pullback(o) => {
+            warp_chunked_with(
+                map,
+                input,
+                output,
+                &chunks.boxes(),
+                o,
+                read,
+                write,
+                progress,
+            )?;
+            Ok(None)
+        }
+        ChunkedMethod::Push(m) => {
+            let plan = push::plan_push_with(map, input, output, m, chunks, progress)?;
+            push::push_chunked_with(map, &plan, read, write, progress).map(Some)
+        }
+    }
+}
 
 /// Check that `options` can be computed chunk by chunk.
 ///
@@ -75,7 +328,7 @@ pub fn check_chunkable(options: &ResampleOptions) -> Result<(), WarpError> {
     Ok(())
 }
 
-fn check_chunk(output: &Geometry, chunk: IndexBox) -> Result<(), WarpError> {
+pub(crate) fn check_chunk(output: &Geometry, chunk: IndexBox) -> Result<(), WarpError> {
     output
         .validate_unbounded()
         .map_err(|source| WarpError::Geometry {
@@ -245,7 +498,7 @@ pub fn chunk_preimage<M: SpaceMap + ?Sized>(
 
 /// The box read when a chunk's [`preimage_box`] is empty: one voxel, so the sampler has a
 /// volume to answer its outside value from.
-fn nonempty(b: IndexBox) -> IndexBox {
+pub(crate) fn nonempty(b: IndexBox) -> IndexBox {
     if b.is_empty() {
         IndexBox {
             start: [0; 3],
