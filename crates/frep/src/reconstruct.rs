@@ -92,6 +92,12 @@ impl<F: Field> SplineCorrected<F> {
         Self::through_values(initial, points, &zeros, smoothing)
     }
 
+    /// The correction spline `d` (one value component).
+    #[must_use]
+    pub fn spline(&self) -> &VolumeSpline<3> {
+        &self.spline
+    }
+
     /// The correction `d(x)`.
     #[must_use]
     pub fn correction(&self, p: DVec3) -> f64 {
