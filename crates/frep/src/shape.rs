@@ -77,6 +77,8 @@ fn commutative(op: BinaryOp) -> bool {
             | BinaryOp::Ne
             | BinaryOp::And
             | BinaryOp::Or
+            | BinaryOp::RUnion
+            | BinaryOp::RIntersection
     )
 }
 
@@ -272,18 +274,16 @@ impl Builder {
     }
 
     /// R-function union `f1 + f2 + √(f1² + f2²)` (HyperFun `|`): `≥ 0` exactly where either
-    /// argument is `≥ 0`, smooth away from the points where both vanish.
+    /// argument is `≥ 0`, smooth away from the points where both vanish. One node
+    /// ([`BinaryOp::RUnion`]), so its enclosure over a box is exact up to rounding.
     pub fn union(&mut self, a: Id, b: Id) -> Id {
-        let s = self.add(a, b);
-        let r = self.norm2(a, b);
-        self.add(s, r)
+        self.binary(BinaryOp::RUnion, a, b)
     }
 
-    /// R-function intersection `f1 + f2 − √(f1² + f2²)` (HyperFun `&`).
+    /// R-function intersection `f1 + f2 − √(f1² + f2²)` (HyperFun `&`), one node
+    /// ([`BinaryOp::RIntersection`]).
     pub fn intersection(&mut self, a: Id, b: Id) -> Id {
-        let s = self.add(a, b);
-        let r = self.norm2(a, b);
-        self.sub(s, r)
+        self.binary(BinaryOp::RIntersection, a, b)
     }
 
     /// R-function subtraction `f1 \ f2 = f1 & (−f2)` (HyperFun `\`).
@@ -531,6 +531,22 @@ impl Builder {
                     let r = self.mul(gb[k], a);
                     let n = self.sub(l, r);
                     self.div(n, d)
+                })
+            }
+            BinaryOp::RUnion | BinaryOp::RIntersection => {
+                // ∂/∂a = 1 ± a/r, ∂/∂b = 1 ± b/r, r = √(a² + b²).
+                let r = self.norm2(a, b);
+                let one = self.constant(1.0);
+                let (qa, qb) = (self.div(a, r), self.div(b, r));
+                let (sa, sb) = if op == BinaryOp::RUnion {
+                    (self.add(one, qa), self.add(one, qb))
+                } else {
+                    (self.sub(one, qa), self.sub(one, qb))
+                };
+                [0, 1, 2].map(|k| {
+                    let l = self.mul(ga[k], sa);
+                    let r = self.mul(gb[k], sb);
+                    self.add(l, r)
                 })
             }
             _ => [zero; 3],

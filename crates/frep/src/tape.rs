@@ -576,7 +576,14 @@ fn costly(n: &Node) -> bool {
                 | UnaryOp::Sign
                 | UnaryOp::Not
         ),
-        Node::Binary(op, _, _) => matches!(op, BinaryOp::Div | BinaryOp::Pow | BinaryOp::Atan2),
+        Node::Binary(op, _, _) => matches!(
+            op,
+            BinaryOp::Div
+                | BinaryOp::Pow
+                | BinaryOp::Atan2
+                | BinaryOp::RUnion
+                | BinaryOp::RIntersection
+        ),
         Node::Voxel(..) => true,
         _ => false,
     }
@@ -1003,7 +1010,22 @@ fn binary_block(op: BinaryOp, o: &mut [f64], a: Src<'_>, b: Src<'_>) {
         a,
         b,
         [
-            Add, Sub, Mul, Div, Min, Max, Pow, Atan2, Lt, Le, Eq, Ne, And, Or
+            Add,
+            Sub,
+            Mul,
+            Div,
+            Min,
+            Max,
+            Pow,
+            Atan2,
+            Lt,
+            Le,
+            Eq,
+            Ne,
+            And,
+            Or,
+            RUnion,
+            RIntersection
         ]
     );
 }
