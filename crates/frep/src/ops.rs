@@ -702,7 +702,7 @@ pub fn binary_interval(op: BinaryOp, a: Interval, b: Interval) -> Interval {
         ),
         BinaryOp::RUnion | BinaryOp::RIntersection => {
             let m = a.lo.abs().max(a.hi.abs()) + b.lo.abs().max(b.hi.abs());
-            if !(m <= R_FUNCTION_TIGHT_MAX) {
+            if m.is_nan() || m > R_FUNCTION_TIGHT_MAX {
                 // The squares may overflow (the computed function is then not monotone):
                 // bound the operations one by one.
                 let s = binary_interval(BinaryOp::Add, a, b);

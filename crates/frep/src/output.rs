@@ -568,7 +568,7 @@ impl<'a> Caster<'a> {
                 mx = mx.max(x);
                 my = my.max(y);
             }
-            let (sx, sy) = ((nx + mx + 1) / 2, (ny + my + 1) / 2);
+            let (sx, sy) = ((nx + mx).div_ceil(2), (ny + my).div_ceil(2));
             for r in live {
                 let (x, y) = (r.k % w, r.k / w);
                 quarters[usize::from(x >= sx) + 2 * usize::from(y >= sy)].push(r);
