@@ -43,16 +43,16 @@ EOF
 fig savchenko_pasko "Fig. 2" "local function mappings by control points (Eq. 11): a initial solid (R-function union, blend, difference); b pinching (point inside) and pricking (points outside); c scratching with elliptic areas of influence" \
     savchenko_pasko/fig02a_initial.png savchenko_pasko/fig02b_pinch_prick.png savchenko_pasko/fig02c_scratch.png
 
-# Fig. 3: a block deformed by convolution along a spiral (Eq. 12, Simpson's rule).
+# Fig. 3: a block deformed by convolution along a curve inside it (Eq. 12, Simpson's rule).
 cat > "$W/block.hf" <<'EOF'
 block(x[3], a[1]) { array v[3]; v = [-0.8, -0.8, -0.5]; block = hfBlock(x, v, 1.6, 1.6, 1.0); }
 EOF
 cat > "$W/spiral.json" <<'EOF'
-{"version": 1, "mappings": [{"kind": "convolution", "a": 0.35, "intervals": 128, "curve":
-  {"type": "helix", "center": [0, 0, 0.5], "radius": 0.5, "pitch": 0.0001, "turns": 1.5}}]}
+{"version": 1, "mappings": [{"kind": "convolution", "a": 0.3, "intervals": 128, "curve":
+  {"type": "helix", "center": [0, 0, 0.2], "radius": 0.45, "pitch": 0.0001, "turns": 1.0}}]}
 EOF
 "$VOLMORPH" frep map "$W/block.hf" --mapping "$W/spiral.json" -o "$S/fig03_spiral.png" --bounds=-1.1,1.1 "${P[@]}" --view 30,50 >/dev/null
-fig savchenko_pasko "Fig. 3" "function mapping controlled by a parametric spiral: convolution deformation of a block (Eq. 12), a sweep-like groove on its top" \
+fig savchenko_pasko "Fig. 3" "function mapping controlled by a parametric curve: convolution deformation of a block (Eq. 12) along a circle 0.3 below its top; the displacement is weighted by f on the curve, so the sweep is a shallow dent and rounding of the top" \
     savchenko_pasko/fig03_spiral.png
 
 # Fig. 5: one control point of a set-theoretic "clock" displaced (red arrow in the paper),
@@ -116,12 +116,12 @@ EOF
 fi
 
 # Figs. 8–9: function-dependent coordinate space mappings of the solid of Fig. 2.
-"$VOLMORPH" frep map "$W/solid.hf" --mapping "$W/none.json" -o "$S/fig08b_section.png" --bounds=-1.1,-1.1,-1.1,1.1,0.3,1.1 "${P[@]}" --view -90,20 >/dev/null
+"$VOLMORPH" frep map "$W/solid.hf" --mapping "$W/none.json" -o "$S/fig08b_section.png" --bounds=-1.1,-0.2,-1.1,1.1,1.1,1.1 "${P[@]}" --view -90,20 >/dev/null
 cat > "$W/shell.json" <<'EOF'
 {"version": 1, "mappings": [{"kind": "shell", "a": -12, "b": 0.6}]}
 EOF
-"$VOLMORPH" frep map "$W/solid.hf" --mapping "$W/shell.json" -o "$S/fig08c_shell_cut.png" --bounds=-1.1,-1.1,-1.1,1.1,0.3,1.1 "${P[@]}" --view -90,20 >/dev/null
-fig savchenko_pasko "Fig. 8" "thin shell x₁ = x₂ = x₃ = a f(x') + b (Eq. 17, a = −12, b = 0.6) of the solid of Fig. 2: b the solid cut at y = 0.3; c the shells (f ∈ [0, 0.06] and, where the diagonal crosses the drilled hole, a second inner one) with the front part removed" \
+"$VOLMORPH" frep map "$W/solid.hf" --mapping "$W/shell.json" -o "$S/fig08c_shell_cut.png" --bounds=-1.1,-0.2,-1.1,1.1,1.1,1.1 "${P[@]}" --view -90,20 >/dev/null
+fig savchenko_pasko "Fig. 8" "thin shell x₁ = x₂ = x₃ = a f(x') + b (Eq. 17, a = −12, b = 0.6) of the solid of Fig. 2: b the solid cut at y = −0.2 (through the drilled hole); c the shells (f ∈ [0, 0.06] and, where the diagonal crosses the drilled hole, a second inner one) with the front part removed" \
     savchenko_pasko/fig08b_section.png savchenko_pasko/fig08c_shell_cut.png
 cat > "$W/maze.json" <<'EOF'
 {"version": 1, "mappings": [{"kind": "maze", "a": 0.6, "b": 28, "c": 0}]}
@@ -184,7 +184,7 @@ cat > "$W/motion.json" <<EOF
   "h1": "smoothstep", "search": {"keyframes": 9, "population": 16, "generations": 20, "seed": 1}}]}
 EOF
 "$VOLMORPH" frep map "$W/ellipsoid.hf" --mapping "$W/motion.json" --frames 5 --size 160 --view 20,55 \
-    --bounds=-3,-1.2,-1.2,3,1.2,1.2 -o "$W/motion" > "$S/fig12_motion.txt"
+    --bounds=-3,-1.2,-1.2,3,1.2,1.2 -o "$W/motion" | grep "collision-free motion" > "$S/fig12_motion.txt"
 rows=()
 for i in 0 1 2 3 4; do
     cp "$W/motion/frame000$i.png" "$S/fig12_motion_$i.png"
