@@ -62,7 +62,7 @@ pub fn load(path: &Path, params: &HashMap<usize, f64>) -> anyhow::Result<Shape> 
         params: params.clone(),
         ..CompileOptions::default()
     };
-    Ok(compile_file(path, &options).context("cannot load the model")?)
+    compile_file(path, &options).context("cannot load the model")
 }
 
 /// Parse `--bounds`.
@@ -525,8 +525,8 @@ fn read_points(path: &Path) -> anyhow::Result<Vec<DVec3>> {
         let m = meshio::read(path).with_context(|| format!("cannot read {}", path.display()))?;
         return Ok(m.positions().to_vec());
     }
-    Ok(volmorph_handles::handles::read_point_list(path)
-        .with_context(|| format!("cannot read points {}", path.display()))?)
+    volmorph_handles::handles::read_point_list(path)
+        .with_context(|| format!("cannot read points {}", path.display()))
 }
 
 fn points_cmd(a: &PointsArgs) -> anyhow::Result<()> {
