@@ -299,6 +299,29 @@ pub struct PyFrep {
     shape: Shape,
 }
 
+impl PyFrep {
+    /// Compile `source`; `data_dir` is the folder data files it names are relative to.
+    fn compile(
+        source: &str,
+        params: Option<HashMap<usize, f64>>,
+        object: Option<String>,
+        data_dir: Option<std::path::PathBuf>,
+    ) -> PyResult<Self> {
+        let params = params.unwrap_or_default();
+        if let Some((k, v)) = params.iter().find(|(_, v)| !v.is_finite()) {
+            return Err(input(format!("parameter a{k} must be finite, got {v}")));
+        }
+        let options = CompileOptions {
+            params,
+            object,
+            data_dir,
+            ..CompileOptions::default()
+        };
+        let shape = compile_source(source, &options).map_err(|e| to_py(ModelError::new_err, &e))?;
+        Ok(Self { shape })
+    }
+}
+
 #[pymethods]
 impl PyFrep {
     /// Compile `source` (HyperFun text) with parameter values `params` (`{1: a1, …}`,
@@ -310,13 +333,7 @@ impl PyFrep {
         params: Option<HashMap<usize, f64>>,
         object: Option<String>,
     ) -> PyResult<Self> {
-        let params = params.unwrap_or_default();
-        if let Some((k, v)) = params.iter().find(|(_, v)| !v.is_finite()) {
-            return Err(input(format!("parameter a{k} must be finite, got {v}")));
-        }
-        let shape = compile_source(source, &CompileOptions { params, object })
-            .map_err(|e| to_py(ModelError::new_err, &e))?;
-        Ok(Self { shape })
+        Self::compile(source, params, object, None)
     }
 
     /// Compile a model file.
@@ -330,7 +347,9 @@ impl PyFrep {
         let src = std::fs::read_to_string(&path).map_err(|e| {
             FileError::new_err(format!("cannot read model {}: {e}", path.display()))
         })?;
-        Self::new(&src, params, object).map_err(|e| {
+        // Data files the model names (`vmVolume`) are relative to its folder.
+        let dir = path.parent().map(std::path::Path::to_path_buf);
+        Self::compile(&src, params, object, dir).map_err(|e| {
             Python::attach(|py| ModelError::new_err(format!("{}: {}", path.display(), e.value(py))))
         })
     }

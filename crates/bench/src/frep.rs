@@ -1,5 +1,6 @@
 //! The F-rep suite: culled grid sampling of F-rep models (HyperFun language), each result
-//! checked bit for bit against point-by-point evaluation.
+//! checked bit for bit against point-by-point evaluation, and [`RENDER_SIZE`]² ray-cast
+//! pictures of them (the default view of `volmorph frep render`).
 //!
 //! The models are either the seven built-in [`SCENES`] — written for volmorph, comparable to
 //! the published libfive/HyperFun benchmark scenes (a ball, CSG, a blend, a gyroid, a twist, a
@@ -12,10 +13,12 @@ use std::time::Duration;
 use glam::DVec3;
 use serde_json::json;
 use volmorph_frep::grid::{box_geometry, sample, sample_naive};
+use volmorph_frep::output::{RenderOptions, render};
 use volmorph_frep::{Shape, Tape, compile_source};
+use volmorph_render::{Camera, Orbit, UpAxis};
 use volmorph_volume::Geometry;
 
-use crate::targets::{ISSUE_6_FREP_LARGE_SCENE, ISSUE_6_FREP_SMALL_SCENE};
+use crate::targets::{ISSUE_6_FREP_LARGE_SCENE, ISSUE_6_FREP_SMALL_SCENE, ISSUE_16_FREP_RENDER};
 use crate::timing::{Case, Item, Report, Unit};
 use crate::{BenchError, check_repeat};
 
@@ -23,6 +26,12 @@ use crate::{BenchError, check_repeat};
 pub const TARGET_GRID: usize = 193;
 /// The box at which the targets are stated: `[−1.6, 1.6]³`.
 pub const TARGET_BOUNDS: (DVec3, DVec3) = (DVec3::splat(-1.6), DVec3::splat(1.6));
+/// Side of the timed pictures, in pixels.
+pub const RENDER_SIZE: u32 = 512;
+/// Azimuth and elevation (degrees, z up) of the timed pictures: `volmorph frep render`'s
+/// default view.
+pub const RENDER_VIEW: (f64, f64) = (35.0, 25.0);
+
 /// Largest grid points per axis accepted (a 2048³ `f32` volume is 32 GiB).
 pub const MAX_GRID: usize = 2048;
 
@@ -132,7 +141,12 @@ pub struct FrepInputs {
     pub tapes: Vec<(FrepModel, Tape)>,
     /// The sampled grid.
     pub geometry: Geometry,
+    /// The camera of the timed pictures ([`RENDER_SIZE`]², [`RENDER_VIEW`], framing the box).
+    pub camera: Camera,
+    /// Ray-casting options (the box, defaults otherwise).
+    pub render: RenderOptions,
     at_target: bool,
+    render_at_target: bool,
 }
 
 impl FrepInputs {
@@ -142,6 +156,14 @@ impl FrepInputs {
     /// As [`FrepConfig::geometry`].
     pub fn new(config: &FrepConfig, models: Vec<FrepModel>) -> Result<Self, BenchError> {
         let geometry = config.geometry()?;
+        let camera = Orbit::new(RENDER_VIEW.0, RENDER_VIEW.1, UpAxis::Z)
+            .and_then(|o| o.model_camera(config.bounds, (RENDER_SIZE, RENDER_SIZE)))
+            .map_err(|e| BenchError::check("F-rep picture", e.to_string()))?;
+        let render = RenderOptions {
+            bounds_min: config.bounds.0,
+            bounds_max: config.bounds.1,
+            ..RenderOptions::default()
+        };
         Ok(Self {
             tapes: models
                 .into_iter()
@@ -151,7 +173,10 @@ impl FrepInputs {
                 })
                 .collect(),
             geometry,
+            camera,
+            render,
             at_target: config.at_target(),
+            render_at_target: config.bounds == TARGET_BOUNDS,
         })
     }
 
@@ -165,6 +190,26 @@ impl FrepInputs {
                     Ok(sample(tape, &self.geometry)?)
                 })
                 .with_target(m.target.filter(|_| self.at_target))
+            })
+            .collect()
+    }
+
+    /// One case per model: its [`RENDER_SIZE`]² picture (criterion id: the model's name and
+    /// `render`), with the target [`ISSUE_16_FREP_RENDER`] for the published scenes over
+    /// [`TARGET_BOUNDS`].
+    #[must_use]
+    pub fn render_cases(&self) -> Vec<Case<'_>> {
+        self.tapes
+            .iter()
+            .map(|(m, tape)| {
+                let name = format!("{} render {RENDER_SIZE}x{RENDER_SIZE}", m.name);
+                Case::call(name, format!("{}/render", m.name), move || {
+                    Ok(render(tape, &self.camera, &self.render)?)
+                })
+                .with_target(
+                    Some(ISSUE_16_FREP_RENDER)
+                        .filter(|_| m.target.is_some() && self.render_at_target),
+                )
             })
             .collect()
     }
@@ -209,10 +254,17 @@ pub fn run(
         }
         items.push(item);
     }
+    for (k, mut case) in inputs.render_cases().into_iter().enumerate() {
+        progress(case.name());
+        let mut item = case.measure(config.repeat)?;
+        item.operations = Some(inputs.tapes[k].1.len());
+        items.push(item);
+    }
     let (lo, hi) = config.bounds;
     let description = format!(
-        "F-rep grid evaluation, {g}^3 over {lo}..{hi}, {r} runs, {t} threads",
+        "F-rep grid evaluation, {g}^3 over {lo}..{hi}, and {s}x{s} pictures, {r} runs, {t} threads",
         g = config.grid,
+        s = RENDER_SIZE,
         r = config.repeat,
         t = rayon::current_num_threads()
     );

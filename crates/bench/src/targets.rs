@@ -61,6 +61,10 @@ pub const ISSUE_6_FREP_SMALL_SCENE: Duration = Duration::from_millis(40);
 /// Issue 6: the same for the published gear and colonnade scenes (libfive: 195–312 ms).
 pub const ISSUE_6_FREP_LARGE_SCENE: Duration = Duration::from_millis(150);
 
+/// Issue 16: a 512×512 ray-cast picture of a published HyperFun scene over [−1.6, 1.6]³ (the
+/// default view of `volmorph frep render`) on 2 cores.
+pub const ISSUE_16_FREP_RENDER: Duration = Duration::from_secs(1);
+
 /// Issue 13: a drag on the 128³ teapot end to end through the scene (command, least-norm
 /// solve, incremental warp update, dirty-region report).
 pub const ISSUE_13_SCENE_DRAG: Duration = Duration::from_millis(40);

@@ -225,10 +225,21 @@ fn frep_suite_samples_the_builtin_scenes_like_pointwise_evaluation() {
         ..frep::FrepConfig::default()
     };
     let r = frep::run(&config, frep::builtin_scenes().unwrap(), &mut quiet()).unwrap();
-    let names: Vec<&str> = frep::SCENES.iter().map(|(n, _)| *n).collect();
+    // Grid sampling of every scene, then its picture.
+    let pictures: Vec<String> = frep::SCENES
+        .iter()
+        .map(|(n, _)| format!("{n} render 512x512"))
+        .collect();
+    let mut names: Vec<&str> = frep::SCENES.iter().map(|(n, _)| *n).collect();
+    names.extend(pictures.iter().map(String::as_str));
     check_items(&r, &names);
-    for it in &r.items {
+    let (grid, render) = r.items.split_at(frep::SCENES.len());
+    for it in grid {
         assert_eq!(it.same_as_pointwise, Some(true), "{it:?}");
+        assert!(it.operations.unwrap() > 0);
+    }
+    for it in render {
+        assert_eq!(it.same_as_pointwise, None, "{it:?}");
         assert!(it.operations.unwrap() > 0);
     }
 }

@@ -26,14 +26,31 @@
 //!
 //! The model's parameter array (the second formal parameter, `a[k]`) is bound to constants:
 //! [`CompileOptions::params`] (defaults 0), so parameters fold into the graph.
+//!
+//! **Sampled volumes.** `vmVolume("file", x, level [, "linear" | "cubic" [, outside]])` is
+//! the defining function `f(x) = s(x) − level` of a volume file (any format volmorph reads):
+//! `s` interpolates the voxels at the physical point `x` (the volume's full geometry,
+//! direction matrix included) trilinearly, or with the interpolating cubic B-spline, and is
+//! the constant `outside` (default: the smallest voxel value) beyond the volume — so voxels
+//! brighter than `level` are solid. `level` may be any expression (a parameter `a[k]`, a
+//! function of `x`); `outside` is a number known at compile time. It is an ordinary node of
+//! the graph: point, batch, interval (from a min–max pyramid of the voxels) and gradient
+//! evaluation all work, and mappings apply to it like to any model (see [`crate::voxel`]).
+//! The file name is relative to [`CompileOptions::data_dir`] (the model file's folder; see
+//! [`compile_file`]) and must resolve, after symbolic links, inside it unless
+//! [`CompileOptions::allow_external_data`] or the process-wide default of
+//! `volmorph-volume-io` (the command line's `--allow-external-data`) allows otherwise. The
+//! volume counts against the memory budget.
 
 use std::collections::HashMap;
+use std::path::{Path, PathBuf};
 
 use crate::error::{FrepError, Pos};
 use crate::lang::{BinOp, Expr, Object, Program, Stmt, UnOp};
 use crate::library::{self, Value};
 use crate::ops::{BinaryOp, UnaryOp};
 use crate::shape::{Builder, Id, MAX_NODES, Shape};
+use crate::voxel::{self, VoxelKernel};
 
 /// Largest total number of loop iterations unrolled at compile time.
 pub const MAX_ITERATIONS: usize = 100_000;
@@ -52,6 +69,13 @@ pub struct CompileOptions {
     pub params: HashMap<usize, f64>,
     /// Name of the object to compile; `None` for the last object of the program.
     pub object: Option<String>,
+    /// The folder data files named by the model (`vmVolume`) are relative to and must stay
+    /// in: the model file's folder ([`compile_file`] sets it). `None` refuses `vmVolume`.
+    pub data_dir: Option<PathBuf>,
+    /// Accept data files that resolve outside [`data_dir`](Self::data_dir). They are also
+    /// accepted when `volmorph-volume-io`'s process-wide default allows external data (the
+    /// command line's `--allow-external-data`).
+    pub allow_external_data: bool,
 }
 
 impl CompileOptions {
@@ -97,6 +121,48 @@ impl CompileOptions {
 pub fn compile_source(src: &str, options: &CompileOptions) -> Result<Shape, FrepError> {
     let program = crate::lang::parse(src)?;
     compile(&program, options)
+}
+
+/// Read and compile a model file: [`compile_source`] with [`CompileOptions::data_dir`] set
+/// to the file's folder (unless `options` sets it).
+///
+/// # Errors
+/// [`FrepError::InFile`] naming `path` around the error of reading (a missing file, a
+/// file over [`crate::lang::MAX_SOURCE_BYTES`], text that is not UTF-8) or of
+/// [`compile_source`].
+pub fn compile_file(path: &Path, options: &CompileOptions) -> Result<Shape, FrepError> {
+    let in_file = |e: FrepError| FrepError::InFile {
+        path: path.display().to_string(),
+        source: Box::new(e),
+    };
+    let bytes = read_bounded(path).map_err(in_file)?;
+    let src = String::from_utf8(bytes).map_err(|_| {
+        in_file(FrepError::InvalidArgument(
+            "the model is not UTF-8 text".into(),
+        ))
+    })?;
+    let mut options = options.clone();
+    if options.data_dir.is_none() {
+        options.data_dir = Some(path.parent().unwrap_or(Path::new("")).to_path_buf());
+    }
+    compile_source(&src, &options).map_err(in_file)
+}
+
+/// The bytes of a model or specification file of at most [`crate::lang::MAX_SOURCE_BYTES`].
+pub(crate) fn read_bounded(path: &Path) -> Result<Vec<u8>, FrepError> {
+    use std::io::Read;
+    let file = volmorph_io::open_regular(path)?;
+    let mut bytes = Vec::new();
+    file.take(crate::lang::MAX_SOURCE_BYTES as u64 + 1)
+        .read_to_end(&mut bytes)
+        .map_err(|e| volmorph_io::IoError::os(path, e))?;
+    if bytes.len() > crate::lang::MAX_SOURCE_BYTES {
+        return Err(FrepError::InvalidArgument(format!(
+            "the file is larger than the {} bytes accepted",
+            crate::lang::MAX_SOURCE_BYTES
+        )));
+    }
+    Ok(bytes)
 }
 
 /// Compile the model object of `program` into a shape `f(x, y, z)`.
@@ -159,6 +225,7 @@ pub fn compile(program: &Program, options: &CompileOptions) -> Result<Shape, Fre
     }
     let mut ctx = Ctx {
         program,
+        options,
         b: &mut b,
         stack: Vec::new(),
         iterations: 0,
@@ -181,6 +248,7 @@ pub fn compile(program: &Program, options: &CompileOptions) -> Result<Shape, Fre
 
 struct Ctx<'a> {
     program: &'a Program,
+    options: &'a CompileOptions,
     b: &'a mut Builder,
     stack: Vec<String>,
     iterations: usize,
@@ -505,6 +573,13 @@ impl Ctx<'_> {
     fn expr(&mut self, e: &Expr, env: &Env) -> Result<Value, FrepError> {
         Ok(match e {
             Expr::Num(v, _) => Value::Scalar(self.b.constant(*v)),
+            Expr::Str(_, pos) => {
+                return Err(FrepError::compile(
+                    *pos,
+                    "a string is accepted only as a file or option name of a function, as in \
+                     vmVolume(\"head.nii.gz\", x, level)",
+                ));
+            }
             Expr::Var(name, pos) => env
                 .get(name)
                 .cloned()
@@ -634,6 +709,9 @@ impl Ctx<'_> {
     }
 
     fn call(&mut self, name: &str, args: &[Expr], pos: Pos, env: &Env) -> Result<Value, FrepError> {
+        if name.eq_ignore_ascii_case("vmVolume") {
+            return self.vm_volume(args, pos, env);
+        }
         // Built-in math functions.
         if let Some((op, arity)) = math_function(name) {
             let ok = match arity {
@@ -736,6 +814,100 @@ impl Ctx<'_> {
             pos,
             format!("unknown function `{name}`{hint}"),
         ))
+    }
+}
+
+impl Ctx<'_> {
+    /// `vmVolume("file", x, level [, kernel [, outside]])` (see the module docs).
+    fn vm_volume(&mut self, args: &[Expr], pos: Pos, env: &Env) -> Result<Value, FrepError> {
+        const USAGE: &str = "vmVolume(\"file\", x, level [, \"linear\" | \"cubic\" [, outside]])";
+        if !(3..=5).contains(&args.len()) {
+            return Err(FrepError::compile(
+                pos,
+                format!(
+                    "`vmVolume` takes 3 to 5 arguments, got {}: {USAGE}",
+                    args.len()
+                ),
+            ));
+        }
+        let Expr::Str(name, npos) = &args[0] else {
+            return Err(FrepError::compile(
+                args[0].pos(),
+                format!(
+                    "the first argument of `vmVolume` is the file name in double quotes: {USAGE}"
+                ),
+            ));
+        };
+        let x = match self.expr(&args[1], env)? {
+            Value::Array(a) if a.len() >= 3 => [a[0], a[1], a[2]],
+            _ => {
+                return Err(FrepError::compile(
+                    args[1].pos(),
+                    format!("the second argument of `vmVolume` is the point array x[3]: {USAGE}"),
+                ));
+            }
+        };
+        let level = self.scalar(&args[2], env)?;
+        let kernel = match args.get(3) {
+            None => VoxelKernel::Linear,
+            Some(Expr::Str(k, kpos)) => {
+                VoxelKernel::parse(k).map_err(|e| FrepError::compile(*kpos, e.to_string()))?
+            }
+            Some(e) => {
+                return Err(FrepError::compile(
+                    e.pos(),
+                    format!("the interpolation of `vmVolume` is \"linear\" or \"cubic\": {USAGE}"),
+                ));
+            }
+        };
+        let outside = match args.get(4) {
+            None => None,
+            Some(e) => {
+                let id = self.scalar(e, env)?;
+                match self.b.const_value(id) {
+                    Some(v) if v.is_finite() => Some(v),
+                    _ => {
+                        return Err(FrepError::compile(
+                            e.pos(),
+                            "the value outside the volume must be a finite number known at \
+                             compile time",
+                        ));
+                    }
+                }
+            }
+        };
+        let Some(dir) = &self.options.data_dir else {
+            return Err(FrepError::compile(
+                *npos,
+                format!(
+                    "`vmVolume` cannot find \"{name}\": the model has no folder (compile it \
+                     from its file)"
+                ),
+            ));
+        };
+        let allow = self.options.allow_external_data
+            || volmorph_volume_io::ReadOptions::default().allow_external_data;
+        let path = volmorph_io::resolve_in_folder(dir, name, allow)
+            .map_err(|e| FrepError::compile(*npos, format!("vmVolume: {e}")))?;
+        let field = voxel::load(&path, kernel, outside)
+            .map_err(|e| FrepError::compile(*npos, format!("vmVolume \"{name}\": {e}")))?;
+        // Continuous voxel index u = M (x − origin).
+        let (m, o) = field.index_map();
+        let u = [0, 1, 2].map(|r| {
+            let mut acc = self.b.constant(0.0);
+            for (c, &xc) in x.iter().enumerate() {
+                let k = m.col(c)[r];
+                if k == 0.0 {
+                    continue;
+                }
+                let d = self.b.add_c(xc, -o[c]);
+                let t = self.b.mul_c(d, k);
+                acc = self.b.add(acc, t);
+            }
+            acc
+        });
+        let s = self.b.voxel(&field, [0; 3], u);
+        Ok(Value::Scalar(self.b.sub(s, level)))
     }
 }
 

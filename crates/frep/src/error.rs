@@ -76,6 +76,26 @@ pub enum FrepError {
     /// A space map failed.
     #[error(transparent)]
     Deform(#[from] volmorph_deform::DeformError),
+    /// An error in a file (a model, a specification), naming it.
+    #[error("{path}: {source}")]
+    InFile {
+        /// The file.
+        path: String,
+        /// What is wrong in it.
+        source: Box<FrepError>,
+    },
+    /// A mapping specification is not valid: the JSON path of the bad field and why.
+    #[error("{}{message}", if path.is_empty() { String::new() } else { format!("{path}: ") })]
+    Spec {
+        /// JSON path of the field, e.g. `mappings[2].points[0].radius` (empty for the whole
+        /// document).
+        path: String,
+        /// What is wrong.
+        message: String,
+    },
+    /// Reading a file failed, or a size exceeds the memory budget.
+    #[error(transparent)]
+    Io(#[from] volmorph_io::IoError),
     /// The caller asked the work to stop through its [`volmorph_io::Progress`]; nothing was
     /// written.
     #[error("stopped on request")]

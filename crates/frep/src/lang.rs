@@ -22,9 +22,13 @@
 //! unary    := ('-' | '+' | '~' | '!' | 'not') unary | power
 //! power    := primary ('^' unary)?                          -- right-associative, binds
 //!                                                             tighter than unary minus
-//! primary  := NUMBER | IDENT | IDENT '[' expr ']' | IDENT '(' args? ')'
+//! primary  := NUMBER | STRING | IDENT | IDENT '[' expr ']' | IDENT '(' args? ')'
 //!           | '[' expr (',' expr)* ']' | '(' expr ')'
 //! ```
+//!
+//! A `STRING` is text between double quotes on one line (`\"` and `\\` escape a quote and a
+//! backslash); it is accepted only where a function takes a name, as the file of
+//! `vmVolume("head.nii.gz", x, level)`.
 //!
 //! Keywords are case-insensitive; identifiers are case-sensitive. Comments run from `--` or
 //! `//` to the end of the line, or between `/*` and `*/`. Array indices are 1-based. An
@@ -153,6 +157,8 @@ pub enum UnOp {
 pub enum Expr {
     /// A number.
     Num(f64, Pos),
+    /// A string literal (a file or option name; see the grammar).
+    Str(String, Pos),
     /// A variable.
     Var(String, Pos),
     /// `name[index]` (1-based).
@@ -173,6 +179,7 @@ impl Expr {
     pub fn pos(&self) -> Pos {
         match self {
             Expr::Num(_, p)
+            | Expr::Str(_, p)
             | Expr::Var(_, p)
             | Expr::Index(_, _, p)
             | Expr::Array(_, p)
@@ -186,6 +193,7 @@ impl Expr {
 #[derive(Debug, Clone, PartialEq)]
 enum Tok {
     Num(f64),
+    Str(String),
     Ident(String),
     Punct(&'static str),
     Eof,
@@ -280,6 +288,33 @@ fn lex(src: &str) -> Result<Vec<(Tok, Pos)>, FrepError> {
             out.push((Tok::Num(v), pos));
             continue;
         }
+        if c == '"' {
+            advance(&mut i, &mut line, &mut col, c);
+            let mut text = String::new();
+            loop {
+                match chars.get(i).copied() {
+                    None | Some('\n') => {
+                        return Err(FrepError::syntax(pos, "string is not closed on its line"));
+                    }
+                    Some('"') => {
+                        advance(&mut i, &mut line, &mut col, '"');
+                        break;
+                    }
+                    Some('\\') if matches!(chars.get(i + 1), Some('"' | '\\')) => {
+                        advance(&mut i, &mut line, &mut col, '\\');
+                        let ch = chars[i];
+                        text.push(ch);
+                        advance(&mut i, &mut line, &mut col, ch);
+                    }
+                    Some(ch) => {
+                        text.push(ch);
+                        advance(&mut i, &mut line, &mut col, ch);
+                    }
+                }
+            }
+            out.push((Tok::Str(text), pos));
+            continue;
+        }
         if c.is_alphabetic() || c == '_' {
             let start = i;
             while i < chars.len() && (chars[i].is_alphanumeric() || chars[i] == '_') {
@@ -359,6 +394,7 @@ struct Parser {
 fn describe(t: &Tok) -> String {
     match t {
         Tok::Num(v) => format!("number {v}"),
+        Tok::Str(t) => format!("string \"{t}\""),
         Tok::Ident(s) => format!("`{s}`"),
         Tok::Punct(p) => format!("`{p}`"),
         Tok::Eof => "end of file".into(),
@@ -507,7 +543,7 @@ impl Parser {
                 Tok::Eof => true,
                 Tok::Punct(p) => *p == "}" || ends.contains(p),
                 Tok::Ident(s) => ends.iter().any(|e| is_keyword(s, e)),
-                Tok::Num(_) => false,
+                Tok::Num(_) | Tok::Str(_) => false,
             };
             if end {
                 break;
@@ -746,6 +782,10 @@ impl Parser {
             Tok::Num(v) => {
                 self.bump();
                 Ok(Expr::Num(v, pos))
+            }
+            Tok::Str(t) => {
+                self.bump();
+                Ok(Expr::Str(t, pos))
             }
             Tok::Punct("(") => {
                 self.bump();

@@ -42,13 +42,16 @@ pub mod grid;
 pub mod lang;
 pub mod library;
 pub mod mapping;
+pub mod motion;
 pub mod ops;
 pub mod output;
 pub mod reconstruct;
 pub mod shape;
+pub mod spec;
 pub mod tape;
+pub mod voxel;
 
-pub use compile::{CompileOptions, compile, compile_source};
+pub use compile::{CompileOptions, compile, compile_file, compile_source};
 pub use error::{FrepError, Pos};
 pub use field::Field;
 pub use ops::{Dual, Interval};

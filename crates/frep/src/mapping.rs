@@ -513,6 +513,24 @@ pub fn displace_by_handles<F: Field>(
     targets: &[DVec3],
     smoothing: f64,
 ) -> Result<Displaced<F, SplineDisplacement>, FrepError> {
+    Ok(Displaced {
+        field,
+        displacement: handle_spline(sources, targets, smoothing)?,
+        scale: -1.0,
+    })
+}
+
+/// The displacement spline of [`displace_by_handles`]: `d` interpolates `δᵢ = Dᵢ − Qᵢ` at
+/// the targets `Dᵢ` (smoothing `smoothing ≥ 0`).
+///
+/// # Errors
+/// [`FrepError::InvalidArgument`] when the lists differ in length or a point is not finite;
+/// as [`SplineDisplacement::new`] otherwise.
+pub fn handle_spline(
+    sources: &[DVec3],
+    targets: &[DVec3],
+    smoothing: f64,
+) -> Result<SplineDisplacement, FrepError> {
     if sources.len() != targets.len() {
         return Err(FrepError::InvalidArgument(format!(
             "{} targets for {} source handles",
@@ -526,11 +544,191 @@ pub fn displace_by_handles<F: Field>(
         )));
     }
     let deltas: Vec<DVec3> = targets.iter().zip(sources).map(|(d, q)| *d - *q).collect();
-    Ok(Displaced {
-        field,
-        displacement: SplineDisplacement::new(targets, &deltas, smoothing)?,
-        scale: -1.0,
+    SplineDisplacement::new(targets, &deltas, smoothing)
+}
+
+/// Smallest squared distance (in the spline's normalised coordinates, centres in the unit
+/// ball) under which [`spline_nodes`] takes the distance to a centre as `√SPLINE_R2_FLOOR`:
+/// the kernel `G(r) = r` has a cusp at its centre, where the symbolic gradient of `√s` would
+/// be `0·∞ = NaN`; with the floor it is zero there, the one-sided value
+/// [`volmorph_handles::volume_spline::green_gradient_factor`] takes. The value changes by at
+/// most `1e-150` of a weight.
+pub const SPLINE_R2_FLOOR: f64 = 1e-300;
+
+/// The 3D volume spline `U` (the Appendix's `G(r) = r` plus a linear polynomial) written as
+/// expression nodes at the point `x`: one node per value component. Evaluates to
+/// [`VolumeSpline::eval`]'s values up to rounding (the sums are taken in another order), and
+/// is differentiated and bounded over boxes like any expression, so a shape built with it
+/// keeps exact gradients, interval culling and compiled evaluation.
+pub fn spline_nodes(b: &mut Builder, spline: &VolumeSpline<3>, x: [Id; 3]) -> Vec<Id> {
+    let v = spline.value_dim();
+    let (shift, scale) = spline.normalisation();
+    let xn = [0, 1, 2].map(|a| {
+        let d = b.add_c(x[a], -shift[a]);
+        b.mul_c(d, scale)
+    });
+    let poly = spline.polynomial();
+    let mut out: Vec<Id> = (0..v)
+        .map(|c| {
+            let mut s = b.constant(poly[c]);
+            for (a, &xa) in xn.iter().enumerate() {
+                let t = b.mul_c(xa, poly[(a + 1) * v + c]);
+                s = b.add(s, t);
+            }
+            s
+        })
+        .collect();
+    let floor = b.constant(SPLINE_R2_FLOOR);
+    for (p, w) in spline
+        .normalised_centres()
+        .iter()
+        .zip(spline.weights().chunks_exact(v))
+    {
+        let mut r2 = b.constant(0.0);
+        for (a, &xa) in xn.iter().enumerate() {
+            let d = b.add_c(xa, -p[a]);
+            let d2 = b.square(d);
+            r2 = b.add(r2, d2);
+        }
+        let r2 = b.binary(BinaryOp::Max, r2, floor);
+        let r = b.sqrt(r2);
+        for (o, &wc) in out.iter_mut().zip(w) {
+            let t = b.mul_c(r, wc);
+            *o = b.add(*o, t);
+        }
+    }
+    out
+}
+
+/// The seed's §4.2 coordinate space mapping driven by control points (Eq. 15–16, Fig. 5) as
+/// a [`Shape`]: `f(x' − s·d(x'))` with the spline `d` of [`handle_spline`] written by
+/// [`spline_nodes`] — the closed form of [`displace_by_handles`] (which is `s = 1`), so the
+/// result is compiled, interval-bounded and differentiated like any model and can be mapped
+/// further. `s` scales the motion (`h₂(t)` of a schedule; exact at `s = 0` and `s = 1` only).
+///
+/// # Errors
+/// As [`handle_spline`]; [`FrepError::InvalidArgument`] for a non-finite `s`.
+pub fn displace_by_handles_shape(
+    f: &Shape,
+    sources: &[DVec3],
+    targets: &[DVec3],
+    smoothing: f64,
+    s: f64,
+) -> Result<Shape, FrepError> {
+    if !s.is_finite() {
+        return Err(FrepError::InvalidArgument(format!(
+            "the motion factor must be finite, got {s}"
+        )));
+    }
+    let d = handle_spline(sources, targets, smoothing)?;
+    Ok(displaced_shape(f, d.spline(), s))
+}
+
+/// `f(x − s·d(x))` for a 3-component displacement spline `d` (see [`spline_nodes`]).
+#[must_use]
+pub fn displaced_shape(f: &Shape, d: &VolumeSpline<3>, s: f64) -> Shape {
+    if s == 0.0 {
+        return f.clone();
+    }
+    Shape::build(|b, x| {
+        let dn = spline_nodes(b, d, x);
+        let moved = [0, 1, 2].map(|k| {
+            let t = b.mul_c(dn[k], -s);
+            b.add(x[k], t)
+        });
+        b.import(f, moved)
     })
+}
+
+/// Function mapping by a volume spline through control points (§4.1.1, the smooth
+/// alternative to Eq. 11 the seed describes after it): `f̃(x) = f(x) + U(x)` with `U` the
+/// 3D volume spline through `U(pᵢ) = vᵢ − f(pᵢ)`, so `f̃(pᵢ) = vᵢ` (every `vᵢ = 0`: the
+/// points lie on the surface of the result). The same function as
+/// [`crate::reconstruct::SplineCorrected::through_values`], as a [`Shape`].
+///
+/// # Errors
+/// As [`crate::reconstruct::SplineCorrected::through_values`].
+pub fn spline_points(
+    f: &Shape,
+    points: &[DVec3],
+    values: &[f64],
+    smoothing: f64,
+) -> Result<Shape, FrepError> {
+    let corrected = crate::reconstruct::SplineCorrected::through_values(
+        Tape::new(f),
+        points,
+        values,
+        smoothing,
+    )?;
+    Ok(f.map(|b, root, x| {
+        let u = spline_nodes(b, corrected.spline(), x);
+        b.add(root, u[0])
+    }))
+}
+
+/// Offset along the gradient with a distance that varies in space (Eq. 17, Fig. 7: "offsets
+/// with the distance modulated by the depth data"): `f(x + d(x) ∇f(x))`, the gradient
+/// symbolic as in [`offset_along_gradient`].
+#[must_use]
+pub fn offset_along_gradient_by(f: &Shape, d: &Shape) -> Shape {
+    f.map(|b, root, x| {
+        let g = b.gradient(root);
+        let dist = b.import(d, x);
+        let moved = [0, 1, 2].map(|k| {
+            let s = b.mul(g[k], dist);
+            b.add(x[k], s)
+        });
+        b.import(f, moved)
+    })
+}
+
+/// Coordinate space mapping by an affine map (Eq. 15): the solid moved by the push-forward
+/// `φ(x) = M x + o`, i.e. `f(φ⁻¹(x')) = f(M⁻¹(x' − o))`.
+///
+/// # Errors
+/// [`FrepError::InvalidArgument`] when `M` is singular (|det| below `1e-12` of its largest
+/// entry cubed) or anything is not finite.
+pub fn affine(f: &Shape, matrix: DMat3, offset: DVec3) -> Result<Shape, FrepError> {
+    let scale = matrix
+        .to_cols_array()
+        .iter()
+        .fold(0.0f64, |m, v| m.max(v.abs()));
+    let det = matrix.determinant();
+    if !(det.is_finite() && offset.is_finite() && det.abs() > 1e-12 * scale.powi(3)) {
+        return Err(FrepError::InvalidArgument(format!(
+            "the affine map needs a finite invertible matrix and a finite offset, got \
+             det = {det}, offset {offset}"
+        )));
+    }
+    let inv = matrix.inverse();
+    Ok(f.map(|b, _, x| {
+        let moved = [0, 1, 2].map(|r| {
+            let mut acc = b.constant(0.0);
+            for (c, &xc) in x.iter().enumerate() {
+                let d = b.add_c(xc, -offset[c]);
+                let t = b.mul_c(d, inv.col(c)[r]);
+                acc = b.add(acc, t);
+            }
+            acc
+        });
+        b.import(f, moved)
+    }))
+}
+
+/// The combined mapping of Eq. 18 in the seed's Fig. 10c form as a [`Shape`] at weights
+/// `w₁ = h₁(t)`, `w₂ = h₂(t)`: `(1 − w₁) f(x' − w₂ d(x')) + w₁ g(x')`, `d` the displacement
+/// spline of [`handle_spline`] (so `x' − d(x')` is the seed's `x' + d₂(x')`). Exactly
+/// `f` at `w₁ = w₂ = 0` and exactly `g` at `w₁ = 1`. The closed form of [`Combined`].
+#[must_use]
+pub fn combined(f: &Shape, g: &Shape, d: &VolumeSpline<3>, w1: f64, w2: f64) -> Shape {
+    if w1 == 1.0 {
+        return g.clone();
+    }
+    let moved = displaced_shape(f, d, w2);
+    if w1 == 0.0 {
+        return moved;
+    }
+    metamorphosis(&moved, g, 1.0 - w1, w1)
 }
 
 /// Combined mapping (Eq. 18, the seed's Fig. 10c form):

@@ -95,7 +95,21 @@ pub enum BinaryOp {
     And,
     /// `1` if either is non-zero, else `0`.
     Or,
+    /// R-function union `a + b + √(a² + b²)` (HyperFun `|`), evaluated with exactly those
+    /// operations; its interval is exact up to rounding (it increases in both arguments).
+    RUnion,
+    /// R-function intersection `a + b − √(a² + b²)` (HyperFun `&`), as [`BinaryOp::RUnion`].
+    RIntersection,
 }
+
+/// Largest `|a| + |b|` over a box for which the R-function interval is taken from its corners
+/// (`2⁵⁰⁰`: the squares stay far from overflow); above it the operations are bounded one by
+/// one.
+const R_FUNCTION_TIGHT_MAX: f64 = f64::from_bits((1023 + 500) << 52);
+
+/// Absolute widening of the R-function corner interval covering squares that underflow
+/// (`2⁻⁵⁰⁰`, above the `2⁻⁵³⁶` such an underflow can shift a square root by).
+const R_FUNCTION_UNDERFLOW_SLACK: f64 = f64::from_bits((1023 - 500) << 52);
 
 /// Largest `|x|` for which [`sin`] and [`cos`] use their own reduction and polynomials;
 /// beyond it (and for non-finite `x`) they call the platform's `sin`/`cos`. Below it the
@@ -284,6 +298,8 @@ pub fn binary(op: BinaryOp, a: f64, b: f64) -> f64 {
         BinaryOp::Ne => cmp(a, b, a != b),
         BinaryOp::And => cmp(a, b, a != 0.0 && b != 0.0),
         BinaryOp::Or => cmp(a, b, a != 0.0 || b != 0.0),
+        BinaryOp::RUnion => (a + b) + (a * a + b * b).sqrt(),
+        BinaryOp::RIntersection => (a + b) - (a * a + b * b).sqrt(),
     }
 }
 
@@ -684,6 +700,37 @@ pub fn binary_interval(op: BinaryOp, a: Interval, b: Interval) -> Interval {
             a.is_zero() && b.is_zero(),
             nan,
         ),
+        BinaryOp::RUnion | BinaryOp::RIntersection => {
+            let m = a.lo.abs().max(a.hi.abs()) + b.lo.abs().max(b.hi.abs());
+            if m.is_nan() || m > R_FUNCTION_TIGHT_MAX {
+                // The squares may overflow (the computed function is then not monotone):
+                // bound the operations one by one.
+                let s = binary_interval(BinaryOp::Add, a, b);
+                let sq = binary_interval(
+                    BinaryOp::Add,
+                    unary_interval(UnaryOp::Square, a),
+                    unary_interval(UnaryOp::Square, b),
+                );
+                let r = unary_interval(UnaryOp::Sqrt, sq);
+                let outer = if op == BinaryOp::RUnion {
+                    BinaryOp::Add
+                } else {
+                    BinaryOp::Sub
+                };
+                return binary_interval(outer, s, r);
+            }
+            // Both increase in each argument, so the corners give the range; rounding (the
+            // cancellation in a + b ∓ √(a² + b²)) can stray by a few units of the operands,
+            // and squares that underflow by at most √(2⁻¹⁰⁷²) = 2⁻⁵³⁶ absolutely.
+            let r = |x: f64, y: f64| binary(op, x, y);
+            let slack = 8.0 * f64::EPSILON * m + R_FUNCTION_UNDERFLOW_SLACK;
+            let c = Interval::from_candidates(&[r(a.lo, b.lo), r(a.hi, b.hi)], nan);
+            Interval {
+                lo: c.lo - slack,
+                hi: c.hi + slack,
+                nan: c.nan,
+            }
+        }
     }
 }
 
@@ -827,6 +874,11 @@ pub fn binary_dual(op: BinaryOp, a: Dual, b: Dual) -> Dual {
             d
         }
         BinaryOp::Atan2 => (a.d * b.v - b.d * a.v) / (a.v * a.v + b.v * b.v),
+        BinaryOp::RUnion | BinaryOp::RIntersection => {
+            let r = (a.v * a.v + b.v * b.v).sqrt();
+            let s = if op == BinaryOp::RUnion { 1.0 } else { -1.0 };
+            a.d * (1.0 + s * a.v / r) + b.d * (1.0 + s * b.v / r)
+        }
         _ => DVec3::ZERO,
     };
     Dual { v, d }

@@ -92,6 +92,12 @@ impl<F: Field> SplineCorrected<F> {
         Self::through_values(initial, points, &zeros, smoothing)
     }
 
+    /// The correction spline `d` (one value component).
+    #[must_use]
+    pub fn spline(&self) -> &VolumeSpline<3> {
+        &self.spline
+    }
+
     /// The correction `d(x)`.
     #[must_use]
     pub fn correction(&self, p: DVec3) -> f64 {
@@ -113,6 +119,144 @@ impl<F: Field> Field for SplineCorrected<F> {
         self.spline
             .eval_with_gradient(p.to_array(), &mut d, &mut dg);
         (v + d[0], g + DVec3::from_array(dg[0]))
+    }
+}
+
+/// Largest number of scattered points [`PointSurface::fit`] accepts (the volume spline's
+/// dense system of `N + 4` unknowns is also checked against the memory budget).
+pub const MAX_SURFACE_POINTS: usize = 20_000;
+
+/// Smallest `det(C)^(1/3)` of the points' covariance relative to their squared extent; below
+/// it the points lie in a plane (to about 1e-6 of their size) and no ellipsoid fits them.
+const MIN_COVARIANCE: f64 = 1e-12;
+
+/// An ellipsoid fitted to scattered surface points by their moments, written distance-like
+/// as `e(x) = ρ/2 · (1 − (x − c)ᵀ Q (x − c))`: the centre `c` is the points' mean and
+/// `Q = (3C)⁻¹` with `C` their covariance (exact for points spread uniformly over a sphere,
+/// whose covariance is `r²/3·I`), `ρ = det(3C)^(1/6)` the geometric mean of the semi-axes, so
+/// `|∇e| ≈ 1` on the ellipsoid. The initial function of [`PointSurface`].
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct FittedEllipsoid {
+    /// Centre `c`.
+    pub centre: DVec3,
+    /// The quadratic form `Q`.
+    pub form: glam::DMat3,
+    /// `ρ`.
+    pub rho: f64,
+}
+
+impl FittedEllipsoid {
+    /// Fit `points`.
+    ///
+    /// # Errors
+    /// [`FrepError::InvalidArgument`] for fewer than 4 points, a non-finite point, or points
+    /// in a plane.
+    pub fn fit(points: &[DVec3]) -> Result<Self, FrepError> {
+        if points.len() < 4 {
+            return Err(FrepError::InvalidArgument(format!(
+                "fitting an ellipsoid needs at least 4 points, got {}",
+                points.len()
+            )));
+        }
+        if let Some(p) = points.iter().find(|p| !p.is_finite()) {
+            return Err(FrepError::InvalidArgument(format!(
+                "point {p} is not finite"
+            )));
+        }
+        let n = points.len() as f64;
+        let centre = points.iter().copied().sum::<DVec3>() / n;
+        let mut c = glam::DMat3::ZERO;
+        let mut extent = 0.0f64;
+        for p in points {
+            let d = *p - centre;
+            extent = extent.max(d.length_squared());
+            c += glam::DMat3::from_cols(d * d.x, d * d.y, d * d.z);
+        }
+        let c3 = c * (3.0 / n);
+        let det = c3.determinant();
+        if !(det.is_finite() && det.cbrt() > MIN_COVARIANCE * extent) {
+            return Err(FrepError::InvalidArgument(format!(
+                "the {} points lie in a plane (or on a line): no solid fits them",
+                points.len()
+            )));
+        }
+        Ok(Self {
+            centre,
+            form: c3.inverse(),
+            rho: det.powf(1.0 / 6.0),
+        })
+    }
+
+    /// `e(x)` as a [`Shape`].
+    #[must_use]
+    pub fn shape(&self) -> crate::shape::Shape {
+        let (c, q, rho) = (self.centre, self.form, self.rho);
+        crate::shape::Shape::build(|b, x| {
+            let d = [0, 1, 2].map(|k| b.add_c(x[k], -c[k]));
+            let mut acc = b.constant(0.0);
+            for r in 0..3 {
+                for k in 0..3 {
+                    let w = q.col(k)[r];
+                    if w == 0.0 {
+                        continue;
+                    }
+                    let t = b.mul(d[r], d[k]);
+                    let t = b.mul_c(t, w);
+                    acc = b.add(acc, t);
+                }
+            }
+            let one = b.constant(1.0);
+            let e = b.sub(one, acc);
+            b.mul_c(e, 0.5 * rho)
+        })
+    }
+}
+
+/// A solid through scattered surface points (§4.1.1, Savchenko et al. 1995b): the
+/// [`FittedEllipsoid`] `f₀` of the points plus the 3D volume spline `d` through `−f₀(pᵢ)`, so
+/// every point lies on the zero set — [`SplineCorrected::through_surface_points`] written as a
+/// [`Shape`] (compiled, interval-bounded, differentiated like any model).
+#[derive(Debug, Clone)]
+pub struct PointSurface {
+    /// The defining function.
+    pub shape: crate::shape::Shape,
+    /// The initial function.
+    pub ellipsoid: FittedEllipsoid,
+    /// The points' bounding box, enlarged by [`SAMPLING_MARGIN`] of its largest extent on
+    /// every side (the box to sample or render).
+    pub bounds: (DVec3, DVec3),
+}
+
+impl PointSurface {
+    /// Reconstruct from `points` with spline smoothing `smoothing ≥ 0` (0 interpolates).
+    ///
+    /// # Errors
+    /// [`FrepError::InvalidArgument`] for more than [`MAX_SURFACE_POINTS`] points; as
+    /// [`FittedEllipsoid::fit`] and [`SplineCorrected::through_surface_points`] (coincident
+    /// points, a system beyond the memory budget).
+    pub fn fit(points: &[DVec3], smoothing: f64) -> Result<Self, FrepError> {
+        if points.len() > MAX_SURFACE_POINTS {
+            return Err(FrepError::InvalidArgument(format!(
+                "{} points: at most {MAX_SURFACE_POINTS} are reconstructed (thin them out)",
+                points.len()
+            )));
+        }
+        let ellipsoid = FittedEllipsoid::fit(points)?;
+        let initial = ellipsoid.shape();
+        let zeros = vec![0.0; points.len()];
+        let shape = crate::mapping::spline_points(&initial, points, &zeros, smoothing)?;
+        let lo = points
+            .iter()
+            .fold(DVec3::splat(f64::INFINITY), |m, p| m.min(*p));
+        let hi = points
+            .iter()
+            .fold(DVec3::splat(f64::NEG_INFINITY), |m, p| m.max(*p));
+        let pad = DVec3::splat(SAMPLING_MARGIN * (hi - lo).max_element());
+        Ok(Self {
+            shape,
+            ellipsoid,
+            bounds: (lo - pad, hi + pad),
+        })
     }
 }
 
@@ -799,6 +943,49 @@ mod tests {
         }
         assert!(SplineCorrected::through_values(ball(1.0), &pts, &vals[1..], 0.0).is_err());
         assert!(SplineCorrected::through_surface_points(ball(1.0), &pts[..3], 0.0).is_err());
+    }
+
+    #[test]
+    fn point_surface_passes_through_its_points() {
+        // 150 points on an ellipsoid (semi-axes 1.5, 1.0, 0.7) about (0.3, −0.2, 1), spread
+        // unevenly (denser near one pole).
+        let (a, b, c) = (1.5, 1.0, 0.7);
+        let centre = DVec3::new(0.3, -0.2, 1.0);
+        let pts: Vec<DVec3> = (0..150)
+            .map(|i| {
+                let u = (f64::from(i) + 0.5) / 150.0;
+                let th = std::f64::consts::PI * u.powf(1.3);
+                let ph = 2.399_963 * f64::from(i);
+                centre
+                    + DVec3::new(
+                        a * th.sin() * ph.cos(),
+                        b * th.sin() * ph.sin(),
+                        c * th.cos(),
+                    )
+            })
+            .collect();
+        let s = PointSurface::fit(&pts, 0.0).unwrap();
+        let t = Tape::new(&s.shape);
+        for p in &pts {
+            assert!(t.eval(*p).abs() < 1e-9, "{p}: {}", t.eval(*p));
+            assert!(p.cmpge(s.bounds.0).all() && p.cmple(s.bounds.1).all());
+        }
+        assert!(t.eval(centre) > 0.0);
+        assert!(t.eval(centre + DVec3::new(3.0, 0.0, 0.0)) < 0.0);
+        // A closed surface enclosing about the ellipsoid's volume.
+        let geo = box_geometry(s.bounds.0, s.bounds.1, [40, 40, 40]).unwrap();
+        let m = mesh(&t, &geo, &MeshOptions::default()).unwrap().mesh;
+        assert!(m.validate().is_closed_manifold());
+        let want = 4.0 / 3.0 * std::f64::consts::PI * a * b * c;
+        let got = m.signed_volume();
+        assert!((got / want - 1.0).abs() < 0.05, "{got} vs {want}");
+        // Too few, coplanar or non-finite points are errors.
+        assert!(PointSurface::fit(&pts[..3], 0.0).is_err());
+        let flat: Vec<DVec3> = pts.iter().map(|p| DVec3::new(p.x, p.y, 0.0)).collect();
+        assert!(PointSurface::fit(&flat, 0.0).is_err());
+        let mut bad = pts.clone();
+        bad[7].y = f64::NAN;
+        assert!(PointSurface::fit(&bad, 0.0).is_err());
     }
 
     #[test]

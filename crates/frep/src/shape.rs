@@ -9,6 +9,7 @@ use std::collections::HashMap;
 use std::sync::Arc;
 
 use crate::ops::{self, BinaryOp, UnaryOp};
+use crate::voxel::VoxelField;
 
 /// Index of a node in a [`Builder`] or [`Shape`].
 pub type Id = u32;
@@ -30,6 +31,19 @@ pub enum Node {
     Binary(BinaryOp, Id, Id),
     /// `select(c, a, b)`: `a` where `c ≠ 0`, else `b` (NaN where `c` is NaN).
     Select(Id, Id, Id),
+    /// A sample of a [`VoxelField`] of the shape ([`Shape::fields`]) at the continuous voxel
+    /// index given by the three arguments (see [`crate::voxel`]).
+    Voxel(VoxelOp, Id, Id, Id),
+}
+
+/// What a [`Node::Voxel`] samples: field `field` of the shape's (or builder's) field table,
+/// differentiated `order[a]` times along index axis `a` (`[0, 0, 0]`: the value).
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash)]
+pub struct VoxelOp {
+    /// Index into the field table.
+    pub field: u32,
+    /// Derivative order per index axis.
+    pub order: [u8; 3],
 }
 
 impl Node {
@@ -49,6 +63,7 @@ impl Node {
 pub struct Builder {
     nodes: Vec<Node>,
     index: HashMap<Node, Id>,
+    fields: Vec<Arc<VoxelField>>,
 }
 
 fn commutative(op: BinaryOp) -> bool {
@@ -62,6 +77,8 @@ fn commutative(op: BinaryOp) -> bool {
             | BinaryOp::Ne
             | BinaryOp::And
             | BinaryOp::Or
+            | BinaryOp::RUnion
+            | BinaryOp::RIntersection
     )
 }
 
@@ -193,6 +210,30 @@ impl Builder {
         self.intern(Node::Select(c, a, b))
     }
 
+    /// A sample of `field` (derivative `order` per index axis) at the continuous voxel index
+    /// `u` (see [`crate::voxel`]); zero when an order exceeds the kernel's degree, folded to
+    /// a constant when `u` is.
+    pub fn voxel(&mut self, field: &Arc<VoxelField>, order: [u8; 3], u: [Id; 3]) -> Id {
+        if order.iter().any(|&o| o > field.kernel().degree()) {
+            return self.constant(0.0);
+        }
+        if let [Some(a), Some(b), Some(c)] = u.map(|i| self.const_value(i)) {
+            return self.constant(field.eval(order, [a, b, c]));
+        }
+        let f = self.field_index(field);
+        self.intern(Node::Voxel(VoxelOp { field: f, order }, u[0], u[1], u[2]))
+    }
+
+    /// The index of `field` in this builder's table (added if new; fields are the same when
+    /// they are the same object).
+    fn field_index(&mut self, field: &Arc<VoxelField>) -> u32 {
+        if let Some(i) = self.fields.iter().position(|f| Arc::ptr_eq(f, field)) {
+            return i as u32;
+        }
+        self.fields.push(Arc::clone(field));
+        (self.fields.len() - 1) as u32
+    }
+
     /// `a + b`.
     pub fn add(&mut self, a: Id, b: Id) -> Id {
         self.binary(BinaryOp::Add, a, b)
@@ -233,18 +274,16 @@ impl Builder {
     }
 
     /// R-function union `f1 + f2 + √(f1² + f2²)` (HyperFun `|`): `≥ 0` exactly where either
-    /// argument is `≥ 0`, smooth away from the points where both vanish.
+    /// argument is `≥ 0`, smooth away from the points where both vanish. One node
+    /// ([`BinaryOp::RUnion`]), so its enclosure over a box is exact up to rounding.
     pub fn union(&mut self, a: Id, b: Id) -> Id {
-        let s = self.add(a, b);
-        let r = self.norm2(a, b);
-        self.add(s, r)
+        self.binary(BinaryOp::RUnion, a, b)
     }
 
-    /// R-function intersection `f1 + f2 − √(f1² + f2²)` (HyperFun `&`).
+    /// R-function intersection `f1 + f2 − √(f1² + f2²)` (HyperFun `&`), one node
+    /// ([`BinaryOp::RIntersection`]).
     pub fn intersection(&mut self, a: Id, b: Id) -> Id {
-        let s = self.add(a, b);
-        let r = self.norm2(a, b);
-        self.sub(s, r)
+        self.binary(BinaryOp::RIntersection, a, b)
     }
 
     /// R-function subtraction `f1 \ f2 = f1 & (−f2)` (HyperFun `\`).
@@ -277,6 +316,7 @@ impl Builder {
     /// nodes `inputs` (function composition `f(inputs)`); returns the new root.
     pub fn import(&mut self, shape: &Shape, inputs: [Id; 3]) -> Id {
         let mut map: Vec<Id> = Vec::with_capacity(shape.nodes.len());
+        let fields = shape.fields.clone();
         for n in shape.nodes.iter() {
             let id = match *n {
                 Node::Input(a) => inputs[usize::from(a.min(2))],
@@ -286,6 +326,11 @@ impl Builder {
                 Node::Select(c, a, b) => {
                     self.select(map[c as usize], map[a as usize], map[b as usize])
                 }
+                Node::Voxel(op, a, b, c) => self.voxel(
+                    &fields[op.field as usize],
+                    op.order,
+                    [map[a as usize], map[b as usize], map[c as usize]],
+                ),
             };
             map.push(id);
         }
@@ -309,7 +354,7 @@ impl Builder {
             let args: Vec<Id> = match self.nodes[i as usize] {
                 Node::Unary(_, a) => vec![a],
                 Node::Binary(_, a, b) => vec![a, b],
-                Node::Select(c, a, b) => vec![c, a, b],
+                Node::Select(c, a, b) | Node::Voxel(_, c, a, b) => vec![c, a, b],
                 _ => vec![],
             };
             for a in args {
@@ -339,6 +384,23 @@ impl Builder {
                 Node::Select(c, a, b) => {
                     let (ga, gb) = (memo[&a], memo[&b]);
                     [0, 1, 2].map(|k| self.select(c, ga[k], gb[k]))
+                }
+                Node::Voxel(op, a, b, c) => {
+                    // Chain rule through the index arguments: Σ_k ∂s/∂u_k · ∇u_k.
+                    let field = Arc::clone(&self.fields[op.field as usize]);
+                    let args = [a, b, c];
+                    let mut g = [zero; 3];
+                    for (k, &arg) in args.iter().enumerate() {
+                        let mut order = op.order;
+                        order[k] = order[k].saturating_add(1);
+                        let partial = self.voxel(&field, order, args);
+                        let ga = memo[&arg];
+                        for (gd, &gad) in g.iter_mut().zip(&ga) {
+                            let t = self.mul(partial, gad);
+                            *gd = self.add(*gd, t);
+                        }
+                    }
+                    g
                 }
             };
             memo.insert(i, g);
@@ -471,6 +533,22 @@ impl Builder {
                     self.div(n, d)
                 })
             }
+            BinaryOp::RUnion | BinaryOp::RIntersection => {
+                // ∂/∂a = 1 ± a/r, ∂/∂b = 1 ± b/r, r = √(a² + b²).
+                let r = self.norm2(a, b);
+                let one = self.constant(1.0);
+                let (qa, qb) = (self.div(a, r), self.div(b, r));
+                let (sa, sb) = if op == BinaryOp::RUnion {
+                    (self.add(one, qa), self.add(one, qb))
+                } else {
+                    (self.sub(one, qa), self.sub(one, qb))
+                };
+                [0, 1, 2].map(|k| {
+                    let l = self.mul(ga[k], sa);
+                    let r = self.mul(gb[k], sb);
+                    self.add(l, r)
+                })
+            }
             _ => [zero; 3],
         }
     }
@@ -479,7 +557,7 @@ impl Builder {
     /// [`Shape::unfinished_loops`] is empty; the compiler attaches its loops.
     #[must_use]
     pub fn finish(&self, root: Id) -> Shape {
-        Shape::compact(&self.nodes, root)
+        Shape::compact(&self.nodes, root, &self.fields)
     }
 }
 
@@ -494,6 +572,7 @@ pub struct Shape {
     nodes: Arc<[Node]>,
     root: Id,
     loops: Arc<[LoopGuard]>,
+    fields: Arc<[Arc<VoxelField>]>,
 }
 
 /// A data-dependent `while` loop that was unrolled to its pass budget without ending at
@@ -513,7 +592,7 @@ pub struct LoopGuard {
 impl Shape {
     /// The nodes reachable from `root`, renumbered in order (arguments must precede their
     /// users).
-    pub(crate) fn compact(nodes: &[Node], root: Id) -> Shape {
+    pub(crate) fn compact(nodes: &[Node], root: Id, fields: &[Arc<VoxelField>]) -> Shape {
         let n = (root as usize + 1).min(nodes.len());
         let mut live = vec![false; n];
         if n > 0 {
@@ -529,7 +608,7 @@ impl Shape {
                     live[a as usize] = true;
                     live[b as usize] = true;
                 }
-                Node::Select(c, a, b) => {
+                Node::Select(c, a, b) | Node::Voxel(_, c, a, b) => {
                     live[c as usize] = true;
                     live[a as usize] = true;
                     live[b as usize] = true;
@@ -539,6 +618,9 @@ impl Shape {
         }
         let mut map = vec![0 as Id; n];
         let mut out = Vec::new();
+        // Fields referenced by live nodes, renumbered in order of first use.
+        let mut field_map: Vec<Option<u32>> = vec![None; fields.len()];
+        let mut kept: Vec<Arc<VoxelField>> = Vec::new();
         for i in 0..n {
             if !live[i] {
                 continue;
@@ -549,6 +631,22 @@ impl Shape {
                 Node::Unary(op, a) => Node::Unary(op, m(a)),
                 Node::Binary(op, a, b) => Node::Binary(op, m(a), m(b)),
                 Node::Select(c, a, b) => Node::Select(m(c), m(a), m(b)),
+                Node::Voxel(op, a, b, c) => {
+                    let f = op.field as usize;
+                    let idx = *field_map[f].get_or_insert_with(|| {
+                        kept.push(Arc::clone(&fields[f]));
+                        (kept.len() - 1) as u32
+                    });
+                    Node::Voxel(
+                        VoxelOp {
+                            field: idx,
+                            order: op.order,
+                        },
+                        m(a),
+                        m(b),
+                        m(c),
+                    )
+                }
                 other => other,
             });
         }
@@ -560,7 +658,14 @@ impl Shape {
             nodes: out.into(),
             root,
             loops: Arc::from(Vec::new()),
+            fields: kept.into(),
         }
+    }
+
+    /// The sampled volumes the shape's [`Node::Voxel`] nodes read, by index.
+    #[must_use]
+    pub fn fields(&self) -> &[Arc<VoxelField>] {
+        &self.fields
     }
 
     /// The data-dependent loops of a compiled model that may not have ended within their
@@ -630,6 +735,8 @@ impl Shape {
                 Node::Unary(op, a) => ops::unary(op, v[a as usize]),
                 Node::Binary(op, a, b) => ops::binary(op, v[a as usize], v[b as usize]),
                 Node::Select(c, a, b) => ops::select(v[c as usize], v[a as usize], v[b as usize]),
+                Node::Voxel(op, a, b, c) => self.fields[op.field as usize]
+                    .eval(op.order, [v[a as usize], v[b as usize], v[c as usize]]),
             };
             v.push(x);
         }

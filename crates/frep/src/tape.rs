@@ -20,7 +20,7 @@ use glam::DVec3;
 use multiversion::multiversion;
 
 use crate::ops::{self, BinaryOp, Choice, Dual, Interval, UnaryOp};
-use crate::shape::{Id, Node, Shape};
+use crate::shape::{Id, Node, Shape, VoxelOp};
 
 /// Points per batch block: each instruction runs over this many points at a time.
 pub const LANES: usize = 256;
@@ -38,6 +38,8 @@ enum Instr {
     Unary(UnaryOp, u32, Arg),
     Binary(BinaryOp, u32, Arg, Arg),
     Select(u32, Arg, Arg, Arg),
+    /// A sample of the shape's field `op.field` at the index `(a, b, c)`.
+    Voxel(VoxelOp, u32, Arg, Arg, Arg),
 }
 
 /// A compiled defining function. Cheap to clone (the graph is shared); evaluation methods
@@ -114,6 +116,7 @@ impl Tape {
                 Node::Unary(op, a) => Instr::Unary(op, out, g(a)),
                 Node::Binary(op, a, b) => Instr::Binary(op, out, g(a), g(b)),
                 Node::Select(c, a, b) => Instr::Select(out, g(c), g(a), g(b)),
+                Node::Voxel(op, a, b, c) => Instr::Voxel(op, out, g(a), g(b), g(c)),
                 Node::Input(_) | Node::Const(_) => unreachable_leaf(),
             });
             // Free the arguments whose last use is this instruction (after the output was
@@ -208,6 +211,10 @@ impl Tape {
                 Instr::Select(o, c, a, b) => {
                     regs[o as usize] = ops::select(get(c, regs), get(a, regs), get(b, regs));
                 }
+                Instr::Voxel(op, o, a, b, c) => {
+                    let u = [get(a, regs), get(b, regs), get(c, regs)];
+                    regs[o as usize] = self.shape.fields()[op.field as usize].eval(op.order, u);
+                }
             }
         }
         get(self.output, regs)
@@ -253,6 +260,15 @@ impl Tape {
                 }
                 Instr::Select(o, c, a, b) => {
                     regs[o as usize] = ops::select_dual(get(c, regs), get(a, regs), get(b, regs));
+                }
+                Instr::Voxel(op, o, a, b, c) => {
+                    let (a, b, c) = (get(a, regs), get(b, regs), get(c, regs));
+                    let (v, g) = self.shape.fields()[op.field as usize]
+                        .eval_with_gradient(op.order, [a.v, b.v, c.v]);
+                    regs[o as usize] = Dual {
+                        v,
+                        d: a.d * g[0] + b.d * g[1] + c.d * g[2],
+                    };
                 }
             }
         }
@@ -328,6 +344,16 @@ impl Tape {
                     let b = src(b, lo, hi, o, xs, n);
                     for (i, d) in dst[..n].iter_mut().enumerate() {
                         *d = ops::select(c.at(i), a.at(i), b.at(i));
+                    }
+                }
+                Instr::Voxel(op, o, a, b, c) => {
+                    let (dst, lo, hi) = split(regs, o as usize);
+                    let a = src(a, lo, hi, o, xs, n);
+                    let b = src(b, lo, hi, o, xs, n);
+                    let c = src(c, lo, hi, o, xs, n);
+                    let field = &self.shape.fields()[op.field as usize];
+                    for (i, d) in dst[..n].iter_mut().enumerate() {
+                        *d = field.eval(op.order, [a.at(i), b.at(i), c.at(i)]);
                     }
                 }
             }
@@ -424,9 +450,10 @@ impl Tape {
         };
         for (ins, &c) in self.instrs.iter().zip(&self.classes) {
             let (o, m) = match *ins {
-                Instr::Unary(_, o, _) | Instr::Binary(_, o, _, _) | Instr::Select(o, _, _, _) => {
-                    (o, compact.len(c))
-                }
+                Instr::Unary(_, o, _)
+                | Instr::Binary(_, o, _, _)
+                | Instr::Select(o, _, _, _)
+                | Instr::Voxel(_, o, _, _, _) => (o, compact.len(c)),
             };
             let (dst, lo, hi) = split(regs, o as usize);
             let [t0, t1, t2] = tmp;
@@ -447,6 +474,15 @@ impl Tape {
                     let b = compact.src(b, c, ctx, t2);
                     for (i, d) in dst[..m].iter_mut().enumerate() {
                         *d = ops::select(cc.at(i), a.at(i), b.at(i));
+                    }
+                }
+                Instr::Voxel(op, _, a, b, cc) => {
+                    let a = compact.src(a, c, ctx, t0);
+                    let b = compact.src(b, c, ctx, t1);
+                    let cc = compact.src(cc, c, ctx, t2);
+                    let field = &self.shape.fields()[op.field as usize];
+                    for (i, d) in dst[..m].iter_mut().enumerate() {
+                        *d = field.eval(op.order, [a.at(i), b.at(i), cc.at(i)]);
                     }
                 }
             }
@@ -493,6 +529,11 @@ impl Tape {
                 Node::Select(c, a, b) => {
                     ops::select_interval(v[c as usize], v[a as usize], v[b as usize])
                 }
+                Node::Voxel(op, a, b, c) => (
+                    self.shape.fields()[op.field as usize]
+                        .bound(op.order, [v[a as usize], v[b as usize], v[c as usize]]),
+                    Choice::Both,
+                ),
             };
             if ch != Choice::Both {
                 s.pruned += 1;
@@ -535,7 +576,15 @@ fn costly(n: &Node) -> bool {
                 | UnaryOp::Sign
                 | UnaryOp::Not
         ),
-        Node::Binary(op, _, _) => matches!(op, BinaryOp::Div | BinaryOp::Pow | BinaryOp::Atan2),
+        Node::Binary(op, _, _) => matches!(
+            op,
+            BinaryOp::Div
+                | BinaryOp::Pow
+                | BinaryOp::Atan2
+                | BinaryOp::RUnion
+                | BinaryOp::RIntersection
+        ),
+        Node::Voxel(..) => true,
         _ => false,
     }
 }
@@ -545,7 +594,7 @@ fn args(n: &Node) -> impl Iterator<Item = Id> {
     let (a, k): ([Id; 3], usize) = match *n {
         Node::Unary(_, a) => ([a, 0, 0], 1),
         Node::Binary(_, a, b) => ([a, b, 0], 2),
-        Node::Select(c, a, b) => ([c, a, b], 3),
+        Node::Select(c, a, b) | Node::Voxel(_, c, a, b) => ([c, a, b], 3),
         _ => ([0; 3], 0),
     };
     a.into_iter().take(k)
@@ -566,6 +615,7 @@ fn simplify_shape(shape: &Shape, choices: &[Choice]) -> Shape {
             (Node::Unary(op, a), _) => (Some(Node::Unary(op, r(a))), None),
             (Node::Binary(op, a, b), _) => (Some(Node::Binary(op, r(a), r(b))), None),
             (Node::Select(c, a, b), _) => (Some(Node::Select(r(c), r(a), r(b))), None),
+            (Node::Voxel(op, a, b, c), _) => (Some(Node::Voxel(op, r(a), r(b), r(c))), None),
             (leaf, _) => (Some(leaf), None),
         };
         // Fold operations whose arguments became constants (a pruned `max(…, 0)` makes
@@ -587,6 +637,13 @@ fn simplify_shape(shape: &Shape, choices: &[Choice]) -> Shape {
                 )))),
                 alias,
             ),
+            Some(Node::Voxel(op, a, b, c))
+                if konst(a).is_some() && konst(b).is_some() && konst(c).is_some() =>
+            {
+                let u = [a, b, c].map(|i| konst(i).unwrap_or(0.0));
+                let v = shape.fields()[op.field as usize].eval(op.order, u);
+                (Some(Node::Const(const_bits(v))), alias)
+            }
             Some(Node::Select(c, a, b)) if konst(c).is_some_and(|v| !v.is_nan()) => {
                 if konst(c).is_some_and(|v| v != 0.0) {
                     (None, Some(a))
@@ -629,7 +686,7 @@ fn simplify_shape(shape: &Shape, choices: &[Choice]) -> Shape {
         }
     }
     let root = rep[shape.root() as usize];
-    Shape::compact(&out, root)
+    Shape::compact(&out, root, shape.fields())
 }
 
 /// Bit pattern of a folded constant (NaNs canonicalised, as the builder does).
@@ -953,7 +1010,22 @@ fn binary_block(op: BinaryOp, o: &mut [f64], a: Src<'_>, b: Src<'_>) {
         a,
         b,
         [
-            Add, Sub, Mul, Div, Min, Max, Pow, Atan2, Lt, Le, Eq, Ne, And, Or
+            Add,
+            Sub,
+            Mul,
+            Div,
+            Min,
+            Max,
+            Pow,
+            Atan2,
+            Lt,
+            Le,
+            Eq,
+            Ne,
+            And,
+            Or,
+            RUnion,
+            RIntersection
         ]
     );
 }

@@ -873,6 +873,31 @@ impl<const D: usize> VolumeSpline<D> {
     pub fn weights(&self) -> &[f64] {
         &self.weights
     }
+
+    /// The normalisation of the [module docs](self), `(shift, scale)`: the spline is
+    /// evaluated at `x̃ = (x − shift)·scale`, so that
+    /// `U(x) = Σ_i λ_i G(‖x̃ − P̃_i‖) + c_0 + Σ_a c_{a+1} x̃_a` with the normalised centres
+    /// [`normalised_centres`](Self::normalised_centres), the [`weights`](Self::weights) `λ_i`
+    /// and the [`polynomial`](Self::polynomial) `c`. With these four a caller can write the
+    /// spline in another form (an expression graph) that evaluates the same function.
+    #[must_use]
+    pub fn normalisation(&self) -> ([f64; D], f64) {
+        (self.frame.shift, self.frame.scale)
+    }
+
+    /// The centres `P̃_i` in the normalised coordinates (see
+    /// [`normalisation`](Self::normalisation)).
+    #[must_use]
+    pub fn normalised_centres(&self) -> &[[f64; D]] {
+        &self.frame.centres
+    }
+
+    /// Polynomial coefficients, row-major `(D + 1) × V`: the constant term `c_0`, then one row
+    /// per normalised coordinate (see [`normalisation`](Self::normalisation)).
+    #[must_use]
+    pub fn polynomial(&self) -> &[f64] {
+        &self.polynomial
+    }
 }
 
 impl VolumeSpline<3> {

@@ -21,7 +21,7 @@ pub mod budget;
 pub mod progress;
 
 use std::io::{self, Read};
-use std::path::Path;
+use std::path::{Path, PathBuf};
 
 pub use atomic::{PartialDir, write_atomic, write_detached};
 pub use budget::{
@@ -73,6 +73,20 @@ pub enum IoError {
         /// Bytes requested.
         bytes: u64,
     },
+    /// A file names a data file that resolves outside the naming file's folder
+    /// ([`resolve_in_folder`]).
+    #[error(
+        "{name:?} resolves to {resolved}, outside {folder}: a file may only name data in its \
+         own folder unless external data is allowed (--allow-external-data)"
+    )]
+    Outside {
+        /// The name as written.
+        name: String,
+        /// The folder it must stay in.
+        folder: String,
+        /// Where it resolves to (after symbolic links).
+        resolved: String,
+    },
 }
 
 /// The input ended before `needed` bytes could be read at `offset`.
@@ -95,6 +109,44 @@ impl IoError {
             path: path.display().to_string(),
             error,
         }
+    }
+}
+
+/// The data file `name`, as written inside a file that lives in `folder` (a model naming a
+/// volume, a specification naming a model): a relative `name` is taken relative to
+/// `folder`, an absolute one as it is. Unless `allow_outside`, the file must resolve — after
+/// `..` components and symbolic links — to a place inside `folder`, so a file from an
+/// untrusted source cannot make volmorph read any file the user can read. Returns the path
+/// to open (`folder` joined with `name`, not canonicalised, so messages show what was
+/// written).
+///
+/// # Errors
+/// [`IoError::Os`] when the file (or `folder`) does not exist or cannot be resolved;
+/// [`IoError::Outside`] when it resolves outside `folder` and `allow_outside` is false.
+pub fn resolve_in_folder(
+    folder: &Path,
+    name: &str,
+    allow_outside: bool,
+) -> Result<PathBuf, IoError> {
+    let folder = if folder.as_os_str().is_empty() {
+        Path::new(".")
+    } else {
+        folder
+    };
+    let path = folder.join(name);
+    let resolved = path.canonicalize().map_err(|e| IoError::os(&path, e))?;
+    if allow_outside {
+        return Ok(path);
+    }
+    let base = folder.canonicalize().map_err(|e| IoError::os(folder, e))?;
+    if resolved.starts_with(&base) {
+        Ok(path)
+    } else {
+        Err(IoError::Outside {
+            name: name.to_string(),
+            folder: base.display().to_string(),
+            resolved: resolved.display().to_string(),
+        })
     }
 }
 
@@ -342,6 +394,42 @@ impl<'a> ByteReader<'a> {
 mod tests {
     use super::*;
     use std::io::Write;
+
+    /// Regression test for data paths escaping their folder: `..`, absolute paths and
+    /// symbolic links leading out are refused unless allowed; names inside are accepted.
+    #[test]
+    fn data_paths_outside_their_folder_are_refused() {
+        let root = tempfile::tempdir().unwrap();
+        let inner = root.path().join("models");
+        std::fs::create_dir(&inner).unwrap();
+        std::fs::write(inner.join("in.txt"), b"x").unwrap();
+        std::fs::create_dir(inner.join("sub")).unwrap();
+        std::fs::write(inner.join("sub/deep.txt"), b"x").unwrap();
+        let secret = root.path().join("secret.txt");
+        std::fs::write(&secret, b"x").unwrap();
+        assert_eq!(
+            resolve_in_folder(&inner, "in.txt", false).unwrap(),
+            inner.join("in.txt")
+        );
+        assert!(resolve_in_folder(&inner, "sub/../sub/deep.txt", false).is_ok());
+        let abs = secret.display().to_string();
+        for name in ["../secret.txt", abs.as_str()] {
+            let e = resolve_in_folder(&inner, name, false).unwrap_err();
+            assert!(matches!(e, IoError::Outside { .. }), "{name}: {e}");
+            assert!(e.to_string().contains("--allow-external-data"), "{e}");
+            assert!(resolve_in_folder(&inner, name, true).is_ok());
+        }
+        #[cfg(unix)]
+        {
+            std::os::unix::fs::symlink(&secret, inner.join("link.txt")).unwrap();
+            let e = resolve_in_folder(&inner, "link.txt", false).unwrap_err();
+            assert!(matches!(e, IoError::Outside { .. }), "{e}");
+            assert!(resolve_in_folder(&inner, "link.txt", true).is_ok());
+        }
+        // A missing file is an I/O error naming it.
+        let e = resolve_in_folder(&inner, "missing.txt", false).unwrap_err();
+        assert!(e.to_string().contains("missing.txt"), "{e}");
+    }
 
     #[test]
     fn atomic_write_leaves_no_file_on_error() {

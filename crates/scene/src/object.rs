@@ -43,7 +43,7 @@ impl FrepModel {
     pub fn new(source: &str, params: BTreeMap<usize, f64>) -> Result<Self, SceneError> {
         let options = CompileOptions {
             params: params.iter().map(|(k, v)| (*k, *v)).collect(),
-            object: None,
+            ..CompileOptions::default()
         };
         let shape = volmorph_frep::compile_source(source, &options)?;
         Ok(Self {

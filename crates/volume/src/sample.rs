@@ -844,11 +844,17 @@ fn prefilter_blocks<C: Voxel>(blocks: &mut [&mut [C]], prev: &mut Vec<f64>) {
     }
 }
 
-/// Cubic B-spline interpolation coefficients of `volume`, stored as `C`, computed separably
-/// along i (rows, from the source voxels through a reusable `f64` line buffer), j (rows of
-/// each z-slab as blocks) and k (column tiles of the xy-planes as blocks), each pass in
-/// parallel.
-fn bspline_coefficients<T: Voxel, C: Voxel, D: AsRef<[T]>>(
+/// Cubic B-spline interpolation coefficients of `volume` (what an
+/// [`Interpolation::CubicBSpline`] sampler interpolates: the spline
+/// `Σ c_ijk β₃(x − i) β₃(y − j) β₃(z − k)` with `c` extended by whole-sample mirror symmetry
+/// passes through every voxel value), stored as `C` in the volume's order (x fastest),
+/// computed separably along i (rows, from the source voxels through a reusable `f64` line
+/// buffer), j (rows of each z-slab as blocks) and k (column tiles of the xy-planes as blocks),
+/// each pass in parallel. A sampler stores `f32` coefficients for every voxel type but `f64`.
+///
+/// # Errors
+/// [`VolumeError::Io`] if the coefficient array would exceed the memory budget.
+pub fn bspline_coefficients<T: Voxel, C: Voxel, D: AsRef<[T]>>(
     volume: &Volume<T, D>,
 ) -> Result<Vec<C>, VolumeError> {
     let [nx, ny, nz] = volume.dims();

@@ -1285,8 +1285,17 @@ fn frep_eval_mesh_render_and_morph() {
         &"--json",
     ]);
     let j: serde_json::Value = serde_json::from_str(&out).unwrap();
-    for it in j["items"].as_array().unwrap() {
+    let items = j["items"].as_array().unwrap();
+    // Two grid cases checked point by point, then two timed pictures.
+    assert_eq!(items.len(), 4, "{j}");
+    for it in &items[..2] {
         assert_eq!(it["same_as_pointwise"], true, "{it}");
+    }
+    for it in &items[2..] {
+        assert!(
+            it["name"].as_str().unwrap().contains("render 512x512"),
+            "{it}"
+        );
     }
 }
 
@@ -1810,6 +1819,249 @@ fn frep_sections_reconstructs_closed_solids() {
     .unwrap();
     let err = fails(&[&"frep", &"sections", &json, &"-o", &mesh]);
     assert!(err.contains("cross-sections"), "{err}");
+}
+
+#[test]
+fn frep_map_writes_volume_mesh_picture_and_animation() {
+    let dir = tempfile::tempdir().unwrap();
+    let csg = dir.path().join("csg.hf");
+    let ball = dir.path().join("ball.hf");
+    std::fs::write(&csg, FREP_CSG).unwrap();
+    std::fs::write(&ball, FREP_BALL).unwrap();
+    // A shell of the block (Fig. 8) pricked by a control point (Fig. 2).
+    let spec = dir.path().join("shell.json");
+    std::fs::write(
+        &spec,
+        r#"{"version": 1, "mappings": [
+            {"kind": "control-points", "points": [{"at": [1.3, 0, 0], "radius": 0.5}]},
+            {"kind": "shell", "a": 0.5, "b": 0.05}]}"#,
+    )
+    .unwrap();
+    let vol = dir.path().join("shell.nii");
+    let out = ok(&[
+        &"frep",
+        &"map",
+        &csg,
+        &"--mapping",
+        &spec,
+        &"-o",
+        &vol,
+        &"--grid",
+        &"20",
+        &"--bounds=-1.6,1.6",
+        &"--param",
+        &"a1=1.2",
+    ]);
+    assert!(
+        out.contains("2 mappings") && out.contains("inside"),
+        "{out}"
+    );
+    let j = info_json(&vol);
+    assert_eq!(j["dims"], serde_json::json!([20, 20, 20]));
+    let mesh = dir.path().join("shell.ply");
+    let out = ok(&[
+        &"frep",
+        &"map",
+        &csg,
+        &"--mapping",
+        &spec,
+        &"-o",
+        &mesh,
+        &"--grid",
+        &"32",
+        &"--bounds=-1.6,1.6",
+        &"--param",
+        &"a1=1.2",
+        &"--close",
+    ]);
+    assert!(out.contains("closed manifold"), "{out}");
+    let png = dir.path().join("shell.png");
+    let out = ok(&[
+        &"frep",
+        &"map",
+        &csg,
+        &"--mapping",
+        &spec,
+        &"-o",
+        &png,
+        &"--size",
+        &"40x30",
+        &"--bounds=-1.6,1.6",
+        &"--param",
+        &"a1=1.2",
+    ]);
+    assert!(out.contains("40x30"), "{out}");
+    assert!(std::fs::metadata(&png).unwrap().len() > 100);
+
+    // A metamorphosis into the ball, animated; the ball is named relative to the spec.
+    let morph = dir.path().join("morph.json");
+    std::fs::write(
+        &morph,
+        r#"{"version": 1, "mappings": [{"kind": "metamorphosis",
+            "target": {"file": "ball.hf"}, "schedule": "smoothstep"}]}"#,
+    )
+    .unwrap();
+    let gif = dir.path().join("morph.gif");
+    let out = ok(&[
+        &"frep",
+        &"map",
+        &csg,
+        &"--mapping",
+        &morph,
+        &"--frames",
+        &"3",
+        &"--size",
+        &"24",
+        &"-o",
+        &gif,
+        &"--param",
+        &"a1=1.2",
+    ]);
+    assert!(out.contains("3 frames"), "{out}");
+    // At t = 1 the result is the ball: the centre is inside.
+    let end = dir.path().join("end.nii");
+    ok(&[
+        &"frep",
+        &"map",
+        &csg,
+        &"--mapping",
+        &morph,
+        &"--t",
+        &"1",
+        &"-o",
+        &end,
+        &"--grid",
+        &"9",
+        &"--bounds=-1.6,1.6",
+        &"--param",
+        &"a1=1.2",
+    ]);
+    assert!(info_json(&end)["stats"]["max"].as_f64().unwrap() > 1.0);
+    // An animation file without --frames, a time out of range.
+    let err = fails(&[&"frep", &"map", &csg, &"--mapping", &morph, &"-o", &gif]);
+    assert!(err.contains("--frames"), "{err}");
+    let err = fails(&[
+        &"frep",
+        &"map",
+        &csg,
+        &"--mapping",
+        &morph,
+        &"--t",
+        &"2",
+        &"-o",
+        &end,
+    ]);
+    assert!(err.contains("--t"), "{err}");
+}
+
+#[test]
+fn frep_map_bad_specs_name_the_file_and_field() {
+    let dir = tempfile::tempdir().unwrap();
+    let csg = dir.path().join("csg.hf");
+    std::fs::write(&csg, FREP_CSG).unwrap();
+    let vol = dir.path().join("v.nii");
+    let cases = [
+        (
+            r#"{"version": 1, "mappings": [{"kind": "shell", "a": 1, "b": "x"}]}"#,
+            "mappings[0].b",
+        ),
+        (
+            r#"{"version": 1, "mappings": [{"kind": "twirl"}]}"#,
+            "mappings[0]",
+        ),
+        (r#"{"version": 7, "mappings": []}"#, "version"),
+        (
+            r#"{"version": 1, "mappings": [{"kind": "control-points",
+                "points": [{"at": [0, 0, 0], "radius": -1}]}]}"#,
+            "mappings[0].points[0]",
+        ),
+        (
+            r#"{"version": 1, "mappings": [{"kind": "metamorphosis",
+                "target": {"file": "../outside.hf"}}]}"#,
+            "mappings[0].target",
+        ),
+    ];
+    for (i, (text, field)) in cases.iter().enumerate() {
+        let spec = dir.path().join(format!("bad{i}.json"));
+        std::fs::write(&spec, text).unwrap();
+        let err = fails(&[
+            &"frep",
+            &"map",
+            &csg,
+            &"--mapping",
+            &spec,
+            &"-o",
+            &vol,
+            &"--grid",
+            &"8",
+        ]);
+        assert!(
+            err.contains(&format!("bad{i}.json")) && err.contains(field),
+            "case {i}: {err}"
+        );
+        assert!(!vol.exists());
+    }
+}
+
+#[test]
+fn frep_points_reconstructs_a_solid_through_its_points() {
+    let dir = tempfile::tempdir().unwrap();
+    let xyz = dir.path().join("cloud.xyz");
+    // 120 points on an ellipsoid with semi-axes 1.2, 0.8, 0.6.
+    let text: String = (0..120)
+        .map(|i| {
+            let u = (f64::from(i) + 0.5) / 120.0;
+            let th = (1.0 - 2.0 * u).acos();
+            let ph = 2.399_963 * f64::from(i);
+            format!(
+                "{} {} {}\n",
+                1.2 * th.sin() * ph.cos(),
+                0.8 * th.sin() * ph.sin(),
+                0.6 * th.cos()
+            )
+        })
+        .collect();
+    std::fs::write(&xyz, text).unwrap();
+    let mesh = dir.path().join("cloud.ply");
+    let out = ok(&[&"frep", &"points", &xyz, &"-o", &mesh, &"--grid", &"40"]);
+    assert!(
+        out.contains("120 points") && out.contains("closed manifold"),
+        "{out}"
+    );
+    // The largest |f| at a point is printed: the surface passes through them.
+    let worst: f64 = out
+        .split("at a point ")
+        .nth(1)
+        .and_then(|s| s.split(')').next())
+        .unwrap()
+        .parse()
+        .unwrap();
+    assert!(worst < 1e-6, "{out}");
+    let png = dir.path().join("cloud.png");
+    let out = ok(&[&"frep", &"points", &xyz, &"-o", &png, &"--size", &"32"]);
+    assert!(out.contains("32x32"), "{out}");
+    let vol = dir.path().join("cloud.nii");
+    ok(&[&"frep", &"points", &xyz, &"-o", &vol, &"--grid", &"12"]);
+    assert!(info_json(&vol)["stats"]["max"].as_f64().unwrap() > 0.0);
+    // The vertices of a mesh are points too.
+    let again = dir.path().join("again.obj");
+    let out = ok(&[
+        &"frep",
+        &"points",
+        &mesh,
+        &"-o",
+        &again,
+        &"--grid",
+        &"24",
+        &"--smoothing",
+        &"1e-3",
+    ]);
+    assert!(out.contains("closed manifold"), "{out}");
+    // Coplanar points are refused naming the file.
+    let flat = dir.path().join("flat.xyz");
+    std::fs::write(&flat, "0 0 0\n1 0 0\n0 1 0\n1 1 0\n0.5 0.2 0\n").unwrap();
+    let err = fails(&[&"frep", &"points", &flat, &"-o", &mesh]);
+    assert!(err.contains("flat.xyz") && err.contains("plane"), "{err}");
 }
 
 // ---------------------------------------------------------------------------------------------

@@ -67,7 +67,7 @@ const UNARY: [UnaryOp; 26] = [
     UnaryOp::PowI(7),
 ];
 
-const BINARY: [BinaryOp; 14] = [
+const BINARY: [BinaryOp; 16] = [
     BinaryOp::Add,
     BinaryOp::Sub,
     BinaryOp::Mul,
@@ -82,6 +82,8 @@ const BINARY: [BinaryOp; 14] = [
     BinaryOp::Ne,
     BinaryOp::And,
     BinaryOp::Or,
+    BinaryOp::RUnion,
+    BinaryOp::RIntersection,
 ];
 
 /// Bit-for-bit equality, any NaN equal to any NaN.

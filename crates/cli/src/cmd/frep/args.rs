@@ -37,6 +37,109 @@ pub enum Command {
         after_help = "Contour file (JSON):\n  {\"sections\": [{\"z\": 0, \"points\": [[x, y], ...]},\n                {\"z\": 2, \"loops\": [[[x, y], ...], [[x, y], ...]]}, ...],\n   \"blend\": \"linear\" | \"catmull-rom\"}\n\nExamples:\n  volmorph frep sections contours.json -o bone.ply --grid 160\n  volmorph frep sections --example femur -o femur.obj"
     )]
     Sections(SectionsArgs),
+    /// Apply extended space mappings (Savchenko & Pasko §4) from a specification file to a
+    /// model and write the result: a volume of the defining function, a mesh, a picture, or an
+    /// animation over the mappings' time.
+    #[command(after_help = MAP_HELP)]
+    Map(MapArgs),
+    /// Reconstruct a solid from scattered surface points (an ellipsoid plus a volume spline
+    /// through the points, §4.1.1) and write its surface, defining function or picture.
+    #[command(
+        after_help = "Examples:\n  volmorph frep points scan.xyz -o scan.ply --grid 160\n  volmorph frep points bunny.obj -o bunny.png --size 384 --view front --up y\n  volmorph frep points cloud.csv -o cloud.nii.gz --smoothing 1e-4\n\nPoints: .xyz/.txt/.pts/.csv (three numbers per line), .fcsv (3D Slicer), or the vertices of\na mesh file (.ply, .obj, .stl, .off). Output by extension: a mesh (.obj, .ply, .stl, .off),\na picture (.png) or a volume of the defining function (.nii, .nii.gz, .mha, .nrrd, .vtk, …)."
+    )]
+    Points(PointsArgs),
+}
+
+/// The worked example of `volmorph frep map`.
+const MAP_HELP: &str =
+    "Example: Fig. 2's pricking and Fig. 8's shell of one model, pictured and meshed:
+
+  cat > prick.json <<'EOF'
+  {\"version\": 1, \"mappings\": [
+    {\"kind\": \"control-points\", \"points\": [
+      {\"at\": [0.9, 0.0, 0.6], \"radius\": 0.5},
+      {\"at\": [0.2, 0.0, -0.3], \"axes\": [[0.6, 0, 0], [0, 0.2, 0], [0, 0, 0.2]]}]},
+    {\"kind\": \"shell\", \"a\": 0.5, \"b\": 0.05}]}
+  EOF
+  volmorph frep map csg.hf --mapping prick.json -o prick.png --size 384
+  volmorph frep map csg.hf --mapping prick.json -o prick.ply --grid 160 --close
+
+More:
+  volmorph frep map ball.hf --mapping morph.json --frames 24 -o morph.gif   (time 0 … 1)
+  volmorph frep map ball.hf --mapping morph.json --t 0.4 -o half.nii.gz --grid 96
+
+Kinds (README \"Mapping specifications\"): offset, control-points, spline-points,
+convolution, metamorphosis, handles, affine, offset-normal, shell, maze, combined,
+collision-free-motion, sequence. Output by extension: a volume of the defining function
+(.nii, .nii.gz, .mha, .nrrd, .vtk, …), a mesh (.obj, .ply, .stl, .off), a picture (.png);
+with --frames an animation (.gif, .png, .apng) or a folder of frame0000.png …";
+
+/// Arguments of `volmorph frep map`.
+#[derive(Debug, clap::Args)]
+pub struct MapArgs {
+    /// Model file (HyperFun language).
+    pub model: PathBuf,
+    /// Mapping specification (JSON; model files it names are relative to its folder).
+    #[arg(long)]
+    pub mapping: PathBuf,
+    /// Output: volume, mesh or picture by extension; with --frames an animation or folder.
+    #[arg(short, long)]
+    pub output: PathBuf,
+    /// Grid points along the longest side of the box (volume and mesh output).
+    #[arg(long, default_value_t = 128)]
+    pub grid: usize,
+    /// Time of the mappings with a schedule, 0 to 1 (1: the whole mapping).
+    #[arg(long, default_value_t = 1.0, conflicts_with = "frames")]
+    pub t: f64,
+    /// Animate: this many frames for t = 0 … 1 (picture output).
+    #[arg(long)]
+    pub frames: Option<usize>,
+    /// Milliseconds per frame of an animation file.
+    #[arg(long, default_value_t = 100, value_parser = clap::value_parser!(u32).range(1..=65535))]
+    pub delay: u32,
+    /// Surface extraction algorithm (mesh output).
+    #[arg(long, value_enum, default_value_t = Method::MarchingCubes)]
+    pub method: Method,
+    /// Cap the shape where the box cuts it, so the mesh is closed (mesh output).
+    #[arg(long)]
+    pub close: bool,
+    /// Write ASCII STL/PLY instead of binary.
+    #[arg(long)]
+    pub ascii: bool,
+    #[command(flatten)]
+    pub view: View,
+    #[command(flatten)]
+    pub common: Common,
+}
+
+/// Arguments of `volmorph frep points`.
+#[derive(Debug, clap::Args)]
+pub struct PointsArgs {
+    /// Points on the surface: a point list (.xyz, .txt, .pts, .csv, .fcsv) or a mesh's
+    /// vertices (.ply, .obj, .stl, .off).
+    pub input: PathBuf,
+    /// Output: mesh, picture or volume by extension.
+    #[arg(short, long)]
+    pub output: PathBuf,
+    /// Grid points along the longest side of the box (volume and mesh output).
+    #[arg(long, default_value_t = 128)]
+    pub grid: usize,
+    /// Volume-spline smoothing (0 passes through every point; larger values smooth noisy
+    /// points, in the spline's normalised units).
+    #[arg(long, default_value_t = 0.0)]
+    pub smoothing: f64,
+    /// Box: `lo,hi` or `x0,y0,z0,x1,y1,z1`; default: the points' box enlarged by 5 % of its
+    /// largest extent on every side.
+    #[arg(long, allow_hyphen_values = true)]
+    pub bounds: Option<String>,
+    /// Surface extraction algorithm (mesh output).
+    #[arg(long, value_enum, default_value_t = Method::MarchingCubes)]
+    pub method: Method,
+    /// Write ASCII STL/PLY instead of binary.
+    #[arg(long)]
+    pub ascii: bool,
+    #[command(flatten)]
+    pub view: View,
 }
 
 /// Options shared by every frep command: model parameters and the box.
