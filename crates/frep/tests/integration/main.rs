@@ -5,3 +5,5 @@ mod conformance;
 mod models;
 mod progress;
 mod size_budget;
+mod spec;
+mod voxel;

@@ -2,4 +2,5 @@
 //! (one link instead of one per file keeps the test build short).
 
 mod scene_commands;
+mod scene_progress;
 mod scene_sculpt;

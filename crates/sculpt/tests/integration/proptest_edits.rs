@@ -1,7 +1,6 @@
 //! Property test: any sequence of dabs and strokes keeps the sculpted mesh a closed,
 //! consistently oriented 2-manifold, and undoing the sequence restores the document.
 
-
 use std::sync::Arc;
 
 use glam::{DQuat, DVec3};

@@ -2,6 +2,7 @@
 //! (one link instead of one per file keeps the test build short).
 
 mod chunked_pullback;
+mod chunked_pushforward;
 mod incremental_props;
 mod inverse_pullback;
 mod jacobian_maps;
