@@ -187,7 +187,7 @@ impl FittedEllipsoid {
         })
     }
 
-    /// `e(x)` as a [`Shape`].
+    /// `e(x)` as a [`Shape`](crate::Shape).
     #[must_use]
     pub fn shape(&self) -> crate::shape::Shape {
         let (c, q, rho) = (self.centre, self.form, self.rho);
@@ -215,7 +215,7 @@ impl FittedEllipsoid {
 /// A solid through scattered surface points (§4.1.1, Savchenko et al. 1995b): the
 /// [`FittedEllipsoid`] `f₀` of the points plus the 3D volume spline `d` through `−f₀(pᵢ)`, so
 /// every point lies on the zero set — [`SplineCorrected::through_surface_points`] written as a
-/// [`Shape`] (compiled, interval-bounded, differentiated like any model).
+/// [`Shape`](crate::Shape) (compiled, interval-bounded, differentiated like any model).
 #[derive(Debug, Clone)]
 pub struct PointSurface {
     /// The defining function.

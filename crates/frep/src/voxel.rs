@@ -1,5 +1,5 @@
 //! Sampled volumes as defining functions: the data behind the model language's
-//! `vmVolume(path, x, level [, kernel [, outside]])` primitive (see [`crate::compile`]).
+//! `vmVolume(path, x, level [, kernel [, outside]])` primitive (see [`crate::compile()`]).
 //!
 //! A [`VoxelField`] holds a volume read through `volmorph-volume-io` (any format volmorph
 //! reads) and interpolates it at **continuous voxel indices** `u = (i, j, k)`: the compiler
