@@ -505,6 +505,14 @@ impl MotionSolution {
         (&self.before, &self.after)
     }
 
+    /// Mean interpenetration volume over the keyframes without and with the solved
+    /// displacements (the two lists of [`Self::penetration`] averaged; 0 without keyframes).
+    #[must_use]
+    pub fn mean_penetration(&self) -> (f64, f64) {
+        let mean = |v: &[f64]| v.iter().sum::<f64>() / v.len().max(1) as f64;
+        (mean(&self.before), mean(&self.after))
+    }
+
     /// The setup this solves.
     #[must_use]
     pub fn setup(&self) -> &MotionSetup {

@@ -258,6 +258,17 @@ impl PointSurface {
             bounds: (lo - pad, hi + pad),
         })
     }
+
+    /// The largest |f| of the reconstructed function at `points` (0 at points it passes
+    /// through exactly; with smoothing > 0 the spline approximates, so this measures how far).
+    #[must_use]
+    pub fn largest_residual(&self, points: &[DVec3]) -> f64 {
+        let tape = crate::tape::Tape::new(&self.shape);
+        points
+            .iter()
+            .map(|p| tape.eval(*p).abs())
+            .fold(0.0, f64::max)
+    }
 }
 
 /// Smallest |area| of a contour loop relative to the square of its extent; below it the loop

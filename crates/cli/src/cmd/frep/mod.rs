@@ -455,14 +455,13 @@ fn map_cmd(a: &MapArgs) -> anyhow::Result<()> {
     pb.finish_and_clear();
     let n = spec.mappings.len();
     for (i, m) in mapped.motions().iter().enumerate() {
-        let (before, after) = m.penetration();
-        let sum = |v: &[f64]| v.iter().sum::<f64>() / v.len().max(1) as f64;
+        let (before, after) = m.mean_penetration();
         say!(
             "collision-free motion {}: mean interpenetration over {} keyframes {} → {} (volume)",
             i + 1,
-            before.len(),
-            volmorph_io::fmt_f64(sum(before)),
-            volmorph_io::fmt_f64(sum(after))
+            m.penetration().0.len(),
+            volmorph_io::fmt_f64(before),
+            volmorph_io::fmt_f64(after)
         );
     }
     let at = |t: f64| -> anyhow::Result<Tape> {
@@ -539,11 +538,8 @@ fn points_cmd(a: &PointsArgs) -> anyhow::Result<()> {
         Some(s) => bounds(s)?,
         None => surface.bounds,
     };
+    let worst = surface.largest_residual(&pts);
     let tape = Tape::new(&surface.shape);
-    let worst = pts
-        .iter()
-        .map(|p| tape.eval(*p).abs())
-        .fold(0.0f64, f64::max);
     let settings = OutputSettings {
         bounds: b,
         grid: a.grid,
