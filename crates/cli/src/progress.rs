@@ -82,3 +82,12 @@ impl volmorph_io::Progress for Bar<'_> {
         self.0.inc(steps);
     }
 }
+
+/// Run `work` with a bar drawn through [`Bar`] while it runs, cleared afterwards whatever it
+/// returns.
+pub fn with_bar<R>(work: impl FnOnce(&Bar<'_>) -> R) -> R {
+    let pb = bar(0);
+    let out = work(&Bar(&pb));
+    pb.finish_and_clear();
+    out
+}

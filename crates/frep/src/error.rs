@@ -73,6 +73,9 @@ pub enum FrepError {
     /// Image or camera error.
     #[error(transparent)]
     Render(#[from] volmorph_render::RenderError),
+    /// Writing a mesh failed.
+    #[error(transparent)]
+    Mesh(#[from] volmorph_mesh::MeshError),
     /// A space map failed.
     #[error(transparent)]
     Deform(#[from] volmorph_deform::DeformError),

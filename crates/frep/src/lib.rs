@@ -37,6 +37,7 @@
 
 pub mod compile;
 mod error;
+pub mod export;
 pub mod field;
 pub mod grid;
 pub mod lang;

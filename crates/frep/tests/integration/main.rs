@@ -2,6 +2,7 @@
 //! (one link instead of one per file keeps the test build short).
 
 mod conformance;
+mod export;
 mod models;
 mod progress;
 mod size_budget;
