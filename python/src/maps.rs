@@ -9,7 +9,7 @@ use numpy::{PyArray1, PyArrayMethods, PyReadonlyArray2, PyUntypedArrayMethods};
 use pyo3::prelude::*;
 use pyo3::types::PyAny;
 use volmorph_deform::{Affine, InverseOptions, SpaceMap};
-use volmorph_handles::HandleSet;
+use volmorph_handles::{HandleSet, TpsKernel};
 use volmorph_lattice::BSplineLattice;
 use volmorph_maps::{AnyMap, HandleDirection, HandleMethod, HandleOptions};
 
@@ -114,8 +114,14 @@ impl PyMap {
     /// (`"affine"`, `"similarity"`, `"rigid"` MLS, `"tps"` thin-plate spline, `"wendland"`).
     /// With `backward=True` the map sends targets to sources: the pull-back that makes the
     /// content at each source appear at its target (as `volmorph handles warp`).
+    ///
+    /// `kernel` is the thin-plate spline's radial kernel: `"r"` (the 3-D biharmonic, the
+    /// default) or `"r2logr"` (`r² ln r`, McPhail's and Bookstein's); `support` the Wendland
+    /// support radius in physical units (default: about a fixed number of neighbours per
+    /// handle). Each is refused for the methods that do not use it.
     #[staticmethod]
-    #[pyo3(signature = (sources, targets, method="tps", smoothing=0.0, backward=false))]
+    #[pyo3(signature = (sources, targets, method="tps", smoothing=0.0, backward=false, kernel=None, support=None))]
+    #[allow(clippy::too_many_arguments)]
     fn from_handles(
         py: Python<'_>,
         sources: PyReadonlyArray2<'_, f64>,
@@ -123,6 +129,8 @@ impl PyMap {
         method: &str,
         smoothing: f64,
         backward: bool,
+        kernel: Option<&str>,
+        support: Option<f64>,
     ) -> PyResult<Self> {
         let s = points(&sources)?;
         let t = points(&targets)?;
@@ -153,8 +161,31 @@ impl PyMap {
             segments: Vec::new(),
             frames: Vec::new(),
         };
+        let kernel = match kernel {
+            None => TpsKernel::default(),
+            Some(_) if method != HandleMethod::Tps => {
+                return Err(input(format!(
+                    "kernel: only the tps method has a kernel choice (method is {})",
+                    method.name()
+                )));
+            }
+            Some(k) => TpsKernel::parse(k).map_err(|e| input(e.to_string()))?,
+        };
+        if let Some(r) = support {
+            if method != HandleMethod::Wendland {
+                return Err(input(format!(
+                    "support={r}: only the wendland method has a support radius (method is {})",
+                    method.name()
+                )));
+            }
+            if !(r.is_finite() && r > 0.0) {
+                return Err(input(format!("support must be finite and > 0, got {r}")));
+            }
+        }
         let options = HandleOptions {
             smoothing,
+            support,
+            kernel,
             ..HandleOptions::default()
         };
         let direction = if backward {

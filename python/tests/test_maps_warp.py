@@ -60,6 +60,63 @@ def test_handle_maps(method):
         np.testing.assert_allclose(back.map(dst), src, atol=1e-6)
 
 
+def _tps_reference(src, dst, query, kernel):
+    """The interpolating thin-plate spline solved directly: [K P; Pᵀ 0] [w; a] = [dst; 0]."""
+    green = {
+        "r": lambda r: r,
+        "r2logr": lambda r: np.where(r > 0, r * r * np.log(np.where(r > 0, r, 1)), 0.0),
+    }[kernel]
+    n = len(src)
+    k = green(np.linalg.norm(src[:, None] - src[None], axis=-1))
+    p = np.hstack([np.ones((n, 1)), src])
+    a = np.zeros((n + 4, n + 4))
+    a[:n, :n], a[:n, n:], a[n:, :n] = k, p, p.T
+    coef = np.linalg.solve(a, np.vstack([dst, np.zeros((4, 3))]))
+    kq = green(np.linalg.norm(query[:, None] - src[None], axis=-1))
+    return kq @ coef[:n] + np.hstack([np.ones((len(query), 1)), query]) @ coef[n:]
+
+
+@pytest.mark.parametrize("kernel", ["r", "r2logr"])
+def test_thin_plate_kernels_match_the_direct_solve(kernel):
+    src = RNG.uniform(-5, 5, size=(15, 3))
+    dst = src + RNG.normal(0, 0.4, size=src.shape)
+    query = RNG.uniform(-6, 6, size=(40, 3))
+    m = vm.Map.from_handles(src, dst, method="tps", kernel=kernel)
+    np.testing.assert_allclose(m.map(src), dst, atol=1e-8)
+    np.testing.assert_allclose(m.map(query), _tps_reference(src, dst, query, kernel), atol=1e-8)
+    if kernel == "r":
+        default = vm.Map.from_handles(src, dst, method="tps")
+        np.testing.assert_array_equal(default.map(query), m.map(query))
+    else:
+        other = vm.Map.from_handles(src, dst, method="tps", kernel="r")
+        assert np.abs(other.map(query) - m.map(query)).max() > 1e-3
+
+
+def test_kernel_and_support_are_checked():
+    src = RNG.uniform(-5, 5, size=(15, 3))
+    dst = src + RNG.normal(0, 0.3, size=src.shape)
+    with pytest.raises(vm.InputError, match="only the tps method"):
+        vm.Map.from_handles(src, dst, method="rigid", kernel="r2logr")
+    with pytest.raises(vm.InputError, match="r2logr"):
+        vm.Map.from_handles(src, dst, method="tps", kernel="gaussian")
+    with pytest.raises(vm.InputError, match="only the wendland method"):
+        vm.Map.from_handles(src, dst, method="tps", support=2.0)
+    with pytest.raises(vm.InputError, match="> 0"):
+        vm.Map.from_handles(src, dst, method="wendland", support=-1.0)
+    # A support radius changes the Wendland map away from the handles, not at them.
+    narrow = vm.Map.from_handles(src, dst, method="wendland", support=3.0)
+    wide = vm.Map.from_handles(src, dst, method="wendland", support=30.0)
+    np.testing.assert_allclose(narrow.map(src), dst, atol=1e-6)
+    np.testing.assert_allclose(wide.map(src), dst, atol=1e-6)
+    # Beyond the support of every handle the map is the least-squares affine trend.
+    far = np.array([[40.0, 40.0, 40.0], [-30.0, 35.0, 0.0]])
+    h = np.hstack([src, np.ones((len(src), 1))])
+    trend = np.linalg.lstsq(h, dst, rcond=None)[0]
+    np.testing.assert_allclose(narrow.map(far), np.hstack([far, np.ones((2, 1))]) @ trend, atol=1e-8)
+    mid = src[:1] + 2.0
+    assert np.abs(narrow.map(mid) - wide.map(mid)).max() > 1e-4
+
+
 @pytest.mark.parametrize("ext", [".json", ".tfm"])
 def test_map_files_round_trip(tmp_path, lattice, ext):
     path = tmp_path / f"m{ext}"

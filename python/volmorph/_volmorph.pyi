@@ -93,6 +93,8 @@ class Map:
         method: str = "tps",
         smoothing: float = 0.0,
         backward: bool = False,
+        kernel: str | None = None,
+        support: float | None = None,
     ) -> Map: ...
     @staticmethod
     def load(path: _Path) -> Map: ...
