@@ -1332,6 +1332,28 @@ mod tests {
     use super::*;
     use volmorph_testkit::Rng;
 
+    /// Assert that the gradient of the scalar spline `sp` at `x` matches central differences
+    /// (step 1e-5) to within `tol` per component.
+    fn assert_gradient_matches_differences<const D: usize>(
+        sp: &VolumeSpline<D>,
+        x: [f64; D],
+        tol: f64,
+    ) {
+        let (mut u, mut g) = ([0.0], [[0.0; D]]);
+        sp.eval_with_gradient(x, &mut u, &mut g);
+        for a in 0..D {
+            let h = 1e-5;
+            let (mut xp, mut xm) = (x, x);
+            xp[a] += h;
+            xm[a] -= h;
+            let (mut up, mut um) = ([0.0], [0.0]);
+            sp.eval(xp, &mut up);
+            sp.eval(xm, &mut um);
+            let fd = (up[0] - um[0]) / (2.0 * h);
+            assert!((g[0][a] - fd).abs() < tol, "axis {a}: {} vs {fd}", g[0][a]);
+        }
+    }
+
     fn random_points<const D: usize>(n: usize, seed: u64) -> Vec<[f64; D]> {
         let mut rng = Rng::new(seed);
         (0..n)
@@ -1399,19 +1421,7 @@ mod tests {
         let sys = VolumeSplineSystem::<3>::with_kernel(&c3, 0.0, TpsKernel::R2LogR).unwrap();
         let vals: Vec<f64> = (0..15).map(|i| (0.4 * f64::from(i)).sin()).collect();
         let sp = sys.solve(&vals, 1).unwrap();
-        let x = [1.0, 2.0, -3.0];
-        let (mut u, mut g) = ([0.0], [[0.0; 3]]);
-        sp.eval_with_gradient(x, &mut u, &mut g);
-        for a in 0..3 {
-            let h = 1e-5;
-            let (mut xp, mut xm) = (x, x);
-            xp[a] += h;
-            xm[a] -= h;
-            let (mut up, mut um) = ([0.0], [0.0]);
-            sp.eval(xp, &mut up);
-            sp.eval(xm, &mut um);
-            assert!((g[0][a] - (up[0] - um[0]) / (2.0 * h)).abs() < 1e-6);
-        }
+        assert_gradient_matches_differences(&sp, [1.0, 2.0, -3.0], 1e-6);
     }
 
     #[test]
@@ -1454,37 +1464,14 @@ mod tests {
         // Gradient of a general spline against central differences, 2D and 3D.
         let vals: Vec<f64> = (0..25).map(|i| (0.7 * i as f64).cos()).collect();
         let sp = sys.solve(&vals, 1).unwrap();
-        let mut g = [[0.0; 3]];
-        sp.eval_with_gradient(x, &mut u, &mut g);
-        for a in 0..3 {
-            let h = 1e-5;
-            let (mut xp, mut xm) = (x, x);
-            xp[a] += h;
-            xm[a] -= h;
-            let (mut up, mut um) = ([0.0], [0.0]);
-            sp.eval(xp, &mut up);
-            sp.eval(xm, &mut um);
-            assert!((g[0][a] - (up[0] - um[0]) / (2.0 * h)).abs() < 1e-7);
-        }
+        assert_gradient_matches_differences(&sp, x, 1e-7);
         let c2 = random_points::<2>(12, 4);
         let v2: Vec<f64> = (0..12).map(|i| f64::from(i) * 0.3).collect();
         let sp2 = VolumeSplineSystem::<2>::new(&c2, 0.0)
             .unwrap()
             .solve(&v2, 1)
             .unwrap();
-        let x2 = [0.4, 7.1];
-        let (mut u2, mut g2) = ([0.0], [[0.0; 2]]);
-        sp2.eval_with_gradient(x2, &mut u2, &mut g2);
-        for a in 0..2 {
-            let h = 1e-5;
-            let (mut xp, mut xm) = (x2, x2);
-            xp[a] += h;
-            xm[a] -= h;
-            let (mut up, mut um) = ([0.0], [0.0]);
-            sp2.eval(xp, &mut up);
-            sp2.eval(xm, &mut um);
-            assert!((g2[0][a] - (up[0] - um[0]) / (2.0 * h)).abs() < 1e-7);
-        }
+        assert_gradient_matches_differences(&sp2, [0.4, 7.1], 1e-7);
     }
 
     #[test]
