@@ -1,12 +1,14 @@
 #!/usr/bin/env bash
 # Fails when two builds that should share their compiled dependencies would resolve a shared
 # dependency with different features, so that everything above it compiles twice:
-#   * the demo's build (`cargo run --release -- demo`: the workspace's binaries, no
-#     dev-dependencies) against the test build (`cargo test --release --workspace`);
+#   * the demo's build (`cargo run --release -- demo`: the command-line tool, the workspace's
+#     default member, without dev-dependencies) against the test build
+#     (`cargo test --release --workspace`);
 #   * the Python extension built alone, as maturin does (`-p volmorph-python`), against the
 #     test build (seen before the fix: the wheel build took 866 s instead of about 80 s).
 # The fix is to list the dependency, with the features printed here, under "Feature
-# unification with the workspace" in python/Cargo.toml.
+# unification with the workspace" in crates/cli/Cargo.toml (demo) or python/Cargo.toml
+# (wheel).
 #
 # Compares cargo's unit graphs (`--unit-graph`, unstable, allowed on stable by
 # RUSTC_BOOTSTRAP=1 as scripts/fuzz.sh does); nothing is compiled.
@@ -20,7 +22,7 @@ graph() {
     RUSTC_BOOTSTRAP=1 cargo "$@" --release --unit-graph -Z unstable-options >"$out"
 }
 graph "$tmp/test.json" test --workspace --no-run
-graph "$tmp/demo.json" build --workspace --bins
+graph "$tmp/demo.json" build -p volmorph-cli --bins
 graph "$tmp/wheel.json" build -p volmorph-python --lib
 python3 - "$tmp" <<'PY'
 import json, sys
