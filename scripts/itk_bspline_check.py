@@ -42,7 +42,8 @@ def main():
     plastimatch = args.plastimatch or shutil.which("plastimatch")
 
     subprocess.run(
-        ["cargo", "build", "-q", "-p", "volmorph-deform", "--example", "itk_bspline_check"],
+        ["cargo", "build", "-q", "-p", "volmorph-lattice", "--features", "examples",
+         "--example", "itk_bspline_check"],
         cwd=ROOT,
         check=True,
     )

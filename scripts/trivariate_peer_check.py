@@ -39,7 +39,8 @@ def random_volume():
 def main():
     root = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
     subprocess.run(
-        ["cargo", "build", "-q", "-p", "volmorph-trivariate", "--example", "eval_points"],
+        ["cargo", "build", "-q", "-p", "volmorph-trivariate", "--features", "examples",
+         "--example", "eval_points"],
         cwd=root, check=True)
     exe = os.path.join(root, "target", "debug", "examples", "eval_points")
     worst = 0.0

@@ -3,8 +3,8 @@
 //! named by its id runs `RUNS` times and its median is printed.
 //!
 //! ```text
-//! cargo build --release -p volmorph-bench --example profile_case
-//! valgrind --tool=callgrind target/release/examples/profile_case pullback_trilinear 1 256
+//! cargo build --profile profiling -p volmorph-bench --features examples --example profile_case
+//! valgrind --tool=callgrind target/profiling/examples/profile_case pullback_trilinear 1 256
 //! ```
 //!
 //! Arguments: `ID [RUNS [SIZE [EDIT_SIZE]]]` (defaults 1, 256, 128); ids as in

@@ -1,7 +1,7 @@
 //! Timing of the mesh readers, writers and validation on a dragon-sized mesh (a triangulated
 //! torus with 435 600 vertices and 871 200 triangles, the size of the Stanford dragon).
 //!
-//! Run with `cargo run --release -p volmorph-mesh --example mesh_io_timing`.
+//! Run with `cargo run --release -p volmorph-mesh --features examples --example mesh_io_timing`.
 
 use std::time::Instant;
 

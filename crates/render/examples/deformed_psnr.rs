@@ -3,7 +3,7 @@
 //! MLS map, and the time of each picture.
 //!
 //! ```text
-//! cargo run --release -p volmorph-render --example deformed_psnr -- VOLUME [SIZE]
+//! cargo run --release -p volmorph-render --features examples --example deformed_psnr -- VOLUME [SIZE]
 //! ```
 //!
 //! The reference resamples the whole volume through the exact map at every voxel (trilinear
