@@ -126,7 +126,7 @@ enum Command {
     #[command(
         after_help = "Example:\n  volmorph mls2d face.png --handles smile.json -o smiling.png --method rigid\n  volmorph mls2d face.png --handles smile.json -o smiling_tps.png --method tps   # kernel r² log r (--kernel r2logr, the only 2-D one)\n\nHandles: {\"points\": [{\"source\": [x, y], \"target\": [x, y]}], \"segments\": [{\"source\": [[x, y], [x, y]], \"target\": [[x, y], [x, y]]}]}\nin pixel coordinates (x right, y down)."
     )]
-    Mls2d(cmd::handles::Mls2dArgs),
+    Mls2d(cmd::mls2d::Mls2dArgs),
     /// Polygon mesh tasks.
     #[command(subcommand)]
     Mesh(cmd::mesh::Command),
@@ -191,7 +191,7 @@ fn main() -> ExitCode {
         Command::Frep(c) => cmd::frep::run(&c),
         Command::Map(c) => cmd::map::run(&c),
         Command::Handles(c) => cmd::handles::run(&c),
-        Command::Mls2d(a) => cmd::handles::run_mls2d(&a),
+        Command::Mls2d(a) => cmd::mls2d::run_mls2d(&a),
         Command::Nurbs(c) => cmd::nurbs::run(&c),
         Command::Render(a) => cmd::render::run(&a),
         Command::Sculpt(a) => cmd::sculpt::run(&a),

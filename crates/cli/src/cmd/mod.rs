@@ -12,6 +12,7 @@ pub mod isosurface;
 pub mod lattice;
 pub mod map;
 pub mod mesh;
+pub mod mls2d;
 pub mod nurbs;
 pub mod nurbs_trace;
 pub mod phantom;

@@ -160,6 +160,44 @@ fn every_register_step_runs_on_a_small_phantom() {
         &dir.path().join("v"),
         &["ventilation.json", "hu_volume_ratio.nii.gz"],
     );
+    // The thin-plate kernel reaches the map built from the correspondences: r (the default)
+    // named explicitly gives the same report, r² log r another.
+    let ventilation_with = |kernel: &str, out: &str| {
+        ok(&[
+            "register",
+            "ventilation",
+            &inh,
+            &exh,
+            "--map",
+            &d("c.json"),
+            "--kernel",
+            kernel,
+            "--labels",
+            &d("lungs_lobes.nii.gz"),
+            "-o",
+            &d(out),
+        ]);
+        std::fs::read_to_string(dir.path().join(out).join("ventilation.json")).unwrap()
+    };
+    let default = std::fs::read_to_string(dir.path().join("v/ventilation.json")).unwrap();
+    assert_eq!(ventilation_with("r", "v_r"), default);
+    assert_ne!(ventilation_with("r2logr", "v_r2logr"), default);
+    let quality_with = |kernel: &str, out: &str| {
+        ok(&[
+            "register",
+            "quality",
+            &inh,
+            &exh,
+            "--map",
+            &d("c.json"),
+            "--kernel",
+            kernel,
+            "-o",
+            &d(out),
+        ]);
+        std::fs::read_to_string(dir.path().join(out).join("quality.json")).unwrap()
+    };
+    assert_ne!(quality_with("r", "q_r"), quality_with("r2logr", "q_r2logr"));
     let out = ok(&[
         "register",
         &inh,

@@ -68,9 +68,9 @@ pub enum Step {
     KnownPair(KnownPairArgs),
 }
 
-/// Options of the handle map and the dense refinement.
+/// How a handle map is built from correspondences or handles: method, smoothing and kernel.
 #[derive(Debug, clap::Args)]
-pub struct MapOptions {
+pub struct HandleMapArgs {
     /// Deformation through the handles (MLS: affine, similarity, rigid).
     #[arg(long, value_enum, default_value_t = Method::Tps)]
     pub method: Method,
@@ -81,6 +81,23 @@ pub struct MapOptions {
     /// r as in the thesis (§5.4.1).
     #[arg(long, value_enum, default_value_t = Kernel::R)]
     pub kernel: Kernel,
+}
+
+impl HandleMapArgs {
+    /// The handle-map options these arguments name.
+    pub(super) fn solve(&self) -> SolveOptions {
+        let mut o = SolveOptions::with_method(self.method.into(), self.smoothing);
+        o.handle.kernel = self.kernel.into();
+        o
+    }
+}
+
+/// Options of the handle map and the dense refinement.
+#[derive(Debug, clap::Args)]
+pub struct MapOptions {
+    /// The handle map.
+    #[command(flatten)]
+    pub handles: HandleMapArgs,
     /// Refine densely with a B-spline lattice on an intensity metric.
     #[arg(long)]
     pub dense: bool,
@@ -107,9 +124,7 @@ pub struct MapOptions {
 impl MapOptions {
     /// The handle-map options these arguments name.
     pub(super) fn solve(&self) -> SolveOptions {
-        let mut o = SolveOptions::with_method(self.method.into(), self.smoothing);
-        o.handle.kernel = self.kernel.into();
-        o
+        self.handles.solve()
     }
 
     /// The dense refinement these arguments ask for, if any.
@@ -257,9 +272,9 @@ pub struct QualityArgs {
     /// Map: lattice (.tfm, lattice JSON) or correspondences / handle JSON (built with --method).
     #[arg(long)]
     pub map: PathBuf,
-    /// Method for a correspondence or handle map.
-    #[arg(long, value_enum, default_value_t = Method::Tps)]
-    pub method: Method,
+    /// How a correspondence or handle map is built (ignored for a lattice or map file).
+    #[command(flatten)]
+    pub handles: HandleMapArgs,
     /// Output folder.
     #[arg(short, long)]
     pub output: PathBuf,
@@ -306,9 +321,9 @@ pub struct VentilationArgs {
     /// Map inhale → exhale (as for `quality`).
     #[arg(long)]
     pub map: PathBuf,
-    /// Method for a correspondence or handle map.
-    #[arg(long, value_enum, default_value_t = Method::Tps)]
-    pub method: Method,
+    /// How a correspondence or handle map is built (ignored for a lattice or map file).
+    #[command(flatten)]
+    pub handles: HandleMapArgs,
     /// Lobe or lung labels on the inhale grid.
     #[arg(long)]
     pub labels: PathBuf,

@@ -11,7 +11,6 @@ use volmorph_register::matching::MatchOptions;
 use volmorph_register::phantom::{KnownDeformationOptions, LungPhantomOptions};
 use volmorph_register::pipeline::{RegisterOptions, register_files_with, solve_files_with};
 use volmorph_register::select::SelectOptions;
-use volmorph_register::solve::SolveOptions;
 use volmorph_register::steps::{self, SubcubeRequest};
 
 pub use self::args::{Command, Step};
@@ -93,7 +92,7 @@ pub fn run(c: &Command) -> anyhow::Result<()> {
                 &a.fixed,
                 &a.moving,
                 &a.map,
-                &SolveOptions::with_method(a.method.into(), 0.0),
+                &a.handles.solve(),
                 a.landmarks.files()?.as_ref(),
                 a.subcube.map(|point| SubcubeRequest {
                     point,
@@ -124,7 +123,7 @@ pub fn run(c: &Command) -> anyhow::Result<()> {
                 &a.exhale,
                 &a.map,
                 &a.labels,
-                &SolveOptions::with_method(a.method.into(), 0.0),
+                &a.handles.solve(),
                 &a.output,
             )?;
             say!("{r}");
