@@ -83,6 +83,7 @@
 //! # Ok::<(), Box<dyn std::error::Error>>(())
 //! ```
 
+mod brush;
 mod cells;
 mod collapse;
 mod cut;
@@ -101,6 +102,7 @@ mod stroke;
 mod tool;
 mod view;
 
+pub use brush::{BrushShape, SPHERE_BRUSH_LEVEL, brush, unit_brush};
 pub use dexel::{BitVolume, TriDexel};
 pub use document::{
     ChangedRegion, DEFAULT_MARGIN, DEFAULT_MAX_DABS, Edit, EditRecord, EditStats, EditTimings,

@@ -21,6 +21,7 @@ use volmorph_lattice::DragOptions;
 use volmorph_scene::{Change, Command, ObjectId, Scene, SceneError};
 
 use crate::coalesce::{Coalesce, Queue};
+use crate::command_json::{Brush, SculptRequest};
 use crate::protocol::{Frame, Kind};
 use crate::setup::Setup;
 
@@ -269,6 +270,10 @@ pub enum Work {
     /// Any other scene command; with a gesture, a newer command of the same gesture replaces
     /// a pending one (absolute edits: a handle's new position, a model's new text).
     Command(Box<Command>, Option<u64>),
+    /// A sculpting stroke (or dab) on a sculpt object; with a gesture, the pending stroke of
+    /// the same gesture, object, brush, operation and size absorbs a newer one (their points
+    /// concatenate: sculpting is cumulative, so nothing is dropped).
+    Sculpt(SculptRequest, Option<u64>),
     /// A built-in workflow (several commands).
     Setup(Setup),
     /// Read a file (resolved inside a root) and add it as an object named after the file.
@@ -281,6 +286,35 @@ pub enum Work {
     /// Write object `id` to a file in the format of its extension ([`Kind::Done`]
     /// `{exported}`).
     Export(ObjectId, PathBuf),
+}
+
+/// The scene command of a sculpt request: its brush as a tool (a mesh object's centred,
+/// unit-reach copy) placed unrotated at each point with scale `size`.
+///
+/// # Errors
+/// A brush mesh that is missing, not a mesh or not closed.
+fn sculpt_command(scene: &Scene, r: SculptRequest) -> Result<Command, SceneError> {
+    let tool = match r.brush {
+        Brush::Shape(shape) => volmorph_sculpt::brush(shape),
+        Brush::Mesh(m) => Arc::new(volmorph_sculpt::unit_brush(scene.mesh(m)?)?),
+    };
+    let poses = r
+        .points
+        .iter()
+        .map(|&p| volmorph_sculpt::Pose {
+            scale: r.size,
+            ..volmorph_sculpt::Pose::at(p)
+        })
+        .collect();
+    Ok(Command::Sculpt {
+        id: r.id,
+        edit: volmorph_sculpt::Edit::Tool {
+            tool,
+            op: r.op,
+            poses,
+            step: None,
+        },
+    })
 }
 
 /// What a job produced.
@@ -298,7 +332,7 @@ impl Coalesce for Job {
     fn key(&self) -> Option<u64> {
         match &self.work {
             Work::Drag { gesture, .. } | Work::Parameters { gesture, .. } => Some(*gesture),
-            Work::Command(_, g) => *g,
+            Work::Command(_, g) | Work::Sculpt(_, g) => *g,
             _ => None,
         }
     }
@@ -324,6 +358,10 @@ impl Coalesce for Job {
                 if std::mem::discriminant(&**c) == std::mem::discriminant(&*n) =>
             {
                 self.work = Work::Command(n, g);
+            }
+            (Work::Sculpt(a, gesture), Work::Sculpt(b, g)) if a.continues_with(&b) => {
+                a.extend(b);
+                *gesture = g;
             }
             (_, work) => {
                 return Err(Job {
@@ -557,6 +595,20 @@ impl Editor {
             Work::Undo => Ok(scene.undo_with(progress)?.unwrap_or_default()),
             Work::Redo => Ok(scene.redo_with(progress)?.unwrap_or_default()),
             Work::Command(c, None) => scene.apply_with(*c, progress),
+            Work::Sculpt(r, None) => scene.apply_with(sculpt_command(scene, r)?, progress),
+            Work::Sculpt(r, Some(gesture)) => {
+                let depth = scene.undo_depth();
+                let change = scene.apply_with(sculpt_command(scene, r)?, progress)?;
+                self.gestures
+                    .entry(gesture)
+                    .or_insert(Gesture {
+                        at: DVec3::ZERO,
+                        steps: 0,
+                        depth,
+                    })
+                    .steps += 1;
+                Ok(change)
+            }
             Work::Command(c, Some(gesture)) => {
                 let depth = scene.undo_depth();
                 let change = scene.apply_with(*c, progress)?;
@@ -594,6 +646,7 @@ fn label(work: &Work) -> &'static str {
         Work::Undo => "undo",
         Work::Redo => "redo",
         Work::Command(..) => "command",
+        Work::Sculpt(..) => "sculpt",
         Work::Setup(_) => "setup",
         Work::Open(_) => "open",
         Work::Save(_) => "save",

@@ -520,10 +520,13 @@ fn edit_of(s: &Shared, page: u64, frame: &Frame) -> Result<Option<Work>, QueryEr
             serde_json::from_value::<Setup>(h.clone())
                 .map_err(|e| QueryError(format!("bad set-up: {e}")))?,
         ),
-        Kind::Command => Work::Command(
-            Box::new(command_json::parse(h)?),
-            h.get("gesture").map(|_| gesture_key(page, h)).transpose()?,
-        ),
+        Kind::Command => {
+            let gesture = h.get("gesture").map(|_| gesture_key(page, h)).transpose()?;
+            match command_json::sculpt(h)? {
+                Some(r) => Work::Sculpt(r, gesture),
+                None => Work::Command(Box::new(command_json::parse(h)?), gesture),
+            }
+        }
         Kind::OpenFile => Work::Open(resolve(s, h)?),
         Kind::SaveScene => Work::Save(resolve_new(s, h)?),
         Kind::LoadScene => Work::Load(resolve(s, h)?),

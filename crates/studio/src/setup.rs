@@ -2,8 +2,9 @@
 //! commands run as one [`Scene::transaction`] (one undo step, or nothing when it fails or is
 //! cancelled): a built-in model, True's direct-manipulation set-up (an identity lattice on the
 //! volume's voxels, the antialiased push-forward through it and the isosurface of the
-//! result), McPhail's handles, a generated mesh, and Feng's mesh FFD (the identity-Jacobian
-//! lattice around a mesh and the mesh deformed through it).
+//! result), McPhail's handles, a generated mesh, Feng's mesh FFD (the identity-Jacobian
+//! lattice around a mesh and the mesh deformed through it), and McPhail's sculpting (a mesh
+//! turned into a sculpt object on a tri-dexel grid with room around it).
 
 use glam::DVec3;
 use serde::Deserialize;
@@ -29,6 +30,19 @@ pub const MAX_FFD_COUNTS: usize = 64;
 /// Largest degree per axis of a mesh-FFD lattice: the accurate FFD's surfaces reach degree
 /// `k_u + k_v + k_w`, and `volmorph_ffd` interpolates up to degree 12.
 pub const MAX_FFD_DEGREE: usize = 4;
+
+/// Grid points along the longest side of a sculpt set-up's grid when the page names none:
+/// 256 is the grid of the thesis's interactive rates (McPhail §3.7) and of the 33 ms dab
+/// target.
+pub const DEFAULT_SCULPT_GRID: usize = 256;
+
+/// Range of a sculpt set-up's grid points along the longest side (at least room for the
+/// margins; at most 512, whose tri-dexel of a closed mesh stays in the hundreds of MB).
+pub const SCULPT_GRID_RANGE: std::ops::RangeInclusive<usize> = 32..=512;
+
+/// Fraction of a sculpt set-up's grid left empty on each side of the mesh, so that material
+/// can be added around it (an `add` only grows the solid inside the grid).
+pub const SCULPT_ROOM: f64 = 0.15;
 
 /// A generated mesh, in the frame of the built-in models (about `[-1, 1]³`).
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Deserialize)]
@@ -93,6 +107,17 @@ pub enum Setup {
     Mesh {
         /// Which.
         shape: Shape,
+    },
+    /// McPhail ch. 3: a copy of the closed mesh `mesh` as a sculpt object (named after it)
+    /// on a tri-dexel grid of `grid` points along its longest side (default
+    /// [`DEFAULT_SCULPT_GRID`], within [`SCULPT_GRID_RANGE`]), with [`SCULPT_ROOM`] of the
+    /// grid empty on every side. The page then sculpts it with `sculpt` commands.
+    Sculpt {
+        /// The mesh object (a mesh, a derived mesh or a sculpt object).
+        mesh: u64,
+        /// Grid points along the longest side.
+        #[serde(default)]
+        grid: Option<usize>,
     },
     /// Feng's mesh FFD (2002 §3.1, `volmorph lattice init --mesh`): the identity-Jacobian
     /// B-spline lattice of `degree` and `counts` control points per axis around the bounding
@@ -280,6 +305,34 @@ impl Setup {
                 };
                 add(scene, name, NewObject::Mesh(mesh))?;
             }
+            Setup::Sculpt { mesh, grid } => {
+                let m = ObjectId(mesh);
+                let n = grid.unwrap_or(DEFAULT_SCULPT_GRID);
+                if !SCULPT_GRID_RANGE.contains(&n) {
+                    return Err(SceneError::Invalid(format!(
+                        "a sculpting grid of {n} points: {} to {} along the longest side",
+                        SCULPT_GRID_RANGE.start(),
+                        SCULPT_GRID_RANGE.end()
+                    )));
+                }
+                let source = scene.mesh(m)?.as_ref().clone();
+                let (lo, hi) = source.bounding_box().ok_or_else(|| {
+                    SceneError::Invalid(format!("mesh {m} has no vertices to sculpt"))
+                })?;
+                // Margin cells so that SCULPT_ROOM of the grid is empty on each side.
+                let margin = (SCULPT_ROOM * (n - 1) as f64).floor();
+                let grid = volmorph_sculpt::Grid::around(lo, hi, n, margin)?;
+                let name = scene.get(m)?.name.clone();
+                add(
+                    scene,
+                    &format!("{name} sculpt"),
+                    NewObject::Sculpt {
+                        mesh: source,
+                        grid,
+                        options: volmorph_sculpt::SculptOptions::default(),
+                    },
+                )?;
+            }
             Setup::MeshFfd {
                 mesh,
                 degree,
@@ -387,6 +440,57 @@ mod tests {
         // Identity handles: resampling at the voxel centres themselves (f32 rounding of the
         // map's evaluation only).
         assert!(worst < 1e-2, "identity handles changed a voxel by {worst}");
+    }
+
+    /// A generated sphere becomes a sculpt object whose mesh is the sphere's (the
+    /// tri-dexel round trip stays within a grid spacing of it) with room around it; a bad
+    /// grid or a non-mesh is refused and changes nothing.
+    #[test]
+    fn a_mesh_becomes_a_sculpt_object_with_room_around_it() {
+        let mut scene = Scene::new();
+        let c = Setup::Mesh {
+            shape: Shape::Sphere,
+        }
+        .run(&mut scene)
+        .unwrap();
+        let sphere = c.added[0];
+        let c = Setup::Sculpt {
+            mesh: sphere.0,
+            grid: Some(64),
+        }
+        .run(&mut scene)
+        .unwrap();
+        let id = c.added[0];
+        assert_eq!(scene.get(id).unwrap().name, "sphere sculpt");
+        let Object::Sculpt(s) = &scene.get(id).unwrap().object else {
+            panic!("a sculpt object is added");
+        };
+        let g = s.document().grid();
+        let (lo, hi) = (
+            g.origin(),
+            g.origin() + g.spacing() * DVec3::from_array(g.dims().map(|d| (d - 1) as f64)),
+        );
+        // Room on every side: at least SCULPT_ROOM of the grid beyond the sphere (radius 0.5).
+        let room = SCULPT_ROOM * (hi.x - lo.x) - 2.0 * g.spacing();
+        assert!(
+            lo.cmplt(DVec3::splat(-0.5 - room)).all() && hi.cmpgt(DVec3::splat(0.5 + room)).all(),
+            "{lo} {hi}"
+        );
+        let m = scene.mesh(id).unwrap();
+        assert!(m.validate().is_closed_manifold());
+        for p in m.positions() {
+            assert!((p.length() - 0.5).abs() < g.spacing(), "{p}");
+        }
+        let depth = scene.undo_depth();
+        for (mesh, grid, what) in [
+            (sphere.0, Some(8), "grid"),
+            (sphere.0, Some(100_000), "grid"),
+            (999, None, "999"),
+        ] {
+            let e = Setup::Sculpt { mesh, grid }.run(&mut scene).unwrap_err();
+            assert!(e.to_string().contains(what), "{e}");
+        }
+        assert_eq!(scene.undo_depth(), depth);
     }
 
     /// A non-finite handle or too many handles are refused, naming the problem, and the

@@ -873,3 +873,151 @@ async fn mesh_ffd_setup_moves_the_mesh_and_downloads_its_step() {
     assert_eq!(text.matches("=MANIFOLD_SOLID_BREP(").count(), 1);
     assert!(text.contains("END-ISO-10303-21;"));
 }
+
+/// The enclosed volume and the number of edges not shared by exactly two triangles of a
+/// [`Kind::MeshData`] frame (positions, normals, then triangle indices).
+fn volume_and_open_edges(f: &Frame) -> (f64, usize) {
+    let nv = f.header["vertices"].as_u64().unwrap() as usize;
+    let nt = f.header["triangles"].as_u64().unwrap() as usize;
+    let p = read_f32(&f.payload[..nv * 12]);
+    let idx: Vec<usize> = f.payload[nv * 24..nv * 24 + nt * 12]
+        .chunks_exact(4)
+        .map(|b| u32::from_le_bytes(b.try_into().unwrap()) as usize)
+        .collect();
+    let at = |i: usize| glam::DVec3::new(p[3 * i].into(), p[3 * i + 1].into(), p[3 * i + 2].into());
+    let mut edges = std::collections::HashMap::new();
+    let mut volume = 0.0;
+    for t in idx.chunks_exact(3) {
+        volume += at(t[0]).dot(at(t[1]).cross(at(t[2]))) / 6.0;
+        for (a, b) in [(t[0], t[1]), (t[1], t[2]), (t[2], t[0])] {
+            *edges.entry((a.min(b), a.max(b))).or_insert(0) += 1;
+        }
+    }
+    (volume, edges.values().filter(|&&n| n != 2).count())
+}
+
+/// Sculpting from a page: a mesh made sculptable, a stroke sent as many segments of one
+/// gesture (coalesced into fewer edits, none dropped) cuts a closed groove, one undo takes
+/// the whole stroke back bit for bit, a mesh object works as a brush, and bad brushes are
+/// refused by name.
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn a_sculpt_stroke_cuts_the_mesh_and_undoes_in_one_step() {
+    let dir = tempfile::tempdir().unwrap();
+    let s = studio(dir.path(), 1 << 20).await;
+    let mut ws = connect(&s).await;
+    send(
+        &mut ws,
+        Kind::Setup,
+        2,
+        json!({"setup": "mesh", "shape": "sphere"}),
+    )
+    .await;
+    let sphere = recv_kind(&mut ws, Kind::Changed).await.header["added"][0]
+        .as_u64()
+        .unwrap();
+    send(
+        &mut ws,
+        Kind::Setup,
+        3,
+        json!({"setup": "sculpt", "mesh": sphere, "grid": 64}),
+    )
+    .await;
+    let id = recv_kind(&mut ws, Kind::Changed).await.header["added"][0]
+        .as_u64()
+        .unwrap();
+    let m0 = ask(&mut ws, Kind::GetMesh, 4, json!({"id": id})).await;
+    let (v0, open0) = volume_and_open_edges(&m0);
+    assert_eq!(open0, 0, "the sculpt object's mesh is closed");
+    // A stroke across the sphere's +z pole (radius 0.5), in 24 segments.
+    let n = 24;
+    let at = |k: usize| [-0.3 + 0.6 * k as f64 / n as f64, 0.0, 0.5];
+    for k in 0..n {
+        send(
+            &mut ws,
+            Kind::Command,
+            100 + k as u32,
+            json!({"command": "sculpt", "gesture": 7, "id": id, "brush": "sphere",
+                   "op": "subtract", "size": 0.15, "points": [at(k), at(k + 1)]}),
+        )
+        .await;
+    }
+    send(&mut ws, Kind::EndGesture, 999, json!({"gesture": 7})).await;
+    let mut edits = 0;
+    loop {
+        let c = recv_kind(&mut ws, Kind::Changed).await;
+        match c.header["edit"].as_str().unwrap() {
+            "sculpt" => edits += 1,
+            "end-gesture" => break,
+            e => panic!("unexpected edit {e}"),
+        }
+    }
+    assert!((1..=n).contains(&edits), "{edits} edits for {n} segments");
+    let m1 = ask(&mut ws, Kind::GetMesh, 5, json!({"id": id})).await;
+    let (v1, open1) = volume_and_open_edges(&m1);
+    assert_eq!(open1, 0, "the sculpted mesh is closed");
+    // The groove: a ball of radius 0.15 swept 0.6 along the pole removes a cap-shaped
+    // trough; at least a third of the swept ball's half inside the sphere.
+    let swept = std::f64::consts::PI * 0.15f64.powi(2) * 0.6
+        + 4.0 / 3.0 * std::f64::consts::PI * 0.15f64.powi(3);
+    assert!(v0 - v1 > swept / 6.0, "removed {} of {swept}", v0 - v1);
+    assert!(v1 > 0.0);
+    send(&mut ws, Kind::Undo, 6, json!({})).await;
+    assert_eq!(
+        recv_kind(&mut ws, Kind::Changed).await.header["edit"],
+        "undo"
+    );
+    let m2 = ask(&mut ws, Kind::GetMesh, 7, json!({"id": id})).await;
+    assert_eq!(m2.header, m0.header);
+    assert!(
+        m2.payload == m0.payload,
+        "one undo restores the mesh bit for bit"
+    );
+    // The generated sphere itself as a brush (centred, unit reach, so size 0.2 is a ball of
+    // radius 0.2), adding at the equator.
+    send(
+        &mut ws,
+        Kind::Command,
+        8,
+        json!({"command": "sculpt", "id": id, "brush": {"mesh": sphere}, "op": "add",
+               "size": 0.2, "points": [[0.5, 0, 0]]}),
+    )
+    .await;
+    assert_eq!(
+        recv_kind(&mut ws, Kind::Changed).await.header["edit"],
+        "sculpt"
+    );
+    let (v3, open3) =
+        volume_and_open_edges(&ask(&mut ws, Kind::GetMesh, 9, json!({"id": id})).await);
+    assert_eq!(open3, 0);
+    assert!(v3 > v0 + 0.005, "{v3} vs {v0}");
+    // A brush that is not a mesh, and an unknown operation, are refused by name.
+    send(
+        &mut ws,
+        Kind::Command,
+        10,
+        json!({"command": "sculpt", "id": id, "brush": {"mesh": 999}, "op": "add",
+               "size": 0.2, "points": [[0.5, 0, 0]]}),
+    )
+    .await;
+    let e = reply(&mut ws, 10).await;
+    assert_eq!(e.kind, Kind::Error);
+    assert!(
+        e.header["message"].as_str().unwrap().contains("999"),
+        "{}",
+        e.header
+    );
+    send(
+        &mut ws,
+        Kind::Command,
+        11,
+        json!({"command": "sculpt", "id": id, "brush": "sphere", "op": "carve",
+               "size": 0.2, "points": [[0.5, 0, 0]]}),
+    )
+    .await;
+    let e = reply(&mut ws, 11).await;
+    assert!(
+        e.header["message"].as_str().unwrap().contains("carve"),
+        "{}",
+        e.header
+    );
+}
