@@ -756,3 +756,97 @@ test('mesh FFD: a dragged lattice point moves the mesh pixels; STEP export is th
   await page.check('#show-volume');
   await page.selectOption('#tool', 'drag');
 });
+
+test('sculpt: a stroke dragged on a sphere cuts a closed groove live, the view stays still, undo restores it', async () => {
+  await page.click('#mesh-sphere');
+  await page.waitForFunction(() => window.__studio.objects.some((o) => o.name === 'sphere'), null, { timeout: 30000 });
+  const sphere = await page.evaluate(() => window.__studio.objects.filter((o) => o.name === 'sphere').pop().id);
+  await page.selectOption('#sculpt-mesh', String(sphere));
+  await page.fill('#sculpt-grid', '96');
+  await page.click('#sculpt-make');
+  await page.waitForFunction(() => {
+    const a = window.__studio;
+    const o = a.objects.find((x) => x.name === 'sphere sculpt');
+    return o && a.view3d.meshes.get(o.id)?.pos && a.tool === 'sculpt';
+  }, null, { timeout: 60000 });
+  const id = await page.evaluate(() => window.__studio.objects.find((x) => x.name === 'sphere sculpt').id);
+  // Only the sculpt object in the 3D view.
+  for (const m of await page.evaluate(() => [...document.querySelectorAll('#objects input[data-mesh]')].map((e) => Number(e.dataset.mesh)))) {
+    if (m !== id) await page.uncheck(`#objects input[data-mesh="${m}"]`);
+  }
+  await page.uncheck('#show-volume');
+  await page.selectOption('#sculpt-op', 'subtract');
+  await page.selectOption('#sculpt-brush', 'sphere');
+  await page.$eval('#sculpt-size', (e) => { e.value = '0.12'; e.dispatchEvent(new Event('input')); });
+  await waitIdle();
+  // The 3D view's pixels without the brush overlay, and the mesh's enclosed volume and open
+  // edges (edges not shared by exactly two triangles).
+  const shot = () => page.evaluate(() => {
+    const a = window.__studio, v = a.view3d;
+    const tool = a.tool; a.tool = 'probe'; v.draw(); a.tool = tool;
+    const px = new Uint8Array(v.canvas.width * v.canvas.height * 4);
+    v.gl.readPixels(0, 0, v.canvas.width, v.canvas.height, v.gl.RGBA, v.gl.UNSIGNED_BYTE, px);
+    return Array.from(px);
+  });
+  const mesh = () => page.evaluate(async (id) => {
+    const { Kind } = await import('./app/protocol.js');
+    const f = await window.__studio.client.request(Kind.GetMesh, { id });
+    const nv = f.header.vertices, nt = f.header.triangles;
+    const p = new Float32Array(f.payload, 0, 3 * nv), t = new Uint32Array(f.payload, 24 * nv, 3 * nt);
+    const edges = new Map();
+    let volume = 0;
+    for (let k = 0; k < t.length; k += 3) {
+      const [a, b, c] = [t[k], t[k + 1], t[k + 2]];
+      const [ax, ay, az, bx, by, bz, cx, cy, cz] = [3 * a, 3 * a + 1, 3 * a + 2, 3 * b, 3 * b + 1, 3 * b + 2, 3 * c, 3 * c + 1, 3 * c + 2].map((i) => p[i]);
+      volume += (ax * (by * cz - bz * cy) - ay * (bx * cz - bz * cx) + az * (bx * cy - by * cx)) / 6;
+      for (const [u, w] of [[a, b], [b, c], [c, a]]) { const key = Math.min(u, w) * 4294967296 + Math.max(u, w); edges.set(key, (edges.get(key) || 0) + 1); }
+    }
+    let open = 0; for (const n of edges.values()) if (n !== 2) open++;
+    return { volume, open, triangles: nt, bytes: Array.from(new Uint8Array(f.payload)) };
+  }, id);
+  const before = await shot();
+  const m0 = await mesh();
+  assert.equal(m0.open, 0, 'the sculpt object is closed');
+  const cam0 = await page.evaluate(() => JSON.stringify(window.__studio.view3d.cam));
+  // A stroke across the sphere's middle as seen: 80 pixels through the projected centre.
+  const c = await page.evaluate(() => {
+    const v = window.__studio.view3d;
+    const [x, y] = v.project([0, 0, 0], v.matrices().mvp);
+    const r = v.canvas.getBoundingClientRect();
+    return { x: r.left + x * r.width / v.canvas.width, y: r.top + y * r.height / v.canvas.height };
+  });
+  await page.evaluate(() => { window.__studio.latencies = []; });
+  await page.mouse.move(c.x - 40, c.y);
+  await page.mouse.down();
+  await page.mouse.move(c.x + 40, c.y, { steps: 10 });
+  await page.mouse.up();
+  await page.waitForFunction(() => window.__studio.lastChange?.edit === 'end-gesture', null, { timeout: 120000 });
+  await waitIdle();
+  const lat = (await page.evaluate(() => window.__studio.latencies)).filter((l) => l.edit === 'sculpt');
+  assert.ok(lat.length >= 1, 'the stroke was applied while dragging');
+  report.sculpt = { grid: 96, strokeEdits: lat.length, dabToPixelsMs: stats(lat.map((l) => l.ms)), serverMs: stats(lat.map((l) => l.server)) };
+  assert.equal(await page.evaluate(() => JSON.stringify(window.__studio.view3d.cam)), cam0, 'sculpting does not move the view');
+  const m1 = await mesh();
+  assert.equal(m1.open, 0, 'the sculpted mesh is closed');
+  assert.ok(m1.volume < m0.volume - 0.002, `the groove removes material: ${m0.volume} → ${m1.volume}`);
+  const after = await shot();
+  let changed = 0;
+  for (let i = 0; i < before.length; i += 4) if (before[i] !== after[i] || before[i + 1] !== after[i + 1] || before[i + 2] !== after[i + 2]) changed++;
+  assert.ok(changed > 200, `only ${changed} pixels changed`);
+  await page.screenshot({ path: path.join(artifacts, 'sculpt.png') });
+  // One undo takes the whole stroke back: the same mesh bytes and the same pixels.
+  await page.click('#undo');
+  await page.waitForFunction(() => window.__studio.lastChange?.edit === 'undo', null, { timeout: 60000 });
+  await waitIdle();
+  // The view has the restored mesh (its triangle count) before the pixels are compared.
+  await page.waitForFunction(([id, n]) => window.__studio.view3d.meshes.get(id)?.idx?.length === 3 * n, [id, m0.triangles], { timeout: 30000 });
+  const m2 = await mesh();
+  assert.deepEqual(m2.bytes, m0.bytes, 'undo restores the mesh bit for bit');
+  await page.waitForTimeout(500);
+  const undone = await shot();
+  let differ = 0;
+  for (let i = 0; i < before.length; i++) if (before[i] !== undone[i]) differ++;
+  assert.equal(differ, 0, 'undo restores the pixels');
+  await page.check('#show-volume');
+  await page.selectOption('#tool', 'drag');
+});

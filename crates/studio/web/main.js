@@ -376,7 +376,7 @@ class App {
 
   gestureEnd(idx, e) {
     if (!this.g) return;
-    if (this.tool === 'drag' && this.g.moved) this.endGesture(this.g.id);
+    if ((this.tool === 'drag' || this.tool === 'sculpt') && this.g.moved) this.endGesture(this.g.id);
     if (this.tool === 'handles') this.panels.handleUp(this.g, idx, e);
     this.g = null;
   }

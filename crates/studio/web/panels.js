@@ -19,6 +19,7 @@ export function setupPanels(app) {
       P.frepSliders(f);
       P.morphChanged();
       P.ffdChanged();
+      P.sculptChanged();
       const hm = app.handleMap();
       if (hm) $('handle-method').value = String(hm.map.method).toLowerCase();
     },
@@ -292,7 +293,53 @@ export function setupPanels(app) {
     const i = nearest(app.cursorPhysical());
     if (i >= 0) app.client.send(Kind.Command, { command: 'delete-handle', map: hm.id, index: i });
   });
-  P.sculptMove = () => app.error('sculpting is not available in this version of the studio');
+
+  // Sculpting (McPhail ch. 3): a mesh made sculptable (a tri-dexel grid around it), then
+  // strokes of a brush (sphere, box or any mesh object, of the chosen reach) painted on it
+  // with the Sculpt tool: in the 3D view where the cursor's ray meets it (the view stays
+  // still), or on a slice at the cursor. A stroke is one undo step.
+  P.sculptObject = () => {
+    const id = Number($('sculpt-object').value);
+    return app.objects.find((o) => o.id === id && o.kind === 'sculpt') || app.objects.filter((o) => o.kind === 'sculpt').pop();
+  };
+  P.sculptSize = () => Number($('sculpt-size').value);
+  P.sculptChanged = () => {
+    const meshes = app.objects.filter((o) => o.mesh);
+    fill($('sculpt-mesh'), meshes.filter((o) => o.kind !== 'sculpt'), (o) => `${o.id} ${o.name}`);
+    fill($('sculpt-object'), app.objects.filter((o) => o.kind === 'sculpt'), (o) => `${o.id} ${o.name}`);
+    const brush = $('sculpt-brush'); const keep = brush.value;
+    brush.textContent = '';
+    brush.add(new Option('sphere', 'sphere')); brush.add(new Option('box', 'box'));
+    for (const o of meshes) brush.add(new Option(`mesh ${o.id} ${o.name}`, `mesh:${o.id}`));
+    if ([...brush.options].some((x) => x.value === keep)) brush.value = keep;
+  };
+  $('sculpt-size').oninput = () => { $('sculpt-size-out').textContent = $('sculpt-size').value; app.view3d.redraw(); };
+  $('sculpt-make').onclick = async () => {
+    try {
+      const mesh = Number($('sculpt-mesh').value);
+      if (!mesh) throw new Error('open or make a mesh first');
+      const grid = Number($('sculpt-grid').value);
+      const c = await app.client.edit(Kind.Setup, { setup: 'sculpt', mesh, grid });
+      P.sculptChanged();
+      $('sculpt-object').value = c.header.added[0];
+      $('tool').value = 'sculpt'; app.tool = 'sculpt';
+      app.status('sculpt object made: paint on it in the 3D view with the left button');
+    } catch (e) { app.error(e.message, e.header); }
+  };
+  // Send one stroke segment (the points in order; one point is a dab) of gesture `gesture`.
+  P.sculptStroke = (gesture, points, e) => {
+    const o = P.sculptObject();
+    if (!o) { app.error('no sculpt object: press "Make sculptable" first'); return; }
+    const b = $('sculpt-brush').value;
+    const brush = b.startsWith('mesh:') ? { mesh: Number(b.slice(5)) } : b;
+    const r = app.client.send(Kind.Command, { command: 'sculpt', gesture, id: o.id, brush, op: $('sculpt-op').value, size: P.sculptSize(), points });
+    app.markInput(r, e);
+  };
+  // A drag on a slice: the stroke follows the cursor's physical point.
+  P.sculptMove = (g, target, e) => {
+    P.sculptStroke(g.id, g.sculptAt ? [g.sculptAt, target] : [target], e);
+    g.sculptAt = target;
+  };
 
   // Files: a browser confined to the server's roots, save/load, drag-and-drop upload.
   const rootSel = $('root');

@@ -1,7 +1,7 @@
 // The 3D view (WebGL2): slice-based volume rendering on the server's cube-cutting proxy
 // geometry (McPhail ch. 2; polygons back to front, premultiplied blending), meshes, and the
-// lattice and handle overlays, the deformed grid, the tool-radius sphere; orbit (left drag), pan (right or shift drag), zoom (wheel),
-// preset views.
+// lattice and handle overlays, the deformed grid, the tool-radius sphere or sculpt brush; orbit (left drag), pan (right or shift drag), zoom (wheel),
+// preset views; in the Sculpt tool the left button paints strokes on the sculpt object instead of orbiting.
 import { Kind } from './protocol.js';
 
 function sub(a, b) { return [a[0] - b[0], a[1] - b[1], a[2] - b[2]]; }
@@ -252,6 +252,9 @@ export class View3D {
     gl.bufferData(gl.ELEMENT_ARRAY_BUFFER, new Uint32Array(f.payload, nv * 24, nt * 3), gl.DYNAMIC_DRAW);
     gl.bindVertexArray(null);
     m.count = nt * 3; m.color = color || [0.85, 0.75, 0.55];
+    // CPU copies for picking (the sculpt brush lands where the cursor's ray meets the mesh).
+    m.pos = new Float32Array(f.payload.slice(0, nv * 12));
+    m.idx = new Uint32Array(f.payload.slice(nv * 24, nv * 24 + nt * 12));
     this.meshes.set(id, m);
     this.redraw();
   }
@@ -381,10 +384,13 @@ export class View3D {
       gl.drawElements(gl.LINES, this.grid.count, gl.UNSIGNED_INT, 0);
       gl.enable(gl.DEPTH_TEST);
     }
-    // The tool radius of a drag or sculpt, around the cursor, over everything.
-    if ((this.app.tool === 'drag' || this.app.tool === 'sculpt') && this.app.volume()) {
+    // The tool radius of a drag around the cursor, or the sculpt brush's reach where it last
+    // touched the sculpt object, over everything.
+    const brush = this.app.tool === 'sculpt' && this.brushAt ? [this.brushAt, this.app.panels.sculptSize()]
+      : (this.app.tool === 'drag' || this.app.tool === 'sculpt') && this.app.volume() ? [this.app.cursorPhysical(), this.app.radius] : null;
+    if (brush) {
       if (!this.sphere) this.sphere = { vao: gl.createVertexArray(), vb: gl.createBuffer() };
-      const lines = sphereLines(this.app.cursorPhysical(), this.app.radius);
+      const lines = sphereLines(brush[0], brush[1]);
       gl.bindVertexArray(this.sphere.vao);
       gl.bindBuffer(gl.ARRAY_BUFFER, this.sphere.vb);
       gl.bufferData(gl.ARRAY_BUFFER, lines, gl.DYNAMIC_DRAW);
@@ -413,6 +419,43 @@ export class View3D {
     return [(e.clientX - r.left) * (this.canvas.width / r.width), (e.clientY - r.top) * (this.canvas.height / r.height)];
   }
 
+  // The ray through the canvas pixel of event `e`: origin (the eye) and unit direction.
+  ray(e) {
+    const [x, y] = this.canvasPoint(e);
+    const { right, up, f } = this.matrices();
+    const t = Math.tan(this.cam.fov / 2);
+    const aspect = this.canvas.width / this.canvas.height;
+    const nx = (2 * x / this.canvas.width - 1) * t * aspect, ny = (1 - 2 * y / this.canvas.height) * t;
+    return { o: this.eye(), d: norm([0, 1, 2].map((i) => f[i] + nx * right[i] + ny * up[i])) };
+  }
+
+  // The nearest point where the ray of event `e` meets mesh `id` as drawn (Möller–Trumbore
+  // over its triangles), or null.
+  hit(e, id) {
+    const m = this.meshes.get(id);
+    if (!m || !m.pos) return null;
+    const { o, d } = this.ray(e);
+    const P = m.pos, I = m.idx;
+    let best = Infinity;
+    for (let k = 0; k < I.length; k += 3) {
+      const a = 3 * I[k], b = 3 * I[k + 1], c = 3 * I[k + 2];
+      const e1 = [P[b] - P[a], P[b + 1] - P[a + 1], P[b + 2] - P[a + 2]];
+      const e2 = [P[c] - P[a], P[c + 1] - P[a + 1], P[c + 2] - P[a + 2]];
+      const pv = cross(d, e2);
+      const det = dot(e1, pv);
+      if (Math.abs(det) < 1e-12) continue;
+      const tv = [o[0] - P[a], o[1] - P[a + 1], o[2] - P[a + 2]];
+      const u = dot(tv, pv) / det;
+      if (u < 0 || u > 1) continue;
+      const qv = cross(tv, e1);
+      const v = dot(d, qv) / det;
+      if (v < 0 || u + v > 1) continue;
+      const t = dot(e2, qv) / det;
+      if (t > 0 && t < best) best = t;
+    }
+    return best < Infinity ? [0, 1, 2].map((i) => o[i] + best * d[i]) : null;
+  }
+
   // The overlay point nearest the cursor within 10 pixels.
   pick(e) {
     if (!this.overlay) return -1;
@@ -432,6 +475,17 @@ export class View3D {
     this.canvas.setPointerCapture(e.pointerId);
     this.last = [e.clientX, e.clientY];
     this.mode = e.button === 2 || e.shiftKey ? 'pan' : 'orbit';
+    // Sculpting freezes the view: the left button paints strokes where the cursor's ray
+    // meets the sculpt object (pan stays on the right button and shift).
+    const sculpt = this.app.tool === 'sculpt' && e.button === 0 && !e.shiftKey ? this.app.panels.sculptObject() : null;
+    if (sculpt) {
+      this.mode = 'sculpt';
+      this.gesture = this.app.newGesture();
+      this.brushAt = this.hit(e, sculpt.id);
+      if (this.brushAt) this.app.panels.sculptStroke(this.gesture, [this.brushAt], e);
+      this.redraw();
+      return;
+    }
     if (this.app.tool === 'lattice' && this.overlay?.kind === 'lattice' && e.button === 0) {
       const i = this.pick(e);
       if (i >= 0) {
@@ -450,6 +504,17 @@ export class View3D {
     const dx = e.clientX - this.last[0], dy = e.clientY - this.last[1];
     this.last = [e.clientX, e.clientY];
     const c = this.cam;
+    if (this.mode === 'sculpt') {
+      const sculpt = this.app.panels.sculptObject();
+      const at = sculpt && this.hit(e, sculpt.id);
+      if (at) {
+        this.interact();
+        this.app.panels.sculptStroke(this.gesture, this.brushAt ? [this.brushAt, at] : [at], e);
+        this.brushAt = at;
+        this.redraw();
+      }
+      return;
+    }
     if (this.mode === 'orbit') {
       c.yaw -= dx * 0.01; c.pitch = Math.max(-1.55, Math.min(1.55, c.pitch + dy * 0.01));
     } else if (this.mode === 'pan') {
@@ -469,7 +534,7 @@ export class View3D {
   }
 
   up() {
-    if (this.mode === 'points') this.app.endGesture(this.gesture);
+    if (this.mode === 'points' || this.mode === 'sculpt') this.app.endGesture(this.gesture);
     this.mode = null; this.last = null;
   }
 
