@@ -3,7 +3,7 @@
 // timing report go to e2e/artifacts/ (git-ignored); the README's screenshot to docs/.
 import { test, before, after } from 'node:test';
 import assert from 'node:assert/strict';
-import { spawn } from 'node:child_process';
+import { spawn, spawnSync } from 'node:child_process';
 import fs from 'node:fs';
 import os from 'node:os';
 import path from 'node:path';
@@ -848,5 +848,73 @@ test('sculpt: a stroke dragged on a sphere cuts a closed groove live, the view s
   for (let i = 0; i < before.length; i++) if (before[i] !== undone[i]) differ++;
   assert.equal(differ, 0, 'undo restores the pixels');
   await page.check('#show-volume');
+  await page.selectOption('#tool', 'drag');
+});
+
+test('registration: two scans registered from the page; a dragged correspondence updates the registered scan', async () => {
+  // The breathing lung phantom (inhale fixed, exhale moving), written into the studio's root.
+  const ph = spawnSync(bin, ['register', 'phantom', '-o', path.join(root, 'lungs'), '--dims', '56,48,40', '--spacing', '5,5,5.5']);
+  assert.equal(ph.status, 0, String(ph.stderr));
+  for (const f of ['inhale.nii.gz', 'exhale.nii.gz']) {
+    await page.evaluate(async (p) => {
+      const { Kind } = await import('./app/protocol.js');
+      await window.__studio.client.edit(Kind.OpenFile, { root: 0, path: p });
+    }, `lungs/${f}`);
+  }
+  await page.waitForFunction(() => ['inhale.nii.gz', 'exhale.nii.gz'].every((n) => window.__studio.objects.some((o) => o.name === n)), null, { timeout: 30000 });
+  const ids = await page.evaluate(() => Object.fromEntries(window.__studio.objects.filter((o) => o.name.endsWith('hale.nii.gz')).map((o) => [o.name, o.id])));
+  await page.selectOption('#reg-fixed', String(ids['inhale.nii.gz']));
+  await page.selectOption('#reg-moving', String(ids['exhale.nii.gz']));
+  await page.fill('#reg-handles', '80');
+  await page.fill('#reg-radius', '12');
+  await page.selectOption('#handle-method', 'tps');
+  const t0 = Date.now();
+  await page.click('#reg-run');
+  await page.waitForFunction(() => {
+    const a = window.__studio;
+    const r = a.objects.find((o) => o.name === 'exhale.nii.gz registered');
+    return r && a.layer === r.id && a.tool === 'handles' && a.handles.length > 10;
+  }, null, { timeout: 120000 });
+  report.registration = { setupMs: Date.now() - t0 };
+  await waitIdle();
+  const n = await page.evaluate(() => window.__studio.handles.length);
+  const reg = await page.evaluate(() => window.__studio.objects.find((o) => o.name === 'exhale.nii.gz registered').id);
+  // The registered scan is on the fixed grid and differs from the moving scan resampled as is.
+  const geo = await page.evaluate(([a, b]) => [window.__studio.byId(a).volume.geometry, window.__studio.byId(b).volume.geometry], [reg, ids['inhale.nii.gz']]);
+  assert.deepEqual(geo[0], geo[1], 'registered onto the fixed grid');
+  // Drag the correspondence nearest the middle of the axial slice by 3 voxels in x.
+  const h = await page.evaluate(() => {
+    const a = window.__studio, g = a.volume().volume.geometry;
+    const mid = [0, 1, 2].map((i) => g.origin[i] + g.spacing[i] * (g.dims[i] - 1) / 2);
+    let best = 0, bd = Infinity;
+    a.handles.forEach((h, i) => { const d = Math.hypot(...[0, 1, 2].map((c) => h.target[c] - mid[c])); if (d < bd) { bd = d; best = i; } });
+    const t = a.handles[best].target;
+    a.setCursor([0, 1, 2].map((c) => (t[c] - g.origin[c]) / g.spacing[c]), -1);
+    return { i: best, target: t };
+  });
+  await waitIdle();
+  const z = Math.round(await page.evaluate(() => window.__studio.cursor[2]));
+  const slice = () => page.evaluate(async ([id, z]) => {
+    const { Kind } = await import('./app/protocol.js');
+    const f = await window.__studio.client.request(Kind.GetSlice, { volume: id, axis: 2, index: z });
+    return Array.from(new Float32Array(f.payload));
+  }, [reg, z]);
+  const before = await slice();
+  const s = await screenOf(2, h.target);
+  await page.mouse.move(s.x, s.y);
+  await page.mouse.down();
+  await page.mouse.move(s.x + 12, s.y, { steps: 4 });
+  await page.mouse.up();
+  await page.waitForFunction(() => window.__studio.lastChange?.edit === 'end-gesture', null, { timeout: 120000 });
+  await waitIdle();
+  const moved = await page.evaluate((i) => window.__studio.handles[i].target, h.i);
+  assert.ok(moved[0] - h.target[0] > 1, `the correspondence's target moved: ${h.target} → ${moved}`);
+  assert.equal(await page.evaluate(() => window.__studio.handles.length), n, 'no correspondence added or lost');
+  const after = await slice();
+  assert.notDeepEqual(after, before, 'the registered scan follows the corrected correspondence');
+  await page.check('#show-jacobian');
+  await waitIdle();
+  await page.screenshot({ path: path.join(artifacts, 'registration.png') });
+  await page.uncheck('#show-jacobian');
   await page.selectOption('#tool', 'drag');
 });

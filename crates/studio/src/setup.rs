@@ -4,7 +4,9 @@
 //! volume's voxels, the antialiased push-forward through it and the isosurface of the
 //! result), McPhail's handles, a generated mesh, Feng's mesh FFD (the identity-Jacobian
 //! lattice around a mesh and the mesh deformed through it), and McPhail's sculpting (a mesh
-//! turned into a sculpt object on a tri-dexel grid with room around it).
+//! turned into a sculpt object on a tri-dexel grid with room around it), and McPhail's
+//! registration workbench (handles selected on a fixed scan and matched in a moving one, the
+//! handle map through them and the moving scan registered onto the fixed grid).
 
 use glam::DVec3;
 use serde::Deserialize;
@@ -43,6 +45,9 @@ pub const SCULPT_GRID_RANGE: std::ops::RangeInclusive<usize> = 32..=512;
 /// Fraction of a sculpt set-up's grid left empty on each side of the mesh, so that material
 /// can be added around it (an `add` only grows the solid inside the grid).
 pub const SCULPT_ROOM: f64 = 0.15;
+
+/// Most handles a registration set-up selects (the thesis uses 100 to 400).
+pub const MAX_REGISTER_HANDLES: usize = 2000;
 
 /// A generated mesh, in the frame of the built-in models (about `[-1, 1]³`).
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Deserialize)]
@@ -119,6 +124,28 @@ pub enum Setup {
         #[serde(default)]
         grid: Option<usize>,
     },
+    /// McPhail ch. 5: up to `handles` handles selected on volume `fixed` (the edge-enhanced
+    /// brightest voxels, `radius` mm apart, §5.3.1), matched in volume `moving` by NCC
+    /// (§5.3.2, coarse to fine, outliers rejected), a handle map of `method` through the
+    /// accepted correspondences (sources in the fixed scan, targets in the moving one: the
+    /// map goes fixed → moving), and the moving scan pulled back through it onto the fixed
+    /// grid ("NAME registered"). A wrong correspondence is corrected by dragging its target
+    /// (`move-handle`); the registered scan follows.
+    Register {
+        /// The fixed scan.
+        fixed: u64,
+        /// The moving scan.
+        moving: u64,
+        /// Most handles, 1 to [`MAX_REGISTER_HANDLES`].
+        #[serde(default = "default_register_handles")]
+        handles: usize,
+        /// Least distance between handles, mm.
+        #[serde(default = "default_register_radius")]
+        radius: f64,
+        /// The handle map's method.
+        #[serde(default = "default_register_method")]
+        method: HandleMethod,
+    },
     /// Feng's mesh FFD (2002 §3.1, `volmorph lattice init --mesh`): the identity-Jacobian
     /// B-spline lattice of `degree` and `counts` control points per axis around the bounding
     /// box of mesh `mesh` (an axis where it is flat padded), and the mesh deformed through it
@@ -135,6 +162,26 @@ pub enum Setup {
         #[serde(default)]
         form: Form,
     },
+}
+
+fn default_register_handles() -> usize {
+    200
+}
+
+fn default_register_radius() -> f64 {
+    10.0
+}
+
+fn default_register_method() -> HandleMethod {
+    HandleMethod::Tps
+}
+
+/// A registration error as a scene error (cancellation kept as such).
+fn from_register(e: volmorph_register::RegisterError) -> SceneError {
+    match e {
+        volmorph_register::RegisterError::Cancelled(c) => SceneError::Cancelled(c),
+        e => SceneError::Invalid(e.to_string()),
+    }
 }
 
 impl Setup {
@@ -305,6 +352,76 @@ impl Setup {
                 };
                 add(scene, name, NewObject::Mesh(mesh))?;
             }
+            Setup::Register {
+                fixed,
+                moving,
+                handles,
+                radius,
+                method,
+            } => {
+                use volmorph_register::matching::{MatchOptions, match_handles_with};
+                use volmorph_register::select::{SelectOptions, select_handles};
+                if !(1..=MAX_REGISTER_HANDLES).contains(&handles) {
+                    return Err(SceneError::Invalid(format!(
+                        "{handles} handles: a registration selects 1 to {MAX_REGISTER_HANDLES}"
+                    )));
+                }
+                let (f, m) = (ObjectId(fixed), ObjectId(moving));
+                let fixed_scan = scene.volume(f)?.to_typed::<f32>();
+                let moving_scan = scene.volume(m)?.to_typed::<f32>();
+                progress.start("selecting handles", 0);
+                let selected = select_handles(
+                    &fixed_scan,
+                    None,
+                    &SelectOptions::with_count_radius(handles, radius),
+                )
+                .map_err(from_register)?;
+                progress.check()?;
+                let sources: Vec<DVec3> = selected.iter().map(|h| h.position).collect();
+                let corr = match_handles_with(
+                    &fixed_scan,
+                    &moving_scan,
+                    &sources,
+                    None,
+                    &MatchOptions::default(),
+                    progress,
+                )
+                .map_err(from_register)?;
+                let set = volmorph_register::solve::handle_set(&corr, method);
+                if set.len() == 0 {
+                    return Err(SceneError::Invalid(format!(
+                        "no handle of {} was matched with confidence: the scans may not overlap",
+                        sources.len()
+                    )));
+                }
+                let name = scene.get(m)?.name.clone();
+                let h = add(
+                    scene,
+                    &format!("{name} correspondences"),
+                    NewObject::Handles {
+                        set,
+                        method,
+                        options: HandleOptions::default(),
+                    },
+                )?;
+                add(
+                    scene,
+                    &format!("{name} registered"),
+                    NewObject::Derived(Recipe::WarpOnto {
+                        source: m,
+                        map: h,
+                        method: WarpMethod::PullbackLinear,
+                        background: volmorph_register::metrics::value_range(
+                            moving_scan.data(),
+                            None,
+                        )
+                        .0,
+                        sampled_nodes: None,
+                        swap_handles: false,
+                        grid: volmorph_maps::json::GridJson::from(fixed_scan.geometry()),
+                    }),
+                )?;
+            }
             Setup::Sculpt { mesh, grid } => {
                 let m = ObjectId(mesh);
                 let n = grid.unwrap_or(DEFAULT_SCULPT_GRID);
@@ -440,6 +557,110 @@ mod tests {
         // Identity handles: resampling at the voxel centres themselves (f32 rounding of the
         // map's evaluation only).
         assert!(worst < 1e-2, "identity handles changed a voxel by {worst}");
+    }
+
+    /// The lung phantom registered from the studio: the correspondences' map brings the
+    /// exhale landmarks closer to the inhale ones than they were, the registered scan lies on
+    /// the fixed grid, dragging one correspondence's target changes the registered scan
+    /// (only near it), and the set-up is one undo step.
+    #[test]
+    fn registration_maps_the_phantom_and_a_dragged_correspondence_updates_it() {
+        use volmorph_deform::SpaceMap;
+        use volmorph_register::phantom::{LungPhantomOptions, lung_phantom};
+        let ph = lung_phantom(&LungPhantomOptions {
+            dims: [56, 48, 40],
+            spacing: DVec3::new(5.0, 5.0, 5.5),
+            ..LungPhantomOptions::default()
+        })
+        .unwrap();
+        let mut scene = Scene::new();
+        let mut add = |name: &str, v: &volmorph_volume::Volume<f32>| {
+            scene
+                .apply(Command::Add {
+                    name: name.into(),
+                    object: NewObject::Volume(AnyVolume::from(v.clone())),
+                })
+                .unwrap()
+                .added[0]
+        };
+        let (f, m) = (add("inhale", &ph.inhale), add("exhale", &ph.exhale));
+        let depth = scene.undo_depth();
+        let c = Setup::Register {
+            fixed: f.0,
+            moving: m.0,
+            handles: 80,
+            radius: 12.0,
+            method: HandleMethod::Tps,
+        }
+        .run(&mut scene)
+        .unwrap();
+        assert_eq!(scene.undo_depth(), depth + 1);
+        let (h, r) = (c.added[0], c.added[1]);
+        assert_eq!(scene.get(r).unwrap().name, "exhale registered");
+        let map = scene.map(h).unwrap().clone();
+        let tre = |moved: bool| {
+            let n = ph.landmarks_inhale.len() as f64;
+            ph.landmarks_inhale
+                .iter()
+                .zip(&ph.landmarks_exhale)
+                .map(|(x, y)| ((if moved { map.apply(*x) } else { *x }) - *y).length())
+                .sum::<f64>()
+                / n
+        };
+        let (before, after) = (tre(false), tre(true));
+        assert!(after < 0.5 * before, "TRE {before:.2} → {after:.2} mm");
+        let registered = scene.volume(r).unwrap().to_typed::<f32>();
+        assert_eq!(registered.geometry(), ph.inhale.geometry());
+        // Drag the first correspondence's target 4 mm along x: the registered scan changes.
+        let Object::Map(MapObject::Handles(hm)) = &scene.get(h).unwrap().object else {
+            panic!("the correspondences are a handle map");
+        };
+        let (s0, t0) = hm.set().points[0];
+        scene
+            .apply(Command::MoveHandle {
+                map: h,
+                index: 0,
+                source: s0,
+                target: t0 + DVec3::new(4.0, 0.0, 0.0),
+            })
+            .unwrap();
+        let moved = scene.volume(r).unwrap().to_typed::<f32>();
+        let changed = registered
+            .data()
+            .iter()
+            .zip(moved.data())
+            .filter(|(a, b)| a != b)
+            .count();
+        assert!(
+            changed > 0,
+            "the registered scan follows the dragged correspondence"
+        );
+        scene.undo().unwrap();
+        assert_eq!(
+            scene.volume(r).unwrap().to_typed::<f32>().data(),
+            registered.data()
+        );
+        // Wrong inputs are named and change nothing.
+        let e = Setup::Register {
+            fixed: f.0,
+            moving: 99,
+            handles: 10,
+            radius: 10.0,
+            method: HandleMethod::Tps,
+        }
+        .run(&mut scene)
+        .unwrap_err();
+        assert!(e.to_string().contains("99"), "{e}");
+        let e = Setup::Register {
+            fixed: f.0,
+            moving: m.0,
+            handles: 0,
+            radius: 10.0,
+            method: HandleMethod::Tps,
+        }
+        .run(&mut scene)
+        .unwrap_err();
+        assert!(e.to_string().contains("handles"), "{e}");
     }
 
     /// A generated sphere becomes a sculpt object whose mesh is the sphere's (the

@@ -20,6 +20,7 @@ export function setupPanels(app) {
       P.morphChanged();
       P.ffdChanged();
       P.sculptChanged();
+      P.registerChanged();
       const hm = app.handleMap();
       if (hm) $('handle-method').value = String(hm.map.method).toLowerCase();
     },
@@ -245,11 +246,13 @@ export function setupPanels(app) {
     const hm = app.handleMap();
     if (hm) app.client.send(Kind.Command, { command: 'set-handle-method', map: hm.id, method: e.target.value });
   };
-  const warpOf = (map) => app.objects.find((o) => o.recipe?.recipe === 'warp' && o.recipe.map === map);
+  const warpOf = (map) => app.objects.find((o) => (o.recipe?.recipe === 'warp' || o.recipe?.recipe === 'warp-onto') && o.recipe.map === map);
   const nearest = (p) => {
     let best = -1, bd = Infinity;
     app.handles.forEach((h, i) => { const d = Math.hypot(h.target[0] - p[0], h.target[1] - p[1], h.target[2] - p[2]); if (d < bd) { bd = d; best = i; } });
-    return bd < app.radius * 0.25 ? best : -1;
+    // Within a quarter of the tool radius, or two voxels of the shown scan (scans in mm).
+    const sp = app.volume()?.volume.geometry.spacing || [0, 0, 0];
+    return bd < Math.max(app.radius * 0.25, 2 * Math.max(...sp)) ? best : -1;
   };
   P.handleDown = (g) => {
     const hm = app.handleMap();
@@ -293,6 +296,32 @@ export function setupPanels(app) {
     const i = nearest(app.cursorPhysical());
     if (i >= 0) app.client.send(Kind.Command, { command: 'delete-handle', map: hm.id, index: i });
   });
+
+  // Registration (McPhail ch. 5): handles selected on the fixed scan and matched in the
+  // moving one become a handle map (the correspondences, shown and dragged with the Handles
+  // tool: a wrong one is corrected by dragging its target, the registered scan follows), and
+  // the moving scan registered onto the fixed grid is shown; the Jacobian overlay shows where
+  // the map expands, compresses or folds.
+  P.registerChanged = () => {
+    const volumes = app.objects.filter((o) => o.volume);
+    fill($('reg-fixed'), volumes, (o) => `${o.id} ${o.name}`);
+    fill($('reg-moving'), volumes, (o) => `${o.id} ${o.name}`);
+  };
+  $('reg-run').onclick = async () => {
+    try {
+      const fixed = Number($('reg-fixed').value), moving = Number($('reg-moving').value);
+      if (!fixed || !moving || fixed === moving) throw new Error('choose two different scans, fixed and moving');
+      const c = await app.client.edit(Kind.Setup, {
+        setup: 'register', fixed, moving, handles: Number($('reg-handles').value), radius: Number($('reg-radius').value),
+        method: $('handle-method').value,
+      });
+      const [map, registered] = c.header.added;
+      app.showLayer(registered);
+      $('tool').value = 'handles'; app.tool = 'handles';
+      const h = app.byId(map);
+      app.status(`registered: ${h?.map?.handles ?? '?'} correspondences; drag a wrong one's target with the Handles tool`);
+    } catch (e) { app.error(e.message, e.header); }
+  };
 
   // Sculpting (McPhail ch. 3): a mesh made sculptable (a tri-dexel grid around it), then
   // strokes of a brush (sphere, box or any mesh object, of the chosen reach) painted on it
