@@ -444,6 +444,8 @@ test('F-rep parameter slider: a drag re-renders the model live and undoes in one
   // The model is a[1] − |x|²: it peaks at a[1] at the centre.
   const before = await peak();
   assert.ok(Math.abs(before - 0.6) < 0.01, `a[1] = 0.6 peaks at ${before}`);
+  // The side panel scrolls: bring the slider on screen before dragging it.
+  await page.locator('#frep-a1').scrollIntoViewIfNeeded();
   const box = await page.locator('#frep-a1').boundingBox();
   const [min, max] = await page.evaluate(() => { const i = document.getElementById('frep-a1'); return [Number(i.min), Number(i.max)]; });
   const at = (v) => box.x + 8 + (box.width - 16) * (v - min) / (max - min);
@@ -647,6 +649,8 @@ test('metamorphosis: a slider drag shows Eq. 13 live and undoes in one step', as
   const start = await check();
   assert.equal(start.t, 0);
   assert.ok(start.worst < 1e-5, `t = 0: Eq. 13 off by ${start.worst}`);
+  // The side panel scrolls: bring the slider on screen before dragging it.
+  await page.locator('#morph-t').scrollIntoViewIfNeeded();
   const box = await page.locator('#morph-t').boundingBox();
   const at = (v) => box.x + 8 + (box.width - 16) * v;
   await page.evaluate(() => { window.__studio.latencies = []; });
