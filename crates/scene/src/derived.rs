@@ -473,11 +473,11 @@ pub(crate) enum Restore {
         error: Option<String>,
     },
     /// The incremental push-forward rewrote the voxels of `voxels` in place: their previous
-    /// values (exact in `f64` for every voxel type). The engine has moved on; it is dropped
-    /// on restore (it is a cache: the next update rebuilds it).
+    /// values, in the volume's voxel type ([`take_box`]). The engine has moved on; it is
+    /// dropped on restore (it is a cache: the next update rebuilds it).
     Voxels {
         voxels: IndexBox,
-        values: Vec<f64>,
+        values: Option<AnyVolume>,
         error: Option<String>,
     },
     /// Nothing changed but the error (cleared).
@@ -577,7 +577,7 @@ impl Derived {
             } => {
                 if let Some(DerivedOutput::Volume(out)) = &mut self.output {
                     let out = Arc::make_mut(out);
-                    with_volume!(out, v => put_box(v, &voxels, &values));
+                    with_volume!(out, v => put_box(v, &voxels, values.as_ref()));
                 }
                 self.engine = None;
                 self.error = error;
@@ -801,7 +801,7 @@ impl Derived {
                 let report = engine.set_parameters(changes)?;
                 let b = report.output_box;
                 let out = Arc::make_mut(out);
-                let values = with_volume!(&*out, v => take_box(v, &b));
+                let values = with_volume!(&*out, v => take_box(v, &b))?;
                 with_volume!(out, v => copy_box(engine.volume(), v, &b));
                 return Ok(Update::InPlace {
                     dirty: Dirty {
@@ -943,41 +943,66 @@ struct WarpSpec {
     onto: Option<Geometry>,
 }
 
-/// The voxels of box `b` of `v` (clipped to the grid), x fastest, as `f64` (exact for every
-/// voxel type); copied row by row.
-fn take_box<T: Voxel>(v: &Volume<T>, b: &IndexBox) -> Vec<f64> {
+/// The voxels of box `b` of `v` (clipped to the grid), in `v`'s own voxel type, as a volume
+/// of the clipped box's dims (x fastest; its geometry is the unit grid, only the values
+/// count). Rows are copied as they are: this copy is the undo record of every incremental
+/// warp update, on the drag's critical path, and keeping the voxel type keeps it small (a
+/// `u8` box takes a byte per voxel). `None` for a box outside the grid.
+///
+/// # Errors
+/// [`SceneError::Volume`] if the box cannot be held (unreachable for a box of `v`).
+fn take_box<T: Voxel>(v: &Volume<T>, b: &IndexBox) -> Result<Option<AnyVolume>, SceneError>
+where
+    AnyVolume: From<Volume<T>>,
+{
     let [nx, ny, nz] = v.geometry().dims;
     let (x0, x1) = (b.start[0].min(nx), b.end[0].min(nx));
-    let mut out = Vec::new();
-    if x0 >= x1 {
-        return out;
+    let (y0, y1) = (b.start[1].min(ny), b.end[1].min(ny));
+    let (z0, z1) = (b.start[2].min(nz), b.end[2].min(nz));
+    let dims = [
+        x1.saturating_sub(x0),
+        y1.saturating_sub(y0),
+        z1.saturating_sub(z0),
+    ];
+    if dims.contains(&0) {
+        return Ok(None);
     }
+    let mut out = Vec::with_capacity(dims.iter().product());
     let data = v.data();
-    for k in b.start[2]..b.end[2].min(nz) {
-        for j in b.start[1]..b.end[1].min(ny) {
+    for k in z0..z1 {
+        for j in y0..y1 {
             let row = (k * ny + j) * nx;
-            out.extend(data[row + x0..row + x1].iter().map(|x| x.to_f64()));
+            out.extend_from_slice(&data[row + x0..row + x1]);
         }
     }
-    out
+    Ok(Some(AnyVolume::from(Volume::new(
+        Geometry::new(dims),
+        out,
+    )?)))
 }
 
-/// Write back what [`take_box`] took from box `b`.
-fn put_box<T: Voxel>(v: &mut Volume<T>, b: &IndexBox, values: &[f64]) {
+/// Write back what [`take_box`] took from box `b` (no record, or one of another voxel type,
+/// writes nothing).
+fn put_box<T: Voxel>(v: &mut Volume<T>, b: &IndexBox, record: Option<&AnyVolume>) {
     let [nx, ny, nz] = v.geometry().dims;
     let (x0, x1) = (b.start[0].min(nx), b.end[0].min(nx));
-    if x0 >= x1 {
+    let (y0, y1) = (b.start[1].min(ny), b.end[1].min(ny));
+    let (z0, z1) = (b.start[2].min(nz), b.end[2].min(nz));
+    let Some(record) = record.filter(|r| r.voxel_type() == T::TYPE) else {
+        return;
+    };
+    if x0 >= x1 || y0 >= y1 || z0 >= z1 {
         return;
     }
-    let mut rows = values.chunks_exact(x1 - x0);
+    // The same voxel type: the conversion is an exact copy.
+    let values = record.to_typed::<T>();
+    let mut rows = values.data().chunks_exact(x1 - x0);
     let data = v.data_mut();
-    for k in b.start[2]..b.end[2].min(nz) {
-        for j in b.start[1]..b.end[1].min(ny) {
+    for k in z0..z1 {
+        for j in y0..y1 {
             let row = (k * ny + j) * nx;
             if let Some(src) = rows.next() {
-                for (d, s) in data[row + x0..row + x1].iter_mut().zip(src) {
-                    *d = T::from_f64(*s);
-                }
+                data[row + x0..row + x1].copy_from_slice(src);
             }
         }
     }
@@ -1041,6 +1066,60 @@ mod tests {
                 std::any::type_name::<T>()
             );
         }
+    }
+
+    /// The undo record of a box (taken in parallel over planes) holds the box's voxels in
+    /// x-fastest order, clipped to the grid, and writing it back restores the volume.
+    #[test]
+    fn take_box_reads_the_clipped_box_in_order_and_put_box_restores_it() {
+        let g = volmorph_volume::Geometry::new([7, 5, 6]);
+        let v = Volume::<u16>::from_fn(g, |i, j, k| (i + 10 * j + 100 * k) as u16).unwrap();
+        let b = IndexBox {
+            start: [2, 1, 3],
+            end: [9, 4, 6],
+        };
+        let taken = take_box(&v, &b).unwrap().unwrap();
+        let mut expected = vec![];
+        for k in 3..6 {
+            for j in 1..4 {
+                for i in 2..7 {
+                    expected.push((i + 10 * j + 100 * k) as f64);
+                }
+            }
+        }
+        assert_eq!(
+            taken.geometry().dims,
+            [5, 3, 3],
+            "the box clipped to the grid"
+        );
+        let values: Vec<f64> = taken
+            .to_typed::<u16>()
+            .data()
+            .iter()
+            .map(|x| f64::from(*x))
+            .collect();
+        assert_eq!(values, expected);
+        assert_eq!(
+            taken.voxel_type(),
+            u16::TYPE,
+            "kept in the volume's type"
+        );
+        let mut w = Volume::<u16>::from_fn(g, |_, _, _| 0).unwrap();
+        put_box(&mut w, &b, Some(&taken));
+        for k in 0..6 {
+            for j in 0..5 {
+                for i in 0..7 {
+                    let inside = (2..7).contains(&i) && (1..4).contains(&j) && (3..6).contains(&k);
+                    let want = if inside { v.get(i, j, k).unwrap() } else { 0 };
+                    assert_eq!(w.get(i, j, k).unwrap(), want, "({i}, {j}, {k})");
+                }
+            }
+        }
+        let outside = IndexBox {
+            start: [0, 5, 0],
+            end: [7, 9, 6],
+        };
+        assert!(take_box(&v, &outside).unwrap().is_none());
     }
 
     /// The run-time-dispatched row conversion gives exactly `Voxel::from_f64` for every
