@@ -477,7 +477,7 @@ pub(crate) enum Restore {
     /// dropped on restore (it is a cache: the next update rebuilds it).
     Voxels {
         voxels: IndexBox,
-        values: Option<AnyVolume>,
+        values: Option<Box<AnyVolume>>,
         error: Option<String>,
     },
     /// Nothing changed but the error (cleared).
@@ -577,7 +577,7 @@ impl Derived {
             } => {
                 if let Some(DerivedOutput::Volume(out)) = &mut self.output {
                     let out = Arc::make_mut(out);
-                    with_volume!(out, v => put_box(v, &voxels, values.as_ref()));
+                    with_volume!(out, v => put_box(v, &voxels, values.as_deref()));
                 }
                 self.engine = None;
                 self.error = error;
@@ -801,7 +801,7 @@ impl Derived {
                 let report = engine.set_parameters(changes)?;
                 let b = report.output_box;
                 let out = Arc::make_mut(out);
-                let values = with_volume!(&*out, v => take_box(v, &b))?;
+                let values = with_volume!(&*out, v => take_box(v, &b))?.map(Box::new);
                 with_volume!(out, v => copy_box(engine.volume(), v, &b));
                 return Ok(Update::InPlace {
                     dirty: Dirty {
@@ -1099,11 +1099,7 @@ mod tests {
             .map(|x| f64::from(*x))
             .collect();
         assert_eq!(values, expected);
-        assert_eq!(
-            taken.voxel_type(),
-            u16::TYPE,
-            "kept in the volume's type"
-        );
+        assert_eq!(taken.voxel_type(), u16::TYPE, "kept in the volume's type");
         let mut w = Volume::<u16>::from_fn(g, |_, _, _| 0).unwrap();
         put_box(&mut w, &b, Some(&taken));
         for k in 0..6 {
