@@ -388,7 +388,7 @@ impl Setup {
                 )
                 .map_err(from_register)?;
                 let set = volmorph_register::solve::handle_set(&corr, method);
-                if set.len() == 0 {
+                if set.is_empty() {
                     return Err(SceneError::Invalid(format!(
                         "no handle of {} was matched with confidence: the scans may not overlap",
                         sources.len()
