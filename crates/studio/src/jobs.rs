@@ -530,6 +530,30 @@ impl Editor {
         }
     }
 
+    /// Apply `command`; with a gesture, count it as one of the gesture's steps (merged into
+    /// one undo step at its end).
+    fn apply_in_gesture(
+        &mut self,
+        scene: &mut Scene,
+        command: Command,
+        gesture: Option<u64>,
+        progress: &dyn volmorph_io::Progress,
+    ) -> Result<Change, SceneError> {
+        let depth = scene.undo_depth();
+        let change = scene.apply_with(command, progress)?;
+        if let Some(gesture) = gesture {
+            self.gestures
+                .entry(gesture)
+                .or_insert(Gesture {
+                    at: DVec3::ZERO,
+                    steps: 0,
+                    depth,
+                })
+                .steps += 1;
+        }
+        Ok(change)
+    }
+
     fn edit(
         &mut self,
         scene: &mut Scene,
@@ -566,23 +590,15 @@ impl Editor {
                 gesture,
                 map,
                 changes,
-            } => {
-                let depth = scene.undo_depth();
-                let change = scene.apply_with(
-                    Command::SetParameters {
-                        map,
-                        changes: changes.into_iter().collect(),
-                    },
-                    progress,
-                )?;
-                let g = self.gestures.entry(gesture).or_insert(Gesture {
-                    at: DVec3::ZERO,
-                    steps: 0,
-                    depth,
-                });
-                g.steps += 1;
-                Ok(change)
-            }
+            } => self.apply_in_gesture(
+                scene,
+                Command::SetParameters {
+                    map,
+                    changes: changes.into_iter().collect(),
+                },
+                Some(gesture),
+                progress,
+            ),
             Work::EndGesture { gesture } => {
                 if let Some(g) = self.gestures.remove(&gesture) {
                     // Merge only if nothing else was applied in between.
@@ -594,33 +610,10 @@ impl Editor {
             }
             Work::Undo => Ok(scene.undo_with(progress)?.unwrap_or_default()),
             Work::Redo => Ok(scene.redo_with(progress)?.unwrap_or_default()),
-            Work::Command(c, None) => scene.apply_with(*c, progress),
-            Work::Sculpt(r, None) => scene.apply_with(sculpt_command(scene, r)?, progress),
-            Work::Sculpt(r, Some(gesture)) => {
-                let depth = scene.undo_depth();
-                let change = scene.apply_with(sculpt_command(scene, r)?, progress)?;
-                self.gestures
-                    .entry(gesture)
-                    .or_insert(Gesture {
-                        at: DVec3::ZERO,
-                        steps: 0,
-                        depth,
-                    })
-                    .steps += 1;
-                Ok(change)
-            }
-            Work::Command(c, Some(gesture)) => {
-                let depth = scene.undo_depth();
-                let change = scene.apply_with(*c, progress)?;
-                self.gestures
-                    .entry(gesture)
-                    .or_insert(Gesture {
-                        at: DVec3::ZERO,
-                        steps: 0,
-                        depth,
-                    })
-                    .steps += 1;
-                Ok(change)
+            Work::Command(c, gesture) => self.apply_in_gesture(scene, *c, gesture, progress),
+            Work::Sculpt(r, gesture) => {
+                let c = sculpt_command(scene, r)?;
+                self.apply_in_gesture(scene, c, gesture, progress)
             }
             Work::Setup(s) => s.run_with(scene, progress),
             Work::Open(path) => {
