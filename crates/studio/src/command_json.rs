@@ -15,7 +15,7 @@ use volmorph_maps::{HandleMethod, HandleOptions};
 use volmorph_scene::{Command, NewObject, ObjectId, Recipe};
 use volmorph_sculpt::{BrushShape, Op};
 
-use crate::views::{QueryError, f64_field, u64_field, vec3_field};
+use crate::views::{QueryError, f64_field, u64_field, vec3_field, vec3_value};
 
 /// Most points of one `sculpt` message (a stroke segment; a page sends one per pointer move).
 pub const MAX_SCULPT_POINTS: usize = 4096;
@@ -115,16 +115,11 @@ pub fn sculpt(h: &Value) -> Result<Option<SculptRequest>, QueryError> {
         .iter()
         .enumerate()
         .map(|(i, p)| {
-            let a: Vec<f64> = p
-                .as_array()
-                .map(|a| a.iter().filter_map(Value::as_f64).collect())
-                .unwrap_or_default();
-            match a.as_slice() {
-                &[x, y, z] if a.iter().all(|c| c.is_finite()) => Ok(DVec3::new(x, y, z)),
-                _ => Err(QueryError(format!(
+            vec3_value(p).ok_or_else(|| {
+                QueryError(format!(
                     "field \"points\": point {i} must be three finite numbers"
-                ))),
-            }
+                ))
+            })
         })
         .collect::<Result<_, _>>()?;
     Ok(Some(SculptRequest {

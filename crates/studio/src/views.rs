@@ -94,16 +94,20 @@ pub fn f64_field(h: &Value, name: &str) -> Result<f64, QueryError> {
 /// # Errors
 /// When it is missing or not three finite numbers.
 pub fn vec3_field(h: &Value, name: &str) -> Result<DVec3, QueryError> {
-    let bad = || QueryError::new(format!("field {name:?} must be three finite numbers"));
-    let a = field(h, name)?.as_array().ok_or_else(bad)?;
-    if a.len() != 3 {
-        return Err(bad());
+    vec3_value(field(h, name)?)
+        .ok_or_else(|| QueryError::new(format!("field {name:?} must be three finite numbers")))
+}
+
+/// The point `[x, y, z]` that `v` holds: three finite numbers, or `None`.
+#[must_use]
+pub fn vec3_value(v: &Value) -> Option<DVec3> {
+    match v.as_array()?.as_slice() {
+        [x, y, z] => {
+            let p = DVec3::new(x.as_f64()?, y.as_f64()?, z.as_f64()?);
+            p.is_finite().then_some(p)
+        }
+        _ => None,
     }
-    let v: Vec<f64> = a.iter().filter_map(Value::as_f64).collect();
-    if v.len() != 3 || v.iter().any(|x| !x.is_finite()) {
-        return Err(bad());
-    }
-    Ok(DVec3::new(v[0], v[1], v[2]))
 }
 
 /// A volume's geometry as JSON: `dims`, `origin`, `spacing`, and `direction` as three
@@ -517,8 +521,9 @@ pub fn probe_frame(scene: &Scene, h: &Value, request: u32) -> Result<Frame, Quer
         }
         let mut images = Vec::with_capacity(list.len() * 3);
         for (i, p) in list.iter().enumerate() {
-            let p = vec3_field(&json!({ "point": p }), "point")
-                .map_err(|_| QueryError::new(format!("point {i} must be three finite numbers")))?;
+            let p = vec3_value(p).ok_or_else(|| {
+                QueryError::new(format!("point {i} must be three finite numbers"))
+            })?;
             images.extend(m.apply(p).to_array().map(|c| c as f32));
         }
         return Ok(Frame::new(
