@@ -138,12 +138,7 @@ pub fn register_with(
     progress: &dyn volmorph_io::Progress,
 ) -> Result<Registration, RegisterError> {
     let t0 = Instant::now();
-    progress.start("selecting handles", 0);
-    let handles = select_handles(fixed, mask, &o.select)?;
-    progress.check()?;
-    let t1 = Instant::now();
-    let sources: Vec<DVec3> = handles.iter().map(|h| h.position).collect();
-    let correspondences = match_handles_with(fixed, moving, &sources, None, &o.matching, progress)?;
+    let (handles, correspondences, t1) = correspond_timed(fixed, moving, mask, o, progress)?;
     let t2 = Instant::now();
     let mut reg = solve_and_refine_with(
         fixed,
@@ -159,6 +154,41 @@ pub fn register_with(
     reg.timings.matching = (t2 - t1).as_secs_f64();
     reg.timings.total += (t2 - t0).as_secs_f64();
     Ok(reg)
+}
+
+/// The first steps of [`register`]: handles selected on `fixed` (within `mask`) and matched
+/// in `moving`, reporting to `progress` as [`register_with`] does. Returns the handles and
+/// their correspondences (one per handle, in order); the handle map is
+/// [`solve::handle_set`](crate::solve::handle_set) of the used ones.
+///
+/// # Errors
+/// The errors of [`select_handles`] and [`match_handles_with`].
+pub fn correspond_with(
+    fixed: &Volume<f32>,
+    moving: &Volume<f32>,
+    mask: Option<&Volume<u8>>,
+    o: &RegisterOptions,
+    progress: &dyn volmorph_io::Progress,
+) -> Result<(Vec<Handle>, Vec<Correspondence>), RegisterError> {
+    let (handles, correspondences, _) = correspond_timed(fixed, moving, mask, o, progress)?;
+    Ok((handles, correspondences))
+}
+
+/// [`correspond_with`] and the time selection ended.
+fn correspond_timed(
+    fixed: &Volume<f32>,
+    moving: &Volume<f32>,
+    mask: Option<&Volume<u8>>,
+    o: &RegisterOptions,
+    progress: &dyn volmorph_io::Progress,
+) -> Result<(Vec<Handle>, Vec<Correspondence>, Instant), RegisterError> {
+    progress.start("selecting handles", 0);
+    let handles = select_handles(fixed, mask, &o.select)?;
+    progress.check()?;
+    let selected = Instant::now();
+    let sources: Vec<DVec3> = handles.iter().map(|h| h.position).collect();
+    let correspondences = match_handles_with(fixed, moving, &sources, None, &o.matching, progress)?;
+    Ok((handles, correspondences, selected))
 }
 
 /// The steps of [`register`] after matching: the handle map through the used

@@ -359,8 +359,8 @@ impl Setup {
                 radius,
                 method,
             } => {
-                use volmorph_register::matching::{MatchOptions, match_handles_with};
-                use volmorph_register::select::{SelectOptions, select_handles};
+                use volmorph_register::pipeline::{RegisterOptions, correspond_with};
+                use volmorph_register::select::SelectOptions;
                 if !(1..=MAX_REGISTER_HANDLES).contains(&handles) {
                     return Err(SceneError::Invalid(format!(
                         "{handles} handles: a registration selects 1 to {MAX_REGISTER_HANDLES}"
@@ -369,29 +369,18 @@ impl Setup {
                 let (f, m) = (ObjectId(fixed), ObjectId(moving));
                 let fixed_scan = scene.volume(f)?.to_typed::<f32>();
                 let moving_scan = scene.volume(m)?.to_typed::<f32>();
-                progress.start("selecting handles", 0);
-                let selected = select_handles(
-                    &fixed_scan,
-                    None,
-                    &SelectOptions::with_count_radius(handles, radius),
-                )
-                .map_err(from_register)?;
-                progress.check()?;
-                let sources: Vec<DVec3> = selected.iter().map(|h| h.position).collect();
-                let corr = match_handles_with(
-                    &fixed_scan,
-                    &moving_scan,
-                    &sources,
-                    None,
-                    &MatchOptions::default(),
-                    progress,
-                )
-                .map_err(from_register)?;
+                let options = RegisterOptions {
+                    select: SelectOptions::with_count_radius(handles, radius),
+                    ..RegisterOptions::default()
+                };
+                let (selected, corr) =
+                    correspond_with(&fixed_scan, &moving_scan, None, &options, progress)
+                        .map_err(from_register)?;
                 let set = volmorph_register::solve::handle_set(&corr, method);
                 if set.is_empty() {
                     return Err(SceneError::Invalid(format!(
                         "no handle of {} was matched with confidence: the scans may not overlap",
-                        sources.len()
+                        selected.len()
                     )));
                 }
                 let name = scene.get(m)?.name.clone();
