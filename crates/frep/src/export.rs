@@ -207,7 +207,7 @@ impl fmt::Display for VolumeSummary {
 
 /// Sample `field` on `g` and write it as an `f32` volume to `path` (format by extension),
 /// reporting the sampling to `progress`, then a stage "writing PATH" of unknown length.
-/// Returns the volume and its summary.
+/// Returns the volume's summary (the volume is moved into the writer, not copied).
 ///
 /// # Errors
 /// Errors of [`sample_with`] (including [`FrepError::Cancelled`]) and of the volume writer
@@ -217,14 +217,14 @@ pub fn write_volume_with(
     g: &Geometry,
     path: &Path,
     progress: &dyn Progress,
-) -> Result<(Volume<f32>, VolumeSummary), FrepError> {
+) -> Result<VolumeSummary, FrepError> {
     let t0 = Instant::now();
     let vol = sample_with(field, g, progress)?;
     let summary = VolumeSummary::of(&vol, t0.elapsed());
     progress.start(&format!("writing {}", path.display()), 0);
     progress.check()?;
-    volmorph_volume_io::write(path, &AnyVolume::from(vol.clone())).map_err(|e| in_file(path, e))?;
-    Ok((vol, summary))
+    volmorph_volume_io::write(path, &AnyVolume::from(vol)).map_err(|e| in_file(path, e))?;
+    Ok(summary)
 }
 
 /// Sample `field` on `g`, extract its surface ([`mesh_with`]) and write it to `path` (format
@@ -310,7 +310,7 @@ pub fn export_with(
         }
         OutputKind::Volume => {
             let g = isotropic_box_geometry(lo, hi, options.grid, MAX_GRID)?;
-            let (_, summary) = write_volume_with(field, &g, path, progress)?;
+            let summary = write_volume_with(field, &g, path, progress)?;
             Ok(Written::Volume(summary))
         }
     }

@@ -88,7 +88,7 @@ fn eval(a: &EvalArgs) -> anyhow::Result<()> {
     let g = grid_geometry(a.grid, b)?;
     let shape = load(&a.model, &params(&a.common.params)?)?;
     let tape = Tape::new(&shape);
-    let (_, summary) = progress::with_bar(|p| write_volume_with(&tape, &g, &a.output, p))?;
+    let summary = progress::with_bar(|p| write_volume_with(&tape, &g, &a.output, p))?;
     say!(
         "{} operations, {}³ samples in {:.1} ms, {}",
         tape.len(),
