@@ -162,41 +162,33 @@ fn every_register_step_runs_on_a_small_phantom() {
     );
     // The thin-plate kernel reaches the map built from the correspondences: r (the default)
     // named explicitly gives the same report, r² log r another.
+    let c_json = d("c.json");
+    // `register STEP` with map c.json built with `kernel`, into `out`: its report's text.
+    let with_kernel = |step: &str, kernel: &str, out: &str, extra: &[&str], report: &str| {
+        let mut args = vec![
+            "register", step, &inh, &exh, "--map", &c_json, "--kernel", kernel, "-o",
+        ];
+        let out_dir = d(out);
+        args.push(&out_dir);
+        args.extend_from_slice(extra);
+        ok(&args);
+        std::fs::read_to_string(dir.path().join(out).join(report)).unwrap()
+    };
+    let labels = d("lungs_lobes.nii.gz");
     let ventilation_with = |kernel: &str, out: &str| {
-        ok(&[
-            "register",
+        with_kernel(
             "ventilation",
-            &inh,
-            &exh,
-            "--map",
-            &d("c.json"),
-            "--kernel",
             kernel,
-            "--labels",
-            &d("lungs_lobes.nii.gz"),
-            "-o",
-            &d(out),
-        ]);
-        std::fs::read_to_string(dir.path().join(out).join("ventilation.json")).unwrap()
+            out,
+            &["--labels", &labels],
+            "ventilation.json",
+        )
     };
     let default = std::fs::read_to_string(dir.path().join("v/ventilation.json")).unwrap();
     assert_eq!(ventilation_with("r", "v_r"), default);
     assert_ne!(ventilation_with("r2logr", "v_r2logr"), default);
-    let quality_with = |kernel: &str, out: &str| {
-        ok(&[
-            "register",
-            "quality",
-            &inh,
-            &exh,
-            "--map",
-            &d("c.json"),
-            "--kernel",
-            kernel,
-            "-o",
-            &d(out),
-        ]);
-        std::fs::read_to_string(dir.path().join(out).join("quality.json")).unwrap()
-    };
+    let quality_with =
+        |kernel: &str, out: &str| with_kernel("quality", kernel, out, &[], "quality.json");
     assert_ne!(quality_with("r", "q_r"), quality_with("r2logr", "q_r2logr"));
     let out = ok(&[
         "register",
