@@ -14,7 +14,7 @@
 
 use glam::{DMat3, DVec3};
 use rayon::prelude::*;
-use volmorph_volume::Geometry;
+use volmorph_volume::{Geometry, IndexBox};
 
 use crate::DeformError;
 
@@ -79,6 +79,42 @@ pub trait SpaceMap: Send + Sync {
         apply_grid_pointwise(self, grid, out)
     }
 
+    /// The images of the voxel centres of the box `part` of `grid` (grid indices
+    /// `part.start .. part.end`, x fastest, `part.len()` points) with exactly the bits
+    /// [`SpaceMap::apply_grid`] on the whole of `grid` gives them. Callers that need a fixed
+    /// evaluation grid for reproducible bits (the incremental push-forward evaluates on
+    /// fixed tiles) use it to evaluate only the points they need.
+    ///
+    /// The default evaluates the whole grid and copies the part (the whole grid's points are
+    /// allocated); lattices override it to evaluate only the part.
+    ///
+    /// # Errors
+    /// [`DeformError::Grid`] for an invalid geometry, [`DeformError::BufferLength`] if `part`
+    /// leaves the grid or `out.len()` is not `part.len()`, [`DeformError::Unsupported`] if the
+    /// default cannot allocate the whole grid; what `apply_grid` returns.
+    fn apply_grid_part(
+        &self,
+        grid: &Geometry,
+        part: IndexBox,
+        out: &mut [DVec3],
+    ) -> Result<(), DeformError> {
+        check_part(grid, part, out)?;
+        if part.start == [0; 3] && part.end == grid.dims {
+            return self.apply_grid(grid, out);
+        }
+        let mut all = Vec::new();
+        all.try_reserve_exact(grid.len()).map_err(|_| {
+            DeformError::Unsupported(format!(
+                "the {} points of the whole grid do not fit in memory",
+                grid.len()
+            ))
+        })?;
+        all.resize(grid.len(), DVec3::ZERO);
+        self.apply_grid(grid, &mut all)?;
+        copy_part(grid.dims, part, &all, out);
+        Ok(())
+    }
+
     /// The image of `p` and the Jacobian there in one call, `(self.apply(p), self.jacobian(p))`.
     /// Iterative solvers (point inversion by Newton's method) need both at every step; lattices
     /// override this with one pass over the control points that shares the basis evaluation.
@@ -135,6 +171,75 @@ pub fn apply_grid_pointwise<M: SpaceMap + ?Sized>(
 ) -> Result<(), DeformError> {
     check_grid(grid, out)?;
     for_each_voxel(grid, out, |x| map.apply(x));
+    Ok(())
+}
+
+/// Check a part of a grid and its output buffer for [`SpaceMap::apply_grid_part`].
+///
+/// # Errors
+/// [`DeformError::Grid`] for an invalid geometry, [`DeformError::BufferLength`] if `part`
+/// leaves the grid (then `expected` is the grid's point count) or `out.len()` is not
+/// `part.len()`.
+pub fn check_part(grid: &Geometry, part: IndexBox, out: &[DVec3]) -> Result<(), DeformError> {
+    grid.validate()?;
+    if (0..3).any(|a| part.end[a] > grid.dims[a]) {
+        return Err(DeformError::BufferLength {
+            expected: grid.len(),
+            got: part.len(),
+        });
+    }
+    check_len(part.len(), out.len())
+}
+
+/// Copy the points of `part` out of `all`, the points of a whole grid of `dims` (x fastest),
+/// into `out` (`part.len()` points, x fastest). Both must have been checked.
+fn copy_part(dims: [usize; 3], part: IndexBox, all: &[DVec3], out: &mut [DVec3]) {
+    let [nx, ny, _] = dims;
+    let w = part.end[0].saturating_sub(part.start[0]);
+    if w == 0 {
+        return;
+    }
+    let mut rows = out.chunks_exact_mut(w);
+    for k in part.start[2]..part.end[2] {
+        for j in part.start[1]..part.end[1] {
+            let s = part.start[0] + nx * (j + ny * k);
+            if let (Some(dst), Some(src)) = (rows.next(), all.get(s..s + w)) {
+                dst.copy_from_slice(src);
+            }
+        }
+    }
+}
+
+/// The pointwise loop behind [`SpaceMap::apply_grid_part`] for maps whose grid evaluation is
+/// pointwise: each voxel centre of `part` through `map.apply`, exactly as
+/// [`apply_grid_pointwise`] computes it, parallel over z-planes.
+///
+/// # Errors
+/// As [`check_part`].
+pub fn apply_grid_part_pointwise<M: SpaceMap + ?Sized>(
+    map: &M,
+    grid: &Geometry,
+    part: IndexBox,
+    out: &mut [DVec3],
+) -> Result<(), DeformError> {
+    check_part(grid, part, out)?;
+    let [w, h] = [0, 1].map(|a| part.end[a].saturating_sub(part.start[a]));
+    if out.is_empty() {
+        return Ok(());
+    }
+    out.par_chunks_mut(w * h)
+        .enumerate()
+        .for_each(|(dk, slab)| {
+            let k = part.start[2] + dk;
+            for (dj, row) in slab.chunks_exact_mut(w).enumerate() {
+                let j = part.start[1] + dj;
+                for (di, o) in row.iter_mut().enumerate() {
+                    let i = part.start[0] + di;
+                    *o =
+                        map.apply(grid.index_to_physical(DVec3::new(i as f64, j as f64, k as f64)));
+                }
+            }
+        });
     Ok(())
 }
 
@@ -323,6 +428,22 @@ impl<A: SpaceMap, B: SpaceMap> SpaceMap for Compose<A, B> {
         });
         Ok(())
     }
+
+    fn apply_grid_part(
+        &self,
+        grid: &Geometry,
+        part: IndexBox,
+        out: &mut [DVec3],
+    ) -> Result<(), DeformError> {
+        // As `apply_grid`: the inner map's part, then the outer map pointwise.
+        self.1.apply_grid_part(grid, part, out)?;
+        out.par_chunks_mut(POINTS_PER_TASK).for_each(|c| {
+            for p in c {
+                *p = self.0.apply(*p);
+            }
+        });
+        Ok(())
+    }
 }
 
 /// `SpaceMap` for a pointer type to a map: every method forwards to the pointee, so its fast
@@ -342,6 +463,14 @@ macro_rules! forward_space_map {
             }
             fn apply_grid(&self, grid: &Geometry, out: &mut [DVec3]) -> Result<(), DeformError> {
                 (**self).apply_grid(grid, out)
+            }
+            fn apply_grid_part(
+                &self,
+                grid: &Geometry,
+                part: IndexBox,
+                out: &mut [DVec3],
+            ) -> Result<(), DeformError> {
+                (**self).apply_grid_part(grid, part, out)
             }
             fn apply_with_jacobian(&self, p: DVec3) -> (DVec3, DMat3) {
                 (**self).apply_with_jacobian(p)

@@ -22,7 +22,7 @@
 use glam::DVec3;
 use rayon::prelude::*;
 use volmorph_spline::{BasisTable, KnotVector};
-use volmorph_volume::Geometry;
+use volmorph_volume::{Geometry, IndexBox};
 
 use crate::{BSplineLattice, LatticeFrame};
 use volmorph_deform::DeformError;
@@ -93,8 +93,19 @@ struct AxisPlan {
 
 impl AxisPlan {
     fn new(kv: &KnotVector, n: usize, start: f64, step: f64) -> Result<Self, DeformError> {
+        Self::over(kv, 0..n, start, step)
+    }
+
+    /// The plan of the grid indices `range` only (indices stay those of the whole grid, and
+    /// each index's parameter and basis values are the whole grid's bits).
+    fn over(
+        kv: &KnotVector,
+        range: std::ops::Range<usize>,
+        start: f64,
+        step: f64,
+    ) -> Result<Self, DeformError> {
         let param = |i: usize| start + step * i as f64;
-        let inside: Vec<usize> = (0..n).filter(|&i| kv.contains(param(i))).collect();
+        let inside: Vec<usize> = range.filter(|&i| kv.contains(param(i))).collect();
         let (Some(&lo), Some(&last)) = (inside.first(), inside.last()) else {
             return Ok(Self {
                 lo: 0,
@@ -179,6 +190,9 @@ struct CoefTable {
 #[derive(Debug, Clone)]
 pub struct LatticeGridPlan {
     grid: Geometry,
+    /// The part of `grid` evaluated (the whole grid unless built by
+    /// [`LatticeGridPlan::part`]).
+    part: IndexBox,
     frame: LatticeFrame,
     knots: [KnotVector; 3],
     path: GridPath,
@@ -222,12 +236,61 @@ impl LatticeGridPlan {
         };
         Ok(Self {
             grid: *grid,
+            part: IndexBox {
+                start: [0; 3],
+                end: grid.dims,
+            },
             frame: *lattice.frame(),
             knots: k.clone(),
             path,
             axes,
             orders,
             table,
+        })
+    }
+
+    /// A separable plan for the box `part` of `grid` only: [`LatticeGridPlan::apply`] then
+    /// fills `part.len()` points (x fastest) with the bits the whole grid's plan gives them
+    /// (every index keeps its parameter `start + step·i` of the whole grid, and the row sums
+    /// are per control column, whatever columns a row needs).
+    ///
+    /// # Errors
+    /// As [`LatticeGridPlan::new`] with [`GridPath::Separable`]; [`DeformError::BufferLength`]
+    /// if `part` leaves the grid.
+    pub fn part(
+        lattice: &BSplineLattice,
+        grid: &Geometry,
+        part: IndexBox,
+    ) -> Result<Self, DeformError> {
+        grid.validate()?;
+        if (0..3).any(|a| part.end[a] > grid.dims[a]) {
+            return Err(DeformError::BufferLength {
+                expected: grid.len(),
+                got: part.len(),
+            });
+        }
+        let (start, step) = aligned_steps(lattice, grid)?.ok_or_else(|| {
+            DeformError::GridNotAligned(
+                "grid index axes are not parallel to the lattice's parameter axes".into(),
+            )
+        })?;
+        let k = lattice.knots();
+        let range = |a: usize| part.start[a].min(part.end[a])..part.end[a];
+        let axes = [
+            AxisPlan::over(&k[0], range(0), start[0], step[0])?,
+            AxisPlan::over(&k[1], range(1), start[1], step[1])?,
+            AxisPlan::over(&k[2], range(2), start[2], step[2])?,
+        ];
+        let deg = lattice.degree();
+        Ok(Self {
+            grid: *grid,
+            part,
+            frame: *lattice.frame(),
+            knots: k.clone(),
+            path: GridPath::Separable,
+            axes,
+            orders: [deg[0] + 1, deg[1] + 1, deg[2] + 1],
+            table: None,
         })
     }
 
@@ -243,22 +306,25 @@ impl LatticeGridPlan {
         self.path
     }
 
-    /// Evaluate `lattice` at every voxel centre of the plan's grid into `out` (x fastest);
-    /// voxels outside the lattice box are mapped to themselves. Parallel over z-slabs, no
+    /// Evaluate `lattice` at every voxel centre of the plan's grid (or of its part, for a
+    /// plan built by [`LatticeGridPlan::part`]) into `out` (x fastest); voxels outside the
+    /// lattice box are mapped to themselves. Parallel over z-slabs, no
     /// allocation per voxel; agrees with pointwise [`SpaceMap::apply`](volmorph_deform::SpaceMap::apply)
     /// to rounding.
     ///
     /// # Errors
     /// [`DeformError::GridNotAligned`] if `lattice` has other knots or another frame than the
     /// lattice the plan was built for (its control points may differ freely),
-    /// [`DeformError::BufferLength`] if `out.len()` is not the grid's voxel count.
+    /// [`DeformError::BufferLength`] if `out.len()` is not the grid's (or the part's) voxel
+    /// count.
     pub fn apply(&self, lattice: &BSplineLattice, out: &mut [DVec3]) -> Result<(), DeformError> {
         if lattice.knots() != &self.knots || lattice.frame() != &self.frame {
             return Err(DeformError::GridNotAligned(
                 "the lattice's knots or frame differ from those the plan was built for".into(),
             ));
         }
-        check_grid(&self.grid, out)?;
+        self.grid.validate()?;
+        volmorph_deform::map::check_len(self.part.len(), out.len())?;
         if out.is_empty() {
             return Ok(());
         }
@@ -272,7 +338,11 @@ impl LatticeGridPlan {
 
     fn apply_separable(&self, pts: &[DVec3], counts: [usize; 3], out: &mut [DVec3]) {
         let grid = &self.grid;
-        let [nx, ny, _] = grid.dims;
+        let IndexBox {
+            start: [x0, y0, z0],
+            end: [x1, y1, _],
+        } = self.part;
+        let (nx, ny) = (x1 - x0, y1 - y0);
         let [cx, cy, _] = counts;
         let [wx, wy, wz] = self.orders;
         // Control columns along u that any in-domain voxel touches. (First indices decrease
@@ -284,12 +354,14 @@ impl LatticeGridPlan {
         };
         out.par_chunks_mut(nx * ny).enumerate().for_each_init(
             || vec![DVec3::ZERO; c_hi - c_lo],
-            |row_sum, (k, slab)| {
+            |row_sum, (dk, slab)| {
+                let k = z0 + dk;
                 let zk = self.axes[2].at(k);
-                for (j, row) in slab.chunks_exact_mut(nx).enumerate() {
+                for (dj, row) in slab.chunks_exact_mut(nx).enumerate() {
+                    let j = y0 + dj;
                     let (Some((fz, bz)), Some((fy, by))) = (zk, self.axes[1].at(j)) else {
-                        for (i, o) in row.iter_mut().enumerate() {
-                            *o = centre(grid, i, j, k);
+                        for (di, o) in row.iter_mut().enumerate() {
+                            *o = centre(grid, x0 + di, j, k);
                         }
                         continue;
                     };
@@ -305,11 +377,13 @@ impl LatticeGridPlan {
                             }
                         }
                     }
-                    // Outside the knot domain along u: the identity.
-                    let (lo, hi) = (ax.lo.min(nx), ax.hi.min(nx));
-                    for (i, o) in row.iter_mut().enumerate() {
-                        if i < lo || i >= hi {
-                            *o = centre(grid, i, j, k);
+                    // Outside the knot domain along u: the identity. (The axis plan holds
+                    // indices of the part only, so its range lies in `x0 .. x1`.)
+                    let (lo, hi) = (ax.lo.clamp(x0, x1) - x0, ax.hi.clamp(x0, x1) - x0);
+                    let hi = hi.max(lo);
+                    for (di, o) in row.iter_mut().enumerate() {
+                        if di < lo || di >= hi {
+                            *o = centre(grid, x0 + di, j, k);
                         }
                     }
                     let inside = &mut row[lo..hi];

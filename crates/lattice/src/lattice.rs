@@ -1114,6 +1114,23 @@ impl SpaceMap for BSplineLattice {
         }
     }
 
+    /// The separable part plan ([`crate::grid::LatticeGridPlan::part`]) when the grid axes
+    /// are parallel to the lattice axes, pointwise otherwise: the bits of
+    /// [`SpaceMap::apply_grid`] on the whole grid, for the part's points only.
+    fn apply_grid_part(
+        &self,
+        grid: &Geometry,
+        part: volmorph_volume::IndexBox,
+        out: &mut [DVec3],
+    ) -> Result<(), DeformError> {
+        volmorph_deform::map::check_part(grid, part, out)?;
+        if crate::grid::aligned_steps(self, grid)?.is_some() {
+            crate::grid::LatticeGridPlan::part(self, grid, part)?.apply(self, out)
+        } else {
+            volmorph_deform::map::apply_grid_part_pointwise(self, grid, part, out)
+        }
+    }
+
     /// One pass over the control points for both the image and the Jacobian (see
     /// [`crate::jacobian`]); the general path for degrees above
     /// [`crate::jacobian::POINT_KERNEL_MAX_DEGREE`].

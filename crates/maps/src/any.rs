@@ -8,7 +8,7 @@ use volmorph_handles::{
 };
 use volmorph_lattice::BSplineLattice;
 use volmorph_trivariate::GeometryMap;
-use volmorph_volume::Geometry;
+use volmorph_volume::{Geometry, IndexBox};
 
 use crate::field::DisplacementField;
 
@@ -273,6 +273,33 @@ impl SpaceMap for AnyMap {
                 Ok(())
             }
             m => m.as_space_map().apply_grid(grid, out),
+        }
+    }
+
+    fn apply_grid_part(
+        &self,
+        grid: &Geometry,
+        part: IndexBox,
+        out: &mut [DVec3],
+    ) -> Result<(), DeformError> {
+        match self {
+            // As `apply_grid`: the first map on the grid (its part), the others pointwise.
+            AnyMap::Compose(ms) => {
+                let Some((first, rest)) = ms.split_first() else {
+                    return Identity.apply_grid_part(grid, part, out);
+                };
+                first.apply_grid_part(grid, part, out)?;
+                if rest.is_empty() {
+                    return Ok(());
+                }
+                let mut tmp = vec![DVec3::ZERO; out.len()];
+                for m in rest {
+                    m.apply_batch(out, &mut tmp)?;
+                    out.copy_from_slice(&tmp);
+                }
+                Ok(())
+            }
+            m => m.as_space_map().apply_grid_part(grid, part, out),
         }
     }
 

@@ -91,6 +91,15 @@ impl SpaceMap for LiveMap {
         each!(self, m => m.apply_grid(grid, out))
     }
 
+    fn apply_grid_part(
+        &self,
+        grid: &Geometry,
+        part: volmorph_volume::IndexBox,
+        out: &mut [DVec3],
+    ) -> Result<(), DeformError> {
+        each!(self, m => m.apply_grid_part(grid, part, out))
+    }
+
     fn jacobian_grid(&self, grid: &Geometry, out: &mut [DMat3]) -> Result<(), DeformError> {
         each!(self, m => m.jacobian_grid(grid, out))
     }

@@ -11,15 +11,15 @@
 //! push-forward used, without evaluating the whole input, every image is evaluated on one
 //! fixed tile: a [`PointGrid`] is cut into tiles of [`TILE`] × [`TILE`] points in x and y,
 //! one plane deep, anchored at index 0 of the grid, and any box of the grid is obtained by
-//! evaluating the tiles it overlaps, whole, and keeping its part
-//! ([`PointGrid::eval_box`]). The bits of a point's image therefore depend only on the map,
+//! evaluating, for each tile it overlaps, the tile's points inside the box with the bits of
+//! the whole tile ([`SpaceMap::apply_grid_part`]; [`PointGrid::eval_box`]). The bits of a point's image therefore depend only on the map,
 //! the input geometry and the point, never on the box asked for, the slab partition or the
 //! thread count.
 
 use glam::DVec3;
 use rayon::prelude::*;
 use volmorph_deform::SpaceMap;
-use volmorph_volume::Geometry;
+use volmorph_volume::{Geometry, IndexBox};
 
 use crate::WarpError;
 use crate::pushforward::offset_grid;
@@ -72,9 +72,10 @@ impl PointGrid {
     }
 
     /// Physical images under `map` of the points of `bx` (a box of this grid's indices),
-    /// x fastest, into `out` (`bx.len()` points). Every tile `bx` overlaps is evaluated
-    /// whole through [`SpaceMap::apply_grid`] on the tile's own geometry (spacing and
-    /// direction of `input`, origin at the tile's first point), planes in parallel.
+    /// x fastest, into `out` (`bx.len()` points). The part of every tile `bx` overlaps is
+    /// evaluated through [`SpaceMap::apply_grid_part`] on the tile's own geometry (spacing and
+    /// direction of `input`, origin at the tile's first point), which gives the bits of the
+    /// whole tile's evaluation; planes in parallel.
     ///
     /// # Errors
     /// [`WarpError::MapOnGrid`] if the map's grid evaluation fails; [`WarpError::BufferLength`]
@@ -111,19 +112,24 @@ impl PointGrid {
                         let h = TILE.min(self.dims[1] - y0);
                         let at = self.offset + DVec3::new(x0 as f64, y0 as f64, z as f64);
                         let g = offset_grid(input, at, [w, h, 1]);
-                        let t = &mut tile[..w * h];
-                        map.apply_grid(&g, t)
-                            .map_err(|source| WarpError::MapOnGrid {
-                                grid: self.name,
-                                source,
-                            })?;
+                        // Only the tile's points inside the box, with the whole tile's bits.
                         let (xs, xe) = (x0.max(bx.lo[0]), (x0 + w).min(bx.lo[0] + wx));
                         let (ys, ye) = (y0.max(bx.lo[1]), (y0 + h).min(bx.lo[1] + wy));
-                        for y in ys..ye {
-                            let s = (y - y0) * w;
-                            let d = (y - bx.lo[1]) * wx;
-                            dst[d + xs - bx.lo[0]..d + xe - bx.lo[0]]
-                                .copy_from_slice(&t[s + xs - x0..s + xe - x0]);
+                        let part = IndexBox {
+                            start: [xs - x0, ys - y0, 0],
+                            end: [xe - x0, ye - y0, 1],
+                        };
+                        let pw = xe - xs;
+                        let t = &mut tile[..part.len()];
+                        map.apply_grid_part(&g, part, t).map_err(|source| {
+                            WarpError::MapOnGrid {
+                                grid: self.name,
+                                source,
+                            }
+                        })?;
+                        for (y, src) in (ys..ye).zip(t.chunks_exact(pw)) {
+                            let d = (y - bx.lo[1]) * wx + xs - bx.lo[0];
+                            dst[d..d + pw].copy_from_slice(src);
                         }
                     }
                 }
