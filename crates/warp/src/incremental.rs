@@ -117,7 +117,7 @@ use crate::pushforward::{
     AntialiasOptions, FaceCentres, PushForwardStats, ToIndex, normalise, output_geometry,
     try_filled,
 };
-use crate::tally::{Region, Voxels, reaches_grid, row, splat, vmax, vmin};
+use crate::tally::{Region, RowBoxes, Voxels, reaches_grid, row, splat, splat_short, vmax, vmin};
 
 /// Widening, in source voxels, of the box of voxel centres whose parameters lie in the
 /// influenced parameter box. The map evaluation and this test compute a centre's parameter
@@ -888,6 +888,7 @@ impl<M: LinearMap + Clone> IncrementalPushForward<M> {
             // every test).
             let reaches = |&(lo, hi): &(DVec3, DVec3)| hi.cmpgt(rlo).all() && lo.cmplt(rhi).all();
             let layers = blocks.layers.iter().enumerate().filter(|(_, b)| reaches(b));
+            let mut boxes = RowBoxes::default();
             // Runs of consecutive reaching blocks along x, visited as one box of voxels
             // (the same voxels in the same order, with longer rows).
             let runs = layers.flat_map(|(k, _)| {
@@ -920,6 +921,7 @@ impl<M: LinearMap + Clone> IncrementalPushForward<M> {
                     redo,
                     slab.lo[2] == z0,
                     all_sane,
+                    &mut boxes,
                 );
             }
             for (tp, vp) in buf
@@ -959,6 +961,7 @@ fn tally_run<'a>(
     redo: &Region,
     first_slab: bool,
     all_sane: bool,
+    boxes: &mut RowBoxes,
 ) {
     let redo_end = [0, 1, 2].map(|a| redo.lo[a] + redo.dims[a]);
     let in_redo = |a: usize, i: usize| i >= redo.lo[a] && i < redo_end[a];
@@ -991,7 +994,24 @@ fn tally_run<'a>(
                 };
             }
             if all_sane {
-                tally_row!(row.boxes_unchecked().map(|(v, b)| (v, Some(b))));
+                // The boxes and short cells of the whole row in vector lanes first.
+                boxes.fill(&row);
+                for (n, v) in row.values.iter().enumerate() {
+                    let (lo, hi) = boxes.bounds(n);
+                    let d = v.to_f64();
+                    let hit = match boxes.shorts(n) {
+                        Some(sh) if d.is_finite() => splat_short(sh, d, 1.0, slab, buf),
+                        _ => splat(lo, hi, d, 1.0, out, slab, buf),
+                    };
+                    if hit
+                        && marks
+                        && in_redo(0, vbox.lo[0] + n)
+                        && (first_slab || lo.z + 0.5 >= slab.lo[2] as f64)
+                        && let Some(slot) = status.get(row.first + n)
+                    {
+                        slot.store(MAPPED, Relaxed);
+                    }
+                }
             } else {
                 tally_row!(row.boxes());
             }

@@ -244,17 +244,36 @@ pub(crate) fn splat<C: Cell>(
     region: &Region,
     buf: &mut [C],
 ) -> bool {
-    let [rx, ry, rz] = region.lo;
-    let [dx, dy, dz] = region.dims;
-    // Fast path: a box at most two cells long along every axis, inside the region, covers
-    // one to three cells per axis from `a = ⌊lo + ½⌋`; fully unrolled per shape. Same
-    // weights and products as the general path. Cells of zero overlap are skipped: their
-    // terms are ±0, and adding ±0 to a tally changes no bit, because a tally starts at +0
-    // and a sum of rounded additions is −0 only when both addends are −0, so no tally is
-    // ever −0 (the one value to which adding +0 is not the identity).
+    // Fast path: a box at most two cells long along every axis ([`splat_short`]).
     if d.is_finite()
         && let (Some(x), Some(y), Some(z)) =
             (short(lo.x, hi.x), short(lo.y, hi.y), short(lo.z, hi.z))
+    {
+        return splat_short([x, y, z], d, sign, region, buf);
+    }
+    splat_general(lo, hi, d, sign, out, region, buf)
+}
+
+/// The [`short`] per-axis cells and overlaps of one box.
+pub(crate) type Short = (usize, [f64; 3], usize);
+
+/// [`splat`] of a box at most two cells long along every axis (finite `d`), given its
+/// per-axis [`short`] results: inside the region it covers one to three cells per axis from
+/// `a = ⌊lo + ½⌋`, fully unrolled per shape. Same weights and products as the general path.
+/// Cells of zero overlap are skipped: their terms are ±0, and adding ±0 to a tally changes
+/// no bit, because a tally starts at +0 and a sum of rounded additions is −0 only when both
+/// addends are −0, so no tally is ever −0 (the one value to which adding +0 is not the
+/// identity).
+#[inline(always)]
+pub(crate) fn splat_short<C: Cell>(
+    [x, y, z]: [Short; 3],
+    d: f64,
+    sign: f64,
+    region: &Region,
+    buf: &mut [C],
+) -> bool {
+    let [rx, ry, rz] = region.lo;
+    let [dx, dy, dz] = region.dims;
     {
         let inside =
             |(a, _, n): (usize, [f64; 3], usize), r0: usize, rn: usize| a >= r0 && a + n <= r0 + rn;
@@ -305,8 +324,23 @@ pub(crate) fn splat<C: Cell>(
                 }
             }
         }
-        return px && py && pz;
+        px && py && pz
     }
+}
+
+/// [`splat`] of any box (finite bounds): per-axis cell ranges, overlaps cell by cell.
+#[inline(always)]
+fn splat_general<C: Cell>(
+    lo: DVec3,
+    hi: DVec3,
+    d: f64,
+    sign: f64,
+    out: [usize; 3],
+    region: &Region,
+    buf: &mut [C],
+) -> bool {
+    let [rx, ry, rz] = region.lo;
+    let [dx, dy, dz] = region.dims;
     let (Some((xa, xb)), Some((ya, yb)), Some((za, zb))) = (
         axis_range(lo.x, hi.x, out[0], rx, dx),
         axis_range(lo.y, hi.y, out[1], ry, dy),
@@ -471,14 +505,130 @@ impl<T> Row<'_, T> {
             |(v, p, nb)| (v, averaged_bounds(p, nb)),
         )
     }
+}
 
-    /// [`Row::boxes`] for centre images known to satisfy [`unchecked_bounds`]' condition.
+/// The proxy boxes of a row of voxels whose centre images are sane (finite and moderate, as
+/// [`unchecked_bounds`] requires) and their per-axis [`short`] cells, computed coordinate by
+/// coordinate over the whole row. Each coordinate goes through the same IEEE operations in
+/// the same order as [`unchecked_bounds`] and [`short`] (so the bits are theirs), but laid
+/// out flat — three coordinates per voxel, x, y, z — and without branches, so the loops run
+/// in vector lanes. Buffers are kept between rows.
+#[derive(Debug, Default)]
+pub(crate) struct RowBoxes {
+    /// Box lower bounds, three per voxel.
+    lo: Vec<f64>,
+    /// Box upper bounds.
+    hi: Vec<f64>,
+    /// [`short`]'s first cell `⌊lo + ½⌋` (as a float; meaningful where `count > 0`).
+    first: Vec<f64>,
+    /// [`short`]'s overlaps with cells `first`, `first + 1`, `first + 2`.
+    w0: Vec<f64>,
+    /// See [`RowBoxes::w0`].
+    w1: Vec<f64>,
+    /// See [`RowBoxes::w0`].
+    w2: Vec<f64>,
+    /// [`short`]'s number of cells with positive overlap, or 0 where it gives `None`.
+    count: Vec<f64>,
+}
+
+impl RowBoxes {
+    /// Compute the boxes and short cells of `row`'s voxels (its centre images must be sane).
     #[inline(always)]
-    pub fn boxes_unchecked(&self) -> impl Iterator<Item = (&T, (DVec3, DVec3))> {
-        self.stencils().map(
-            #[inline(always)]
-            |(v, p, nb)| (v, unchecked_bounds(p, nb)),
-        )
+    pub fn fill<T>(&mut self, row: &Row<'_, T>) {
+        let n3 = 3 * row.values.len();
+        for v in [
+            &mut self.lo,
+            &mut self.hi,
+            &mut self.first,
+            &mut self.w0,
+            &mut self.w1,
+            &mut self.w2,
+            &mut self.count,
+        ] {
+            if v.len() < n3 {
+                v.resize(n3, 0.0);
+            }
+        }
+        fn flat(p: &[DVec3], len: usize) -> &[f64] {
+            let f: &[f64] = bytemuck::cast_slice(p);
+            f.get(..len).unwrap_or(&[])
+        }
+        // Centre `m / 3` of the row is at `c[m + 3]`, its −x and +x neighbours at `c[m]`
+        // and `c[m + 6]`.
+        let c = flat(row.centres, n3 + 6);
+        let (ym, yp) = (flat(row.ym, n3), flat(row.yp, n3));
+        let (zm, zp) = (flat(row.zm, n3), flat(row.zp, n3));
+        if c.len() < n3 + 6 || [ym, yp, zm, zp].iter().any(|a| a.len() < n3) {
+            // Unreachable for the rows [`row`] builds; leave every box to the general path.
+            self.count[..n3].fill(0.0);
+            return;
+        }
+        let (lo, hi) = (&mut self.lo[..n3], &mut self.hi[..n3]);
+        for m in 0..n3 {
+            // As `unchecked_bounds`: the neighbours (−x, +x, −y, +y, −z, +z) paired.
+            let mn = fmin(
+                fmin(fmin(c[m], c[m + 6]), fmin(ym[m], yp[m])),
+                fmin(zm[m], zp[m]),
+            );
+            let mx = fmax(
+                fmax(fmax(c[m], c[m + 6]), fmax(ym[m], yp[m])),
+                fmax(zm[m], zp[m]),
+            );
+            let p = c[m + 3];
+            lo[m] = 0.5 * (p + mn);
+            hi[m] = 0.5 * (p + mx);
+        }
+        let (first, count) = (&mut self.first[..n3], &mut self.count[..n3]);
+        let (w0, w1, w2) = (&mut self.w0[..n3], &mut self.w1[..n3], &mut self.w2[..n3]);
+        for m in 0..n3 {
+            // As `short`, with both of its cases computed and one selected.
+            let (l, h) = (lo[m], hi[m]);
+            let s = l + 0.5;
+            let len = h - l;
+            let ok = s >= 0.0 && len > 0.0 && len <= 2.0 && s < 1e15;
+            // For 0 ≤ s < 2⁵³ the truncation equals `short`'s `s as i64` converted back.
+            let a = s.trunc();
+            let e = a + 0.5;
+            let e1 = e + 1.0;
+            let (v0, v1, v2, n) = if len <= 1.0 {
+                let n = if h > e { 2.0 } else { 1.0 };
+                (fmin(h, e) - l, fmax(h - e, 0.0), 0.0, n)
+            } else {
+                let n = if h > e1 { 3.0 } else { 2.0 };
+                (e - l, fmin(h, e1) - e, fmax(h - e1, 0.0), n)
+            };
+            first[m] = a;
+            w0[m] = v0;
+            w1[m] = v1;
+            w2[m] = v2;
+            count[m] = if ok { n } else { 0.0 };
+        }
+    }
+
+    /// Voxel `n`'s proxy box (of the last [`RowBoxes::fill`]).
+    #[inline(always)]
+    pub fn bounds(&self, n: usize) -> (DVec3, DVec3) {
+        let at = |v: &[f64]| DVec3::from_slice(v.get(3 * n..3 * n + 3).unwrap_or(&[0.0; 3]));
+        (at(&self.lo), at(&self.hi))
+    }
+
+    /// Voxel `n`'s [`short`] results per axis, if every axis has them.
+    #[inline(always)]
+    pub fn shorts(&self, n: usize) -> Option<[Short; 3]> {
+        let i = 3 * n;
+        let count = self.count.get(i..i + 3)?;
+        if count.contains(&0.0) {
+            return None;
+        }
+        let axis = |a: usize| -> Short {
+            let m = i + a;
+            (
+                self.first[m] as usize,
+                [self.w0[m], self.w1[m], self.w2[m]],
+                count[a] as usize,
+            )
+        };
+        Some([axis(0), axis(1), axis(2)])
     }
 }
 
