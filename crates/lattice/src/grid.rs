@@ -78,17 +78,35 @@ pub(crate) fn aligned_steps(
 }
 
 /// One grid axis against one lattice axis: the contiguous range of indices inside the knot
-/// domain and their basis table.
+/// domain and their basis values (from a [`BasisTable`]).
 #[derive(Debug, Clone)]
 struct AxisPlan {
     lo: usize,
     hi: usize,
-    table: Option<BasisTable>,
-    /// First control index of each in-domain grid index `lo + r` (entry `r`): the table's,
-    /// copied into one flat array for the per-voxel loop.
+    /// Basis functions per index (the degree plus one).
+    order: usize,
+    /// First control index of each in-domain grid index `lo + r` (entry `r`).
     firsts: Vec<usize>,
-    /// The basis values of grid index `lo + r` at entries `r·(p+1) .. (r+1)·(p+1)`.
+    /// The basis values of grid index `lo + r` at entries `r·order .. (r+1)·order`.
     values: Vec<f64>,
+}
+
+/// Axis plans kept per thread by [`AxisPlan::cached`].
+const AXIS_PLAN_CACHE: usize = 8;
+
+/// An [`AxisPlan`] and everything it was computed from.
+struct AxisPlanEntry {
+    knots: KnotVector,
+    range: std::ops::Range<usize>,
+    start: u64,
+    step: u64,
+    plan: AxisPlan,
+}
+
+thread_local! {
+    /// The axis plans this thread built last, most recent first (see [`AxisPlan::cached`]).
+    static AXIS_PLANS: std::cell::RefCell<Vec<AxisPlanEntry>> =
+        const { std::cell::RefCell::new(Vec::new()) };
 }
 
 impl AxisPlan {
@@ -105,12 +123,13 @@ impl AxisPlan {
         step: f64,
     ) -> Result<Self, DeformError> {
         let param = |i: usize| start + step * i as f64;
+        let order = kv.degree() + 1;
         let inside: Vec<usize> = range.filter(|&i| kv.contains(param(i))).collect();
         let (Some(&lo), Some(&last)) = (inside.first(), inside.last()) else {
             return Ok(Self {
                 lo: 0,
                 hi: 0,
-                table: None,
+                order,
                 firsts: Vec::new(),
                 values: Vec::new(),
             });
@@ -126,10 +145,51 @@ impl AxisPlan {
         Ok(Self {
             lo,
             hi: last + 1,
-            table: Some(table),
+            order,
             firsts,
             values,
         })
+    }
+
+    /// [`AxisPlan::over`], remembered per thread: the plan depends only on the knots, the
+    /// index range and the bits of `start` and `step`, so a plan built before from equal
+    /// inputs is the same plan. The push-forward's fixed tiles
+    /// (`volmorph_warp::centres`) ask for the same few axes tile after tile and plane after
+    /// plane; the last [`AXIS_PLAN_CACHE`] plans are kept.
+    fn cached(
+        kv: &KnotVector,
+        range: std::ops::Range<usize>,
+        start: f64,
+        step: f64,
+    ) -> Result<Self, DeformError> {
+        let (sb, tb) = (start.to_bits(), step.to_bits());
+        let hit = AXIS_PLANS.with_borrow_mut(|plans| {
+            let n = plans.iter().position(|e| {
+                e.start == sb && e.step == tb && e.range == range && same_bits(&e.knots, kv)
+            })?;
+            let e = plans.remove(n);
+            let plan = e.plan.clone();
+            plans.insert(0, e);
+            Some(plan)
+        });
+        if let Some(plan) = hit {
+            return Ok(plan);
+        }
+        let plan = Self::over(kv, range.clone(), start, step)?;
+        AXIS_PLANS.with_borrow_mut(|plans| {
+            plans.truncate(AXIS_PLAN_CACHE - 1);
+            plans.insert(
+                0,
+                AxisPlanEntry {
+                    knots: kv.clone(),
+                    range,
+                    start: sb,
+                    step: tb,
+                    plan: plan.clone(),
+                },
+            );
+        });
+        Ok(plan)
     }
 
     /// First control index and basis values of grid index `i`, if inside the domain.
@@ -138,9 +198,23 @@ impl AxisPlan {
         if i < self.lo || i >= self.hi {
             return None;
         }
-        let t = self.table.as_ref()?;
-        Some((t.first(i - self.lo)?, t.values(i - self.lo)?))
+        let r = i - self.lo;
+        Some((
+            *self.firsts.get(r)?,
+            self.values.get(r * self.order..(r + 1) * self.order)?,
+        ))
     }
+}
+
+/// `true` if two knot vectors have the same degree and bit-identical knots (`==` on floats
+/// would equate −0 and +0).
+fn same_bits(a: &KnotVector, b: &KnotVector) -> bool {
+    a.degree() == b.degree()
+        && a.knots().len() == b.knots().len()
+        && a.knots()
+            .iter()
+            .zip(b.knots())
+            .all(|(x, y)| x.to_bits() == y.to_bits())
 }
 
 /// Which dense evaluation scheme a [`LatticeGridPlan`] uses (see the [module docs](self)).
@@ -277,9 +351,9 @@ impl LatticeGridPlan {
         let k = lattice.knots();
         let range = |a: usize| part.start[a].min(part.end[a])..part.end[a];
         let axes = [
-            AxisPlan::over(&k[0], range(0), start[0], step[0])?,
-            AxisPlan::over(&k[1], range(1), start[1], step[1])?,
-            AxisPlan::over(&k[2], range(2), start[2], step[2])?,
+            AxisPlan::cached(&k[0], range(0), start[0], step[0])?,
+            AxisPlan::cached(&k[1], range(1), start[1], step[1])?,
+            AxisPlan::cached(&k[2], range(2), start[2], step[2])?,
         ];
         let deg = lattice.degree();
         Ok(Self {
