@@ -325,15 +325,10 @@ impl Segments {
     ) {
         for (i, seg) in (columns.0..columns.1).zip(out) {
             let vbox = Blocks::voxels([i, 0, 0], dims);
-            let (mut lo, mut hi) = (DVec3::INFINITY, DVec3::NEG_INFINITY);
             let (a, b) = (vbox.lo[0], vbox.lo[0] + vbox.dims[0] + 2);
-            for p in row.get(a..b).unwrap_or(&[]) {
-                if p.is_finite() {
-                    lo = vmin(lo, *p);
-                    hi = vmax(hi, *p);
-                }
-            }
-            *seg = (lo, hi);
+            let mut hull = Hull::EMPTY;
+            hull.add_all(row.get(a..b).unwrap_or(&[]));
+            *seg = (hull.lo, hull.hi);
         }
     }
 }
@@ -607,6 +602,7 @@ impl<M: LinearMap + Clone> IncrementalPushForward<M> {
             &influenced,
             &self.to_index,
             &mut segments,
+            self.insane == 0,
         );
         let touched = Region::of_bounds(
             vmin(hulls.old.lo, hulls.new.lo),
@@ -1065,6 +1061,85 @@ impl Hull {
             hi: vmax(self.hi, o.hi),
         }
     }
+
+    /// [`Hull::add`] of every point of `ps`; returns the largest coordinate magnitude of
+    /// `ps` when every coordinate is finite (`None` otherwise).
+    #[inline(always)]
+    fn add_all(&mut self, ps: &[DVec3]) -> Option<f64> {
+        match Span::of(ps) {
+            Some(s) => {
+                self.lo = vmin(self.lo, s.lo);
+                self.hi = vmax(self.hi, s.hi);
+                Some(s.max_abs)
+            }
+            None => {
+                for p in ps {
+                    self.add(*p);
+                }
+                None
+            }
+        }
+    }
+}
+
+/// Bounds and largest magnitude of a run of points whose coordinates are all finite,
+/// computed over the flat coordinates in vector lanes (twelve accumulators: four points of
+/// three coordinates). Bounds are exact (a minimum or maximum rounds nothing); only the sign
+/// of a zero bound may differ from a point-by-point fold, which no comparison the engine
+/// makes can see.
+struct Span {
+    lo: DVec3,
+    hi: DVec3,
+    max_abs: f64,
+}
+
+impl Span {
+    /// The span of `ps`, or `None` if a coordinate is NaN or infinite (or `ps` is empty).
+    #[inline(always)]
+    fn of(ps: &[DVec3]) -> Option<Self> {
+        const L: usize = 12;
+        let f: &[f64] = bytemuck::cast_slice(ps);
+        let mut lo = [f64::INFINITY; L];
+        let mut hi = [f64::NEG_INFINITY; L];
+        let mut big = [0.0_f64; L];
+        // `x · 0` is ±0 for a finite `x` and NaN otherwise; the sum is ±0 iff all are finite.
+        let mut bad = [0.0_f64; L];
+        let mut step = |k: usize, x: f64, lo: &mut [f64; L], hi: &mut [f64; L]| {
+            lo[k] = if x < lo[k] { x } else { lo[k] };
+            hi[k] = if x > hi[k] { x } else { hi[k] };
+            let a = x.abs();
+            big[k] = if a > big[k] { a } else { big[k] };
+            bad[k] += x * 0.0;
+        };
+        let mut chunks = f.chunks_exact(L);
+        for c in &mut chunks {
+            for (k, &x) in c.iter().enumerate() {
+                step(k, x, &mut lo, &mut hi);
+            }
+        }
+        for (k, &x) in chunks.remainder().iter().enumerate() {
+            step(k, x, &mut lo, &mut hi);
+        }
+        if ps.is_empty() || bad.iter().sum::<f64>() != 0.0 {
+            return None;
+        }
+        let mut s = Self {
+            lo: DVec3::INFINITY,
+            hi: DVec3::NEG_INFINITY,
+            max_abs: 0.0,
+        };
+        for k in 0..L {
+            let a = k % 3;
+            s.lo[a] = if lo[k] < s.lo[a] { lo[k] } else { s.lo[a] };
+            s.hi[a] = if hi[k] > s.hi[a] { hi[k] } else { s.hi[a] };
+            s.max_abs = if big[k] > s.max_abs {
+                big[k]
+            } else {
+                s.max_abs
+            };
+        }
+        Some(s)
+    }
 }
 
 /// The hulls of the centre images of a neighbourhood before and after an update, and the
@@ -1080,7 +1155,9 @@ struct Hulls {
 /// `cdims[0]·cdims[1]`), which holds `fresh_box`: take the hull of the stored images, then
 /// store `fresh` (physical images over `fresh_box`) converted to output indices by
 /// `to_index`, taking their hull; and fill `segments` (whose rows hold the hood's) from the
-/// new images — one pass, parallel over planes.
+/// new images — one pass, parallel over planes. `all_sane` tells that every stored image
+/// is [`sane`] (then none of the replaced ones is counted).
+#[allow(clippy::too_many_arguments)]
 fn swap_in(
     centres: &mut [DVec3],
     dims: [usize; 3],
@@ -1089,6 +1166,7 @@ fn swap_in(
     fresh_box: &Region,
     to_index: &ToIndex,
     segments: &mut Segments,
+    all_sane: bool,
 ) -> Hulls {
     let [cx, cy] = [dims[0] + 2, dims[1] + 2];
     let [fx, fy, _] = fresh_box.dims;
@@ -1124,9 +1202,7 @@ fn swap_in(
                     && j < hood.lo[1] + hood.dims[1]
                     && let Some(row) = full.get_mut(hood.lo[0]..hood.lo[0] + hood.dims[0])
                 {
-                    for p in row.iter() {
-                        h.old.add(*p);
-                    }
+                    h.old.add_all(row);
                     let dy = j.wrapping_sub(fresh_box.lo[1]);
                     let src = new
                         .filter(|_| dy < fy)
@@ -1135,11 +1211,15 @@ fn swap_in(
                         .checked_sub(hood.lo[0])
                         .and_then(|x| row.get_mut(x..x + fx));
                     if let (Some(src), Some(dst)) = (src, dst) {
+                        // With no insane image stored, none is replaced.
+                        if !all_sane {
+                            h.replaced_insane += dst.iter().filter(|d| !sane(**d)).count();
+                        }
                         for (d, p) in dst.iter_mut().zip(src) {
-                            h.replaced_insane += usize::from(!sane(*d));
                             *d = to_index.apply(*p);
-                            h.new.add(*d);
-                            h.new_insane += usize::from(!sane(*d));
+                        }
+                        if h.new.add_all(dst).is_none_or(|m| m >= SANE) {
+                            h.new_insane += dst.iter().filter(|d| !sane(**d)).count();
                         }
                     }
                 }
@@ -1153,4 +1233,60 @@ fn swap_in(
             replaced_insane: a.replaced_insane + b.replaced_insane,
             new_insane: a.new_insane + b.new_insane,
         })
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use volmorph_testkit::Rng;
+
+    /// The lane-wise span of a run of points is the point-by-point hull (every length, to
+    /// cover the remainder after the 4-point chunks), its largest magnitude is the largest
+    /// coordinate magnitude, and a NaN or infinite coordinate anywhere gives `None`, so
+    /// [`Hull::add_all`] falls back to skipping the non-finite points one by one.
+    #[test]
+    fn span_is_the_pointwise_hull_and_refuses_non_finite_points() {
+        let mut rng = Rng::new(7);
+        for len in 0..40 {
+            let ps: Vec<DVec3> = (0..len)
+                .map(|_| {
+                    DVec3::new(
+                        rng.range(-9.0, 9.0),
+                        rng.range(-1e3, 1e3),
+                        rng.range(0.0, 1.0),
+                    )
+                })
+                .collect();
+            let mut want = Hull::EMPTY;
+            for p in &ps {
+                want.add(*p);
+            }
+            let max_abs = ps.iter().map(|p| p.abs().max_element()).fold(0.0, f64::max);
+            match Span::of(&ps) {
+                Some(s) => {
+                    assert_eq!(
+                        (s.lo, s.hi, s.max_abs),
+                        (want.lo, want.hi, max_abs),
+                        "{len} points"
+                    );
+                }
+                None => assert_eq!(len, 0),
+            }
+            for bad in [f64::NAN, f64::INFINITY, f64::NEG_INFINITY] {
+                if len == 0 {
+                    continue;
+                }
+                let mut q = ps.clone();
+                q[len / 2][len % 3] = bad;
+                assert!(Span::of(&q).is_none(), "{bad} among {len} points");
+                let mut h = Hull::EMPTY;
+                assert_eq!(h.add_all(&q), None);
+                let mut w = Hull::EMPTY;
+                for p in &q {
+                    w.add(*p);
+                }
+                assert_eq!((h.lo, h.hi), (w.lo, w.hi));
+            }
+        }
+    }
 }
