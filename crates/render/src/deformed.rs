@@ -34,7 +34,7 @@ use volmorph_deform::{SampledMap, SpaceMap};
 use volmorph_volume::Geometry;
 
 use crate::camera::Camera;
-use crate::dvr::{Accumulator, Dda, DvrRenderer, DvrVolume, RayResult, RenderMode};
+use crate::dvr::{Accumulator, Caster, Dda, DvrRenderer, DvrVolume, RayResult, RenderMode};
 use crate::error::RenderError;
 use crate::geometry::Ray;
 use crate::image::RgbaImage;
@@ -394,6 +394,22 @@ fn trilinear(k: &[Vec3; 8], f: Vec3) -> Vec3 {
     x00.lerp(x10, f.y).lerp(x01.lerp(x11, f.y), f.z)
 }
 
+/// The rays of a deformed picture.
+struct Deformed<'r, 'a> {
+    renderer: &'r DvrRenderer<'a>,
+    view: &'r DeformedView,
+    memo: &'r [AtomicU8],
+    lighting: Option<Lighting>,
+}
+
+impl Caster for Deformed<'_, '_> {
+    #[inline(always)]
+    fn cast(&self, ray: &Ray) -> RayResult {
+        self.renderer
+            .cast_deformed(self.view, self.memo, ray, self.lighting.as_ref())
+    }
+}
+
 impl DvrRenderer<'_> {
     /// The picture `camera` takes of the volume as deformed by `view` (see the [module
     /// docs](crate::deformed)).
@@ -409,9 +425,15 @@ impl DvrRenderer<'_> {
         view.check_volume(self.volume)?;
         let lighting = self.lighting(camera)?;
         let memo = view.visibility_memo();
-        self.render_rows(camera, |ray| {
-            self.cast_deformed(view, &memo, ray, lighting.as_ref())
-        })
+        self.render_rows(
+            camera,
+            &Deformed {
+                renderer: self,
+                view,
+                memo: &memo,
+                lighting,
+            },
+        )
     }
 
     /// Cast one ray through the deformed volume.

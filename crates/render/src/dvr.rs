@@ -613,7 +613,13 @@ impl<'a> DvrRenderer<'a> {
     /// [`RenderError::Size`] for an oversized picture.
     pub fn render(&self, camera: &Camera) -> Result<RgbaImage, RenderError> {
         let lighting = self.lighting(camera)?;
-        self.render_rows(camera, |ray| self.cast(ray, lighting.as_ref()))
+        self.render_rows(
+            camera,
+            &Undeformed {
+                renderer: self,
+                lighting,
+            },
+        )
     }
 
     /// The lighting of a picture by `camera`, if shading is on.
@@ -625,11 +631,11 @@ impl<'a> DvrRenderer<'a> {
             .transpose()
     }
 
-    /// Run `cast` for every pixel's ray (rows in parallel) and encode the result.
-    pub(crate) fn render_rows<F: Fn(&Ray) -> RayResult + Sync>(
+    /// Run `caster` for every pixel's ray (rows in parallel) and encode the result.
+    pub(crate) fn render_rows<C: Caster>(
         &self,
         camera: &Camera,
-        cast: F,
+        caster: &C,
     ) -> Result<RgbaImage, RenderError> {
         let (w, h) = (camera.width(), camera.height());
         let mut img = RgbaImage::new(w, h, [0; 4])?;
@@ -639,7 +645,7 @@ impl<'a> DvrRenderer<'a> {
         img.pixels_mut()
             .par_chunks_mut(w as usize)
             .enumerate()
-            .for_each(|(y, row)| row_kernel(camera, y as u32, row, &cast, bg_lin, bg_alpha, bg));
+            .for_each(|(y, row)| row_kernel(camera, y as u32, row, caster, bg_lin, bg_alpha, bg));
         Ok(img)
     }
 
@@ -920,21 +926,43 @@ impl RayResult {
     };
 }
 
+/// What casts the rays of a picture for [`row_kernel`]. Implementations mark
+/// [`Caster::cast`] `#[inline(always)]`: the ray loop must inline into the kernel to be
+/// compiled in its AVX2 and FMA version (a closure was compiled apart, for the baseline
+/// target only).
+pub(crate) trait Caster: Sync {
+    /// The result of one pixel's ray.
+    fn cast(&self, ray: &Ray) -> RayResult;
+}
+
+/// The rays of an undeformed picture.
+struct Undeformed<'r, 'a> {
+    renderer: &'r DvrRenderer<'a>,
+    lighting: Option<Lighting>,
+}
+
+impl Caster for Undeformed<'_, '_> {
+    #[inline(always)]
+    fn cast(&self, ray: &Ray) -> RayResult {
+        self.renderer.cast(ray, self.lighting.as_ref())
+    }
+}
+
 /// One picture row: cast and encode every pixel. Compiled also for AVX2 and FMA, chosen at
-/// run time (the ray loops inline into it, so rounding and multiply-adds become single
-/// instructions there).
+/// run time (the ray loops inline into it through [`Caster::cast`], so rounding and
+/// multiply-adds become single instructions there).
 #[multiversion(targets("x86_64+avx2+fma"))]
-fn row_kernel<F: Fn(&Ray) -> RayResult>(
+fn row_kernel<C: Caster>(
     camera: &Camera,
     y: u32,
     row: &mut [[u8; 4]],
-    cast: &F,
+    caster: &C,
     bg_lin: [f32; 3],
     bg_alpha: f32,
     bg: [u8; 4],
 ) {
     for (x, px) in row.iter_mut().enumerate() {
-        let r = cast(&camera.ray(x as u32, y));
+        let r = caster.cast(&camera.ray(x as u32, y));
         *px = encode(r, bg_lin, bg_alpha, bg);
     }
 }
