@@ -35,7 +35,7 @@
 
 use std::sync::OnceLock;
 
-use glam::{DMat3, DVec3, Mat3, Vec3};
+use glam::{DMat3, DVec3, I16Vec4, Mat3, Vec3, Vec3A, Vec4, Vec4Swizzles};
 use multiversion::multiversion;
 use rayon::prelude::*;
 use volmorph_volume::{AnyVolume, Geometry, Volume, Voxel, VoxelType, with_volume};
@@ -74,9 +74,31 @@ pub struct DvrVolume {
     octree: MinMaxOctree,
     /// Whether the source voxel type is an integer type.
     integer: bool,
-    /// Half central differences of the codes per voxel (one-sided at the faces), made on the
-    /// first shaded picture.
-    gradients: OnceLock<Vec<[i16; 3]>>,
+    /// Largest cell index per axis (`n − 2`), as `f32`.
+    max_cell: Vec3,
+    /// Per voxel, for shaded pictures: the code less [`CODE_BIAS`] and the half central
+    /// differences of the codes (one-sided at the faces), so that a sample reads its value and
+    /// gradient in one 8-byte load per corner. Made on the first shaded picture.
+    shaded: OnceLock<Vec<I16Vec4>>,
+}
+
+/// Offset of the codes in the shaded table ([`DvrVolume`]): `code − 32768` fits an `i16`, and
+/// adding it back after the conversion to `f32` is exact.
+const CODE_BIAS: f32 = 32_768.0;
+
+/// Largest voxel count along an axis: cell indices are found in `f32` ([`DvrVolume::cell_of`]),
+/// whose integers are exact and whose bits give the index below 2²³.
+pub const MAX_DIMENSION: usize = 1 << 23;
+
+/// `2²³`: adding it to an integral `f32` in `[0, 2²³)` puts the integer in the low mantissa
+/// bits.
+const MANTISSA_SHIFT: f32 = 8_388_608.0;
+
+/// The integer in `[0, 2²³)` that the integral `x` stands for, without the saturating
+/// float-to-integer conversion (its range checks cost a dozen instructions per axis).
+#[inline(always)]
+fn index_bits(x: f32) -> usize {
+    ((x + MANTISSA_SHIFT).to_bits() & 0x7f_ffff) as usize
 }
 
 impl DvrVolume {
@@ -92,7 +114,7 @@ impl DvrVolume {
     ///
     /// # Errors
     /// [`RenderError::InvalidArgument`] when the geometry is invalid, a dimension is below 2
-    /// (nothing to interpolate), or no voxel value is finite.
+    /// (nothing to interpolate) or above [`MAX_DIMENSION`], or no voxel value is finite.
     pub fn from_volume<T: Voxel>(volume: &Volume<T>) -> Result<Self, RenderError> {
         let geometry = *volume.geometry();
         geometry
@@ -102,6 +124,12 @@ impl DvrVolume {
         if dims.iter().any(|&d| d < 2) {
             return Err(RenderError::invalid(format!(
                 "a volume of {dims:?} voxels has nothing to render (at least 2 per axis)"
+            )));
+        }
+        if dims.iter().any(|&d| d > MAX_DIMENSION) {
+            return Err(RenderError::invalid(format!(
+                "a volume of {dims:?} voxels is too long to render (at most {MAX_DIMENSION} per \
+                 axis)"
             )));
         }
         let (lo, hi) = volume
@@ -154,7 +182,12 @@ impl DvrVolume {
             code_max,
             octree,
             integer: !float,
-            gradients: OnceLock::new(),
+            max_cell: Vec3::new(
+                (dims[0] - 2) as f32,
+                (dims[1] - 2) as f32,
+                (dims[2] - 2) as f32,
+            ),
+            shaded: OnceLock::new(),
         })
     }
 
@@ -263,16 +296,15 @@ impl DvrVolume {
     /// box.
     #[inline(always)]
     pub(crate) fn cell_of(&self, u: Vec3) -> (usize, Vec3) {
-        let [nx, ny, nz] = self.dims;
-        let cell = |x: f32, n: usize| -> (usize, f32) {
-            // Through i32: one conversion instruction (the value is far below 2³¹).
-            let i = (x as i32).clamp(0, n as i32 - 2) as usize;
-            (i, x - i as f32)
-        };
-        let (i, fx) = cell(u.x, nx);
-        let (j, fy) = cell(u.y, ny);
-        let (k, fz) = cell(u.z, nz);
-        (i + nx * (j + ny * k), Vec3::new(fx, fy, fz))
+        let [nx, ny, _] = self.dims;
+        // floor, then clamp to the cells: the same cell as truncating and clamping (they
+        // differ only below 0, where both clamp to 0), found in the vector unit.
+        let c = Vec3A::from(u)
+            .floor()
+            .clamp(Vec3A::ZERO, self.max_cell.into());
+        let f = Vec3::from(Vec3A::from(u) - c);
+        let (i, j, k) = (index_bits(c.x), index_bits(c.y), index_bits(c.z));
+        (i + nx * (j + ny * k), f)
     }
 
     /// Trilinear code in the cell at offset `o` with fractions `f` (see [`Self::cell_of`]).
@@ -344,31 +376,43 @@ impl DvrVolume {
     /// in the grid box.
     #[inline(always)]
     pub(crate) fn gradient_cell(&self, o: usize, f: Vec3) -> Vec3 {
+        self.sample_shaded(o, f).yzw()
+    }
+
+    /// The code ([`Self::sample_cell`], the same bits) and the gradient ([`Self::gradient_cell`])
+    /// in the cell at offset `o` with fractions `f`, as `(code, ∂x, ∂y, ∂z)`: both from one
+    /// trilinear interpolation of the shaded table's four lanes (each lane as
+    /// `a + f·(b − a)`).
+    #[inline(always)]
+    pub(crate) fn sample_shaded(&self, o: usize, f: Vec3) -> Vec4 {
         let [nx, ny, _] = self.dims;
         let (sy, sz) = (nx, nx * ny);
         // One bounds check for the eight corners.
-        let g = &self.gradients()[o..o + sz + sy + 2];
-        let v = |n: usize| {
-            let [a, b, c] = g[n];
-            Vec3::new(f32::from(a), f32::from(b), f32::from(c))
-        };
-        let c00 = v(0).lerp(v(1), f.x);
-        let c10 = v(sy).lerp(v(sy + 1), f.x);
-        let c01 = v(sz).lerp(v(sz + 1), f.x);
-        let c11 = v(sz + sy).lerp(v(sz + sy + 1), f.x);
-        c00.lerp(c10, f.y).lerp(c01.lerp(c11, f.y), f.z)
+        let g = &self.shaded_table()[o..o + sz + sy + 2];
+        let bias = Vec4::new(CODE_BIAS, 0.0, 0.0, 0.0);
+        let v = |n: usize| g[n].as_vec4() + bias;
+        let lerp = |a: Vec4, b: Vec4, t: f32| a + Vec4::splat(t) * (b - a);
+        let c00 = lerp(v(0), v(1), f.x);
+        let c10 = lerp(v(sy), v(sy + 1), f.x);
+        let c01 = lerp(v(sz), v(sz + 1), f.x);
+        let c11 = lerp(v(sz + sy), v(sz + sy + 1), f.x);
+        let c0 = lerp(c00, c10, f.y);
+        let c1 = lerp(c01, c11, f.y);
+        lerp(c0, c1, f.z)
     }
 
-    /// The per-voxel gradients, computed on first use (in parallel over z-slices).
-    fn gradients(&self) -> &[[i16; 3]] {
-        self.gradients.get_or_init(|| {
+    /// The shaded table (codes and gradients per voxel), computed on first use (in parallel
+    /// over z-slices).
+    fn shaded_table(&self) -> &[I16Vec4] {
+        self.shaded.get_or_init(|| {
             let [nx, ny, nz] = self.dims;
             let d = &self.data;
             let plane = nx * ny;
             // Half differences rounded towards −∞ (an arithmetic shift): at most 32767 in
             // magnitude for 16-bit codes, so they fit an i16.
             let half = |a: u16, b: u16| ((i32::from(a) - i32::from(b)) >> 1) as i16;
-            let mut g = vec![[0i16; 3]; d.len()];
+            let bias = |q: u16| (i32::from(q) - CODE_BIAS as i32) as i16;
+            let mut g = vec![I16Vec4::ZERO; d.len()];
             g.par_chunks_mut(plane).enumerate().for_each(|(k, slab)| {
                 let here = &d[k * plane..][..plane];
                 let below = &d[k.saturating_sub(1) * plane..][..plane];
@@ -381,11 +425,12 @@ impl DvrVolume {
                     let out = &mut slab[j * nx..][..nx];
                     for i in 0..nx {
                         let (i0, i1) = (i.saturating_sub(1), (i + 1).min(nx - 1));
-                        out[i] = [
+                        out[i] = I16Vec4::new(
+                            bias(row[i]),
                             half(row[i1], row[i0]),
                             half(next[i], prev[i]),
                             half(hi[i], lo[i]),
-                        ];
+                        );
                     }
                 }
             });
@@ -515,8 +560,8 @@ impl<'a> DvrRenderer<'a> {
         }
         if let Some(s) = &options.shading {
             s.validate()?;
-            // Normals come from the gradient table: make it now, not inside the first picture.
-            volume.gradients();
+            // Normals come from the shaded table: make it now, not inside the first picture.
+            volume.shaded_table();
         }
         if let Some(c) = &options.clip
             && !(c.point.is_finite() && c.normal.is_finite() && c.normal.length_squared() > 0.0)
@@ -689,29 +734,19 @@ impl<'a> DvrRenderer<'a> {
         let brick = octree.brick() as f32;
         let inv_brick = 1.0 / brick;
         let [bx, by, bz] = octree.level_dims(0);
+        let max_leaf = Vec3A::new((bx - 1) as f32, (by - 1) as f32, (bz - 1) as f32);
         // Parameter length of one brick along the ray's fastest axis.
         let brick_t = brick / d.abs().max_element();
         // Per axis: the brick face a ray leaves through (0 or 1 brick ahead) and 1/d.
-        let exit_side = Vec3::select(d.cmpgt(Vec3::ZERO), Vec3::ONE, Vec3::ZERO);
-        let inv_d = d.recip();
+        let exit_side = Vec3A::from(Vec3::select(d.cmpgt(Vec3::ZERO), Vec3::ONE, Vec3::ZERO));
+        let inv_d = Vec3A::from(d.recip());
+        let (oa, da) = (Vec3A::from(o), Vec3A::from(d));
+        // Composite pictures with shading read code and gradient together.
+        let shaded = acc.lighting.is_some() && matches!(self.options.mode, RenderMode::Composite);
         let mip = matches!(self.options.mode, RenderMode::MaximumIntensity);
         let inv_step = 1.0 / self.step;
         // Sample k lies at t = k·Δ; the first is the first at or after t0.
         let mut k = (t0 * inv_step).ceil() as u32;
-        // Brick of an index position and the parameter where the ray leaves it.
-        let leaf_of = |u: Vec3| -> [usize; 3] {
-            let b = u * inv_brick;
-            [
-                (b.x as i32).clamp(0, bx as i32 - 1) as usize,
-                (b.y as i32).clamp(0, by as i32 - 1) as usize,
-                (b.z as i32).clamp(0, bz as i32 - 1) as usize,
-            ]
-        };
-        let exit_of = |leaf: [usize; 3]| -> f32 {
-            let face =
-                (Vec3::new(leaf[0] as f32, leaf[1] as f32, leaf[2] as f32) + exit_side) * brick;
-            ((face - o) * inv_d).min_element()
-        };
         'ray: loop {
             let t = k as f32 * self.step;
             if t >= t1 {
@@ -720,10 +755,18 @@ impl<'a> DvrRenderer<'a> {
             // Samples up to `run_end` need no brick test: the whole brick is visible.
             let mut run_end = t1;
             if skip {
-                let leaf = leaf_of(o + d * t);
+                // The brick of the sample (floor and clamp: the brick that truncating and
+                // clamping gives) and the parameter where the ray leaves it.
+                let b = ((oa + da * t) * inv_brick)
+                    .floor()
+                    .clamp(Vec3A::ZERO, max_leaf);
+                let leaf = [index_bits(b.x), index_bits(b.y), index_bits(b.z)];
+                // (As Vec3: its minimum ignores the NaN of a face in the plane of an axis the
+                // ray does not move along.)
+                let exit = Vec3::from(((b + exit_side) * brick - oa) * inv_d).min_element();
                 if mip {
                     if f32::from(octree.range(0, leaf).1) <= acc.max_code {
-                        k = k.max((exit_of(leaf) * inv_step) as u32) + 1;
+                        k = k.max((exit * inv_step) as u32) + 1;
                         continue;
                     }
                 } else {
@@ -733,12 +776,12 @@ impl<'a> DvrRenderer<'a> {
                         // this brick, or further while it stays within dist − 1 bricks (every
                         // point up to there is in an invisible brick), and on to the next
                         // sample beyond.
-                        let ahead = exit_of(leaf).max(t + f32::from(dist - 1) * brick_t);
+                        let ahead = exit.max(t + f32::from(dist - 1) * brick_t);
                         k = k.max((ahead * inv_step) as u32) + 1;
                         continue;
                     }
                 }
-                run_end = exit_of(leaf).min(t1);
+                run_end = exit.min(t1);
             }
             // The first sample always runs (progress even if rounding puts the exit before it).
             let mut first = true;
@@ -754,19 +797,23 @@ impl<'a> DvrRenderer<'a> {
                     k += 1;
                     continue;
                 }
-                let q = vol.sample_cell(cell, f);
-                let stop = acc.add(
-                    q,
-                    || (t - self.step >= t0).then(|| vol.sample(o + d * (t - self.step))),
-                    |s| {
-                        grad_to_world
-                            * if s == 0.0 {
-                                vol.gradient_cell(cell, f)
-                            } else {
-                                vol.gradient(u - d * (self.step * s))
-                            }
-                    },
-                );
+                let stop = if shaded {
+                    let s = vol.sample_shaded(cell, f);
+                    acc.composite(s.x, || grad_to_world * s.yzw())
+                } else {
+                    acc.add(
+                        vol.sample_cell(cell, f),
+                        || (t - self.step >= t0).then(|| vol.sample(o + d * (t - self.step))),
+                        |s| {
+                            grad_to_world
+                                * if s == 0.0 {
+                                    vol.gradient_cell(cell, f)
+                                } else {
+                                    vol.gradient(u - d * (self.step * s))
+                                }
+                        },
+                    )
+                };
                 k += 1;
                 if stop {
                     break 'ray;
@@ -991,7 +1038,7 @@ fn encode(r: RayResult, bg_lin: [f32; 3], bg_alpha: f32, bg: [u8; 4]) -> [u8; 4]
 /// Front-to-back state of one ray for every mode.
 pub(crate) struct Accumulator<'r> {
     renderer: &'r DvrRenderer<'r>,
-    lighting: Option<ViewLighting>,
+    pub lighting: Option<ViewLighting>,
     color: Vec3,
     trans: f32,
     /// Largest code seen (maximum-intensity projection), −1 before any sample.
@@ -1025,6 +1072,23 @@ impl<'r> Accumulator<'r> {
         }
     }
 
+    /// Add the composite sample of code `q` whose world gradient `grad` gives (called only
+    /// for a visible sample with shading on). Returns whether the ray is finished.
+    #[inline(always)]
+    pub(crate) fn composite(&mut self, q: f32, grad: impl FnOnce() -> Vec3) -> bool {
+        let r = self.renderer;
+        let i = r.entry_index(q);
+        let a = r.alpha[i];
+        if a > 0.0 {
+            let (k, s) = self.light(grad);
+            let c = (r.rgb[i] * k + Vec3::splat(s)).min(Vec3::ONE);
+            self.color += c * (self.trans * a);
+            self.trans *= 1.0 - a;
+            return r.options.early_termination && self.trans < MIN_TRANSMITTANCE;
+        }
+        false
+    }
+
     /// Add the sample of code `q`. `previous` gives, for the isosurface only, the code of the
     /// previous sample on the ray (if the ray had one); `grad_back(s)` is the world gradient
     /// at the point `s` steps back along the ray from this sample (`0 ≤ s < 1`; composite
@@ -1039,18 +1103,7 @@ impl<'r> Accumulator<'r> {
     ) -> bool {
         let r = self.renderer;
         match r.options.mode {
-            RenderMode::Composite => {
-                let i = r.entry_index(q);
-                let a = r.alpha[i];
-                if a > 0.0 {
-                    let (k, s) = self.light(|| grad_back(0.0));
-                    let c = (r.rgb[i] * k + Vec3::splat(s)).min(Vec3::ONE);
-                    self.color += c * (self.trans * a);
-                    self.trans *= 1.0 - a;
-                    return r.options.early_termination && self.trans < MIN_TRANSMITTANCE;
-                }
-                false
-            }
+            RenderMode::Composite => self.composite(q, || grad_back(0.0)),
             RenderMode::MaximumIntensity => {
                 self.max_code = self.max_code.max(q);
                 false
