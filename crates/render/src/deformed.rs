@@ -28,7 +28,7 @@
 
 use std::sync::atomic::{AtomicU8, Ordering};
 
-use glam::{DMat3, Mat3, Vec3};
+use glam::{DMat3, Mat3, Vec3, Vec4Swizzles};
 use rayon::prelude::*;
 use volmorph_deform::{SampledMap, SpaceMap};
 use volmorph_volume::Geometry;
@@ -456,41 +456,69 @@ impl DvrRenderer<'_> {
         let mip = matches!(self.options.mode, RenderMode::MaximumIntensity);
         let vol_hi = vol.index_box();
         let inside = |u: Vec3| u.cmpge(Vec3::ZERO).all() && u.cmple(vol_hi).all();
-        view.walk(
-            (o, d),
-            (t0, t1),
-            self.step,
-            |n| {
-                !skip
-                    || mip
-                    || view.cell_visible(n, vol, memo, &|mn, mx| self.range_visible(mn, mx))
-            },
-            |c, u, t, jac| {
+        // Composite pictures with shading read code and gradient together.
+        let shaded = acc.lighting.is_some() && matches!(self.options.mode, RenderMode::Composite);
+        // The walk of `DeformedView::walk`, written out so that the whole ray loop inlines
+        // into the row kernel (a closure per sample was compiled apart).
+        let step = self.step;
+        let inv_step = 1.0 / step;
+        let [nx, ny, _] = view.grid.dims;
+        'ray: for (gcell, ta, tb) in Dda::new(o, d, t0, t1, 1.0, view.grid.dims.map(|n| n - 1)) {
+            let n = gcell[0] + nx * (gcell[1] + ny * gcell[2]);
+            if skip
+                && !mip
+                && !view.cell_visible(n, vol, memo, &|mn, mx| self.range_visible(mn, mx))
+            {
+                continue;
+            }
+            let k = corners(&view.nodes, n, nx, nx * ny);
+            let base = Vec3::new(gcell[0] as f32, gcell[1] as f32, gcell[2] as f32);
+            // Along the ray the trilinear interpolant is a cubic in τ = t − ta.
+            let cubic = Cubic::along(&k, o + d * ta - base, d);
+            let jac = |c: Vec3| cell_jacobian(&k, (c - base).clamp(Vec3::ZERO, Vec3::ONE));
+            let mut s = (ta * inv_step).ceil() as u32;
+            loop {
+                let t = s as f32 * step;
+                if t >= tb {
+                    break;
+                }
+                s += 1;
+                let u = cubic.at(t - ta);
                 if !inside(u) {
-                    return false;
+                    continue;
                 }
                 let (cell, f) = vol.cell_of(u);
                 if skip && !mip && !self.cells_visible(cell) {
-                    return false;
+                    continue;
                 }
-                let q = vol.sample_cell(cell, f);
-                acc.add(
-                    q,
-                    || {
-                        let p = view.map_at(c - d * self.step);
-                        (t - self.step >= t0 && inside(p)).then(|| vol.sample(p))
-                    },
-                    |s| {
-                        if s == 0.0 {
-                            (jac(c) * to_grid).transpose() * vol.gradient_cell(cell, f)
-                        } else {
-                            let c = c - d * (self.step * s);
-                            view.jacobian_at(c, to_grid).transpose() * vol.gradient(view.map_at(c))
-                        }
-                    },
-                )
-            },
-        );
+                // The grid position, for the Jacobian (only shaded samples need it).
+                let c = o + d * t;
+                let stop = if shaded {
+                    let smp = vol.sample_shaded(cell, f);
+                    acc.composite(smp.x, || (jac(c) * to_grid).transpose() * smp.yzw())
+                } else {
+                    acc.add(
+                        vol.sample_cell(cell, f),
+                        || {
+                            let p = view.map_at(c - d * step);
+                            (t - step >= t0 && inside(p)).then(|| vol.sample(p))
+                        },
+                        |sb| {
+                            if sb == 0.0 {
+                                (jac(c) * to_grid).transpose() * vol.gradient_cell(cell, f)
+                            } else {
+                                let c = c - d * (step * sb);
+                                view.jacobian_at(c, to_grid).transpose()
+                                    * vol.gradient(view.map_at(c))
+                            }
+                        },
+                    )
+                };
+                if stop {
+                    break 'ray;
+                }
+            }
+        }
         acc.finish(self)
     }
 }

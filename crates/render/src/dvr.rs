@@ -94,6 +94,13 @@ pub const MAX_DIMENSION: usize = 1 << 23;
 /// bits.
 const MANTISSA_SHIFT: f32 = 8_388_608.0;
 
+/// `v.floor()` lane by lane: one rounding instruction each where SSE4.1 is on (the AVX2
+/// row kernel), where `Vec3A::floor` emulates it in about ten SSE2 instructions.
+#[inline(always)]
+fn floor(v: Vec3A) -> Vec3A {
+    Vec3A::new(v.x.floor(), v.y.floor(), v.z.floor())
+}
+
 /// The integer in `[0, 2²³)` that the integral `x` stands for, without the saturating
 /// float-to-integer conversion (its range checks cost a dozen instructions per axis).
 #[inline(always)]
@@ -299,9 +306,7 @@ impl DvrVolume {
         let [nx, ny, _] = self.dims;
         // floor, then clamp to the cells: the same cell as truncating and clamping (they
         // differ only below 0, where both clamp to 0), found in the vector unit.
-        let c = Vec3A::from(u)
-            .floor()
-            .clamp(Vec3A::ZERO, self.max_cell.into());
+        let c = floor(u.into()).clamp(Vec3A::ZERO, self.max_cell.into());
         let f = Vec3::from(Vec3A::from(u) - c);
         let (i, j, k) = (index_bits(c.x), index_bits(c.y), index_bits(c.z));
         (i + nx * (j + ny * k), f)
@@ -757,9 +762,7 @@ impl<'a> DvrRenderer<'a> {
             if skip {
                 // The brick of the sample (floor and clamp: the brick that truncating and
                 // clamping gives) and the parameter where the ray leaves it.
-                let b = ((oa + da * t) * inv_brick)
-                    .floor()
-                    .clamp(Vec3A::ZERO, max_leaf);
+                let b = floor((oa + da * t) * inv_brick).clamp(Vec3A::ZERO, max_leaf);
                 let leaf = [index_bits(b.x), index_bits(b.y), index_bits(b.z)];
                 // (As Vec3: its minimum ignores the NaN of a face in the plane of an axis the
                 // ray does not move along.)
