@@ -28,7 +28,7 @@
 
 use std::sync::atomic::{AtomicU8, Ordering};
 
-use glam::{DMat3, Mat3, Vec3, Vec4Swizzles};
+use glam::{DMat3, Mat3, Vec3, Vec3A, Vec4Swizzles};
 use rayon::prelude::*;
 use volmorph_deform::{SampledMap, SpaceMap};
 use volmorph_volume::Geometry;
@@ -291,13 +291,15 @@ impl DeformedView {
 }
 
 /// A trilinear interpolant restricted to the line `p + τ·v` (cell-local coordinates): a
-/// cubic polynomial in `τ` per component, evaluated by Horner's rule.
-struct Cubic([Vec3; 4]);
+/// cubic polynomial in `τ` per component, evaluated by Horner's rule. Kept in `Vec3A` (one
+/// vector operation per step; the same operations per lane as in `Vec3`, so the same bits).
+struct Cubic([Vec3A; 4]);
 
 impl Cubic {
     /// The cubic of the cell with corners `k` (x fastest) along `p + τ·v`.
     #[inline(always)]
     fn along(k: &[Vec3; 8], p: Vec3, v: Vec3) -> Self {
+        let k = k.map(Vec3A::from);
         // Multilinear form f = g + gx·x + gy·y + gz·z + gxy·xy + gxz·xz + gyz·yz + gxyz·xyz.
         let g = k[0];
         let gx = k[1] - k[0];
@@ -335,7 +337,7 @@ impl Cubic {
     #[inline(always)]
     fn at(&self, tau: f32) -> Vec3 {
         let [c0, c1, c2, c3] = self.0;
-        ((c3 * tau + c2) * tau + c1) * tau + c0
+        Vec3::from(((c3 * tau + c2) * tau + c1) * tau + c0)
     }
 }
 
@@ -451,6 +453,7 @@ impl DvrRenderer<'_> {
             return RayResult::EMPTY;
         };
         let to_grid = view.to_grid().as_mat3();
+        let to_grid_t = to_grid.transpose();
         let mut acc = Accumulator::new(self, lighting, -ray.dir.as_vec3());
         let skip = self.options.skip_empty_space;
         let mip = matches!(self.options.mode, RenderMode::MaximumIntensity);
@@ -495,7 +498,9 @@ impl DvrRenderer<'_> {
                 let c = o + d * t;
                 let stop = if shaded {
                     let smp = vol.sample_shaded(cell, f);
-                    acc.composite(smp.x, || (jac(c) * to_grid).transpose() * smp.yzw())
+                    // (J·G)ᵀ∇ as Gᵀ(Jᵀ∇): two products with a vector instead of one of two
+                    // matrices.
+                    acc.composite(smp.x, || to_grid_t * (jac(c).transpose() * smp.yzw()))
                 } else {
                     acc.add(
                         vol.sample_cell(cell, f),
