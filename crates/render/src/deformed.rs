@@ -28,13 +28,13 @@
 
 use std::sync::atomic::{AtomicU8, Ordering};
 
-use glam::{DMat3, Mat3, Vec3};
+use glam::{DMat3, Mat3, Vec3, Vec3A, Vec4Swizzles};
 use rayon::prelude::*;
 use volmorph_deform::{SampledMap, SpaceMap};
 use volmorph_volume::Geometry;
 
 use crate::camera::Camera;
-use crate::dvr::{Accumulator, Dda, DvrRenderer, DvrVolume, RayResult, RenderMode};
+use crate::dvr::{Accumulator, Caster, Dda, DvrRenderer, DvrVolume, RayResult, RenderMode};
 use crate::error::RenderError;
 use crate::geometry::Ray;
 use crate::image::RgbaImage;
@@ -291,13 +291,15 @@ impl DeformedView {
 }
 
 /// A trilinear interpolant restricted to the line `p + τ·v` (cell-local coordinates): a
-/// cubic polynomial in `τ` per component, evaluated by Horner's rule.
-struct Cubic([Vec3; 4]);
+/// cubic polynomial in `τ` per component, evaluated by Horner's rule. Kept in `Vec3A` (one
+/// vector operation per step; the same operations per lane as in `Vec3`, so the same bits).
+struct Cubic([Vec3A; 4]);
 
 impl Cubic {
     /// The cubic of the cell with corners `k` (x fastest) along `p + τ·v`.
     #[inline(always)]
     fn along(k: &[Vec3; 8], p: Vec3, v: Vec3) -> Self {
+        let k = k.map(Vec3A::from);
         // Multilinear form f = g + gx·x + gy·y + gz·z + gxy·xy + gxz·xz + gyz·yz + gxyz·xyz.
         let g = k[0];
         let gx = k[1] - k[0];
@@ -335,7 +337,7 @@ impl Cubic {
     #[inline(always)]
     fn at(&self, tau: f32) -> Vec3 {
         let [c0, c1, c2, c3] = self.0;
-        ((c3 * tau + c2) * tau + c1) * tau + c0
+        Vec3::from(((c3 * tau + c2) * tau + c1) * tau + c0)
     }
 }
 
@@ -394,6 +396,22 @@ fn trilinear(k: &[Vec3; 8], f: Vec3) -> Vec3 {
     x00.lerp(x10, f.y).lerp(x01.lerp(x11, f.y), f.z)
 }
 
+/// The rays of a deformed picture.
+struct Deformed<'r, 'a> {
+    renderer: &'r DvrRenderer<'a>,
+    view: &'r DeformedView,
+    memo: &'r [AtomicU8],
+    lighting: Option<Lighting>,
+}
+
+impl Caster for Deformed<'_, '_> {
+    #[inline(always)]
+    fn cast(&self, ray: &Ray) -> RayResult {
+        self.renderer
+            .cast_deformed(self.view, self.memo, ray, self.lighting.as_ref())
+    }
+}
+
 impl DvrRenderer<'_> {
     /// The picture `camera` takes of the volume as deformed by `view` (see the [module
     /// docs](crate::deformed)).
@@ -409,9 +427,15 @@ impl DvrRenderer<'_> {
         view.check_volume(self.volume)?;
         let lighting = self.lighting(camera)?;
         let memo = view.visibility_memo();
-        self.render_rows(camera, |ray| {
-            self.cast_deformed(view, &memo, ray, lighting.as_ref())
-        })
+        self.render_rows(
+            camera,
+            &Deformed {
+                renderer: self,
+                view,
+                memo: &memo,
+                lighting,
+            },
+        )
     }
 
     /// Cast one ray through the deformed volume.
@@ -429,46 +453,77 @@ impl DvrRenderer<'_> {
             return RayResult::EMPTY;
         };
         let to_grid = view.to_grid().as_mat3();
+        let to_grid_t = to_grid.transpose();
         let mut acc = Accumulator::new(self, lighting, -ray.dir.as_vec3());
         let skip = self.options.skip_empty_space;
         let mip = matches!(self.options.mode, RenderMode::MaximumIntensity);
         let vol_hi = vol.index_box();
         let inside = |u: Vec3| u.cmpge(Vec3::ZERO).all() && u.cmple(vol_hi).all();
-        view.walk(
-            (o, d),
-            (t0, t1),
-            self.step,
-            |n| {
-                !skip
-                    || mip
-                    || view.cell_visible(n, vol, memo, &|mn, mx| self.range_visible(mn, mx))
-            },
-            |c, u, t, jac| {
+        // Composite pictures with shading read code and gradient together.
+        let shaded = acc.lighting.is_some() && matches!(self.options.mode, RenderMode::Composite);
+        // The walk of `DeformedView::walk`, written out so that the whole ray loop inlines
+        // into the row kernel (a closure per sample was compiled apart).
+        let step = self.step;
+        let inv_step = 1.0 / step;
+        let [nx, ny, _] = view.grid.dims;
+        'ray: for (gcell, ta, tb) in Dda::new(o, d, t0, t1, 1.0, view.grid.dims.map(|n| n - 1)) {
+            let n = gcell[0] + nx * (gcell[1] + ny * gcell[2]);
+            if skip
+                && !mip
+                && !view.cell_visible(n, vol, memo, &|mn, mx| self.range_visible(mn, mx))
+            {
+                continue;
+            }
+            let k = corners(&view.nodes, n, nx, nx * ny);
+            let base = Vec3::new(gcell[0] as f32, gcell[1] as f32, gcell[2] as f32);
+            // Along the ray the trilinear interpolant is a cubic in τ = t − ta.
+            let cubic = Cubic::along(&k, o + d * ta - base, d);
+            let jac = |c: Vec3| cell_jacobian(&k, (c - base).clamp(Vec3::ZERO, Vec3::ONE));
+            let mut s = (ta * inv_step).ceil() as u32;
+            loop {
+                let t = s as f32 * step;
+                if t >= tb {
+                    break;
+                }
+                s += 1;
+                let u = cubic.at(t - ta);
                 if !inside(u) {
-                    return false;
+                    continue;
                 }
                 let (cell, f) = vol.cell_of(u);
                 if skip && !mip && !self.cells_visible(cell) {
-                    return false;
+                    continue;
                 }
-                let q = vol.sample_cell(cell, f);
-                acc.add(
-                    q,
-                    || {
-                        let p = view.map_at(c - d * self.step);
-                        (t - self.step >= t0 && inside(p)).then(|| vol.sample(p))
-                    },
-                    |s| {
-                        if s == 0.0 {
-                            (jac(c) * to_grid).transpose() * vol.gradient_cell(cell, f)
-                        } else {
-                            let c = c - d * (self.step * s);
-                            view.jacobian_at(c, to_grid).transpose() * vol.gradient(view.map_at(c))
-                        }
-                    },
-                )
-            },
-        );
+                // The grid position, for the Jacobian (only shaded samples need it).
+                let c = o + d * t;
+                let stop = if shaded {
+                    let smp = vol.sample_shaded(cell, f);
+                    // (J·G)ᵀ∇ as Gᵀ(Jᵀ∇): two products with a vector instead of one of two
+                    // matrices.
+                    acc.composite(smp.x, || to_grid_t * (jac(c).transpose() * smp.yzw()))
+                } else {
+                    acc.add(
+                        vol.sample_cell(cell, f),
+                        || {
+                            let p = view.map_at(c - d * step);
+                            (t - step >= t0 && inside(p)).then(|| vol.sample(p))
+                        },
+                        |sb| {
+                            if sb == 0.0 {
+                                (jac(c) * to_grid).transpose() * vol.gradient_cell(cell, f)
+                            } else {
+                                let c = c - d * (step * sb);
+                                view.jacobian_at(c, to_grid).transpose()
+                                    * vol.gradient(view.map_at(c))
+                            }
+                        },
+                    )
+                };
+                if stop {
+                    break 'ray;
+                }
+            }
+        }
         acc.finish(self)
     }
 }
