@@ -732,10 +732,7 @@ impl KeyPoints {
         let [nx, ny, _] = lungs.geometry().dims;
         let sec = nx * ny;
         let lung = kind.lung();
-        if !lungs.data()[self.slice * sec..(self.slice + 1) * sec]
-            .iter()
-            .any(|&v| v == lung)
-        {
+        if !lungs.data()[self.slice * sec..(self.slice + 1) * sec].contains(&lung) {
             return Err(RegisterError::option(
                 "lobe script",
                 format!(
@@ -1153,7 +1150,8 @@ pub fn trace_lobes_with(
             .y
     };
     // Per section: curves (fissure index → pixels) computed in parallel.
-    let per_section: Result<Vec<Vec<(usize, Vec<usize>)>>, volmorph_io::Cancelled> = (0..nz)
+    type Curves = Vec<(usize, Vec<usize>)>;
+    let per_section: Result<Vec<Curves>, volmorph_io::Cancelled> = (0..nz)
         .into_par_iter()
         .map(|k| {
             progress.check()?;
