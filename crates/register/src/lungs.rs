@@ -40,7 +40,10 @@
 //! the part anterior of the horizontal fissure the middle lobe, the rest the upper lobe; in the
 //! left lung posterior of the oblique fissure is the lower lobe, the rest the upper lobe. Where
 //! a section lacks a fissure (beyond its range) the regions inherit the label they overlap
-//! most in the neighbouring labelled section. A front-end replaces the script by clicks.
+//! most in the neighbouring labelled section; regions no labelled section reaches are the
+//! upper lobe in the upper half of the sections and the lower lobe in the lower half (the
+//! right lung anterior of the oblique fissure: the upper lobe). A front-end replaces the
+//! script by clicks (see [`LobeScript::set_key`]).
 
 use std::cmp::Ordering;
 use std::collections::{BinaryHeap, VecDeque};
@@ -1336,17 +1339,21 @@ pub fn trace_lobes_with(
             break;
         }
     }
-    // Sections no labelled section reaches: upper lobe above the lung's middle, lower below.
+    // Regions no labelled section reaches: a whole lung is the upper lobe above the volume's
+    // middle section and the lower lobe below; the right lung anterior of the oblique fissure
+    // where no horizontal fissure is traced is the upper lobe (the rest of the lung, as
+    // anterior of the horizontal fissure is the middle lobe).
     for (k, pix, allowed) in &pending {
         if allowed.is_empty() {
             continue;
         }
         let upper = 2 * k >= nz;
-        let l = match (allowed.contains(&lobe::RUL), upper) {
-            (true, true) => lobe::RUL,
-            (true, false) => lobe::RLL,
-            (false, true) => lobe::LUL,
-            (false, false) => lobe::LLL,
+        let l = if allowed.contains(&lobe::RLL) {
+            if upper { lobe::RUL } else { lobe::RLL }
+        } else if allowed.contains(&lobe::LLL) {
+            if upper { lobe::LUL } else { lobe::LLL }
+        } else {
+            lobe::RUL
         };
         for &p in pix {
             labels[k * sec + p] = l;
