@@ -40,7 +40,10 @@
 //! the part anterior of the horizontal fissure the middle lobe, the rest the upper lobe; in the
 //! left lung posterior of the oblique fissure is the lower lobe, the rest the upper lobe. Where
 //! a section lacks a fissure (beyond its range) the regions inherit the label they overlap
-//! most in the neighbouring labelled section. A front-end replaces the script by clicks.
+//! most in the neighbouring labelled section; regions no labelled section reaches are the
+//! upper lobe in the upper half of the sections and the lower lobe in the lower half (the
+//! right lung anterior of the oblique fissure: the upper lobe). A front-end replaces the
+//! script by clicks (see [`LobeScript::set_key`]).
 
 use std::cmp::Ordering;
 use std::collections::{BinaryHeap, VecDeque};
@@ -59,8 +62,9 @@ pub const RIGHT_LUNG: u8 = 1;
 /// Label of the left lung.
 pub const LEFT_LUNG: u8 = 2;
 
-/// Options of [`segment_lungs`].
+/// Options of [`segment_lungs`]. In JSON, fields left out take their [`Default`] values.
 #[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+#[serde(default, deny_unknown_fields)]
 pub struct LungOptions {
     /// Low density below this, HU.
     pub threshold: f32,
@@ -81,6 +85,48 @@ impl Default for LungOptions {
             airway_threshold: -950.0,
             max_airway_fraction: 0.1,
         }
+    }
+}
+
+impl LungOptions {
+    /// Most rounds of majority filtering [`LungOptions::validate`] accepts (each round erodes
+    /// the lungs' outline a little; the thesis uses a few).
+    pub const MAX_MAJORITY_ROUNDS: usize = 32;
+
+    /// Check the options: finite thresholds, at most [`LungOptions::MAX_MAJORITY_ROUNDS`]
+    /// rounds, an airway share in `(0, 1]`. [`segment_lungs`] checks them.
+    ///
+    /// # Errors
+    /// [`RegisterError::Option`] naming the option.
+    pub fn validate(&self) -> Result<(), RegisterError> {
+        for (what, v) in [
+            ("threshold", self.threshold),
+            ("airway_threshold", self.airway_threshold),
+        ] {
+            if !v.is_finite() {
+                return Err(RegisterError::option(
+                    what,
+                    format!("must be a finite HU value, got {v}"),
+                ));
+            }
+        }
+        if self.majority_rounds > Self::MAX_MAJORITY_ROUNDS {
+            return Err(RegisterError::option(
+                "majority_rounds",
+                format!(
+                    "{} rounds: at most {}",
+                    self.majority_rounds,
+                    Self::MAX_MAJORITY_ROUNDS
+                ),
+            ));
+        }
+        if !(self.max_airway_fraction > 0.0 && self.max_airway_fraction <= 1.0) {
+            return Err(RegisterError::option(
+                "max_airway_fraction",
+                format!("must be in (0, 1], got {}", self.max_airway_fraction),
+            ));
+        }
+        Ok(())
     }
 }
 
@@ -178,8 +224,32 @@ pub struct LungSegmentation {
 /// Segment the lungs of a CT in HU (see the [module docs](self)).
 ///
 /// # Errors
-/// [`RegisterError::TooLittle`] if fewer than two lung components remain.
+/// [`RegisterError::Option`] for options that [`LungOptions::validate`] refuses,
+/// [`RegisterError::TooLittle`] if fewer than two lung components remain (a volume that is
+/// not a chest CT in HU, or whose lungs the threshold misses).
 pub fn segment_lungs(ct: &Volume<f32>, o: &LungOptions) -> Result<LungSegmentation, RegisterError> {
+    segment_lungs_with(ct, o, &volmorph_io::NoProgress)
+}
+
+/// [`segment_lungs`] reporting to `progress`: one stage of `4 + majority_rounds` steps (the
+/// border components, the airway, each round of majority filtering, the lung components, the
+/// hole filling), cancellation polled between them.
+///
+/// # Errors
+/// As [`segment_lungs`]; [`RegisterError::Cancelled`] when `progress` asks to stop.
+pub fn segment_lungs_with(
+    ct: &Volume<f32>,
+    o: &LungOptions,
+    progress: &dyn volmorph_io::Progress,
+) -> Result<LungSegmentation, RegisterError> {
+    o.validate()?;
+    progress.start("segmenting the lungs", 4 + o.majority_rounds as u64);
+    progress.check()?;
+    let step = || -> Result<(), RegisterError> {
+        progress.advance(1);
+        progress.check()?;
+        Ok(())
+    };
     let g = *ct.geometry();
     let dims = g.dims;
     let d = ct.data();
@@ -200,6 +270,7 @@ pub fn segment_lungs(ct: &Volume<f32>, o: &LungOptions) -> Result<LungSegmentati
             *v = 0;
         }
     }
+    step()?;
     // 3. Airway from the top axial section (largest physical z).
     let top_is_last = g.index_to_physical(DVec3::new(0.0, 0.0, (nz - 1) as f64)).z
         >= g.index_to_physical(DVec3::ZERO).z;
@@ -260,9 +331,11 @@ pub fn segment_lungs(ct: &Volume<f32>, o: &LungOptions) -> Result<LungSegmentati
             *v = 0;
         }
     }
+    step()?;
     // 4. Majority filtering.
     for _ in 0..o.majority_rounds {
         low = majority_filter(&low, dims);
+        step()?;
     }
     // 5. Two largest components (split by erosion if the lungs touch).
     let (lab, sizes) = components(&low, dims);
@@ -282,6 +355,7 @@ pub fn segment_lungs(ct: &Volume<f32>, o: &LungOptions) -> Result<LungSegmentati
             "fewer than two lung components after thresholding and filtering".into(),
         ));
     }
+    step()?;
     let mean_x = |v: &Vec<usize>| {
         v.iter()
             .map(|&n| crate::image::voxel_position(&g, n).x)
@@ -298,6 +372,7 @@ pub fn segment_lungs(ct: &Volume<f32>, o: &LungOptions) -> Result<LungSegmentati
         }
     }
     fill_section_holes(&mut mask, dims);
+    progress.advance(1);
     let lung_voxels = [
         mask.iter().filter(|&&v| v == RIGHT_LUNG).count(),
         mask.iter().filter(|&&v| v == LEFT_LUNG).count(),
@@ -482,6 +557,20 @@ pub fn enhance_lobe_boundaries(
     lungs: &Volume<u8>,
     o: &EnhanceOptions,
 ) -> Result<Volume<f32>, RegisterError> {
+    enhance_lobe_boundaries_with(ct, lungs, o, &volmorph_io::NoProgress)
+}
+
+/// [`enhance_lobe_boundaries`] reporting to `progress`: one stage of one step per axial
+/// section (the sections run in parallel, each polling cancellation first).
+///
+/// # Errors
+/// As [`enhance_lobe_boundaries`]; [`RegisterError::Cancelled`] when `progress` asks to stop.
+pub fn enhance_lobe_boundaries_with(
+    ct: &Volume<f32>,
+    lungs: &Volume<u8>,
+    o: &EnhanceOptions,
+    progress: &dyn volmorph_io::Progress,
+) -> Result<Volume<f32>, RegisterError> {
     crate::image::same_grid(ct.geometry(), lungs.geometry(), "lung mask")?;
     let filters = quadratic_fit_filters();
     let g = *ct.geometry();
@@ -489,53 +578,70 @@ pub fn enhance_lobe_boundaries(
     let d = ct.data();
     let m = lungs.data();
     let mut out = vec![0.0f32; d.len()];
+    progress.start("enhancing the lobe boundaries", nz as u64);
     out.par_chunks_mut(nx * ny)
         .enumerate()
-        .for_each(|(k, slab)| {
-            if k < 2 || k + 2 >= nz {
-                return;
+        .try_for_each(|(k, slab)| {
+            progress.check()?;
+            if k >= 2 && k + 2 < nz {
+                enhance_section(d, m, &filters, [nx, ny], k, o, slab);
             }
-            for j in 2..ny.saturating_sub(2) {
-                for i in 2..nx.saturating_sub(2) {
-                    let n = i + nx * (j + ny * k);
-                    if m[n] == 0 {
-                        continue;
-                    }
-                    let mut coef = [0.0f64; 7];
-                    let mut t = 0;
-                    for z in 0..5 {
-                        for y in 0..5 {
-                            let row = (i - 2) + nx * ((j + y - 2) + ny * (k + z - 2));
-                            for x in 0..5 {
-                                let v = f64::from(d[row + x]);
-                                for c in 0..7 {
-                                    coef[c] += filters[c][t] * v;
-                                }
-                                t += 1;
-                            }
-                        }
-                    }
-                    let a = (coef[0] - o.hu_zero) / o.hu_span;
-                    if !(a > o.range[0] && a < o.range[1]) {
-                        continue;
-                    }
-                    let ev =
-                        symmetric_eigenvalues(coef[1], coef[2], coef[3], coef[4], coef[5], coef[6]);
-                    let dom = ev
-                        .iter()
-                        .copied()
-                        .max_by(|x, y| x.abs().total_cmp(&y.abs()))
-                        .unwrap_or(0.0);
-                    if dom < 0.0 {
-                        slab[i + nx * j] = (-dom) as f32;
-                    }
-                }
-            }
-        });
+            progress.advance(1);
+            Ok::<(), volmorph_io::Cancelled>(())
+        })?;
     Ok(Volume::new(g, out)?)
 }
 
-/// A fissure of the lobe model.
+/// The enhanced values of axial section `k` (at least 2 sections from either end) into
+/// `slab`.
+fn enhance_section(
+    d: &[f32],
+    m: &[u8],
+    filters: &[[f64; 125]],
+    [nx, ny]: [usize; 2],
+    k: usize,
+    o: &EnhanceOptions,
+    slab: &mut [f32],
+) {
+    for j in 2..ny.saturating_sub(2) {
+        for i in 2..nx.saturating_sub(2) {
+            let n = i + nx * (j + ny * k);
+            if m[n] == 0 {
+                continue;
+            }
+            let mut coef = [0.0f64; 7];
+            let mut t = 0;
+            for z in 0..5 {
+                for y in 0..5 {
+                    let row = (i - 2) + nx * ((j + y - 2) + ny * (k + z - 2));
+                    for x in 0..5 {
+                        let v = f64::from(d[row + x]);
+                        for c in 0..7 {
+                            coef[c] += filters[c][t] * v;
+                        }
+                        t += 1;
+                    }
+                }
+            }
+            let a = (coef[0] - o.hu_zero) / o.hu_span;
+            if !(a > o.range[0] && a < o.range[1]) {
+                continue;
+            }
+            let ev = symmetric_eigenvalues(coef[1], coef[2], coef[3], coef[4], coef[5], coef[6]);
+            let dom = ev
+                .iter()
+                .copied()
+                .max_by(|x, y| x.abs().total_cmp(&y.abs()))
+                .unwrap_or(0.0);
+            if dom < 0.0 {
+                slab[i + nx * j] = (-dom) as f32;
+            }
+        }
+    }
+}
+
+/// A fissure of the lobe model. Its name in scripts and messages ([`FissureKind::name`],
+/// [`std::str::FromStr`]) is `right-oblique`, `right-horizontal` or `left-oblique`.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
 #[serde(rename_all = "kebab-case")]
 pub enum FissureKind {
@@ -548,7 +654,23 @@ pub enum FissureKind {
 }
 
 impl FissureKind {
-    fn lung(self) -> u8 {
+    /// Every fissure.
+    pub const ALL: [Self; 3] = [Self::RightOblique, Self::RightHorizontal, Self::LeftOblique];
+
+    /// The fissure's name in scripts: `right-oblique`, `right-horizontal` or `left-oblique`.
+    #[must_use]
+    pub fn name(self) -> &'static str {
+        match self {
+            Self::RightOblique => "right-oblique",
+            Self::RightHorizontal => "right-horizontal",
+            Self::LeftOblique => "left-oblique",
+        }
+    }
+
+    /// The label of the lung the fissure divides in [`segment_lungs`]'s mask: [`RIGHT_LUNG`]
+    /// or [`LEFT_LUNG`].
+    #[must_use]
+    pub fn lung(self) -> u8 {
         match self {
             Self::RightOblique | Self::RightHorizontal => RIGHT_LUNG,
             Self::LeftOblique => LEFT_LUNG,
@@ -556,7 +678,38 @@ impl FissureKind {
     }
 }
 
-/// End points of a fissure curve in one axial section (pixel coordinates `[i, j]`).
+impl std::fmt::Display for FissureKind {
+    /// The fissure's [name](FissureKind::name).
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.write_str(self.name())
+    }
+}
+
+impl std::str::FromStr for FissureKind {
+    type Err = RegisterError;
+
+    /// The fissure of a [name](FissureKind::name).
+    ///
+    /// # Errors
+    /// [`RegisterError::Option`] naming the known fissures for any other text.
+    fn from_str(s: &str) -> Result<Self, RegisterError> {
+        Self::ALL
+            .into_iter()
+            .find(|k| k.name() == s)
+            .ok_or_else(|| {
+                RegisterError::option(
+                    "fissure",
+                    format!(
+                        "unknown fissure {s:?} (known: {})",
+                        Self::ALL.map(Self::name).join(", ")
+                    ),
+                )
+            })
+    }
+}
+
+/// End points of a fissure curve in one axial section (pixel coordinates `[i, j]`: continuous
+/// voxel indices along the volume's first and second axes, pixel centres at whole numbers).
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 #[serde(deny_unknown_fields)]
 pub struct KeyPoints {
@@ -566,6 +719,62 @@ pub struct KeyPoints {
     pub from: [f64; 2],
     /// Second end point `[i, j]`.
     pub to: [f64; 2],
+}
+
+impl KeyPoints {
+    /// Check that the key can be traced on `lungs` (a [`segment_lungs`] mask) for fissure
+    /// `kind`: its section lies in the volume, both points lie on the section (continuous
+    /// indices within half a pixel of its pixel centres, `−0.5 ≤ i ≤ nx − 0.5` and likewise
+    /// `j`; not NaN), and the section holds some of the fissure's lung (the points are
+    /// snapped to that lung's outline when traced, so they need not be on it).
+    ///
+    /// # Errors
+    /// [`RegisterError::Option`] naming the key and what is wrong.
+    pub fn check_on(&self, kind: FissureKind, lungs: &Volume<u8>) -> Result<(), RegisterError> {
+        self.check_in(kind, lungs.geometry().dims)?;
+        let [nx, ny, _] = lungs.geometry().dims;
+        let sec = nx * ny;
+        let lung = kind.lung();
+        if !lungs.data()[self.slice * sec..(self.slice + 1) * sec].contains(&lung) {
+            return Err(RegisterError::option(
+                "lobe script",
+                format!(
+                    "{kind} key at section {}: the section holds no {} lung; put the key on a \
+                     section through it",
+                    self.slice,
+                    if lung == RIGHT_LUNG { "right" } else { "left" }
+                ),
+            ));
+        }
+        Ok(())
+    }
+
+    /// The grid checks of [`KeyPoints::check_on`] for a volume of `dims` voxels.
+    fn check_in(&self, kind: FissureKind, dims: [usize; 3]) -> Result<(), RegisterError> {
+        let [nx, ny, nz] = dims;
+        let bad = |why: String| {
+            RegisterError::option(
+                "lobe script",
+                format!("{kind} key at section {}: {why}", self.slice),
+            )
+        };
+        if self.slice >= nz {
+            return Err(bad(format!(
+                "outside the volume's {nz} sections (0 to {})",
+                nz.saturating_sub(1)
+            )));
+        }
+        for (name, p) in [("from", self.from), ("to", self.to)] {
+            let inside = |v: f64, n: usize| v >= -0.5 && v <= n as f64 - 0.5;
+            if !(inside(p[0], nx) && inside(p[1], ny)) {
+                return Err(bad(format!(
+                    "point {name} [{}, {}] lies outside the {nx} × {ny} pixels of the section",
+                    p[0], p[1]
+                )));
+            }
+        }
+        Ok(())
+    }
 }
 
 /// One fissure: its range of sections and its key sections.
@@ -584,6 +793,11 @@ pub struct FissureScript {
 
 /// The scripted input of [`trace_lobes`] (JSON: `{"fissures": [{"kind": "right-oblique",
 /// "first": 10, "last": 50, "keys": [{"slice": 10, "from": [i, j], "to": [i, j]}, …]}, …]}`).
+///
+/// A front-end builds it click by click with [`LobeScript::set_key`],
+/// [`LobeScript::remove_key`] and [`LobeScript::set_range`], which keep it well formed: each
+/// fissure at most once, with at least one key, `first ≤ last`, keys at distinct sections
+/// inside `first..=last`, sorted by section.
 #[derive(Debug, Clone, PartialEq, Default, Serialize, Deserialize)]
 #[serde(deny_unknown_fields)]
 pub struct LobeScript {
@@ -596,7 +810,9 @@ impl LobeScript {
     ///
     /// # Errors
     /// [`RegisterError::Io`] if it cannot be read, [`RegisterError::Parse`] naming the file for
-    /// bad JSON, a fissure without keys or with `first > last`.
+    /// bad JSON or a script that is not well formed (see [`LobeScript`]: a fissure twice,
+    /// without keys, with `first > last`, with two keys at one section or a key outside its
+    /// range, a point that is not finite).
     pub fn read(path: &Path) -> Result<Self, RegisterError> {
         let text = std::fs::read_to_string(path)
             .map_err(|e| RegisterError::Io(volmorph_io::IoError::os(path, e)))?;
@@ -605,13 +821,8 @@ impl LobeScript {
             message,
         };
         let s: Self = serde_json::from_str(&text).map_err(|e| err(e.to_string()))?;
-        for (n, f) in s.fissures.iter().enumerate() {
-            if f.keys.is_empty() || f.first > f.last {
-                return Err(err(format!(
-                    "fissure {n} ({:?}) needs keys and first ≤ last",
-                    f.kind
-                )));
-            }
+        if let Some(m) = s.form_error() {
+            return Err(err(m));
         }
         Ok(s)
     }
@@ -620,6 +831,170 @@ impl LobeScript {
     #[must_use]
     pub fn to_json(&self) -> String {
         serde_json::to_string_pretty(self).unwrap_or_default()
+    }
+
+    /// What makes the script not well formed (see [`LobeScript`]), if anything.
+    fn form_error(&self) -> Option<String> {
+        for (n, f) in self.fissures.iter().enumerate() {
+            let kind = f.kind;
+            if self.fissures[..n].iter().any(|g| g.kind == kind) {
+                return Some(format!("fissure {kind} appears twice"));
+            }
+            if f.keys.is_empty() {
+                return Some(format!("fissure {kind} has no key"));
+            }
+            if f.first > f.last {
+                return Some(format!(
+                    "fissure {kind}: first section {} after last section {}",
+                    f.first, f.last
+                ));
+            }
+            for (m, key) in f.keys.iter().enumerate() {
+                if f.keys[..m].iter().any(|k| k.slice == key.slice) {
+                    return Some(format!("fissure {kind}: two keys at section {}", key.slice));
+                }
+                if !(f.first..=f.last).contains(&key.slice) {
+                    return Some(format!(
+                        "fissure {kind}: key at section {} outside its sections {} to {}",
+                        key.slice, f.first, f.last
+                    ));
+                }
+                if !key.from.iter().chain(&key.to).all(|v| v.is_finite()) {
+                    return Some(format!(
+                        "fissure {kind}: key at section {} has a point that is not finite",
+                        key.slice
+                    ));
+                }
+            }
+        }
+        None
+    }
+
+    /// Check that the script is well formed (see [`LobeScript`]) and fits a volume of `dims`
+    /// voxels: every section in the volume, every point on its section (as
+    /// [`KeyPoints::check_on`] without the lung test). [`trace_lobes`] checks this.
+    ///
+    /// # Errors
+    /// [`RegisterError::Option`] (`lobe script`) saying what is wrong.
+    pub fn validate(&self, dims: [usize; 3]) -> Result<(), RegisterError> {
+        if let Some(m) = self.form_error() {
+            return Err(RegisterError::option("lobe script", m));
+        }
+        for f in &self.fissures {
+            if f.last >= dims[2] {
+                return Err(RegisterError::option(
+                    "lobe script",
+                    format!(
+                        "fissure {} reaches section {} of a volume with {} sections",
+                        f.kind, f.last, dims[2]
+                    ),
+                ));
+            }
+            for key in &f.keys {
+                key.check_in(f.kind, dims)?;
+            }
+        }
+        Ok(())
+    }
+
+    /// The script of fissure `kind`, if it has one.
+    #[must_use]
+    pub fn fissure(&self, kind: FissureKind) -> Option<&FissureScript> {
+        self.fissures.iter().find(|f| f.kind == kind)
+    }
+
+    /// Add `key` to fissure `kind`, in place of its key at the same section if it has one
+    /// (returned). A fissure the script lacks is added, traced in the key's section only; the
+    /// range of one it has grows to hold the key's section. Keys stay sorted by section. The
+    /// key is not checked against a volume (see [`KeyPoints::check_on`]).
+    pub fn set_key(&mut self, kind: FissureKind, key: KeyPoints) -> Option<KeyPoints> {
+        let Some(f) = self.fissures.iter_mut().find(|f| f.kind == kind) else {
+            self.fissures.push(FissureScript {
+                kind,
+                first: key.slice,
+                last: key.slice,
+                keys: vec![key],
+            });
+            return None;
+        };
+        f.first = f.first.min(key.slice);
+        f.last = f.last.max(key.slice);
+        match f.keys.binary_search_by_key(&key.slice, |k| k.slice) {
+            Ok(i) => Some(std::mem::replace(&mut f.keys[i], key)),
+            Err(i) => {
+                f.keys.insert(i, key);
+                None
+            }
+        }
+    }
+
+    /// Remove the key of fissure `kind` at section `slice` and return it; a fissure left
+    /// without keys leaves the script (its range with it).
+    ///
+    /// # Errors
+    /// [`RegisterError::Option`] (`key`) if the fissure has no key at that section.
+    pub fn remove_key(
+        &mut self,
+        kind: FissureKind,
+        slice: usize,
+    ) -> Result<KeyPoints, RegisterError> {
+        let missing = || {
+            RegisterError::option(
+                "key",
+                format!("fissure {kind} has no key at section {slice}"),
+            )
+        };
+        let n = self
+            .fissures
+            .iter()
+            .position(|f| f.kind == kind)
+            .ok_or_else(missing)?;
+        let f = &mut self.fissures[n];
+        let i = f
+            .keys
+            .iter()
+            .position(|k| k.slice == slice)
+            .ok_or_else(missing)?;
+        let key = f.keys.remove(i);
+        if f.keys.is_empty() {
+            self.fissures.remove(n);
+        }
+        Ok(key)
+    }
+
+    /// Trace fissure `kind` from section `first` to section `last` (inclusive; the sections
+    /// before its first key take that key's points, those after a key inherit it).
+    ///
+    /// # Errors
+    /// [`RegisterError::Option`] (`range`) if the fissure has no key yet, `first > last`, or
+    /// a key lies outside the new range (remove it first).
+    pub fn set_range(
+        &mut self,
+        kind: FissureKind,
+        first: usize,
+        last: usize,
+    ) -> Result<(), RegisterError> {
+        let bad = |why: String| RegisterError::option("range", format!("fissure {kind}: {why}"));
+        let f = self
+            .fissures
+            .iter_mut()
+            .find(|f| f.kind == kind)
+            .ok_or_else(|| bad("no key yet: add one before setting its sections".into()))?;
+        if first > last {
+            return Err(bad(format!(
+                "first section {first} after last section {last}"
+            )));
+        }
+        if let Some(k) = f.keys.iter().find(|k| !(first..=last).contains(&k.slice)) {
+            return Err(bad(format!(
+                "its key at section {} lies outside sections {first} to {last}; remove the key \
+                 first",
+                k.slice
+            )));
+        }
+        f.first = first;
+        f.last = last;
+        Ok(())
     }
 }
 
@@ -739,37 +1114,50 @@ pub struct LobeModel {
 }
 
 /// Trace the fissures of `script` through `enhanced` within `lungs` and label the lobes (see
-/// the [module docs](self)).
+/// the [module docs](self)). A key whose section holds none of its fissure's lung traces
+/// nothing there (the sections inheriting it neither, until one holds the lung).
 ///
 /// # Errors
-/// [`RegisterError::Mismatch`] for grids that differ or a script section outside the volume.
+/// [`RegisterError::Mismatch`] for grids that differ, [`RegisterError::Option`] for a script
+/// that is not well formed or does not fit the volume ([`LobeScript::validate`]).
 pub fn trace_lobes(
     lungs: &Volume<u8>,
     enhanced: &Volume<f32>,
     script: &LobeScript,
 ) -> Result<LobeModel, RegisterError> {
+    trace_lobes_with(lungs, enhanced, script, &volmorph_io::NoProgress)
+}
+
+/// [`trace_lobes`] reporting to `progress`: one stage of one step per axial section (the
+/// sections' curves are traced in parallel, each polling cancellation first); the labelling
+/// that follows is not counted.
+///
+/// # Errors
+/// As [`trace_lobes`]; [`RegisterError::Cancelled`] when `progress` asks to stop.
+pub fn trace_lobes_with(
+    lungs: &Volume<u8>,
+    enhanced: &Volume<f32>,
+    script: &LobeScript,
+    progress: &dyn volmorph_io::Progress,
+) -> Result<LobeModel, RegisterError> {
     crate::image::same_grid(lungs.geometry(), enhanced.geometry(), "enhanced image")?;
     let g = *lungs.geometry();
+    script.validate(g.dims)?;
     let [nx, ny, nz] = g.dims;
     let m = lungs.data();
     let e = enhanced.data();
-    for f in &script.fissures {
-        if f.last >= nz {
-            return Err(RegisterError::Mismatch(format!(
-                "fissure {:?} reaches section {} of a volume with {nz}",
-                f.kind, f.last
-            )));
-        }
-    }
+    progress.start("tracing the fissures", nz as u64);
     let sec = nx * ny;
     let y_of = |p: usize| {
         g.index_to_physical(DVec3::new((p % nx) as f64, (p / nx) as f64, 0.0))
             .y
     };
     // Per section: curves (fissure index → pixels) computed in parallel.
-    let per_section: Vec<Vec<(usize, Vec<usize>)>> = (0..nz)
+    type Curves = Vec<(usize, Vec<usize>)>;
+    let per_section: Result<Vec<Curves>, volmorph_io::Cancelled> = (0..nz)
         .into_par_iter()
         .map(|k| {
+            progress.check()?;
             let mut out = Vec::new();
             for (fi, f) in script.fissures.iter().enumerate() {
                 if k < f.first || k > f.last {
@@ -823,9 +1211,11 @@ pub fn trace_lobes(
                     out.push((fi, path));
                 }
             }
-            out
+            progress.advance(1);
+            Ok(out)
         })
         .collect();
+    let per_section = per_section?;
     // Label regions per section; undetermined regions resolved by neighbouring sections.
     let mut labels = vec![lobe::NONE; m.len()];
     let mut pending: Vec<(usize, Vec<usize>, Vec<u8>)> = Vec::new();
@@ -949,17 +1339,21 @@ pub fn trace_lobes(
             break;
         }
     }
-    // Sections no labelled section reaches: upper lobe above the lung's middle, lower below.
+    // Regions no labelled section reaches: a whole lung is the upper lobe above the volume's
+    // middle section and the lower lobe below; the right lung anterior of the oblique fissure
+    // where no horizontal fissure is traced is the upper lobe (the rest of the lung, as
+    // anterior of the horizontal fissure is the middle lobe).
     for (k, pix, allowed) in &pending {
         if allowed.is_empty() {
             continue;
         }
         let upper = 2 * k >= nz;
-        let l = match (allowed.contains(&lobe::RUL), upper) {
-            (true, true) => lobe::RUL,
-            (true, false) => lobe::RLL,
-            (false, true) => lobe::LUL,
-            (false, false) => lobe::LLL,
+        let l = if allowed.contains(&lobe::RLL) {
+            if upper { lobe::RUL } else { lobe::RLL }
+        } else if allowed.contains(&lobe::LLL) {
+            if upper { lobe::LUL } else { lobe::LLL }
+        } else {
+            lobe::RUL
         };
         for &p in pix {
             labels[k * sec + p] = l;
@@ -1053,6 +1447,125 @@ mod tests {
         for c in 0..7 {
             assert!((coef[c] - want[c]).abs() < 1e-10, "{c}: {}", coef[c]);
         }
+    }
+
+    fn key(slice: usize) -> KeyPoints {
+        KeyPoints {
+            slice,
+            from: [1.0, 2.0],
+            to: [6.0, 2.0],
+        }
+    }
+
+    /// Keys added one by one keep the script well formed: a new fissure is traced in its key's
+    /// section, later keys widen the range, a key at a taken section replaces it, removing
+    /// the last key removes the fissure; ranges that cut a key off or have no key are refused.
+    #[test]
+    fn script_edits_keep_it_well_formed() {
+        let mut s = LobeScript::default();
+        assert_eq!(s.set_key(FissureKind::RightOblique, key(5)), None);
+        let f = s.fissure(FissureKind::RightOblique).unwrap();
+        assert_eq!((f.first, f.last), (5, 5));
+        assert_eq!(s.set_key(FissureKind::RightOblique, key(2)), None);
+        assert_eq!(s.set_key(FissureKind::RightOblique, key(8)), None);
+        let moved = KeyPoints {
+            to: [7.0, 3.0],
+            ..key(5)
+        };
+        assert_eq!(
+            s.set_key(FissureKind::RightOblique, moved.clone()),
+            Some(key(5))
+        );
+        let f = s.fissure(FissureKind::RightOblique).unwrap();
+        assert_eq!((f.first, f.last), (2, 8));
+        assert_eq!(
+            f.keys.iter().map(|k| k.slice).collect::<Vec<_>>(),
+            [2, 5, 8]
+        );
+        assert_eq!(f.keys[1], moved);
+        s.validate([10, 10, 10]).unwrap();
+        s.set_range(FissureKind::RightOblique, 0, 9).unwrap();
+        for (first, last, what) in [(3, 9, "section 2"), (0, 7, "section 8"), (6, 4, "after")] {
+            let e = s
+                .set_range(FissureKind::RightOblique, first, last)
+                .unwrap_err();
+            assert!(e.to_string().contains(what), "{e}");
+        }
+        let e = s.set_range(FissureKind::LeftOblique, 0, 3).unwrap_err();
+        assert!(e.to_string().contains("no key"), "{e}");
+        assert_eq!(s.remove_key(FissureKind::RightOblique, 5).unwrap(), moved);
+        assert!(s.remove_key(FissureKind::RightOblique, 5).is_err());
+        assert!(s.remove_key(FissureKind::LeftOblique, 2).is_err());
+        s.remove_key(FissureKind::RightOblique, 2).unwrap();
+        s.remove_key(FissureKind::RightOblique, 8).unwrap();
+        assert!(s.fissures.is_empty());
+    }
+
+    /// Scripts that do not fit the volume or are not well formed are refused, naming the
+    /// problem; fissure names parse and unknown ones are named.
+    #[test]
+    fn scripts_are_checked_against_the_volume() {
+        let mut s = LobeScript::default();
+        s.set_key(FissureKind::LeftOblique, key(3));
+        s.validate([10, 10, 10]).unwrap();
+        assert!(
+            s.validate([10, 10, 3])
+                .unwrap_err()
+                .to_string()
+                .contains("3 sections")
+        );
+        let mut far = s.clone();
+        far.set_key(
+            FissureKind::LeftOblique,
+            KeyPoints {
+                from: [10.2, 0.0],
+                ..key(4)
+            },
+        );
+        let e = far.validate([10, 10, 10]).unwrap_err().to_string();
+        assert!(e.contains("from") && e.contains("outside"), "{e}");
+        let mut nan = s.clone();
+        nan.fissures[0].keys[0].to[1] = f64::NAN;
+        assert!(
+            nan.validate([10, 10, 10])
+                .unwrap_err()
+                .to_string()
+                .contains("finite")
+        );
+        let mut twice = s.clone();
+        twice.fissures.push(twice.fissures[0].clone());
+        assert!(
+            twice
+                .validate([10, 10, 10])
+                .unwrap_err()
+                .to_string()
+                .contains("twice")
+        );
+        assert_eq!(
+            "right-horizontal".parse::<FissureKind>().unwrap(),
+            FissureKind::RightHorizontal
+        );
+        for k in FissureKind::ALL {
+            assert_eq!(k.name().parse::<FissureKind>().unwrap(), k);
+            assert_eq!(
+                serde_json::to_value(k).unwrap(),
+                serde_json::Value::String(k.name().into())
+            );
+        }
+        let e = "middle".parse::<FissureKind>().unwrap_err().to_string();
+        assert!(e.contains("middle") && e.contains("left-oblique"), "{e}");
+        // A key on a section without its lung.
+        let g = volmorph_volume::Geometry::new([10, 10, 10]);
+        let mut mask = vec![0u8; 1000];
+        mask[5 + 10 * (5 + 10 * 3)] = LEFT_LUNG;
+        let lungs = Volume::new(g, mask).unwrap();
+        key(3).check_on(FissureKind::LeftOblique, &lungs).unwrap();
+        let e = key(3)
+            .check_on(FissureKind::RightOblique, &lungs)
+            .unwrap_err()
+            .to_string();
+        assert!(e.contains("right lung"), "{e}");
+        assert!(key(4).check_on(FissureKind::LeftOblique, &lungs).is_err());
     }
 
     #[test]

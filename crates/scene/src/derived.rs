@@ -147,6 +147,22 @@ pub enum Recipe {
         /// The volume whose grid is sampled.
         grid: ObjectId,
     },
+    /// The lobe labels of McPhail's lung model (§5.6.3,
+    /// [`volmorph_register::lungs::trace_lobes`]; u8, labels as
+    /// [`volmorph_register::phantom::lobe`], 0 outside the lungs): the fissures of `script`
+    /// traced section by section through the enhanced lobe-boundary image `boundaries`
+    /// within the lung mask `lungs` (1 right, 2 left, as
+    /// [`volmorph_register::lungs::segment_lungs`] makes it; any voxel type, read as u8), both
+    /// on one grid. A front-end edits the script click by click and sets the new recipe; an
+    /// empty script labels each lung by height only.
+    Lobes {
+        /// The lung mask.
+        lungs: ObjectId,
+        /// The enhanced lobe-boundary image.
+        boundaries: ObjectId,
+        /// The key points of the fissures (pixel coordinates on axial sections).
+        script: volmorph_register::lungs::LobeScript,
+    },
 }
 
 mod method_name {
@@ -229,6 +245,9 @@ impl Recipe {
                 v
             }
             Recipe::FrepMorph { from, to, grid, .. } => vec![*from, *to, *grid],
+            Recipe::Lobes {
+                lungs, boundaries, ..
+            } => vec![*lungs, *boundaries],
         }
     }
 
@@ -241,12 +260,12 @@ impl Recipe {
             | Recipe::DeformedMesh { map, .. }
             | Recipe::Jacobian { map, .. } => Some(*map),
             Recipe::FrepSampled { map, .. } => *map,
-            Recipe::Isosurface { .. } | Recipe::FrepMorph { .. } => None,
+            Recipe::Isosurface { .. } | Recipe::FrepMorph { .. } | Recipe::Lobes { .. } => None,
         }
     }
 
     /// The recipe's name in project files (the `"recipe"` tag): `warp`, `warp-onto`,
-    /// `deformed-mesh`, `isosurface`, `frep-sampled`, `frep-morph` or `jacobian`.
+    /// `deformed-mesh`, `isosurface`, `frep-sampled`, `frep-morph`, `jacobian` or `lobes`.
     #[must_use]
     pub fn name(&self) -> &'static str {
         match self {
@@ -257,6 +276,7 @@ impl Recipe {
             Recipe::FrepSampled { .. } => "frep-sampled",
             Recipe::FrepMorph { .. } => "frep-morph",
             Recipe::Jacobian { .. } => "jacobian",
+            Recipe::Lobes { .. } => "lobes",
         }
     }
 
@@ -268,7 +288,8 @@ impl Recipe {
             | Recipe::WarpOnto { .. }
             | Recipe::Jacobian { .. }
             | Recipe::FrepSampled { .. }
-            | Recipe::FrepMorph { .. } => "volume",
+            | Recipe::FrepMorph { .. }
+            | Recipe::Lobes { .. } => "volume",
             Recipe::DeformedMesh { .. } | Recipe::Isosurface { .. } => "mesh",
         }
     }
@@ -385,6 +406,8 @@ pub(crate) struct Inputs<'a> {
     pub frep: Option<&'a crate::FrepModel>,
     /// The second model of a metamorphosis.
     pub frep_to: Option<&'a crate::FrepModel>,
+    /// A second volume (the lobe-boundary image of lobe tracing).
+    pub second: Option<&'a Arc<AnyVolume>>,
 }
 
 /// What an update changed in a derived object: voxels (for volumes) and a physical box.
@@ -416,6 +439,23 @@ pub(crate) fn physical_box(g: &Geometry, b: &IndexBox) -> Option<(DVec3, DVec3)>
         out = (out.0.min(p), out.1.max(p));
     }
     Some(out)
+}
+
+/// The voxels of `v` as u8: borrowed when they are u8, else converted
+/// ([`AnyVolume::to_typed`]).
+pub(crate) fn u8_voxels(v: &AnyVolume) -> std::borrow::Cow<'_, Volume<u8>> {
+    match v {
+        AnyVolume::U8(t) => std::borrow::Cow::Borrowed(t),
+        other => std::borrow::Cow::Owned(other.to_typed()),
+    }
+}
+
+/// The voxels of `v` as f32: borrowed when they are f32, else converted.
+fn f32_voxels(v: &AnyVolume) -> std::borrow::Cow<'_, Volume<f32>> {
+    match v {
+        AnyVolume::F32(t) => std::borrow::Cow::Borrowed(t),
+        other => std::borrow::Cow::Owned(other.to_typed()),
+    }
 }
 
 /// A zero volume of `source`'s voxel type on `grid`.
@@ -750,6 +790,22 @@ impl Derived {
                     .geometry();
                 let det = jacobian_determinant_with(map.map(), &grid, progress)?;
                 Ok(volume(&grid, AnyVolume::from(det)))
+            }
+            Recipe::Lobes { script, .. } => {
+                let (Some(lungs), Some(boundaries)) = (inputs.volume, inputs.second) else {
+                    return Err(SceneError::invalid(
+                        "lobe tracing without its lung mask and lobe-boundary image",
+                    ));
+                };
+                let lungs = u8_voxels(lungs);
+                let boundaries = f32_voxels(boundaries);
+                let model = volmorph_register::lungs::trace_lobes_with(
+                    &lungs,
+                    &boundaries,
+                    &script,
+                    progress,
+                )?;
+                Ok(volume(lungs.geometry(), AnyVolume::from(model.lobes)))
             }
         }
     }

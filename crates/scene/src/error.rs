@@ -76,6 +76,10 @@ pub enum SceneError {
     /// An accurate FFD or its STEP file failed.
     #[error(transparent)]
     Ffd(#[from] volmorph_ffd::FfdError),
+    /// A step of the lung model (segmentation, lobe tracing) failed or its script does not
+    /// fit the volume.
+    #[error(transparent)]
+    Register(#[from] volmorph_register::RegisterError),
     /// A project file is malformed.
     #[error("project {path}: {message}")]
     Project {

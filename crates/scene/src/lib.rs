@@ -4,7 +4,8 @@
 //! F-rep models, trivariate NURBS models, maps (given whole — lattices, affine maps, NURBS
 //! geometry, compositions — or built from handles), and derived objects that know what they
 //! are computed from ([`Recipe`]: warped volumes, deformed meshes, isosurfaces, Jacobian maps,
-//! sampled F-rep models and their metamorphoses).
+//! sampled F-rep models and their metamorphoses, the lobe labels of a lung model traced from a
+//! script of fissure points).
 //!
 //! * Every change is a [`Command`] applied through [`Scene::apply`]; it goes into an undo/redo
 //!   history ([`Scene::undo`], [`Scene::redo`]) and returns a [`Change`]: the objects added,

@@ -494,6 +494,25 @@ impl Scene {
                 frep(*to)?;
                 volume(*grid)
             }
+            Recipe::Lobes {
+                lungs,
+                boundaries,
+                script,
+            } => {
+                volume(*lungs)?;
+                volume(*boundaries)?;
+                let grid = |id: ObjectId| self.get(id).ok().and_then(|e| e.object.volume());
+                if let (Some(l), Some(b)) = (grid(*lungs), grid(*boundaries)) {
+                    if l.geometry() != b.geometry() {
+                        return Err(SceneError::invalid(format!(
+                            "lobe tracing: the lung mask {lungs} and the lobe-boundary image \
+                             {boundaries} lie on different grids"
+                        )));
+                    }
+                    script.validate(l.geometry().dims)?;
+                }
+                Ok(())
+            }
         }
     }
 
@@ -1005,6 +1024,7 @@ impl Scene {
                 map: self.map_object(*map).ok(),
                 frep: None,
                 frep_to: None,
+                second: None,
             },
             Recipe::DeformedMesh { mesh, map } => Inputs {
                 volume: None,
@@ -1012,6 +1032,7 @@ impl Scene {
                 map: self.map_object(*map).ok(),
                 frep: None,
                 frep_to: None,
+                second: None,
             },
             Recipe::Isosurface { volume, .. } => Inputs {
                 volume: object(*volume).and_then(Object::volume),
@@ -1019,6 +1040,7 @@ impl Scene {
                 map: None,
                 frep: None,
                 frep_to: None,
+                second: None,
             },
             Recipe::Jacobian { map, grid } => Inputs {
                 volume: object(*grid).and_then(Object::volume),
@@ -1026,6 +1048,7 @@ impl Scene {
                 map: self.map_object(*map).ok(),
                 frep: None,
                 frep_to: None,
+                second: None,
             },
             Recipe::FrepSampled { model, map, grid } => Inputs {
                 volume: object(*grid).and_then(Object::volume),
@@ -1036,6 +1059,7 @@ impl Scene {
                     _ => None,
                 },
                 frep_to: None,
+                second: None,
             },
             Recipe::FrepMorph { from, to, grid, .. } => {
                 let frep = |id: ObjectId| match object(id) {
@@ -1048,8 +1072,19 @@ impl Scene {
                     map: None,
                     frep: frep(*from),
                     frep_to: frep(*to),
+                    second: None,
                 }
             }
+            Recipe::Lobes {
+                lungs, boundaries, ..
+            } => Inputs {
+                volume: object(*lungs).and_then(Object::volume),
+                mesh: None,
+                map: None,
+                frep: None,
+                frep_to: None,
+                second: object(*boundaries).and_then(Object::volume),
+            },
         }
     }
 

@@ -922,3 +922,136 @@ test('registration: two scans registered from the page; a dragged correspondence
   await page.uncheck('#show-jacobian');
   await page.selectOption('#tool', 'drag');
 });
+
+// Canvas position (whole CSS pixels on the page) of a continuous voxel index in slice view
+// `axis`.
+async function screenOfIndex(axis, idx) {
+  return page.evaluate(([axis, idx]) => {
+    const v = window.__studio.slices[axis];
+    const [cx, cy] = v.toCanvas(idx);
+    const r = v.canvas.getBoundingClientRect();
+    return { x: Math.round(r.left + cx * r.width / v.canvas.width), y: Math.round(r.top + cy * r.height / v.canvas.height) };
+  }, [axis, idx]);
+}
+
+test('lobes: lungs found from the page, two clicks on an axial section trace a fissure; the slice shows the lobe colours; undo and the key\'s removal restore it', async () => {
+  const dir = path.join(root, 'lobes-ph');
+  const ph = spawnSync(bin, ['register', 'phantom', '-o', dir, '--dims', '56,48,40', '--spacing', '5,5,5.5']);
+  assert.equal(ph.status, 0, String(ph.stderr));
+  const ct = await page.evaluate(async (p) => {
+    const { Kind } = await import('./app/protocol.js');
+    const c = await window.__studio.client.edit(Kind.OpenFile, { root: 0, path: p });
+    return c.header.added[0];
+  }, 'lobes-ph/inhale.nii.gz');
+  await page.locator('#lobes-setup').scrollIntoViewIfNeeded();
+  await page.selectOption('#lobes-ct', String(ct));
+  const t0 = Date.now();
+  await page.click('#lobes-setup');
+  await page.waitForFunction((ct) => {
+    const a = window.__studio;
+    return a.layer === ct && a.tool === 'lobes' && a.panels.lobesObject()?.id > ct;
+  }, ct, { timeout: 120000 });
+  report.lobes = { setupMs: Date.now() - t0 };
+  const lobes = await page.evaluate(() => window.__studio.panels.lobesObject().id);
+  // A key of the phantom's right oblique fissure (its scripted end points), mid-range.
+  const script = JSON.parse(fs.readFileSync(path.join(dir, 'lobe_script.json'), 'utf8'));
+  const f = script.fissures.find((x) => x.kind === 'right-oblique');
+  const key = f.keys[Math.floor(f.keys.length / 2)];
+  const k = key.slice;
+  await page.evaluate((k) => { const a = window.__studio; const c = a.cursor.slice(); c[2] = k; a.setCursor(c, -1); }, k);
+  await waitIdle();
+  const from = await screenOfIndex(2, [key.from[0], key.from[1], k]);
+  const to = await screenOfIndex(2, [key.to[0], key.to[1], k]);
+  // The crosshair where the second click leaves it, so pictures before and after compare.
+  await page.evaluate((to) => { const a = window.__studio; a.setCursor(a.slices[2].point({ clientX: to.x, clientY: to.y }), -1); }, to);
+  await waitIdle();
+  // The lobe labels of the section, from the server; the picture of the axial view.
+  const labels = () => page.evaluate(async ([id, k]) => {
+    const { Kind } = await import('./app/protocol.js');
+    const f = await window.__studio.client.request(Kind.GetSlice, { volume: id, axis: 2, index: k });
+    return Array.from(new Float32Array(f.payload));
+  }, [lobes, k]);
+  const shot = () => page.evaluate(() => { const c = document.getElementById('slice-z'); return Array.from(c.getContext('2d').getImageData(0, 0, c.width, c.height).data); });
+  const right = (ls) => new Set(ls.filter((l) => l >= 1 && l <= 3));
+  const before = await labels();
+  const pictureBefore = await shot();
+  assert.equal(right(before).size, 1, `without a key the right lung is one lobe: ${[...right(before)]}`);
+
+  await page.selectOption('#lobes-fissure', 'right-oblique');
+  await page.evaluate(() => { window.__studio.latencies = []; });
+  await page.mouse.click(from.x, from.y);
+  await page.mouse.click(to.x, to.y);
+  await page.waitForFunction(() => window.__studio.latencies.some((l) => l.edit === 'command'), null, { timeout: 60000 });
+  await waitIdle();
+  const lat = await page.evaluate(() => window.__studio.latencies.filter((l) => l.edit === 'command'));
+  report.lobes.traceToPixelsMs = lat[0].ms;
+  report.lobes.traceServerMs = lat[0].server;
+  report.lobes.traceEventToSendMs = lat[0].sent;
+  const after = await labels();
+  assert.ok(right(after).has(3) && right(after).size >= 2, `the fissure splits the right lung: ${[...right(after)]}`);
+  const keys = await page.evaluate(() => window.__studio.panels.lobesObject().recipe.script.fissures.map((x) => [x.kind, x.keys.map((y) => y.slice)]));
+  assert.deepEqual(keys, [['right-oblique', [k]]]);
+  const pictureAfter = await shot();
+  let changed = 0;
+  for (let i = 0; i < pictureBefore.length; i += 4) if (pictureBefore[i] !== pictureAfter[i] || pictureBefore[i + 2] !== pictureAfter[i + 2]) changed++;
+  assert.ok(changed > 200, `only ${changed} pixels of the axial view changed`);
+  await page.screenshot({ path: path.join(artifacts, 'lobes.png') });
+  // Each labelled voxel shows its lobe's colour blended over the CT's grey.
+  const colours = await page.evaluate(async ([ct, k, labels]) => {
+    const { Kind } = await import('./app/protocol.js');
+    const { LOBE_RGB, LOBE_ALPHA } = await import('./app/slices.js');
+    const app = window.__studio;
+    const v = app.slices[2];
+    const f = await app.client.request(Kind.GetSlice, { volume: ct, axis: 2, index: k });
+    const vals = new Float32Array(f.payload);
+    const [lo, hi] = app.currentWindow();
+    const lut = app.lut();
+    const shown = v.canvas.getContext('2d').getImageData(0, 0, v.canvas.width, v.canvas.height).data;
+    const per = {};
+    for (let row = 0; row < f.header.height; row++) for (let col = 0; col < f.header.width; col++) {
+      const l = Math.round(labels[row * f.header.width + col]);
+      if (!LOBE_RGB[l]) continue;
+      const t = Math.max(0, Math.min(255, Math.round((vals[row * f.header.width + col] - lo) * 255 / (hi - lo))));
+      const want = lut[t].map((g, c) => Math.round(g * (1 - LOBE_ALPHA) + LOBE_RGB[l][c] * LOBE_ALPHA));
+      const [x, y] = v.toCanvas([col, f.header.height - 1 - row, k]);
+      const o = 4 * (Math.floor(y) * v.canvas.width + Math.floor(x));
+      const p = per[l] || (per[l] = { n: 0, ok: 0 });
+      p.n++;
+      if ([0, 1, 2].every((c) => Math.abs(shown[o + c] - want[c]) <= 2)) p.ok++;
+    }
+    return per;
+  }, [ct, k, after]);
+  for (const [l, p] of Object.entries(colours)) assert.ok(p.ok >= 0.9 * p.n, `lobe ${l}: ${p.ok} of ${p.n} voxels in its colour`);
+  assert.ok(colours[3]?.n > 10, 'the right lower lobe is shown');
+
+  // Undo: the labels and the picture are as before the key; redo brings the key back.
+  await page.keyboard.press('Control+z');
+  await page.waitForFunction(() => window.__studio.lastChange?.edit === 'undo', null, { timeout: 60000 });
+  await waitIdle(500);
+  assert.deepEqual(await labels(), before);
+  const undone = await shot();
+  let differ = 0;
+  for (let i = 0; i < undone.length; i++) if (undone[i] !== pictureBefore[i]) differ++;
+  assert.equal(differ, 0, 'undo restores the picture');
+  await page.keyboard.press('Control+Shift+z');
+  await page.waitForFunction(() => window.__studio.lastChange?.edit === 'redo', null, { timeout: 60000 });
+  await waitIdle();
+  assert.deepEqual(await labels(), after);
+  // The key listed in the panel is removed with its button.
+  const x = page.locator(`#lobes-keys li[data-slice="${k}"] button`);
+  await x.scrollIntoViewIfNeeded();
+  await x.click();
+  await page.waitForFunction(() => window.__studio.panels.lobesObject().recipe.script.fissures.length === 0, null, { timeout: 60000 });
+  await waitIdle();
+  assert.deepEqual(await labels(), before);
+  // A click off the lungs' sections is refused with a message; nothing changes.
+  const err = await page.evaluate(async (id) => {
+    const { Kind } = await import('./app/protocol.js');
+    try {
+      await window.__studio.client.edit(Kind.Command, { command: 'trace-lobes', id, fissure: 'left-oblique', slice: 0, from: [1, 1], to: [500, 2] });
+      return 'accepted';
+    } catch (e) { return e.message; }
+  }, lobes);
+  assert.match(err, /outside|holds no left lung/);
+  await page.selectOption('#tool', 'drag');
+});

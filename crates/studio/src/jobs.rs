@@ -22,6 +22,7 @@ use volmorph_scene::{Change, Command, ObjectId, Scene, SceneError};
 
 use crate::coalesce::{Coalesce, Queue};
 use crate::command_json::{Brush, SculptRequest};
+use crate::lobes::LobeRequest;
 use crate::protocol::{Frame, Kind};
 use crate::setup::Setup;
 
@@ -274,6 +275,9 @@ pub enum Work {
     /// the same gesture, object, brush, operation and size absorbs a newer one (their points
     /// concatenate: sculpting is cumulative, so nothing is dropped).
     Sculpt(SculptRequest, Option<u64>),
+    /// An edit of the fissure script of a `lobes` object ([`crate::lobes`]): the lobes are
+    /// traced again.
+    Lobes(LobeRequest),
     /// A built-in workflow (several commands).
     Setup(Setup),
     /// Read a file (resolved inside a root) and add it as an object named after the file.
@@ -615,6 +619,10 @@ impl Editor {
                 let c = sculpt_command(scene, r)?;
                 self.apply_in_gesture(scene, c, gesture, progress)
             }
+            Work::Lobes(r) => {
+                let c = crate::lobes::command(scene, r)?;
+                scene.apply_with(c, progress)
+            }
             Work::Setup(s) => s.run_with(scene, progress),
             Work::Open(path) => {
                 let object = volmorph_scene::files::read_object_with(&path, progress)?;
@@ -638,7 +646,7 @@ fn label(work: &Work) -> &'static str {
         Work::EndGesture { .. } => "end-gesture",
         Work::Undo => "undo",
         Work::Redo => "redo",
-        Work::Command(..) => "command",
+        Work::Command(..) | Work::Lobes(_) => "command",
         Work::Sculpt(..) => "sculpt",
         Work::Setup(_) => "setup",
         Work::Open(_) => "open",

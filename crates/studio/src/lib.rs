@@ -17,6 +17,7 @@ pub mod assets;
 pub mod coalesce;
 pub mod command_json;
 pub mod jobs;
+pub mod lobes;
 pub mod protocol;
 pub mod security;
 mod server;

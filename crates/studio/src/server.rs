@@ -522,9 +522,12 @@ fn edit_of(s: &Shared, page: u64, frame: &Frame) -> Result<Option<Work>, QueryEr
         ),
         Kind::Command => {
             let gesture = h.get("gesture").map(|_| gesture_key(page, h)).transpose()?;
-            match command_json::sculpt(h)? {
-                Some(r) => Work::Sculpt(r, gesture),
-                None => Work::Command(Box::new(command_json::parse(h)?), gesture),
+            if let Some(r) = command_json::sculpt(h)? {
+                Work::Sculpt(r, gesture)
+            } else if let Some(r) = crate::lobes::parse(h)? {
+                Work::Lobes(r)
+            } else {
+                Work::Command(Box::new(command_json::parse(h)?), gesture)
             }
         }
         Kind::OpenFile => Work::Open(resolve(s, h)?),

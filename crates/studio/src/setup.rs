@@ -4,9 +4,11 @@
 //! volume's voxels, the antialiased push-forward through it and the isosurface of the
 //! result), McPhail's handles, a generated mesh, Feng's mesh FFD (the identity-Jacobian
 //! lattice around a mesh and the mesh deformed through it), and McPhail's sculpting (a mesh
-//! turned into a sculpt object on a tri-dexel grid with room around it), and McPhail's
+//! turned into a sculpt object on a tri-dexel grid with room around it), McPhail's
 //! registration workbench (handles selected on a fixed scan and matched in a moving one, the
-//! handle map through them and the moving scan registered onto the fixed grid).
+//! handle map through them and the moving scan registered onto the fixed grid), and his
+//! lobe-based lung model (the lungs of a CT segmented, its lobe boundaries enhanced, and the
+//! lobe labels traced from the fissure points the user clicks, [`crate::lobes`]).
 
 use glam::DVec3;
 use serde::Deserialize;
@@ -145,6 +147,19 @@ pub enum Setup {
         /// The handle map's method.
         #[serde(default = "default_register_method")]
         method: HandleMethod,
+    },
+    /// McPhail §5.6: the lung model of CT volume `ct` (HU, read as f32). The lungs are
+    /// segmented (§5.6.1, `volmorph_register::lungs::segment_lungs` with `options`: "NAME
+    /// lungs", u8 labels 1 right, 2 left), the lobe boundaries enhanced (§5.6.2: "NAME lobe
+    /// boundaries", f32), and the lobes added as a `lobes` derived object with no fissure yet
+    /// ("NAME lobes", each lung labelled by height only). The page then clicks the fissures'
+    /// end points on axial sections (§5.6.3: `trace-lobes`, [`crate::lobes`]).
+    Lungs {
+        /// The CT volume.
+        ct: u64,
+        /// Segmentation options (JSON as `LungOptions`; fields left out take their defaults).
+        #[serde(default)]
+        options: volmorph_register::lungs::LungOptions,
     },
     /// Feng's mesh FFD (2002 §3.1, `volmorph lattice init --mesh`): the identity-Jacobian
     /// B-spline lattice of `degree` and `counts` control points per axis around the bounding
@@ -408,6 +423,48 @@ impl Setup {
                         sampled_nodes: None,
                         swap_handles: false,
                         grid: volmorph_maps::json::GridJson::from(fixed_scan.geometry()),
+                    }),
+                )?;
+            }
+            Setup::Lungs { ct, options } => {
+                use volmorph_register::RegisterError;
+                use volmorph_register::lungs::{
+                    EnhanceOptions, LobeScript, enhance_lobe_boundaries_with, segment_lungs_with,
+                };
+                let c = ObjectId(ct);
+                let scan = scene.volume(c)?.to_typed::<f32>();
+                let name = scene.get(c)?.name.clone();
+                let seg = segment_lungs_with(&scan, &options, progress).map_err(|e| match e {
+                    RegisterError::TooLittle(m) => SceneError::Invalid(format!(
+                        "no lungs found in volume {c} ({name:?}): {m}; the lung set-up needs a \
+                         chest CT in Hounsfield units"
+                    )),
+                    e => from_register(e),
+                })?;
+                let boundaries = enhance_lobe_boundaries_with(
+                    &scan,
+                    &seg.mask,
+                    &EnhanceOptions::default(),
+                    progress,
+                )
+                .map_err(from_register)?;
+                let lungs = add(
+                    scene,
+                    &format!("{name} lungs"),
+                    NewObject::Volume(AnyVolume::from(seg.mask)),
+                )?;
+                let boundaries = add(
+                    scene,
+                    &format!("{name} lobe boundaries"),
+                    NewObject::Volume(AnyVolume::from(boundaries)),
+                )?;
+                add(
+                    scene,
+                    &format!("{name} lobes"),
+                    NewObject::Derived(Recipe::Lobes {
+                        lungs,
+                        boundaries,
+                        script: LobeScript::default(),
                     }),
                 )?;
             }
@@ -701,6 +758,42 @@ mod tests {
             assert!(e.to_string().contains(what), "{e}");
         }
         assert_eq!(scene.undo_depth(), depth);
+    }
+
+    /// A volume without lungs (the teapot) or a missing one is refused by the lung set-up,
+    /// naming the problem, and the scene is unchanged.
+    #[test]
+    fn the_lung_setup_refuses_a_volume_without_lungs() {
+        let mut scene = Scene::new();
+        teapot(&mut scene);
+        let (count, depth) = (scene.objects().count(), scene.undo_depth());
+        for (ct, named) in [(1, "no lungs found in volume #1"), (9, "#9")] {
+            let e = Setup::Lungs {
+                ct,
+                options: Default::default(),
+            }
+            .run(&mut scene)
+            .unwrap_err();
+            assert!(e.to_string().contains(named), "{e}");
+        }
+        let bad: Result<Setup, _> = serde_json::from_value(serde_json::json!(
+            {"setup": "lungs", "ct": 1, "options": {"threshold": -300, "rounds": 2}}
+        ));
+        assert!(bad.unwrap_err().to_string().contains("rounds"));
+        let e = Setup::Lungs {
+            ct: 1,
+            options: volmorph_register::lungs::LungOptions {
+                majority_rounds: 1000,
+                ..Default::default()
+            },
+        }
+        .run(&mut scene)
+        .unwrap_err();
+        assert!(e.to_string().contains("majority_rounds"), "{e}");
+        assert_eq!(
+            (scene.objects().count(), scene.undo_depth()),
+            (count, depth)
+        );
     }
 
     /// A non-finite handle or too many handles are refused, naming the problem, and the

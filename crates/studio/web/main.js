@@ -43,6 +43,8 @@ class App {
     this.activeLattice = null;
     // Meshes the 3D view leaves out (unchecked in the object list).
     this.hiddenMeshes = new Set();
+    // Whether the slices show the lobe labels of the Lobes panel's object.
+    this.showLobes = true;
   }
 
   async start() {
@@ -102,6 +104,7 @@ class App {
     $('show-volume').onchange = (e) => { this.view3d.showVolume = e.target.checked; this.view3d.draw(); };
     $('show-grid').onchange = (e) => { this.view3d.showGrid = e.target.checked; this.refreshGrid(); };
     $('show-jacobian').onchange = (e) => { this.showJacobian = e.target.checked; this.reloadSlices(); };
+    $('show-lobes').onchange = (e) => { this.showLobes = e.target.checked; this.reloadSlices(); };
     $('show-lattice').onchange = (e) => { this.view3d.showLattice = e.target.checked; this.view3d.draw(); };
   }
 
@@ -214,6 +217,16 @@ class App {
   jacobianShown() {
     const js = this.slices.map((s) => s.jacobian).filter(Boolean);
     $('jacobian-info').textContent = js.length ? `folded: ${js.map((j) => j.folded).join(' / ')}` : '';
+  }
+  // The lobe-label volume the slices colour (the Lobes panel's object), when the overlay is on
+  // and it lies on the shown volume's voxel grid.
+  lobesOverlay() {
+    if (!this.showLobes) return null;
+    const o = this.panels?.lobesObject();
+    const v = this.volume();
+    if (!o?.volume || !v) return null;
+    const a = o.volume.geometry.dims, b = v.volume.geometry.dims;
+    return a.every((d, i) => d === b[i]) ? o : null;
   }
   currentWindow() { return this.window.get(this.layer) || [0, 1]; }
 
@@ -347,10 +360,10 @@ class App {
     try { performance.mark(`input-${r}`, { startTime: t }); } catch (_) { /* marks are optional */ }
   }
 
-  gestureStart(idx, e) {
+  gestureStart(idx, e, axis) {
     const v = this.volume(); if (!v) return;
     this.view3d.interact();
-    this.g = { idx, p: physical(v.volume.geometry, idx), id: this.newGesture(), moved: false };
+    this.g = { idx, axis, p: physical(v.volume.geometry, idx), id: this.newGesture(), moved: false };
     if (this.tool === 'handles') this.panels.handleDown(this.g, e);
   }
 
@@ -378,6 +391,7 @@ class App {
     if (!this.g) return;
     if ((this.tool === 'drag' || this.tool === 'sculpt') && this.g.moved) this.endGesture(this.g.id);
     if (this.tool === 'handles') this.panels.handleUp(this.g, idx, e);
+    if (this.tool === 'lobes') this.panels.lobeClick(this.g, e);
     this.g = null;
   }
 
@@ -449,6 +463,8 @@ class App {
     if (touched.has(this.layer)) {
       slices = this.reloadSlices();
       this.refreshVolume();
+    } else if (touched.has(this.lobesOverlay()?.id)) {
+      slices = this.reloadSlices();
     }
     const timed = t0 === undefined ? Promise.resolve()
       : slices.then(() => new Promise((r) => requestAnimationFrame(() => r()))).then(() => {

@@ -1,5 +1,5 @@
 // The side panels: transfer-function editor, F-rep editor and parameter sliders, handles,
-// sculpting, files.
+// registration, lobes, sculpting, files.
 import { Kind } from './protocol.js';
 
 const $ = (id) => document.getElementById(id);
@@ -21,6 +21,7 @@ export function setupPanels(app) {
       P.ffdChanged();
       P.sculptChanged();
       P.registerChanged();
+      P.lobesChanged();
       const hm = app.handleMap();
       if (hm) $('handle-method').value = String(hm.map.method).toLowerCase();
     },
@@ -322,6 +323,111 @@ export function setupPanels(app) {
       app.status(`registered: ${h?.map?.handles ?? '?'} correspondences; drag a wrong one's target with the Handles tool`);
     } catch (e) { app.error(e.message, e.header); }
   };
+
+  // Lobes (McPhail §5.6): the lungs of a CT segmented and its lobe boundaries enhanced (the
+  // "lungs" set-up, which adds a lobes object), then, with the Lobe points tool, two clicks on
+  // the lung outline of an axial section make the key of the chosen fissure there (a
+  // trace-lobes command: the server traces the fissure through every section of its range by
+  // Dijkstra and labels the lobes; the slices show the labels). Later sections inherit a key
+  // until the next one; "First/Last here" set the sections a fissure is traced in. Each key,
+  // range or removal is one undo step.
+  let lobePending = null;
+  P.lobesObject = () => {
+    const all = app.objects.filter((o) => o.recipe?.recipe === 'lobes');
+    const id = Number($('lobes-object').value);
+    return all.find((o) => o.id === id) || all[all.length - 1];
+  };
+  const fissureOf = (o, kind) => o?.recipe.script.fissures.find((f) => f.kind === kind);
+  // The keys (and a first point being placed) on axial section `slice`: {fissure, points}.
+  P.lobeKeys = (slice) => {
+    const o = P.lobesObject();
+    if (!o) return [];
+    const out = [];
+    for (const f of o.recipe.script.fissures) {
+      for (const k of f.keys) if (k.slice === slice) out.push({ fissure: f.kind, points: [k.from, k.to] });
+    }
+    if (lobePending && lobePending.id === o.id && lobePending.slice === slice) out.push({ fissure: lobePending.fissure, points: [lobePending.from] });
+    return out;
+  };
+  P.lobesChanged = () => {
+    fill($('lobes-ct'), app.objects.filter((o) => o.volume && o.recipe?.recipe !== 'lobes'), (o) => `${o.id} ${o.name}`);
+    fill($('lobes-object'), app.objects.filter((o) => o.recipe?.recipe === 'lobes'), (o) => `${o.id} ${o.name}`);
+    const o = P.lobesObject();
+    if (lobePending && lobePending.id !== o?.id) lobePending = null;
+    const ul = $('lobes-keys'); ul.textContent = '';
+    for (const f of o?.recipe.script.fissures || []) {
+      const head = document.createElement('li');
+      head.className = 'fissure';
+      head.textContent = `${f.kind}: sections ${f.first}–${f.last}`;
+      ul.append(head);
+      for (const k of f.keys) {
+        const li = document.createElement('li');
+        li.dataset.fissure = f.kind; li.dataset.slice = k.slice;
+        const p = (x) => `(${x[0].toFixed(1)}, ${x[1].toFixed(1)})`;
+        li.append(`k ${k.slice}: ${p(k.from)} → ${p(k.to)}`);
+        li.title = 'show this section';
+        li.onclick = (e) => { if (e.target === li) { const c = app.cursor.slice(); c[2] = k.slice; app.setCursor(c, -1); } };
+        const x = Object.assign(document.createElement('button'), { textContent: '×', title: 'remove this key' });
+        x.onclick = () => app.client.edit(Kind.Command, { command: 'remove-lobe-key', id: o.id, fissure: f.kind, slice: k.slice })
+          .then(() => app.status(`key of ${f.kind} at section ${k.slice} removed`)).catch((e) => app.error(e.message, e.header));
+        li.append(x);
+        ul.append(li);
+      }
+    }
+    // The axial view draws the keys of its section.
+    if (o) app.redrawSlices();
+  };
+  $('lobes-object').onchange = () => { P.lobesChanged(); app.reloadSlices(); };
+  $('lobes-setup').onclick = async () => {
+    try {
+      const ct = Number($('lobes-ct').value);
+      if (!ct) throw new Error('open a chest CT first');
+      const c = await app.client.edit(Kind.Setup, { setup: 'lungs', ct });
+      $('lobes-object').value = c.header.added[2];
+      P.lobesChanged();
+      $('layer').value = ct;
+      await app.showLayer(ct);
+      $('tool').value = 'lobes'; app.tool = 'lobes';
+      app.status('lungs found: click the two ends of a fissure on the lung outline in the axial view');
+    } catch (e) { app.error(e.message, e.header); }
+  };
+  // A click of the Lobe points tool: the first sets the key's start on the axial section, the
+  // second its end (same section), which sends the key.
+  P.lobeClick = (g, e) => {
+    const o = P.lobesObject();
+    if (!o) { app.error('no lobes: press "Find lungs" first'); return; }
+    if (g.axis !== 2) { app.error('click the fissure points in the axial (k) view'); return; }
+    const slice = Math.round(g.idx[2]);
+    const at = [g.idx[0], g.idx[1]].map((x) => Math.round(x * 100) / 100);
+    const fissure = $('lobes-fissure').value;
+    if (!lobePending || lobePending.id !== o.id || lobePending.slice !== slice || lobePending.fissure !== fissure) {
+      lobePending = { id: o.id, slice, fissure, from: at };
+      app.redrawSlices();
+      app.status(`${fissure} at section ${slice}: now click its other end`);
+      return;
+    }
+    const from = lobePending.from;
+    lobePending = null;
+    const r = app.client.send(Kind.Command, { command: 'trace-lobes', id: o.id, fissure, slice, from, to: at });
+    app.markInput(r, e);
+    app.redrawSlices();
+  };
+  document.addEventListener('keydown', (e) => {
+    if (e.key === 'Escape' && lobePending) { lobePending = null; app.redrawSlices(); app.status('key cancelled'); }
+  });
+  const range = (end) => {
+    const o = P.lobesObject();
+    if (!o) { app.error('no lobes: press "Find lungs" first'); return; }
+    const kind = $('lobes-fissure').value;
+    const f = fissureOf(o, kind);
+    if (!f) { app.error(`${kind} has no key yet: click one first`); return; }
+    const here = Math.round(app.cursor[2]);
+    const [first, last] = end === 'first' ? [here, f.last] : [f.first, here];
+    app.client.edit(Kind.Command, { command: 'lobe-range', id: o.id, fissure: kind, first, last })
+      .then(() => app.status(`${kind} traced in sections ${first}–${last}`)).catch((e) => app.error(e.message, e.header));
+  };
+  $('lobes-first').onclick = () => range('first');
+  $('lobes-last').onclick = () => range('last');
 
   // Sculpting (McPhail ch. 3): a mesh made sculptable (a tri-dexel grid around it), then
   // strokes of a brush (sphere, box or any mesh object, of the chosen reach) painted on it

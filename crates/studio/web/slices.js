@@ -1,7 +1,8 @@
 // The three orthogonal slice views: window/level and a colour map applied to the server's
 // f32 slice, the Jacobian overlay (the server's determinant slice, folded voxels
-// highlighted), a crosshair shared by the views, physical position and value under the
-// cursor, and the drag gestures of the active tool.
+// highlighted), the lobe overlay (the server's slice of a lobe-label volume, one colour per
+// lobe) with the fissure key points of the axial section, a crosshair shared by the views,
+// physical position and value under the cursor, and the drag gestures of the active tool.
 import { Kind } from './protocol.js';
 
 const IN_PLANE = [[1, 2], [0, 2], [0, 1]];
@@ -12,6 +13,20 @@ export const FOLD_RGB = [255, 0, 255];
 const JACOBIAN_FULL = Math.LN2;
 // Strongest tint over the picture.
 const JACOBIAN_ALPHA = 0.6;
+
+// Colours of the lobe labels (volmorph_register::phantom::lobe: 1 RUL, 2 RML, 3 RLL, 4 LUL,
+// 5 LLL), blended over the picture with LOBE_ALPHA; other labels are clear.
+export const LOBE_RGB = [null, [235, 80, 70], [250, 205, 50], [70, 200, 95], [70, 140, 250], [195, 95, 235]];
+export const LOBE_ALPHA = 0.45;
+// Colours of the fissures' key points in the axial view.
+export const FISSURE_RGB = { 'right-oblique': '#ff9f40', 'right-horizontal': '#40e0ff', 'left-oblique': '#ff5ad2' };
+
+// The picture's pixel `o` (RGBA array `d`) with label `l` blended over it.
+export function blendLobe(d, o, l) {
+  const c = LOBE_RGB[l];
+  if (!c) return;
+  for (let k = 0; k < 3; k++) d[o + k] = Math.round(d[o + k] * (1 - LOBE_ALPHA) + c[k] * LOBE_ALPHA);
+}
 
 // The Jacobian overlay of one determinant: [r, g, b, alpha] to blend over the picture.
 // Folding (J ≤ 0, or not finite) is opaque FOLD_RGB; expansion (J > 1) tints red,
@@ -72,10 +87,13 @@ export class SliceView {
     const map = app.showJacobian ? app.jacobianMap() : undefined;
     const jac = map === undefined ? Promise.resolve(null)
       : app.client.request(Kind.GetJacobian, { map: map.id, volume: vol.id, axis: this.axis, index });
-    this.loading = Promise.all([app.client.request(Kind.GetSlice, { volume: vol.id, axis: this.axis, index }), jac])
-      .then(([f, j]) => {
+    const lobes = app.lobesOverlay();
+    const lob = lobes ? app.client.request(Kind.GetSlice, { volume: lobes.id, axis: this.axis, index }) : Promise.resolve(null);
+    this.loading = Promise.all([app.client.request(Kind.GetSlice, { volume: vol.id, axis: this.axis, index }), jac, lob])
+      .then(([f, j, l]) => {
         this.slice = { ...f.header, values: new Float32Array(f.payload) };
         this.jacobian = j ? { ...j.header, values: new Float32Array(j.payload) } : null;
+        this.lobes = l ? { ...l.header, values: new Float32Array(l.payload) } : null;
         app.jacobianShown(this);
         if (!app.window.has(vol.id)) app.window.set(vol.id, f.header.window.slice());
         app.windowChanged(false);
@@ -110,6 +128,10 @@ export class SliceView {
         d[4 * i + 1] = Math.round(d[4 * i + 1] * (1 - a) + g * a);
         d[4 * i + 2] = Math.round(d[4 * i + 2] * (1 - a) + b * a);
       }
+    }
+    const lob = this.lobes;
+    if (lob && lob.values.length === s.values.length) {
+      for (let i = 0; i < lob.values.length; i++) blendLobe(d, 4 * i, Math.round(lob.values[i]));
     }
     return img;
   }
@@ -173,6 +195,18 @@ export class SliceView {
       ctx.strokeStyle = 'rgba(80,200,255,0.8)';
       ctx.beginPath(); ctx.arc(cx, cy, r, 0, 2 * Math.PI); ctx.stroke();
     }
+    // The fissure keys of this axial section (and the first point of one being placed).
+    if (this.axis === 2) {
+      for (const k of app.panels?.lobeKeys(this.slice.index) || []) {
+        ctx.strokeStyle = FISSURE_RGB[k.fissure] || '#fff';
+        ctx.lineWidth = 2;
+        for (const p of k.points) {
+          const [x, y] = this.toCanvas([p[0], p[1], this.slice.index]);
+          ctx.beginPath(); ctx.arc(x, y, 4, 0, 2 * Math.PI); ctx.stroke();
+        }
+        ctx.lineWidth = 1;
+      }
+    }
     for (const h of app.handles || []) {
       const g = app.volume().volume.geometry;
       const [sx, sy] = this.toCanvas(indexOf(g, h.source));
@@ -199,7 +233,7 @@ export class SliceView {
       return;
     }
     this.app.setCursor(idx, this.axis);
-    this.app.gestureStart(idx, e);
+    this.app.gestureStart(idx, e, this.axis);
   }
 
   move(e) {

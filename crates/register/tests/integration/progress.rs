@@ -166,3 +166,31 @@ fn registration_reports_and_a_cancelled_run_writes_nothing() {
         );
     }
 }
+
+/// The lung segmentation, the lobe-boundary enhancement and the lobe tracing report their
+/// steps exactly, stop when cancelled, and give with progress what they give without.
+#[test]
+fn lung_model_steps_report_and_can_be_cancelled() {
+    use volmorph_register::lungs::{
+        EnhanceOptions, LungOptions, enhance_lobe_boundaries, enhance_lobe_boundaries_with,
+        segment_lungs, segment_lungs_with, trace_lobes, trace_lobes_with,
+    };
+    let p = volmorph_register::phantom::lung_phantom(&LungPhantomOptions {
+        dims: [48, 40, 36],
+        spacing: DVec3::new(6.0, 6.0, 7.0),
+        ..LungPhantomOptions::default()
+    })
+    .unwrap();
+    let o = LungOptions::default();
+    let plain = segment_lungs(&p.inhale, &o).unwrap();
+    let seg = progress::check(|pr| segment_lungs_with(&p.inhale, &o, pr));
+    assert_eq!(plain.mask.data(), seg.mask.data());
+    let eo = EnhanceOptions::default();
+    let e = enhance_lobe_boundaries(&p.inhale, &seg.mask, &eo).unwrap();
+    let with = progress::check(|pr| enhance_lobe_boundaries_with(&p.inhale, &seg.mask, &eo, pr));
+    assert_eq!(e.data(), with.data());
+    let model = trace_lobes(&seg.mask, &e, &p.lobe_script).unwrap();
+    let with = progress::check(|pr| trace_lobes_with(&seg.mask, &e, &p.lobe_script, pr));
+    assert_eq!(model.lobes.data(), with.lobes.data());
+    assert_eq!(model.curves, with.curves);
+}

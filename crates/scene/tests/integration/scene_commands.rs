@@ -765,3 +765,106 @@ fn handle_maps_keep_their_thin_plate_kernel_through_edits_and_projects() {
     let e = Scene::load(&path).unwrap_err().to_string();
     assert!(e.contains("k.vmproj") && e.contains("r3"), "{e}");
 }
+
+/// A lobes object traces its script's fissures over a lung mask and its lobe-boundary image
+/// (the side of the fissure with the larger y is the lower lobe); a script that does not fit
+/// the grid is refused and changes nothing; a new script is undone exactly; the recipe and
+/// its labels survive a project round trip.
+#[test]
+fn lobes_follow_their_script_through_undo_and_projects() {
+    use volmorph_register::lungs::{FissureKind, KeyPoints, LobeScript};
+    use volmorph_register::phantom::lobe;
+    use volmorph_volume::Volume;
+    let g = Geometry::new([20, 16, 6]);
+    let mask = Volume::from_fn(g, |i, j, _| match (i, j) {
+        (2..8, 3..13) => 1u8,
+        (12..18, 3..13) => 2,
+        _ => 0,
+    })
+    .unwrap();
+    // A bright sheet at j = 8 across the right lung: the fissure's path.
+    let sheet = Volume::from_fn(g, |i, j, _| {
+        if (2..8).contains(&i) && j == 8 {
+            1.0f32
+        } else {
+            0.0
+        }
+    })
+    .unwrap();
+    let mut scene = Scene::new();
+    let lungs = add(
+        &mut scene,
+        "lungs",
+        NewObject::Volume(AnyVolume::from(mask)),
+    );
+    let boundaries = add(
+        &mut scene,
+        "sheet",
+        NewObject::Volume(AnyVolume::from(sheet)),
+    );
+    let recipe = |script: LobeScript| Recipe::Lobes {
+        lungs,
+        boundaries,
+        script,
+    };
+    let lobes = add(
+        &mut scene,
+        "lobes",
+        NewObject::Derived(recipe(LobeScript::default())),
+    );
+    let labels = |scene: &Scene| scene.volume(lobes).unwrap().to_typed::<u8>();
+    let plain = labels(&scene);
+    // No fissure: each lung by height (upper lobes in the upper half of the sections).
+    assert_eq!(plain[[4, 5, 5]], lobe::RUL);
+    assert_eq!(plain[[4, 5, 0]], lobe::RLL);
+    assert_eq!(plain[[14, 5, 5]], lobe::LUL);
+    let mut script = LobeScript::default();
+    script.set_key(
+        FissureKind::RightOblique,
+        KeyPoints {
+            slice: 2,
+            from: [2.0, 8.0],
+            to: [7.0, 8.0],
+        },
+    );
+    script.set_range(FissureKind::RightOblique, 0, 5).unwrap();
+    scene
+        .apply(Command::SetRecipe {
+            id: lobes,
+            recipe: recipe(script.clone()),
+        })
+        .unwrap();
+    let traced = labels(&scene);
+    for k in 0..6 {
+        assert_eq!(traced[[4, 11, k]], lobe::RLL, "section {k}");
+        assert_eq!(traced[[4, 5, k]], lobe::RUL, "section {k}");
+    }
+    // A script reaching past the last section is refused.
+    let depth = scene.undo_depth();
+    let mut far = script.clone();
+    far.fissures[0].last = 6;
+    let e = scene
+        .apply(Command::SetRecipe {
+            id: lobes,
+            recipe: recipe(far),
+        })
+        .unwrap_err();
+    assert!(e.to_string().contains("reaches section 6"), "{e}");
+    assert_eq!(scene.undo_depth(), depth);
+    assert_eq!(labels(&scene).data(), traced.data());
+    scene.undo().unwrap();
+    assert_eq!(labels(&scene).data(), plain.data());
+    scene.redo().unwrap();
+    let dir = tempfile::tempdir().unwrap();
+    let path = dir.path().join("lobes.vmproj");
+    scene.save(&path).unwrap();
+    let back = Scene::load(&path).unwrap();
+    let volmorph_scene::Object::Derived(d) = &back.get(lobes).unwrap().object else {
+        panic!("the lobes are a derived object");
+    };
+    assert_eq!(d.recipe(), &recipe(script));
+    assert_eq!(
+        back.volume(lobes).unwrap().to_typed::<u8>().data(),
+        traced.data()
+    );
+}
