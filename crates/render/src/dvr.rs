@@ -86,7 +86,7 @@ pub struct DvrVolume {
 /// adding it back after the conversion to `f32` is exact.
 const CODE_BIAS: f32 = 32_768.0;
 
-/// Largest voxel count along an axis: cell indices are found in `f32` ([`DvrVolume::cell_of`]),
+/// Largest voxel count along an axis: cell indices are found in `f32` (`DvrVolume::cell_of`),
 /// whose integers are exact and whose bits give the index below 2²³.
 pub const MAX_DIMENSION: usize = 1 << 23;
 
