@@ -17,7 +17,9 @@
 //! * [`ffd`] — accurate and vertex FFD of spheres through a moved degree-2 lattice;
 //! * [`frep`] — culled grid sampling of F-rep models (the built-in [`frep::SCENES`] or files);
 //! * [`handles`] — 2D and 3D MLS and thin-plate splines;
-//! * [`scene`] — a drag through the scene and the same drag on the engines.
+//! * [`scene`] — a drag through the scene and the same drag on the engines;
+//! * [`roofline`] — the machine's memory bandwidth and floating-point rate, the roofs of every
+//!   hot path.
 //!
 //! Random inputs come from [`volmorph_testkit::Rng`] with the seed [`SEED`], so every run and
 //! every machine times the same inputs.
@@ -40,6 +42,7 @@ pub mod ffd;
 pub mod frep;
 pub mod handles;
 pub mod isosurface;
+pub mod roofline;
 pub mod scene;
 pub mod targets;
 pub mod timing;

@@ -190,6 +190,52 @@ pub struct Item {
     pub operations: Option<usize>,
     /// Whether the result equals a point-by-point reference bit for bit (F-rep cases).
     pub same_as_pointwise: Option<bool>,
+    /// Work done by each run, shown as a rate over the median time (probe cases).
+    pub rate: Option<Rate>,
+}
+
+/// Work done by one run of a case, so that a report shows its rate: `work` divided by the
+/// median time in seconds, in [`RateUnit`]s.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Rate {
+    /// Bytes moved or floating-point operations done by one run (what the unit counts).
+    pub work: f64,
+    /// What `work` counts and how its rate is shown.
+    pub unit: RateUnit,
+}
+
+/// The unit of a [`Rate`].
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum RateUnit {
+    /// `work` is bytes; shown in GB/s (10⁹ bytes per second).
+    GigabytesPerSecond,
+    /// `work` is floating-point operations (a fused multiply-add counts two); shown in
+    /// Gflop/s (10⁹ per second).
+    GigaflopsPerSecond,
+}
+
+impl RateUnit {
+    /// The symbol printed after a rate.
+    #[must_use]
+    pub fn symbol(self) -> &'static str {
+        match self {
+            RateUnit::GigabytesPerSecond => "GB/s",
+            RateUnit::GigaflopsPerSecond => "Gflop/s",
+        }
+    }
+}
+
+impl Rate {
+    /// The rate at a run time of `seconds`, in the unit's scale (10⁹ per second); NaN for a
+    /// time that is not positive.
+    #[must_use]
+    pub fn at(&self, seconds: f64) -> f64 {
+        if seconds > 0.0 {
+            self.work / seconds * 1e-9
+        } else {
+            f64::NAN
+        }
+    }
 }
 
 impl Item {
@@ -204,7 +250,21 @@ impl Item {
             triangles: None,
             operations: None,
             same_as_pointwise: None,
+            rate: None,
         }
+    }
+
+    /// The item with the work of one run, shown as a rate over the median time.
+    #[must_use]
+    pub fn with_rate(mut self, rate: Option<Rate>) -> Self {
+        self.rate = rate;
+        self
+    }
+
+    /// The rate at the median time, if the item has a [`Rate`].
+    #[must_use]
+    pub fn median_rate(&self) -> Option<f64> {
+        self.rate.map(|r| r.at(self.median()))
     }
 
     /// The item with a triangle count.
@@ -259,6 +319,10 @@ impl Item {
         }
         if let Some(same) = self.same_as_pointwise {
             v["same_as_pointwise"] = json!(same);
+        }
+        if let (Some(rate), Some(value)) = (self.rate, self.median_rate()) {
+            v["median_rate"] = json!(value);
+            v["rate_unit"] = json!(rate.unit.symbol());
         }
         v
     }
@@ -368,6 +432,7 @@ impl Report {
         let with_triangles = self.items.iter().any(|it| it.triangles.is_some());
         let with_ops = self.items.iter().any(|it| it.operations.is_some());
         let with_check = self.items.iter().any(|it| it.same_as_pointwise.is_some());
+        let with_rate = self.items.iter().any(|it| it.rate.is_some());
         let mut out = String::new();
         let _ = writeln!(out, "{}", self.description);
         let mut header = format!(
@@ -382,6 +447,9 @@ impl Report {
         }
         if with_check {
             header.push_str(" = pointwise");
+        }
+        if with_rate {
+            header.push_str(&format!(" {:>17}", "rate (median)"));
         }
         let _ = writeln!(out, "{}", header.trim_end());
         for it in &self.items {
@@ -419,6 +487,14 @@ impl Report {
                     Some(false) => " NO",
                     None => " -",
                 });
+            }
+            if with_rate {
+                match (it.rate, it.median_rate()) {
+                    (Some(r), Some(v)) => {
+                        line.push_str(&format!(" {v:>9.2} {:<7}", r.unit.symbol()));
+                    }
+                    _ => line.push_str(&format!(" {:>17}", "-")),
+                }
             }
             let _ = writeln!(out, "{}", line.trim_end());
         }

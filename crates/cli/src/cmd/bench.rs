@@ -6,7 +6,7 @@
 use std::path::PathBuf;
 
 use anyhow::{Context, anyhow};
-use volmorph_bench::{BenchError, Report, ffd, frep, handles, isosurface, scene, warp};
+use volmorph_bench::{BenchError, Report, ffd, frep, handles, isosurface, roofline, scene, warp};
 
 use crate::{args, progress};
 
@@ -45,6 +45,12 @@ pub enum Command {
     /// drag on the engines directly, and the scene's overhead (target 1 ms).
     #[command(after_help = "Example:\n  volmorph bench scene --size 128 --repeat 9")]
     Scene(SceneArgs),
+    /// Measure this machine's roofs, on one thread and on all: memory bandwidth (read, copy
+    /// and STREAM triad over arrays far beyond the cache) and floating-point issue rate
+    /// (fused multiply-add in f64 and f32, multiply then add in f64, the roof of bit-exact
+    /// kernels). docs/performance.md bounds every hot path by these figures.
+    #[command(after_help = "Example:\n  volmorph bench roofline --repeat 5 --megabytes 256")]
+    Roofline(RooflineArgs),
 }
 
 /// Arguments of `volmorph bench warp`.
@@ -163,6 +169,20 @@ pub struct SceneArgs {
     pub json: bool,
 }
 
+/// Arguments of `volmorph bench roofline`.
+#[derive(Debug, clap::Args)]
+pub struct RooflineArgs {
+    /// Size of each of the three bandwidth arrays, in MiB (64 to 4096).
+    #[arg(long, default_value_t = roofline::DEFAULT_MEGABYTES)]
+    pub megabytes: usize,
+    /// Timed runs per probe.
+    #[arg(long, default_value_t = 5)]
+    pub repeat: usize,
+    /// Print the results as JSON instead of a table.
+    #[arg(long)]
+    pub json: bool,
+}
+
 /// Run a bench subcommand.
 pub fn run(cmd: &Command) -> anyhow::Result<()> {
     let pb = progress::spinner("setting up");
@@ -224,6 +244,16 @@ pub fn run(cmd: &Command) -> anyhow::Result<()> {
                 &scene::SceneConfig {
                     size: a.size,
                     lattice: a.lattice,
+                    repeat: a.repeat,
+                },
+                &mut progress,
+            ),
+            a.json,
+        ),
+        Command::Roofline(a) => (
+            roofline::run(
+                &roofline::RooflineConfig {
+                    megabytes: a.megabytes,
                     repeat: a.repeat,
                 },
                 &mut progress,
