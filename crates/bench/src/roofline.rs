@@ -332,31 +332,51 @@ pub fn measure(
     drop(arrays);
 
     let iters = FLOP_ITERATIONS;
-    // (name, chains, one thread's loop): each issues 2 flops per chain and iteration.
-    let loops: [(&str, usize, &(dyn Fn() -> f64 + Sync)); 3] = [
-        ("f64 fused multiply-add", FMA_F64_CHAINS, &|| {
-            fma_f64(black_box(iters), black_box(0.999_999), black_box(1e-3))
-        }),
-        ("f32 fused multiply-add", FMA_F32_CHAINS, &|| {
-            f64::from(fma_f32(
-                black_box(iters),
-                black_box(0.999_9),
-                black_box(1e-3),
-            ))
-        }),
-        ("f64 multiply then add", MUL_ADD_F64_CHAINS, &|| {
-            mul_add_f64(black_box(iters), black_box(0.999_999), black_box(1e-3))
-        }),
-    ];
     for &n in counts {
         let label = threads_label(n);
-        for (name, chains, f) in loops {
-            let name = format!("{name}, {label}");
-            progress(&name);
-            let t = times(config.repeat, || on_threads(n, f));
-            let flops = (2 * chains * iters * n) as f64;
-            items.push(rate_item(name, t, flops, false));
-        }
+        progress(&format!("f64 fused multiply-add, {label}"));
+        let t = times(config.repeat, || {
+            on_threads(n, &|| {
+                fma_f64(black_box(iters), black_box(0.999_999), black_box(1e-3))
+            })
+        });
+        let flops = (2 * FMA_F64_CHAINS * iters * n) as f64;
+        items.push(rate_item(
+            format!("f64 fused multiply-add, {label}"),
+            t,
+            flops,
+            false,
+        ));
+        progress(&format!("f32 fused multiply-add, {label}"));
+        let t = times(config.repeat, || {
+            on_threads(n, &|| {
+                f64::from(fma_f32(
+                    black_box(iters),
+                    black_box(0.999_9),
+                    black_box(1e-3),
+                ))
+            })
+        });
+        let flops = (2 * FMA_F32_CHAINS * iters * n) as f64;
+        items.push(rate_item(
+            format!("f32 fused multiply-add, {label}"),
+            t,
+            flops,
+            false,
+        ));
+        progress(&format!("f64 multiply then add, {label}"));
+        let t = times(config.repeat, || {
+            on_threads(n, &|| {
+                mul_add_f64(black_box(iters), black_box(0.999_999), black_box(1e-3))
+            })
+        });
+        let flops = (2 * MUL_ADD_F64_CHAINS * iters * n) as f64;
+        items.push(rate_item(
+            format!("f64 multiply then add, {label}"),
+            t,
+            flops,
+            false,
+        ));
     }
 
     let all = threads_label(*counts.last().unwrap_or(&1));
