@@ -234,7 +234,11 @@ pub fn prepare_polygons(mesh: &Mesh) -> Result<PreparedPolygons, FfdError> {
         } else {
             out.report.triangulated_nonplanar.push(f);
         }
-        ear_clip(&p, nh, &mut tris).map_err(|message| FfdError::BadFace { face: f, message })?;
+        let mut clipped = ear_clip(&p, nh, &mut tris);
+        if clipped.is_err() && !planar {
+            clipped = triangulate_folded(&p, n, &mut tris);
+        }
+        clipped.map_err(|message| FfdError::BadFace { face: f, message })?;
         for t in &tris {
             let tri = [
                 ring[t[0] as usize],
@@ -294,6 +298,47 @@ fn is_convex(p: &[DVec3], n: DVec3) -> bool {
     }
     // A star-shaped winding turns more than once around.
     turned < 2.0 * std::f64::consts::PI + 1e-6
+}
+
+/// Triangulates a non-planar polygon whose outline, seen along its Newell normal `n`, crosses
+/// itself (a strongly folded face). The outline is tried in the coordinate planes, the one with
+/// the largest Newell component first (the projection's signed area is that component, so the
+/// axis is signed to keep the outline counter-clockwise); a quad that is folded in every view
+/// is split along the diagonal whose two triangles bend least against each other (largest dot
+/// of their unit normals; Blender's "beauty" rule for quads).
+///
+/// # Errors
+///
+/// The message of [`ear_clip`] when no view gives a simple outline and the polygon has more than
+/// four corners.
+fn triangulate_folded(p: &[DVec3], n: DVec3, tris: &mut Vec<[u32; 3]>) -> Result<(), String> {
+    let mut axes = [0usize, 1, 2];
+    axes.sort_by(|&a, &b| n[b].abs().total_cmp(&n[a].abs()));
+    let mut last = Err(String::new());
+    for a in axes {
+        if n[a] == 0.0 {
+            continue;
+        }
+        let mut axis = DVec3::ZERO;
+        axis[a] = n[a].signum();
+        last = ear_clip(p, axis, tris);
+        if last.is_ok() {
+            return last;
+        }
+    }
+    if p.len() == 4 {
+        let unit = |a: DVec3, b: DVec3, c: DVec3| (b - a).cross(c - a).normalize_or_zero();
+        let bend02 = unit(p[0], p[1], p[2]).dot(unit(p[0], p[2], p[3]));
+        let bend13 = unit(p[1], p[2], p[3]).dot(unit(p[1], p[3], p[0]));
+        tris.clear();
+        if bend02 >= bend13 {
+            tris.extend([[0, 1, 2], [0, 2, 3]]);
+        } else {
+            tris.extend([[1, 2, 3], [1, 3, 0]]);
+        }
+        return Ok(());
+    }
+    last
 }
 
 /// Ear clipping of a simple polygon (counter-clockwise about `n`) into triangles of local
@@ -404,5 +449,27 @@ mod tests {
         let prep = prepare_polygons(&mesh).unwrap();
         assert_eq!(prep.report.triangulated_nonplanar, vec![0]);
         assert_eq!(prep.len(), 2);
+    }
+
+    proptest::proptest! {
+        /// Any quad with a nonzero vector area, however folded, splits into two triangles
+        /// that use all four corners once and share one diagonal.
+        #[test]
+        fn folded_quads_always_split(c in proptest::collection::vec(-1.0f64..1.0, 12)) {
+            let p: Vec<DVec3> = c.chunks(3).map(|v| DVec3::new(v[0], v[1], v[2])).collect();
+            let n = newell(p.iter().copied());
+            proptest::prop_assume!(n.length() > 1e-6);
+            let mut tris = Vec::new();
+            triangulate_folded(&p, n, &mut tris).unwrap();
+            proptest::prop_assert_eq!(tris.len(), 2);
+            let mut seen = [0; 4];
+            for t in &tris {
+                for &i in t {
+                    seen[i as usize] += 1;
+                }
+            }
+            proptest::prop_assert_eq!(seen.iter().sum::<i32>(), 6);
+            proptest::prop_assert!(seen.iter().all(|&k| k == 1 || k == 2));
+        }
     }
 }

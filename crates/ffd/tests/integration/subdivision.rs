@@ -198,3 +198,26 @@ fn ffd_adaptive_tiny_tolerance_runs_unbounded() {
     let stop = Counter::cancel_after(1);
     assert!(adaptive_ffd_with(&mesh, &bend, 1e-6, 12, &stop).is_err());
 }
+
+/// Issue: a strongly folded (non-planar) quad whose outline, seen along its Newell normal,
+/// crosses itself was refused with "polygon cannot be triangulated (its outline
+/// self-intersects)", although a quad always splits into two triangles along a diagonal. The
+/// case proptest found in CI: vertices snapped to knot planes in `z` fold face 0 over itself.
+#[test]
+fn folded_nonplanar_quad_is_refused_as_self_intersecting() {
+    let mut vals = vec![0.0; 40];
+    vals[0] = 0.697_517_405_299_531_1;
+    vals[2] = 0.342_399_838_958_764_97;
+    vals[12] = 0.572_324_890_320_407;
+    let mut snap = vec![false; 13];
+    for s in [0, 2, 9, 12] {
+        snap[s] = true;
+    }
+    let (deg, extra) = (1, 3);
+    let counts = [deg + 1 + extra, deg + 2 + extra, deg + 1 + (extra + 1) % 4];
+    let planes: Vec<f64> = (0..=counts[0] - deg)
+        .map(|i| i as f64 / (counts[0] - deg) as f64)
+        .collect();
+    let mesh = grid_mesh(4, &vals, &snap, &planes);
+    check(&mesh, [deg, deg, deg], counts);
+}
