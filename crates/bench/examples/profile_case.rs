@@ -7,12 +7,32 @@
 //! valgrind --tool=callgrind target/profiling/examples/profile_case pullback_trilinear 1 256
 //! ```
 //!
-//! Arguments: `ID [RUNS [SIZE [EDIT_SIZE]]]` (defaults 1, 256, 128); ids as in
-//! `crates/bench/benches/warp.rs`, and `scene_drag`, `engine_drag` of the scene suite.
+//! Arguments: `ID [RUNS [SIZE [EDIT_SIZE]]]` (defaults 1, 256, 128); ids of the warp suite
+//! (`crates/bench/benches/warp.rs`), `scene_drag` and `engine_drag` of the scene suite, the
+//! isosurface suite's (at `SIZE`), and the handle (`tps_…`, `mls…`) and FFD (`accurate_…`,
+//! `vertex_ffd…`) suites' at their default settings.
 
+use volmorph_bench::ffd::{FfdConfig, FfdInputs};
+use volmorph_bench::handles::{HandlesConfig, HandlesInputs};
+use volmorph_bench::isosurface::{IsosurfaceConfig, IsosurfaceInputs};
 use volmorph_bench::scene::{SceneConfig, SceneInputs};
 use volmorph_bench::warp::{EditInputs, WarpConfig, WarpInputs};
 use volmorph_bench::{BenchError, Case};
+
+/// Ids of the isosurface suite (the others are told apart by prefix).
+const ISOSURFACE: [&str; 3] = [
+    "marching_cubes",
+    "dual_contouring",
+    "dual_contouring_qef_everywhere",
+];
+
+/// The case of `cases` with id `id`.
+fn find<'a>(cases: impl IntoIterator<Item = Case<'a>>, id: &str) -> Result<Case<'a>, BenchError> {
+    cases
+        .into_iter()
+        .find(|c| c.id() == id)
+        .ok_or_else(|| BenchError::check("profile_case", format!("no case {id}")))
+}
 
 fn main() -> Result<(), BenchError> {
     let args: Vec<String> = std::env::args().skip(1).collect();
@@ -64,20 +84,35 @@ fn main() -> Result<(), BenchError> {
             ..SceneConfig::default()
         };
         let inputs = SceneInputs::new(&config)?;
-        let case = inputs.cases()?.into_iter().find(|c| c.id() == id);
-        go(case.ok_or_else(|| BenchError::check("profile_case", format!("no case {id}")))?)?;
+        go(find(inputs.cases()?, &id)?)?;
     } else if edits.contains(&id.as_str()) {
         let inputs = EditInputs::new(&config)?;
         let mut cases = inputs.cases()?;
         cases.extend(inputs.extra_cases());
-        let case = cases.into_iter().find(|c| c.id() == id);
-        go(case.ok_or_else(|| BenchError::check("profile_case", format!("no case {id}")))?)?;
+        go(find(cases, &id)?)?;
+    } else if ISOSURFACE.contains(&id.as_str()) {
+        let inputs = IsosurfaceInputs::new(&IsosurfaceConfig {
+            size: config.size,
+            repeat: 1,
+        })?;
+        let mut cases = inputs.cases();
+        cases.extend(inputs.extra_cases());
+        go(find(cases, &id)?)?;
+    } else if id.starts_with("tps_") || id.starts_with("mls") {
+        let inputs = HandlesInputs::new(&HandlesConfig::default())?;
+        let mut cases = inputs.cases()?;
+        cases.extend(inputs.extra_cases()?);
+        go(find(cases, &id)?)?;
+    } else if id.starts_with("accurate_") || id.starts_with("vertex_ffd") {
+        let inputs = FfdInputs::new(&FfdConfig::default())?;
+        let mut cases = inputs.cases();
+        cases.extend(inputs.extra_cases()?);
+        go(find(cases, &id)?)?;
     } else {
         let inputs = WarpInputs::new(&config)?;
         let mut cases = inputs.cases();
         cases.extend(inputs.extra_cases());
-        let case = cases.into_iter().find(|c| c.id() == id);
-        go(case.ok_or_else(|| BenchError::check("profile_case", format!("no case {id}")))?)?;
+        go(find(cases, &id)?)?;
     }
     times.sort_by(f64::total_cmp);
     println!(
