@@ -3,6 +3,7 @@
 //! * [`Rng`] — the one seeded pseudo-random generator of the test suites and benches.
 //! * [`conformance`] — the suite every space map runs ([`space_map_conformance!`]) and the
 //!   extra checks of maps linear in their parameters ([`linear_map_conformance!`]).
+//! * [`fingerprint`] — FNV-1a over output bits, for tests pinning rewritten kernels.
 //! * [`progress`] — the contract of every `_with(…, progress)` function: steps reach the
 //!   announced totals, cancellation returns an error carrying `Cancelled`.
 //!
@@ -11,6 +12,7 @@
 //! depends on it.
 
 pub mod conformance;
+pub mod fingerprint;
 pub mod progress;
 mod rng;
 

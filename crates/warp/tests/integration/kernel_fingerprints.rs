@@ -18,6 +18,7 @@ use glam::DVec3;
 use volmorph_deform::SpaceMap;
 use volmorph_lattice::BSplineLattice;
 use volmorph_testkit::Rng;
+use volmorph_testkit::fingerprint::fnv1a as fnv;
 use volmorph_volume::sample::Interpolation;
 use volmorph_volume::{Geometry, Volume};
 use volmorph_warp::incremental::IncrementalPushForward;
@@ -26,17 +27,6 @@ use volmorph_warp::pushforward::{
     AntialiasOptions, push_forward_antialiased, push_forward_antialiased_f32,
 };
 
-/// FNV-1a over a stream of 64-bit words.
-fn fnv(words: impl Iterator<Item = u64>) -> u64 {
-    let mut h: u64 = 0xcbf2_9ce4_8422_2325;
-    for w in words {
-        for b in w.to_le_bytes() {
-            h ^= u64::from(b);
-            h = h.wrapping_mul(0x0000_0100_0000_01b3);
-        }
-    }
-    h
-}
 
 fn grid() -> Geometry {
     Geometry::new([40, 36, 32])
