@@ -70,6 +70,7 @@ mod dual;
 mod error;
 mod marching;
 mod qef;
+mod scan;
 mod table;
 
 pub use dual::{

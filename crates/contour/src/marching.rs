@@ -6,6 +6,7 @@ use volmorph_mesh::Mesh;
 use volmorph_volume::{AnyVolume, Volume, Voxel, with_volume};
 
 use crate::ContourError;
+use crate::scan::{Classes, for_each_bit};
 use crate::table::{CASES, corner_offset, edge_corners};
 
 /// Smallest distance, as a fraction of the edge, between a surface vertex and either end of
@@ -87,7 +88,7 @@ pub fn marching_cubes<T: Voxel>(
 }
 
 /// [`marching_cubes`] reporting to `progress`: one stage of `2·nz − 1` steps, one per grid
-/// plane classified and counted, then one per cell layer meshed, and stopping between
+/// plane classified, then one per cell layer meshed, and stopping between
 /// planes or layers when cancelled. The result equals [`marching_cubes`]'s bit for bit.
 ///
 /// # Errors
@@ -140,7 +141,7 @@ pub(crate) struct Field<'a, T> {
     pub(crate) nx: usize,
     pub(crate) ny: usize,
     pub(crate) nz: usize,
-    level: f64,
+    pub(crate) level: f64,
     pub(crate) below: bool,
     pub(crate) origin: DVec3,
     /// Index step → physical step.
@@ -375,74 +376,71 @@ impl<'a, T: Voxel> Field<'a, T> {
             };
         }
     }
+}
 
-    /// Number of vertices owned by plane `k` (flags `lo`, rows `lo_rows`): crossed x and y
-    /// edges in the plane, and crossed z edges to plane `k + 1` (flags `hi`, if any).
-    fn plane_count(&self, lo: &[u8], lo_rows: &[u8], hi: Option<(&[u8], &[u8])>) -> usize {
-        let nx = self.nx;
-        let differ = |a: &[u8], b: &[u8]| -> usize {
+/// The marching-cubes scan over the packed classification ([`Classes`]): counting, vertex
+/// numbering and cell meshing visit crossed edges and non-uniform cells only, in scan order
+/// (x fastest, then y, then z), as the per-sample scan did.
+impl<T: Voxel> Field<'_, T> {
+    /// Number of vertices owned by plane `k`: crossed x and y edges in the plane, and crossed
+    /// z edges to plane `k + 1` (if any).
+    fn plane_count(&self, c: &Classes, k: usize) -> usize {
+        let mut n = 0;
+        let ones = |a: &[u64], b: &[u64]| -> usize {
             a.iter()
                 .zip(b)
-                .map(|(&x, &y)| u32::from(x ^ y))
-                .sum::<u32>() as usize
+                .map(|(x, y)| (x ^ y).count_ones() as usize)
+                .sum()
         };
-        let mut n = 0;
-        for (j, row) in lo.chunks_exact(nx).enumerate() {
-            if lo_rows[j] == MIXED {
-                n += differ(&row[..nx - 1], &row[1..]);
+        for j in 0..self.ny {
+            let row = c.row(k, j);
+            if c.summary(k, j) == MIXED {
+                n += (0..c.wpr())
+                    .map(|w| c.x_crossings(row, w).count_ones() as usize)
+                    .sum::<usize>();
             }
-            if j + 1 < self.ny && !uniform_alike(lo_rows[j], lo_rows[j + 1]) {
-                n += differ(row, &lo[(j + 1) * nx..(j + 2) * nx]);
+            if j + 1 < self.ny && !uniform_alike(c.summary(k, j), c.summary(k, j + 1)) {
+                n += ones(row, c.row(k, j + 1));
             }
-            if let Some((hi, hi_rows)) = hi
-                && !uniform_alike(lo_rows[j], hi_rows[j])
-            {
-                n += differ(row, &hi[j * nx..(j + 1) * nx]);
+            if k + 1 < self.nz && !uniform_alike(c.summary(k, j), c.summary(k + 1, j)) {
+                n += ones(row, c.row(k + 1, j));
             }
         }
         n
     }
 
-    /// Fill the x and y edge tables of plane `k` (classified in `flags`, `rows`), numbering
-    /// crossings from `first` in scan order (x edges row by row, then y edges). Writes the
-    /// vertices when `sink` is given (the plane is owned). Entries of uncrossed edges are left
-    /// as they were: the case table never refers to them. Returns the number of crossings.
-    #[allow(clippy::too_many_arguments)]
+    /// Fill the x and y edge tables of plane `k`, numbering crossings from `first` in scan
+    /// order (x edges row by row, then y edges). Writes the vertices when `sink` is given
+    /// (the plane is owned). Entries of uncrossed edges are left as they were: the case table
+    /// never refers to them. Returns the number of crossings.
     fn fill_xy(
         &self,
+        c: &Classes,
         k: usize,
         first: usize,
-        ex: &mut [u32],
-        ey: &mut [u32],
-        flags: &[u8],
-        rows: &[u8],
+        (ex, ey): (&mut [u32], &mut [u32]),
         mut sink: Option<&mut Sink<'_>>,
     ) -> usize {
         let (nx, ny) = (self.nx, self.ny);
         let base = k * nx * ny;
         let mut next = first;
-        for j in (0..ny).filter(|&j| rows[j] == MIXED) {
-            for i in 0..nx - 1 {
-                let l = j * nx + i;
-                if flags[l] != flags[l + 1] {
-                    if let Some(s) = sink.as_deref_mut() {
-                        s.put(next, self.vertex([i, j, k], base + l, 0));
-                    }
-                    ex[l] = next as u32;
-                    next += 1;
-                }
+        let mut put = |l: usize, i: usize, j: usize, axis: usize, table: &mut [u32]| {
+            if let Some(s) = sink.as_deref_mut() {
+                s.put(next, self.vertex([i, j, k], base + l, axis));
+            }
+            table[l] = next as u32;
+            next += 1;
+        };
+        for j in (0..ny).filter(|&j| c.summary(k, j) == MIXED) {
+            let row = c.row(k, j);
+            for w in 0..c.wpr() {
+                for_each_bit(c.x_crossings(row, w), w, |i| put(j * nx + i, i, j, 0, ex));
             }
         }
-        for j in (0..ny - 1).filter(|&j| !uniform_alike(rows[j], rows[j + 1])) {
-            for i in 0..nx {
-                let l = j * nx + i;
-                if flags[l] != flags[l + nx] {
-                    if let Some(s) = sink.as_deref_mut() {
-                        s.put(next, self.vertex([i, j, k], base + l, 1));
-                    }
-                    ey[l] = next as u32;
-                    next += 1;
-                }
+        for j in (0..ny - 1).filter(|&j| !uniform_alike(c.summary(k, j), c.summary(k, j + 1))) {
+            let (r0, r1) = (c.row(k, j), c.row(k, j + 1));
+            for w in 0..c.wpr() {
+                for_each_bit(r0[w] ^ r1[w], w, |i| put(j * nx + i, i, j, 1, ey));
             }
         }
         next - first
@@ -450,26 +448,29 @@ impl<'a, T: Voxel> Field<'a, T> {
 
     /// Fill the z edge table between planes `k` and `k + 1`, numbering from `first` and
     /// writing the vertices.
-    fn fill_z(&self, k: usize, first: usize, ez: &mut [u32], p: &Planes, sink: &mut Sink<'_>) {
+    fn fill_z(&self, c: &Classes, k: usize, first: usize, ez: &mut [u32], sink: &mut Sink<'_>) {
         let nx = self.nx;
         let base = k * nx * self.ny;
         let mut next = first;
-        for j in (0..self.ny).filter(|&j| !uniform_alike(p.brows[j], p.trows[j])) {
-            for i in 0..nx {
-                let l = j * nx + i;
-                if p.bin[l] != p.tin[l] {
+        for j in (0..self.ny).filter(|&j| !uniform_alike(c.summary(k, j), c.summary(k + 1, j))) {
+            let (lo, hi) = (c.row(k, j), c.row(k + 1, j));
+            for w in 0..c.wpr() {
+                for_each_bit(lo[w] ^ hi[w], w, |i| {
+                    let l = j * nx + i;
                     sink.put(next, self.vertex([i, j, k], base + l, 2));
                     ez[l] = next as u32;
                     next += 1;
-                }
+                });
             }
         }
     }
 
     /// Process the cell layers `layers` (cells between planes `k` and `k + 1`), writing the
     /// vertices of the planes this slab owns and returning the triangles.
+    #[allow(clippy::too_many_arguments)]
     fn slab(
         &self,
+        c: &Classes,
         layers: std::ops::Range<usize>,
         owns_top: bool,
         offsets: &[usize],
@@ -484,104 +485,96 @@ impl<'a, T: Voxel> Field<'a, T> {
             tx: vec![NONE; plane],
             ty: vec![NONE; plane],
             z: vec![NONE; plane],
-            bin: vec![0; plane],
-            tin: vec![0; plane],
-            brows: vec![0; self.ny],
-            trows: vec![0; self.ny],
         };
         let mut triangles = Vec::new();
         let k0 = layers.start;
-        self.classify(k0, &mut p.bin, &mut p.brows);
-        let mut xy_count = self.fill_xy(
-            k0,
-            offsets[k0],
-            &mut p.bx,
-            &mut p.by,
-            &p.bin,
-            &p.brows,
-            Some(&mut *sink),
-        );
+        let mut xy_count =
+            self.fill_xy(c, k0, offsets[k0], (&mut p.bx, &mut p.by), Some(&mut *sink));
         for k in layers.clone() {
             if progress.is_cancelled() {
                 break;
             }
             let top = k + 1;
             let owned = top < layers.end || owns_top;
-            self.classify(top, &mut p.tin, &mut p.trows);
             let top_count = self.fill_xy(
+                c,
                 top,
                 offsets[top],
-                &mut p.tx,
-                &mut p.ty,
-                &p.tin,
-                &p.trows,
+                (&mut p.tx, &mut p.ty),
                 if owned { Some(&mut *sink) } else { None },
             );
-            let mut z = std::mem::take(&mut p.z);
-            self.fill_z(k, offsets[k] + xy_count, &mut z, &p, sink);
-            p.z = z;
-            self.cells(&p, lookup, &mut triangles);
+            self.fill_z(c, k, offsets[k] + xy_count, &mut p.z, sink);
+            self.cells(c, k, &p, lookup, &mut triangles);
             std::mem::swap(&mut p.bx, &mut p.tx);
             std::mem::swap(&mut p.by, &mut p.ty);
-            std::mem::swap(&mut p.bin, &mut p.tin);
-            std::mem::swap(&mut p.brows, &mut p.trows);
             xy_count = top_count;
             progress.advance(1);
         }
         triangles
     }
 
-    /// Triangles of one cell layer whose edge tables are in `p`.
-    fn cells(&self, p: &Planes, lookup: &EdgeLookup, out: &mut Vec<[u32; 3]>) {
+    /// Triangles of cell layer `k` (between planes `k` and `k + 1`), whose edge tables are
+    /// in `p`.
+    fn cells(
+        &self,
+        c: &Classes,
+        k: usize,
+        p: &Planes,
+        lookup: &EdgeLookup,
+        out: &mut Vec<[u32; 3]>,
+    ) {
         let nx = self.nx;
         let tables: [&[u32]; 5] = [&p.bx, &p.by, &p.tx, &p.ty, &p.z];
         for j in 0..self.ny - 1 {
-            let r = [p.brows[j], p.brows[j + 1], p.trows[j], p.trows[j + 1]];
+            let r = [
+                c.summary(k, j),
+                c.summary(k, j + 1),
+                c.summary(k + 1, j),
+                c.summary(k + 1, j + 1),
+            ];
             if r[0] != MIXED && r.iter().all(|&x| x == r[0]) {
                 continue; // the whole row of cells is inside or outside
             }
+            let rows = [
+                c.row(k, j),
+                c.row(k, j + 1),
+                c.row(k + 1, j),
+                c.row(k + 1, j + 1),
+            ];
+            let bit = |row: &[u64], i: usize| ((row[i / 64] >> (i % 64)) & 1) as u8;
+            // Corner bits: x = 0 side in bits 0, 2, 4, 6; the x = 1 side shifted by one.
+            let column = |i: usize| {
+                bit(rows[0], i)
+                    | (bit(rows[1], i) << 2)
+                    | (bit(rows[2], i) << 4)
+                    | (bit(rows[3], i) << 6)
+            };
             let row = j * nx;
-            let b0 = &p.bin[row..row + nx];
-            let b1 = &p.bin[row + nx..row + 2 * nx];
-            let t0 = &p.tin[row..row + nx];
-            let t1 = &p.tin[row + nx..row + 2 * nx];
-            // Corner bits: x = 0 side in bits 0, 2, 4, 6; the x = 1 side is the next column's
-            // pattern shifted by one.
-            let column = |i: usize| b0[i] | (b1[i] << 2) | (t0[i] << 4) | (t1[i] << 6);
-            let mut left = column(0);
-            for i in 0..nx - 1 {
-                let right = column(i + 1);
-                let case = left | (right << 1);
-                left = right;
-                if case == 0 || case == 255 {
-                    continue;
-                }
-                let o = row + i;
-                for tri in CASES[usize::from(case)].triangles() {
-                    let v = tri.map(|e| {
-                        let e = usize::from(e);
-                        tables[lookup.slots[e]][o + lookup.deltas[e]]
-                    });
-                    out.push(if lookup.flip { [v[0], v[2], v[1]] } else { v });
-                }
+            for w in 0..c.wpr() {
+                for_each_bit(c.active_cells(rows, w), w, |i| {
+                    let case = column(i) | (column(i + 1) << 1);
+                    let o = row + i;
+                    for tri in CASES[usize::from(case)].triangles() {
+                        let v = tri.map(|e| {
+                            let e = usize::from(e);
+                            tables[lookup.slots[e]][o + lookup.deltas[e]]
+                        });
+                        out.push(if lookup.flip { [v[0], v[2], v[1]] } else { v });
+                    }
+                });
             }
         }
     }
 }
 
 /// Scratch tables of one slab: edge → vertex index for the x and y edges of the bottom and
-/// top planes of the current cell layer and for the z edges between them, plus the inside
-/// flags and row summaries of both planes.
+/// top planes of the current cell layer and for the z edges between them.
 struct Planes {
     bx: Vec<u32>,
     by: Vec<u32>,
     tx: Vec<u32>,
     ty: Vec<u32>,
     z: Vec<u32>,
-    bin: Vec<u8>,
-    tin: Vec<u8>,
-    brows: Vec<u8>,
-    trows: Vec<u8>,
 }
 
 /// Where vertices of one slab go: the slab's part of the global arrays, starting at global
@@ -653,34 +646,13 @@ fn extract<T: Voxel>(
         &format!("marching cubes on {}×{}×{}", field.nx, field.ny, nz),
         (2 * nz - 1) as u64,
     );
-    // Vertices owned by each plane, then their global numbering.
-    let (plane, ny) = (field.nx * field.ny, field.ny);
+    // Every sample classified once (one step per plane), then the vertices owned by each
+    // plane and their global numbering.
+    let classes = Classes::new(field, progress)?;
+    progress.check()?;
     let counts: Vec<usize> = (0..nz)
         .into_par_iter()
-        .map_init(
-            || {
-                (
-                    vec![0u8; plane],
-                    vec![0u8; ny],
-                    vec![0u8; plane],
-                    vec![0u8; ny],
-                )
-            },
-            |(lo, lo_rows, hi, hi_rows), k| {
-                if progress.is_cancelled() {
-                    return 0;
-                }
-                field.classify(k, lo, lo_rows);
-                let n = if k + 1 < nz {
-                    field.classify(k + 1, hi, hi_rows);
-                    field.plane_count(lo, lo_rows, Some((hi, hi_rows)))
-                } else {
-                    field.plane_count(lo, lo_rows, None)
-                };
-                progress.advance(1);
-                n
-            },
-        )
+        .map(|k| field.plane_count(&classes, k))
         .collect();
     progress.check()?;
     let mut offsets = Vec::with_capacity(nz + 1);
@@ -731,7 +703,9 @@ fn extract<T: Voxel>(
         .into_par_iter()
         .filter(|(r, _, _)| !r.is_empty())
         .map(|(range, last, mut sink)| {
-            field.slab(range, last, &offsets, &mut sink, &lookup, progress)
+            field.slab(
+                &classes, range, last, &offsets, &mut sink, &lookup, progress,
+            )
         })
         .collect();
     progress.check()?;

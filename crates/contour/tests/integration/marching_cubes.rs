@@ -479,7 +479,10 @@ fn surface_bits(s: &IsoSurface) -> u64 {
                     .chain(&s.normals)
                     .flat_map(|p| p.to_array().map(f64::to_bits)),
             )
-            .chain(m.faces().flat_map(|f| f.iter().map(|&i| u64::from(i)).collect::<Vec<_>>())),
+            .chain(
+                m.faces()
+                    .flat_map(|f| f.iter().map(|&i| u64::from(i)).collect::<Vec<_>>()),
+            ),
     )
 }
 
@@ -495,7 +498,9 @@ fn marching_cubes_bits_unchanged() {
     let sphere = phantom::signed_distance(Phantom::Sphere, [64, 64, 64]).unwrap();
     got.push(surface_bits(&marching_cubes(&sphere, 0.0, &SDF).unwrap()));
     let teapot = phantom::density(Phantom::Teapot, [70, 66, 40]).unwrap();
-    got.push(surface_bits(&marching_cubes(&teapot, 127.0, &DENSITY).unwrap()));
+    got.push(surface_bits(
+        &marching_cubes(&teapot, 127.0, &DENSITY).unwrap(),
+    ));
     // Random field on an odd-sized, mirrored, oblique grid; a quarter of the samples exactly
     // at the level, a few NaN, whole rows constant.
     let dims = [131, 67, 33];
@@ -529,8 +534,12 @@ fn marching_cubes_bits_unchanged() {
         .with_direction(direction);
     let random = Volume::new(geometry, data).unwrap();
     got.push(surface_bits(&marching_cubes(&random, 0.0, &SDF).unwrap()));
-    got.push(surface_bits(&marching_cubes(&random, 0.25, &DENSITY).unwrap()));
-    let small: Vec<f32> = (0..3 * 4 * 5).map(|_| rng.range(-1.0, 1.0) as f32).collect();
+    got.push(surface_bits(
+        &marching_cubes(&random, 0.25, &DENSITY).unwrap(),
+    ));
+    let small: Vec<f32> = (0..3 * 4 * 5)
+        .map(|_| rng.range(-1.0, 1.0) as f32)
+        .collect();
     let small = Volume::new(Geometry::new([3, 4, 5]), small).unwrap();
     got.push(surface_bits(&marching_cubes(&small, 0.0, &SDF).unwrap()));
     let expected: [u64; 5] = [
