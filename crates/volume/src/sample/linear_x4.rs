@@ -243,7 +243,10 @@ mod tests {
                 s.sample_index_serial_by(&points, &mut got16, path).unwrap();
                 for (n, w) in want.iter().enumerate() {
                     let q = points[n];
-                    assert!(same(got32[n].into(), f64::from(*w as f32)), "{what} at {q:?}");
+                    assert!(
+                        same(got32[n].into(), f64::from(*w as f32)),
+                        "{what} at {q:?}"
+                    );
                     assert_eq!(got16[n], i16::from_f64(*w), "{what} at {q:?}");
                 }
             }
@@ -271,7 +274,16 @@ mod tests {
             0.1,
         ];
         check::<f32>(&floats);
-        check::<f64>(&[0.0, -0.0, 1e300, -1e-310, f64::NAN, f64::NEG_INFINITY, 0.1, 7.0]);
+        check::<f64>(&[
+            0.0,
+            -0.0,
+            1e300,
+            -1e-310,
+            f64::NAN,
+            f64::NEG_INFINITY,
+            0.1,
+            7.0,
+        ]);
     }
 
     /// Where the CPU has AVX2 the vector kernel really runs (and declines otherwise).
