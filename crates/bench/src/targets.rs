@@ -4,9 +4,11 @@
 
 use std::time::Duration;
 
-/// Issue 3: pull-back warp of a 256³ `f32` volume through a moved 9×9×9 cubic lattice with
-/// trilinear interpolation (SimpleITK's `Resample` takes 10.2 s on the same work).
-pub const ISSUE_3_PULLBACK_TRILINEAR: Duration = Duration::from_millis(250);
+/// Issue 22: pull-back warp of a 256³ `f32` volume through a moved 9×9×9 cubic lattice with
+/// trilinear interpolation (SimpleITK's `Resample` takes 10.2 s on the same work). It
+/// replaces issue 3's target of 250 ms for the same case (`ISSUE_3_PULLBACK_TRILINEAR`,
+/// measured at about 259–340 ms idle before issue 22): a case shows one target, the tighter.
+pub const ISSUE_22_PULLBACK_TRILINEAR: Duration = Duration::from_millis(60);
 
 /// Issue 3: antialiased push-forward of a 256³ `u8` volume through a moved 9×9×9 lattice.
 pub const ISSUE_3_PUSHFORWARD_ANTIALIASED: Duration = Duration::from_millis(1000);

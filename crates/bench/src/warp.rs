@@ -23,8 +23,8 @@ use volmorph_warp::pushforward::{
 };
 
 use crate::targets::{
-    ISSUE_3_DRAG, ISSUE_3_INCREMENTAL_UPDATE, ISSUE_3_PULLBACK_TRILINEAR,
-    ISSUE_3_PUSHFORWARD_ANTIALIASED,
+    ISSUE_3_DRAG, ISSUE_3_INCREMENTAL_UPDATE, ISSUE_3_PUSHFORWARD_ANTIALIASED,
+    ISSUE_22_PULLBACK_TRILINEAR,
 };
 use crate::timing::{Case, Report, Sample, Unit, measure_all};
 use crate::{BenchError, MAX_SIZE, SEED, check_repeat};
@@ -158,7 +158,7 @@ impl WarpInputs {
                 "pullback_trilinear",
                 Interpolation::Linear,
             )
-            .with_target(at(ISSUE_3_PULLBACK_TRILINEAR)),
+            .with_target(at(ISSUE_22_PULLBACK_TRILINEAR)),
             self.pull_back(
                 "pull-back cubic B-spline (f32)",
                 "pullback_cubic",

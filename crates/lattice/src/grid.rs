@@ -30,6 +30,8 @@ use volmorph_deform::map::check_grid;
 
 mod adjoint;
 pub use adjoint::PointBasis;
+#[cfg(target_arch = "x86_64")]
+mod row_x4;
 
 /// Largest off-diagonal drift allowed for a grid to count as aligned with a lattice: over the
 /// whole grid, ignoring the cross terms may move a parameter by at most this many lattice
@@ -215,6 +217,21 @@ fn same_bits(a: &KnotVector, b: &KnotVector) -> bool {
             .iter()
             .zip(b.knots())
             .all(|(x, y)| x.to_bits() == y.to_bits())
+}
+
+/// Which loop evaluates the voxels of a row on the separable path: the cubic row loop in
+/// vector registers where the CPU allows it (`Vector`, see `row_x4`), or the portable loop
+/// (`Portable`, what other degrees and CPUs run). Both give the same bits.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+enum RowLoop {
+    /// The vector loop when it applies, the portable loop otherwise.
+    Vector,
+    /// The portable loop only.
+    #[cfg_attr(
+        not(test),
+        allow(dead_code, reason = "the tests force the portable loop")
+    )]
+    Portable,
 }
 
 /// Which dense evaluation scheme a [`LatticeGridPlan`] uses (see the [module docs](self)).
@@ -404,13 +421,19 @@ impl LatticeGridPlan {
         }
         let points = lattice.control_points();
         match &self.table {
-            None => self.apply_separable(&points, lattice.counts(), out),
+            None => self.apply_separable(&points, lattice.counts(), out, RowLoop::Vector),
             Some(t) => self.apply_table(t, &points, lattice.counts(), out),
         }
         Ok(())
     }
 
-    fn apply_separable(&self, pts: &[DVec3], counts: [usize; 3], out: &mut [DVec3]) {
+    fn apply_separable(
+        &self,
+        pts: &[DVec3],
+        counts: [usize; 3],
+        out: &mut [DVec3],
+        row_loop: RowLoop,
+    ) {
         let grid = &self.grid;
         let IndexBox {
             start: [x0, y0, z0],
@@ -426,9 +449,14 @@ impl LatticeGridPlan {
             (Some((f0, _)), Some((f1, _))) => (f0.min(f1), (f0.max(f1) + wx).min(cx)),
             _ => (0, 0),
         };
+        // The cubic row loop in vector registers where the CPU allows it (same bits).
+        #[cfg(target_arch = "x86_64")]
+        let vector = wx == 4 && row_loop == RowLoop::Vector && row_x4::available();
+        #[cfg(not(target_arch = "x86_64"))]
+        let _ = row_loop;
         out.par_chunks_mut(nx * ny).enumerate().for_each_init(
-            || vec![DVec3::ZERO; c_hi - c_lo],
-            |row_sum, (dk, slab)| {
+            || (vec![DVec3::ZERO; c_hi - c_lo], Vec::<[f64; 4]>::new()),
+            |(row_sum, _padded), (dk, slab)| {
                 let k = z0 + dk;
                 let zk = self.axes[2].at(k);
                 for (dj, row) in slab.chunks_exact_mut(nx).enumerate() {
@@ -461,6 +489,11 @@ impl LatticeGridPlan {
                         }
                     }
                     let inside = &mut row[lo..hi];
+                    #[cfg(target_arch = "x86_64")]
+                    if vector {
+                        row_x4::cubic_row(row_sum, _padded, &ax.firsts, c_lo, &ax.values, inside);
+                        continue;
+                    }
                     let firsts = ax.firsts.iter().map(|&f| f - c_lo);
                     if wx == 4 {
                         // Cubic: the general loop below unrolled (same sums, same order).
@@ -698,6 +731,69 @@ fn residue_classes(axis: &AxisPlan, g: usize, descending: bool) -> (Vec<u32>, Ve
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    /// The vector row loop gives the portable loop's bits: cubic lattices (moved at random,
+    /// some control points far away) on grids running with and against the lattice axes,
+    /// reaching beyond the lattice box, for whole grids and parts.
+    #[test]
+    fn vector_row_loop_matches_the_portable_loop() {
+        let mut rng = volmorph_testkit::Rng::new(0x70_11);
+        for (n, grid) in [
+            Geometry::new([37, 11, 9])
+                .with_spacing(DVec3::new(0.3, 0.9, 1.7))
+                .with_origin(DVec3::new(-2.0, 1.0, 0.5)),
+            Geometry::new([70, 6, 5])
+                .with_direction(glam::DMat3::from_diagonal(DVec3::new(-1.0, 1.0, -1.0))),
+        ]
+        .into_iter()
+        .enumerate()
+        {
+            let mut lat = BSplineLattice::uniform_cubic_around(
+                DVec3::new(-3.0, -2.0, -4.0),
+                DVec3::new(9.0, 8.0, 7.0),
+                [7, 6, 5],
+            )
+            .unwrap();
+            let counts = lat.counts();
+            for k in 0..counts[2] {
+                for j in 0..counts[1] {
+                    for i in 0..counts[0] {
+                        let far = if (i + j + k + n) % 11 == 0 { 1e6 } else { 1.0 };
+                        lat.move_control_point([i, j, k], rng.point(far)).unwrap();
+                    }
+                }
+            }
+            let [nx, ny, nz] = grid.dims;
+            let parts = [
+                IndexBox {
+                    start: [0; 3],
+                    end: grid.dims,
+                },
+                IndexBox {
+                    start: [3, 1, 2],
+                    end: [nx - 5, ny, nz - 1],
+                },
+            ];
+            for part in parts {
+                let plan = LatticeGridPlan::part(&lat, &grid, part).unwrap();
+                let pts = lat.control_points();
+                let mut vector = vec![DVec3::NAN; part.len()];
+                let mut portable = vec![DVec3::NAN; part.len()];
+                plan.apply_separable(&pts, counts, &mut vector, RowLoop::Vector);
+                plan.apply_separable(&pts, counts, &mut portable, RowLoop::Portable);
+                for (v, p) in vector.iter().zip(&portable) {
+                    assert_eq!(
+                        v.to_array().map(f64::to_bits),
+                        p.to_array().map(f64::to_bits)
+                    );
+                }
+                // `apply` takes the vector loop where the CPU allows it.
+                let mut whole = vec![DVec3::NAN; part.len()];
+                plan.apply(&lat, &mut whole).unwrap();
+                assert_eq!(whole, vector);
+            }
+        }
+    }
 
     /// True's setting: with `G` voxels per cell the fractional positions repeat with period
     /// `G`, in either grid direction, so each axis has `G` table classes, plus one when a
