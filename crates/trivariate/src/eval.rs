@@ -102,51 +102,6 @@ fn alpha_rows<const R: usize, const P: usize>(
     }
 }
 
-/// [`alpha_rows`] of degree `P` for the three axes at once, one axis per lane (lane 3
-/// repeats axis 0): the same operations lane by lane, so the rows are bit for bit those of
-/// [`alpha_rows`], with the divisions and products done as vector operations. `kt[i][a]` is
-/// knot `s_a + 1 − P + i` of axis `a` (the window the scheme reads), `t[a]` its parameter.
-/// Returns the point rows and the derivative rows, `[q][a]`.
-#[inline(always)]
-fn alpha_rows_lanes<const P: usize>(
-    kt: &[[f64; 4]; 6],
-    t: [f64; 4],
-) -> ([[f64; 4]; 4], [[f64; 4]; 4]) {
-    let mut l = [[0.0f64; 4]; 4];
-    let mut r = [[0.0f64; 4]; 4];
-    l[P - 1] = [1.0; 4];
-    r[P] = [1.0; 4];
-    for lev in (1..P).rev() {
-        l[lev - 1] = [0.0; 4];
-        r[lev - 1] = [0.0; 4];
-        for q in lev..=P {
-            // Knots j = s + q − P and j + P + 1 − lev = s + q + 1 − lev.
-            let (lo, hi) = (kt[q - 1], kt[q + P - lev]);
-            for x in 0..4 {
-                let a = (t[x] - lo[x]) / (hi[x] - lo[x]);
-                let (tl, tr) = (l[q][x], r[q][x]);
-                l[q - 1][x] += (1.0 - a) * tl;
-                r[q - 1][x] += (1.0 - a) * tr;
-                l[q][x] = a * tl;
-                r[q][x] = a * tr;
-            }
-        }
-    }
-    let (us, ue) = (kt[P - 1], kt[P]);
-    let mut point = [[0.0f64; 4]; 4];
-    let mut deriv = [[0.0f64; 4]; 4];
-    for x in 0..4 {
-        let d = ue[x] - us[x];
-        let g = (t[x] - us[x]) / d;
-        let c = P as f64 / d;
-        for q in 0..=P {
-            point[q][x] = (1.0 - g) * l[q][x] + g * r[q][x];
-            deriv[q][x] = c * (r[q][x] - l[q][x]);
-        }
-    }
-    (point, deriv)
-}
-
 /// A prepared evaluator for one trivariate spline (geometry or attribute).
 #[derive(Debug, Clone, Copy)]
 pub struct VolumeEvaluator<'a> {
@@ -332,7 +287,7 @@ fn refinement_kernel<const R: usize>(
     let mut first = [0usize; 3];
     let mut ord = [0usize; 3];
     // Tricubic volumes (the common case) get loops of constant length, fully unrolled, and
-    // the three axes' rows computed together.
+    // knot spans found by counting.
     let tricubic = s.degrees() == [3; 3];
     if tricubic {
         tricubic_rows(s, u, &mut pt, &mut de, &mut first)?;
@@ -390,7 +345,8 @@ fn axis_rows<const R: usize>(
     Ok(())
 }
 
-/// [`axis_rows`] of a tricubic spline by [`alpha_rows_lanes`]: the same numbers, bit for bit.
+/// [`axis_rows`] of a tricubic spline: constant-length loops and spans by counting; the
+/// same numbers, bit for bit.
 #[inline(always)]
 fn tricubic_rows<const R: usize>(
     s: &TensorBSpline<3>,
@@ -399,26 +355,10 @@ fn tricubic_rows<const R: usize>(
     de: &mut [[f64; R]; 3],
     first: &mut [usize; 3],
 ) -> Result<(), TrivariateError> {
-    let mut kt = [[0.0f64; 4]; 6];
     for (a, kv) in s.knots().iter().enumerate() {
         let span = span_by_count(kv, u[a])?;
-        let window = kv.knots().get(span - 2..span + 4).ok_or_else(|| {
-            TrivariateError::InvalidArgument("knot span outside the knot vector".into())
-        })?;
-        for (i, &t) in window.iter().enumerate() {
-            kt[i][a] = t;
-        }
+        alpha_rows::<R, 3>(kv.knots(), 3, span, u[a], &mut pt[a], &mut de[a]);
         first[a] = span - 3;
-    }
-    for row in &mut kt {
-        row[3] = row[0];
-    }
-    let (p, d) = alpha_rows_lanes::<3>(&kt, [u[0], u[1], u[2], u[0]]);
-    for a in 0..3 {
-        for q in 0..4 {
-            pt[a][q] = p[q][a];
-            de[a][q] = d[q][a];
-        }
     }
     Ok(())
 }
@@ -467,8 +407,9 @@ fn contract<const H: usize, const R: usize, const O: usize>(
         let mut sp = [0.0; H];
         let mut su = [0.0; H];
         let mut sv = [0.0; H];
+        let plane = (first[2] + k) * s2 + first[0] * H;
         for j in 0..o1 {
-            let base = first[0] * H + (first[1] + j) * s1 + (first[2] + k) * s2;
+            let base = plane + (first[1] + j) * s1;
             let row = &coefs[base..base + o0 * H];
             let mut rp = [0.0; H];
             let mut ru = [0.0; H];
@@ -681,11 +622,11 @@ mod tests {
         TensorBSpline::new_rational(kv, dim, pts, ws).unwrap()
     }
 
-    /// The tricubic rows computed three axes at once are bit for bit the per-axis rows of
-    /// [`alpha_rows`] (the path they replace), on random parameters, knots and domain ends;
+    /// The tricubic rows (spans by counting, constant-length loops) are bit for bit the
+    /// per-axis rows of the general path, on random parameters, knots and domain ends;
     /// outside the domain both refuse.
     #[test]
-    fn tricubic_lane_rows_equal_axis_rows() {
+    fn tricubic_rows_equal_axis_rows() {
         let volumes = [
             random_volume(1, [3; 3], [8, 6, 7], 3),
             random_volume(2, [3; 3], [4, 9, 5], 1),
