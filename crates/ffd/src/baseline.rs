@@ -29,15 +29,26 @@ pub const MAX_ADAPTIVE_DEPTH: u32 = 24;
 pub const MIN_RELATIVE_TOLERANCE: f64 = 1e-9;
 
 /// Point-wise FFD of the vertices: the same faces, every position `x` replaced by
-/// `map.apply(x)` (in parallel).
+/// `map.apply(x)` (in parallel, by the map's batch evaluation).
+///
+/// The new positions are written straight into the new mesh's buffer (the input's positions
+/// are not copied first), while the input is checked and the faces are copied on another
+/// thread.
 ///
 /// # Errors
-/// [`FfdError::NonFinite`] for a NaN or infinite input coordinate.
+/// [`FfdError::NonFinite`] for a NaN or infinite input coordinate (the first one).
 pub fn vertex_ffd(mesh: &Mesh, map: &dyn SpaceMap) -> Result<Mesh, FfdError> {
-    check_finite(mesh.positions())?;
-    let mut out = mesh.clone();
-    map.apply_batch(mesh.positions(), out.positions_mut())?;
-    Ok(out)
+    let mut positions = vec![DVec3::ZERO; mesh.vertex_count()];
+    let (mapped, faces) = rayon::join(
+        || map.apply_batch(mesh.positions(), &mut positions),
+        || {
+            check_finite(mesh.positions())?;
+            Ok::<_, FfdError>((mesh.indices().to_vec(), mesh.offsets().to_vec()))
+        },
+    );
+    let (indices, offsets) = faces?;
+    mapped?;
+    Ok(Mesh::from_csr_unvalidated(positions, indices, offsets)?)
 }
 
 fn check_finite(p: &[DVec3]) -> Result<(), FfdError> {

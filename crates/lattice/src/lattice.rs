@@ -966,7 +966,7 @@ impl BSplineLattice {
     /// [`SpaceMap::apply`] of a polynomial lattice given its control points `ctrl` (index `i`
     /// fastest).
     #[inline]
-    fn apply_with_net(&self, ctrl: &[DVec3], p: DVec3) -> DVec3 {
+    pub(crate) fn apply_with_net(&self, ctrl: &[DVec3], p: DVec3) -> DVec3 {
         let u = self.frame.to_parameter(p);
         if !self.contains_parameter(u) {
             return p;
@@ -1061,7 +1061,8 @@ impl SpaceMap for BSplineLattice {
     /// Parallel over chunks of points with the control net copied once into a contiguous
     /// array of points and a per-point kernel (span search, Cox–de Boor basis per axis, one
     /// contraction over the `(p+1)³` control points); agrees with [`SpaceMap::apply`] to
-    /// rounding.
+    /// rounding. Polynomial lattices of one degree up to [`crate::batch::MAX_BATCH_DEGREE`]
+    /// on every axis take the vectorised kernel of [`crate::batch`] (the same bits).
     fn apply_batch(&self, points: &[DVec3], out: &mut [DVec3]) -> Result<(), DeformError> {
         volmorph_deform::map::check_len(points.len(), out.len())?;
         if self.spline.is_rational() {
@@ -1072,6 +1073,9 @@ impl SpaceMap for BSplineLattice {
                         *o = self.apply(p);
                     }
                 });
+            return Ok(());
+        }
+        if crate::batch::apply_batch(self, points, out) {
             return Ok(());
         }
         let ctrl = self.control_points();

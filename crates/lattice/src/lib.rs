@@ -6,6 +6,8 @@
 //!   outside the box ([`lattice`] states the conventions), fast dense evaluation on voxel grids
 //!   ([`grid`], True §5.2: separable per-axis tables and True's coefficient table, reusable
 //!   across control-point edits as [`grid::LatticeGridPlan`]s) and a JSON form ([`json`]).
+//! * [`batch`] — the vectorised batch kernel of polynomial lattices (vertex FFD), bit for bit
+//!   the pointwise evaluation.
 //! * [`jacobian`] — one-pass image-and-Jacobian of a lattice at a point and the separable
 //!   Jacobian path on voxel grids.
 //! * [`formats`] — cubic lattices as ITK `BSplineTransform` files (`.tfm`) and plastimatch
@@ -36,6 +38,7 @@
 //! }
 //! ```
 
+pub mod batch;
 pub mod formats;
 pub mod grid;
 pub mod jacobian;

@@ -214,9 +214,9 @@ impl<'a> VolumeEvaluator<'a> {
 /// [`VolumeEvaluator::refinement_into`]: dispatches on the largest degree to row buffers
 /// sized to it (zeroing `MAX_DEGREE`-sized buffers per point would cost more than the
 /// arithmetic of a tricubic evaluation). Compiled twice — for the baseline target and for
-/// x86-64 with AVX2 and FMA, where the homogeneous tuples of the contraction become single
-/// fused vector operations — and the variant is chosen at run time from the CPU's features
-/// (the two may differ in the last bits, FMA rounding once instead of twice).
+/// x86-64 with AVX2 and FMA, where the homogeneous tuples of the contraction become vector
+/// operations — and the variant is chosen at run time from the CPU's features. Rust never
+/// contracts a multiply and an add into an FMA, so both variants give the same bits.
 #[multiversion(targets("x86_64+avx2+fma"))]
 fn refinement_point(
     s: &TensorBSpline<3>,
