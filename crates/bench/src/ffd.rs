@@ -8,8 +8,9 @@ use std::time::Duration;
 use glam::DVec3;
 use serde_json::json;
 use volmorph_deform::SpaceMap;
-use volmorph_ffd::accurate::AccuratePlan;
+use volmorph_ffd::accurate::{AccuratePlan, TrimmedModel};
 use volmorph_ffd::baseline::vertex_ffd;
+use volmorph_ffd::step::step_string;
 use volmorph_ffd::shapes::uv_sphere;
 use volmorph_lattice::BSplineLattice;
 use volmorph_mesh::Mesh;
@@ -88,7 +89,8 @@ pub fn moved_lattice(mesh: &Mesh, seed: u64) -> Result<BSplineLattice, BenchErro
     Ok(lat)
 }
 
-/// The inputs: the two unit spheres at the origin and a moved lattice around each.
+/// The inputs: the two unit spheres at the origin and a moved lattice around each, and the
+/// accurate FFD of the first (for the STEP-writing case).
 #[derive(Debug)]
 pub struct FfdInputs {
     /// The accurate-FFD sphere.
@@ -99,12 +101,14 @@ pub struct FfdInputs {
     pub big: Mesh,
     /// The lattice around it.
     pub big_lattice: BSplineLattice,
+    /// The accurate FFD of `sphere` through `lattice`, the input of the STEP-writing case.
+    pub model: TrimmedModel,
     rings: u32,
     vertex_rings: u32,
 }
 
 impl FfdInputs {
-    /// Build the spheres and lattices.
+    /// Build the spheres and lattices, and the accurate FFD of the first sphere.
     ///
     /// # Errors
     /// [`BenchError`] from building the meshes or lattices.
@@ -113,19 +117,22 @@ impl FfdInputs {
         let lattice = moved_lattice(&sphere, SEED)?;
         let big = uv_sphere(config.vertex_rings, 1.0, DVec3::ZERO)?;
         let big_lattice = moved_lattice(&big, SEED)?;
+        let model = Arc::new(AccuratePlan::new(&sphere, &lattice)?).deform(&lattice)?;
         Ok(Self {
             sphere,
             lattice,
             big,
             big_lattice,
+            model,
             rings: config.rings,
             vertex_rings: config.vertex_rings,
         })
     }
 
     /// The accurate FFD, plan and surfaces (counting Bézier patches in the triangles column),
-    /// and vertex FFD (a new mesh), with their targets at the target sizes (issue 4's for the
-    /// accurate FFD, issue 22's for vertex FFD).
+    /// vertex FFD (a new mesh), with their targets at the target sizes (issue 4's for the
+    /// accurate FFD, issue 22's for vertex FFD), and the STEP text of the accurate FFD's
+    /// result (written to memory: the formatting, not the disk).
     #[must_use]
     pub fn cases(&self) -> Vec<Case<'_>> {
         let at = |yes: bool, t: Duration| yes.then_some(t);
@@ -147,6 +154,11 @@ impl FfdInputs {
                 self.vertex_rings == TARGET_VERTEX_RINGS,
                 ISSUE_22_VERTEX_FFD,
             )),
+            Case::call(
+                "STEP text of the accurate FFD",
+                "step_writing",
+                move || Ok(step_string(&self.model, "bench")?),
+            ),
         ]
     }
 

@@ -23,7 +23,8 @@ pub enum Command {
     #[command(after_help = "Example:\n  volmorph bench isosurface --size 256 --repeat 5 --json")]
     Isosurface(IsosurfaceArgs),
     /// Time the accurate FFD of a 70k-triangle sphere through a moved 6×8×6 degree-2 lattice
-    /// (target 2 s) and vertex FFD of a 1M-vertex sphere (target 50 ms).
+    /// (target 2 s), vertex FFD of a 1M-vertex sphere (target 25 ms) and the STEP text of the
+    /// accurate FFD's result.
     #[command(after_help = "Example:\n  volmorph bench ffd --repeat 3")]
     Ffd(FfdArgs),
     /// Time grid evaluation of F-rep models (HyperFun files, or the seven built-in scenes

@@ -27,7 +27,6 @@ use volmorph_warp::pushforward::{
     AntialiasOptions, push_forward_antialiased, push_forward_antialiased_f32,
 };
 
-
 fn grid() -> Geometry {
     Geometry::new([40, 36, 32])
         .with_spacing(DVec3::new(0.9, 1.1, 1.3))
