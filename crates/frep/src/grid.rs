@@ -30,6 +30,10 @@ use crate::tape::{BatchScratch, IntervalScratch, Tape};
 /// Largest region evaluated with the batch evaluator without further subdivision.
 pub const LEAF_POINTS: usize = 1024;
 
+/// How much longer than the other sides a region's x side must be before it is cut in
+/// halves along x, on grids evaluated row-structured.
+const ROW_SPLIT_BIAS: usize = 4;
+
 /// z-layers per parallel task.
 const SLAB: usize = 4;
 
@@ -302,7 +306,15 @@ impl Worker<'_> {
             self.leaf(tape, lo, hi);
             return;
         }
-        let axis = (0..3).max_by_key(|&a| size[a]).unwrap_or(0);
+        // On rows-separable grids x is cut last (long rows make row-structured evaluation
+        // cheap: compact values are read broadcast row by row).
+        let bias = if self.rows_separable {
+            ROW_SPLIT_BIAS
+        } else {
+            1
+        };
+        let weight = |a: usize| if a == 0 { size[a] } else { size[a] * bias };
+        let axis = (0..3).max_by_key(|&a| weight(a)).unwrap_or(0);
         let mid = lo[axis] + size[axis] / 2;
         let mut hi_a = hi;
         hi_a[axis] = mid;
@@ -326,8 +338,13 @@ impl Worker<'_> {
     }
 
     fn leaf(&mut self, tape: &Tape, lo: [usize; 3], hi: [usize; 3]) {
-        let [nx, ny, _] = self.geometry.dims;
-        let [xs, ys, zs, vals] = &mut self.coords[..] else {
+        if self.rows_separable {
+            self.leaf_rows(tape, lo, hi);
+            return;
+        }
+        // The buffers are taken out of `self` while `store` writes the slab.
+        let mut coords = std::mem::take(&mut self.coords);
+        let [xs, ys, zs, vals] = &mut coords[..] else {
             return;
         };
         let row_len = hi[0] - lo[0];
@@ -350,38 +367,72 @@ impl Worker<'_> {
                     n += 1;
                 }
             }
-            if self.rows_separable && row_len <= LEAF_POINTS {
-                tape.eval_rows_with(
-                    row_len,
-                    &xs[..n],
-                    &ys[..n],
-                    &zs[..n],
-                    &mut vals[..n],
-                    &mut self.batch,
-                );
-            } else {
-                tape.eval_batch_with(
-                    &xs[..n],
-                    &ys[..n],
-                    &zs[..n],
-                    &mut vals[..n],
-                    &mut self.batch,
-                );
-            }
-            let mut n = 0;
-            for r in r0..r1 {
-                let (j, k) = (lo[1] + r % (hi[1] - lo[1]), lo[2] + r / (hi[1] - lo[1]));
-                let base = nx * (j + ny * (k - self.k0));
-                let m = row_len.min(LEAF_POINTS);
-                for (o, v) in self.out[base + lo[0]..base + lo[0] + m]
-                    .iter_mut()
-                    .zip(&vals[n..n + m])
-                {
-                    *o = *v as f32;
-                }
-                n += m;
-            }
+            tape.eval_batch_with(
+                &xs[..n],
+                &ys[..n],
+                &zs[..n],
+                &mut vals[..n],
+                &mut self.batch,
+            );
+            self.store(lo, hi, r0, r1, &vals[..n]);
             r0 = r1;
+        }
+        self.coords = coords;
+    }
+
+    /// [`Worker::leaf`] on a rows-separable grid: the x coordinates of one row and the y
+    /// and z coordinates of every row, evaluated row-structured. The coordinates are those
+    /// of [`Frame::point`] (x does not depend on the row, y and z not on the column, bit
+    /// for bit, by [`Frame::rows_separable`]).
+    fn leaf_rows(&mut self, tape: &Tape, lo: [usize; 3], hi: [usize; 3]) {
+        let row_len = (hi[0] - lo[0]).min(LEAF_POINTS);
+        if row_len == 0 {
+            return;
+        }
+        let mut coords = std::mem::take(&mut self.coords);
+        let [xs, ys, zs, vals] = &mut coords[..] else {
+            return;
+        };
+        let first = self.frame.row(lo[1], lo[2]);
+        for (x, i) in xs.iter_mut().zip(lo[0]..lo[0] + row_len) {
+            *x = self.frame.point(first, i).x;
+        }
+        let rows_per = (LEAF_POINTS / row_len).max(1);
+        let nrows = (hi[1] - lo[1]) * (hi[2] - lo[2]);
+        let mut r0 = 0;
+        while r0 < nrows {
+            let r1 = (r0 + rows_per).min(nrows);
+            for (n, r) in (r0..r1).enumerate() {
+                let (j, k) = (lo[1] + r % (hi[1] - lo[1]), lo[2] + r / (hi[1] - lo[1]));
+                let p = self.frame.point(self.frame.row(j, k), lo[0]);
+                ys[n] = p.y;
+                zs[n] = p.z;
+            }
+            let n = (r1 - r0) * row_len;
+            tape.eval_rows_with(
+                &xs[..row_len],
+                &ys[..r1 - r0],
+                &zs[..r1 - r0],
+                &mut vals[..n],
+                &mut self.batch,
+            );
+            self.store(lo, hi, r0, r1, &vals[..n]);
+            r0 = r1;
+        }
+        self.coords = coords;
+    }
+
+    /// Write the values of rows `r0..r1` of the region `[lo, hi)` (rows of at most
+    /// [`LEAF_POINTS`] values, y fastest) into the slab.
+    fn store(&mut self, lo: [usize; 3], hi: [usize; 3], r0: usize, r1: usize, vals: &[f64]) {
+        let [nx, ny, _] = self.geometry.dims;
+        let m = (hi[0] - lo[0]).min(LEAF_POINTS);
+        for (r, v) in (r0..r1).zip(vals.chunks_exact(m)) {
+            let (j, k) = (lo[1] + r % (hi[1] - lo[1]), lo[2] + r / (hi[1] - lo[1]));
+            let base = nx * (j + ny * (k - self.k0)) + lo[0];
+            for (o, v) in self.out[base..base + m].iter_mut().zip(v) {
+                *o = *v as f32;
+            }
         }
     }
 }
