@@ -19,6 +19,9 @@
 //!
 //! Fields without a tape are evaluated point by point in parallel (no culling).
 
+use std::collections::HashMap;
+use std::rc::Rc;
+
 use glam::DVec3;
 use rayon::prelude::*;
 use volmorph_volume::{Geometry, Volume};
@@ -28,7 +31,7 @@ use crate::field::Field;
 use crate::tape::{BatchScratch, IntervalScratch, Tape};
 
 /// Largest region evaluated with the batch evaluator without further subdivision.
-pub const LEAF_POINTS: usize = 1024;
+pub const LEAF_POINTS: usize = 4096;
 
 /// How much longer than the other sides a region's x side must be before it is cut in
 /// halves along x, on grids evaluated row-structured.
@@ -75,7 +78,7 @@ pub fn sample_with(
         Some(tape) => {
             data.par_chunks_mut(layer * SLAB)
                 .enumerate()
-                .for_each(|(s, slab)| {
+                .for_each_init(TapeCache::default, |cache, (s, slab)| {
                     if progress.is_cancelled() {
                         return;
                     }
@@ -91,8 +94,9 @@ pub fn sample_with(
                         batch: BatchScratch::default(),
                         iv: IntervalScratch::default(),
                         coords: vec![[0.0; LEAF_POINTS]; 4],
+                        cache,
                     };
-                    w.region(tape, [0, 0, k0], [nx, ny, k0 + nz]);
+                    w.region(tape, Some(FULL_TAPE), [0, 0, k0], [nx, ny, k0 + nz]);
                     progress.advance(nz as u64);
                 });
         }
@@ -282,11 +286,62 @@ struct Worker<'a> {
     iv: IntervalScratch,
     /// Leaf buffers: x, y, z and values.
     coords: Vec<[f64; LEAF_POINTS]>,
+    cache: &'a mut TapeCache,
+}
+
+/// Largest number of specialised tapes a [`TapeCache`] keeps.
+const TAPE_CACHE_LIMIT: usize = 1024;
+
+/// The [`TapeCache`] id of the tape sampled.
+const FULL_TAPE: usize = usize::MAX;
+
+/// Specialised tapes one worker has built, by the tape they were specialised from and the
+/// choices over the region: regions deciding the same `min`/`max`/`select` sides share one
+/// tape (building it costs more than evaluating the intervals). [`Tape::simplify`] is a
+/// function of the tape and the choices alone, so a cached tape is the one it would build.
+#[derive(Default)]
+struct TapeCache {
+    tapes: Vec<Rc<Tape>>,
+    index: HashMap<Vec<u8>, usize>,
+    key: Vec<u8>,
+}
+
+impl TapeCache {
+    /// `tape` specialised to the choices `iv` recorded over a region (`None`: nothing to
+    /// prune, use `tape`), and its id. `id` names `tape` ([`FULL_TAPE`], or an index into
+    /// the cache); `None` for a tape not cached (the cache was full), whose
+    /// specialisations are not cached either.
+    fn specialise(
+        &mut self,
+        tape: &Tape,
+        id: Option<usize>,
+        iv: &IntervalScratch,
+    ) -> (Option<Rc<Tape>>, Option<usize>) {
+        let Some(id) = id else {
+            return (tape.simplify(iv).map(Rc::new), None);
+        };
+        self.key.clear();
+        self.key.extend_from_slice(&id.to_le_bytes());
+        iv.choice_key(&mut self.key);
+        if let Some(&k) = self.index.get(&self.key[..]) {
+            return (Some(Rc::clone(&self.tapes[k])), Some(k));
+        }
+        let Some(t) = tape.simplify(iv).map(Rc::new) else {
+            return (None, Some(id));
+        };
+        if self.tapes.len() >= TAPE_CACHE_LIMIT {
+            return (Some(t), None);
+        }
+        self.tapes.push(Rc::clone(&t));
+        self.index.insert(self.key.clone(), self.tapes.len() - 1);
+        (Some(t), Some(self.tapes.len() - 1))
+    }
 }
 
 impl Worker<'_> {
     /// Fill the index box `[lo, hi)` (hi exclusive).
-    fn region(&mut self, tape: &Tape, lo: [usize; 3], hi: [usize; 3]) {
+    /// `id` names `tape` in the worker's [`TapeCache`].
+    fn region(&mut self, tape: &Tape, id: Option<usize>, lo: [usize; 3], hi: [usize; 3]) {
         let size = [hi[0] - lo[0], hi[1] - lo[1], hi[2] - lo[2]];
         let count = size[0] * size[1] * size[2];
         if count == 0 {
@@ -294,14 +349,18 @@ impl Worker<'_> {
         }
         // Specialise the tape to the region's physical bounding box (when it has anything
         // to prune).
-        let specialised = if tape.choice_count() > 0 {
+        let (specialised, id) = if tape.choice_count() > 0 {
             let (plo, phi) = self.bounds(lo, hi);
             let _ = tape.interval_with(plo, phi, &mut self.iv);
-            tape.simplify(&self.iv)
+            if self.iv.pruned() == 0 {
+                (None, id)
+            } else {
+                self.cache.specialise(tape, id, &self.iv)
+            }
         } else {
-            None
+            (None, id)
         };
-        let tape = specialised.as_ref().unwrap_or(tape);
+        let tape = specialised.as_deref().unwrap_or(tape);
         if count <= LEAF_POINTS {
             self.leaf(tape, lo, hi);
             return;
@@ -320,8 +379,8 @@ impl Worker<'_> {
         hi_a[axis] = mid;
         let mut lo_b = lo;
         lo_b[axis] = mid;
-        self.region(tape, lo, hi_a);
-        self.region(tape, lo_b, hi);
+        self.region(tape, id, lo, hi_a);
+        self.region(tape, id, lo_b, hi);
     }
 
     /// Physical bounding box of the voxel centres in `[lo, hi)`.

@@ -797,6 +797,12 @@ pub struct IntervalScratch {
 }
 
 impl IntervalScratch {
+    /// Append the [`Choice`] of every graph node over the last box to `key`, one byte each:
+    /// two boxes with the same key give the same [`Tape::simplify`] result.
+    pub(crate) fn choice_key(&self, key: &mut Vec<u8>) {
+        key.extend(self.choices.iter().map(|&c| c as u8));
+    }
+
     /// Number of `min`/`max`/`select` nodes decided over the last box.
     #[must_use]
     pub fn pruned(&self) -> usize {
@@ -1072,7 +1078,7 @@ mod tests {
         });
         let t = Tape::new(&s);
         for row_len in [1, 3, 7, 16, 37, LANES, LANES + 44, 3 * LANES] {
-            let rows = 700 / row_len + 1;
+            let rows = (700 / row_len + 1).max(6);
             let n = rows * row_len;
             let cx: Vec<f64> = (0..row_len).map(|i| -1.5 + 0.37 * i as f64).collect();
             let cy: Vec<f64> = (0..rows)
