@@ -20,7 +20,8 @@
 //!    `new_float_slice_eval`), brute force over every point, one z-layer per call,
 //!    parallel over z-layers with rayon (one evaluator per worker) — fidget's own renderers
 //!    produce height maps, not a dense grid of values;
-//! 3. checks that the two grids agree at every point within [`AGREE_ABS`] + [`AGREE_REL`]·|v|
+//! 3. checks that volmorph's grid is bit for bit its point-by-point evaluation
+//!    (`grid::sample_naive`), and that the two grids agree at every point within [`AGREE_ABS`] + [`AGREE_REL`]·|v|
 //!    (fidget evaluates in `f32`, volmorph in `f64` rounded to `f32` at the end);
 //! 4. prints the median of each over `--repeat` runs (default 7, alternating the two) and
 //!    the ratio fidget / volmorph (above 1: volmorph faster).
@@ -36,7 +37,7 @@ use fidget::jit::JitShape;
 use fidget::shape::EzShape;
 use glam::DVec3;
 use rayon::prelude::*;
-use volmorph_frep::grid::{box_geometry, sample};
+use volmorph_frep::grid::{box_geometry, sample, sample_naive};
 use volmorph_frep::ops::{BinaryOp, UnaryOp};
 use volmorph_frep::shape::Node;
 use volmorph_frep::{Shape, Tape, compile_source};
@@ -218,6 +219,11 @@ fn run(name: &str, src: &str, g: &Geometry, repeat: usize) -> Res<f64> {
         tf.push(t.elapsed());
     }
     let ours = ours.ok_or("no run")?;
+    // volmorph's own check: bit-for-bit the point-by-point values of the full tape.
+    let naive = sample_naive(&tape, g).map_err(|e| e.to_string())?;
+    if ours.data().iter().zip(naive.data()).any(|(a, b)| a.to_bits() != b.to_bits()) {
+        return Err(format!("{name}: volmorph's grid differs from point-by-point evaluation"));
+    }
     let (mut worst, mut bad) = (0f64, 0usize);
     for (a, b) in ours.data().iter().zip(&theirs) {
         let (a, b) = (f64::from(*a), f64::from(*b));
