@@ -76,9 +76,9 @@ pub fn sample_with(
     progress.start(&format!("sampling a {nx}×{ny}×{nz} grid"), nz as u64);
     match field.tape() {
         Some(tape) => {
-            data.par_chunks_mut(layer * SLAB)
-                .enumerate()
-                .for_each_init(TapeCache::default, |cache, (s, slab)| {
+            data.par_chunks_mut(layer * SLAB).enumerate().for_each_init(
+                TapeCache::default,
+                |cache, (s, slab)| {
                     if progress.is_cancelled() {
                         return;
                     }
@@ -98,7 +98,8 @@ pub fn sample_with(
                     };
                     w.region(tape, Some(FULL_TAPE), [0, 0, k0], [nx, ny, k0 + nz]);
                     progress.advance(nz as u64);
-                });
+                },
+            );
         }
         None => {
             let frame = Frame::new(geometry);

@@ -1101,9 +1101,9 @@ mod tests {
                 .collect();
             let (mut xs, mut ys, mut zs) = (vec![0.0; n], vec![0.0; n], vec![0.0; n]);
             for r in 0..rows {
-                for i in 0..row_len {
+                for (i, &x) in cx.iter().enumerate() {
                     let l = r * row_len + i;
-                    (xs[l], ys[l], zs[l]) = (cx[i], cy[r], cz[r]);
+                    (xs[l], ys[l], zs[l]) = (x, cy[r], cz[r]);
                 }
             }
             let mut a = vec![0.0; n];

@@ -221,8 +221,15 @@ fn run(name: &str, src: &str, g: &Geometry, repeat: usize) -> Res<f64> {
     let ours = ours.ok_or("no run")?;
     // volmorph's own check: bit-for-bit the point-by-point values of the full tape.
     let naive = sample_naive(&tape, g).map_err(|e| e.to_string())?;
-    if ours.data().iter().zip(naive.data()).any(|(a, b)| a.to_bits() != b.to_bits()) {
-        return Err(format!("{name}: volmorph's grid differs from point-by-point evaluation"));
+    if ours
+        .data()
+        .iter()
+        .zip(naive.data())
+        .any(|(a, b)| a.to_bits() != b.to_bits())
+    {
+        return Err(format!(
+            "{name}: volmorph's grid differs from point-by-point evaluation"
+        ));
     }
     let (mut worst, mut bad) = (0f64, 0usize);
     for (a, b) in ours.data().iter().zip(&theirs) {
