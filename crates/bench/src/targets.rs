@@ -85,3 +85,9 @@ pub const ISSUE_13_SCENE_DRAG: Duration = Duration::from_millis(40);
 
 /// Issue 13: what going through the scene adds to the same drag done on the engines directly.
 pub const ISSUE_13_SCENE_OVERHEAD: Duration = Duration::from_millis(1);
+
+/// Issue 22: F-rep dense-grid sampling (193³ over [−1.6, 1.6]³) of each published scene
+/// (`s1`–`s5`, `c1_gear`, `c2_colonnade`) at least this many times faster than fidget's JIT
+/// float-slice evaluator on the same grid, both medians from the same run of
+/// `peers/frep-fidget` (a ratio, fidget's median over volmorph's; not a duration).
+pub const ISSUE_22_FREP_VS_FIDGET: f64 = 2.0;

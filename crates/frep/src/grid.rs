@@ -19,6 +19,9 @@
 //!
 //! Fields without a tape are evaluated point by point in parallel (no culling).
 
+use std::collections::HashMap;
+use std::rc::Rc;
+
 use glam::DVec3;
 use rayon::prelude::*;
 use volmorph_volume::{Geometry, Volume};
@@ -28,7 +31,11 @@ use crate::field::Field;
 use crate::tape::{BatchScratch, IntervalScratch, Tape};
 
 /// Largest region evaluated with the batch evaluator without further subdivision.
-pub const LEAF_POINTS: usize = 1024;
+pub const LEAF_POINTS: usize = 4096;
+
+/// How much longer than the other sides a region's x side must be before it is cut in
+/// halves along x, on grids evaluated row-structured.
+const ROW_SPLIT_BIAS: usize = 4;
 
 /// z-layers per parallel task.
 const SLAB: usize = 4;
@@ -69,9 +76,9 @@ pub fn sample_with(
     progress.start(&format!("sampling a {nx}×{ny}×{nz} grid"), nz as u64);
     match field.tape() {
         Some(tape) => {
-            data.par_chunks_mut(layer * SLAB)
-                .enumerate()
-                .for_each(|(s, slab)| {
+            data.par_chunks_mut(layer * SLAB).enumerate().for_each_init(
+                TapeCache::default,
+                |cache, (s, slab)| {
                     if progress.is_cancelled() {
                         return;
                     }
@@ -87,10 +94,12 @@ pub fn sample_with(
                         batch: BatchScratch::default(),
                         iv: IntervalScratch::default(),
                         coords: vec![[0.0; LEAF_POINTS]; 4],
+                        cache,
                     };
-                    w.region(tape, [0, 0, k0], [nx, ny, k0 + nz]);
+                    w.region(tape, Some(FULL_TAPE), [0, 0, k0], [nx, ny, k0 + nz]);
                     progress.advance(nz as u64);
-                });
+                },
+            );
         }
         None => {
             let frame = Frame::new(geometry);
@@ -278,11 +287,62 @@ struct Worker<'a> {
     iv: IntervalScratch,
     /// Leaf buffers: x, y, z and values.
     coords: Vec<[f64; LEAF_POINTS]>,
+    cache: &'a mut TapeCache,
+}
+
+/// Largest number of specialised tapes a [`TapeCache`] keeps.
+const TAPE_CACHE_LIMIT: usize = 1024;
+
+/// The [`TapeCache`] id of the tape sampled.
+const FULL_TAPE: usize = usize::MAX;
+
+/// Specialised tapes one worker has built, by the tape they were specialised from and the
+/// choices over the region: regions deciding the same `min`/`max`/`select` sides share one
+/// tape (building it costs more than evaluating the intervals). [`Tape::simplify`] is a
+/// function of the tape and the choices alone, so a cached tape is the one it would build.
+#[derive(Default)]
+struct TapeCache {
+    tapes: Vec<Rc<Tape>>,
+    index: HashMap<Vec<u8>, usize>,
+    key: Vec<u8>,
+}
+
+impl TapeCache {
+    /// `tape` specialised to the choices `iv` recorded over a region (`None`: nothing to
+    /// prune, use `tape`), and its id. `id` names `tape` ([`FULL_TAPE`], or an index into
+    /// the cache); `None` for a tape not cached (the cache was full), whose
+    /// specialisations are not cached either.
+    fn specialise(
+        &mut self,
+        tape: &Tape,
+        id: Option<usize>,
+        iv: &IntervalScratch,
+    ) -> (Option<Rc<Tape>>, Option<usize>) {
+        let Some(id) = id else {
+            return (tape.simplify(iv).map(Rc::new), None);
+        };
+        self.key.clear();
+        self.key.extend_from_slice(&id.to_le_bytes());
+        iv.choice_key(&mut self.key);
+        if let Some(&k) = self.index.get(&self.key[..]) {
+            return (Some(Rc::clone(&self.tapes[k])), Some(k));
+        }
+        let Some(t) = tape.simplify(iv).map(Rc::new) else {
+            return (None, Some(id));
+        };
+        if self.tapes.len() >= TAPE_CACHE_LIMIT {
+            return (Some(t), None);
+        }
+        self.tapes.push(Rc::clone(&t));
+        self.index.insert(self.key.clone(), self.tapes.len() - 1);
+        (Some(t), Some(self.tapes.len() - 1))
+    }
 }
 
 impl Worker<'_> {
     /// Fill the index box `[lo, hi)` (hi exclusive).
-    fn region(&mut self, tape: &Tape, lo: [usize; 3], hi: [usize; 3]) {
+    /// `id` names `tape` in the worker's [`TapeCache`].
+    fn region(&mut self, tape: &Tape, id: Option<usize>, lo: [usize; 3], hi: [usize; 3]) {
         let size = [hi[0] - lo[0], hi[1] - lo[1], hi[2] - lo[2]];
         let count = size[0] * size[1] * size[2];
         if count == 0 {
@@ -290,26 +350,38 @@ impl Worker<'_> {
         }
         // Specialise the tape to the region's physical bounding box (when it has anything
         // to prune).
-        let specialised = if tape.choice_count() > 0 {
+        let (specialised, id) = if tape.choice_count() > 0 {
             let (plo, phi) = self.bounds(lo, hi);
             let _ = tape.interval_with(plo, phi, &mut self.iv);
-            tape.simplify(&self.iv)
+            if self.iv.pruned() == 0 {
+                (None, id)
+            } else {
+                self.cache.specialise(tape, id, &self.iv)
+            }
         } else {
-            None
+            (None, id)
         };
-        let tape = specialised.as_ref().unwrap_or(tape);
+        let tape = specialised.as_deref().unwrap_or(tape);
         if count <= LEAF_POINTS {
             self.leaf(tape, lo, hi);
             return;
         }
-        let axis = (0..3).max_by_key(|&a| size[a]).unwrap_or(0);
+        // On rows-separable grids x is cut last (long rows make row-structured evaluation
+        // cheap: compact values are read broadcast row by row).
+        let bias = if self.rows_separable {
+            ROW_SPLIT_BIAS
+        } else {
+            1
+        };
+        let weight = |a: usize| if a == 0 { size[a] } else { size[a] * bias };
+        let axis = (0..3).max_by_key(|&a| weight(a)).unwrap_or(0);
         let mid = lo[axis] + size[axis] / 2;
         let mut hi_a = hi;
         hi_a[axis] = mid;
         let mut lo_b = lo;
         lo_b[axis] = mid;
-        self.region(tape, lo, hi_a);
-        self.region(tape, lo_b, hi);
+        self.region(tape, id, lo, hi_a);
+        self.region(tape, id, lo_b, hi);
     }
 
     /// Physical bounding box of the voxel centres in `[lo, hi)`.
@@ -326,8 +398,13 @@ impl Worker<'_> {
     }
 
     fn leaf(&mut self, tape: &Tape, lo: [usize; 3], hi: [usize; 3]) {
-        let [nx, ny, _] = self.geometry.dims;
-        let [xs, ys, zs, vals] = &mut self.coords[..] else {
+        if self.rows_separable {
+            self.leaf_rows(tape, lo, hi);
+            return;
+        }
+        // The buffers are taken out of `self` while `store` writes the slab.
+        let mut coords = std::mem::take(&mut self.coords);
+        let [xs, ys, zs, vals] = &mut coords[..] else {
             return;
         };
         let row_len = hi[0] - lo[0];
@@ -350,38 +427,72 @@ impl Worker<'_> {
                     n += 1;
                 }
             }
-            if self.rows_separable && row_len <= LEAF_POINTS {
-                tape.eval_rows_with(
-                    row_len,
-                    &xs[..n],
-                    &ys[..n],
-                    &zs[..n],
-                    &mut vals[..n],
-                    &mut self.batch,
-                );
-            } else {
-                tape.eval_batch_with(
-                    &xs[..n],
-                    &ys[..n],
-                    &zs[..n],
-                    &mut vals[..n],
-                    &mut self.batch,
-                );
-            }
-            let mut n = 0;
-            for r in r0..r1 {
-                let (j, k) = (lo[1] + r % (hi[1] - lo[1]), lo[2] + r / (hi[1] - lo[1]));
-                let base = nx * (j + ny * (k - self.k0));
-                let m = row_len.min(LEAF_POINTS);
-                for (o, v) in self.out[base + lo[0]..base + lo[0] + m]
-                    .iter_mut()
-                    .zip(&vals[n..n + m])
-                {
-                    *o = *v as f32;
-                }
-                n += m;
-            }
+            tape.eval_batch_with(
+                &xs[..n],
+                &ys[..n],
+                &zs[..n],
+                &mut vals[..n],
+                &mut self.batch,
+            );
+            self.store(lo, hi, r0, r1, &vals[..n]);
             r0 = r1;
+        }
+        self.coords = coords;
+    }
+
+    /// [`Worker::leaf`] on a rows-separable grid: the x coordinates of one row and the y
+    /// and z coordinates of every row, evaluated row-structured. The coordinates are those
+    /// of [`Frame::point`] (x does not depend on the row, y and z not on the column, bit
+    /// for bit, by [`Frame::rows_separable`]).
+    fn leaf_rows(&mut self, tape: &Tape, lo: [usize; 3], hi: [usize; 3]) {
+        let row_len = (hi[0] - lo[0]).min(LEAF_POINTS);
+        if row_len == 0 {
+            return;
+        }
+        let mut coords = std::mem::take(&mut self.coords);
+        let [xs, ys, zs, vals] = &mut coords[..] else {
+            return;
+        };
+        let first = self.frame.row(lo[1], lo[2]);
+        for (x, i) in xs.iter_mut().zip(lo[0]..lo[0] + row_len) {
+            *x = self.frame.point(first, i).x;
+        }
+        let rows_per = (LEAF_POINTS / row_len).max(1);
+        let nrows = (hi[1] - lo[1]) * (hi[2] - lo[2]);
+        let mut r0 = 0;
+        while r0 < nrows {
+            let r1 = (r0 + rows_per).min(nrows);
+            for (n, r) in (r0..r1).enumerate() {
+                let (j, k) = (lo[1] + r % (hi[1] - lo[1]), lo[2] + r / (hi[1] - lo[1]));
+                let p = self.frame.point(self.frame.row(j, k), lo[0]);
+                ys[n] = p.y;
+                zs[n] = p.z;
+            }
+            let n = (r1 - r0) * row_len;
+            tape.eval_rows_with(
+                &xs[..row_len],
+                &ys[..r1 - r0],
+                &zs[..r1 - r0],
+                &mut vals[..n],
+                &mut self.batch,
+            );
+            self.store(lo, hi, r0, r1, &vals[..n]);
+            r0 = r1;
+        }
+        self.coords = coords;
+    }
+
+    /// Write the values of rows `r0..r1` of the region `[lo, hi)` (rows of at most
+    /// [`LEAF_POINTS`] values, y fastest) into the slab.
+    fn store(&mut self, lo: [usize; 3], hi: [usize; 3], r0: usize, r1: usize, vals: &[f64]) {
+        let [nx, ny, _] = self.geometry.dims;
+        let m = (hi[0] - lo[0]).min(LEAF_POINTS);
+        for (r, v) in (r0..r1).zip(vals.chunks_exact(m)) {
+            let (j, k) = (lo[1] + r % (hi[1] - lo[1]), lo[2] + r / (hi[1] - lo[1]));
+            let base = nx * (j + ny * (k - self.k0)) + lo[0];
+            for (o, v) in self.out[base..base + m].iter_mut().zip(v) {
+                *o = *v as f32;
+            }
         }
     }
 }

@@ -77,7 +77,6 @@ impl Tape {
         let mut instrs = Vec::new();
         let mut classes = Vec::new();
         let mut dep_of: Vec<u8> = Vec::with_capacity(n);
-        let mut class_of: Vec<Class> = Vec::with_capacity(n);
         for (i, node) in nodes.iter().enumerate() {
             let d = match *node {
                 Node::Input(a) => 1u8 << a.min(2),
@@ -85,18 +84,9 @@ impl Tape {
                 _ => args(node).fold(0u8, |m, a| m | dep_of[a as usize]),
             };
             dep_of.push(d);
-            // Compact evaluation pays off for costly operations and what is computed from
-            // their compact results; cheap operations of raw inputs run on every lane
-            // (expanding their results would cost as much as computing them).
-            let allowed = Class::of(d);
-            let class = if allowed != Class::Full
-                && (costly(node) || args(node).any(|a| class_of[a as usize] != Class::Full))
-            {
-                allowed
-            } else {
-                Class::Full
-            };
-            class_of.push(class);
+            // Every operation runs on the fewest lanes its inputs distinguish; an operation
+            // combining compact values of different classes reads them broadcast.
+            let class = Class::of(d);
             let leaf = match *node {
                 Node::Input(a) => Some(Arg::Input(a.min(2))),
                 Node::Const(b) => Some(Arg::Imm(f64::from_bits(b))),
@@ -365,26 +355,24 @@ impl Tape {
         }
     }
 
-    /// Evaluate on a block of whole grid rows: lane `r · row_len + i` is point `i` of row
-    /// `r`, where the x coordinate depends only on `i` (every row holds the same x values)
-    /// and y and z only on `r` (constant along each row). Each instruction is evaluated
-    /// only on the lanes its inputs distinguish: once if it depends on no input, once per
-    /// row position if only on x, once per row if not on x, and at every lane otherwise.
-    /// Every value is the one [`Tape::eval_batch`] gives (each operation is a pure function
-    /// of its arguments), bit for bit.
-    ///
-    /// The caller guarantees the row structure; `row_len` must be in `1..=LANES` and divide
-    /// the length (otherwise this falls back to [`Tape::eval_batch_with`]).
+    /// Evaluate on whole grid rows given compactly: point `(i, r)` — lane `r · x.len() + i`
+    /// of `out` — is `(x[i], y[r], z[r])`, for `r < out.len() / x.len()` (the slices are
+    /// truncated to the shortest). This is the layout of a grid whose x coordinate depends
+    /// only on the column and y and z only on the row. Each instruction is evaluated only
+    /// on the lanes its inputs distinguish: once if it depends on no input, once per
+    /// column if only on x, once per row if not on x, and at every lane otherwise (reading
+    /// compact arguments broadcast). Every value is the one [`Tape::eval_batch`] gives on
+    /// the expanded points (each operation is a pure function of its arguments), bit for
+    /// bit.
     pub(crate) fn eval_rows_with(
         &self,
-        row_len: usize,
         x: &[f64],
         y: &[f64],
         z: &[f64],
         out: &mut [f64],
         scratch: &mut BatchScratch,
     ) {
-        rows_kernel(self, row_len, x, y, z, out, scratch);
+        rows_kernel(self, x, y, z, out, scratch);
     }
 
     /// Body of [`Tape::eval_rows_with`], inlined into each compiled variant of
@@ -392,61 +380,64 @@ impl Tape {
     #[inline(always)]
     fn eval_rows_inner(
         &self,
-        row_len: usize,
         x: &[f64],
         y: &[f64],
         z: &[f64],
         out: &mut [f64],
         scratch: &mut BatchScratch,
     ) {
-        let n = x.len().min(y.len()).min(z.len()).min(out.len());
-        if row_len == 0 || row_len > LANES || !n.is_multiple_of(row_len) {
-            self.eval_batch_inner(x, y, z, out, scratch);
+        let row_len = x.len();
+        if row_len == 0 {
             return;
         }
+        let rows = y.len().min(z.len()).min(out.len() / row_len);
         if scratch.regs.len() < self.regs {
             scratch.regs.resize(self.regs, [0.0; LANES]);
         }
         if scratch.class.len() < self.regs {
             scratch.class.resize(self.regs, Class::Full);
         }
-        let block = (LANES / row_len) * row_len;
-        let mut start = 0;
-        while start < n {
-            let end = (start + block).min(n);
-            let xs = [&x[start..end], &y[start..end], &z[start..end]];
-            self.eval_rows_block(row_len, xs, scratch, &mut out[start..end]);
-            start = end;
+        // Rows longer than a block are cut into segments, each a block of one row.
+        let seg = row_len.min(LANES);
+        let per_block = LANES / seg;
+        for s0 in (0..row_len).step_by(seg) {
+            let s1 = (s0 + seg).min(row_len);
+            let xs = &x[s0..s1];
+            let mut r0 = 0;
+            while r0 < rows {
+                let r1 = (r0 + per_block).min(rows);
+                if s1 - s0 == row_len {
+                    let o = &mut out[r0 * row_len..r1 * row_len];
+                    self.eval_rows_block(xs, &y[r0..r1], &z[r0..r1], scratch, o);
+                } else {
+                    let o = &mut out[r0 * row_len + s0..r0 * row_len + s1];
+                    self.eval_rows_block(xs, &y[r0..r1], &z[r0..r1], scratch, o);
+                }
+                r0 = r1;
+            }
         }
     }
 
     #[inline(always)]
     fn eval_rows_block(
         &self,
-        row_len: usize,
-        xs: [&[f64]; 3],
+        x: &[f64],
+        y: &[f64],
+        z: &[f64],
         scratch: &mut BatchScratch,
         out: &mut [f64],
     ) {
-        let n = out.len();
-        let rows = n / row_len;
+        let row_len = x.len();
+        let rows = out.len() / row_len;
+        let n = rows * row_len;
         let BatchScratch { regs, class, tmp } = scratch;
-        // Row heads: the y and z of every row, and the x of one row.
-        let mut heads = [[0.0f64; LANES]; 2];
-        for (r, chunk) in xs[1].chunks_exact(row_len).enumerate() {
-            heads[0][r] = chunk[0];
-        }
-        for (r, chunk) in xs[2].chunks_exact(row_len).enumerate() {
-            heads[1][r] = chunk[0];
-        }
         let compact = Compact {
             row_len,
             rows,
             n,
-            x: &xs[0][..row_len],
-            y: &heads[0][..rows],
-            z: &heads[1][..rows],
-            full: xs,
+            x,
+            y: &y[..rows],
+            z: &z[..rows],
         };
         for (ins, &c) in self.instrs.iter().zip(&self.classes) {
             let (o, m) = match *ins {
@@ -488,10 +479,13 @@ impl Tape {
             }
             class[o as usize] = c;
         }
+        let out = &mut out[..n];
         match self.output {
             Arg::Reg(r) => compact.expand(&regs[r as usize], class[r as usize], out),
             Arg::Imm(v) => out.fill(v),
-            Arg::Input(k) => out.copy_from_slice(xs[usize::from(k)]),
+            Arg::Input(0) => compact.expand(compact.x, Class::X, out),
+            Arg::Input(1) => compact.expand(compact.y, Class::Rows, out),
+            Arg::Input(_) => compact.expand(compact.z, Class::Rows, out),
         }
     }
 
@@ -561,32 +555,6 @@ impl Tape {
 fn unreachable_leaf() -> Instr {
     // Leaves were handled before; a harmless placeholder keeps this total.
     Instr::Unary(UnaryOp::Neg, 0, Arg::Imm(f64::NAN))
-}
-
-/// Whether a node's operation is costly enough to evaluate on as few lanes as possible.
-fn costly(n: &Node) -> bool {
-    match *n {
-        Node::Unary(op, _) => !matches!(
-            op,
-            UnaryOp::Neg
-                | UnaryOp::Abs
-                | UnaryOp::Square
-                | UnaryOp::Floor
-                | UnaryOp::Ceil
-                | UnaryOp::Sign
-                | UnaryOp::Not
-        ),
-        Node::Binary(op, _, _) => matches!(
-            op,
-            BinaryOp::Div
-                | BinaryOp::Pow
-                | BinaryOp::Atan2
-                | BinaryOp::RUnion
-                | BinaryOp::RIntersection
-        ),
-        Node::Voxel(..) => true,
-        _ => false,
-    }
 }
 
 /// Arguments of a node.
@@ -731,7 +699,8 @@ impl Class {
 
 type Ctx<'a> = (&'a Regs, &'a Regs, u32, &'a [Class]);
 
-/// Shapes of a row-structured block.
+/// Shapes of a row-structured block: `rows` rows of `row_len` points, the x coordinate of
+/// every column and the y and z coordinates of every row.
 struct Compact<'a> {
     row_len: usize,
     rows: usize,
@@ -739,7 +708,6 @@ struct Compact<'a> {
     x: &'a [f64],
     y: &'a [f64],
     z: &'a [f64],
-    full: [&'a [f64]; 3],
 }
 
 impl Compact<'_> {
@@ -752,93 +720,70 @@ impl Compact<'_> {
         }
     }
 
-    /// Operand `a` of an instruction of class `c`, expanded into `tmp` if its register is
-    /// stored more compactly than `c` needs.
+    /// Values of class `rc` (stored compactly in `v`) as an operand of an instruction of
+    /// class `c`: as they are when the classes agree, broadcast for a full-lane
+    /// instruction, compacted through `tmp` otherwise (not produced by compilation — an
+    /// instruction's arguments depend on no input it does not — but total).
     #[inline(always)]
-    fn src<'b>(&'b self, a: Arg, c: Class, ctx: Ctx<'b>, tmp: &'b mut Vec<f64>) -> Src<'b> {
-        let (lo, hi, o, class) = ctx;
-        match a {
-            Arg::Imm(v) => Src::C(v),
-            Arg::Input(k) => match (c, k) {
-                (Class::Full, _) => Src::S(self.full[usize::from(k)]),
-                (_, 0) => Src::S(self.x),
-                (_, 1) => Src::S(self.y),
-                _ => Src::S(self.z),
-            },
-            Arg::Reg(r) => {
-                let reg: &'b [f64; LANES] = if r < o {
-                    &lo[r as usize]
-                } else {
-                    &hi[(r - o - 1) as usize]
-                };
-                let rc = class[r as usize];
-                if rc == c {
-                    Src::S(&reg[..self.len(c)])
-                } else if rc == Class::Const {
-                    Src::C(reg[0])
-                } else if rc == Class::Full {
-                    self.compact(&reg[..self.n], c, tmp)
-                } else {
-                    tmp.resize(self.n, 0.0);
-                    self.expand(reg, rc, tmp);
-                    if c == Class::Full {
-                        Src::S(&tmp[..])
-                    } else {
-                        // Not produced by compilation (a compact instruction's register
-                        // arguments are full, constant or of its own class), but total.
-                        let mut t2 = std::mem::take(tmp);
-                        let v = self.compact_owned(&mut t2, c);
-                        *tmp = t2;
-                        v.map_or(Src::S(&tmp[..self.len(c)]), Src::C)
+    fn view<'b>(&self, v: &'b [f64], rc: Class, c: Class, tmp: &'b mut Vec<f64>) -> Src<'b> {
+        match (rc, c) {
+            (Class::Const, _) => Src::C(v[0]),
+            (rc, c) if rc == c => Src::S(&v[..self.len(c)]),
+            (Class::X, Class::Full) => Src::X(&v[..self.row_len]),
+            (Class::Rows, Class::Full) => Src::R(&v[..self.rows], self.row_len),
+            (rc, c) => {
+                tmp.resize(self.n, 0.0);
+                self.expand(v, rc, tmp);
+                match c {
+                    Class::Const => Src::C(tmp[0]),
+                    Class::X => Src::S(&tmp[..self.row_len]),
+                    Class::Full => Src::S(&tmp[..]),
+                    Class::Rows => {
+                        for r in 0..self.rows {
+                            tmp[r] = tmp[r * self.row_len];
+                        }
+                        Src::S(&tmp[..self.rows])
                     }
                 }
             }
         }
     }
 
-    /// The lanes of class `c` of full-lane values `full` (gathered into `tmp` for rows).
-    fn compact<'b>(&self, full: &'b [f64], c: Class, tmp: &'b mut Vec<f64>) -> Src<'b> {
-        match c {
-            Class::Const => Src::C(full[0]),
-            Class::X => Src::S(&full[..self.row_len]),
-            Class::Full => Src::S(full),
-            Class::Rows => {
-                tmp.clear();
-                tmp.extend(full.iter().step_by(self.row_len).take(self.rows));
-                Src::S(&tmp[..])
+    /// Operand `a` of an instruction of class `c`.
+    #[inline(always)]
+    fn src<'b>(&'b self, a: Arg, c: Class, ctx: Ctx<'b>, tmp: &'b mut Vec<f64>) -> Src<'b> {
+        let (lo, hi, o, class) = ctx;
+        match a {
+            Arg::Imm(v) => Src::C(v),
+            Arg::Input(0) => self.view(self.x, Class::X, c, tmp),
+            Arg::Input(1) => self.view(self.y, Class::Rows, c, tmp),
+            Arg::Input(_) => self.view(self.z, Class::Rows, c, tmp),
+            Arg::Reg(r) => {
+                let reg: &'b [f64; LANES] = if r < o {
+                    &lo[r as usize]
+                } else {
+                    &hi[(r - o - 1) as usize]
+                };
+                self.view(reg, class[r as usize], c, tmp)
             }
         }
     }
 
-    /// Compact full-lane values in place to the lanes of class `c` (`Some` for a constant).
-    fn compact_owned(&self, v: &mut [f64], c: Class) -> Option<f64> {
+    /// Write the full-lane values of values stored with class `c` into `out`.
+    fn expand(&self, v: &[f64], c: Class, out: &mut [f64]) {
         match c {
-            Class::Const => Some(v[0]),
-            Class::X | Class::Full => None,
-            Class::Rows => {
-                for r in 0..self.rows {
-                    v[r] = v[r * self.row_len];
-                }
-                None
-            }
-        }
-    }
-
-    /// Write the full-lane values of a register stored with class `c` into `out`.
-    fn expand(&self, reg: &[f64; LANES], c: Class, out: &mut [f64]) {
-        match c {
-            Class::Const => out.fill(reg[0]),
+            Class::Const => out.fill(v[0]),
             Class::X => {
                 for row in out.chunks_exact_mut(self.row_len) {
-                    row.copy_from_slice(&reg[..self.row_len]);
+                    row.copy_from_slice(&v[..self.row_len]);
                 }
             }
             Class::Rows => {
-                for (row, &v) in out.chunks_exact_mut(self.row_len).zip(&reg[..self.rows]) {
+                for (row, &v) in out.chunks_exact_mut(self.row_len).zip(&v[..self.rows]) {
                     row.fill(v);
                 }
             }
-            Class::Full => out.copy_from_slice(&reg[..self.n]),
+            Class::Full => out.copy_from_slice(&v[..self.n]),
         }
     }
 }
@@ -852,6 +797,12 @@ pub struct IntervalScratch {
 }
 
 impl IntervalScratch {
+    /// Append the [`Choice`] of every graph node over the last box to `key`, one byte each:
+    /// two boxes with the same key give the same [`Tape::simplify`] result.
+    pub(crate) fn choice_key(&self, key: &mut Vec<u8>) {
+        key.extend(self.choices.iter().map(|&c| c as u8));
+    }
+
     /// Number of `min`/`max`/`select` nodes decided over the last box.
     #[must_use]
     pub fn pruned(&self) -> usize {
@@ -859,19 +810,47 @@ impl IntervalScratch {
     }
 }
 
-/// A block operand: a slice of `n` values or a constant.
+/// A block operand: a slice of `n` values, a constant, or compact values read broadcast
+/// over a row-structured block.
 #[derive(Clone, Copy)]
 enum Src<'a> {
     S(&'a [f64]),
     C(f64),
+    /// One value per column: lane `l` reads `s[l % s.len()]`.
+    X(&'a [f64]),
+    /// One value per row of the given length: lane `l` reads `s[l / len]`.
+    R(&'a [f64], usize),
 }
 
-impl Src<'_> {
+impl<'a> Src<'a> {
     #[inline(always)]
     fn at(&self, i: usize) -> f64 {
         match *self {
             Src::S(s) => s[i],
             Src::C(c) => c,
+            Src::X(s) => s[i % s.len()],
+            Src::R(s, len) => s[i / len],
+        }
+    }
+
+    /// Row length of a broadcast operand.
+    #[inline(always)]
+    fn row_len(&self) -> Option<usize> {
+        match *self {
+            Src::X(s) => Some(s.len()),
+            Src::R(_, len) => Some(len),
+            Src::S(_) | Src::C(_) => None,
+        }
+    }
+
+    /// Row `r` (of length `len`) of the operand, as a slice or a constant.
+    #[inline(always)]
+    fn row(&self, r: usize, len: usize) -> Src<'a> {
+        match *self {
+            Src::S(s) => Src::S(&s[r * len..(r + 1) * len]),
+            Src::C(c) => Src::C(c),
+            Src::X(s) => Src::S(s),
+            Src::R(s, _) => Src::C(s[r]),
         }
     }
 }
@@ -915,14 +894,13 @@ fn batch_kernel(
 #[multiversion(targets("x86_64+avx2+fma"))]
 fn rows_kernel(
     tape: &Tape,
-    row_len: usize,
     x: &[f64],
     y: &[f64],
     z: &[f64],
     out: &mut [f64],
     scratch: &mut BatchScratch,
 ) {
-    tape.eval_rows_inner(row_len, x, y, z, out, scratch);
+    tape.eval_rows_inner(x, y, z, out, scratch);
 }
 
 #[inline(always)]
@@ -934,11 +912,29 @@ fn map1(o: &mut [f64], a: Src<'_>, f: impl Fn(f64) -> f64) {
             }
         }
         Src::C(c) => o.fill(f(c)),
+        // Not produced by compilation (an operation of one compact value is compact).
+        Src::X(_) | Src::R(..) => {
+            for (i, o) in o.iter_mut().enumerate() {
+                *o = f(a.at(i));
+            }
+        }
     }
 }
 
 #[inline(always)]
 fn map2(o: &mut [f64], a: Src<'_>, b: Src<'_>, f: impl Fn(f64, f64) -> f64) {
+    if let Some(len) = a.row_len().or(b.row_len()) {
+        // A broadcast operand: row by row, each row a slice or a constant.
+        for (r, o) in o.chunks_exact_mut(len).enumerate() {
+            map2_flat(o, a.row(r, len), b.row(r, len), &f);
+        }
+    } else {
+        map2_flat(o, a, b, f);
+    }
+}
+
+#[inline(always)]
+fn map2_flat(o: &mut [f64], a: Src<'_>, b: Src<'_>, f: impl Fn(f64, f64) -> f64) {
     match (a, b) {
         (Src::S(a), Src::S(b)) => {
             for ((o, &a), &b) in o.iter_mut().zip(a).zip(b) {
@@ -956,6 +952,11 @@ fn map2(o: &mut [f64], a: Src<'_>, b: Src<'_>, f: impl Fn(f64, f64) -> f64) {
             }
         }
         (Src::C(a), Src::C(b)) => o.fill(f(a, b)),
+        (a, b) => {
+            for (i, o) in o.iter_mut().enumerate() {
+                *o = f(a.at(i), b.at(i));
+            }
+        }
     }
 }
 
@@ -1076,31 +1077,40 @@ mod tests {
             b.add(w, q)
         });
         let t = Tape::new(&s);
-        for row_len in [1, 3, 7, 16, 37, LANES] {
-            let rows = 700 / row_len + 1;
+        for row_len in [1, 3, 7, 16, 37, LANES, LANES + 44, 3 * LANES] {
+            let rows = (700 / row_len + 1).max(6);
             let n = rows * row_len;
-            let (mut xs, mut ys, mut zs) = (vec![0.0; n], vec![0.0; n], vec![0.0; n]);
-            for r in 0..rows {
-                for i in 0..row_len {
-                    let l = r * row_len + i;
-                    xs[l] = -1.5 + 0.37 * i as f64;
-                    ys[l] = if r % 5 == 0 {
+            let cx: Vec<f64> = (0..row_len).map(|i| -1.5 + 0.37 * i as f64).collect();
+            let cy: Vec<f64> = (0..rows)
+                .map(|r| {
+                    if r % 5 == 0 {
                         0.0
                     } else {
                         0.9 - 0.11 * r as f64
-                    };
-                    zs[l] = if r % 5 == 0 {
+                    }
+                })
+                .collect();
+            let cz: Vec<f64> = (0..rows)
+                .map(|r| {
+                    if r % 5 == 0 {
                         0.0
                     } else {
                         0.3 - 0.4 * (r % 3) as f64
-                    };
+                    }
+                })
+                .collect();
+            let (mut xs, mut ys, mut zs) = (vec![0.0; n], vec![0.0; n], vec![0.0; n]);
+            for r in 0..rows {
+                for (i, &x) in cx.iter().enumerate() {
+                    let l = r * row_len + i;
+                    (xs[l], ys[l], zs[l]) = (x, cy[r], cz[r]);
                 }
             }
             let mut a = vec![0.0; n];
             let mut b = vec![0.0; n];
             let mut sc = BatchScratch::default();
             t.eval_batch_with(&xs, &ys, &zs, &mut a, &mut sc);
-            t.eval_rows_with(row_len, &xs, &ys, &zs, &mut b, &mut sc);
+            t.eval_rows_with(&cx, &cy, &cz, &mut b, &mut sc);
             for l in 0..n {
                 assert_eq!(
                     a[l].to_bits(),

@@ -602,6 +602,44 @@ fn bad_models_give_located_errors() {
     assert!(e.to_string().contains("a2"), "{e}");
 }
 
+/// Grids large enough that regions are cut many times, specialised tapes are shared
+/// between regions and leaves are evaluated row-structured on rows of every length: still
+/// bit-for-bit the point-by-point values (the smooth blend of two balls, a union of many
+/// boxes, a twisted bar).
+#[test]
+fn large_grid_sampling_equals_pointwise_evaluation() {
+    let models = [
+        "m(x[3], a[1]) { dx1 = x[1] - 0.45; dx2 = x[1] + 0.45;
+            a1 = sqrt(dx1*dx1 + x[2]*x[2] + x[3]*x[3]) - 0.7;
+            b1 = sqrt(dx2*dx2 + x[2]*x[2] + x[3]*x[3]) - 0.7;
+            k = 0.25; h = max(k - abs(a1 - b1), 0.0) / k;
+            f = min(a1, b1) - h*h*h*k/6.0; m = -f; }",
+        "m(x[3], a[1]) { f = 1.0e9; i = 0;
+            while i < 9 loop c = cos(0.7*i); s = sin(0.7*i);
+              u = abs(c*x[1] + s*x[2] - 0.9) - 0.1; v = abs(c*x[2] - s*x[1]) - 0.08;
+              f = min(f, max(max(u, v), abs(x[3]) - 0.2)); i = i + 1; endloop;
+            m = -f; }",
+        "m(x[3], a[1]) { ct = cos(1.2*x[3]); st = sin(1.2*x[3]);
+            f = max(abs(x[1]*ct + x[2]*st) - 0.35, abs(x[2]*ct - x[1]*st) - 0.35);
+            m = -max(f, abs(x[3]) - 1.1); }",
+    ];
+    for src in models {
+        let t = tape(src);
+        for dims in [[97, 61, 45], [300, 9, 11]] {
+            let g = box_geometry(DVec3::splat(-1.6), DVec3::splat(1.6), dims).unwrap();
+            let fast = sample(&t, &g).unwrap();
+            let slow = sample_naive(&t, &g).unwrap();
+            let same = fast
+                .data()
+                .iter()
+                .zip(slow.data())
+                .filter(|(a, b)| a.to_bits() == b.to_bits())
+                .count();
+            assert_eq!(same, slow.data().len(), "{dims:?}: {src}");
+        }
+    }
+}
+
 #[test]
 fn grid_sampling_equals_pointwise_evaluation() {
     let models = [
