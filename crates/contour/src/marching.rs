@@ -471,6 +471,7 @@ impl<T: Voxel> Field<'_, T> {
     fn slab(
         &self,
         c: &Classes,
+        p: &mut Planes,
         layers: std::ops::Range<usize>,
         owns_top: bool,
         offsets: &[usize],
@@ -478,14 +479,6 @@ impl<T: Voxel> Field<'_, T> {
         lookup: &EdgeLookup,
         progress: &dyn volmorph_io::Progress,
     ) -> Vec<[u32; 3]> {
-        let plane = self.nx * self.ny;
-        let mut p = Planes {
-            bx: vec![NONE; plane],
-            by: vec![NONE; plane],
-            tx: vec![NONE; plane],
-            ty: vec![NONE; plane],
-            z: vec![NONE; plane],
-        };
         let mut triangles = Vec::new();
         let k0 = layers.start;
         let mut xy_count =
@@ -575,6 +568,19 @@ struct Planes {
     tx: Vec<u32>,
     ty: Vec<u32>,
     z: Vec<u32>,
+}
+
+impl Planes {
+    /// Tables for planes of `plane` samples.
+    fn new(plane: usize) -> Self {
+        Self {
+            bx: vec![NONE; plane],
+            by: vec![NONE; plane],
+            tx: vec![NONE; plane],
+            ty: vec![NONE; plane],
+            z: vec![NONE; plane],
+        }
+    }
 }
 
 /// Where vertices of one slab go: the slab's part of the global arrays, starting at global
@@ -702,11 +708,16 @@ fn extract<T: Voxel>(
     let per_slab: Vec<Vec<[u32; 3]>> = sinks
         .into_par_iter()
         .filter(|(r, _, _)| !r.is_empty())
-        .map(|(range, last, mut sink)| {
-            field.slab(
-                &classes, range, last, &offsets, &mut sink, &lookup, progress,
-            )
-        })
+        // One set of edge tables per worker, reused by its slabs (stale entries are never
+        // read: the case table names crossed edges only, and those are written first).
+        .map_init(
+            || Planes::new(field.nx * field.ny),
+            |p, (range, last, mut sink)| {
+                field.slab(
+                    &classes, p, range, last, &offsets, &mut sink, &lookup, progress,
+                )
+            },
+        )
         .collect();
     progress.check()?;
     let triangles: Vec<[u32; 3]> = per_slab.concat();
