@@ -10,8 +10,8 @@ use serde_json::json;
 use volmorph_deform::SpaceMap;
 use volmorph_ffd::accurate::{AccuratePlan, TrimmedModel};
 use volmorph_ffd::baseline::vertex_ffd;
-use volmorph_ffd::step::step_string;
 use volmorph_ffd::shapes::uv_sphere;
+use volmorph_ffd::step::step_string;
 use volmorph_lattice::BSplineLattice;
 use volmorph_mesh::Mesh;
 use volmorph_testkit::Rng;
@@ -154,11 +154,9 @@ impl FfdInputs {
                 self.vertex_rings == TARGET_VERTEX_RINGS,
                 ISSUE_22_VERTEX_FFD,
             )),
-            Case::call(
-                "STEP text of the accurate FFD",
-                "step_writing",
-                move || Ok(step_string(&self.model, "bench")?),
-            ),
+            Case::call("STEP text of the accurate FFD", "step_writing", move || {
+                Ok(step_string(&self.model, "bench")?)
+            }),
         ]
     }
 

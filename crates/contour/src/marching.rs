@@ -497,7 +497,7 @@ impl<T: Voxel> Field<'_, T> {
                 if owned { Some(&mut *sink) } else { None },
             );
             self.fill_z(c, k, offsets[k] + xy_count, &mut p.z, sink);
-            self.cells(c, k, &p, lookup, &mut triangles);
+            self.cells(c, k, p, lookup, &mut triangles);
             std::mem::swap(&mut p.bx, &mut p.tx);
             std::mem::swap(&mut p.by, &mut p.ty);
             xy_count = top_count;
