@@ -213,8 +213,20 @@ fn ffd_suite_moves_every_control_point_by_at_most_five_percent() {
         );
     }
     let r = ffd::run(&config, &mut quiet()).unwrap();
-    check_items(&r, &["accurate FFD (plan + surfaces)", "vertex FFD"]);
+    check_items(
+        &r,
+        &[
+            "accurate FFD (plan + surfaces)",
+            "vertex FFD",
+            "STEP text of the accurate FFD",
+        ],
+    );
     assert!(r.items[0].triangles.unwrap() >= 4 * 8 * 7);
+    // The STEP case writes the accurate FFD of the same sphere: a part-21 file with a face
+    // per trimmed face of the model.
+    let (text, summary) = volmorph_ffd::step::step_string(&inputs.model, "t").unwrap();
+    assert!(text.starts_with("ISO-10303-21;"), "{}", &text[..40]);
+    assert!(summary.faces >= inputs.model.surfaces.len(), "{summary:?}");
 }
 
 #[test]
