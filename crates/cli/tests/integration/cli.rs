@@ -1154,7 +1154,18 @@ fn bench_ffd_runs_small() {
     ]))
     .unwrap();
     let items = j["items"].as_array().unwrap();
-    assert_eq!(items.len(), 2);
+    let names: Vec<&str> = items
+        .iter()
+        .map(|it| it["name"].as_str().unwrap())
+        .collect();
+    assert_eq!(
+        names,
+        [
+            "accurate FFD (plan + surfaces)",
+            "vertex FFD",
+            "STEP text of the accurate FFD"
+        ]
+    );
     for it in items {
         assert!(it["median_s"].as_f64().unwrap() > 0.0, "{it}");
         assert!(it["target_s"].is_null(), "{it}");
