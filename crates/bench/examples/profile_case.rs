@@ -10,7 +10,7 @@
 //! Arguments: `ID [RUNS [SIZE [EDIT_SIZE]]]` (defaults 1, 256, 128); ids of the warp suite
 //! (`crates/bench/benches/warp.rs`), `scene_drag` and `engine_drag` of the scene suite, the
 //! isosurface suite's (at `SIZE`), and the handle (`tps_…`, `mls…`) and FFD (`accurate_…`,
-//! `vertex_ffd…`) suites' at their default settings.
+//! `vertex_ffd…`, `step_writing`) suites' at their default settings.
 
 use volmorph_bench::ffd::{FfdConfig, FfdInputs};
 use volmorph_bench::handles::{HandlesConfig, HandlesInputs};
@@ -103,7 +103,7 @@ fn main() -> Result<(), BenchError> {
         let mut cases = inputs.cases()?;
         cases.extend(inputs.extra_cases()?);
         go(find(cases, &id)?)?;
-    } else if id.starts_with("accurate_") || id.starts_with("vertex_ffd") {
+    } else if id.starts_with("accurate_") || id.starts_with("vertex_ffd") || id == "step_writing" {
         let inputs = FfdInputs::new(&FfdConfig::default())?;
         let mut cases = inputs.cases();
         cases.extend(inputs.extra_cases()?);
