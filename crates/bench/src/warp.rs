@@ -23,8 +23,8 @@ use volmorph_warp::pushforward::{
 };
 
 use crate::targets::{
-    ISSUE_3_DRAG, ISSUE_3_INCREMENTAL_UPDATE, ISSUE_3_PUSHFORWARD_ANTIALIASED,
-    ISSUE_22_PULLBACK_TRILINEAR,
+    ISSUE_3_DRAG, ISSUE_22_INCREMENTAL_UPDATE, ISSUE_22_PULLBACK_TRILINEAR,
+    ISSUE_22_PUSHFORWARD_ANTIALIASED,
 };
 use crate::timing::{Case, Report, Sample, Unit, measure_all};
 use crate::{BenchError, MAX_SIZE, SEED, check_repeat};
@@ -174,7 +174,7 @@ impl WarpInputs {
                 "pushforward_antialiased",
                 move || Ok(push_forward_antialiased(&self.density, lat, grid, &aa)?),
             )
-            .with_target(at(ISSUE_3_PUSHFORWARD_ANTIALIASED)),
+            .with_target(at(ISSUE_22_PUSHFORWARD_ANTIALIASED)),
             Case::call(
                 "Jacobian determinant map",
                 "jacobian_determinant",
@@ -307,7 +307,7 @@ impl EditInputs {
                 Ok(engine.set_parameters(&changes)?)
             },
         )
-        .with_target(at(ISSUE_3_INCREMENTAL_UPDATE));
+        .with_target(at(ISSUE_22_INCREMENTAL_UPDATE));
 
         let mut engine = self.engine()?;
         let mut session = ManipulationSession::new(

@@ -66,7 +66,7 @@ fn editing_targets_are_shown_at_the_target_size() {
     assert_eq!(
         targets,
         [
-            Some(volmorph_bench::targets::ISSUE_3_INCREMENTAL_UPDATE),
+            Some(volmorph_bench::targets::ISSUE_22_INCREMENTAL_UPDATE),
             Some(volmorph_bench::targets::ISSUE_3_DRAG)
         ]
     );
