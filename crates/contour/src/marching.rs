@@ -6,7 +6,7 @@ use volmorph_mesh::Mesh;
 use volmorph_volume::{AnyVolume, Volume, Voxel, with_volume};
 
 use crate::ContourError;
-use crate::scan::{Classes, for_each_bit};
+use crate::scan::{Classes, cell_case, for_each_bit};
 use crate::table::{CASES, corner_offset, edge_corners};
 
 /// Smallest distance, as a fraction of the edge, between a surface vertex and either end of
@@ -534,28 +534,17 @@ impl<T: Voxel> Field<'_, T> {
                 c.row(k + 1, j),
                 c.row(k + 1, j + 1),
             ];
-            let bit = |row: &[u64], i: usize| ((row[i / 64] >> (i % 64)) & 1) as u8;
-            // Corner bits: x = 0 side in bits 0, 2, 4, 6; the x = 1 side shifted by one.
-            let column = |i: usize| {
-                bit(rows[0], i)
-                    | (bit(rows[1], i) << 2)
-                    | (bit(rows[2], i) << 4)
-                    | (bit(rows[3], i) << 6)
-            };
             let row = j * nx;
-            for w in 0..c.wpr() {
-                for_each_bit(c.active_cells(rows, w), w, |i| {
-                    let case = column(i) | (column(i + 1) << 1);
-                    let o = row + i;
-                    for tri in CASES[usize::from(case)].triangles() {
-                        let v = tri.map(|e| {
-                            let e = usize::from(e);
-                            tables[lookup.slots[e]][o + lookup.deltas[e]]
-                        });
-                        out.push(if lookup.flip { [v[0], v[2], v[1]] } else { v });
-                    }
-                });
-            }
+            c.for_each_active_cell(rows, |i| {
+                let o = row + i;
+                for tri in CASES[usize::from(cell_case(rows, i))].triangles() {
+                    let v = tri.map(|e| {
+                        let e = usize::from(e);
+                        tables[lookup.slots[e]][o + lookup.deltas[e]]
+                    });
+                    out.push(if lookup.flip { [v[0], v[2], v[1]] } else { v });
+                }
+            });
         }
     }
 }

@@ -110,19 +110,35 @@ impl Classes {
         (row[w] ^ shifted_down(row, w)) & edge_mask(w, self.nx)
     }
 
-    /// The cells between row pair `(b0, b1)` of one plane and `(t0, t1)` of the next, word
-    /// `w`, whose eight corners do not all lie on one side: bit `b` for the cell whose lowest
-    /// corner is sample `i = 64w + b` (`i < nx − 1`). A cell is uniform exactly when both
-    /// its corner columns are (all four corners as the column's `b0` corner) and the two
-    /// `b0` corners agree.
+    /// Calls `f(i)`, in increasing order, for every cell between row pair `(b0, b1)` of one
+    /// plane and `(t0, t1)` of the next whose eight corners do not all lie on one side; `i`
+    /// is the cell's lowest corner sample (`i < nx − 1`). A cell is uniform exactly when both
+    /// its corner columns are (all four corners as the column's `b0` corner) and the two `b0`
+    /// corners agree. Each word's column differences are computed once and carried to the
+    /// next word, whose first column is the last cell's right side.
     #[inline]
-    pub(crate) fn active_cells(&self, rows: [&[u64]; 4], w: usize) -> u64 {
-        let e = column_differences(rows, w);
-        let e_next = column_differences(rows, w + 1);
+    pub(crate) fn for_each_active_cell(&self, rows: [&[u64]; 4], mut f: impl FnMut(usize)) {
         let b0 = rows[0];
-        let active = e | (e >> 1) | (e_next << 63) | (b0[w] ^ shifted_down(b0, w));
-        active & edge_mask(w, self.nx)
+        let mut e = column_differences(rows, 0);
+        for w in 0..self.wpr {
+            let e_next = column_differences(rows, w + 1);
+            let columns = (e | (e >> 1) | (e_next << 63)) & edge_mask(w, self.nx);
+            for_each_bit(columns | self.x_crossings(b0, w), w, &mut f);
+            e = e_next;
+        }
     }
+}
+
+/// The marching-cubes case of the cell whose lowest corner is sample `i` of row quadruple
+/// `[b0, b1, t0, t1]`: corner bits 0, 2, 4, 6 are the `i` column of `b0`, `b1`, `t0`, `t1`,
+/// bits 1, 3, 5, 7 the `i + 1` column (the table's corner numbering, x fastest).
+#[inline]
+pub(crate) fn cell_case(rows: [&[u64]; 4], i: usize) -> u8 {
+    let bit = |row: &[u64], i: usize| ((row[i / WORD] >> (i % WORD)) & 1) as u8;
+    let column = |i: usize| {
+        bit(rows[0], i) | (bit(rows[1], i) << 2) | (bit(rows[2], i) << 4) | (bit(rows[3], i) << 6)
+    };
+    column(i) | (column(i + 1) << 1)
 }
 
 /// Columns of word `w` (of a row quadruple `[b0, b1, t0, t1]`) whose four corners do not all
