@@ -194,14 +194,14 @@ def compare_pullback(exe, repeat, tmp):
     def run_sitk():
         sitk.Resample(image, image, tx, sitk.sitkLinear, 0.0, sitk.sitkFloat32)
 
-    peer = median_time(run_sitk, max(1, min(repeat, 3)))
+    peer_runs = max(1, min(repeat, 3))  # SimpleITK takes seconds per run
+    peer = median_time(run_sitk, peer_runs)
     report = bench_json(exe, ["warp", "--size", str(size), "--lattice", str(counts),
                               "--repeat", str(repeat)])
     ours = item(report, "pull-back trilinear (f32)")["median_s"]
     print(f"pullback: SimpleITK {sitk.Version.VersionString()} on "
           f"{sitk.ProcessObject.GetGlobalDefaultNumberOfThreads()} threads, "
-          f"{size}³ f32, {counts}³ control points (peer median of "
-          f"{max(1, min(repeat, 3))} runs)")
+          f"{size}³ f32, {counts}³ control points (peer median of {peer_runs} runs)")
     line("pullback", ours, peer, "SimpleITK Resample", 1.0)
 
 

@@ -11,10 +11,11 @@
 //! region are dropped, so far from the surface of a CSG model only a few instructions
 //! remain. Regions of at most [`LEAF_POINTS`] voxels are evaluated with the batch
 //! evaluator; on grids whose x axis is the physical x axis (no y or z component, and the y
-//! and z steps without x component) the batch is row-structured, so costly operations of x
-//! alone are computed once per row position and those of y and z alone once per row (the
-//! gyroid's `sin(3x)`, a twist's `cos(1.2z)`). Because specialisation is exact, the result is **bit-for-bit the value of
-//! point-by-point evaluation** of the full tape at each voxel centre ([`sample_naive`],
+//! and z steps without x component) the batch is row-structured, so every operation of x
+//! alone is computed once per row position and every one of y and z alone once per row (the
+//! gyroid's `sin(3x)`, a twist's `cos(1.2z)`), and full-lane operations read those compact
+//! values broadcast. Because specialisation is exact, the result is **bit-for-bit the value
+//! of point-by-point evaluation** of the full tape at each voxel centre ([`sample_naive`],
 //! which the tests compare against).
 //!
 //! Fields without a tape are evaluated point by point in parallel (no culling).
