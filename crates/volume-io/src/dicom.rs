@@ -374,22 +374,33 @@ fn check_declared_lengths(
             u32::from_le_bytes(b)
         })
     };
+    // PS3.5 7.1.2: these VRs carry a 2-byte length; every other VR, and (as the parser
+    // reads it) an unrecognised VR, which it takes for UN, carries 2 reserved bytes and a
+    // 4-byte length.
     let long_vr = |vr: &[u8]| {
-        matches!(
+        !matches!(
             vr,
-            b"OB"
-                | b"OD"
-                | b"OF"
-                | b"OL"
-                | b"OV"
-                | b"OW"
-                | b"SQ"
-                | b"SV"
-                | b"UC"
-                | b"UN"
-                | b"UR"
-                | b"UT"
-                | b"UV"
+            b"AE"
+                | b"AS"
+                | b"AT"
+                | b"CS"
+                | b"DA"
+                | b"DS"
+                | b"DT"
+                | b"FL"
+                | b"FD"
+                | b"IS"
+                | b"LO"
+                | b"LT"
+                | b"PN"
+                | b"SH"
+                | b"SL"
+                | b"SS"
+                | b"ST"
+                | b"TM"
+                | b"UI"
+                | b"UL"
+                | b"US"
         )
     };
     let mut syntax = String::new();
@@ -1362,6 +1373,35 @@ mod tests {
         // The true count still reads.
         let (v, _) = read_bytes(&with_frame_count("pydicom_rtdose.dcm", "3")).unwrap();
         assert_eq!(v.geometry().dims[2], 3);
+    }
+
+    /// Fuzz `dicom` (oom-afd1d846…): an element with the unrecognised VR `\0\0` declared a
+    /// 4.29 GB value. The parser reads an unknown VR as UN (2 reserved bytes, a 4-byte
+    /// length), while the length walk took it for a 2-byte-length VR, read 30 bytes and let
+    /// the forged length through to an allocation beyond the memory budget. The walk now
+    /// reads every VR outside the 2-byte-length list as the parser does.
+    #[test]
+    fn unknown_vr_with_forged_length_is_refused_before_allocating() {
+        let mut b = vec![0u8; 128];
+        b.extend_from_slice(b"DICM");
+        let meta_element = |b: &mut Vec<u8>, elem: u16, vr: &[u8; 2], value: &[u8]| {
+            b.extend_from_slice(&2u16.to_le_bytes());
+            b.extend_from_slice(&elem.to_le_bytes());
+            b.extend_from_slice(vr);
+            b.extend_from_slice(&(value.len() as u16).to_le_bytes());
+            b.extend_from_slice(value);
+        };
+        meta_element(&mut b, 0x0010, b"UI", b"1.2.840.10008.1.2.1\0");
+        // (0010,574F), VR "\0\0", reserved 0x001E, length 0xFFEC_0000, then a few bytes.
+        b.extend_from_slice(&[0x10, 0x00, 0x4F, 0x57, 0, 0, 30, 0, 0, 0, 0xEC, 0xFF]);
+        b.extend_from_slice(&[0u8; 24]);
+        let e = read_bytes(&b).unwrap_err().to_string();
+        assert!(e.contains("(0010,574F) declares 4293656576 bytes"), "{e}");
+        // A known long VR (OB) and a short one (US) are walked as before.
+        let mut ok = b[..b.len() - 36].to_vec();
+        ok.extend_from_slice(&[0x28, 0x00, 0x10, 0x00, b'U', b'S', 2, 0, 4, 0]);
+        ok.extend_from_slice(&[0x09, 0x00, 0x10, 0x00, b'O', b'B', 0, 0, 2, 0, 0, 0, 7, 7]);
+        check_declared_lengths(&ok, ok.len() as u64, false, "ok").unwrap();
     }
 
     /// Fuzz `dicom` (oom-cc4cec7e…): a 998-byte file whose ImagePositionPatient declares a
