@@ -34,7 +34,7 @@ use glam::DVec3;
 
 use crate::FfdError;
 use crate::accurate::{BezierSurface, TrimmedModel};
-use std::collections::HashMap;
+use rustc_hash::FxHashMap;
 
 /// The `distance_accuracy_value` written to the file (millimetres).
 pub const STEP_UNCERTAINTY: f64 = 1e-7;
@@ -56,31 +56,41 @@ pub struct StepSummary {
     pub entities: usize,
 }
 
-/// A STEP real: shortest round-trip digits, always with a decimal point, `E` exponent.
-fn real(x: f64) -> String {
-    let s = format!("{x:?}");
-    let (mant, exp) = match s.find(['e', 'E']) {
-        Some(i) => (&s[..i], Some(&s[i + 1..])),
-        None => (s.as_str(), None),
-    };
-    let mut out = if mant.contains('.') {
-        mant.to_string()
-    } else {
-        format!("{mant}.")
-    };
-    if let Some(e) = exp {
-        out.push('E');
-        out.push_str(e);
+/// Append `x` as a STEP real to `out`: shortest round-trip digits (Rust's `{:?}`), always
+/// with a decimal point, `E` exponent (`1.0`, `-2.5`, `1.E-7`, `1.5E300`).
+fn push_real(out: &mut String, x: f64) {
+    let start = out.len();
+    let _ = write!(out, "{x:?}");
+    if let Some(e) = out[start..].find('e') {
+        let e = start + e;
+        out.replace_range(e..=e, "E");
+        if !out[start..e].contains('.') {
+            out.insert(e, '.');
+        }
     }
-    out
+}
+
+/// `x` as a STEP real (see [`push_real`]).
+fn real(x: f64) -> String {
+    let mut s = String::with_capacity(24);
+    push_real(&mut s, x);
+    s
 }
 
 /// An entity writer handing out `#n` ids. Geometric entities go through [`Out::shared`]:
 /// an entity whose text was written before is referred to, not written again.
+///
+/// Points are de-duplicated by their coordinates' bits before any text is made: shortest
+/// round-trip digits are injective on non-NaN values (the text reads back to the same bits),
+/// so equal bits give equal text and different bits different text, and the file is the one
+/// de-duplication by text would write. Every value reaching the writer is finite
+/// ([`step_string`] checks).
 struct Out {
     text: String,
     next: usize,
-    shared: HashMap<String, usize>,
+    shared: FxHashMap<String, usize>,
+    points3: FxHashMap<[u64; 3], usize>,
+    points2: FxHashMap<[u64; 2], usize>,
 }
 
 impl Out {
@@ -102,21 +112,39 @@ impl Out {
         id
     }
 
+    /// A `CARTESIAN_POINT` of the given coordinates written straight into the text.
+    fn write_point(&mut self, coords: &[f64]) -> usize {
+        let id = self.next;
+        self.next += 1;
+        let _ = write!(self.text, "#{id}=CARTESIAN_POINT('',(");
+        for (i, &c) in coords.iter().enumerate() {
+            if i > 0 {
+                self.text.push(',');
+            }
+            push_real(&mut self.text, c);
+        }
+        self.text.push_str("));\n");
+        id
+    }
+
     fn point3(&mut self, p: DVec3) -> usize {
-        self.shared(format!(
-            "CARTESIAN_POINT('',({},{},{}))",
-            real(p.x),
-            real(p.y),
-            real(p.z)
-        ))
+        let key = p.to_array().map(f64::to_bits);
+        if let Some(&id) = self.points3.get(&key) {
+            return id;
+        }
+        let id = self.write_point(&p.to_array());
+        self.points3.insert(key, id);
+        id
     }
 
     fn point2(&mut self, p: [f64; 2]) -> usize {
-        self.shared(format!(
-            "CARTESIAN_POINT('',({},{}))",
-            real(p[0]),
-            real(p[1])
-        ))
+        let key = p.map(f64::to_bits);
+        if let Some(&id) = self.points2.get(&key) {
+            return id;
+        }
+        let id = self.write_point(&p);
+        self.points2.insert(key, id);
+        id
     }
 
     fn direction(&mut self, d: DVec3) -> usize {
@@ -129,11 +157,16 @@ impl Out {
     }
 }
 
+/// `#a,#b,…`: references to the entities `ids`.
 fn refs(ids: &[usize]) -> String {
-    ids.iter()
-        .map(|i| format!("#{i}"))
-        .collect::<Vec<_>>()
-        .join(",")
+    let mut s = String::with_capacity(8 * ids.len());
+    for (i, id) in ids.iter().enumerate() {
+        if i > 0 {
+            s.push(',');
+        }
+        let _ = write!(s, "#{id}");
+    }
+    s
 }
 
 /// Largest distance of a surface control point from its fitted plane (or of an edge curve's
@@ -209,11 +242,38 @@ pub fn step_string(model: &TrimmedModel, name: &str) -> Result<(String, StepSumm
         .collect();
     let faces = plan.faces();
     let edges = plan.edges();
+    // Room for the whole file at once (one allocation, no copy at the end): about 80 bytes
+    // per point (its entity and a reference to it) and 300 per edge and face.
+    let points = model
+        .surfaces
+        .iter()
+        .map(|s| s.control_points.len())
+        .sum::<usize>()
+        + model
+            .edge_curves
+            .iter()
+            .map(|c| c.control_points.len())
+            .sum::<usize>()
+        + model.images.len();
     let mut o = Out {
-        text: String::with_capacity(64 * (faces.len() + edges.len()) + 4096),
+        text: String::with_capacity(80 * points + 300 * (faces.len() + edges.len()) + 4096),
         next: 1,
-        shared: HashMap::new(),
+        shared: FxHashMap::default(),
+        points3: FxHashMap::default(),
+        points2: FxHashMap::default(),
     };
+    o.points3.reserve(points);
+    o.text.push_str("ISO-10303-21;\nHEADER;\n");
+    o.text.push_str(
+        "FILE_DESCRIPTION(('volmorph accurate B-spline FFD: trimmed Bezier surfaces'),'2;1');\n",
+    );
+    let _ = writeln!(
+        o.text,
+        "FILE_NAME('{name}','2000-01-01T00:00:00',(''),(''),'volmorph','volmorph','');"
+    );
+    o.text.push_str(
+        "FILE_SCHEMA(('AUTOMOTIVE_DESIGN { 1 0 10303 214 1 1 1 1 }'));\nENDSEC;\nDATA;\n",
+    );
     let app = o.add("APPLICATION_CONTEXT('automotive_design')");
     o.add(&format!(
         "APPLICATION_PROTOCOL_DEFINITION('international standard','automotive_design',2000,#{app})"
@@ -267,16 +327,17 @@ pub fn step_string(model: &TrimmedModel, name: &str) -> Result<(String, StepSumm
         } else {
             let [ns, nt] = s.degrees;
             let a = ns + 1;
-            let mut rows = Vec::with_capacity(a);
+            let mut body = format!("B_SPLINE_SURFACE_WITH_KNOTS('',{ns},{nt},(");
+            let mut ids = Vec::with_capacity(nt + 1);
             for i in 0..=ns {
-                let ids: Vec<usize> = (0..=nt)
-                    .map(|j| o.point3(s.control_points[i + a * j]))
-                    .collect();
-                rows.push(format!("({})", refs(&ids)));
+                ids.clear();
+                ids.extend((0..=nt).map(|j| o.point3(s.control_points[i + a * j])));
+                let sep = if i > 0 { "," } else { "" };
+                let _ = write!(body, "{sep}({})", refs(&ids));
             }
-            let id = o.shared(format!(
-                "B_SPLINE_SURFACE_WITH_KNOTS('',{ns},{nt},({}),.UNSPECIFIED.,.F.,.F.,.F.,({},{}),({},{}),({},{}),({},{}),.UNSPECIFIED.)",
-                rows.join(","),
+            let _ = write!(
+                body,
+                "),.UNSPECIFIED.,.F.,.F.,.F.,({},{}),({},{}),({},{}),({},{}),.UNSPECIFIED.)",
                 ns + 1,
                 ns + 1,
                 nt + 1,
@@ -285,7 +346,8 @@ pub fn step_string(model: &TrimmedModel, name: &str) -> Result<(String, StepSumm
                 real(s.rect[0][1]),
                 real(s.rect[1][0]),
                 real(s.rect[1][1]),
-            ));
+            );
+            let id = o.shared(body);
             (id, false)
         });
     }
@@ -372,7 +434,8 @@ pub fn step_string(model: &TrimmedModel, name: &str) -> Result<(String, StepSumm
         )));
     }
     // Edge lookup by (min, max) point pair.
-    let mut lookup: HashMap<(u32, u32), usize> = HashMap::with_capacity(edges.len());
+    let mut lookup: FxHashMap<(u32, u32), usize> = FxHashMap::default();
+    lookup.reserve(edges.len());
     for (i, e) in edges.iter().enumerate() {
         lookup.insert((e.start, e.end), i);
     }
@@ -418,19 +481,7 @@ pub fn step_string(model: &TrimmedModel, name: &str) -> Result<(String, StepSumm
     };
     o.add(&format!("SHAPE_DEFINITION_REPRESENTATION(#{pds},#{rep})"));
 
-    let mut text = String::with_capacity(o.text.len() + 512);
-    text.push_str("ISO-10303-21;\nHEADER;\n");
-    text.push_str(
-        "FILE_DESCRIPTION(('volmorph accurate B-spline FFD: trimmed Bezier surfaces'),'2;1');\n",
-    );
-    let _ = writeln!(
-        text,
-        "FILE_NAME('{name}','2000-01-01T00:00:00',(''),(''),'volmorph','volmorph','');"
-    );
-    text.push_str(
-        "FILE_SCHEMA(('AUTOMOTIVE_DESIGN { 1 0 10303 214 1 1 1 1 }'));\nENDSEC;\nDATA;\n",
-    );
-    text.push_str(&o.text);
+    let mut text = o.text;
     text.push_str("ENDSEC;\nEND-ISO-10303-21;\n");
     let summary = StepSummary {
         faces: face_ids.len(),
@@ -471,6 +522,62 @@ mod tests {
         assert_eq!(real(-2.5), "-2.5");
         assert_eq!(real(1e-7), "1.E-7");
         assert_eq!(real(1.5e300), "1.5E300");
+        assert_eq!(real(-0.0), "-0.0");
+        assert_eq!(real(1e16), "1.E16");
         assert_eq!(real(0.1).parse::<f64>().unwrap(), 0.1);
+    }
+
+    /// The formatting `push_real` replaced: `{:?}`, then the exponent split and rejoined.
+    fn real_by_splitting(x: f64) -> String {
+        let s = format!("{x:?}");
+        let (mant, exp) = match s.find(['e', 'E']) {
+            Some(i) => (&s[..i], Some(&s[i + 1..])),
+            None => (s.as_str(), None),
+        };
+        let mut out = if mant.contains('.') {
+            mant.to_string()
+        } else {
+            format!("{mant}.")
+        };
+        if let Some(e) = exp {
+            out.push('E');
+            out.push_str(e);
+        }
+        out
+    }
+
+    /// Appending in place gives the text the two-string formatting gave, on random bit
+    /// patterns (every exponent) and on the decimal/exponential switch points, and reads
+    /// back to the same bits.
+    #[test]
+    fn push_real_matches_the_splitting_formatter() {
+        let mut state = 0x9E37_79B9_7F4A_7C15u64;
+        let mut values = vec![
+            0.0,
+            -0.0,
+            1e-4,
+            9.999e-5,
+            1e15,
+            9.999_999_999_999_998e15,
+            1e16,
+        ];
+        for _ in 0..20_000 {
+            state ^= state << 13;
+            state ^= state >> 7;
+            state ^= state << 17;
+            let x = f64::from_bits(state);
+            if x.is_finite() {
+                values.push(x);
+                values.push((x.abs().log10().clamp(-30.0, 30.0)).exp2());
+            }
+        }
+        let mut out = String::from("(");
+        for x in values {
+            let before = out.len();
+            push_real(&mut out, x);
+            assert_eq!(out[before..], real_by_splitting(x), "{x:e}");
+            assert_eq!(out[before..].parse::<f64>().unwrap().to_bits(), x.to_bits());
+            out.push(',');
+        }
     }
 }

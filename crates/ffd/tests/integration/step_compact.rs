@@ -149,3 +149,41 @@ fn a_local_drag_leaves_planes_outside_its_support() {
         }
     }
 }
+
+/// The STEP text of a jiggled sphere (curved patches, pcurves, planes) and of a local drag
+/// (planes and curved patches side by side), `(FNV-1a of the bytes, length)`.
+fn step_fingerprints() -> [(u64, usize); 2] {
+    let text_of = |subdiv: u32, degree: usize, count: usize, local: bool| {
+        let mesh = sphere(subdiv, 1.0, DVec3::ZERO);
+        let (lo, hi) = mesh.bounding_box().unwrap();
+        let mut lat =
+            BSplineLattice::feng_end_interpolating_around(lo, hi, [degree; 3], [count; 3]).unwrap();
+        if local {
+            let p = lat.control_points()[7 + count * (5 + count * 5)];
+            lat.set_control_point([7, 5, 5], p + DVec3::new(0.2, 0.1, 0.0))
+                .unwrap();
+        } else {
+            jiggle(&mut lat, 0.15, 5);
+        }
+        let model = accurate_ffd(&mesh, &lat).unwrap();
+        step_string(&model, "sphere").unwrap().0
+    };
+    [text_of(3, 2, 5, false), text_of(5, 3, 10, true)].map(|t| {
+        let h = volmorph_testkit::fingerprint::fnv1a(t.bytes().map(u64::from));
+        (h, t.len())
+    })
+}
+
+/// Rewriting the writer for speed (points de-duplicated by their coordinate bits, reals
+/// written straight into the text) must not change a byte of the file.
+#[test]
+fn step_text_bytes_unchanged() {
+    let got = step_fingerprints();
+    assert_eq!(
+        got,
+        [
+            (0xcdd4_6f18_fb3c_988d, 396_000),
+            (0xb965_aabf_e7c8_1802, 827_695)
+        ]
+    );
+}
