@@ -56,9 +56,83 @@ pub struct StepSummary {
     pub entities: usize,
 }
 
-/// Append `x` as a STEP real to `out`: shortest round-trip digits (Rust's `{:?}`), always
-/// with a decimal point, `E` exponent (`1.0`, `-2.5`, `1.E-7`, `1.5E300`).
+/// Append `x` as a STEP real to `out`: the shortest digits that read back to the same `f64`,
+/// laid out as Rust's `{:?}` lays them out (plain decimal for `1e-4 ≤ |x| < 1e16` and zero,
+/// otherwise scientific), always with a decimal point and an `E` exponent: `1.0`, `-2.5`,
+/// `0.0001`, `1.E-7`, `1.5E300`. Non-finite values (never written by [`step_string`], which
+/// refuses them) come out as `{:?}` prints them.
+///
+/// The digits come from `ryu` (shortest round trip, the closest such digits, as Rust's own
+/// formatter chooses; `push_real_matches_rust_debug_digits` checks the two agree), which is
+/// several times faster than the `core::fmt` path it replaced.
 fn push_real(out: &mut String, x: f64) {
+    if !x.is_finite() || may_tie(x) {
+        push_real_by_fmt(out, x);
+        return;
+    }
+    if x == 0.0 {
+        out.push_str(if x.is_sign_negative() { "-0.0" } else { "0.0" });
+        return;
+    }
+    let mut buf = ryu::Buffer::new();
+    let text = buf.format_finite(x).as_bytes();
+    let text = text.strip_prefix(b"-").unwrap_or(text);
+    let (mant, exp) = match text.iter().position(|&b| b == b'e') {
+        Some(i) => (&text[..i], parse_exponent(&text[i + 1..])),
+        None => (text, 0),
+    };
+    // The significant digits d₁d₂…dₙ and kk with |x| = 0.d₁d₂…dₙ × 10^kk.
+    let mut digits = [0u8; 32];
+    let (mut n, mut before_point, mut seen_point) = (0usize, 0i32, false);
+    for &b in mant {
+        if b == b'.' {
+            seen_point = true;
+        } else if n == 0 && b == b'0' {
+            if seen_point {
+                before_point -= 1;
+            }
+        } else if n < digits.len() {
+            digits[n] = b;
+            n += 1;
+            if !seen_point {
+                before_point += 1;
+            }
+        }
+    }
+    while n > 1 && digits[n - 1] == b'0' {
+        n -= 1;
+    }
+    let digits = &digits[..n];
+    let kk = before_point + exp;
+    if x < 0.0 {
+        out.push('-');
+    }
+    if (1e-4..1e16).contains(&x.abs()) {
+        if kk <= 0 {
+            out.push_str("0.");
+            out.extend(std::iter::repeat_n('0', kk.unsigned_abs() as usize));
+            out.push_str(ascii(digits));
+        } else if kk as usize >= n {
+            out.push_str(ascii(digits));
+            out.extend(std::iter::repeat_n('0', kk as usize - n));
+            out.push_str(".0");
+        } else {
+            out.push_str(ascii(&digits[..kk as usize]));
+            out.push('.');
+            out.push_str(ascii(&digits[kk as usize..]));
+        }
+    } else {
+        out.push_str(ascii(&digits[..1]));
+        out.push('.');
+        out.push_str(ascii(&digits[1..]));
+        out.push('E');
+        out.push_str(itoa::Buffer::new().format(kk - 1));
+    }
+}
+
+/// [`push_real`] through `core::fmt`: `{:?}`, then the exponent's `e` made `E` with a
+/// decimal point before it.
+fn push_real_by_fmt(out: &mut String, x: f64) {
     let start = out.len();
     let _ = write!(out, "{x:?}");
     if let Some(e) = out[start..].find('e') {
@@ -68,6 +142,52 @@ fn push_real(out: &mut String, x: f64) {
             out.insert(e, '.');
         }
     }
+}
+
+/// `true` if two shortest round-trip digit strings of `x` may be equally close to it, where
+/// ryu (ties to even) and Rust's formatter (ties away from zero) may choose differently.
+///
+/// Such a tie needs `x` to be exactly a decimal of at most 18 significant digits ending in 5
+/// (17 shortest digits and the halving one): with `x = m·2^e`, `m` odd, that is `e < 0` and
+/// `m·5^(−e) < 10¹⁸`, or an integer beyond 2⁵³ (below it the integer's own digits are the
+/// unique shortest form). Everything else, nearly every coordinate, has one closest shortest
+/// string, the same for both.
+fn may_tie(x: f64) -> bool {
+    let bits = x.to_bits();
+    let biased = ((bits >> 52) & 0x7ff) as i32;
+    let fraction = bits & ((1 << 52) - 1);
+    let (m, e) = if biased == 0 {
+        (fraction, -1074)
+    } else {
+        (fraction | (1 << 52), biased - 1075)
+    };
+    if m == 0 {
+        return false;
+    }
+    let tz = m.trailing_zeros();
+    let (m, e) = (m >> tz, e + tz as i32);
+    if e >= 0 {
+        return x.abs() >= 9_007_199_254_740_992.0; // 2⁵³
+    }
+    let k = e.unsigned_abs();
+    k <= 27 && u128::from(m) * 5u128.pow(k) < 10u128.pow(18)
+}
+
+/// ASCII digits as text.
+fn ascii(d: &[u8]) -> &str {
+    std::str::from_utf8(d).unwrap_or("")
+}
+
+/// The decimal exponent after `ryu`'s `e` (an optional `-` and at most three digits).
+fn parse_exponent(b: &[u8]) -> i32 {
+    let (neg, b) = match b.strip_prefix(b"-") {
+        Some(rest) => (true, rest),
+        None => (false, b),
+    };
+    let v = b
+        .iter()
+        .fold(0i32, |v, &d| v * 10 + i32::from(d.wrapping_sub(b'0')));
+    if neg { -v } else { v }
 }
 
 /// `x` as a STEP real (see [`push_real`]).
@@ -94,11 +214,21 @@ struct Out {
 }
 
 impl Out {
-    /// A new entity (topology: always its own instance).
-    fn add(&mut self, body: &str) -> usize {
+    /// Number the next entity and write its `#n=`.
+    fn start_entity(&mut self) -> usize {
         let id = self.next;
         self.next += 1;
-        let _ = writeln!(self.text, "#{id}={body};");
+        self.text.push('#');
+        self.text.push_str(itoa::Buffer::new().format(id));
+        self.text.push('=');
+        id
+    }
+
+    /// A new entity (topology: always its own instance).
+    fn add(&mut self, body: &str) -> usize {
+        let id = self.start_entity();
+        self.text.push_str(body);
+        self.text.push_str(";\n");
         id
     }
 
@@ -114,9 +244,8 @@ impl Out {
 
     /// A `CARTESIAN_POINT` of the given coordinates written straight into the text.
     fn write_point(&mut self, coords: &[f64]) -> usize {
-        let id = self.next;
-        self.next += 1;
-        let _ = write!(self.text, "#{id}=CARTESIAN_POINT('',(");
+        let id = self.start_entity();
+        self.text.push_str("CARTESIAN_POINT('',(");
         for (i, &c) in coords.iter().enumerate() {
             if i > 0 {
                 self.text.push(',');
@@ -164,7 +293,8 @@ fn refs(ids: &[usize]) -> String {
         if i > 0 {
             s.push(',');
         }
-        let _ = write!(s, "#{id}");
+        s.push('#');
+        s.push_str(itoa::Buffer::new().format(*id));
     }
     s
 }
@@ -527,30 +657,13 @@ mod tests {
         assert_eq!(real(0.1).parse::<f64>().unwrap(), 0.1);
     }
 
-    /// The formatting `push_real` replaced: `{:?}`, then the exponent split and rejoined.
-    fn real_by_splitting(x: f64) -> String {
-        let s = format!("{x:?}");
-        let (mant, exp) = match s.find(['e', 'E']) {
-            Some(i) => (&s[..i], Some(&s[i + 1..])),
-            None => (s.as_str(), None),
-        };
-        let mut out = if mant.contains('.') {
-            mant.to_string()
-        } else {
-            format!("{mant}.")
-        };
-        if let Some(e) = exp {
-            out.push('E');
-            out.push_str(e);
-        }
-        out
-    }
-
-    /// Appending in place gives the text the two-string formatting gave, on random bit
-    /// patterns (every exponent) and on the decimal/exponential switch points, and reads
-    /// back to the same bits.
+    /// The ryu-based writer gives the text the `core::fmt` formatting gave (the same
+    /// shortest digits, the same layout) on a million random bit patterns (every exponent,
+    /// subnormals), on every power of ten and its two neighbours (the layout switch points
+    /// and digit-count edges), and on random values between 1e-5 and 1e-4 (where ryu's own
+    /// layout differs from Rust's); every text reads back to the same bits.
     #[test]
-    fn push_real_matches_the_splitting_formatter() {
+    fn push_real_matches_rust_debug_digits() {
         let mut state = 0x9E37_79B9_7F4A_7C15u64;
         let mut values = vec![
             0.0,
@@ -561,21 +674,38 @@ mod tests {
             9.999_999_999_999_998e15,
             1e16,
         ];
-        for _ in 0..20_000 {
+        values.extend([f64::MIN_POSITIVE, f64::MAX, f64::MIN, 5e-324, -5e-324]);
+        for e in -323..=308 {
+            let p: f64 = format!("1e{e}").parse().unwrap();
+            let b = p.to_bits();
+            values.extend([p, -p, f64::from_bits(b + 1), f64::from_bits(b - 1)]);
+        }
+        let mut next = || {
             state ^= state << 13;
             state ^= state >> 7;
             state ^= state << 17;
-            let x = f64::from_bits(state);
+            state
+        };
+        for _ in 0..1_000_000 {
+            let x = f64::from_bits(next());
             if x.is_finite() {
                 values.push(x);
-                values.push((x.abs().log10().clamp(-30.0, 30.0)).exp2());
             }
+            let unit = (next() >> 11) as f64 / (1u64 << 53) as f64;
+            values.push(1e-5 + 9e-5 * unit);
+            values.push(-(1e3 * unit));
+            // Few fraction bits: exact short decimals, where ties between digit strings live.
+            let m = (next() >> 11) as f64;
+            let shift = (next() % 64) as i32 - 32;
+            values.push(m * 2f64.powi(shift));
         }
         let mut out = String::from("(");
         for x in values {
             let before = out.len();
             push_real(&mut out, x);
-            assert_eq!(out[before..], real_by_splitting(x), "{x:e}");
+            let mut by_fmt = String::new();
+            push_real_by_fmt(&mut by_fmt, x);
+            assert_eq!(out[before..], by_fmt, "{x:e}");
             assert_eq!(out[before..].parse::<f64>().unwrap().to_bits(), x.to_bits());
             out.push(',');
         }
