@@ -58,13 +58,14 @@ pub struct StepSummary {
 
 /// Append `x` as a STEP real to `out`: the shortest digits that read back to the same `f64`,
 /// laid out as Rust's `{:?}` lays them out (plain decimal for `1e-4 ≤ |x| < 1e16` and zero,
-/// otherwise scientific), always with a decimal point and an `E` exponent: `1.0`, `-2.5`,
-/// `0.0001`, `1.E-7`, `1.5E300`. Non-finite values (never written by [`step_string`], which
-/// refuses them) come out as `{:?}` prints them.
+/// otherwise scientific with an `E` exponent), always with a decimal point: `1.0`, `-2.5`,
+/// `0.0001`, `1.E-7`, `1.5E300`. Non-finite values ([`step_string`] refuses them in surfaces
+/// and curves) come out as `{:?}` prints them.
 ///
 /// The digits come from `ryu` (shortest round trip, the closest such digits, as Rust's own
-/// formatter chooses; `push_real_matches_rust_debug_digits` checks the two agree), which is
-/// several times faster than the `core::fmt` path it replaced.
+/// formatter chooses; where two are equally close, [`may_tie`], the `core::fmt` path is
+/// taken; `push_real_matches_rust_debug_digits` checks the two agree), several times faster
+/// than `core::fmt`.
 fn push_real(out: &mut String, x: f64) {
     if !x.is_finite() || may_tie(x) {
         push_real_by_fmt(out, x);
@@ -75,7 +76,14 @@ fn push_real(out: &mut String, x: f64) {
         return;
     }
     let mut buf = ryu::Buffer::new();
-    let text = buf.format_finite(x).as_bytes();
+    let text = buf.format_finite(x);
+    if (1e-4..1e16).contains(&x.abs()) {
+        // ryu lays out plain decimals as `{:?}` does (`0.0001`, `2.5`, `1000000000000000.0`).
+        out.push_str(text);
+        return;
+    }
+    // Scientific in Rust's layout: the digits and exponent taken apart.
+    let text = text.as_bytes();
     let text = text.strip_prefix(b"-").unwrap_or(text);
     let (mant, exp) = match text.iter().position(|&b| b == b'e') {
         Some(i) => (&text[..i], parse_exponent(&text[i + 1..])),
@@ -102,32 +110,15 @@ fn push_real(out: &mut String, x: f64) {
     while n > 1 && digits[n - 1] == b'0' {
         n -= 1;
     }
-    let digits = &digits[..n];
     let kk = before_point + exp;
     if x < 0.0 {
         out.push('-');
     }
-    if (1e-4..1e16).contains(&x.abs()) {
-        if kk <= 0 {
-            out.push_str("0.");
-            out.extend(std::iter::repeat_n('0', kk.unsigned_abs() as usize));
-            out.push_str(ascii(digits));
-        } else if kk as usize >= n {
-            out.push_str(ascii(digits));
-            out.extend(std::iter::repeat_n('0', kk as usize - n));
-            out.push_str(".0");
-        } else {
-            out.push_str(ascii(&digits[..kk as usize]));
-            out.push('.');
-            out.push_str(ascii(&digits[kk as usize..]));
-        }
-    } else {
-        out.push_str(ascii(&digits[..1]));
-        out.push('.');
-        out.push_str(ascii(&digits[1..]));
-        out.push('E');
-        out.push_str(itoa::Buffer::new().format(kk - 1));
-    }
+    out.push_str(ascii(&digits[..1]));
+    out.push('.');
+    out.push_str(ascii(&digits[1..n]));
+    out.push('E');
+    out.push_str(itoa::Buffer::new().format(kk - 1));
 }
 
 /// [`push_real`] through `core::fmt`: `{:?}`, then the exponent's `e` made `E` with a
@@ -169,9 +160,20 @@ fn may_tie(x: f64) -> bool {
     if e >= 0 {
         return x.abs() >= 9_007_199_254_740_992.0; // 2⁵³
     }
-    let k = e.unsigned_abs();
-    k <= 27 && u128::from(m) * 5u128.pow(k) < 10u128.pow(18)
+    let k = e.unsigned_abs() as usize;
+    k < POW5.len() && u128::from(m) * u128::from(POW5[k]) < 1_000_000_000_000_000_000
 }
+
+/// 5⁰ … 5²⁷; from 5²⁸ on, every odd mantissa times 5ᵏ has more than 18 digits.
+const POW5: [u64; 28] = {
+    let mut p = [1u64; 28];
+    let mut i = 1;
+    while i < 28 {
+        p[i] = p[i - 1] * 5;
+        i += 1;
+    }
+    p
+};
 
 /// ASCII digits as text.
 fn ascii(d: &[u8]) -> &str {
