@@ -449,14 +449,27 @@ impl LatticeGridPlan {
             (Some((f0, _)), Some((f1, _))) => (f0.min(f1), (f0.max(f1) + wx).min(cx)),
             _ => (0, 0),
         };
-        // The cubic row loop in vector registers where the CPU allows it (same bits).
+        // The cubic row in vector registers where the CPU allows it (same bits).
         #[cfg(target_arch = "x86_64")]
         let vector = wx == 4 && row_loop == RowLoop::Vector && row_x4::available();
+        #[cfg(target_arch = "x86_64")]
+        let padded = if vector {
+            row_x4::padded(pts)
+        } else {
+            Vec::new()
+        };
         #[cfg(not(target_arch = "x86_64"))]
         let _ = row_loop;
+        let columns = c_hi - c_lo;
         out.par_chunks_mut(nx * ny).enumerate().for_each_init(
-            || (vec![DVec3::ZERO; c_hi - c_lo], Vec::<[f64; 4]>::new()),
-            |(row_sum, _padded), (dk, slab)| {
+            || {
+                (
+                    vec![DVec3::ZERO; columns],
+                    Vec::<[f64; 4]>::new(),
+                    Vec::<(f64, usize)>::with_capacity(wy * wz),
+                )
+            },
+            |(row_sum, _sums, layers), (dk, slab)| {
                 let k = z0 + dk;
                 let zk = self.axes[2].at(k);
                 for (dj, row) in slab.chunks_exact_mut(nx).enumerate() {
@@ -467,18 +480,6 @@ impl LatticeGridPlan {
                         }
                         continue;
                     };
-                    // Blend the (wy × wz) control layers of this row once.
-                    row_sum.fill(DVec3::ZERO);
-                    for (c, &nz) in bz.iter().enumerate().take(wz) {
-                        for (b, &ny_) in by.iter().enumerate().take(wy) {
-                            let wgt = nz * ny_;
-                            let base = ((fz + c) * cy + fy + b) * cx;
-                            let layer = &pts[base + c_lo..base + c_hi];
-                            for (s, &p) in row_sum.iter_mut().zip(layer) {
-                                *s += wgt * p;
-                            }
-                        }
-                    }
                     // Outside the knot domain along u: the identity. (The axis plan holds
                     // indices of the part only, so its range lies in `x0 .. x1`.)
                     let (lo, hi) = (ax.lo.clamp(x0, x1) - x0, ax.hi.clamp(x0, x1) - x0);
@@ -489,10 +490,27 @@ impl LatticeGridPlan {
                         }
                     }
                     let inside = &mut row[lo..hi];
+                    // The (wy × wz) control layers of this row: weight and first column.
+                    layers.clear();
+                    for (c, &nz) in bz.iter().enumerate().take(wz) {
+                        for (b, &ny_) in by.iter().enumerate().take(wy) {
+                            layers.push((nz * ny_, ((fz + c) * cy + fy + b) * cx + c_lo));
+                        }
+                    }
                     #[cfg(target_arch = "x86_64")]
                     if vector {
-                        row_x4::cubic_row(row_sum, _padded, &ax.firsts, c_lo, &ax.values, inside);
+                        let (firsts, values) = (&ax.firsts, &ax.values);
+                        row_x4::cubic_row(
+                            &padded, layers, columns, _sums, firsts, c_lo, values, inside,
+                        );
                         continue;
+                    }
+                    // Blend the layers once into a row of partial sums along u.
+                    row_sum.fill(DVec3::ZERO);
+                    for &(wgt, start) in layers.iter() {
+                        for (s, &p) in row_sum.iter_mut().zip(&pts[start..start + columns]) {
+                            *s += wgt * p;
+                        }
                     }
                     let firsts = ax.firsts.iter().map(|&f| f - c_lo);
                     if wx == 4 {
@@ -791,6 +809,65 @@ mod tests {
                 let mut whole = vec![DVec3::NAN; part.len()];
                 plan.apply(&lat, &mut whole).unwrap();
                 assert_eq!(whole, vector);
+            }
+        }
+    }
+
+    /// The vector row (blending and voxels) gives the portable loop's bits on edge values:
+    /// control coordinates of ±0, subnormals, ±1e308 (whose sums overflow to ±∞ and, mixed,
+    /// to NaN) and ordinary ones, on parts of every width from 1 to 13 voxels, so the rows'
+    /// column counts take every remainder modulo four.
+    #[test]
+    fn vector_row_blending_matches_the_portable_loop_on_edge_values() {
+        /// Same bits, or both NaN (Rust leaves the payload of a NaN from NaN operands
+        /// unspecified).
+        fn same(a: f64, b: f64) -> bool {
+            a.to_bits() == b.to_bits() || (a.is_nan() && b.is_nan())
+        }
+        let edge: [f64; 9] = [
+            -0.0, 0.0, 1e308, -1e308, 5e-324, -2.5e-310, 1.0, -3.5, 1e-300,
+        ];
+        let mut rng = volmorph_testkit::Rng::new(0x0b1e_d);
+        let grid = Geometry::new([40, 7, 6])
+            .with_spacing(DVec3::new(0.37, 1.1, 1.3))
+            .with_origin(DVec3::new(-2.5, -1.0, -3.0));
+        for tame in [false, true] {
+            let mut lat = BSplineLattice::uniform_cubic_around(
+                DVec3::new(-3.0, -2.0, -4.0),
+                DVec3::new(12.0, 8.0, 7.0),
+                [11, 6, 5],
+            )
+            .unwrap();
+            let counts = lat.counts();
+            for k in 0..counts[2] {
+                for j in 0..counts[1] {
+                    for i in 0..counts[0] {
+                        let mut pick = || {
+                            let v = edge[rng.index(edge.len())];
+                            if tame && v.abs() > 1e300 { -0.0 } else { v }
+                        };
+                        let p = DVec3::new(pick(), pick(), pick());
+                        lat.set_control_point([i, j, k], p).unwrap();
+                    }
+                }
+            }
+            let pts = lat.control_points();
+            for width in 1..=13 {
+                let x0 = rng.index(grid.dims[0] - width + 1);
+                let part = IndexBox {
+                    start: [x0, 1, 0],
+                    end: [x0 + width, 6, 6],
+                };
+                let plan = LatticeGridPlan::part(&lat, &grid, part).unwrap();
+                let mut vector = vec![DVec3::NAN; part.len()];
+                let mut portable = vec![DVec3::NAN; part.len()];
+                plan.apply_separable(&pts, counts, &mut vector, RowLoop::Vector);
+                plan.apply_separable(&pts, counts, &mut portable, RowLoop::Portable);
+                for (v, p) in vector.iter().zip(&portable) {
+                    for a in 0..3 {
+                        assert!(same(v[a], p[a]), "width {width}: {v:?} vs {p:?}");
+                    }
+                }
             }
         }
     }
