@@ -11,14 +11,22 @@
 //!   broadcast once per four columns), so a row's sums are stored once instead of once per
 //!   layer.
 //! * **voxels**: each voxel of the row is `0 + b₀·p_f + b₁·p_{f+1} + b₂·p_{f+2} + b₃·p_{f+3}`
-//!   over the partial sums `p` with the voxel's basis values `b` and first column `f`.
+//!   over the partial sums `p` with the voxel's basis values `b` and first column `f`. Four
+//!   consecutive voxels with the same `f` (all but the groups straddling a knot) run in
+//!   structure-of-arrays lanes: one register per coordinate, lane `l` voxel `l`, the four
+//!   voxels' basis values transposed into one register per term and each sum broadcast;
+//!   the three registers are interleaved back into `[x, y, z]` points. Other voxels run one
+//!   at a time with `[x, y, z, 0]` lanes.
 //!
 //! So every coordinate has the portable loop's bits. The kernel is compiled with AVX2 enabled
 //! and chosen at run time (`is_x86_feature_detected!`); calling it is the one `unsafe`
 //! operation here (the intrinsics are safe inside it and every memory access goes through
 //! slices).
 
-use std::arch::x86_64::{__m256d, _mm256_add_pd, _mm256_mul_pd, _mm256_set1_pd, _mm256_setzero_pd};
+use std::arch::x86_64::{
+    __m256d, _mm256_add_pd, _mm256_mul_pd, _mm256_permute2f128_pd, _mm256_set1_pd,
+    _mm256_setzero_pd, _mm256_unpackhi_pd, _mm256_unpacklo_pd,
+};
 
 use glam::DVec3;
 
@@ -112,10 +120,103 @@ fn blend<const N: usize>(
     }
 }
 
-/// The voxels of the row from its partial sums (see the [module docs](self)).
+/// The voxels of the row from its partial sums (see the [module docs](self)): four voxels
+/// at a time in structure-of-arrays lanes where they share their columns (one register per
+/// coordinate, lane `l` the group's voxel `l`), one at a time with `[x, y, z, 0]` lanes
+/// elsewhere.
 #[inline]
 #[target_feature(enable = "avx2")]
 fn voxels(sums: &[[f64; 4]], firsts: &[usize], c_lo: usize, values: &[f64], out: &mut [DVec3]) {
+    let flat: &mut [f64] = bytemuck::cast_slice_mut(out);
+    let groups = flat
+        .chunks_exact_mut(12)
+        .zip(firsts.chunks_exact(4))
+        .zip(values.chunks_exact(16));
+    let mut done = 0;
+    for ((o, f), b) in groups {
+        let shared = f.iter().all(|&g| g == f[0]);
+        let columns = f[0]
+            .checked_sub(c_lo)
+            .and_then(|f| sums.get(f..f + 4))
+            .and_then(|p| <&[[f64; 4]; 4]>::try_from(p).ok());
+        match (shared, columns) {
+            (true, Some(p)) => {
+                if let Ok(o) = <&mut [f64; 12]>::try_from(o) {
+                    four_voxels(p, b, o);
+                }
+            }
+            _ => one_by_one(sums, f, c_lo, b, bytemuck::cast_slice_mut(o)),
+        }
+        done += 4;
+    }
+    let (firsts, values) = (firsts.get(done..).unwrap_or(&[]), values.get(4 * done..));
+    if let (Some(o), Some(b)) = (out.get_mut(done..), values) {
+        one_by_one(sums, firsts, c_lo, b, o);
+    }
+}
+
+/// Four voxels sharing the columns `p`: lane `l` of each coordinate's register is
+/// `0 + b₀·p₀ + b₁·p₁ + b₂·p₂ + b₃·p₃` with voxel `l`'s basis values (`b[4l .. 4l + 4]`);
+/// written to `o` as four `[x, y, z]` points.
+#[inline]
+#[target_feature(enable = "avx2")]
+fn four_voxels(p: &[[f64; 4]; 4], b: &[f64], o: &mut [f64; 12]) {
+    // The basis values by column: register n holds b_n of the four voxels.
+    let r: [__m256d; 4] = std::array::from_fn(|l| load(b, 4 * l));
+    let (t0, t1) = (_mm256_unpacklo_pd(r[0], r[1]), _mm256_unpackhi_pd(r[0], r[1]));
+    let (t2, t3) = (_mm256_unpacklo_pd(r[2], r[3]), _mm256_unpackhi_pd(r[2], r[3]));
+    let basis = [
+        _mm256_permute2f128_pd::<0x20>(t0, t2),
+        _mm256_permute2f128_pd::<0x20>(t1, t3),
+        _mm256_permute2f128_pd::<0x31>(t0, t2),
+        _mm256_permute2f128_pd::<0x31>(t1, t3),
+    ];
+    let coordinate = |a: usize| {
+        let mut acc = _mm256_setzero_pd();
+        for (bn, pn) in basis.iter().zip(p) {
+            acc = _mm256_add_pd(acc, _mm256_mul_pd(*bn, _mm256_set1_pd(pn[a])));
+        }
+        acc
+    };
+    let (x, y, z) = (coordinate(0), coordinate(1), coordinate(2));
+    // Interleave to x₀ y₀ z₀ x₁ | y₁ z₁ x₂ y₂ | z₂ x₃ y₃ z₃.
+    let xy_even = _mm256_unpacklo_pd(x, y); // x₀ y₀ x₂ y₂
+    let xy_odd = _mm256_unpackhi_pd(x, y); // x₁ y₁ x₃ y₃
+    let zx = _mm256_unpacklo_pd(z, xy_odd); // z₀ x₁ z₂ x₃
+    let yz = _mm256_unpackhi_pd(xy_odd, z); // y₁ z₁ y₃ z₃
+    let quads = [
+        _mm256_permute2f128_pd::<0x20>(xy_even, zx),
+        _mm256_permute2f128_pd::<0x30>(yz, xy_even),
+        _mm256_permute2f128_pd::<0x31>(zx, yz),
+    ];
+    for (chunk, q) in o.chunks_exact_mut(4).zip(quads) {
+        chunk.copy_from_slice(&bytemuck::cast::<_, [f64; 4]>(q));
+    }
+}
+
+/// Four values of `b` from `at` as a register (zeros where `b` is shorter).
+#[inline]
+#[target_feature(enable = "avx2")]
+fn load(b: &[f64], at: usize) -> __m256d {
+    let v: [f64; 4] = b
+        .get(at..at + 4)
+        .and_then(|s| s.try_into().ok())
+        .unwrap_or([0.0; 4]);
+    bytemuck::cast(v)
+}
+
+/// Voxels one at a time: `out[r]` from the four sums starting at column `firsts[r] − c_lo`
+/// with the basis values `values[4r .. 4r + 4]` in `[x, y, z, 0]` lanes; a voxel whose
+/// columns are missing from `sums` is left as it is.
+#[inline]
+#[target_feature(enable = "avx2")]
+fn one_by_one(
+    sums: &[[f64; 4]],
+    firsts: &[usize],
+    c_lo: usize,
+    values: &[f64],
+    out: &mut [DVec3],
+) {
     for ((o, &f), b) in out.iter_mut().zip(firsts).zip(values.chunks_exact(4)) {
         let f = f - c_lo;
         if let Some(p) = sums.get(f..f + 4) {
