@@ -112,10 +112,6 @@ thread_local! {
 }
 
 impl AxisPlan {
-    fn new(kv: &KnotVector, n: usize, start: f64, step: f64) -> Result<Self, DeformError> {
-        Self::over(kv, 0..n, start, step)
-    }
-
     /// The plan of the grid indices `range` only (indices stay those of the whole grid, and
     /// each index's parameter and basis values are the whole grid's bits).
     fn over(
@@ -156,8 +152,10 @@ impl AxisPlan {
     /// [`AxisPlan::over`], remembered per thread: the plan depends only on the knots, the
     /// index range and the bits of `start` and `step`, so a plan built before from equal
     /// inputs is the same plan. The push-forward's fixed tiles
-    /// (`volmorph_warp::centres`) ask for the same few axes tile after tile and plane after
-    /// plane; the last [`AXIS_PLAN_CACHE`] plans are kept.
+    /// (`volmorph_warp::centres`, through [`LatticeGridPlan::part`]) and the pull-back's
+    /// tiles (`volmorph_warp::pullback`, through [`LatticeGridPlan::new`]) ask for the same
+    /// few axes tile after tile and band after band; the last [`AXIS_PLAN_CACHE`] plans are
+    /// kept.
     fn cached(
         kv: &KnotVector,
         range: std::ops::Range<usize>,
@@ -315,9 +313,9 @@ impl LatticeGridPlan {
         })?;
         let k = lattice.knots();
         let axes = [
-            AxisPlan::new(&k[0], grid.dims[0], start[0], step[0])?,
-            AxisPlan::new(&k[1], grid.dims[1], start[1], step[1])?,
-            AxisPlan::new(&k[2], grid.dims[2], start[2], step[2])?,
+            AxisPlan::cached(&k[0], 0..grid.dims[0], start[0], step[0])?,
+            AxisPlan::cached(&k[1], 0..grid.dims[1], start[1], step[1])?,
+            AxisPlan::cached(&k[2], 0..grid.dims[2], start[2], step[2])?,
         ];
         let deg = lattice.degree();
         let orders = [deg[0] + 1, deg[1] + 1, deg[2] + 1];
@@ -484,12 +482,14 @@ impl LatticeGridPlan {
                     // indices of the part only, so its range lies in `x0 .. x1`.)
                     let (lo, hi) = (ax.lo.clamp(x0, x1) - x0, ax.hi.clamp(x0, x1) - x0);
                     let hi = hi.max(lo);
-                    for (di, o) in row.iter_mut().enumerate() {
-                        if di < lo || di >= hi {
-                            *o = centre(grid, x0 + di, j, k);
-                        }
+                    let (before, rest) = row.split_at_mut(lo);
+                    let (inside, after) = rest.split_at_mut(hi - lo);
+                    for (di, o) in before.iter_mut().enumerate() {
+                        *o = centre(grid, x0 + di, j, k);
                     }
-                    let inside = &mut row[lo..hi];
+                    for (di, o) in after.iter_mut().enumerate() {
+                        *o = centre(grid, x0 + hi + di, j, k);
+                    }
                     // The (wy × wz) control layers of this row: weight and first column.
                     layers.clear();
                     for (c, &nz) in bz.iter().enumerate().take(wz) {
@@ -884,7 +884,7 @@ mod tests {
             (3, 0.5, 1.0 / 3.0, false),
             (2, 5.75, -0.5, false),
         ] {
-            let axis = AxisPlan::new(&kv, 40, start, step).unwrap();
+            let axis = AxisPlan::over(&kv, 0..40, start, step).unwrap();
             let (class, reps) = residue_classes(&axis, g, step < 0.0);
             assert_eq!(reps.len(), g + usize::from(end_hit), "G = {g}");
             if !end_hit {
