@@ -165,8 +165,14 @@ fn voxels(sums: &[[f64; 4]], firsts: &[usize], c_lo: usize, values: &[f64], out:
 fn four_voxels(p: &[[f64; 4]; 4], b: &[f64], o: &mut [f64; 12]) {
     // The basis values by column: register n holds b_n of the four voxels.
     let r = [load(b, 0), load(b, 4), load(b, 8), load(b, 12)];
-    let (t0, t1) = (_mm256_unpacklo_pd(r[0], r[1]), _mm256_unpackhi_pd(r[0], r[1]));
-    let (t2, t3) = (_mm256_unpacklo_pd(r[2], r[3]), _mm256_unpackhi_pd(r[2], r[3]));
+    let (t0, t1) = (
+        _mm256_unpacklo_pd(r[0], r[1]),
+        _mm256_unpackhi_pd(r[0], r[1]),
+    );
+    let (t2, t3) = (
+        _mm256_unpacklo_pd(r[2], r[3]),
+        _mm256_unpackhi_pd(r[2], r[3]),
+    );
     let basis = [
         _mm256_permute2f128_pd::<0x20>(t0, t2),
         _mm256_permute2f128_pd::<0x20>(t1, t3),
@@ -220,13 +226,7 @@ fn load(b: &[f64], at: usize) -> __m256d {
 /// columns are missing from `sums` is left as it is.
 #[inline]
 #[target_feature(enable = "avx2")]
-fn one_by_one(
-    sums: &[[f64; 4]],
-    firsts: &[usize],
-    c_lo: usize,
-    values: &[f64],
-    out: &mut [DVec3],
-) {
+fn one_by_one(sums: &[[f64; 4]], firsts: &[usize], c_lo: usize, values: &[f64], out: &mut [DVec3]) {
     for ((o, &f), b) in out.iter_mut().zip(firsts).zip(values.chunks_exact(4)) {
         let f = f - c_lo;
         if let Some(p) = sums.get(f..f + 4) {
