@@ -750,6 +750,37 @@ fn residue_classes(axis: &AxisPlan, g: usize, descending: bool) -> (Vec<u32>, Ve
 mod tests {
     use super::*;
 
+    /// A cubic lattice around `lo .. hi` with `counts` control points, each set to
+    /// `point([i, j, k])`.
+    fn lattice_with(
+        lo: DVec3,
+        hi: DVec3,
+        counts: [usize; 3],
+        mut point: impl FnMut([usize; 3]) -> DVec3,
+    ) -> BSplineLattice {
+        let mut lat = BSplineLattice::uniform_cubic_around(lo, hi, counts).unwrap();
+        for k in 0..counts[2] {
+            for j in 0..counts[1] {
+                for i in 0..counts[0] {
+                    lat.set_control_point([i, j, k], point([i, j, k])).unwrap();
+                }
+            }
+        }
+        lat
+    }
+
+    /// `plan` on `lat` by the vector and by the portable row loop, and the result of
+    /// [`LatticeGridPlan::apply`].
+    fn both_loops(plan: &LatticeGridPlan, lat: &BSplineLattice) -> [Vec<DVec3>; 3] {
+        let (pts, counts) = (lat.control_points(), lat.counts());
+        let mut out = [0; 3].map(|_| vec![DVec3::NAN; plan.part.len()]);
+        let [vector, portable, applied] = &mut out;
+        plan.apply_separable(&pts, counts, vector, RowLoop::Vector);
+        plan.apply_separable(&pts, counts, portable, RowLoop::Portable);
+        plan.apply(lat, applied).unwrap();
+        out
+    }
+
     /// The vector row loop gives the portable loop's bits: cubic lattices (moved at random,
     /// some control points far away) on grids running with and against the lattice axes,
     /// reaching beyond the lattice box, for whole grids and parts.
@@ -766,21 +797,12 @@ mod tests {
         .into_iter()
         .enumerate()
         {
-            let mut lat = BSplineLattice::uniform_cubic_around(
-                DVec3::new(-3.0, -2.0, -4.0),
-                DVec3::new(9.0, 8.0, 7.0),
-                [7, 6, 5],
-            )
-            .unwrap();
-            let counts = lat.counts();
-            for k in 0..counts[2] {
-                for j in 0..counts[1] {
-                    for i in 0..counts[0] {
-                        let far = if (i + j + k + n) % 11 == 0 { 1e6 } else { 1.0 };
-                        lat.move_control_point([i, j, k], rng.point(far)).unwrap();
-                    }
-                }
-            }
+            let (lo, hi) = (DVec3::new(-3.0, -2.0, -4.0), DVec3::new(9.0, 8.0, 7.0));
+            let id = BSplineLattice::uniform_cubic_around(lo, hi, [7, 6, 5]).unwrap();
+            let lat = lattice_with(lo, hi, [7, 6, 5], |[i, j, k]| {
+                let far = if (i + j + k + n) % 11 == 0 { 1e6 } else { 1.0 };
+                id.control_point([i, j, k]).unwrap() + rng.point(far)
+            });
             let [nx, ny, nz] = grid.dims;
             let parts = [
                 IndexBox {
@@ -794,11 +816,7 @@ mod tests {
             ];
             for part in parts {
                 let plan = LatticeGridPlan::part(&lat, &grid, part).unwrap();
-                let pts = lat.control_points();
-                let mut vector = vec![DVec3::NAN; part.len()];
-                let mut portable = vec![DVec3::NAN; part.len()];
-                plan.apply_separable(&pts, counts, &mut vector, RowLoop::Vector);
-                plan.apply_separable(&pts, counts, &mut portable, RowLoop::Portable);
+                let [vector, portable, applied] = both_loops(&plan, &lat);
                 for (v, p) in vector.iter().zip(&portable) {
                     assert_eq!(
                         v.to_array().map(f64::to_bits),
@@ -806,9 +824,7 @@ mod tests {
                     );
                 }
                 // `apply` takes the vector loop where the CPU allows it.
-                let mut whole = vec![DVec3::NAN; part.len()];
-                plan.apply(&lat, &mut whole).unwrap();
-                assert_eq!(whole, vector);
+                assert_eq!(applied, vector);
             }
         }
     }
@@ -832,26 +848,14 @@ mod tests {
             .with_spacing(DVec3::new(0.37, 1.1, 1.3))
             .with_origin(DVec3::new(-2.5, -1.0, -3.0));
         for tame in [false, true] {
-            let mut lat = BSplineLattice::uniform_cubic_around(
-                DVec3::new(-3.0, -2.0, -4.0),
-                DVec3::new(12.0, 8.0, 7.0),
-                [11, 6, 5],
-            )
-            .unwrap();
-            let counts = lat.counts();
-            for k in 0..counts[2] {
-                for j in 0..counts[1] {
-                    for i in 0..counts[0] {
-                        let mut pick = || {
-                            let v = edge[rng.index(edge.len())];
-                            if tame && v.abs() > 1e300 { -0.0 } else { v }
-                        };
-                        let p = DVec3::new(pick(), pick(), pick());
-                        lat.set_control_point([i, j, k], p).unwrap();
-                    }
-                }
-            }
-            let pts = lat.control_points();
+            let (lo, hi) = (DVec3::new(-3.0, -2.0, -4.0), DVec3::new(12.0, 8.0, 7.0));
+            let lat = lattice_with(lo, hi, [11, 6, 5], |_| {
+                let mut pick = || {
+                    let v = edge[rng.index(edge.len())];
+                    if tame && v.abs() > 1e300 { -0.0 } else { v }
+                };
+                DVec3::new(pick(), pick(), pick())
+            });
             for width in 1..=13 {
                 let x0 = rng.index(grid.dims[0] - width + 1);
                 let part = IndexBox {
@@ -859,10 +863,7 @@ mod tests {
                     end: [x0 + width, 6, 6],
                 };
                 let plan = LatticeGridPlan::part(&lat, &grid, part).unwrap();
-                let mut vector = vec![DVec3::NAN; part.len()];
-                let mut portable = vec![DVec3::NAN; part.len()];
-                plan.apply_separable(&pts, counts, &mut vector, RowLoop::Vector);
-                plan.apply_separable(&pts, counts, &mut portable, RowLoop::Portable);
+                let [vector, portable, _] = both_loops(&plan, &lat);
                 for (v, p) in vector.iter().zip(&portable) {
                     for a in 0..3 {
                         assert!(same(v[a], p[a]), "width {width}: {v:?} vs {p:?}");
