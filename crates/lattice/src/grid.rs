@@ -112,10 +112,6 @@ thread_local! {
 }
 
 impl AxisPlan {
-    fn new(kv: &KnotVector, n: usize, start: f64, step: f64) -> Result<Self, DeformError> {
-        Self::over(kv, 0..n, start, step)
-    }
-
     /// The plan of the grid indices `range` only (indices stay those of the whole grid, and
     /// each index's parameter and basis values are the whole grid's bits).
     fn over(
@@ -156,8 +152,10 @@ impl AxisPlan {
     /// [`AxisPlan::over`], remembered per thread: the plan depends only on the knots, the
     /// index range and the bits of `start` and `step`, so a plan built before from equal
     /// inputs is the same plan. The push-forward's fixed tiles
-    /// (`volmorph_warp::centres`) ask for the same few axes tile after tile and plane after
-    /// plane; the last [`AXIS_PLAN_CACHE`] plans are kept.
+    /// (`volmorph_warp::centres`, through [`LatticeGridPlan::part`]) and the pull-back's
+    /// tiles (`volmorph_warp::pullback`, through [`LatticeGridPlan::new`]) ask for the same
+    /// few axes tile after tile and band after band; the last [`AXIS_PLAN_CACHE`] plans are
+    /// kept.
     fn cached(
         kv: &KnotVector,
         range: std::ops::Range<usize>,
@@ -315,9 +313,9 @@ impl LatticeGridPlan {
         })?;
         let k = lattice.knots();
         let axes = [
-            AxisPlan::new(&k[0], grid.dims[0], start[0], step[0])?,
-            AxisPlan::new(&k[1], grid.dims[1], start[1], step[1])?,
-            AxisPlan::new(&k[2], grid.dims[2], start[2], step[2])?,
+            AxisPlan::cached(&k[0], 0..grid.dims[0], start[0], step[0])?,
+            AxisPlan::cached(&k[1], 0..grid.dims[1], start[1], step[1])?,
+            AxisPlan::cached(&k[2], 0..grid.dims[2], start[2], step[2])?,
         ];
         let deg = lattice.degree();
         let orders = [deg[0] + 1, deg[1] + 1, deg[2] + 1];
@@ -449,14 +447,27 @@ impl LatticeGridPlan {
             (Some((f0, _)), Some((f1, _))) => (f0.min(f1), (f0.max(f1) + wx).min(cx)),
             _ => (0, 0),
         };
-        // The cubic row loop in vector registers where the CPU allows it (same bits).
+        // The cubic row in vector registers where the CPU allows it (same bits).
         #[cfg(target_arch = "x86_64")]
         let vector = wx == 4 && row_loop == RowLoop::Vector && row_x4::available();
+        #[cfg(target_arch = "x86_64")]
+        let padded = if vector {
+            row_x4::padded(pts)
+        } else {
+            Vec::new()
+        };
         #[cfg(not(target_arch = "x86_64"))]
         let _ = row_loop;
+        let columns = c_hi - c_lo;
         out.par_chunks_mut(nx * ny).enumerate().for_each_init(
-            || (vec![DVec3::ZERO; c_hi - c_lo], Vec::<[f64; 4]>::new()),
-            |(row_sum, _padded), (dk, slab)| {
+            || {
+                (
+                    vec![DVec3::ZERO; columns],
+                    Vec::<[f64; 4]>::new(),
+                    Vec::<(f64, usize)>::with_capacity(wy * wz),
+                )
+            },
+            |(row_sum, _sums, layers), (dk, slab)| {
                 let k = z0 + dk;
                 let zk = self.axes[2].at(k);
                 for (dj, row) in slab.chunks_exact_mut(nx).enumerate() {
@@ -467,32 +478,39 @@ impl LatticeGridPlan {
                         }
                         continue;
                     };
-                    // Blend the (wy × wz) control layers of this row once.
-                    row_sum.fill(DVec3::ZERO);
-                    for (c, &nz) in bz.iter().enumerate().take(wz) {
-                        for (b, &ny_) in by.iter().enumerate().take(wy) {
-                            let wgt = nz * ny_;
-                            let base = ((fz + c) * cy + fy + b) * cx;
-                            let layer = &pts[base + c_lo..base + c_hi];
-                            for (s, &p) in row_sum.iter_mut().zip(layer) {
-                                *s += wgt * p;
-                            }
-                        }
-                    }
                     // Outside the knot domain along u: the identity. (The axis plan holds
                     // indices of the part only, so its range lies in `x0 .. x1`.)
                     let (lo, hi) = (ax.lo.clamp(x0, x1) - x0, ax.hi.clamp(x0, x1) - x0);
                     let hi = hi.max(lo);
-                    for (di, o) in row.iter_mut().enumerate() {
-                        if di < lo || di >= hi {
-                            *o = centre(grid, x0 + di, j, k);
+                    let (before, rest) = row.split_at_mut(lo);
+                    let (inside, after) = rest.split_at_mut(hi - lo);
+                    for (di, o) in before.iter_mut().enumerate() {
+                        *o = centre(grid, x0 + di, j, k);
+                    }
+                    for (di, o) in after.iter_mut().enumerate() {
+                        *o = centre(grid, x0 + hi + di, j, k);
+                    }
+                    // The (wy × wz) control layers of this row: weight and first column.
+                    layers.clear();
+                    for (c, &nz) in bz.iter().enumerate().take(wz) {
+                        for (b, &ny_) in by.iter().enumerate().take(wy) {
+                            layers.push((nz * ny_, ((fz + c) * cy + fy + b) * cx + c_lo));
                         }
                     }
-                    let inside = &mut row[lo..hi];
                     #[cfg(target_arch = "x86_64")]
                     if vector {
-                        row_x4::cubic_row(row_sum, _padded, &ax.firsts, c_lo, &ax.values, inside);
+                        let (firsts, values) = (&ax.firsts, &ax.values);
+                        row_x4::cubic_row(
+                            &padded, layers, columns, _sums, firsts, c_lo, values, inside,
+                        );
                         continue;
+                    }
+                    // Blend the layers once into a row of partial sums along u.
+                    row_sum.fill(DVec3::ZERO);
+                    for &(wgt, start) in layers.iter() {
+                        for (s, &p) in row_sum.iter_mut().zip(&pts[start..start + columns]) {
+                            *s += wgt * p;
+                        }
                     }
                     let firsts = ax.firsts.iter().map(|&f| f - c_lo);
                     if wx == 4 {
@@ -732,6 +750,37 @@ fn residue_classes(axis: &AxisPlan, g: usize, descending: bool) -> (Vec<u32>, Ve
 mod tests {
     use super::*;
 
+    /// A cubic lattice around `lo .. hi` with `counts` control points, each set to
+    /// `point([i, j, k])`.
+    fn lattice_with(
+        lo: DVec3,
+        hi: DVec3,
+        counts: [usize; 3],
+        mut point: impl FnMut([usize; 3]) -> DVec3,
+    ) -> BSplineLattice {
+        let mut lat = BSplineLattice::uniform_cubic_around(lo, hi, counts).unwrap();
+        for k in 0..counts[2] {
+            for j in 0..counts[1] {
+                for i in 0..counts[0] {
+                    lat.set_control_point([i, j, k], point([i, j, k])).unwrap();
+                }
+            }
+        }
+        lat
+    }
+
+    /// `plan` on `lat` by the vector and by the portable row loop, and the result of
+    /// [`LatticeGridPlan::apply`].
+    fn both_loops(plan: &LatticeGridPlan, lat: &BSplineLattice) -> [Vec<DVec3>; 3] {
+        let (pts, counts) = (lat.control_points(), lat.counts());
+        let mut out = [0; 3].map(|_| vec![DVec3::NAN; plan.part.len()]);
+        let [vector, portable, applied] = &mut out;
+        plan.apply_separable(&pts, counts, vector, RowLoop::Vector);
+        plan.apply_separable(&pts, counts, portable, RowLoop::Portable);
+        plan.apply(lat, applied).unwrap();
+        out
+    }
+
     /// The vector row loop gives the portable loop's bits: cubic lattices (moved at random,
     /// some control points far away) on grids running with and against the lattice axes,
     /// reaching beyond the lattice box, for whole grids and parts.
@@ -748,21 +797,12 @@ mod tests {
         .into_iter()
         .enumerate()
         {
-            let mut lat = BSplineLattice::uniform_cubic_around(
-                DVec3::new(-3.0, -2.0, -4.0),
-                DVec3::new(9.0, 8.0, 7.0),
-                [7, 6, 5],
-            )
-            .unwrap();
-            let counts = lat.counts();
-            for k in 0..counts[2] {
-                for j in 0..counts[1] {
-                    for i in 0..counts[0] {
-                        let far = if (i + j + k + n) % 11 == 0 { 1e6 } else { 1.0 };
-                        lat.move_control_point([i, j, k], rng.point(far)).unwrap();
-                    }
-                }
-            }
+            let (lo, hi) = (DVec3::new(-3.0, -2.0, -4.0), DVec3::new(9.0, 8.0, 7.0));
+            let id = BSplineLattice::uniform_cubic_around(lo, hi, [7, 6, 5]).unwrap();
+            let lat = lattice_with(lo, hi, [7, 6, 5], |[i, j, k]| {
+                let far = if (i + j + k + n) % 11 == 0 { 1e6 } else { 1.0 };
+                id.control_point([i, j, k]).unwrap() + rng.point(far)
+            });
             let [nx, ny, nz] = grid.dims;
             let parts = [
                 IndexBox {
@@ -776,11 +816,7 @@ mod tests {
             ];
             for part in parts {
                 let plan = LatticeGridPlan::part(&lat, &grid, part).unwrap();
-                let pts = lat.control_points();
-                let mut vector = vec![DVec3::NAN; part.len()];
-                let mut portable = vec![DVec3::NAN; part.len()];
-                plan.apply_separable(&pts, counts, &mut vector, RowLoop::Vector);
-                plan.apply_separable(&pts, counts, &mut portable, RowLoop::Portable);
+                let [vector, portable, applied] = both_loops(&plan, &lat);
                 for (v, p) in vector.iter().zip(&portable) {
                     assert_eq!(
                         v.to_array().map(f64::to_bits),
@@ -788,9 +824,51 @@ mod tests {
                     );
                 }
                 // `apply` takes the vector loop where the CPU allows it.
-                let mut whole = vec![DVec3::NAN; part.len()];
-                plan.apply(&lat, &mut whole).unwrap();
-                assert_eq!(whole, vector);
+                assert_eq!(applied, vector);
+            }
+        }
+    }
+
+    /// The vector row (blending and voxels) gives the portable loop's bits on edge values:
+    /// control coordinates of ±0, subnormals, ±1e308 (whose sums overflow to ±∞ and, mixed,
+    /// to NaN) and ordinary ones, on parts of every width from 1 to 13 voxels, so the rows'
+    /// column counts take every remainder modulo four.
+    #[test]
+    fn vector_row_blending_matches_the_portable_loop_on_edge_values() {
+        /// Same bits, or both NaN (Rust leaves the payload of a NaN from NaN operands
+        /// unspecified).
+        fn same(a: f64, b: f64) -> bool {
+            a.to_bits() == b.to_bits() || (a.is_nan() && b.is_nan())
+        }
+        let edge: [f64; 9] = [
+            -0.0, 0.0, 1e308, -1e308, 5e-324, -2.5e-310, 1.0, -3.5, 1e-300,
+        ];
+        let mut rng = volmorph_testkit::Rng::new(0xb1ed);
+        let grid = Geometry::new([40, 7, 6])
+            .with_spacing(DVec3::new(0.37, 1.1, 1.3))
+            .with_origin(DVec3::new(-2.5, -1.0, -3.0));
+        for tame in [false, true] {
+            let (lo, hi) = (DVec3::new(-3.0, -2.0, -4.0), DVec3::new(12.0, 8.0, 7.0));
+            let lat = lattice_with(lo, hi, [11, 6, 5], |_| {
+                let mut pick = || {
+                    let v = edge[rng.index(edge.len())];
+                    if tame && v.abs() > 1e300 { -0.0 } else { v }
+                };
+                DVec3::new(pick(), pick(), pick())
+            });
+            for width in 1..=13 {
+                let x0 = rng.index(grid.dims[0] - width + 1);
+                let part = IndexBox {
+                    start: [x0, 1, 0],
+                    end: [x0 + width, 6, 6],
+                };
+                let plan = LatticeGridPlan::part(&lat, &grid, part).unwrap();
+                let [vector, portable, _] = both_loops(&plan, &lat);
+                for (v, p) in vector.iter().zip(&portable) {
+                    for a in 0..3 {
+                        assert!(same(v[a], p[a]), "width {width}: {v:?} vs {p:?}");
+                    }
+                }
             }
         }
     }
@@ -807,7 +885,7 @@ mod tests {
             (3, 0.5, 1.0 / 3.0, false),
             (2, 5.75, -0.5, false),
         ] {
-            let axis = AxisPlan::new(&kv, 40, start, step).unwrap();
+            let axis = AxisPlan::over(&kv, 0..40, start, step).unwrap();
             let (class, reps) = residue_classes(&axis, g, step < 0.0);
             assert_eq!(reps.len(), g + usize::from(end_hit), "G = {g}");
             if !end_hit {
