@@ -20,6 +20,15 @@ with the issue's target ratio:
             Resample with a third-order BSplineTransform of 9³ control points (mesh 6³) over
             the same image, its inner control points moved at random by up to half a region,
             linear interpolation. The issue's target is an absolute 60 ms; the ratio is shown.
+* splinepy  B-spline volume evaluation against splinepy's NURBS/BSpline (its C++ core on all
+            cores, `nthreads`): (a) point + gradient of a rational tricubic volume of 8³
+            control points at 2²⁰ random parameters (`volmorph bench ffd`, item "trivariate
+            point + gradient"; splinepy's `derivative` with orders 000, 100, 010, 001 in one
+            call); (b) the vertex FFD's map, a degree-2 volume of 6×8×6 control points at the
+            1 001 114 vertices' parameters (item "vertex FFD, positions only", which also maps
+            each vertex from physical to parameter space; splinepy is handed the parameters).
+            Random volumes of the same degrees and sizes on splinepy's side: evaluation cost
+            does not depend on the control point values. Target ≥ 1× (ahead of the peer).
 
 volmorph's figures are the medians its own `volmorph bench … --json` reports (inputs built
 once, outside the clock); the peers' are medians of the same call timed here after one
@@ -28,9 +37,9 @@ warm-up, also with inputs built outside the clock.
 Skips each comparison cleanly (a SKIP line) when its peer is not importable; exits 0 unless a
 check failed (triangle counts apart by more than 1 %, or volmorph failed).
 Build first:  cargo build --release -p volmorph-cli
-Peers:        pip install numpy vtk scipy SimpleITK
+Peers:        pip install numpy vtk scipy SimpleITK splinepy
 Run from the repository root:
-    python3 scripts/peer_speed.py [--repeat 5] [--only mc,tps,pullback]
+    python3 scripts/peer_speed.py [--repeat 5] [--only mc,tps,pullback,splinepy]
 """
 import argparse
 import json
@@ -205,10 +214,59 @@ def compare_pullback(exe, repeat, tmp):
     line("pullback", ours, peer, "SimpleITK Resample", 1.0)
 
 
+def compare_splinepy(exe, repeat):
+    try:
+        import numpy as np
+        import splinepy
+    except ImportError:
+        print("SKIP splinepy: splinepy and numpy are needed (pip install numpy splinepy)")
+        return
+    threads = os.cpu_count() or 1
+    peer_runs = max(1, min(repeat, 3))  # splinepy takes seconds per run
+    rng = np.random.default_rng(22)
+
+    def clamped(degree, count):
+        inner = np.linspace(0.0, 1.0, count - degree + 1)
+        return np.concatenate([[0.0] * degree, inner, [1.0] * degree]).tolist()
+
+    # (a) rational tricubic, 8³ control points, 2²⁰ points: point and the three partials.
+    points = 1 << 20
+    n = 8
+    rational = splinepy.NURBS(
+        degrees=[3, 3, 3],
+        knot_vectors=[clamped(3, n)] * 3,
+        control_points=rng.uniform(-1.0, 1.0, (n ** 3, 3)),
+        weights=rng.uniform(0.5, 2.0, (n ** 3, 1)),
+    )
+    queries = rng.uniform(0.0, 1.0, (points, 3))
+    orders = [[0, 0, 0], [1, 0, 0], [0, 1, 0], [0, 0, 1]]
+    peer_a = median_time(lambda: rational.derivative(queries, orders, nthreads=threads),
+                         peer_runs)
+
+    # (b) the vertex FFD's volume: degree 2, 6 × 8 × 6 control points, 1 001 114 points.
+    counts = [6, 8, 6]
+    volume = splinepy.BSpline(
+        degrees=[2, 2, 2],
+        knot_vectors=[clamped(2, c) for c in counts],
+        control_points=rng.uniform(-1.0, 1.0, (int(np.prod(counts)), 3)),
+    )
+    vertices = rng.uniform(0.0, 1.0, (1_001_114, 3))
+    peer_b = median_time(lambda: volume.evaluate(vertices, nthreads=threads), peer_runs)
+
+    report = bench_json(exe, ["ffd", "--repeat", str(repeat)])
+    ours_a = item(report, "trivariate point + gradient")["median_s"]
+    ours_b = item(report, "vertex FFD, positions only")["median_s"]
+    print(f"splinepy {splinepy.__version__} on {threads} threads: (a) rational tricubic 8³, "
+          f"{points} points, point + gradient; (b) degree-2 6×8×6 volume at 1 001 114 points "
+          f"(peer medians of {peer_runs} runs)")
+    line("trivariate", ours_a, peer_a, "splinepy derivative", 1.0)
+    line("vertex ffd", ours_b, peer_b, "splinepy evaluate", 1.0)
+
+
 def main():
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--repeat", type=int, default=5)
-    ap.add_argument("--only", default="mc,tps,pullback")
+    ap.add_argument("--only", default="mc,tps,pullback,splinepy")
     args = ap.parse_args()
     exe = volmorph_exe()
     only = set(args.only.split(","))
@@ -221,6 +279,8 @@ def main():
                 compare_tps(exe, args.repeat)
             if "pullback" in only:
                 compare_pullback(exe, args.repeat, tmp)
+            if "splinepy" in only:
+                compare_splinepy(exe, args.repeat)
         except (RuntimeError, subprocess.CalledProcessError) as e:
             print(f"FAIL: {e}")
             global FAILED
