@@ -11,41 +11,35 @@
 //! Tally: a voxel on the two-cell path builds its four rows of two cells as
 //! `[w₀·d, w₀, w₁·d, w₁]` with `w = ((sign·w_z)·w_y)·w_x` (multiplication commutes exactly)
 //! and adds each to its two `[V, W]` cells with one add (`f32` cells after one conversion
-//! `vcvtpd2ps`, the rounding of `as f32`). Every other voxel runs [`lanes::one_voxel`].
+//! `vcvtpd2ps`, the rounding of `as f32`). Every other voxel takes the per-voxel path
+//! ([`lanes::each_voxel`]).
 //!
 //! The kernels are compiled with AVX2 enabled and chosen at run time
 //! (`is_x86_feature_detected!`); calling them is the one `unsafe` operation here (the
 //! intrinsics are safe inside them and every memory access goes through slices).
 
 use std::arch::x86_64::{
-    __m128, __m256d, _CMP_EQ_OQ, _CMP_GE_OQ, _CMP_GT_OQ, _CMP_LE_OQ, _CMP_LT_OQ, _CMP_NGT_UQ,
-    _MM_FROUND_NO_EXC, _MM_FROUND_TO_ZERO, _mm_add_ps, _mm256_add_pd, _mm256_and_pd,
-    _mm256_blend_pd, _mm256_blendv_pd, _mm256_cmp_pd, _mm256_cvtpd_ps, _mm256_max_pd,
-    _mm256_min_pd, _mm256_mul_pd, _mm256_or_pd, _mm256_permute2f128_pd, _mm256_permute4x64_pd,
-    _mm256_round_pd, _mm256_set_pd, _mm256_set1_pd, _mm256_setzero_pd, _mm256_sub_pd,
-    _mm256_unpackhi_pd, _mm256_unpacklo_pd,
+    __m128, __m256d, _CMP_EQ_OQ, _CMP_GE_OQ, _CMP_GT_OQ, _CMP_LE_OQ, _CMP_LT_OQ, _MM_FROUND_NO_EXC,
+    _MM_FROUND_TO_ZERO, _mm_add_ps, _mm256_add_pd, _mm256_and_pd, _mm256_blend_pd,
+    _mm256_blendv_pd, _mm256_cmp_pd, _mm256_cvtpd_ps, _mm256_max_pd, _mm256_min_pd, _mm256_mul_pd,
+    _mm256_or_pd, _mm256_permute2f128_pd, _mm256_permute4x64_pd, _mm256_round_pd, _mm256_set_pd,
+    _mm256_set1_pd, _mm256_setzero_pd, _mm256_sub_pd, _mm256_unpackhi_pd, _mm256_unpacklo_pd,
 };
 
 use volmorph_volume::Voxel;
 
-use super::lanes::{self, Boxes, Fit, Flat, MAPPED};
-use super::{Lanes, Region, Row};
+use super::Lanes;
+use super::lanes::{self, Boxes, Fit, Flat, Job};
 
 /// Whether the CPU runs these kernels (AVX2).
 pub(super) fn available() -> bool {
     std::arch::is_x86_feature_detected!("avx2")
 }
 
-/// Both passes over `row` (see [`lanes`]); requires [`available`].
-#[allow(clippy::too_many_arguments)]
+/// Both passes over `job`'s row (see [`lanes`]); requires [`available`].
 pub(super) fn run<T: Voxel>(
-    row: &Row<'_, T>,
-    flat: &Flat<'_>,
-    fit: &Fit,
+    job: &Job<'_, '_, T>,
     boxes: &mut Boxes<'_>,
-    sign: f64,
-    out: [usize; 3],
-    region: &Region,
     buf: Lanes<'_>,
     outcome: &mut [u8],
 ) {
@@ -53,28 +47,17 @@ pub(super) fn run<T: Voxel>(
     // (It is otherwise safe: every memory access goes through slices.)
     #[allow(unsafe_code)]
     unsafe {
-        both(row, flat, fit, boxes, sign, out, region, buf, outcome);
+        both(job, boxes, buf, outcome);
     }
 }
 
-#[allow(clippy::too_many_arguments)]
 #[target_feature(enable = "avx2")]
-fn both<T: Voxel>(
-    row: &Row<'_, T>,
-    flat: &Flat<'_>,
-    fit: &Fit,
-    boxes: &mut Boxes<'_>,
-    sign: f64,
-    out: [usize; 3],
-    region: &Region,
-    buf: Lanes<'_>,
-    outcome: &mut [u8],
-) {
-    fill(flat, fit, boxes);
+fn both<T: Voxel>(job: &Job<'_, '_, T>, boxes: &mut Boxes<'_>, buf: Lanes<'_>, outcome: &mut [u8]) {
+    fill(&job.flat, &job.fit, boxes);
     let Boxes { w01, share, .. } = boxes;
     match buf {
-        Lanes::F32(b) => tally_f32(row, w01, share, sign, out, region, b, outcome),
-        Lanes::F64(b) => tally_f64(row, w01, share, sign, out, region, b, outcome),
+        Lanes::F32(b) => tally_f32(job, w01, share, b, outcome),
+        Lanes::F64(b) => tally_f64(job, w01, share, b, outcome),
     }
 }
 
@@ -165,11 +148,12 @@ fn fill(f: &Flat<'_>, fit: &Fit, out: &mut Boxes<'_>) {
                 _mm256_max_pd(_mm256_sub_pd(h, e), zero),
                 short,
             );
-            let two_cells = _mm256_or_pd(short, _mm256_cmp_pd::<_CMP_NGT_UQ>(h, e1));
+            let two_cells = _mm256_or_pd(short, _mm256_cmp_pd::<_CMP_LE_OQ>(h, e1));
             let inside = _mm256_and_pd(
                 _mm256_cmp_pd::<_CMP_GE_OQ>(a, r0[j]),
                 _mm256_cmp_pd::<_CMP_LE_OQ>(a, last[j]),
             );
+            // `t − t` is 0 for a finite `t`, NaN otherwise.
             let finite = _mm256_cmp_pd::<_CMP_EQ_OQ>(_mm256_sub_pd(t, t), zero);
             let fits = _mm256_and_pd(_mm256_and_pd(ok, two_cells), _mm256_and_pd(inside, finite));
             let share =
@@ -217,35 +201,27 @@ fn rows(w: &[f64], d: f64, sign: f64) -> [__m256d; 4] {
 macro_rules! tally_cells {
     ($name:ident, $cell:ty, $add:ident) => {
         /// The tally pass (see the [module docs](self)) into cells of this type.
-        #[allow(clippy::too_many_arguments)]
         #[inline]
         #[target_feature(enable = "avx2")]
         fn $name<T: Voxel>(
-            row: &Row<'_, T>,
+            job: &Job<'_, '_, T>,
             w01: &[f64],
             share: &[f64],
-            sign: f64,
-            out: [usize; 3],
-            region: &Region,
             buf: &mut [$cell],
             outcome: &mut [u8],
         ) {
-            let sy = region.dims[0];
-            let sz = sy * region.dims[1];
-            for (n, (v, o)) in row.values.iter().zip(outcome.iter_mut()).enumerate() {
-                let d = v.to_f64();
-                *o = match (lanes::base_of(share, n, d), w01.get(6 * n..6 * n + 6)) {
-                    (Some(base), Some(w)) => {
-                        let [r00, r01, r10, r11] = rows(w, d, sign);
-                        $add(buf, base, r00);
-                        $add(buf, base + sy, r01);
-                        $add(buf, base + sz, r10);
-                        $add(buf, base + sz + sy, r11);
-                        MAPPED
-                    }
-                    _ => lanes::one_voxel(row, n, d, sign, out, region, buf),
-                };
-            }
+            let t = &job.target;
+            let sy = t.region.dims[0];
+            let sz = sy * t.region.dims[1];
+            lanes::each_voxel(job.row, share, t, buf, outcome, |buf, n, base, d| {
+                if let Some(w) = w01.get(6 * n..6 * n + 6) {
+                    let [r00, r01, r10, r11] = rows(w, d, t.sign);
+                    $add(buf, base, r00);
+                    $add(buf, base + sy, r01);
+                    $add(buf, base + sz, r10);
+                    $add(buf, base + sz + sy, r11);
+                }
+            });
         }
     };
 }
