@@ -117,7 +117,7 @@ use crate::pushforward::{
     try_filled,
 };
 use crate::tally::{
-    MAPPED, NON_FINITE, OUTSIDE, Region, RowBoxes, Voxels, reaches_grid, row, vmax, vmin,
+    MAPPED, NON_FINITE, OUTSIDE, Region, RowBoxes, Target, Voxels, reaches_grid, row, vmax, vmin,
 };
 
 /// Widening, in source voxels, of the box of voxel centres whose parameters lie in the
@@ -957,7 +957,12 @@ fn tally_run<'a>(
                 continue;
             };
             // The boxes and cells of the whole row in vector lanes.
-            boxes.tally(&row, 1.0, out, slab, buf);
+            let target = Target {
+                sign: 1.0,
+                out,
+                region: slab,
+            };
+            boxes.tally(&row, target, buf);
             if !(in_redo(1, vbox.lo[1] + dj) && in_redo(2, vbox.lo[2] + dk)) {
                 continue;
             }

@@ -20,7 +20,7 @@ mod lanes;
 #[cfg(target_arch = "x86_64")]
 mod lanes_x4;
 
-pub(crate) use lanes::{MAPPED, NON_FINITE, OUTSIDE, RowBoxes};
+pub(crate) use lanes::{MAPPED, NON_FINITE, OUTSIDE, RowBoxes, Target};
 
 /// Boxes spanning at most this many output cells along every axis take the fast path with
 /// per-axis weights in stack arrays; larger ones compute the overlaps cell by cell.
@@ -602,7 +602,7 @@ pub(crate) fn tally_averaged<'a, T: Voxel, C: Cell>(
                 stats.non_finite += vbox.dims[0];
                 continue;
             };
-            boxes.tally(&row, sign, out, region, buf);
+            boxes.tally(&row, Target { sign, out, region }, buf);
             let mut counts = [0usize; 3];
             for &o in boxes.outcomes() {
                 counts[usize::from(o.min(NON_FINITE))] += 1;

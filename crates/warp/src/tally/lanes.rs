@@ -6,18 +6,15 @@
 //! ([`super::unchecked_bounds`], then [`super::short`]), so the bits are theirs:
 //!
 //! 1. **Boxes** ([`fill`]): the min and max of the six neighbouring centre images, the box
-//!    `[lo, hi]`, the first cell `a = ⌊lo + ½⌋`, the overlaps with cells `a`, `a + 1`,
-//!    `a + 2` (zero past the box), whether the box reaches the third cell, and, where the
-//!    box is at most two cells long on that axis, holds only finite points and its cells lie
-//!    inside the tally region, the coordinate's share `(a − r₀)·stride` of the buffer index
-//!    of the box's first cell (NaN otherwise). Along x a box is always written three cells
-//!    wide; along y and z two or three rows wide.
+//!    `[lo, hi]`, the first cell `a = ⌊lo + ½⌋` and the overlaps with cells `a` and `a + 1`,
+//!    and, where the box is at most two cells long on that axis, holds only finite points
+//!    and its two cells lie inside the tally region, the coordinate's share
+//!    `(a − r₀)·stride` of the buffer index of the box's first cell (NaN otherwise).
 //! 2. **Tally** ([`tally`]): per voxel, the three shares add up to the buffer index of its
-//!    first cell (NaN if one axis did not fit); such a voxel adds its 3 × (2 or 3) × (2 or
-//!    3) cells with no branch on the cells along x (a cell beyond the box gets the weight
-//!    +0, and adding ±0 to a tally changes no bit: see [`super::splat_short`]). Every
-//!    other voxel takes the per-voxel path ([`super::averaged_bounds`], [`super::splat`])
-//!    unchanged.
+//!    first cell (NaN if one axis did not fit); such a voxel adds its 2 × 2 × 2 cells with
+//!    no branch on its shape (a cell beyond the box gets the weight +0, and adding ±0 to a
+//!    tally changes no bit: see [`super::splat_short`]). Every other voxel takes the
+//!    per-voxel path ([`super::averaged_bounds`], [`super::splat`]) unchanged.
 //!
 //! Each voxel still adds to each cell at most once, voxels in row order, so every cell sums
 //! its contributions in the order the per-voxel path does.
@@ -38,20 +35,17 @@ pub(crate) const OUTSIDE: u8 = 1;
 /// See [`MAPPED`]: a face-centre image is NaN or infinite (no box).
 pub(crate) const NON_FINITE: u8 = 2;
 
-/// Where the tally region lies along each axis, for the boxes pass: a box written `k`
-/// cells wide along axis `a` (three along x; two along y and z unless it reaches a third
-/// cell) fits when its first cell satisfies `r0[a] ≤ first ≤ r0[a] + dims[a] − k`
-/// (`narrow[a]` for two cells, `wide[a]` for three); its share of the buffer index is then
-/// `(first − r0[a])·stride[a]`. All values are integers below 2⁵³, so every product and sum
-/// of shares is exact.
+/// Where the tally region lies along each axis, for the boxes pass: a box fits along axis
+/// `a` when its two cells `first, first + 1` satisfy `r0[a] ≤ first ≤ last[a]`; its share
+/// of the buffer index is then `(first − r0[a])·stride[a]`. All values are integers below
+/// 2⁵³, so every product and sum of shares is exact.
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub(crate) struct Fit {
     /// First region index per axis.
     pub r0: [f64; 3],
-    /// Largest first cell of a box two cells wide along y and z (three along x).
-    pub narrow: [f64; 3],
-    /// Largest first cell of a box three cells wide.
-    pub wide: [f64; 3],
+    /// Largest first cell per axis whose second cell is still in the region
+    /// (`r0 + dims − 2`; below `r0` when the region is one cell thin).
+    pub last: [f64; 3],
     /// Buffer strides per axis (1, row, plane).
     pub stride: [f64; 3],
 }
@@ -60,12 +54,9 @@ impl Fit {
     /// The fit of boxes to `region`, laid out x fastest.
     pub fn of(region: &Region) -> Self {
         let [dx, dy, _] = region.dims;
-        let end = |a: usize| region.lo[a] as f64 + region.dims[a] as f64;
-        let wide = [0, 1, 2].map(|a| end(a) - 3.0);
         Self {
             r0: region.lo.map(|v| v as f64),
-            narrow: [wide[0], end(1) - 2.0, end(2) - 2.0],
-            wide,
+            last: [0, 1, 2].map(|a| region.lo[a] as f64 + region.dims[a] as f64 - 2.0),
             stride: [1.0, dx as f64, (dx * dy) as f64],
         }
     }
@@ -132,16 +123,15 @@ impl<'a> Flat<'a> {
     }
 }
 
-/// What the boxes pass writes, per flat coordinate `m` (the slices are `n3` long, `w`
-/// `4·n3`).
+/// What the boxes pass writes, per flat coordinate `m` (the slices are `n3` long, `w01`
+/// `2·n3`).
 pub(crate) struct Boxes<'a> {
     /// Box lower bounds.
     pub lo: &'a mut [f64],
-    /// Per coordinate: the overlaps with cells `a`, `a + 1`, `a + 2`, then 1 where the box
-    /// reaches the third cell and 0 where not (`w[4m .. 4m + 4]`).
-    pub w: &'a mut [f64],
+    /// Overlaps with cells `a` and `a + 1`, interleaved (`w01[2m]`, `w01[2m + 1]`).
+    pub w01: &'a mut [f64],
     /// The coordinate's share of the buffer index of the box's first cell, or NaN where the
-    /// box does not take the lanes' path on this axis.
+    /// box does not take the two-cell path on this axis.
     pub share: &'a mut [f64],
 }
 
@@ -172,20 +162,12 @@ pub(crate) fn fill_one(f: &Flat<'_>, fit: &Fit, m: usize, axis: usize, out: &mut
     } else {
         fmin(h, e1) - e
     };
-    let v2 = if one { 0.0 } else { fmax(h - e1, 0.0) };
-    // A box longer than one cell reaches a third cell past `e1`.
+    // At most two cells: a box longer than one cell reaches a third cell past `e1`.
     let two = one || h <= e1;
-    let last = if two {
-        fit.narrow[axis]
-    } else {
-        fit.wide[axis]
-    };
-    let fits = ok && a >= fit.r0[axis] && a <= last && t.is_finite();
+    let fits = ok && two && a >= fit.r0[axis] && a <= fit.last[axis] && t.is_finite();
     out.lo[m] = l;
-    out.w[4 * m] = v0;
-    out.w[4 * m + 1] = v1;
-    out.w[4 * m + 2] = v2;
-    out.w[4 * m + 3] = if two { 0.0 } else { 1.0 };
+    out.w01[2 * m] = v0;
+    out.w01[2 * m + 1] = v1;
     out.share[m] = if fits {
         (a - fit.r0[axis]) * fit.stride[axis]
     } else {
@@ -200,7 +182,7 @@ pub(crate) fn fill(f: &Flat<'_>, fit: &Fit, out: &mut Boxes<'_>) {
     }
 }
 
-/// The per-voxel path for voxel `n` of `row` (one that did not fit the lanes' path): its
+/// The per-voxel path for voxel `n` of `row` (one that did not fit the two-cell path): its
 /// box from the stencil ([`averaged_bounds`]), tallied by [`splat`].
 #[inline(always)]
 fn one_voxel<T, C: Cell>(row: &Row<'_, T>, n: usize, d: f64, t: &Target<'_>, buf: &mut [C]) -> u8 {
@@ -211,7 +193,7 @@ fn one_voxel<T, C: Cell>(row: &Row<'_, T>, n: usize, d: f64, t: &Target<'_>, buf
     }
 }
 
-/// The buffer index of voxel `n`'s first cell if it takes the lanes' path, from its three
+/// The buffer index of voxel `n`'s first cell if it takes the two-cell path, from its three
 /// shares (a NaN share fails the test).
 #[inline(always)]
 pub(crate) fn base_of(share: &[f64], n: usize, d: f64) -> Option<usize> {
@@ -222,7 +204,7 @@ pub(crate) fn base_of(share: &[f64], n: usize, d: f64) -> Option<usize> {
 
 /// The tally pass over `row`'s voxels in order, each outcome ([`MAPPED`], [`OUTSIDE`],
 /// [`NON_FINITE`]) written to `outcome`: a voxel with a buffer index from [`base_of`] goes
-/// to `lanes(buf, n, base, d)` (its cells from `base`), any other to the per-voxel path.
+/// to `two_cells(buf, n, base, d)` (its 2 × 2 × 2 cells), any other to the per-voxel path.
 #[inline(always)]
 pub(crate) fn each_voxel<T: Voxel, C: Cell>(
     row: &Row<'_, T>,
@@ -230,13 +212,13 @@ pub(crate) fn each_voxel<T: Voxel, C: Cell>(
     t: &Target<'_>,
     buf: &mut [C],
     outcome: &mut [u8],
-    mut lanes: impl FnMut(&mut [C], usize, usize, f64),
+    mut two_cells: impl FnMut(&mut [C], usize, usize, f64),
 ) {
     for (n, (v, o)) in row.values.iter().zip(outcome.iter_mut()).enumerate() {
         let d = v.to_f64();
         *o = match base_of(share, n, d) {
             Some(base) => {
-                lanes(buf, n, base, d);
+                two_cells(buf, n, base, d);
                 MAPPED
             }
             None => one_voxel(row, n, d, t, buf),
@@ -244,45 +226,46 @@ pub(crate) fn each_voxel<T: Voxel, C: Cell>(
     }
 }
 
-/// The rows along y and z (2 or 3 each) a voxel on the lanes' path writes, from its
-/// per-coordinate weights `w` (twelve: x, y, z, each `[w₀, w₁, w₂, reaches the third]`).
-#[inline(always)]
-pub(crate) fn rows_of(w: &[f64]) -> (bool, bool) {
-    (
-        w.get(7).is_some_and(|&f| f != 0.0),
-        w.get(11).is_some_and(|&f| f != 0.0),
-    )
-}
-
-/// The tally pass (portable loop): the voxels on the lanes' path through [`Kernel::run`]
-/// three cells wide along x.
+/// The tally pass (portable loop): the two-cell voxels through [`Kernel::run`] with the
+/// third cell's weights zero.
 fn tally<T: Voxel, C: Cell>(
     row: &Row<'_, T>,
-    w: &[f64],
+    w01: &[f64],
     share: &[f64],
     t: &Target<'_>,
     buf: &mut [C],
     outcome: &mut [u8],
 ) {
     let [dx, dy, _] = t.region.dims;
-    each_voxel(row, share, t, buf, outcome, |buf, n, base, d| {
-        if let Some(w) = w.get(12 * n..12 * n + 12) {
-            let k = Kernel {
-                base,
-                sy: dx,
-                sz: dx * dy,
-                w: [[w[0], w[1], w[2]], [w[4], w[5], w[6]], [w[8], w[9], w[10]]],
-                d,
-                sign: t.sign,
-            };
-            match rows_of(w) {
-                (false, false) => k.run::<C, 3, 2, 2>(buf),
-                (true, false) => k.run::<C, 3, 3, 2>(buf),
-                (false, true) => k.run::<C, 3, 2, 3>(buf),
-                (true, true) => k.run::<C, 3, 3, 3>(buf),
+    each_voxel(
+        row,
+        share,
+        t,
+        buf,
+        outcome,
+        #[inline(always)]
+        |buf, n, base, d| {
+            if let Some(w) = w01.get(6 * n..6 * n + 6) {
+                let k = Kernel {
+                    base,
+                    sy: dx,
+                    sz: dx * dy,
+                    w: [[w[0], w[1], 0.0], [w[2], w[3], 0.0], [w[4], w[5], 0.0]],
+                    d,
+                    sign: t.sign,
+                };
+                k.run::<C, 2, 2, 2>(buf);
             }
-        }
-    });
+        },
+    );
+}
+
+/// Whether the CPU runs the AVX2 kernels.
+pub(crate) fn vector_available() -> bool {
+    #[cfg(target_arch = "x86_64")]
+    return super::lanes_x4::available();
+    #[cfg(not(target_arch = "x86_64"))]
+    false
 }
 
 /// The working rows of the two passes, kept between rows (and the outcomes of the last
@@ -291,9 +274,8 @@ fn tally<T: Voxel, C: Cell>(
 pub(crate) struct RowBoxes {
     /// Box lower bounds, three per voxel.
     lo: Vec<f64>,
-    /// Overlaps with a box's first three cells per axis and whether it reaches the third,
-    /// twelve per voxel.
-    w: Vec<f64>,
+    /// Overlaps with a box's first two cells per axis, six per voxel.
+    w01: Vec<f64>,
     /// Shares of the first cell's buffer index, three per voxel.
     share: Vec<f64>,
     /// Per voxel: [`MAPPED`], [`OUTSIDE`] or [`NON_FINITE`].
@@ -301,33 +283,25 @@ pub(crate) struct RowBoxes {
 }
 
 impl RowBoxes {
-    /// Tally (with `sign`) the boxes of `row`'s voxels into `buf` over `region` of an
-    /// output grid of `out` dims, in vector lanes where the CPU has AVX2 (see the
-    /// [module docs](self)); afterwards [`RowBoxes::outcomes`] tells what each voxel did.
-    /// The same bits as [`averaged_bounds`] and [`splat`] voxel by voxel.
+    /// Tally the boxes of `row`'s voxels into `buf` as `target` says, in vector lanes where
+    /// the CPU has AVX2 (see the [module docs](self)); afterwards [`RowBoxes::outcomes`]
+    /// tells what each voxel did. The same bits as [`averaged_bounds`] and [`splat`] voxel
+    /// by voxel.
     pub fn tally<T: Voxel, C: Cell>(
         &mut self,
         row: &Row<'_, T>,
-        sign: f64,
-        out: [usize; 3],
-        region: &Region,
+        target: Target<'_>,
         buf: &mut [C],
     ) {
-        #[cfg(target_arch = "x86_64")]
-        let vector = super::lanes_x4::available();
-        #[cfg(not(target_arch = "x86_64"))]
-        let vector = false;
-        self.tally_with(row, sign, out, region, buf, vector);
+        self.tally_with(row, target, buf, vector_available());
     }
 
-    /// [`RowBoxes::tally`] with the AVX2 kernels (`vector`, which requires the CPU to have
-    /// AVX2) or the portable loops.
+    /// [`RowBoxes::tally`] with the AVX2 kernels (`vector`, which requires
+    /// [`vector_available`]) or the portable loops.
     pub(crate) fn tally_with<T: Voxel, C: Cell>(
         &mut self,
         row: &Row<'_, T>,
-        sign: f64,
-        out: [usize; 3],
-        region: &Region,
+        target: Target<'_>,
         buf: &mut [C],
         vector: bool,
     ) {
@@ -335,7 +309,7 @@ impl RowBoxes {
         let n3 = 3 * n;
         for (v, len) in [
             (&mut self.lo, n3),
-            (&mut self.w, 4 * n3),
+            (&mut self.w01, 2 * n3),
             (&mut self.share, n3),
         ] {
             v.resize(len, 0.0);
@@ -343,21 +317,20 @@ impl RowBoxes {
         self.outcome.resize(n, NON_FINITE);
         let mut boxes = Boxes {
             lo: &mut self.lo,
-            w: &mut self.w,
+            w01: &mut self.w01,
             share: &mut self.share,
         };
-        let target = Target { sign, out, region };
         let Some(flat) = Flat::of(row) else {
             // Unreachable for rows built by `super::row`: every voxel takes the per-voxel
             // path, which finds no stencil.
             boxes.share.fill(f64::NAN);
-            tally(row, boxes.w, boxes.share, &target, buf, &mut self.outcome);
+            tally(row, boxes.w01, boxes.share, &target, buf, &mut self.outcome);
             return;
         };
         let job = Job {
             row,
             flat,
-            fit: Fit::of(region),
+            fit: Fit::of(target.region),
             target,
         };
         #[cfg(target_arch = "x86_64")]
@@ -367,7 +340,7 @@ impl RowBoxes {
         }
         let _ = vector;
         fill(&job.flat, &job.fit, &mut boxes);
-        tally(row, boxes.w, boxes.share, &target, buf, &mut self.outcome);
+        tally(row, boxes.w01, boxes.share, &target, buf, &mut self.outcome);
     }
 
     /// What each voxel of the last row tallied did ([`MAPPED`], [`OUTSIDE`],
@@ -562,7 +535,7 @@ mod tests {
             },
         ];
         let mut boxes = RowBoxes::default();
-        let mut on_lanes = 0;
+        let mut two_cell = 0;
         for case in 0..600 {
             let n = 1 + rng.index(30);
             let start = rng.point_in(DVec3::new(-2.0, -1.5, -1.5), DVec3::new(8.0, 9.5, 8.5));
@@ -577,7 +550,12 @@ mod tests {
             let mut want = first.clone();
             let expected = reference(&row, sign, out, &region, &mut want);
             let mut got = first;
-            boxes.tally_with(&row, sign, out, &region, &mut got, vector);
+            let target = Target {
+                sign,
+                out,
+                region: &region,
+            };
+            boxes.tally_with(&row, target, &mut got, vector);
             for (i, (g, w)) in got.iter().zip(&want).enumerate() {
                 let (g, w) = (g.bits(), w.bits());
                 assert!(
@@ -591,12 +569,12 @@ mod tests {
                     assert!(same(boxes.lo_z(k), lo_z), "case {case} voxel {k}");
                 }
             }
-            on_lanes += (0..n)
+            two_cell += (0..n)
                 .filter(|&k| base_of(&boxes.share, k, 1.0).is_some())
                 .count();
         }
-        // The lanes' path is taken (and so tested) often.
-        assert!(on_lanes > 500, "{on_lanes} voxels on the lanes' path");
+        // The two-cell path is taken (and so tested) often.
+        assert!(two_cell > 500, "{two_cell} voxels on the two-cell path");
     }
 
     /// The portable loops and (where the CPU has AVX2) the AVX2 kernels reproduce the
@@ -605,12 +583,8 @@ mod tests {
     /// coordinates, in and at the edges of the tally region.
     #[test]
     fn lanes_match_the_voxel_path() {
-        #[cfg(target_arch = "x86_64")]
-        let vector = super::super::lanes_x4::available();
-        #[cfg(not(target_arch = "x86_64"))]
-        let vector = false;
         for (seed, v) in [(11, false), (21, true)] {
-            if v && !vector {
+            if v && !vector_available() {
                 continue;
             }
             check_rows::<[f32; 2]>(seed, v);
@@ -638,11 +612,11 @@ mod tests {
                 let row = data.row();
                 let flat = Flat::of(&row).unwrap();
                 let run = |vector: bool| {
-                    let (mut lo, mut w, mut share) =
-                        (vec![0.0; 3 * n], vec![0.0; 12 * n], vec![0.0; 3 * n]);
+                    let (mut lo, mut w01, mut share) =
+                        (vec![0.0; 3 * n], vec![0.0; 6 * n], vec![0.0; 3 * n]);
                     let mut b = Boxes {
                         lo: &mut lo,
-                        w: &mut w,
+                        w01: &mut w01,
                         share: &mut share,
                     };
                     if vector {
@@ -663,7 +637,7 @@ mod tests {
                     } else {
                         fill(&flat, &fit, &mut b);
                     }
-                    (lo, w, share)
+                    (lo, w01, share)
                 };
                 let (a, b) = (run(false), run(true));
                 for (x, y) in [(&a.0, &b.0), (&a.1, &b.1), (&a.2, &b.2)] {

@@ -8,12 +8,11 @@
 //! truncation by `vroundpd`, selects by `vblendvpd`, no fused multiply-add. The remaining
 //! coordinates run [`lanes::fill_one`] itself.
 //!
-//! Tally: a voxel on the lanes' path writes its 2 or 3 rows along y times 2 or 3 along z
-//! (one branch on the four shapes), each row three cells wide: the first two cells as one
-//! vector `[w₀·d, w₀, w₁·d, w₁]` with `w = ((sign·w_z)·w_y)·w_x` (multiplication commutes
-//! exactly), added to their `[V, W]` with one add (`f32` cells after one conversion
-//! `vcvtpd2ps`, the rounding of `as f32`), the third cell as the scalar path adds it. Every
-//! other voxel takes the per-voxel path ([`lanes::each_voxel`]).
+//! Tally: a voxel on the two-cell path builds its four rows of two cells as
+//! `[w₀·d, w₀, w₁·d, w₁]` with `w = ((sign·w_z)·w_y)·w_x` (multiplication commutes exactly)
+//! and adds each to its two `[V, W]` cells with one add (`f32` cells after one conversion
+//! `vcvtpd2ps`, the rounding of `as f32`). Every other voxel takes the per-voxel path
+//! ([`lanes::each_voxel`]).
 //!
 //! The kernels are compiled with AVX2 enabled and chosen at run time
 //! (`is_x86_feature_detected!`); calling them is the one `unsafe` operation here (the
@@ -23,14 +22,14 @@ use std::arch::x86_64::{
     __m128, __m256d, _CMP_EQ_OQ, _CMP_GE_OQ, _CMP_GT_OQ, _CMP_LE_OQ, _CMP_LT_OQ, _MM_FROUND_NO_EXC,
     _MM_FROUND_TO_ZERO, _mm_add_ps, _mm256_add_pd, _mm256_and_pd, _mm256_blend_pd,
     _mm256_blendv_pd, _mm256_cmp_pd, _mm256_cvtpd_ps, _mm256_max_pd, _mm256_min_pd, _mm256_mul_pd,
-    _mm256_or_pd, _mm256_permute2f128_pd, _mm256_round_pd, _mm256_set_pd, _mm256_set1_pd,
-    _mm256_setzero_pd, _mm256_sub_pd, _mm256_unpackhi_pd, _mm256_unpacklo_pd,
+    _mm256_or_pd, _mm256_permute2f128_pd, _mm256_permute4x64_pd, _mm256_round_pd, _mm256_set_pd,
+    _mm256_set1_pd, _mm256_setzero_pd, _mm256_sub_pd, _mm256_unpackhi_pd, _mm256_unpacklo_pd,
 };
 
 use volmorph_volume::Voxel;
 
+use super::Lanes;
 use super::lanes::{self, Boxes, Fit, Flat, Job};
-use super::{Cell, Lanes};
 
 /// Whether the CPU runs these kernels (AVX2).
 pub(super) fn available() -> bool {
@@ -55,10 +54,10 @@ pub(super) fn run<T: Voxel>(
 #[target_feature(enable = "avx2")]
 fn both<T: Voxel>(job: &Job<'_, '_, T>, boxes: &mut Boxes<'_>, buf: Lanes<'_>, outcome: &mut [u8]) {
     fill(&job.flat, &job.fit, boxes);
-    let Boxes { w, share, .. } = boxes;
+    let Boxes { w01, share, .. } = boxes;
     match buf {
-        Lanes::F32(b) => tally_f32(job, w, share, b, outcome),
-        Lanes::F64(b) => tally_f64(job, w, share, b, outcome),
+        Lanes::F32(b) => tally_f32(job, w01, share, b, outcome),
+        Lanes::F64(b) => tally_f64(job, w01, share, b, outcome),
     }
 }
 
@@ -92,8 +91,7 @@ fn fill(f: &Flat<'_>, fit: &Fit, out: &mut Boxes<'_>) {
         _mm256_set_pd(a(3), a(2), a(1), a(0))
     };
     let r0 = [0, 1, 2].map(|j| pattern(fit.r0, j));
-    let narrow = [0, 1, 2].map(|j| pattern(fit.narrow, j));
-    let wide = [0, 1, 2].map(|j| pattern(fit.wide, j));
+    let last = [0, 1, 2].map(|j| pattern(fit.last, j));
     let stride = [0, 1, 2].map(|j| pattern(fit.stride, j));
     let half = _mm256_set1_pd(0.5);
     let (zero, one, two) = (
@@ -150,28 +148,22 @@ fn fill(f: &Flat<'_>, fit: &Fit, out: &mut Boxes<'_>) {
                 _mm256_max_pd(_mm256_sub_pd(h, e), zero),
                 short,
             );
-            let v2 = _mm256_blendv_pd(_mm256_max_pd(_mm256_sub_pd(h, e1), zero), zero, short);
-            let two = _mm256_or_pd(short, _mm256_cmp_pd::<_CMP_LE_OQ>(h, e1));
-            let last = _mm256_blendv_pd(wide[j], narrow[j], two);
+            let two_cells = _mm256_or_pd(short, _mm256_cmp_pd::<_CMP_LE_OQ>(h, e1));
             let inside = _mm256_and_pd(
                 _mm256_cmp_pd::<_CMP_GE_OQ>(a, r0[j]),
-                _mm256_cmp_pd::<_CMP_LE_OQ>(a, last),
+                _mm256_cmp_pd::<_CMP_LE_OQ>(a, last[j]),
             );
             // `t − t` is 0 for a finite `t`, NaN otherwise.
             let finite = _mm256_cmp_pd::<_CMP_EQ_OQ>(_mm256_sub_pd(t, t), zero);
-            let fits = _mm256_and_pd(_mm256_and_pd(ok, inside), finite);
+            let fits = _mm256_and_pd(_mm256_and_pd(ok, two_cells), _mm256_and_pd(inside, finite));
             let share =
                 _mm256_blendv_pd(nan, _mm256_mul_pd(_mm256_sub_pd(a, r0[j]), stride[j]), fits);
-            let third = _mm256_blendv_pd(one, zero, two);
             store(out.lo, m, l);
             store(out.share, m, share);
-            // Transpose to [v0 v1 v2 third] per coordinate.
-            let (t0, t1) = (_mm256_unpacklo_pd(v0, v1), _mm256_unpackhi_pd(v0, v1));
-            let (t2, t3) = (_mm256_unpacklo_pd(v2, third), _mm256_unpackhi_pd(v2, third));
-            store(out.w, 4 * m, _mm256_permute2f128_pd::<0x20>(t0, t2));
-            store(out.w, 4 * m + 4, _mm256_permute2f128_pd::<0x20>(t1, t3));
-            store(out.w, 4 * m + 8, _mm256_permute2f128_pd::<0x31>(t0, t2));
-            store(out.w, 4 * m + 12, _mm256_permute2f128_pd::<0x31>(t1, t3));
+            // [v0₀ v1₀ v0₁ v1₁] and [v0₂ v1₂ v0₃ v1₃].
+            let (lo2, hi2) = (_mm256_unpacklo_pd(v0, v1), _mm256_unpackhi_pd(v0, v1));
+            store(out.w01, 2 * m, _mm256_permute2f128_pd::<0x20>(lo2, hi2));
+            store(out.w01, 2 * m + 4, _mm256_permute2f128_pd::<0x31>(lo2, hi2));
         }
     }
     for m in 12 * steps..n3 {
@@ -179,76 +171,71 @@ fn fill(f: &Flat<'_>, fit: &Fit, out: &mut Boxes<'_>) {
     }
 }
 
-/// The tally pass for one cell type: `$add(buf, i, row)` adds `[w₀·d, w₀, w₁·d, w₁]` to
-/// cells `i`, `i + 1`.
-macro_rules! tally_cells {
-    ($name:ident, $block:ident, $cell:ty, $add:ident) => {
-        /// The `NY × NZ` rows of three cells of one voxel on the lanes' path, from buffer
-        /// index `base`: per row `w = wyz·w_x` with `wyz = (sign·w_z)·w_y`, the first two
-        /// cells in one vector, the third as [`Cell::add`].
-        #[inline]
-        #[target_feature(enable = "avx2")]
-        fn $block<const NY: usize, const NZ: usize>(
-            buf: &mut [$cell],
-            base: usize,
-            [sy, sz]: [usize; 2],
-            w: &[f64],
-            d: f64,
-            sign: f64,
-        ) {
-            let (Some(&x0), Some(&x1), Some(&x2)) = (w.first(), w.get(1), w.get(2)) else {
-                return;
-            };
-            let wx = _mm256_set_pd(x1, x1, x0, x0);
-            let dv = _mm256_set1_pd(d);
-            for z in 0..NZ {
-                let wz = sign * w.get(8 + z).copied().unwrap_or(0.0);
-                for y in 0..NY {
-                    let wyz = wz * w.get(4 + y).copied().unwrap_or(0.0);
-                    let i = base + z * sz + y * sy;
-                    let pair = _mm256_mul_pd(_mm256_set1_pd(wyz), wx);
-                    $add(
-                        buf,
-                        i,
-                        _mm256_blend_pd::<0b0101>(pair, _mm256_mul_pd(pair, dv)),
-                    );
-                    if let Some(cell) = buf.get_mut(i + 2) {
-                        let w = wyz * x2;
-                        cell.add(w * d, w);
-                    }
-                }
-            }
-        }
+/// The four rows `(z, y)` = (0, 0), (0, 1), (1, 0), (1, 1) of a two-cell voxel's cells,
+/// each `[w₀·d, w₀, w₁·d, w₁]`, from its overlaps `w = [x₀, x₁, y₀, y₁, z₀, z₁]`.
+#[inline]
+#[target_feature(enable = "avx2")]
+fn rows(w: &[f64], d: f64, sign: f64) -> [__m256d; 4] {
+    let xy = load(w, 0);
+    let (z0, z1) = (w.get(4).copied(), w.get(5).copied());
+    let (z0, z1) = (z0.unwrap_or(0.0), z1.unwrap_or(0.0));
+    let wz = _mm256_mul_pd(_mm256_set1_pd(sign), _mm256_set_pd(z1, z1, z0, z0));
+    let wy = _mm256_permute2f128_pd::<0x11>(xy, xy);
+    let wyz = _mm256_mul_pd(wz, wy);
+    let wx = _mm256_permute4x64_pd::<0b01_01_00_00>(xy);
+    let dv = _mm256_set1_pd(d);
+    let row = |b: __m256d| {
+        let w = _mm256_mul_pd(b, wx);
+        _mm256_blend_pd::<0b0101>(w, _mm256_mul_pd(w, dv))
+    };
+    [
+        row(_mm256_permute4x64_pd::<0x00>(wyz)),
+        row(_mm256_permute4x64_pd::<0x55>(wyz)),
+        row(_mm256_permute4x64_pd::<0xAA>(wyz)),
+        row(_mm256_permute4x64_pd::<0xFF>(wyz)),
+    ]
+}
 
+/// The tally pass for one cell type: `$add(buf, i, row)` adds a row of [`rows`] to cells
+/// `i`, `i + 1`.
+macro_rules! tally_cells {
+    ($name:ident, $cell:ty, $add:ident) => {
         /// The tally pass (see the [module docs](self)) into cells of this type.
         #[inline]
         #[target_feature(enable = "avx2")]
         fn $name<T: Voxel>(
             job: &Job<'_, '_, T>,
-            w: &[f64],
+            w01: &[f64],
             share: &[f64],
             buf: &mut [$cell],
             outcome: &mut [u8],
         ) {
             let t = &job.target;
             let sy = t.region.dims[0];
-            let strides = [sy, sy * t.region.dims[1]];
-            lanes::each_voxel(job.row, share, t, buf, outcome, |buf, n, base, d| {
-                if let Some(w) = w.get(12 * n..12 * n + 12) {
-                    match lanes::rows_of(w) {
-                        (false, false) => $block::<2, 2>(buf, base, strides, w, d, t.sign),
-                        (true, false) => $block::<3, 2>(buf, base, strides, w, d, t.sign),
-                        (false, true) => $block::<2, 3>(buf, base, strides, w, d, t.sign),
-                        (true, true) => $block::<3, 3>(buf, base, strides, w, d, t.sign),
+            let sz = sy * t.region.dims[1];
+            lanes::each_voxel(
+                job.row,
+                share,
+                t,
+                buf,
+                outcome,
+                #[inline(always)]
+                |buf, n, base, d| {
+                    if let Some(w) = w01.get(6 * n..6 * n + 6) {
+                        let [r00, r01, r10, r11] = rows(w, d, t.sign);
+                        $add(buf, base, r00);
+                        $add(buf, base + sy, r01);
+                        $add(buf, base + sz, r10);
+                        $add(buf, base + sz + sy, r11);
                     }
-                }
-            });
+                },
+            );
         }
     };
 }
 
-tally_cells!(tally_f32, block_f32, [f32; 2], add_f32);
-tally_cells!(tally_f64, block_f64, [f64; 2], add_f64);
+tally_cells!(tally_f32, [f32; 2], add_f32);
+tally_cells!(tally_f64, [f64; 2], add_f64);
 
 /// `[V, W]` of cells `i`, `i + 1` (`f32`) plus a row `[w₀·d, w₀, w₁·d, w₁]` rounded to `f32`.
 #[inline]
