@@ -237,27 +237,19 @@ fn tally<T: Voxel, C: Cell>(
     outcome: &mut [u8],
 ) {
     let [dx, dy, _] = t.region.dims;
-    each_voxel(
-        row,
-        share,
-        t,
-        buf,
-        outcome,
-        #[inline(always)]
-        |buf, n, base, d| {
-            if let Some(w) = w01.get(6 * n..6 * n + 6) {
-                let k = Kernel {
-                    base,
-                    sy: dx,
-                    sz: dx * dy,
-                    w: [[w[0], w[1], 0.0], [w[2], w[3], 0.0], [w[4], w[5], 0.0]],
-                    d,
-                    sign: t.sign,
-                };
-                k.run::<C, 2, 2, 2>(buf);
-            }
-        },
-    );
+    each_voxel(row, share, t, buf, outcome, |buf, n, base, d| {
+        if let Some(w) = w01.get(6 * n..6 * n + 6) {
+            let k = Kernel {
+                base,
+                sy: dx,
+                sz: dx * dy,
+                w: [[w[0], w[1], 0.0], [w[2], w[3], 0.0], [w[4], w[5], 0.0]],
+                d,
+                sign: t.sign,
+            };
+            k.run::<C, 2, 2, 2>(buf);
+        }
+    });
 }
 
 /// Whether the CPU runs the AVX2 kernels.
