@@ -106,7 +106,6 @@ use std::sync::atomic::AtomicU8;
 use std::sync::atomic::Ordering::Relaxed;
 
 use glam::DVec3;
-use multiversion::multiversion;
 use rayon::prelude::*;
 use volmorph_deform::live::{Influence, LinearMap, changed_parameters};
 use volmorph_volume::{Geometry, IndexBox, Volume, Voxel};
@@ -117,7 +116,9 @@ use crate::pushforward::{
     AntialiasOptions, FaceCentres, PushForwardStats, ToIndex, normalise, output_geometry,
     try_filled,
 };
-use crate::tally::{Region, RowBoxes, Voxels, reaches_grid, row, splat, splat_short, vmax, vmin};
+use crate::tally::{
+    MAPPED, NON_FINITE, OUTSIDE, Region, RowBoxes, Target, Voxels, reaches_grid, row, vmax, vmin,
+};
 
 /// Widening, in source voxels, of the box of voxel centres whose parameters lie in the
 /// influenced parameter box. The map evaluation and this test compute a centre's parameter
@@ -160,13 +161,6 @@ const BLOCK: [usize; 3] = [16, 1, 1];
 /// straddle a slab boundary is visited by both slabs, so slabs much thinner than a block's
 /// reach would visit most blocks twice.
 const MIN_SLAB_PLANES: usize = 8;
-
-/// What a source voxel's proxy box does under the current map (one byte per voxel).
-const MAPPED: u8 = 0;
-/// See [`MAPPED`]: the box overlaps no output voxel.
-const OUTSIDE: u8 = 1;
-/// See [`MAPPED`]: a face-centre image is NaN or infinite.
-const NON_FINITE: u8 = 2;
 
 /// The antialiased push-forward of a source volume through a [`LinearMap`] (a lattice, affine
 /// or frame MLS, a thin-plate spline), kept up to date under parameter moves by recomputing
@@ -866,7 +860,6 @@ impl<M: LinearMap + Clone> IncrementalPushForward<M> {
         let status = &self.status;
         let bg = self.background;
         let z0 = region.lo[2];
-        let all_sane = self.insane == 0;
         work.into_par_iter().for_each(|(slab, buf, vol)| {
             if progress.is_cancelled() {
                 return;
@@ -916,7 +909,6 @@ impl<M: LinearMap + Clone> IncrementalPushForward<M> {
                     status,
                     redo,
                     slab.lo[2] == z0,
-                    all_sane,
                     &mut boxes,
                 );
             }
@@ -942,11 +934,9 @@ impl<M: LinearMap + Clone> IncrementalPushForward<M> {
 /// first output plane; `first_slab` for the slab that also takes boxes reaching below the
 /// grid). Voxels in index order, as [`IncrementalPushForward::recompute`] requires.
 ///
-/// Compiled for the baseline target and for x86-64 with AVX2, chosen at run time; both
-/// give the same bits (the same IEEE operations in the same order; Rust never contracts a
-/// multiply and an add, so FMA is not used).
+/// Row by row through [`RowBoxes`] (AVX2 kernels where the CPU has them, chosen at run
+/// time; the same bits as the per-voxel box filter).
 #[allow(clippy::too_many_arguments)]
-#[multiversion(targets("x86_64+avx2+fma"))]
 fn tally_run<'a>(
     src: &Voxels<'a, f32>,
     vbox: &Region,
@@ -956,7 +946,6 @@ fn tally_run<'a>(
     status: &[AtomicU8],
     redo: &Region,
     first_slab: bool,
-    all_sane: bool,
     boxes: &mut RowBoxes,
 ) {
     let redo_end = [0, 1, 2].map(|a| redo.lo[a] + redo.dims[a]);
@@ -967,49 +956,26 @@ fn tally_run<'a>(
             let Some(row) = row(src, vbox, c0, dj, dk) else {
                 continue;
             };
-            let marks = in_redo(1, vbox.lo[1] + dj) && in_redo(2, vbox.lo[2] + dk);
-            // One loop body for both ways of getting the boxes.
-            macro_rules! tally_row {
-                ($boxes:expr) => {
-                    for (n, (v, proxy)) in $boxes.enumerate() {
-                        let Some((lo, hi)) = proxy else {
-                            continue;
-                        };
-                        let hit = splat(lo, hi, v.to_f64(), 1.0, out, slab, buf);
-                        // The slab holding the box's first output plane (the first slab
-                        // for boxes reaching below the grid) marks a redone voxel.
-                        if hit
-                            && marks
-                            && in_redo(0, vbox.lo[0] + n)
-                            && (first_slab || lo.z + 0.5 >= slab.lo[2] as f64)
-                            && let Some(slot) = status.get(row.first + n)
-                        {
-                            slot.store(MAPPED, Relaxed);
-                        }
-                    }
-                };
+            // The boxes and cells of the whole row in vector lanes.
+            let target = Target {
+                sign: 1.0,
+                out,
+                region: slab,
+            };
+            boxes.tally(&row, target, buf);
+            if !(in_redo(1, vbox.lo[1] + dj) && in_redo(2, vbox.lo[2] + dk)) {
+                continue;
             }
-            if all_sane {
-                // The boxes and short cells of the whole row in vector lanes first.
-                boxes.fill(&row);
-                for (n, v) in row.values.iter().enumerate() {
-                    let (lo, hi) = boxes.bounds(n);
-                    let d = v.to_f64();
-                    let hit = match boxes.shorts(n) {
-                        Some(sh) if d.is_finite() => splat_short(sh, d, 1.0, slab, buf),
-                        _ => splat(lo, hi, d, 1.0, out, slab, buf),
-                    };
-                    if hit
-                        && marks
-                        && in_redo(0, vbox.lo[0] + n)
-                        && (first_slab || lo.z + 0.5 >= slab.lo[2] as f64)
-                        && let Some(slot) = status.get(row.first + n)
-                    {
-                        slot.store(MAPPED, Relaxed);
-                    }
+            for (n, &o) in boxes.outcomes().iter().enumerate() {
+                // The slab holding the box's first output plane (the first slab for boxes
+                // reaching below the grid) marks a redone voxel.
+                if o == MAPPED
+                    && in_redo(0, vbox.lo[0] + n)
+                    && (first_slab || boxes.lo_z(n) + 0.5 >= slab.lo[2] as f64)
+                    && let Some(slot) = status.get(row.first + n)
+                {
+                    slot.store(MAPPED, Relaxed);
                 }
-            } else {
-                tally_row!(row.boxes());
             }
         }
     }

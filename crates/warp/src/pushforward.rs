@@ -462,7 +462,13 @@ fn accumulate<T: Voxel, M: SpaceMap + ?Sized>(
     }
     let to_index = ToIndex::new(output);
     let plane_out = output.dims[0] * output.dims[1];
-    let mut acc = try_filled(output.len(), [0.0f32; 2], "accumulator")?;
+    // Filled plane by plane as the slab tallies arrive (see `add_tally`), not zeroed first.
+    let mut acc = Vec::new();
+    acc.try_reserve_exact(output.len())
+        .map_err(|_| WarpError::Allocation {
+            what: "accumulator",
+            bytes: output.len().saturating_mul(std::mem::size_of::<[f32; 2]>()),
+        })?;
     let mut stats = PushForwardStats::default();
     let slab_list = slabs(input.geometry().dims);
     // Slabs run in parallel in windows of one slab per thread; each window's tallies are
@@ -486,20 +492,35 @@ fn accumulate<T: Voxel, M: SpaceMap + ?Sized>(
             if tally.data.is_empty() {
                 continue;
             }
-            let start = tally.z0 * plane_out;
-            let dst = &mut acc[start..start + tally.data.len()];
-            dst.par_chunks_mut(plane_out)
-                .zip(tally.data.par_chunks(plane_out))
-                .for_each(|(d, s)| {
-                    for (d, s) in d.iter_mut().zip(s) {
-                        d[0] += s[0];
-                        d[1] += s[1];
-                    }
-                });
+            add_tally(&mut acc, tally.z0 * plane_out, &tally.data, plane_out);
         }
     }
     progress.check()?;
+    acc.resize(output.len(), [0.0; 2]);
     Ok((acc, stats))
+}
+
+/// Add a slab's tallies `data`, which start at accumulator index `start`, to `acc`, whose
+/// length marks the planes tallied so far (every later index is an implicit +0): indices
+/// already there get `+= s`, a gap before `start` gets zeros, and indices past the end are
+/// appended as `0 + s`, the very sum a zeroed accumulator would hold (so the result has the
+/// bits of zeroing the whole accumulator first and adding every tally, without that extra
+/// pass over it). `acc` must have the capacity for every index.
+fn add_tally(acc: &mut Vec<[f32; 2]>, start: usize, data: &[[f32; 2]], plane: usize) {
+    if acc.len() < start {
+        acc.resize(start, [0.0; 2]);
+    }
+    let (old, new) = data.split_at((acc.len() - start).min(data.len()));
+    acc[start..start + old.len()]
+        .par_chunks_mut(plane.max(1))
+        .zip(old.par_chunks(plane.max(1)))
+        .for_each(|(d, s)| {
+            for (d, s) in d.iter_mut().zip(s) {
+                d[0] += s[0];
+                d[1] += s[1];
+            }
+        });
+    acc.par_extend(new.par_iter().map(|s| [0.0 + s[0], 0.0 + s[1]]));
 }
 
 /// Evaluate `map` on the points of box `bx` of `grid` (tile by tile, see
@@ -646,4 +667,48 @@ fn slab_buffer(
     };
     let data = try_filled(region.len(), [0.0f32; 2], "slab accumulator")?;
     Ok((region, data))
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use volmorph_testkit::Rng;
+
+    /// Filling the accumulator as the tallies arrive gives the bits of zeroing it first and
+    /// adding every tally, whatever planes the tallies cover: gaps no tally reaches, tallies
+    /// overlapping the planes before them, tallies reaching back below the planes filled
+    /// so far, and trailing planes nothing reaches.
+    #[test]
+    fn accumulator_filled_on_arrival_equals_zeroed_then_added() {
+        let mut rng = Rng::new(3);
+        let plane = 6;
+        let planes = 12;
+        for case in 0..200 {
+            let mut want = vec![[0.0f32; 2]; plane * planes];
+            let mut got = Vec::with_capacity(plane * planes);
+            for _ in 0..1 + rng.index(5) {
+                let z0 = rng.index(planes);
+                let nz = 1 + rng.index(planes - z0);
+                let data: Vec<[f32; 2]> = (0..nz * plane)
+                    .map(|_| {
+                        if rng.chance(0.2) {
+                            [0.0, 0.0]
+                        } else {
+                            [rng.range(-5.0, 300.0) as f32, rng.range(0.0, 2.0) as f32]
+                        }
+                    })
+                    .collect();
+                for (d, s) in want[z0 * plane..].iter_mut().zip(&data) {
+                    d[0] += s[0];
+                    d[1] += s[1];
+                }
+                add_tally(&mut got, z0 * plane, &data, plane);
+            }
+            got.resize(plane * planes, [0.0; 2]);
+            let bits = |v: &[[f32; 2]]| -> Vec<[u32; 2]> {
+                v.iter().map(|c| c.map(f32::to_bits)).collect()
+            };
+            assert_eq!(bits(&got), bits(&want), "case {case}");
+        }
+    }
 }

@@ -12,10 +12,15 @@
 //! values that adding it (`sign = +1`) added.
 
 use glam::DVec3;
-use multiversion::multiversion;
 use volmorph_volume::Voxel;
 
 use crate::pushforward::PushForwardStats;
+
+mod lanes;
+#[cfg(target_arch = "x86_64")]
+mod lanes_x4;
+
+pub(crate) use lanes::{MAPPED, NON_FINITE, OUTSIDE, RowBoxes, Target};
 
 /// Boxes spanning at most this many output cells along every axis take the fast path with
 /// per-axis weights in stack arrays; larger ones compute the overlaps cell by cell.
@@ -25,6 +30,17 @@ const SMALL: usize = 4;
 pub(crate) trait Cell: Copy + Send + Sync {
     /// Add `wd` to `V` and `w` to `W`.
     fn add(&mut self, wd: f64, w: f64);
+
+    /// A buffer of these cells as the vector kernels take it.
+    fn lanes(buf: &mut [Self]) -> Lanes<'_>;
+}
+
+/// A tally buffer of one of the two cell types (what the vector kernels dispatch on).
+pub(crate) enum Lanes<'a> {
+    /// `f32` tallies (the full push-forward).
+    F32(&'a mut [[f32; 2]]),
+    /// `f64` tallies (the incremental engine).
+    F64(&'a mut [[f64; 2]]),
 }
 
 impl Cell for [f32; 2] {
@@ -33,6 +49,10 @@ impl Cell for [f32; 2] {
         self[0] += wd as f32;
         self[1] += w as f32;
     }
+
+    fn lanes(buf: &mut [Self]) -> Lanes<'_> {
+        Lanes::F32(buf)
+    }
 }
 
 impl Cell for [f64; 2] {
@@ -40,6 +60,10 @@ impl Cell for [f64; 2] {
     fn add(&mut self, wd: f64, w: f64) {
         self[0] += wd;
         self[1] += w;
+    }
+
+    fn lanes(buf: &mut [Self]) -> Lanes<'_> {
+        Lanes::F64(buf)
     }
 }
 
@@ -255,7 +279,7 @@ pub(crate) fn splat<C: Cell>(
 }
 
 /// The [`short`] per-axis cells and overlaps of one box.
-pub(crate) type Short = (usize, [f64; 3], usize);
+type Short = (usize, [f64; 3], usize);
 
 /// [`splat`] of a box at most two cells long along every axis (finite `d`), given its
 /// per-axis [`short`] results: inside the region it covers one to three cells per axis from
@@ -265,7 +289,7 @@ pub(crate) type Short = (usize, [f64; 3], usize);
 /// addends are −0, so no tally is ever −0 (the one value to which adding +0 is not the
 /// identity).
 #[inline(always)]
-pub(crate) fn splat_short<C: Cell>(
+fn splat_short<C: Cell>(
     [x, y, z]: [Short; 3],
     d: f64,
     sign: f64,
@@ -497,6 +521,22 @@ impl<T> Row<'_, T> {
             )
     }
 
+    /// Voxel `n`'s centre image and its six neighbours' (−x, +x, −y, +y, −z, +z), if the
+    /// row holds them.
+    #[inline(always)]
+    pub fn stencil(&self, n: usize) -> Option<(DVec3, [DVec3; 6])> {
+        let c = self.centres.get(n..n + 3)?;
+        let nb = [
+            c[0],
+            c[2],
+            *self.ym.get(n)?,
+            *self.yp.get(n)?,
+            *self.zm.get(n)?,
+            *self.zp.get(n)?,
+        ];
+        Some((c[1], nb))
+    }
+
     /// Per voxel of the row: its value and proxy box ([`averaged_bounds`]).
     #[inline(always)]
     pub fn boxes(&self) -> impl Iterator<Item = (&T, Option<(DVec3, DVec3)>)> {
@@ -504,131 +544,6 @@ impl<T> Row<'_, T> {
             #[inline(always)]
             |(v, p, nb)| (v, averaged_bounds(p, nb)),
         )
-    }
-}
-
-/// The proxy boxes of a row of voxels whose centre images are sane (finite and moderate, as
-/// [`unchecked_bounds`] requires) and their per-axis [`short`] cells, computed coordinate by
-/// coordinate over the whole row. Each coordinate goes through the same IEEE operations in
-/// the same order as [`unchecked_bounds`] and [`short`] (so the bits are theirs), but laid
-/// out flat — three coordinates per voxel, x, y, z — and without branches, so the loops run
-/// in vector lanes. Buffers are kept between rows.
-#[derive(Debug, Default)]
-pub(crate) struct RowBoxes {
-    /// Box lower bounds, three per voxel.
-    lo: Vec<f64>,
-    /// Box upper bounds.
-    hi: Vec<f64>,
-    /// [`short`]'s first cell `⌊lo + ½⌋` (as a float; meaningful where `count > 0`).
-    first: Vec<f64>,
-    /// [`short`]'s overlaps with cells `first`, `first + 1`, `first + 2`.
-    w0: Vec<f64>,
-    /// See [`RowBoxes::w0`].
-    w1: Vec<f64>,
-    /// See [`RowBoxes::w0`].
-    w2: Vec<f64>,
-    /// [`short`]'s number of cells with positive overlap, or 0 where it gives `None`.
-    count: Vec<f64>,
-}
-
-impl RowBoxes {
-    /// Compute the boxes and short cells of `row`'s voxels (its centre images must be sane).
-    #[inline(always)]
-    pub fn fill<T>(&mut self, row: &Row<'_, T>) {
-        let n3 = 3 * row.values.len();
-        for v in [
-            &mut self.lo,
-            &mut self.hi,
-            &mut self.first,
-            &mut self.w0,
-            &mut self.w1,
-            &mut self.w2,
-            &mut self.count,
-        ] {
-            if v.len() < n3 {
-                v.resize(n3, 0.0);
-            }
-        }
-        fn flat(p: &[DVec3], len: usize) -> &[f64] {
-            let f: &[f64] = bytemuck::cast_slice(p);
-            f.get(..len).unwrap_or(&[])
-        }
-        // Centre `m / 3` of the row is at `c[m + 3]`, its −x and +x neighbours at `c[m]`
-        // and `c[m + 6]`.
-        let c = flat(row.centres, n3 + 6);
-        let (ym, yp) = (flat(row.ym, n3), flat(row.yp, n3));
-        let (zm, zp) = (flat(row.zm, n3), flat(row.zp, n3));
-        if c.len() < n3 + 6 || [ym, yp, zm, zp].iter().any(|a| a.len() < n3) {
-            // Unreachable for the rows [`row`] builds; leave every box to the general path.
-            self.count[..n3].fill(0.0);
-            return;
-        }
-        let (lo, hi) = (&mut self.lo[..n3], &mut self.hi[..n3]);
-        for m in 0..n3 {
-            // As `unchecked_bounds`: the neighbours (−x, +x, −y, +y, −z, +z) paired.
-            let mn = fmin(
-                fmin(fmin(c[m], c[m + 6]), fmin(ym[m], yp[m])),
-                fmin(zm[m], zp[m]),
-            );
-            let mx = fmax(
-                fmax(fmax(c[m], c[m + 6]), fmax(ym[m], yp[m])),
-                fmax(zm[m], zp[m]),
-            );
-            let p = c[m + 3];
-            lo[m] = 0.5 * (p + mn);
-            hi[m] = 0.5 * (p + mx);
-        }
-        let (first, count) = (&mut self.first[..n3], &mut self.count[..n3]);
-        let (w0, w1, w2) = (&mut self.w0[..n3], &mut self.w1[..n3], &mut self.w2[..n3]);
-        for m in 0..n3 {
-            // As `short`, with both of its cases computed and one selected.
-            let (l, h) = (lo[m], hi[m]);
-            let s = l + 0.5;
-            let len = h - l;
-            let ok = s >= 0.0 && len > 0.0 && len <= 2.0 && s < 1e15;
-            // For 0 ≤ s < 2⁵³ the truncation equals `short`'s `s as i64` converted back.
-            let a = s.trunc();
-            let e = a + 0.5;
-            let e1 = e + 1.0;
-            let (v0, v1, v2, n) = if len <= 1.0 {
-                let n = if h > e { 2.0 } else { 1.0 };
-                (fmin(h, e) - l, fmax(h - e, 0.0), 0.0, n)
-            } else {
-                let n = if h > e1 { 3.0 } else { 2.0 };
-                (e - l, fmin(h, e1) - e, fmax(h - e1, 0.0), n)
-            };
-            first[m] = a;
-            w0[m] = v0;
-            w1[m] = v1;
-            w2[m] = v2;
-            count[m] = if ok { n } else { 0.0 };
-        }
-    }
-
-    /// Voxel `n`'s proxy box (of the last [`RowBoxes::fill`]).
-    #[inline(always)]
-    pub fn bounds(&self, n: usize) -> (DVec3, DVec3) {
-        let at = |v: &[f64]| DVec3::from_slice(v.get(3 * n..3 * n + 3).unwrap_or(&[0.0; 3]));
-        (at(&self.lo), at(&self.hi))
-    }
-
-    /// Voxel `n`'s [`short`] results per axis, if every axis has them.
-    #[inline(always)]
-    pub fn shorts(&self, n: usize) -> Option<[Short; 3]> {
-        let i = 3 * n;
-        let count = self.count.get(i..i + 3)?;
-        if count.contains(&0.0) {
-            return None;
-        }
-        let axis = |a: usize| -> Short {
-            let m = i + a;
-            (
-                self.first[m] as usize,
-                [self.w0[m], self.w1[m], self.w2[m]],
-                count[a] as usize,
-            )
-        };
-        Some([axis(0), axis(1), axis(2)])
     }
 }
 
@@ -667,10 +582,8 @@ pub(crate) fn row<'a, T>(
 /// centre images sit at centre-array index `c0 + (voxel − vbox.lo)`, with True's averaged
 /// face centres, into `buf` over `region` of an output grid of `out` dims.
 ///
-/// Compiled for the baseline target and for x86-64 with AVX2, chosen at run time; both
-/// give the same bits (the same IEEE operations in the same order; Rust never contracts a
-/// multiply and an add, so FMA is not used).
-#[multiversion(targets("x86_64+avx2+fma"))]
+/// Row by row through [`RowBoxes`] (AVX2 kernels where the CPU has them, chosen at run
+/// time); the same bits as [`averaged_bounds`] and [`splat`] voxel by voxel in index order.
 pub(crate) fn tally_averaged<'a, T: Voxel, C: Cell>(
     src: &Voxels<'a, T>,
     vbox: &Region,
@@ -681,6 +594,7 @@ pub(crate) fn tally_averaged<'a, T: Voxel, C: Cell>(
     sign: f64,
 ) -> PushForwardStats {
     let mut stats = PushForwardStats::default();
+    let mut boxes = RowBoxes::default();
     for dk in 0..vbox.dims[2] {
         for dj in 0..vbox.dims[1] {
             let Some(row) = row(src, vbox, c0, dj, dk) else {
@@ -688,17 +602,14 @@ pub(crate) fn tally_averaged<'a, T: Voxel, C: Cell>(
                 stats.non_finite += vbox.dims[0];
                 continue;
             };
-            for (v, proxy) in row.boxes() {
-                let Some((lo, hi)) = proxy else {
-                    stats.non_finite += 1;
-                    continue;
-                };
-                if splat(lo, hi, v.to_f64(), sign, out, region, buf) {
-                    stats.mapped += 1;
-                } else {
-                    stats.outside += 1;
-                }
+            boxes.tally(&row, Target { sign, out, region }, buf);
+            let mut counts = [0usize; 3];
+            for &o in boxes.outcomes() {
+                counts[usize::from(o.min(NON_FINITE))] += 1;
             }
+            stats.mapped += counts[usize::from(MAPPED)];
+            stats.outside += counts[usize::from(OUTSIDE)];
+            stats.non_finite += counts[usize::from(NON_FINITE)];
         }
     }
     stats
