@@ -1,6 +1,7 @@
 //! The mesh FFD suite: the accurate B-spline FFD (Feng 2002: plan and trimmed Bézier
 //! surfaces) of a UV sphere, and vertex FFD of a finer sphere, each through a randomly moved
-//! 6×8×6 degree-2 lattice.
+//! 6×8×6 degree-2 lattice; and the evaluation of a trivariate spline map with its
+//! derivatives (point and gradient of a rational tricubic volume, Martin & Cohen §4).
 
 use std::sync::Arc;
 use std::time::Duration;
@@ -14,10 +15,15 @@ use volmorph_ffd::shapes::uv_sphere;
 use volmorph_ffd::step::step_string;
 use volmorph_lattice::BSplineLattice;
 use volmorph_mesh::Mesh;
+use volmorph_spline::TensorBSpline;
 use volmorph_testkit::Rng;
+use volmorph_trivariate::examples::rational_tricubic_8cubed;
+use volmorph_trivariate::{EvalMethod, VolumeEvaluator};
 
-use crate::targets::{ISSUE_4_ACCURATE_FFD, ISSUE_22_VERTEX_FFD};
-use crate::timing::{Case, Report, Unit, measure_all};
+use crate::targets::{
+    ISSUE_4_ACCURATE_FFD, ISSUE_22_TRIVARIATE_POINTS_PER_SECOND, ISSUE_22_VERTEX_FFD,
+};
+use crate::timing::{Case, Rate, RateUnit, Report, Unit, measure_all};
 use crate::{BenchError, SEED, check_repeat};
 
 /// Rings of the accurate-FFD sphere at which its target is stated: 4·133·132 = 70 224
@@ -30,6 +36,9 @@ pub const TARGET_VERTEX_RINGS: u32 = 708;
 pub const LATTICE_COUNTS: [usize; 3] = [6, 8, 6];
 /// Degree per axis of the lattice.
 pub const LATTICE_DEGREE: [usize; 3] = [2, 2, 2];
+/// Random parameter triples of the trivariate point-and-gradient batch, the size at which
+/// issue 22 states its rate.
+pub const TRIVARIATE_POINTS: usize = 1 << 20;
 
 /// Settings of the FFD suite.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
@@ -103,6 +112,11 @@ pub struct FfdInputs {
     pub big_lattice: BSplineLattice,
     /// The accurate FFD of `sphere` through `lattice`, the input of the STEP-writing case.
     pub model: TrimmedModel,
+    /// The rational tricubic volume of the point-and-gradient case
+    /// ([`rational_tricubic_8cubed`]).
+    pub volume: TensorBSpline<3>,
+    /// Its [`TRIVARIATE_POINTS`] parameter triples, uniform in the unit cube (seeded).
+    pub params: Vec<[f64; 3]>,
     rings: u32,
     vertex_rings: u32,
 }
@@ -118,12 +132,20 @@ impl FfdInputs {
         let big = uv_sphere(config.vertex_rings, 1.0, DVec3::ZERO)?;
         let big_lattice = moved_lattice(&big, SEED)?;
         let model = Arc::new(AccuratePlan::new(&sphere, &lattice)?).deform(&lattice)?;
+        let volume = rational_tricubic_8cubed()
+            .map_err(|e| BenchError::check("trivariate volume", e.to_string()))?;
+        let mut rng = Rng::new(SEED);
+        let params = (0..TRIVARIATE_POINTS)
+            .map(|_| [rng.unit(), rng.unit(), rng.unit()])
+            .collect();
         Ok(Self {
             sphere,
             lattice,
             big,
             big_lattice,
             model,
+            volume,
+            params,
             rings: config.rings,
             vertex_rings: config.vertex_rings,
         })
@@ -157,7 +179,31 @@ impl FfdInputs {
             Case::call("STEP text of the accurate FFD", "step_writing", move || {
                 Ok(step_string(&self.model, "bench")?)
             }),
+            self.trivariate_case(),
         ]
+    }
+
+    /// Point and gradient of [`FfdInputs::volume`] at every parameter triple (refinement
+    /// evaluation, rayon over the batch), with issue 22's rate as the time of the batch.
+    fn trivariate_case(&self) -> Case<'_> {
+        let n = self.params.len();
+        let dim = self.volume.dim();
+        let (mut values, mut gradients) = (vec![0.0; n * dim], vec![0.0; n * 3 * dim]);
+        let e = VolumeEvaluator::new(&self.volume);
+        let target = Duration::from_secs_f64(n as f64 / ISSUE_22_TRIVARIATE_POINTS_PER_SECOND);
+        Case::call(
+            "trivariate point + gradient",
+            "trivariate_point_gradient",
+            move || {
+                e.eval_batch(EvalMethod::Refinement, &self.params, &mut values, &mut gradients)
+                    .map_err(|e| BenchError::check("trivariate evaluation", e.to_string()))
+            },
+        )
+        .with_target((n == TRIVARIATE_POINTS).then_some(target))
+        .with_rate(Rate {
+            work: n as f64,
+            unit: RateUnit::MegapointsPerSecond,
+        })
     }
 
     /// Measured by the criterion benches only: the accurate FFD's surfaces with the plan
@@ -200,9 +246,11 @@ pub fn run(config: &FfdConfig, progress: &mut dyn FnMut(&str)) -> Result<Report,
     let [nu, nv, nw] = LATTICE_COUNTS;
     let description = format!(
         "sphere of {} triangles (accurate; 'triangles' column = Bézier patches) and of {} \
-         vertices (vertex FFD), {nu}x{nv}x{nw} degree-2 lattice, {} runs each, {} threads",
+         vertices (vertex FFD), {nu}x{nv}x{nw} degree-2 lattice; {} points of a rational \
+         tricubic 8^3 volume; {} runs each, {} threads",
         inputs.sphere.face_count(),
         inputs.big.vertex_count(),
+        inputs.params.len(),
         config.repeat,
         rayon::current_num_threads()
     );
