@@ -198,6 +198,7 @@ fn ffd_suite_moves_every_control_point_by_at_most_five_percent() {
     let config = ffd::FfdConfig {
         rings: 8,
         vertex_rings: 10,
+        points: 1001,
         repeat: 1,
     };
     let inputs = ffd::FfdInputs::new(&config).unwrap();
@@ -218,10 +219,21 @@ fn ffd_suite_moves_every_control_point_by_at_most_five_percent() {
         &[
             "accurate FFD (plan + surfaces)",
             "vertex FFD",
+            "vertex FFD, positions only",
             "STEP text of the accurate FFD",
+            "trivariate point + gradient",
         ],
     );
     assert!(r.items[0].triangles.unwrap() >= 4 * 8 * 7);
+    // The trivariate case shows its rate in points per second.
+    let tri = &r.items[4];
+    assert_eq!(inputs.params.len(), 1001);
+    let rate = tri.median_rate().unwrap();
+    assert!(
+        (rate - 1001.0 / tri.median() / 1e6).abs() <= 1e-9 * rate,
+        "{rate}"
+    );
+    assert!(r.to_text().contains("Mpts/s"));
     // The STEP case writes the accurate FFD of the same sphere: a part-21 file with a face
     // per trimmed face of the model.
     let (text, summary) = volmorph_ffd::step::step_string(&inputs.model, "t").unwrap();

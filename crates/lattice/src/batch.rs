@@ -375,7 +375,10 @@ mod tests {
         let ctrl = lat.control_points();
         for (p, o) in pts.iter().zip(&out) {
             let want = lat.apply_with_net(&ctrl, *p);
-            assert_eq!(o.to_array().map(f64::to_bits), want.to_array().map(f64::to_bits));
+            assert_eq!(
+                o.to_array().map(f64::to_bits),
+                want.to_array().map(f64::to_bits)
+            );
         }
     }
 

@@ -596,7 +596,13 @@ mod tests {
     /// A tricubic volume of `n` control points per axis and value dimension `dim`, rational
     /// or not, with clamped random knots on `[0, 1]` or the unclamped integers `0 … n + 3`
     /// (domain `[3, n]`).
-    fn tricubic(seed: u64, n: usize, dim: usize, rational: bool, clamped: bool) -> TensorBSpline<3> {
+    fn tricubic(
+        seed: u64,
+        n: usize,
+        dim: usize,
+        rational: bool,
+        clamped: bool,
+    ) -> TensorBSpline<3> {
         let s = random_volume(seed, [3; 3], [n; 3], dim);
         let knots = if clamped {
             s.knots().clone()
@@ -695,9 +701,15 @@ mod tests {
         ] {
             let mut params = good.clone();
             params[n] = bad;
-            params[n + 1..].iter_mut().step_by(5).for_each(|u| u[1] = 2.0);
+            params[n + 1..]
+                .iter_mut()
+                .step_by(5)
+                .for_each(|u| u[1] = 2.0);
             let (mut v1, mut g1) = (vec![0.0; 3], vec![0.0; 9]);
-            let want = e.refinement_into(bad, &mut v1, &mut g1).unwrap_err().to_string();
+            let want = e
+                .refinement_into(bad, &mut v1, &mut g1)
+                .unwrap_err()
+                .to_string();
             for path in [Path::Lanes, Path::PerPoint] {
                 let mut vs = vec![0.0; params.len() * 3];
                 let mut gs = vec![0.0; params.len() * 9];
