@@ -107,6 +107,10 @@ fn apply_batch_by(
     let net = Net::new(lattice);
     #[cfg(target_arch = "x86_64")]
     let lanes = path == Path::Lanes && lanes_x4::available();
+    #[cfg(target_arch = "x86_64")]
+    let cells = lanes
+        .then(|| lanes_x4::Cells::new(&net, d0, points.len()))
+        .flatten();
     #[cfg(not(target_arch = "x86_64"))]
     let _ = path;
     out.par_chunks_mut(CHUNK)
@@ -114,10 +118,11 @@ fn apply_batch_by(
         .for_each(|(o, p)| {
             #[cfg(target_arch = "x86_64")]
             if lanes {
+                let cells = cells.as_ref();
                 match d0 {
-                    1 => lanes_x4::run::<1>(&net, p, o),
-                    2 => lanes_x4::run::<2>(&net, p, o),
-                    _ => lanes_x4::run::<3>(&net, p, o),
+                    1 => lanes_x4::run::<1>(&net, cells, p, o),
+                    2 => lanes_x4::run::<2>(&net, cells, p, o),
+                    _ => lanes_x4::run::<3>(&net, cells, p, o),
                 }
                 return;
             }
@@ -370,15 +375,20 @@ mod tests {
         let lat = lattice(4, [2; 3], false, true);
         let pts = points(&lat, 4);
         let net = Net::new(&lat);
-        let mut out = vec![DVec3::ZERO; pts.len()];
-        lanes_x4::run::<2>(&net, &pts, &mut out);
+        let cells = lanes_x4::Cells::new(&net, 2, pts.len());
+        assert!(cells.is_some());
+        assert!(lanes_x4::Cells::new(&net, 2, 10).is_none());
         let ctrl = lat.control_points();
-        for (p, o) in pts.iter().zip(&out) {
-            let want = lat.apply_with_net(&ctrl, *p);
-            assert_eq!(
-                o.to_array().map(f64::to_bits),
-                want.to_array().map(f64::to_bits)
-            );
+        for cells in [None, cells.as_ref()] {
+            let mut out = vec![DVec3::ZERO; pts.len()];
+            lanes_x4::run::<2>(&net, cells, &pts, &mut out);
+            for (p, o) in pts.iter().zip(&out) {
+                let want = lat.apply_with_net(&ctrl, *p);
+                assert_eq!(
+                    o.to_array().map(f64::to_bits),
+                    want.to_array().map(f64::to_bits)
+                );
+            }
         }
     }
 
