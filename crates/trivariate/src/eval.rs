@@ -443,6 +443,20 @@ fn contract<const H: usize, const R: usize, const O: usize>(
             hw[x] += cd * sp[x];
         }
     }
+    project(s, &h, [&hu, &hv, &hw], value, gradient);
+}
+
+/// The point and gradient from the homogeneous sums of [`contract`] (`h` the point; `hu`,
+/// `hv`, `hw` its derivatives along u, v, w): for rational volumes the projection `h/w` and the quotient
+/// rule `(h_a − w_a·P)/w`, otherwise the sums themselves.
+#[inline(always)]
+fn project<const H: usize>(
+    s: &TensorBSpline<3>,
+    h: &[f64; H],
+    [hu, hv, hw]: [&[f64; H]; 3],
+    value: &mut [f64],
+    gradient: &mut [f64],
+) {
     let dim = s.dim();
     if s.is_rational() {
         let w = h[dim];

@@ -6,7 +6,9 @@
 //! the domain) and the point and derivative α rows of every axis (`alpha_rows` with `P = 3`)
 //! run in vector registers, each lane holding one point. The rows are then transposed into
 //! each point's `[f64; 4]` rows and the sub-net contraction runs per point, as in the
-//! per-point kernel (its homogeneous tuples are the vector there).
+//! per-point kernel: its homogeneous tuples are the vector there, written out with
+//! intrinsics for homogeneous dimension 4 (rational 3D volumes: the accumulators stay in
+//! registers and every control point is one load, two multiplies and two adds).
 //!
 //! Every lane performs exactly the IEEE operations of the per-point kernel in the same
 //! order; no multiply is fused with an add (Rust never contracts them and no FMA intrinsic is
@@ -28,7 +30,7 @@ use std::arch::x86_64::{
 
 use volmorph_spline::TensorBSpline;
 
-use super::{contract, refinement_kernel};
+use super::{contract, project, refinement_kernel};
 use crate::TrivariateError;
 
 /// The degree this kernel evaluates on every axis.
@@ -137,7 +139,11 @@ fn groups<const H: usize>(
         {
             let p = [pts[0][l], pts[1][l], pts[2][l]];
             let d = [des[0][l], des[1][l], des[2][l]];
-            contract::<H, 4, 4>(s, first[l], [P + 1; 3], &p, &d, v, g);
+            if H == 4 {
+                contract_h4(s, first[l], &p, &d, v, g);
+            } else {
+                contract::<H, 4, 4>(s, first[l], [P + 1; 3], &p, &d, v, g);
+            }
         }
     }
     let done = params.len() - params.len() % 4;
@@ -206,6 +212,55 @@ fn alpha_lanes(w: &[__m256d; 2 * P], t: __m256d) -> ([__m256d; 4], [__m256d; 4])
     });
     let deriv = std::array::from_fn(|q| _mm256_mul_pd(c, _mm256_sub_pd(r[q], l[q])));
     (point, deriv)
+}
+
+/// `contract::<4, 4, 4>` with the homogeneous 4-tuples in vector registers: the same sums in
+/// the same order (each starting from `0.0`), then the same projection.
+#[inline]
+#[target_feature(enable = "avx2")]
+fn contract_h4(
+    s: &TensorBSpline<3>,
+    first: [usize; 3],
+    pt: &[[f64; 4]; 3],
+    de: &[[f64; 4]; 3],
+    value: &mut [f64],
+    gradient: &mut [f64],
+) {
+    let coefs = s.homogeneous_coefficients();
+    let [n0, n1, _] = s.counts();
+    let (s1, s2) = (4 * n0, 4 * n0 * n1);
+    let a = pt[0].map(|x| _mm256_set1_pd(x));
+    let b = de[0].map(|x| _mm256_set1_pd(x));
+    let zero = _mm256_setzero_pd();
+    let (mut h, mut hu, mut hv, mut hw) = (zero, zero, zero, zero);
+    for k in 0..=P {
+        let (mut sp, mut su, mut sv) = (zero, zero, zero);
+        for j in 0..=P {
+            let base = first[0] * 4 + (first[1] + j) * s1 + (first[2] + k) * s2;
+            let Some(row) = coefs.get(base..base + 4 * (P + 1)) else {
+                // Not reached (the spans are valid); the scalar contraction decides.
+                contract::<4, 4, 4>(s, first, [P + 1; 3], pt, de, value, gradient);
+                return;
+            };
+            let (mut rp, mut ru) = (zero, zero);
+            for (i, c) in bytemuck::cast_slice::<f64, [f64; 4]>(row).iter().enumerate() {
+                let c: __m256d = bytemuck::cast(*c);
+                rp = _mm256_add_pd(rp, _mm256_mul_pd(a[i], c));
+                ru = _mm256_add_pd(ru, _mm256_mul_pd(b[i], c));
+            }
+            let (bp, bd) = (_mm256_set1_pd(pt[1][j]), _mm256_set1_pd(de[1][j]));
+            sp = _mm256_add_pd(sp, _mm256_mul_pd(bp, rp));
+            su = _mm256_add_pd(su, _mm256_mul_pd(bp, ru));
+            sv = _mm256_add_pd(sv, _mm256_mul_pd(bd, rp));
+        }
+        let (cp, cd) = (_mm256_set1_pd(pt[2][k]), _mm256_set1_pd(de[2][k]));
+        h = _mm256_add_pd(h, _mm256_mul_pd(cp, sp));
+        hu = _mm256_add_pd(hu, _mm256_mul_pd(cp, su));
+        hv = _mm256_add_pd(hv, _mm256_mul_pd(cp, sv));
+        hw = _mm256_add_pd(hw, _mm256_mul_pd(cd, sp));
+    }
+    let [h, hu, hv, hw]: [[f64; 4]; 4] = [h, hu, hv, hw].map(bytemuck::cast);
+    project(s, &h, [&hu, &hv, &hw], value, gradient);
 }
 
 /// The 4×4 transpose: lane `l` of `rows[q]` becomes lane `q` of the result's entry `l`.
