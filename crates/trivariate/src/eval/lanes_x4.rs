@@ -30,7 +30,7 @@ use std::arch::x86_64::{
 
 use volmorph_spline::TensorBSpline;
 
-use super::{contract, project, refinement_kernel};
+use super::{contract, project, refinement_run};
 use crate::TrivariateError;
 
 /// The degree this kernel evaluates on every axis.
@@ -93,7 +93,7 @@ fn groups<const H: usize>(
         };
         let inside = _mm256_and_pd(_mm256_and_pd(within(0), within(1)), within(2));
         if _mm256_movemask_pd(inside) != 0b1111 {
-            per_point(s, u, v, g)?;
+            refinement_run(s, u, v, g)?;
             continue;
         }
         let mut pt = [[_mm256_setzero_pd(); 4]; 3];
@@ -119,7 +119,7 @@ fn groups<const H: usize>(
                 (window(0), window(1), window(2), window(3))
             else {
                 // Not reached (spans lie in `P ..= last_span`); the per-point kernel decides.
-                per_point(s, u, v, g)?;
+                refinement_run(s, u, v, g)?;
                 continue 'groups;
             };
             let w: [__m256d; 2 * P] =
@@ -147,31 +147,12 @@ fn groups<const H: usize>(
         }
     }
     let done = params.len() - params.len() % 4;
-    per_point(
+    refinement_run(
         s,
         &params[done..],
         &mut values[done * dim..],
         &mut gradients[done * 3 * dim..],
     )
-}
-
-/// The per-point kernel over `params` (`dim` and `3·dim` outputs per point), in order.
-#[inline]
-fn per_point(
-    s: &TensorBSpline<3>,
-    params: &[[f64; 3]],
-    values: &mut [f64],
-    gradients: &mut [f64],
-) -> Result<(), TrivariateError> {
-    let dim = s.dim();
-    for ((u, v), g) in params
-        .iter()
-        .zip(values.chunks_exact_mut(dim))
-        .zip(gradients.chunks_exact_mut(3 * dim))
-    {
-        refinement_kernel::<4>(s, *u, v, g)?;
-    }
-    Ok(())
 }
 
 /// `alpha_rows::<4, 3>` for four points at once: the point and derivative rows of each
