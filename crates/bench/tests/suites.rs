@@ -386,3 +386,24 @@ fn scene_drag_is_the_engine_drag() {
     let [a, b, d] = [&r.items[0], &r.items[1], &r.items[2]];
     assert_eq!(d.times, [a.times[0] - b.times[0]]);
 }
+
+/// Vertex FFD of issue 22's 1 001 114-vertex sphere through the suite's moved lattice keeps
+/// its output bits: the fingerprint of every coordinate is pinned to the value of the
+/// per-point batch kernel (the lattice's unit tests pin the four-lane kernel to that kernel
+/// bit for bit), and the faces are the input's.
+#[test]
+fn vertex_ffd_of_the_target_sphere_keeps_its_bits() {
+    let mesh = volmorph_ffd::shapes::uv_sphere(ffd::TARGET_VERTEX_RINGS, 1.0, DVec3::ZERO).unwrap();
+    assert_eq!(mesh.vertex_count(), 1_001_114);
+    let lat = ffd::moved_lattice(&mesh, volmorph_bench::SEED).unwrap();
+    let out = volmorph_ffd::baseline::vertex_ffd(&mesh, &lat).unwrap();
+    assert_eq!(out.indices(), mesh.indices());
+    assert_eq!(out.offsets(), mesh.offsets());
+    let bits = volmorph_testkit::fingerprint::fnv1a(
+        out.positions()
+            .iter()
+            .flat_map(|v| v.to_array())
+            .map(f64::to_bits),
+    );
+    assert_eq!(bits, 0x3b1f_5185_5955_bf24, "{bits:#x}");
+}

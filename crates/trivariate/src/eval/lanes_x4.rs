@@ -224,7 +224,10 @@ fn contract_h4(
                 return;
             };
             let (mut rp, mut ru) = (zero, zero);
-            for (i, c) in bytemuck::cast_slice::<f64, [f64; 4]>(row).iter().enumerate() {
+            for (i, c) in bytemuck::cast_slice::<f64, [f64; 4]>(row)
+                .iter()
+                .enumerate()
+            {
                 let c: __m256d = bytemuck::cast(*c);
                 rp = _mm256_add_pd(rp, _mm256_mul_pd(a[i], c));
                 ru = _mm256_add_pd(ru, _mm256_mul_pd(b[i], c));
