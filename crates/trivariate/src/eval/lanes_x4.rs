@@ -36,6 +36,9 @@ use crate::TrivariateError;
 /// The degree this kernel evaluates on every axis.
 const P: usize = 3;
 
+/// Each point's per-axis rows of a group: `rows[a][lane]`.
+type PointRows = [[[f64; 4]; 4]; 3];
+
 /// Whether the CPU runs [`run`] (AVX2).
 pub(super) fn available() -> bool {
     std::arch::is_x86_feature_detected!("avx2")
@@ -131,7 +134,7 @@ fn groups<const H: usize>(
         }
         // Each point's rows: `rows[a][lane]` is `pt[a]` (or `de[a]`) of that lane.
         let rows_of = |r: &[[__m256d; 4]; 3]| r.map(|q| transpose(q).map(bytemuck::cast));
-        let (pts, des): ([[[f64; 4]; 4]; 3], [[[f64; 4]; 4]; 3]) = (rows_of(&pt), rows_of(&de));
+        let (pts, des): (PointRows, PointRows) = (rows_of(&pt), rows_of(&de));
         for (l, (v, g)) in v
             .chunks_exact_mut(dim)
             .zip(g.chunks_exact_mut(3 * dim))
