@@ -16,7 +16,7 @@
 //!   contraction is one vector multiply and one vector add.
 //!
 //! Where the CPU has AVX2, four points go through the frame, the spans and the basis rows
-//! together, one per lane ([`lanes_x4`]); elsewhere the per-point loop runs, compiled for
+//! together, one per lane (`lanes_x4`); elsewhere the per-point loop runs, compiled for
 //! the baseline target and for x86-64 with AVX2 and FMA and picked at run time. Rust never
 //! contracts a multiply and an add, so every path gives the same bits. (An AVX-512 variant
 //! of the per-point loop was slower on the reference machine: 55 against 48 ns of CPU time

@@ -23,6 +23,10 @@
 //! Output layout (both methods): `value[..dim]` is the point, `gradient[a·dim + c]` is
 //! `∂S_c/∂u_a` (axis-major, `a` = 0 for u). Neither method allocates per point.
 //! [`EvalMethod::default`] is the faster one on the benchmark `benches/evaluate.rs`.
+//!
+//! Batches ([`VolumeEvaluator::eval_batch`]) of tricubic volumes run the refinement method
+//! four parameter points per vector where the CPU has AVX2 (`lanes_x4`: spans and α rows one
+//! point per lane), with the per-point kernel's bits and errors.
 
 use multiversion::multiversion;
 use rayon::prelude::*;
