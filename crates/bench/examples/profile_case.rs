@@ -103,7 +103,11 @@ fn main() -> Result<(), BenchError> {
         let mut cases = inputs.cases()?;
         cases.extend(inputs.extra_cases()?);
         go(find(cases, &id)?)?;
-    } else if id.starts_with("accurate_") || id.starts_with("vertex_ffd") || id == "step_writing" {
+    } else if id.starts_with("accurate_")
+        || id.starts_with("vertex_ffd")
+        || id == "step_writing"
+        || id == "trivariate_point_gradient"
+    {
         let inputs = FfdInputs::new(&FfdConfig::default())?;
         let mut cases = inputs.cases();
         cases.extend(inputs.extra_cases()?);

@@ -1,6 +1,7 @@
 //! The mesh FFD suite: the accurate B-spline FFD (Feng 2002: plan and trimmed Bézier
 //! surfaces) of a UV sphere, and vertex FFD of a finer sphere, each through a randomly moved
-//! 6×8×6 degree-2 lattice.
+//! 6×8×6 degree-2 lattice; and the evaluation of a trivariate spline map with its
+//! derivatives (point and gradient of a rational tricubic volume, Martin & Cohen §4).
 
 use std::sync::Arc;
 use std::time::Duration;
@@ -14,10 +15,15 @@ use volmorph_ffd::shapes::uv_sphere;
 use volmorph_ffd::step::step_string;
 use volmorph_lattice::BSplineLattice;
 use volmorph_mesh::Mesh;
+use volmorph_spline::TensorBSpline;
 use volmorph_testkit::Rng;
+use volmorph_trivariate::examples::rational_tricubic_8cubed;
+use volmorph_trivariate::{EvalMethod, VolumeEvaluator};
 
-use crate::targets::{ISSUE_4_ACCURATE_FFD, ISSUE_22_VERTEX_FFD};
-use crate::timing::{Case, Report, Unit, measure_all};
+use crate::targets::{
+    ISSUE_4_ACCURATE_FFD, ISSUE_22_TRIVARIATE_POINTS_PER_SECOND, ISSUE_22_VERTEX_FFD,
+};
+use crate::timing::{Case, Rate, RateUnit, Report, Unit, measure_all};
 use crate::{BenchError, SEED, check_repeat};
 
 /// Rings of the accurate-FFD sphere at which its target is stated: 4·133·132 = 70 224
@@ -30,6 +36,11 @@ pub const TARGET_VERTEX_RINGS: u32 = 708;
 pub const LATTICE_COUNTS: [usize; 3] = [6, 8, 6];
 /// Degree per axis of the lattice.
 pub const LATTICE_DEGREE: [usize; 3] = [2, 2, 2];
+/// Random parameter triples of the trivariate point-and-gradient batch at which issue 22
+/// states its rate.
+pub const TRIVARIATE_POINTS: usize = 1 << 20;
+/// Most parameter triples of the trivariate batch (2²⁴: 1.6 GB of parameters and results).
+pub const MAX_TRIVARIATE_POINTS: usize = 1 << 24;
 
 /// Settings of the FFD suite.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
@@ -38,6 +49,9 @@ pub struct FfdConfig {
     pub rings: u32,
     /// Latitude rings of the vertex-FFD sphere (2·r·(r−1)+2 vertices), 2 to 2048.
     pub vertex_rings: u32,
+    /// Parameter triples of the trivariate point-and-gradient batch, 1 to
+    /// [`MAX_TRIVARIATE_POINTS`].
+    pub points: usize,
     /// Timed runs per case, 1 to [`crate::MAX_REPEAT`].
     pub repeat: usize,
 }
@@ -47,6 +61,7 @@ impl Default for FfdConfig {
         Self {
             rings: TARGET_RINGS,
             vertex_rings: TARGET_VERTEX_RINGS,
+            points: TRIVARIATE_POINTS,
             repeat: 3,
         }
     }
@@ -60,6 +75,7 @@ impl FfdConfig {
     pub fn validate(&self) -> Result<(), BenchError> {
         BenchError::range("rings", self.rings, 2..=2048)?;
         BenchError::range("vertex_rings", self.vertex_rings, 2..=2048)?;
+        BenchError::range("points", self.points, 1..=MAX_TRIVARIATE_POINTS)?;
         check_repeat(self.repeat)
     }
 }
@@ -103,6 +119,12 @@ pub struct FfdInputs {
     pub big_lattice: BSplineLattice,
     /// The accurate FFD of `sphere` through `lattice`, the input of the STEP-writing case.
     pub model: TrimmedModel,
+    /// The rational tricubic volume of the point-and-gradient case
+    /// ([`rational_tricubic_8cubed`]).
+    pub volume: TensorBSpline<3>,
+    /// Its parameter triples ([`FfdConfig::points`] of them), uniform in the unit cube
+    /// (seeded).
+    pub params: Vec<[f64; 3]>,
     rings: u32,
     vertex_rings: u32,
 }
@@ -118,12 +140,20 @@ impl FfdInputs {
         let big = uv_sphere(config.vertex_rings, 1.0, DVec3::ZERO)?;
         let big_lattice = moved_lattice(&big, SEED)?;
         let model = Arc::new(AccuratePlan::new(&sphere, &lattice)?).deform(&lattice)?;
+        let volume = rational_tricubic_8cubed()
+            .map_err(|e| BenchError::check("trivariate volume", e.to_string()))?;
+        let mut rng = Rng::new(SEED);
+        let params = (0..config.points)
+            .map(|_| [rng.unit(), rng.unit(), rng.unit()])
+            .collect();
         Ok(Self {
             sphere,
             lattice,
             big,
             big_lattice,
             model,
+            volume,
+            params,
             rings: config.rings,
             vertex_rings: config.vertex_rings,
         })
@@ -131,11 +161,14 @@ impl FfdInputs {
 
     /// The accurate FFD, plan and surfaces (counting Bézier patches in the triangles column),
     /// vertex FFD (a new mesh), with their targets at the target sizes (issue 4's for the
-    /// accurate FFD, issue 22's for vertex FFD), and the STEP text of the accurate FFD's
-    /// result (written to memory: the formatting, not the disk).
+    /// accurate FFD, issue 22's for vertex FFD), vertex FFD into a preallocated buffer (the
+    /// map evaluation without the mesh: no face copy, no fresh pages), the STEP text of the
+    /// accurate FFD's result (written to memory: the formatting, not the disk), and the
+    /// trivariate point-and-gradient evaluation with issue 22's rate.
     #[must_use]
     pub fn cases(&self) -> Vec<Case<'_>> {
         let at = |yes: bool, t: Duration| yes.then_some(t);
+        let mut out = vec![DVec3::ZERO; self.big.vertex_count()];
         vec![
             Case::call_counting(
                 "accurate FFD (plan + surfaces)",
@@ -154,27 +187,6 @@ impl FfdInputs {
                 self.vertex_rings == TARGET_VERTEX_RINGS,
                 ISSUE_22_VERTEX_FFD,
             )),
-            Case::call("STEP text of the accurate FFD", "step_writing", move || {
-                Ok(step_string(&self.model, "bench")?)
-            }),
-        ]
-    }
-
-    /// Measured by the criterion benches only: the accurate FFD's surfaces with the plan
-    /// reused (an interactive edit of the lattice), and vertex FFD into a preallocated buffer
-    /// (the deformation without the mesh copy).
-    ///
-    /// # Errors
-    /// [`BenchError::Ffd`] from planning.
-    pub fn extra_cases(&self) -> Result<Vec<Case<'_>>, BenchError> {
-        let plan = Arc::new(AccuratePlan::new(&self.sphere, &self.lattice)?);
-        let mut out = vec![DVec3::ZERO; self.big.vertex_count()];
-        Ok(vec![
-            Case::call(
-                "accurate FFD, surfaces only",
-                "accurate_surfaces_only",
-                move || Ok(plan.deform(&self.lattice)?),
-            ),
             Case::call(
                 "vertex FFD, positions only",
                 "vertex_ffd_positions",
@@ -184,7 +196,53 @@ impl FfdInputs {
                         .apply_batch(self.big.positions(), &mut out)?)
                 },
             ),
-        ])
+            Case::call("STEP text of the accurate FFD", "step_writing", move || {
+                Ok(step_string(&self.model, "bench")?)
+            }),
+            self.trivariate_case(),
+        ]
+    }
+
+    /// Point and gradient of [`FfdInputs::volume`] at every parameter triple (refinement
+    /// evaluation, rayon over the batch), with issue 22's rate as the time of the batch.
+    fn trivariate_case(&self) -> Case<'_> {
+        let n = self.params.len();
+        let dim = self.volume.dim();
+        let (mut values, mut gradients) = (vec![0.0; n * dim], vec![0.0; n * 3 * dim]);
+        let e = VolumeEvaluator::new(&self.volume);
+        let target = Duration::from_secs_f64(n as f64 / ISSUE_22_TRIVARIATE_POINTS_PER_SECOND);
+        Case::call(
+            "trivariate point + gradient",
+            "trivariate_point_gradient",
+            move || {
+                e.eval_batch(
+                    EvalMethod::Refinement,
+                    &self.params,
+                    &mut values,
+                    &mut gradients,
+                )
+                .map_err(|e| BenchError::check("trivariate evaluation", e.to_string()))
+            },
+        )
+        .with_target((n == TRIVARIATE_POINTS).then_some(target))
+        .with_rate(Rate {
+            work: n as f64,
+            unit: RateUnit::MegapointsPerSecond,
+        })
+    }
+
+    /// Measured by the criterion benches only: the accurate FFD's surfaces with the plan
+    /// reused (an interactive edit of the lattice).
+    ///
+    /// # Errors
+    /// [`BenchError::Ffd`] from planning.
+    pub fn extra_cases(&self) -> Result<Vec<Case<'_>>, BenchError> {
+        let plan = Arc::new(AccuratePlan::new(&self.sphere, &self.lattice)?);
+        Ok(vec![Case::call(
+            "accurate FFD, surfaces only",
+            "accurate_surfaces_only",
+            move || Ok(plan.deform(&self.lattice)?),
+        )])
     }
 }
 
@@ -200,9 +258,11 @@ pub fn run(config: &FfdConfig, progress: &mut dyn FnMut(&str)) -> Result<Report,
     let [nu, nv, nw] = LATTICE_COUNTS;
     let description = format!(
         "sphere of {} triangles (accurate; 'triangles' column = Bézier patches) and of {} \
-         vertices (vertex FFD), {nu}x{nv}x{nw} degree-2 lattice, {} runs each, {} threads",
+         vertices (vertex FFD), {nu}x{nv}x{nw} degree-2 lattice; {} points of a rational \
+         tricubic 8^3 volume; {} runs each, {} threads",
         inputs.sphere.face_count(),
         inputs.big.vertex_count(),
+        inputs.params.len(),
         config.repeat,
         rayon::current_num_threads()
     );
@@ -212,15 +272,20 @@ pub fn run(config: &FfdConfig, progress: &mut dyn FnMut(&str)) -> Result<Report,
         vec![
             ("size", json!(config.rings)),
             ("vertex_rings", json!(config.vertex_rings)),
+            ("points", json!(config.points)),
             ("lattice", json!(nu)),
         ],
         config.repeat,
         Unit::Seconds,
         items,
     );
-    if config.rings != TARGET_RINGS || config.vertex_rings != TARGET_VERTEX_RINGS {
+    if config.rings != TARGET_RINGS
+        || config.vertex_rings != TARGET_VERTEX_RINGS
+        || config.points != TRIVARIATE_POINTS
+    {
         report.notes.push(format!(
-            "(targets are stated for {TARGET_RINGS} and {TARGET_VERTEX_RINGS} rings)"
+            "(targets are stated for {TARGET_RINGS} and {TARGET_VERTEX_RINGS} rings and \
+             {TRIVARIATE_POINTS} trivariate points)"
         ));
     }
     Ok(report)

@@ -30,6 +30,7 @@ pub struct Case<'a> {
     name: String,
     id: String,
     target: Option<Duration>,
+    rate: Option<Rate>,
     run: RunFn<'a>,
 }
 
@@ -56,6 +57,7 @@ impl<'a> Case<'a> {
             name: name.into(),
             id: id.into(),
             target: None,
+            rate: None,
             run: Box::new(run),
         }
     }
@@ -100,6 +102,13 @@ impl<'a> Case<'a> {
     #[must_use]
     pub fn with_target(mut self, target: Option<Duration>) -> Self {
         self.target = target;
+        self
+    }
+
+    /// The case with the work of one run, shown as a rate over the median time.
+    #[must_use]
+    pub fn with_rate(mut self, rate: Rate) -> Self {
+        self.rate = Some(rate);
         self
     }
 
@@ -153,7 +162,9 @@ impl<'a> Case<'a> {
             times.push(s.elapsed.as_secs_f64());
             triangles = s.triangles;
         }
-        Ok(Item::new(self.name.clone(), times, self.target).with_triangles(triangles))
+        Ok(Item::new(self.name.clone(), times, self.target)
+            .with_triangles(triangles)
+            .with_rate(self.rate))
     }
 }
 
@@ -212,6 +223,8 @@ pub enum RateUnit {
     /// `work` is floating-point operations (a fused multiply-add counts two); shown in
     /// Gflop/s (10⁹ per second).
     GigaflopsPerSecond,
+    /// `work` is evaluated points; shown in millions of points per second.
+    MegapointsPerSecond,
 }
 
 impl RateUnit {
@@ -221,17 +234,26 @@ impl RateUnit {
         match self {
             RateUnit::GigabytesPerSecond => "GB/s",
             RateUnit::GigaflopsPerSecond => "Gflop/s",
+            RateUnit::MegapointsPerSecond => "Mpts/s",
+        }
+    }
+
+    /// What one unit of the shown rate is, in `work` per second.
+    fn scale(self) -> f64 {
+        match self {
+            RateUnit::GigabytesPerSecond | RateUnit::GigaflopsPerSecond => 1e9,
+            RateUnit::MegapointsPerSecond => 1e6,
         }
     }
 }
 
 impl Rate {
-    /// The rate at a run time of `seconds`, in the unit's scale (10⁹ per second); NaN for a
-    /// time that is not positive.
+    /// The rate at a run time of `seconds`, in the unit's scale (10⁹ per second, or 10⁶ for
+    /// points); NaN for a time that is not positive.
     #[must_use]
     pub fn at(&self, seconds: f64) -> f64 {
         if seconds > 0.0 {
-            self.work / seconds * 1e-9
+            self.work / seconds / self.unit.scale()
         } else {
             f64::NAN
         }

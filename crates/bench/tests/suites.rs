@@ -198,6 +198,7 @@ fn ffd_suite_moves_every_control_point_by_at_most_five_percent() {
     let config = ffd::FfdConfig {
         rings: 8,
         vertex_rings: 10,
+        points: 1001,
         repeat: 1,
     };
     let inputs = ffd::FfdInputs::new(&config).unwrap();
@@ -218,10 +219,21 @@ fn ffd_suite_moves_every_control_point_by_at_most_five_percent() {
         &[
             "accurate FFD (plan + surfaces)",
             "vertex FFD",
+            "vertex FFD, positions only",
             "STEP text of the accurate FFD",
+            "trivariate point + gradient",
         ],
     );
     assert!(r.items[0].triangles.unwrap() >= 4 * 8 * 7);
+    // The trivariate case shows its rate in points per second.
+    let tri = &r.items[4];
+    assert_eq!(inputs.params.len(), 1001);
+    let rate = tri.median_rate().unwrap();
+    assert!(
+        (rate - 1001.0 / tri.median() / 1e6).abs() <= 1e-9 * rate,
+        "{rate}"
+    );
+    assert!(r.to_text().contains("Mpts/s"));
     // The STEP case writes the accurate FFD of the same sphere: a part-21 file with a face
     // per trimmed face of the model.
     let (text, summary) = volmorph_ffd::step::step_string(&inputs.model, "t").unwrap();
@@ -373,4 +385,25 @@ fn scene_drag_is_the_engine_drag() {
     // With one run, the overhead is exactly that run's difference.
     let [a, b, d] = [&r.items[0], &r.items[1], &r.items[2]];
     assert_eq!(d.times, [a.times[0] - b.times[0]]);
+}
+
+/// Vertex FFD of issue 22's 1 001 114-vertex sphere through the suite's moved lattice keeps
+/// its output bits: the fingerprint of every coordinate is pinned to the value of the
+/// per-point batch kernel (the lattice's unit tests pin the four-lane kernel to that kernel
+/// bit for bit), and the faces are the input's.
+#[test]
+fn vertex_ffd_of_the_target_sphere_keeps_its_bits() {
+    let mesh = volmorph_ffd::shapes::uv_sphere(ffd::TARGET_VERTEX_RINGS, 1.0, DVec3::ZERO).unwrap();
+    assert_eq!(mesh.vertex_count(), 1_001_114);
+    let lat = ffd::moved_lattice(&mesh, volmorph_bench::SEED).unwrap();
+    let out = volmorph_ffd::baseline::vertex_ffd(&mesh, &lat).unwrap();
+    assert_eq!(out.indices(), mesh.indices());
+    assert_eq!(out.offsets(), mesh.offsets());
+    let bits = volmorph_testkit::fingerprint::fnv1a(
+        out.positions()
+            .iter()
+            .flat_map(|v| v.to_array())
+            .map(f64::to_bits),
+    );
+    assert_eq!(bits, 0x3b1f_5185_5955_bf24, "{bits:#x}");
 }

@@ -6,29 +6,9 @@
 use std::hint::black_box;
 
 use criterion::{Criterion, Throughput, criterion_group, criterion_main};
-use volmorph_spline::{KnotVector, TensorBSpline};
 use volmorph_testkit::Rng;
+use volmorph_trivariate::examples::rational_tricubic_8cubed;
 use volmorph_trivariate::{EvalMethod, VolumeEvaluator};
-
-fn volume() -> TensorBSpline<3> {
-    let kv = KnotVector::clamped_uniform(3, 8, [0.0, 1.0]).expect("knots");
-    let mut pts = Vec::with_capacity(512 * 3);
-    let mut ws = Vec::with_capacity(512);
-    for k in 0..8 {
-        for j in 0..8 {
-            for i in 0..8 {
-                let (x, y, z) = (f64::from(i), f64::from(j), f64::from(k));
-                pts.extend([
-                    x + 0.1 * (y * z).sin(),
-                    y + 0.1 * (x + z).cos(),
-                    z + 0.05 * x,
-                ]);
-                ws.push(1.0 + 0.25 * ((x + 2.0 * y + 3.0 * z) * 0.7).sin().abs());
-            }
-        }
-    }
-    TensorBSpline::new_rational([kv.clone(), kv.clone(), kv], 3, pts, ws).expect("volume")
-}
 
 /// `n` parameter points uniform in the unit cube (seeded).
 fn params(n: usize) -> Vec<[f64; 3]> {
@@ -39,7 +19,7 @@ fn params(n: usize) -> Vec<[f64; 3]> {
 }
 
 fn bench(c: &mut Criterion) {
-    let s = volume();
+    let s = rational_tricubic_8cubed().expect("volume");
     let e = VolumeEvaluator::new(&s);
     let ps = params(1 << 20);
     let mut vs = vec![0.0; ps.len() * 3];

@@ -23,6 +23,10 @@
 //! Output layout (both methods): `value[..dim]` is the point, `gradient[a·dim + c]` is
 //! `∂S_c/∂u_a` (axis-major, `a` = 0 for u). Neither method allocates per point.
 //! [`EvalMethod::default`] is the faster one on the benchmark `benches/evaluate.rs`.
+//!
+//! Batches ([`VolumeEvaluator::eval_batch`]) of tricubic volumes run the refinement method
+//! four parameter points per vector where the CPU has AVX2 (`lanes_x4`: spans and α rows one
+//! point per lane), with the per-point kernel's bits and errors.
 
 use multiversion::multiversion;
 use rayon::prelude::*;
@@ -30,6 +34,9 @@ use volmorph_spline::{MAX_DEGREE, TensorBSpline};
 
 use crate::TrivariateError;
 use crate::error::ctx;
+
+#[cfg(target_arch = "x86_64")]
+mod lanes_x4;
 
 /// Per-axis row buffer length.
 const ROW: usize = MAX_DEGREE + 1;
@@ -174,6 +181,18 @@ impl<'a> VolumeEvaluator<'a> {
         values: &mut [f64],
         gradients: &mut [f64],
     ) -> Result<(), TrivariateError> {
+        self.eval_batch_by(method, params, values, gradients, Path::Lanes)
+    }
+
+    /// [`VolumeEvaluator::eval_batch`] with refinement chunks through the loop `path`.
+    fn eval_batch_by(
+        &self,
+        method: EvalMethod,
+        params: &[[f64; 3]],
+        values: &mut [f64],
+        gradients: &mut [f64],
+        path: Path,
+    ) -> Result<(), TrivariateError> {
         let dim = self.spline.dim();
         if values.len() != params.len() * dim {
             return Err(TrivariateError::DataLength {
@@ -195,7 +214,7 @@ impl<'a> VolumeEvaluator<'a> {
             .zip(gradients.par_chunks_mut(BATCH * 3 * dim))
             .try_for_each(|((ps, vs), gs)| match method {
                 EvalMethod::Refinement if self.spline.homogeneous_dim() <= MAX_REFINEMENT_HDIM => {
-                    refinement_run(self.spline, ps, vs, gs)
+                    refinement_chunk(self.spline, ps, vs, gs, path)
                 }
                 _ => {
                     for ((u, v), g) in ps
@@ -225,6 +244,45 @@ fn refinement_point(
     gradient: &mut [f64],
 ) -> Result<(), TrivariateError> {
     refinement_dispatch(s, u, value, gradient)
+}
+
+/// Which loop a batch's refinement chunks run.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+enum Path {
+    /// Tricubic volumes four points per vector (`lanes_x4`) where the CPU has AVX2; other
+    /// volumes and CPUs as [`Path::PerPoint`].
+    Lanes,
+    /// One point at a time ([`refinement_run`]), the portable loop (chosen by the tests).
+    #[cfg_attr(not(test), allow(dead_code))]
+    PerPoint,
+}
+
+/// One chunk of a batch's refinement evaluation through the loop `path` (the homogeneous
+/// dimension is at most [`MAX_REFINEMENT_HDIM`]; `values`/`gradients` hold `dim` and
+/// `3·dim` numbers per point).
+fn refinement_chunk(
+    s: &TensorBSpline<3>,
+    params: &[[f64; 3]],
+    values: &mut [f64],
+    gradients: &mut [f64],
+    path: Path,
+) -> Result<(), TrivariateError> {
+    #[cfg(target_arch = "x86_64")]
+    if path == Path::Lanes && s.degrees() == [3; 3] && lanes_x4::available() {
+        return match s.homogeneous_dim() {
+            1 => lanes_x4::run::<1>(s, params, values, gradients),
+            2 => lanes_x4::run::<2>(s, params, values, gradients),
+            3 => lanes_x4::run::<3>(s, params, values, gradients),
+            4 => lanes_x4::run::<4>(s, params, values, gradients),
+            5 => lanes_x4::run::<5>(s, params, values, gradients),
+            6 => lanes_x4::run::<6>(s, params, values, gradients),
+            7 => lanes_x4::run::<7>(s, params, values, gradients),
+            _ => lanes_x4::run::<8>(s, params, values, gradients),
+        };
+    }
+    #[cfg(not(target_arch = "x86_64"))]
+    let _ = path;
+    refinement_run(s, params, values, gradients)
 }
 
 /// [`refinement_point`] over a run of points (`values`/`gradients` hold `dim` and `3·dim`
@@ -389,6 +447,20 @@ fn contract<const H: usize, const R: usize, const O: usize>(
             hw[x] += cd * sp[x];
         }
     }
+    project(s, &h, [&hu, &hv, &hw], value, gradient);
+}
+
+/// The point and gradient from the homogeneous sums of [`contract`] (`h` the point; `hu`,
+/// `hv`, `hw` its derivatives along u, v, w): for rational volumes the projection `h/w` and the quotient
+/// rule `(h_a − w_a·P)/w`, otherwise the sums themselves.
+#[inline(always)]
+fn project<const H: usize>(
+    s: &TensorBSpline<3>,
+    h: &[f64; H],
+    [hu, hv, hw]: [&[f64; H]; 3],
+    value: &mut [f64],
+    gradient: &mut [f64],
+) {
     let dim = s.dim();
     if s.is_rational() {
         let w = h[dim];
@@ -536,6 +608,151 @@ mod tests {
                     }
                 }
             }
+        }
+    }
+
+    /// A tricubic volume of `n` control points per axis and value dimension `dim`, rational
+    /// or not, with clamped random knots on `[0, 1]` or the unclamped integers `0 … n + 3`
+    /// (domain `[3, n]`).
+    fn tricubic(
+        seed: u64,
+        n: usize,
+        dim: usize,
+        rational: bool,
+        clamped: bool,
+    ) -> TensorBSpline<3> {
+        let s = random_volume(seed, [3; 3], [n; 3], dim);
+        let knots = if clamped {
+            s.knots().clone()
+        } else {
+            let kv = KnotVector::new(3, (0..=n + 3).map(|i| i as f64).collect()).unwrap();
+            [kv.clone(), kv.clone(), kv]
+        };
+        if rational {
+            let w = s.weights().unwrap();
+            TensorBSpline::new_rational(knots, dim, s.control_points(), w).unwrap()
+        } else {
+            TensorBSpline::new(knots, dim, s.control_points()).unwrap()
+        }
+    }
+
+    /// Parameters in the domain of `s`: random, on knot planes, on the domain's faces and
+    /// corners, `count` of them.
+    fn domain_params(s: &TensorBSpline<3>, seed: u64, count: usize) -> Vec<[f64; 3]> {
+        let mut rng = Rng::new(seed);
+        (0..count)
+            .map(|i| {
+                std::array::from_fn(|a| {
+                    let kv = &s.knots()[a];
+                    let [lo, hi] = kv.domain();
+                    match (i + a) % 5 {
+                        0 | 1 => lo + rng.unit() * (hi - lo),
+                        2 => kv.knots()[kv.degree() + rng.index(kv.num_basis() - kv.degree() + 1)],
+                        3 => [lo, hi][rng.index(2)],
+                        _ => lo + (hi - lo) * rng.index(4) as f64 / 3.0,
+                    }
+                })
+            })
+            .collect()
+    }
+
+    /// The batch through both loops against the per-point kernel, bit for bit.
+    fn check_lanes(s: &TensorBSpline<3>, params: &[[f64; 3]]) {
+        let dim = s.dim();
+        let e = VolumeEvaluator::new(s);
+        let mut want_v = vec![0.0; params.len() * dim];
+        let mut want_g = vec![0.0; params.len() * 3 * dim];
+        for ((u, v), g) in params
+            .iter()
+            .zip(want_v.chunks_exact_mut(dim))
+            .zip(want_g.chunks_exact_mut(3 * dim))
+        {
+            e.refinement_into(*u, v, g).unwrap();
+        }
+        for path in [Path::Lanes, Path::PerPoint] {
+            let mut vs = vec![f64::NAN; want_v.len()];
+            let mut gs = vec![f64::NAN; want_g.len()];
+            e.eval_batch_by(EvalMethod::Refinement, params, &mut vs, &mut gs, path)
+                .unwrap();
+            let bits = |x: &[f64]| x.iter().map(|v| v.to_bits()).collect::<Vec<_>>();
+            for (i, u) in params.iter().enumerate() {
+                let (v, g) = (i * dim..(i + 1) * dim, 3 * i * dim..3 * (i + 1) * dim);
+                assert_eq!(bits(&vs[v.clone()]), bits(&want_v[v]), "{path:?} at {u:?}");
+                assert_eq!(bits(&gs[g.clone()]), bits(&want_g[g]), "{path:?} at {u:?}");
+            }
+        }
+    }
+
+    #[test]
+    fn lanes_equal_per_point_bits_for_every_homogeneous_dimension() {
+        for (seed, dim, rational, clamped) in [
+            (1, 3, true, true),
+            (2, 3, false, true),
+            (3, 1, true, false),
+            (4, 7, true, true),
+            (5, 8, false, false),
+            (6, 2, false, true),
+            (7, 5, true, false),
+            (8, 4, false, true),
+        ] {
+            let s = tricubic(seed, 5 + seed as usize % 4, dim, rational, clamped);
+            // 1 001 points: groups of four and a tail of one.
+            check_lanes(&s, &domain_params(&s, seed, 1001));
+            check_lanes(&s, &domain_params(&s, seed, 3));
+        }
+    }
+
+    /// A batch with a point outside the domain, NaN or infinite reports the per-point
+    /// kernel's error for the first such point, through both loops; the points before it are
+    /// evaluated.
+    #[test]
+    fn lanes_report_the_first_point_outside_the_domain() {
+        let s = tricubic(9, 8, 3, true, true);
+        let e = VolumeEvaluator::new(&s);
+        let good = domain_params(&s, 9, 64);
+        for (n, bad) in [
+            (13, [0.5, 1.5, 0.5]),
+            (40, [0.5, 0.5, f64::NAN]),
+            (2, [f64::INFINITY, 0.5, 0.5]),
+            (63, [0.5, f64::NEG_INFINITY, 0.5]),
+            (21, [-1e-300, 0.5, 0.5]),
+        ] {
+            let mut params = good.clone();
+            params[n] = bad;
+            params[n + 1..]
+                .iter_mut()
+                .step_by(5)
+                .for_each(|u| u[1] = 2.0);
+            let (mut v1, mut g1) = (vec![0.0; 3], vec![0.0; 9]);
+            let want = e
+                .refinement_into(bad, &mut v1, &mut g1)
+                .unwrap_err()
+                .to_string();
+            for path in [Path::Lanes, Path::PerPoint] {
+                let mut vs = vec![0.0; params.len() * 3];
+                let mut gs = vec![0.0; params.len() * 9];
+                let got = e
+                    .eval_batch_by(EvalMethod::Refinement, &params, &mut vs, &mut gs, path)
+                    .unwrap_err();
+                assert_eq!(got.to_string(), want, "{path:?}");
+                for (i, u) in params[..n].iter().enumerate() {
+                    e.refinement_into(*u, &mut v1, &mut g1).unwrap();
+                    assert_eq!(&vs[3 * i..3 * i + 3], &v1, "{path:?} point {i}");
+                    assert_eq!(&gs[9 * i..9 * i + 9], &g1, "{path:?} point {i}");
+                }
+            }
+        }
+    }
+
+    proptest! {
+        #![proptest_config(ProptestConfig::with_cases(32))]
+        #[test]
+        fn lanes_equal_per_point(
+            seed in any::<u64>(), n in 4usize..10, dim in 1usize..8,
+            rational in any::<bool>(), clamped in any::<bool>(), count in 0usize..300,
+        ) {
+            let s = tricubic(seed, n, dim, rational, clamped);
+            check_lanes(&s, &domain_params(&s, seed ^ 7, count));
         }
     }
 

@@ -326,6 +326,34 @@ pub fn twisted_box(n: usize) -> Result<AggregateVolume, TrivariateError> {
     Aggregate::new(geo)?.with_attribute("f", attr)
 }
 
+/// The rational tricubic volume of issue 22's point-and-gradient target (the criterion bench
+/// `evaluate` and the `volmorph bench ffd` row): 8³ control points on clamped uniform knots
+/// over [0, 1]³, the integer grid gently bent (`x + 0.1·sin(yz)`, `y + 0.1·cos(x + z)`,
+/// `z + 0.05·x`) with weights `1 + 0.25·|sin(0.7·(x + 2y + 3z))|` in `[1, 1.25]`.
+///
+/// # Errors
+/// None in practice (the knots and net are valid); [`TrivariateError::Spline`] otherwise.
+pub fn rational_tricubic_8cubed() -> Result<TensorBSpline<3>, TrivariateError> {
+    let kv = KnotVector::clamped_uniform(3, 8, [0.0, 1.0]).map_err(ctx("8³ volume knots"))?;
+    let mut pts = Vec::with_capacity(512 * 3);
+    let mut ws = Vec::with_capacity(512);
+    for k in 0..8 {
+        for j in 0..8 {
+            for i in 0..8 {
+                let (x, y, z) = (f64::from(i), f64::from(j), f64::from(k));
+                pts.extend([
+                    x + 0.1 * (y * z).sin(),
+                    y + 0.1 * (x + z).cos(),
+                    z + 0.05 * x,
+                ]);
+                ws.push(1.0 + 0.25 * ((x + 2.0 * y + 3.0 * z) * 0.7).sin().abs());
+            }
+        }
+    }
+    TensorBSpline::new_rational([kv.clone(), kv.clone(), kv], 3, pts, ws)
+        .map_err(ctx("8³ rational volume"))
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;

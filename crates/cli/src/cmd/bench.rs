@@ -23,8 +23,9 @@ pub enum Command {
     #[command(after_help = "Example:\n  volmorph bench isosurface --size 256 --repeat 5 --json")]
     Isosurface(IsosurfaceArgs),
     /// Time the accurate FFD of a 70k-triangle sphere through a moved 6×8×6 degree-2 lattice
-    /// (target 2 s), vertex FFD of a 1M-vertex sphere (target 25 ms) and the STEP text of the
-    /// accurate FFD's result.
+    /// (target 2 s), vertex FFD of a 1M-vertex sphere (target 25 ms), the STEP text of the
+    /// accurate FFD's result, and point + gradient of a rational tricubic 8³ volume at 2²⁰
+    /// points (target 20 M points/s).
     #[command(after_help = "Example:\n  volmorph bench ffd --repeat 3")]
     Ffd(FfdArgs),
     /// Time grid evaluation of F-rep models (HyperFun files, or the seven built-in scenes
@@ -98,6 +99,9 @@ pub struct FfdArgs {
     /// Latitude rings of the sphere for vertex FFD (2·r·(r−1)+2 vertices).
     #[arg(long, default_value_t = ffd::TARGET_VERTEX_RINGS)]
     pub vertex_rings: u32,
+    /// Parameter triples of the trivariate point-and-gradient batch.
+    #[arg(long, default_value_t = ffd::TRIVARIATE_POINTS)]
+    pub points: usize,
     /// Timed runs per item.
     #[arg(long, default_value_t = 3)]
     pub repeat: usize,
@@ -216,6 +220,7 @@ pub fn run(cmd: &Command) -> anyhow::Result<()> {
                 &ffd::FfdConfig {
                     rings: a.rings,
                     vertex_rings: a.vertex_rings,
+                    points: a.points,
                     repeat: a.repeat,
                 },
                 &mut progress,

@@ -1148,6 +1148,8 @@ fn bench_ffd_runs_small() {
         &"8",
         &"--vertex-rings",
         &"10",
+        &"--points",
+        &"999",
         &"--repeat",
         &"1",
         &"--json",
@@ -1163,7 +1165,9 @@ fn bench_ffd_runs_small() {
         [
             "accurate FFD (plan + surfaces)",
             "vertex FFD",
-            "STEP text of the accurate FFD"
+            "vertex FFD, positions only",
+            "STEP text of the accurate FFD",
+            "trivariate point + gradient"
         ]
     );
     for it in items {
@@ -1171,6 +1175,9 @@ fn bench_ffd_runs_small() {
         assert!(it["target_s"].is_null(), "{it}");
     }
     assert!(items[0]["triangles"].as_u64().unwrap() >= 4 * 8 * 7);
+    assert_eq!(j["points"], 999);
+    assert_eq!(items[4]["rate_unit"], "Mpts/s");
+    assert!(items[4]["median_rate"].as_f64().unwrap() > 0.0);
 }
 
 // ---------------------------------------------------------------------------------------
