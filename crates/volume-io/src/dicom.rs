@@ -427,37 +427,44 @@ fn check_declared_lengths(
         if until_pixel_data && (group, elem) == (0x7FE0, 0x0010) {
             return Ok(());
         }
-        let (len, value_at, is_sq) = if group == 0xFFFE {
+        let (len, value_at, is_sq, vr) = if group == 0xFFFE {
             // Item, item delimiter, sequence delimiter: a 4-byte length, no VR.
             let Some(len) = u32_at(pos + 4, be) else {
                 return Ok(());
             };
             // An item's content is walked like a data set.
-            (len, pos + 8, true)
+            (len, pos + 8, true, VR::UN)
         } else if explicit {
             let Some(vr) = bytes.get(pos + 4..pos + 6) else {
                 return Ok(());
             };
+            let parsed = VR::from_binary([vr[0], vr[1]]).unwrap_or(VR::UN);
             if long_vr(vr) {
                 let Some(len) = u32_at(pos + 8, be) else {
                     return Ok(());
                 };
-                (len, pos + 12, vr == b"SQ")
+                (len, pos + 12, vr == b"SQ", parsed)
             } else {
                 let Some(len) = u16_at(pos + 6, be) else {
                     return Ok(());
                 };
-                (u32::from(len), pos + 8, false)
+                (u32::from(len), pos + 8, false, parsed)
             }
         } else {
             let Some(len) = u32_at(pos + 4, be) else {
                 return Ok(());
             };
+            // The parser's VR: OW for pixel and overlay data, else the dictionary's, else UN.
             let tag = dicom_object::Tag(group, elem);
-            let sq = StandardDataDictionary
-                .by_tag(tag)
-                .is_some_and(|e| e.vr().relaxed() == VR::SQ);
-            (len, pos + 8, sq)
+            let vr = if (group, elem) == (0x7FE0, 0x0010) || (group >> 8 == 0x60 && elem == 0x3000)
+            {
+                VR::OW
+            } else {
+                StandardDataDictionary
+                    .by_tag(tag)
+                    .map_or(VR::UN, |e| e.vr().relaxed())
+            };
+            (len, pos + 8, vr == VR::SQ, vr)
         };
         if len == u32::MAX || is_sq {
             // Undefined length (sequences, encapsulated pixel data) or a sequence or item of
@@ -483,7 +490,21 @@ fn check_declared_lengths(
             let v = bytes.get(value_at..value_at + len as usize).unwrap_or(&[]);
             syntax = String::from_utf8_lossy(v).into_owned();
         }
-        pos = value_at + len as usize;
+        // The parser reads a binary numeric value as whole numbers only (`len / size` of
+        // them), so a length that is not a multiple of the size leaves the rest of the
+        // value to be read as the next element's header; walk as it does.
+        pos = value_at + (len - len % value_unit(vr)) as usize;
+    }
+}
+
+/// Bytes per number of a binary numeric VR (1 for text and byte VRs), as the parser reads
+/// values: it decodes `len / size` numbers and leaves a remainder unread.
+fn value_unit(vr: VR) -> u32 {
+    match vr {
+        VR::SS | VR::US | VR::OW => 2,
+        VR::AT | VR::FL | VR::OF | VR::SL | VR::UL | VR::OL => 4,
+        VR::FD | VR::OD | VR::SV | VR::UV | VR::OV => 8,
+        _ => 1,
     }
 }
 
@@ -1373,6 +1394,26 @@ mod tests {
         // The true count still reads.
         let (v, _) = read_bytes(&with_frame_count("pydicom_rtdose.dcm", "3")).unwrap();
         assert_eq!(v.geometry().dims[2], 3);
+    }
+
+    /// Fuzz `dicom` (an 811 MB allocation found under `ulimit -v`, RSS creeping past
+    /// libFuzzer's 2 GB limit in CI): a 638-byte implicit-VR file whose group length
+    /// (3000,0000), a UL, declares 14 bytes. The parser reads three numbers (12 bytes) and
+    /// takes the last two bytes as the start of the next header, which then declared
+    /// 811 335 711 bytes; the length walk had skipped all 14 and never saw that header.
+    /// The walk now consumes a numeric value as the parser does.
+    #[test]
+    fn misaligned_numeric_length_is_refused_before_allocating() {
+        let path = Path::new(env!("CARGO_MANIFEST_DIR"))
+            .join("tests/corpus/peers/misaligned_numeric_length.dcm");
+        let bytes = std::fs::read(&path).unwrap();
+        let e = read_bytes(&bytes).unwrap_err().to_string();
+        assert!(e.contains("declares 811335711 bytes"), "{e}");
+        assert!(check_declared_lengths_of_file(&path, false).is_err());
+        assert_eq!(value_unit(VR::UL), 4);
+        assert_eq!(value_unit(VR::OW), 2);
+        assert_eq!(value_unit(VR::FD), 8);
+        assert_eq!(value_unit(VR::DS), 1);
     }
 
     /// Fuzz `dicom` (oom-afd1d846…): an element with the unrecognised VR `\0\0` declared a
