@@ -353,7 +353,10 @@ fn check_declared_lengths(
     until_pixel_data: bool,
     what: &str,
 ) -> Result<(), VolumeError> {
-    let mut pos: usize = if bytes.len() >= 132 && &bytes[128..132] == b"DICM" {
+    // Where the meta group starts: after `DICM`, at 0 (no preamble) or at 128.
+    let mut pos: usize = if bytes.starts_with(b"DICM") {
+        4
+    } else if bytes.len() >= 132 && &bytes[128..132] == b"DICM" {
         132
     } else {
         0
@@ -405,6 +408,8 @@ fn check_declared_lengths(
     };
     let mut syntax = String::new();
     let mut in_meta = true;
+    // Bytes of the meta group still to read, once its group length is known.
+    let mut meta_left: Option<u64> = None;
     loop {
         // The meta group is explicit VR little endian; the data set follows its syntax.
         let (explicit, be) = if in_meta {
@@ -420,8 +425,56 @@ fn check_declared_lengths(
         let (Some(group), Some(elem)) = (u16_at(pos, be), u16_at(pos + 2, be)) else {
             return Ok(());
         };
-        if in_meta && group != 0x0002 {
-            in_meta = false;
+        if in_meta {
+            // The parser's meta reader: (0002,0000), a UL of 4 bytes holding the group
+            // length, then explicit-VR little-endian elements of any group, each skipped or
+            // read whole, until that many bytes are consumed; the data set starts there.
+            let Some(vr) = bytes.get(pos + 4..pos + 6) else {
+                return Ok(());
+            };
+            let (len, value_at) = if long_vr(vr) {
+                let Some(len) = u32_at(pos + 8, false) else {
+                    return Ok(());
+                };
+                (len, pos + 12)
+            } else {
+                let Some(len) = u16_at(pos + 6, false) else {
+                    return Ok(());
+                };
+                (u32::from(len), pos + 8)
+            };
+            let Some(left) = meta_left else {
+                // The parser refuses a stream that does not start with the group length.
+                if (group, elem) != (0x0002, 0x0000) || len != 4 {
+                    return Ok(());
+                }
+                let Some(group_length) = u32_at(value_at, false) else {
+                    return Ok(());
+                };
+                meta_left = Some(u64::from(group_length));
+                pos = value_at + 4;
+                continue;
+            };
+            if left == 0 {
+                in_meta = false;
+                continue;
+            }
+            if len == u32::MAX {
+                return Ok(()); // undefined length in the meta group: the parser refuses it
+            }
+            let remain = total.saturating_sub(value_at as u64);
+            if u64::from(len) > remain {
+                return Err(err(format!(
+                    "{what}: element ({group:04X},{elem:04X}) declares {len} bytes, but only {remain} remain"
+                )));
+            }
+            if (group, elem) == (0x0002, 0x0010) {
+                let v = bytes.get(value_at..value_at + len as usize).unwrap_or(&[]);
+                syntax = String::from_utf8_lossy(v).into_owned();
+            }
+            let consumed = (value_at - pos) as u64 + u64::from(len);
+            meta_left = Some(left.saturating_sub(consumed));
+            pos = value_at + len as usize;
             continue;
         }
         if until_pixel_data && (group, elem) == (0x7FE0, 0x0010) {
@@ -485,10 +538,6 @@ fn check_declared_lengths(
             return Err(err(format!(
                 "{what}: element ({group:04X},{elem:04X}) declares {len} bytes, but only {remain} remain"
             )));
-        }
-        if in_meta && (group, elem) == (0x0002, 0x0010) {
-            let v = bytes.get(value_at..value_at + len as usize).unwrap_or(&[]);
-            syntax = String::from_utf8_lossy(v).into_owned();
         }
         // The parser reads a binary numeric value as whole numbers only (`len / size` of
         // them), so a length that is not a multiple of the size leaves the rest of the
@@ -1396,6 +1445,24 @@ mod tests {
         assert_eq!(v.geometry().dims[2], 3);
     }
 
+    /// Fuzz `dicom` (oom-a92a376a…, a 2 GiB allocation from a 411-byte file): the meta
+    /// group ended, for the length walk, at the first element of another group, but the
+    /// parser reads meta elements of any group until the (0002,0000) group length is used
+    /// up. The walk started the data set 12 bytes early and missed the group length
+    /// (0000,0000) of 2³¹ bytes the parser then read. The walk now ends the meta group as
+    /// the parser does.
+    #[test]
+    fn meta_group_ends_where_its_group_length_says() {
+        let path = Path::new(env!("CARGO_MANIFEST_DIR"))
+            .join("tests/corpus/peers/meta_group_length_overrun.dcm");
+        let bytes = std::fs::read(&path).unwrap();
+        let e = read_bytes(&bytes).unwrap_err().to_string();
+        assert!(e.contains("declares 2147483648 bytes"), "{e}");
+        // Without the preamble (`DICM` at 0) the walk runs too.
+        let e = check_declared_lengths(&bytes[128..], 283, false, "x").unwrap_err();
+        assert!(e.to_string().contains("declares 2147483648 bytes"), "{e}");
+    }
+
     /// Fuzz `dicom` (an 811 MB allocation found under `ulimit -v`, RSS creeping past
     /// libFuzzer's 2 GB limit in CI): a 638-byte implicit-VR file whose group length
     /// (3000,0000), a UL, declares 14 bytes. The parser reads three numbers (12 bytes) and
@@ -1432,6 +1499,7 @@ mod tests {
             b.extend_from_slice(&(value.len() as u16).to_le_bytes());
             b.extend_from_slice(value);
         };
+        meta_element(&mut b, 0x0000, b"UL", &28u32.to_le_bytes());
         meta_element(&mut b, 0x0010, b"UI", b"1.2.840.10008.1.2.1\0");
         // (0010,574F), VR "\0\0", reserved 0x001E, length 0xFFEC_0000, then a few bytes.
         b.extend_from_slice(&[0x10, 0x00, 0x4F, 0x57, 0, 0, 30, 0, 0, 0, 0xEC, 0xFF]);
