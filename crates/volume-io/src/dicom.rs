@@ -65,6 +65,8 @@ use glam::{DMat3, DVec3};
 use crate::Header;
 use volmorph_volume::{AnyVolume, Geometry, Volume, VolumeError, Voxel, VoxelType};
 
+mod lengths;
+
 const FMT: &str = "DICOM";
 
 /// Largest difference between the orientation vectors of two slices of one series (they are
@@ -333,244 +335,32 @@ struct Scanned {
     frames: u32,
 }
 
-/// How much of a file [`check_declared_lengths_of_file`] reads: the elements before the
-/// pixel data of any real image fit well inside it.
-const LENGTH_SCAN_PREFIX: u64 = 64 << 20;
-
-/// Refuse a DICOM stream in which an element declares a defined value length longer than the
-/// bytes that remain (`total` is the whole stream's length; `bytes` may be a prefix of it).
-/// dicom-rs sizes a value's buffer from the declared length before reading it, so a forged
-/// length of a few GiB in a 1 KB file would be allocated and zeroed: this walk runs first.
-///
-/// It reads the preamble (when `DICM` is at 128), the explicit little-endian meta group, and
-/// the data set in the transfer syntax the meta group names (implicit or explicit VR, little
-/// or big endian), descending into sequences and items; deflated data sets are not walked
-/// (their lengths refer to the inflated stream). A stream that ends early simply ends the
-/// walk: the parser reports it. With `until_pixel_data`, the walk stops at (7FE0,0010).
+/// [`lengths::check`] on the bytes of a DICOM stream held in memory.
 fn check_declared_lengths(
     bytes: &[u8],
-    total: u64,
     until_pixel_data: bool,
     what: &str,
 ) -> Result<(), VolumeError> {
-    // Where the meta group starts: after `DICM`, at 0 (no preamble) or at 128.
-    let mut pos: usize = if bytes.starts_with(b"DICM") {
-        4
-    } else if bytes.len() >= 132 && &bytes[128..132] == b"DICM" {
-        132
-    } else {
-        0
-    };
-    let u16_at = |p: usize, be: bool| -> Option<u16> {
-        let b: [u8; 2] = bytes.get(p..p + 2)?.try_into().ok()?;
-        Some(if be {
-            u16::from_be_bytes(b)
-        } else {
-            u16::from_le_bytes(b)
-        })
-    };
-    let u32_at = |p: usize, be: bool| -> Option<u32> {
-        let b: [u8; 4] = bytes.get(p..p + 4)?.try_into().ok()?;
-        Some(if be {
-            u32::from_be_bytes(b)
-        } else {
-            u32::from_le_bytes(b)
-        })
-    };
-    // PS3.5 7.1.2: these VRs carry a 2-byte length; every other VR, and (as the parser
-    // reads it) an unrecognised VR, which it takes for UN, carries 2 reserved bytes and a
-    // 4-byte length.
-    let long_vr = |vr: &[u8]| {
-        !matches!(
-            vr,
-            b"AE"
-                | b"AS"
-                | b"AT"
-                | b"CS"
-                | b"DA"
-                | b"DS"
-                | b"DT"
-                | b"FL"
-                | b"FD"
-                | b"IS"
-                | b"LO"
-                | b"LT"
-                | b"PN"
-                | b"SH"
-                | b"SL"
-                | b"SS"
-                | b"ST"
-                | b"TM"
-                | b"UI"
-                | b"UL"
-                | b"US"
-        )
-    };
-    let mut syntax = String::new();
-    let mut in_meta = true;
-    // Bytes of the meta group still to read, once its group length is known.
-    let mut meta_left: Option<u64> = None;
-    loop {
-        // The meta group is explicit VR little endian; the data set follows its syntax.
-        let (explicit, be) = if in_meta {
-            (true, false)
-        } else {
-            match syntax.trim_end_matches(['\0', ' ']) {
-                "1.2.840.10008.1.2" => (false, false),
-                "1.2.840.10008.1.2.2" => (true, true),
-                "1.2.840.10008.1.2.1.99" => return Ok(()),
-                _ => (true, false),
-            }
-        };
-        let (Some(group), Some(elem)) = (u16_at(pos, be), u16_at(pos + 2, be)) else {
-            return Ok(());
-        };
-        if in_meta {
-            // The parser's meta reader: (0002,0000), a UL of 4 bytes holding the group
-            // length, then explicit-VR little-endian elements of any group, each skipped or
-            // read whole, until that many bytes are consumed; the data set starts there.
-            let Some(vr) = bytes.get(pos + 4..pos + 6) else {
-                return Ok(());
-            };
-            let (len, value_at) = if long_vr(vr) {
-                let Some(len) = u32_at(pos + 8, false) else {
-                    return Ok(());
-                };
-                (len, pos + 12)
-            } else {
-                let Some(len) = u16_at(pos + 6, false) else {
-                    return Ok(());
-                };
-                (u32::from(len), pos + 8)
-            };
-            let Some(left) = meta_left else {
-                // The parser refuses a stream that does not start with the group length.
-                if (group, elem) != (0x0002, 0x0000) || len != 4 {
-                    return Ok(());
-                }
-                let Some(group_length) = u32_at(value_at, false) else {
-                    return Ok(());
-                };
-                meta_left = Some(u64::from(group_length));
-                pos = value_at + 4;
-                continue;
-            };
-            if left == 0 {
-                in_meta = false;
-                continue;
-            }
-            if len == u32::MAX {
-                return Ok(()); // undefined length in the meta group: the parser refuses it
-            }
-            let remain = total.saturating_sub(value_at as u64);
-            if u64::from(len) > remain {
-                return Err(err(format!(
-                    "{what}: element ({group:04X},{elem:04X}) declares {len} bytes, but only {remain} remain"
-                )));
-            }
-            if (group, elem) == (0x0002, 0x0010) {
-                let v = bytes.get(value_at..value_at + len as usize).unwrap_or(&[]);
-                syntax = String::from_utf8_lossy(v).into_owned();
-            }
-            let consumed = (value_at - pos) as u64 + u64::from(len);
-            meta_left = Some(left.saturating_sub(consumed));
-            pos = value_at + len as usize;
-            continue;
-        }
-        if until_pixel_data && (group, elem) == (0x7FE0, 0x0010) {
-            return Ok(());
-        }
-        let (len, value_at, is_sq, vr) = if group == 0xFFFE {
-            // Item, item delimiter, sequence delimiter: a 4-byte length, no VR.
-            let Some(len) = u32_at(pos + 4, be) else {
-                return Ok(());
-            };
-            // An item's content is walked like a data set.
-            (len, pos + 8, true, VR::UN)
-        } else if explicit {
-            let Some(vr) = bytes.get(pos + 4..pos + 6) else {
-                return Ok(());
-            };
-            let parsed = VR::from_binary([vr[0], vr[1]]).unwrap_or(VR::UN);
-            if long_vr(vr) {
-                let Some(len) = u32_at(pos + 8, be) else {
-                    return Ok(());
-                };
-                (len, pos + 12, vr == b"SQ", parsed)
-            } else {
-                let Some(len) = u16_at(pos + 6, be) else {
-                    return Ok(());
-                };
-                (u32::from(len), pos + 8, false, parsed)
-            }
-        } else {
-            let Some(len) = u32_at(pos + 4, be) else {
-                return Ok(());
-            };
-            // The parser's VR: OW for pixel and overlay data, else the dictionary's, else UN.
-            let tag = dicom_object::Tag(group, elem);
-            let vr = if (group, elem) == (0x7FE0, 0x0010) || (group >> 8 == 0x60 && elem == 0x3000)
-            {
-                VR::OW
-            } else {
-                StandardDataDictionary
-                    .by_tag(tag)
-                    .map_or(VR::UN, |e| e.vr().relaxed())
-            };
-            (len, pos + 8, vr == VR::SQ, vr)
-        };
-        if len == u32::MAX || is_sq {
-            // Undefined length (sequences, encapsulated pixel data) or a sequence or item of
-            // defined length: walk into it.
-            if len != u32::MAX {
-                let remain = total.saturating_sub(value_at as u64);
-                if u64::from(len) > remain {
-                    return Err(err(format!(
-                        "{what}: element ({group:04X},{elem:04X}) declares {len} bytes, but only {remain} remain"
-                    )));
-                }
-            }
-            pos = value_at;
-            continue;
-        }
-        let remain = total.saturating_sub(value_at as u64);
-        if u64::from(len) > remain {
-            return Err(err(format!(
-                "{what}: element ({group:04X},{elem:04X}) declares {len} bytes, but only {remain} remain"
-            )));
-        }
-        // The parser reads a binary numeric value as whole numbers only (`len / size` of
-        // them), so a length that is not a multiple of the size leaves the rest of the
-        // value to be read as the next element's header; walk as it does.
-        pos = value_at + (len - len % value_unit(vr)) as usize;
-    }
+    lengths::check(
+        std::io::Cursor::new(bytes),
+        bytes.len() as u64,
+        until_pixel_data,
+        what,
+    )
 }
 
-/// Bytes per number of a binary numeric VR (1 for text and byte VRs), as the parser reads
-/// values: it decodes `len / size` numbers and leaves a remainder unread.
-fn value_unit(vr: VR) -> u32 {
-    match vr {
-        VR::SS | VR::US | VR::OW => 2,
-        VR::AT | VR::FL | VR::OF | VR::SL | VR::UL | VR::OL => 4,
-        VR::FD | VR::OD | VR::SV | VR::UV | VR::OV => 8,
-        _ => 1,
-    }
-}
-
-/// [`check_declared_lengths`] on the first [`LENGTH_SCAN_PREFIX`] bytes of a file.
+/// [`lengths::check`] on a DICOM file.
 fn check_declared_lengths_of_file(path: &Path, until_pixel_data: bool) -> Result<(), VolumeError> {
-    use std::io::Read as _;
     let what = path.display().to_string();
-    let file = std::fs::File::open(path).map_err(|e| err(format!("{what}: {e}")))?;
-    let total = file
-        .metadata()
-        .map_err(|e| err(format!("{what}: {e}")))?
-        .len();
-    let mut prefix = Vec::new();
-    file.take(LENGTH_SCAN_PREFIX)
-        .read_to_end(&mut prefix)
-        .map_err(|e| err(format!("{what}: {e}")))?;
-    check_declared_lengths(&prefix, total, until_pixel_data, &what)
+    let os = |error| {
+        VolumeError::Io(volmorph_io::IoError::Os {
+            path: what.clone(),
+            error,
+        })
+    };
+    let file = std::fs::File::open(path).map_err(os)?;
+    let total = file.metadata().map_err(os)?.len();
+    lengths::check(file, total, until_pixel_data, &what)
 }
 
 fn open_header(path: &Path) -> Option<DefaultDicomObject> {
@@ -788,7 +578,7 @@ fn read_multiframe(path: &Path) -> Result<(AnyVolume, Header), VolumeError> {
 /// [`VolumeError::Io`] when the pixel matrix exceeds the memory budget.
 pub fn read_bytes(bytes: &[u8]) -> Result<(AnyVolume, Header), VolumeError> {
     let what = "DICOM data";
-    check_declared_lengths(bytes, bytes.len() as u64, false, what)?;
+    check_declared_lengths(bytes, false, what)?;
     let open = || {
         OpenFileOptions::new()
             .read_preamble(dicom_object::file::ReadPreamble::Auto)
@@ -1459,7 +1249,7 @@ mod tests {
         let e = read_bytes(&bytes).unwrap_err().to_string();
         assert!(e.contains("declares 2147483648 bytes"), "{e}");
         // Without the preamble (`DICM` at 0) the walk runs too.
-        let e = check_declared_lengths(&bytes[128..], 283, false, "x").unwrap_err();
+        let e = check_declared_lengths(&bytes[128..], false, "x").unwrap_err();
         assert!(e.to_string().contains("declares 2147483648 bytes"), "{e}");
     }
 
@@ -1477,10 +1267,6 @@ mod tests {
         let e = read_bytes(&bytes).unwrap_err().to_string();
         assert!(e.contains("declares 811335711 bytes"), "{e}");
         assert!(check_declared_lengths_of_file(&path, false).is_err());
-        assert_eq!(value_unit(VR::UL), 4);
-        assert_eq!(value_unit(VR::OW), 2);
-        assert_eq!(value_unit(VR::FD), 8);
-        assert_eq!(value_unit(VR::DS), 1);
     }
 
     /// Fuzz `dicom` (oom-afd1d846…): an element with the unrecognised VR `\0\0` declared a
@@ -1510,7 +1296,105 @@ mod tests {
         let mut ok = b[..b.len() - 36].to_vec();
         ok.extend_from_slice(&[0x28, 0x00, 0x10, 0x00, b'U', b'S', 2, 0, 4, 0]);
         ok.extend_from_slice(&[0x09, 0x00, 0x10, 0x00, b'O', b'B', 0, 0, 2, 0, 0, 0, 7, 7]);
-        check_declared_lengths(&ok, ok.len() as u64, false, "ok").unwrap();
+        check_declared_lengths(&ok, false, "ok").unwrap();
+    }
+
+    /// Fuzz `dicom` (a 503 MB allocation from an 806-byte file, found under `ulimit -v`): the
+    /// hand-written length walk, a mirror of the parser's reading, diverged from it a fourth
+    /// time and let a string value's forged length through to `read_value_strs`. The data set
+    /// is now walked by the parser's own token reader, so the check sees the headers the
+    /// parser sees.
+    #[test]
+    fn string_length_the_mirror_missed_is_refused_before_allocating() {
+        let path = Path::new(env!("CARGO_MANIFEST_DIR"))
+            .join("tests/corpus/peers/misread_string_length.dcm");
+        let bytes = std::fs::read(&path).unwrap();
+        let e = read_bytes(&bytes).unwrap_err().to_string();
+        assert!(
+            e.contains("(0020,000D) declares 503329024 bytes, but only 378 remain"),
+            "{e}"
+        );
+        assert!(check_declared_lengths_of_file(&path, false).is_err());
+    }
+
+    /// A stream: preamble, meta group (explicit VR little endian unless `syntax` says
+    /// otherwise), then `data_set` as given.
+    fn stream(syntax: &str, data_set: &[u8]) -> Vec<u8> {
+        let mut b = vec![0u8; 128];
+        b.extend_from_slice(b"DICM");
+        let mut uid = syntax.as_bytes().to_vec();
+        if uid.len() % 2 == 1 {
+            uid.push(0);
+        }
+        b.extend_from_slice(&[2, 0, 0, 0, b'U', b'L', 4, 0]);
+        b.extend_from_slice(&(8 + uid.len() as u32).to_le_bytes());
+        b.extend_from_slice(&[2, 0, 0x10, 0, b'U', b'I']);
+        b.extend_from_slice(&(uid.len() as u16).to_le_bytes());
+        b.extend_from_slice(&uid);
+        b.extend_from_slice(data_set);
+        b
+    }
+
+    /// The check skips native pixel data without reading it and resumes after its value: an
+    /// element there with a forged length is still refused, and a well-formed one passes.
+    #[test]
+    fn elements_after_native_pixel_data_are_checked() {
+        let mut ds = vec![
+            0xE0, 0x7F, 0x10, 0x00, b'O', b'W', 0, 0, 4, 0, 0, 0, 1, 2, 3, 4,
+        ];
+        let good = [0xFC, 0xFF, 0xFC, 0xFF, b'O', b'B', 0, 0, 2, 0, 0, 0, 0, 0];
+        let forged = [
+            0xFC, 0xFF, 0xFC, 0xFF, b'O', b'B', 0, 0, 0, 0, 0xFF, 0x7F, 0, 0,
+        ];
+        let mut ok = ds.clone();
+        ok.extend_from_slice(&good);
+        check_declared_lengths(&stream("1.2.840.10008.1.2.1", &ok), false, "ok").unwrap();
+        ds.extend_from_slice(&forged);
+        let bytes = stream("1.2.840.10008.1.2.1", &ds);
+        let e = check_declared_lengths(&bytes, false, "x")
+            .unwrap_err()
+            .to_string();
+        assert!(
+            e.contains("(FFFC,FFFC) declares 2147418112 bytes, but only 2 remain"),
+            "{e}"
+        );
+        // A header-only read stops at the pixel data and never reaches it.
+        check_declared_lengths(&bytes, true, "x").unwrap();
+        // The same through a file.
+        let dir = tempfile::tempdir().unwrap();
+        let path = dir.path().join("after_pixels.dcm");
+        std::fs::write(&path, &bytes).unwrap();
+        assert!(check_declared_lengths_of_file(&path, false).is_err());
+        check_declared_lengths_of_file(&path, true).unwrap();
+    }
+
+    /// A deflated data set is walked inflated: a forged length in it is checked against the
+    /// inflated bytes, not the compressed ones.
+    #[test]
+    fn deflated_data_set_is_checked_inflated() {
+        use std::io::Write as _;
+        let deflate = |raw: &[u8]| {
+            let mut z = flate2::write::DeflateEncoder::new(Vec::new(), flate2::Compression::best());
+            z.write_all(raw).unwrap();
+            z.finish().unwrap()
+        };
+        // (0010,0010) PN, 4 bytes; then (0009,1010) OB declaring 1000 bytes where 8 follow.
+        let mut raw = vec![0x10, 0, 0x10, 0, b'P', b'N', 4, 0, b'A', b'^', b'B', b' '];
+        raw.extend_from_slice(&[0x09, 0, 0x10, 0x10, b'O', b'B', 0, 0, 0xE8, 0x03, 0, 0]);
+        raw.extend_from_slice(&[0u8; 1000]);
+        let deflated = "1.2.840.10008.1.2.1.99";
+        // Whole: 1000 bytes follow when inflated, though far fewer compressed.
+        let whole = stream(deflated, &deflate(&raw));
+        assert!(whole.len() < 400, "{}", whole.len());
+        check_declared_lengths(&whole, false, "whole").unwrap();
+        raw.truncate(raw.len() - 992);
+        let e = check_declared_lengths(&stream(deflated, &deflate(&raw)), false, "x")
+            .unwrap_err()
+            .to_string();
+        assert!(
+            e.contains("(0009,1010) declares 1000 bytes, but only 8 remain"),
+            "{e}"
+        );
     }
 
     /// Fuzz `dicom` (oom-cc4cec7e…): a 998-byte file whose ImagePositionPatient declares a
@@ -1535,7 +1419,7 @@ mod tests {
             let b = std::fs::read(&p).unwrap();
             // Cut into the pixel data: the declared length no longer fits.
             let cut = &b[..b.len() - 10];
-            let e = check_declared_lengths(cut, cut.len() as u64, false, name).unwrap_err();
+            let e = check_declared_lengths(cut, false, name).unwrap_err();
             assert!(e.to_string().contains("(7FE0,0010)"), "{name}: {e}");
         }
     }
