@@ -590,6 +590,9 @@ pub fn read_bytes(bytes: &[u8]) -> Result<(AnyVolume, Header), VolumeError> {
     if int(&obj, tags::NUMBER_OF_FRAMES).unwrap_or(1) > 1 {
         return read_multiframe_object(&obj, what);
     }
+    // The pixel data is in memory already: refuse one too short for its frame before the
+    // volume is allocated (Rows and Columns alone could ask for the whole memory budget).
+    check_frames_present(&obj, &PixelFormat::of(&obj, what)?, 1, what)?;
     let names = [what.to_owned()];
     read_slices(&names, |_| Ok(&obj), |_| Ok(&obj))
 }
@@ -1317,6 +1320,70 @@ mod tests {
         assert!(check_declared_lengths_of_file(&path, false).is_err());
     }
 
+    /// Fuzz `dicom` (4.2 GB resident from a 444-byte file): the check first skipped native
+    /// pixel data by its declared length, 30 bytes of OV. The parser reads an OV value as
+    /// whole 8-byte numbers, 24 bytes, and reads the next header 6 bytes earlier, where it
+    /// declared 4.28 GB. The check now reads every value as the parser does.
+    #[test]
+    fn misaligned_pixel_data_length_is_refused_before_allocating() {
+        let path = Path::new(env!("CARGO_MANIFEST_DIR"))
+            .join("tests/corpus/peers/misaligned_pixel_data_length.dcm");
+        let bytes = std::fs::read(&path).unwrap();
+        let e = read_bytes(&bytes).unwrap_err().to_string();
+        assert!(
+            e.contains("(1300,1600) declares 4278201856 bytes, but only 14 remain"),
+            "{e}"
+        );
+        assert!(check_declared_lengths_of_file(&path, false).is_err());
+    }
+
+    /// Fuzz `dicom` (an 870 MB resident set replaying the corpus): the meta group's length
+    /// element (0002,0000) had a VR other than `UL`. dicom-object's meta reader checks only
+    /// its tag and its length of 4, but the check took such a stream for one the reader
+    /// refuses and let the reader run, which allocated a forged UID length. The check now
+    /// accepts any VR there, as the reader does.
+    #[test]
+    fn meta_group_length_of_any_vr_is_walked() {
+        let path = Path::new(env!("CARGO_MANIFEST_DIR"))
+            .join("tests/corpus/peers/meta_group_length_not_ul.dcm");
+        let bytes = std::fs::read(&path).unwrap();
+        let e = read_bytes(&bytes).unwrap_err().to_string();
+        assert!(
+            e.contains("(0002,0002) declares 875443505 bytes, but only 1 remain"),
+            "{e}"
+        );
+        assert!(check_declared_lengths_of_file(&path, true).is_err());
+    }
+
+    /// A single-frame image whose `PixelData` is shorter than `Rows`×`Columns` asks for is
+    /// refused before its volume is allocated (a 16384² frame from a 1 KB file).
+    #[test]
+    fn short_pixel_data_is_refused_before_allocating() {
+        let mut ds = Vec::new();
+        let us = |ds: &mut Vec<u8>, elem: u16, v: u16| {
+            ds.extend_from_slice(&[0x28, 0x00]);
+            ds.extend_from_slice(&elem.to_le_bytes());
+            ds.extend_from_slice(&[b'U', b'S', 2, 0]);
+            ds.extend_from_slice(&v.to_le_bytes());
+        };
+        us(&mut ds, 0x0002, 1); // SamplesPerPixel
+        us(&mut ds, 0x0010, 16384); // Rows
+        us(&mut ds, 0x0011, 16384); // Columns
+        us(&mut ds, 0x0100, 16); // BitsAllocated
+        us(&mut ds, 0x0101, 16); // BitsStored
+        us(&mut ds, 0x0102, 15); // HighBit
+        us(&mut ds, 0x0103, 0); // PixelRepresentation
+        ds.extend_from_slice(&[0xE0, 0x7F, 0x10, 0x00, b'O', b'W', 0, 0, 8, 0, 0, 0]);
+        ds.extend_from_slice(&[0u8; 8]);
+        let e = read_bytes(&stream("1.2.840.10008.1.2.1", &ds))
+            .unwrap_err()
+            .to_string();
+        assert!(
+            e.contains("need 536870912 bytes of PixelData; it holds 8"),
+            "{e}"
+        );
+    }
+
     /// A stream: preamble, meta group (explicit VR little endian unless `syntax` says
     /// otherwise), then `data_set` as given.
     fn stream(syntax: &str, data_set: &[u8]) -> Vec<u8> {
@@ -1335,8 +1402,8 @@ mod tests {
         b
     }
 
-    /// The check skips native pixel data without reading it and resumes after its value: an
-    /// element there with a forged length is still refused, and a well-formed one passes.
+    /// Elements after native pixel data are checked: one with a forged length is refused, a
+    /// well-formed one passes, and a header-only check never gets there.
     #[test]
     fn elements_after_native_pixel_data_are_checked() {
         let mut ds = vec![

@@ -10,9 +10,10 @@
 //!   bytes it has handed out. Every token that announces a length before its value is read
 //!   (an element header, a sequence or item start, a pixel-data fragment) is checked against
 //!   the bytes that remain at that point. The check therefore sees exactly the headers the
-//!   parser will see, whatever quirks its reading has. Native pixel data in the root data set
-//!   is not read: after its header is checked the walk restarts past its value (the reader's
-//!   state there is the same as at the start of a data set).
+//!   parser will see, whatever quirks its reading has. Values, pixel data included, are read
+//!   as the parser reads them and dropped at once: skipping a value by its declared length
+//!   would not do, since the parser reads binary values as whole numbers only and leaves
+//!   the rest of a misaligned length to be read as the next header.
 //! * **The meta group** (0002,xxxx) is read by dicom-object's own meta reader, which has no
 //!   token stream; [`check_meta`] walks it as that reader does (explicit VR little endian,
 //!   ended by the (0002,0000) group length, unknown VRs read as UN).
@@ -126,30 +127,31 @@ pub(super) fn check<R: Read + Seek>(
                 inner: adapter.adapt_reader(Box::new(&mut src)),
                 read: Rc::clone(&read),
             };
-            walk(source, ts, &read, inflated, until_pixel_data, what).map(|_| ())
+            walk(source, ts, &read, inflated, until_pixel_data, what)
         }
         Codec::None | Codec::EncapsulatedPixelData(..) => {
-            let mut at = data_start;
-            loop {
-                src.seek(SeekFrom::Start(at)).map_err(io)?;
-                let read = Rc::new(Cell::new(0));
-                let source = Counted {
-                    inner: std::io::BufReader::new(&mut src),
-                    read: Rc::clone(&read),
-                };
-                match walk(source, ts, &read, total - at, until_pixel_data, what)? {
-                    Some(skip_to) => at += skip_to,
-                    None => return Ok(()),
-                }
-            }
+            src.seek(SeekFrom::Start(data_start)).map_err(io)?;
+            let read = Rc::new(Cell::new(0));
+            let source = Counted {
+                inner: std::io::BufReader::new(&mut src),
+                read: Rc::clone(&read),
+            };
+            walk(
+                source,
+                ts,
+                &read,
+                total - data_start,
+                until_pixel_data,
+                what,
+            )
         }
     }
 }
 
 /// Walk a data set's tokens from `source` (`len` bytes long; `read` counts the bytes taken
-/// from it), checking each announced length against the bytes left. Returns `Some(offset)`
-/// when it stopped at native pixel data in the root data set whose value ends at `offset`
-/// (the caller resumes there), `None` at the end of the walk.
+/// from it), checking each announced length against the bytes left. Values are read as the
+/// parser reads them (pixel data too: the parser reads a binary value as whole numbers only,
+/// `len − len mod size` bytes, and where the next header starts depends on that).
 fn walk<R: Read>(
     source: Counted<R>,
     ts: &TransferSyntax,
@@ -157,9 +159,9 @@ fn walk<R: Read>(
     len: u64,
     until_pixel_data: bool,
     what: &str,
-) -> Result<Option<u64>, VolumeError> {
+) -> Result<(), VolumeError> {
     let Ok(tokens) = DataSetReader::new_with_ts_options(source, ts, Default::default()) else {
-        return Ok(None);
+        return Ok(());
     };
     let fits = |tag: Tag, declared: Option<u32>| -> Result<(), VolumeError> {
         let remain = len.saturating_sub(read.get());
@@ -179,22 +181,14 @@ fn walk<R: Read>(
     for token in tokens {
         // A malformed stream: the parser stops at the same token and reports it.
         let Ok(token) = token else {
-            return Ok(None);
+            return Ok(());
         };
         match token {
             DataToken::ElementHeader(h) => {
-                if depth == 0 && h.tag == PIXEL_DATA {
-                    if until_pixel_data {
-                        return Ok(None);
-                    }
-                    fits(h.tag, h.len.get())?;
-                    if let Some(n) = h.len.get() {
-                        // Native pixel data: resume after its value.
-                        return Ok(Some(read.get() + u64::from(n)));
-                    }
-                } else {
-                    fits(h.tag, h.len.get())?;
+                if depth == 0 && h.tag == PIXEL_DATA && until_pixel_data {
+                    return Ok(());
                 }
+                fits(h.tag, h.len.get())?;
             }
             DataToken::SequenceStart { tag, len } => {
                 fits(tag, len.get())?;
@@ -203,7 +197,7 @@ fn walk<R: Read>(
             }
             DataToken::PixelSequenceStart => {
                 if depth == 0 && until_pixel_data {
-                    return Ok(None);
+                    return Ok(());
                 }
                 depth += 1;
                 seq_tags.push(PIXEL_DATA);
@@ -222,7 +216,7 @@ fn walk<R: Read>(
             _ => {}
         }
     }
-    Ok(None)
+    Ok(())
 }
 
 /// Walk the meta group of `src` (which starts at byte `start`, after `DICM`, of a `total`-byte
@@ -273,8 +267,8 @@ fn check_meta<R: Read + Seek>(
             )))
         }
     };
-    // (0002,0000) UL, 4 bytes: anything else is refused by the reader.
-    let Some((2, 0, [b'U', b'L'], 4, value_at)) = header(src, start)? else {
+    // (0002,0000) with a length of 4, whatever its VR: anything else is refused by the reader.
+    let Some((2, 0, _, 4, value_at)) = header(src, start)? else {
         return Ok(());
     };
     let mut b = [0u8; 4];
