@@ -12,6 +12,12 @@
 //! isosurface suite's (at `SIZE`), and the handle (`tps_…`, `mls…`) and FFD (`accurate_…`,
 //! `vertex_ffd…`, `step_writing`) suites' at their default settings.
 
+/// mimalloc rather than the system allocator: it reuses the memory of freed large buffers
+/// instead of returning it to the system and faulting it in again page by page, which cost
+/// marching cubes on a 256³ field about a third of its time (see `docs/performance.md`).
+#[global_allocator]
+static ALLOCATOR: mimalloc::MiMalloc = mimalloc::MiMalloc;
+
 use volmorph_bench::ffd::{FfdConfig, FfdInputs};
 use volmorph_bench::handles::{HandlesConfig, HandlesInputs};
 use volmorph_bench::isosurface::{IsosurfaceConfig, IsosurfaceInputs};
