@@ -238,15 +238,8 @@ fn read_stream<R: Read>(
             .map_err(|_| err(format!("cannot allocate {frame_bytes} bytes")))?;
         data.resize(n, T::default());
         let buf: &mut [u8] = bytemuck::cast_slice_mut(&mut data);
-        let mut got = 0;
-        while got < buf.len() {
-            match r.read(&mut buf[got..]) {
-                Ok(0) => break,
-                Ok(k) => got += k,
-                Err(e) if e.kind() == std::io::ErrorKind::Interrupted => {}
-                Err(e) => return Err(err(format!("reading voxel data: {e}"))),
-            }
-        }
+        let got = crate::text_header::fill(r, buf)
+            .map_err(|e| err(format!("reading voxel data: {e}")))?;
         if got < buf.len() {
             return Err(err(format!(
                 "voxel data truncated: {got} of the {frame_bytes} bytes of frame {frame}"

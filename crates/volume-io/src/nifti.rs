@@ -1599,16 +1599,7 @@ fn io_err(e: io::Error, what: &str) -> VolumeError {
 
 /// Read until `buf` is full or the stream ends; returns the number of bytes read.
 fn fill<R: Read>(r: &mut R, buf: &mut [u8], what: &str) -> Result<usize, VolumeError> {
-    let mut done = 0;
-    while done < buf.len() {
-        match r.read(&mut buf[done..]) {
-            Ok(0) => break,
-            Ok(n) => done += n,
-            Err(e) if e.kind() == io::ErrorKind::Interrupted => {}
-            Err(e) => return Err(io_err(e, what)),
-        }
-    }
-    Ok(done)
+    crate::text_header::fill(r, buf).map_err(|e| io_err(e, what))
 }
 
 /// Skip `n` bytes of the stream.

@@ -367,8 +367,9 @@ fn skip_lines(fmt: &'static str, r: &mut dyn BufRead, n: u64) -> Result<u64, Vol
     Ok(consumed)
 }
 
-/// Read into `buf` until it is full or the reader ends; returns the bytes read.
-fn fill(r: &mut dyn Read, buf: &mut [u8]) -> io::Result<usize> {
+/// Read into `buf` until it is full or the reader ends (retrying interrupted reads); returns
+/// the bytes read. The one short-read loop of the volume readers.
+pub(crate) fn fill(r: &mut dyn Read, buf: &mut [u8]) -> io::Result<usize> {
     let mut got = 0;
     while got < buf.len() {
         match r.read(&mut buf[got..]) {

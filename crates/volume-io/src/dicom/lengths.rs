@@ -33,6 +33,7 @@ use dicom_transfer_syntax_registry::TransferSyntaxRegistry;
 use volmorph_volume::VolumeError;
 
 use super::err;
+use crate::text_header::fill;
 
 /// (7FE0,0010) Pixel Data.
 const PIXEL_DATA: Tag = Tag(0x7FE0, 0x0010);
@@ -74,7 +75,7 @@ pub(super) fn check<R: Read + Seek>(
     // The magic: dicom-object looks for it at 128 first, then at 0.
     let mut head = [0u8; 132];
     src.seek(SeekFrom::Start(0)).map_err(io)?;
-    let n = read_up_to(&mut src, &mut head).map_err(io)?;
+    let n = fill(&mut src, &mut head).map_err(io)?;
     let magic: u64 = if n == 132 && &head[128..132] == b"DICM" {
         128
     } else if head.starts_with(b"DICM") {
@@ -239,7 +240,7 @@ fn check_meta<R: Read + Seek>(
     let header = |src: &mut R, at: u64| -> Result<Option<MetaHeader>, VolumeError> {
         let mut b = [0u8; 12];
         src.seek(SeekFrom::Start(at)).map_err(|e| io_err(what, e))?;
-        let n = read_up_to(&mut *src, &mut b).map_err(|e| io_err(what, e))?;
+        let n = fill(&mut *src, &mut b).map_err(|e| io_err(what, e))?;
         if n < 8 {
             return Ok(None);
         }
@@ -274,7 +275,7 @@ fn check_meta<R: Read + Seek>(
     let mut b = [0u8; 4];
     src.seek(SeekFrom::Start(value_at))
         .map_err(|e| io_err(what, e))?;
-    if read_up_to(&mut *src, &mut b).map_err(|e| io_err(what, e))? < 4 {
+    if fill(&mut *src, &mut b).map_err(|e| io_err(what, e))? < 4 {
         return Ok(());
     }
     let mut left = u64::from(u32::from_le_bytes(b));
@@ -301,20 +302,6 @@ fn check_meta<R: Read + Seek>(
 /// An explicit-VR element header of the meta group: group, element, VR, value length, and
 /// where the value starts.
 type MetaHeader = (u16, u16, [u8; 2], u32, u64);
-
-/// Read into `buf` until it is full or the stream ends; the number of bytes read.
-fn read_up_to(src: &mut impl Read, buf: &mut [u8]) -> std::io::Result<usize> {
-    let mut n = 0;
-    while n < buf.len() {
-        match src.read(&mut buf[n..]) {
-            Ok(0) => break,
-            Ok(k) => n += k,
-            Err(e) if e.kind() == std::io::ErrorKind::Interrupted => {}
-            Err(e) => return Err(e),
-        }
-    }
-    Ok(n)
-}
 
 /// An I/O error on the stream named `what`.
 fn io_err(what: &str, error: std::io::Error) -> VolumeError {
