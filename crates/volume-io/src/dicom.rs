@@ -1205,6 +1205,15 @@ mod tests {
         assert_eq!(output_type(&u, &[p]).0, VoxelType::F32);
     }
 
+    /// The path and bytes of a file of `tests/corpus/peers`.
+    fn corpus_file(name: &str) -> (PathBuf, Vec<u8>) {
+        let path = Path::new(env!("CARGO_MANIFEST_DIR"))
+            .join("tests/corpus/peers")
+            .join(name);
+        let bytes = std::fs::read(&path).unwrap();
+        (path, bytes)
+    }
+
     /// A corpus file with `NumberOfFrames` replaced by `frames`, as bytes.
     fn with_frame_count(name: &str, frames: &str) -> Vec<u8> {
         use dicom_core::{DataElement, PrimitiveValue};
@@ -1246,14 +1255,15 @@ mod tests {
     /// the parser does.
     #[test]
     fn meta_group_ends_where_its_group_length_says() {
-        let path = Path::new(env!("CARGO_MANIFEST_DIR"))
-            .join("tests/corpus/peers/meta_group_length_overrun.dcm");
-        let bytes = std::fs::read(&path).unwrap();
+        let (path, bytes) = corpus_file("meta_group_length_overrun.dcm");
         let e = read_bytes(&bytes).unwrap_err().to_string();
         assert!(e.contains("declares 2147483648 bytes"), "{e}");
         // Without the preamble (`DICM` at 0) the walk runs too.
         let e = check_declared_lengths(&bytes[128..], false, "x").unwrap_err();
         assert!(e.to_string().contains("declares 2147483648 bytes"), "{e}");
+        // And from the file, header scan and full read alike.
+        assert!(check_declared_lengths_of_file(&path, true).is_err());
+        assert!(check_declared_lengths_of_file(&path, false).is_err());
     }
 
     /// Fuzz `dicom` (an 811 MB allocation found under `ulimit -v`, RSS creeping past
@@ -1264,9 +1274,7 @@ mod tests {
     /// The walk now consumes a numeric value as the parser does.
     #[test]
     fn misaligned_numeric_length_is_refused_before_allocating() {
-        let path = Path::new(env!("CARGO_MANIFEST_DIR"))
-            .join("tests/corpus/peers/misaligned_numeric_length.dcm");
-        let bytes = std::fs::read(&path).unwrap();
+        let (path, bytes) = corpus_file("misaligned_numeric_length.dcm");
         let e = read_bytes(&bytes).unwrap_err().to_string();
         assert!(e.contains("declares 811335711 bytes"), "{e}");
         assert!(check_declared_lengths_of_file(&path, false).is_err());
@@ -1309,9 +1317,7 @@ mod tests {
     /// parser sees.
     #[test]
     fn string_length_the_mirror_missed_is_refused_before_allocating() {
-        let path = Path::new(env!("CARGO_MANIFEST_DIR"))
-            .join("tests/corpus/peers/misread_string_length.dcm");
-        let bytes = std::fs::read(&path).unwrap();
+        let (path, bytes) = corpus_file("misread_string_length.dcm");
         let e = read_bytes(&bytes).unwrap_err().to_string();
         assert!(
             e.contains("(0020,000D) declares 503329024 bytes, but only 378 remain"),
@@ -1326,9 +1332,7 @@ mod tests {
     /// declared 4.28 GB. The check now reads every value as the parser does.
     #[test]
     fn misaligned_pixel_data_length_is_refused_before_allocating() {
-        let path = Path::new(env!("CARGO_MANIFEST_DIR"))
-            .join("tests/corpus/peers/misaligned_pixel_data_length.dcm");
-        let bytes = std::fs::read(&path).unwrap();
+        let (path, bytes) = corpus_file("misaligned_pixel_data_length.dcm");
         let e = read_bytes(&bytes).unwrap_err().to_string();
         assert!(
             e.contains("(1300,1600) declares 4278201856 bytes, but only 14 remain"),
@@ -1344,9 +1348,7 @@ mod tests {
     /// accepts any VR there, as the reader does.
     #[test]
     fn meta_group_length_of_any_vr_is_walked() {
-        let path = Path::new(env!("CARGO_MANIFEST_DIR"))
-            .join("tests/corpus/peers/meta_group_length_not_ul.dcm");
-        let bytes = std::fs::read(&path).unwrap();
+        let (path, bytes) = corpus_file("meta_group_length_not_ul.dcm");
         let e = read_bytes(&bytes).unwrap_err().to_string();
         assert!(
             e.contains("(0002,0002) declares 875443505 bytes, but only 1 remain"),
@@ -1469,9 +1471,7 @@ mod tests {
     /// failing. Declared lengths are now checked against the bytes that remain first.
     #[test]
     fn forged_value_length_is_refused_before_allocating() {
-        let path = Path::new(env!("CARGO_MANIFEST_DIR"))
-            .join("tests/corpus/peers/forged_value_length.dcm");
-        let bytes = std::fs::read(&path).unwrap();
+        let (path, bytes) = corpus_file("forged_value_length.dcm");
         let e = read_bytes(&bytes).unwrap_err().to_string();
         assert!(e.contains("(0020,0032) declares 4110417936 bytes"), "{e}");
         // The file path refuses it too, before the parser.
