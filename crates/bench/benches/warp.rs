@@ -6,12 +6,6 @@
 
 mod common;
 
-/// mimalloc rather than the system allocator: it reuses the memory of freed large buffers
-/// instead of returning it to the system and faulting it in again page by page, which cost
-/// marching cubes on a 256³ field about a third of its time (see `docs/performance.md`).
-#[global_allocator]
-static ALLOCATOR: mimalloc::MiMalloc = mimalloc::MiMalloc;
-
 use criterion::{Criterion, criterion_group, criterion_main};
 use volmorph_bench::warp::{EditInputs, WarpConfig, WarpInputs};
 
