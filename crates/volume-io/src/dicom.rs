@@ -351,16 +351,10 @@ fn check_declared_lengths(
 
 /// [`lengths::check`] on a DICOM file.
 fn check_declared_lengths_of_file(path: &Path, until_pixel_data: bool) -> Result<(), VolumeError> {
-    let what = path.display().to_string();
-    let os = |error| {
-        VolumeError::Io(volmorph_io::IoError::Os {
-            path: what.clone(),
-            error,
-        })
-    };
+    let os = crate::text_header::os_err(path);
     let file = std::fs::File::open(path).map_err(os)?;
     let total = file.metadata().map_err(os)?.len();
-    lengths::check(file, total, until_pixel_data, &what)
+    lengths::check(file, total, until_pixel_data, &path.display().to_string())
 }
 
 fn open_header(path: &Path) -> Option<DefaultDicomObject> {
@@ -1214,12 +1208,19 @@ mod tests {
         (path, bytes)
     }
 
+    /// The path and bytes of a corpus file that [`read_bytes`] must refuse with an error
+    /// containing `message`.
+    fn refused_corpus_file(name: &str, message: &str) -> (PathBuf, Vec<u8>) {
+        let (path, bytes) = corpus_file(name);
+        let e = read_bytes(&bytes).unwrap_err().to_string();
+        assert!(e.contains(message), "{name}: {e}");
+        (path, bytes)
+    }
+
     /// A corpus file with `NumberOfFrames` replaced by `frames`, as bytes.
     fn with_frame_count(name: &str, frames: &str) -> Vec<u8> {
         use dicom_core::{DataElement, PrimitiveValue};
-        let path = Path::new(env!("CARGO_MANIFEST_DIR"))
-            .join("tests/corpus/peers")
-            .join(name);
+        let (path, _) = corpus_file(name);
         let mut obj = OpenFileOptions::new().open_file(&path).unwrap();
         obj.put(DataElement::new(
             tags::NUMBER_OF_FRAMES,
@@ -1255,9 +1256,8 @@ mod tests {
     /// the parser does.
     #[test]
     fn meta_group_ends_where_its_group_length_says() {
-        let (path, bytes) = corpus_file("meta_group_length_overrun.dcm");
-        let e = read_bytes(&bytes).unwrap_err().to_string();
-        assert!(e.contains("declares 2147483648 bytes"), "{e}");
+        let (path, bytes) =
+            refused_corpus_file("meta_group_length_overrun.dcm", "declares 2147483648 bytes");
         // Without the preamble (`DICM` at 0) the walk runs too.
         let e = check_declared_lengths(&bytes[128..], false, "x").unwrap_err();
         assert!(e.to_string().contains("declares 2147483648 bytes"), "{e}");
@@ -1274,9 +1274,8 @@ mod tests {
     /// The walk now consumes a numeric value as the parser does.
     #[test]
     fn misaligned_numeric_length_is_refused_before_allocating() {
-        let (path, bytes) = corpus_file("misaligned_numeric_length.dcm");
-        let e = read_bytes(&bytes).unwrap_err().to_string();
-        assert!(e.contains("declares 811335711 bytes"), "{e}");
+        let (path, _) =
+            refused_corpus_file("misaligned_numeric_length.dcm", "declares 811335711 bytes");
         assert!(check_declared_lengths_of_file(&path, false).is_err());
     }
 
@@ -1317,11 +1316,9 @@ mod tests {
     /// parser sees.
     #[test]
     fn string_length_the_mirror_missed_is_refused_before_allocating() {
-        let (path, bytes) = corpus_file("misread_string_length.dcm");
-        let e = read_bytes(&bytes).unwrap_err().to_string();
-        assert!(
-            e.contains("(0020,000D) declares 503329024 bytes, but only 378 remain"),
-            "{e}"
+        let (path, _) = refused_corpus_file(
+            "misread_string_length.dcm",
+            "(0020,000D) declares 503329024 bytes, but only 378 remain",
         );
         assert!(check_declared_lengths_of_file(&path, false).is_err());
     }
@@ -1332,11 +1329,9 @@ mod tests {
     /// declared 4.28 GB. The check now reads every value as the parser does.
     #[test]
     fn misaligned_pixel_data_length_is_refused_before_allocating() {
-        let (path, bytes) = corpus_file("misaligned_pixel_data_length.dcm");
-        let e = read_bytes(&bytes).unwrap_err().to_string();
-        assert!(
-            e.contains("(1300,1600) declares 4278201856 bytes, but only 14 remain"),
-            "{e}"
+        let (path, _) = refused_corpus_file(
+            "misaligned_pixel_data_length.dcm",
+            "(1300,1600) declares 4278201856 bytes, but only 14 remain",
         );
         assert!(check_declared_lengths_of_file(&path, false).is_err());
     }
@@ -1348,11 +1343,9 @@ mod tests {
     /// accepts any VR there, as the reader does.
     #[test]
     fn meta_group_length_of_any_vr_is_walked() {
-        let (path, bytes) = corpus_file("meta_group_length_not_ul.dcm");
-        let e = read_bytes(&bytes).unwrap_err().to_string();
-        assert!(
-            e.contains("(0002,0002) declares 875443505 bytes, but only 1 remain"),
-            "{e}"
+        let (path, _) = refused_corpus_file(
+            "meta_group_length_not_ul.dcm",
+            "(0002,0002) declares 875443505 bytes, but only 1 remain",
         );
         assert!(check_declared_lengths_of_file(&path, true).is_err());
     }
@@ -1471,19 +1464,17 @@ mod tests {
     /// failing. Declared lengths are now checked against the bytes that remain first.
     #[test]
     fn forged_value_length_is_refused_before_allocating() {
-        let (path, bytes) = corpus_file("forged_value_length.dcm");
-        let e = read_bytes(&bytes).unwrap_err().to_string();
-        assert!(e.contains("(0020,0032) declares 4110417936 bytes"), "{e}");
+        let (path, _) = refused_corpus_file(
+            "forged_value_length.dcm",
+            "(0020,0032) declares 4110417936 bytes",
+        );
         // The file path refuses it too, before the parser.
         assert!(check_declared_lengths_of_file(&path, false).is_err());
         assert!(check_declared_lengths_of_file(&path, true).is_err());
         // Real files pass the walk, through to their pixel data.
         for name in ["pydicom_rtdose.dcm", "pydicom_enhanced_ct.dcm"] {
-            let p = Path::new(env!("CARGO_MANIFEST_DIR"))
-                .join("tests/corpus/peers")
-                .join(name);
+            let (p, b) = corpus_file(name);
             check_declared_lengths_of_file(&p, false).unwrap();
-            let b = std::fs::read(&p).unwrap();
             // Cut into the pixel data: the declared length no longer fits.
             let cut = &b[..b.len() - 10];
             let e = check_declared_lengths(cut, false, name).unwrap_err();

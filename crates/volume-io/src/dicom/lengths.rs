@@ -23,6 +23,7 @@
 
 use std::cell::Cell;
 use std::io::{Read, Seek, SeekFrom};
+use std::path::Path;
 use std::rc::Rc;
 
 use dicom_core::Tag;
@@ -33,7 +34,7 @@ use dicom_transfer_syntax_registry::TransferSyntaxRegistry;
 use volmorph_volume::VolumeError;
 
 use super::err;
-use crate::text_header::fill;
+use crate::text_header::{fill, os_err};
 
 /// (7FE0,0010) Pixel Data.
 const PIXEL_DATA: Tag = Tag(0x7FE0, 0x0010);
@@ -42,6 +43,18 @@ const PIXEL_DATA: Tag = Tag(0x7FE0, 0x0010);
 struct Counted<R> {
     inner: R,
     read: Rc<Cell<u64>>,
+}
+
+impl<R> Counted<R> {
+    /// `inner`, counted, and the count.
+    fn new(inner: R) -> (Self, Rc<Cell<u64>>) {
+        let read = Rc::new(Cell::new(0));
+        let counted = Self {
+            inner,
+            read: Rc::clone(&read),
+        };
+        (counted, read)
+    }
 }
 
 impl<R: Read> Read for Counted<R> {
@@ -71,7 +84,7 @@ pub(super) fn check<R: Read + Seek>(
     until_pixel_data: bool,
     what: &str,
 ) -> Result<(), VolumeError> {
-    let io = |e| io_err(what, e);
+    let io = os_err(Path::new(what));
     // The magic: dicom-object looks for it at 128 first, then at 0.
     let mut head = [0u8; 132];
     src.seek(SeekFrom::Start(0)).map_err(io)?;
@@ -86,12 +99,8 @@ pub(super) fn check<R: Read + Seek>(
     // The meta group, walked as dicom-object's meta reader will read it.
     check_meta(&mut src, magic + 4, total, what)?;
     // Let dicom-object's meta reader read it, counting the bytes it takes.
-    let read = Rc::new(Cell::new(0));
     src.seek(SeekFrom::Start(magic)).map_err(io)?;
-    let mut counted = Counted {
-        inner: &mut src,
-        read: Rc::clone(&read),
-    };
+    let (mut counted, read) = Counted::new(&mut src);
     let Ok(table) = FileMetaTable::from_reader(&mut counted) else {
         return Ok(()); // the parser refuses the meta group
     };
@@ -99,12 +108,13 @@ pub(super) fn check<R: Read + Seek>(
     let Some(ts) = TransferSyntaxRegistry.get(table.transfer_syntax()) else {
         return Ok(()); // the parser refuses an unknown transfer syntax
     };
-    match ts.codec() {
-        Codec::Dataset(None) => Ok(()), // the parser refuses it (no adapter built in)
+    // The data set's bytes as the parser reads them, and how many there are.
+    src.seek(SeekFrom::Start(data_start)).map_err(io)?;
+    let (data, len): (Box<dyn Read + '_>, u64) = match ts.codec() {
+        Codec::Dataset(None) => return Ok(()), // the parser refuses it (no adapter built in)
         Codec::Dataset(Some(adapter)) => {
             // Deflated: learn the inflated length, then walk the inflated stream.
             let limit = volmorph_io::memory_limit();
-            src.seek(SeekFrom::Start(data_start)).map_err(io)?;
             let inflated = std::io::copy(
                 &mut adapter
                     .adapt_reader(Box::new(&mut src))
@@ -123,30 +133,15 @@ pub(super) fn check<R: Read + Seek>(
                 }));
             }
             src.seek(SeekFrom::Start(data_start)).map_err(io)?;
-            let read = Rc::new(Cell::new(0));
-            let source = Counted {
-                inner: adapter.adapt_reader(Box::new(&mut src)),
-                read: Rc::clone(&read),
-            };
-            walk(source, ts, &read, inflated, until_pixel_data, what)
+            (adapter.adapt_reader(Box::new(&mut src)), inflated)
         }
-        Codec::None | Codec::EncapsulatedPixelData(..) => {
-            src.seek(SeekFrom::Start(data_start)).map_err(io)?;
-            let read = Rc::new(Cell::new(0));
-            let source = Counted {
-                inner: std::io::BufReader::new(&mut src),
-                read: Rc::clone(&read),
-            };
-            walk(
-                source,
-                ts,
-                &read,
-                total - data_start,
-                until_pixel_data,
-                what,
-            )
-        }
-    }
+        Codec::None | Codec::EncapsulatedPixelData(..) => (
+            Box::new(std::io::BufReader::new(&mut src)),
+            total - data_start,
+        ),
+    };
+    let (source, read) = Counted::new(data);
+    walk(source, ts, &read, len, until_pixel_data, what)
 }
 
 /// Walk a data set's tokens from `source` (`len` bytes long; `read` counts the bytes taken
@@ -175,9 +170,8 @@ fn walk<R: Read>(
             _ => Ok(()),
         }
     };
-    // Nesting: sequences and items entered and not yet left.
-    let mut depth = 0usize;
-    // The tag of the innermost sequence (items are named after it in errors).
+    // The sequences entered and not yet left, innermost last (items are named after their
+    // sequence in errors); none in the root data set.
     let mut seq_tags: Vec<Tag> = Vec::new();
     for token in tokens {
         // A malformed stream: the parser stops at the same token and reports it.
@@ -186,33 +180,27 @@ fn walk<R: Read>(
         };
         match token {
             DataToken::ElementHeader(h) => {
-                if depth == 0 && h.tag == PIXEL_DATA && until_pixel_data {
+                if seq_tags.is_empty() && h.tag == PIXEL_DATA && until_pixel_data {
                     return Ok(());
                 }
                 fits(h.tag, h.len.get())?;
             }
             DataToken::SequenceStart { tag, len } => {
                 fits(tag, len.get())?;
-                depth += 1;
                 seq_tags.push(tag);
             }
             DataToken::PixelSequenceStart => {
-                if depth == 0 && until_pixel_data {
+                if seq_tags.is_empty() && until_pixel_data {
                     return Ok(());
                 }
-                depth += 1;
                 seq_tags.push(PIXEL_DATA);
             }
             DataToken::ItemStart { len } => {
                 let tag = seq_tags.last().copied().unwrap_or(Tag(0xFFFE, 0xE000));
                 fits(tag, len.get())?;
-                depth += 1;
             }
-            DataToken::ItemEnd | DataToken::SequenceEnd => {
-                depth = depth.saturating_sub(1);
-                if matches!(token, DataToken::SequenceEnd) {
-                    seq_tags.pop();
-                }
+            DataToken::SequenceEnd => {
+                seq_tags.pop();
             }
             _ => {}
         }
@@ -237,51 +225,36 @@ fn check_meta<R: Read + Seek>(
 ) -> Result<(), VolumeError> {
     // An explicit-VR header: tag, VR, then a 2-byte length, or 2 reserved bytes and a 4-byte
     // length. `None` where the stream ends (the reader reports that).
+    let io = os_err(Path::new(what));
     let header = |src: &mut R, at: u64| -> Result<Option<MetaHeader>, VolumeError> {
         let mut b = [0u8; 12];
-        src.seek(SeekFrom::Start(at)).map_err(|e| io_err(what, e))?;
-        let n = fill(&mut *src, &mut b).map_err(|e| io_err(what, e))?;
-        if n < 8 {
-            return Ok(None);
-        }
-        let group = u16::from_le_bytes([b[0], b[1]]);
-        let elem = u16::from_le_bytes([b[2], b[3]]);
-        let vr = [b[4], b[5]];
-        if long_vr(&vr) {
-            if n < 12 {
-                return Ok(None);
-            }
-            Ok(Some((
-                group,
-                elem,
-                vr,
-                u32::from_le_bytes([b[8], b[9], b[10], b[11]]),
-                at + 12,
-            )))
+        src.seek(SeekFrom::Start(at)).map_err(io)?;
+        let n = fill(&mut *src, &mut b).map_err(io)?;
+        let tag = (
+            u16::from_le_bytes([b[0], b[1]]),
+            u16::from_le_bytes([b[2], b[3]]),
+        );
+        Ok(if n >= 12 && long_vr(&b[4..6]) {
+            Some((tag, u32::from_le_bytes([b[8], b[9], b[10], b[11]]), at + 12))
+        } else if n >= 8 && !long_vr(&b[4..6]) {
+            Some((tag, u32::from(u16::from_le_bytes([b[6], b[7]])), at + 8))
         } else {
-            Ok(Some((
-                group,
-                elem,
-                vr,
-                u32::from(u16::from_le_bytes([b[6], b[7]])),
-                at + 8,
-            )))
-        }
+            None
+        })
     };
     // (0002,0000) with a length of 4, whatever its VR: anything else is refused by the reader.
-    let Some((2, 0, _, 4, value_at)) = header(src, start)? else {
+    let Some(((2, 0), 4, value_at)) = header(src, start)? else {
         return Ok(());
     };
     let mut b = [0u8; 4];
-    src.seek(SeekFrom::Start(value_at))
-        .map_err(|e| io_err(what, e))?;
-    if fill(&mut *src, &mut b).map_err(|e| io_err(what, e))? < 4 {
+    src.seek(SeekFrom::Start(value_at)).map_err(io)?;
+    if fill(&mut *src, &mut b).map_err(io)? < 4 {
         return Ok(());
     }
     let mut left = u64::from(u32::from_le_bytes(b));
     let mut pos = value_at + 4;
     while left > 0 {
-        let Some((group, elem, _, len, value_at)) = header(src, pos)? else {
+        let Some(((group, elem), len, value_at)) = header(src, pos)? else {
             return Ok(());
         };
         if len == u32::MAX {
@@ -299,17 +272,9 @@ fn check_meta<R: Read + Seek>(
     Ok(())
 }
 
-/// An explicit-VR element header of the meta group: group, element, VR, value length, and
+/// An explicit-VR element header of the meta group: (group, element), value length, and
 /// where the value starts.
-type MetaHeader = (u16, u16, [u8; 2], u32, u64);
-
-/// An I/O error on the stream named `what`.
-fn io_err(what: &str, error: std::io::Error) -> VolumeError {
-    VolumeError::Io(volmorph_io::IoError::Os {
-        path: what.to_owned(),
-        error,
-    })
-}
+type MetaHeader = ((u16, u16), u32, u64);
 
 /// Whether an explicit VR carries 2 reserved bytes and a 4-byte length. PS3.5 7.1.2 lists the
 /// VRs with a 2-byte length; every other VR, and (as dicom-rs reads it) an unrecognised VR,
