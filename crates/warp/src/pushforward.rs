@@ -165,7 +165,7 @@ impl ToIndex {
         }
     }
 
-    #[inline]
+    #[inline(always)]
     pub(crate) fn apply(&self, p: DVec3) -> DVec3 {
         self.m * (p - self.origin)
     }

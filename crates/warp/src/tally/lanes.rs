@@ -13,8 +13,14 @@
 //! 2. **Tally** ([`tally`]): per voxel, the three shares add up to the buffer index of its
 //!    first cell (NaN if one axis did not fit); such a voxel adds its 2 × 2 × 2 cells with
 //!    no branch on its shape (a cell beyond the box gets the weight +0, and adding ±0 to a
-//!    tally changes no bit: see [`super::splat_short`]). Every other voxel takes the
-//!    per-voxel path ([`super::averaged_bounds`], [`super::splat`]) unchanged.
+//!    tally changes no bit: see [`super::splat_short`]). A voxel whose box is short and
+//!    finite on every axis and has no cell in the region on one of them (its share −∞, so
+//!    the sum is −∞) is [`OUTSIDE`] at once: the per-voxel path would find the same box,
+//!    take [`super::splat_short`], clip that axis to nothing and add nothing. Such voxels
+//!    are common where a recomputed region cuts through a run of blocks (a quarter of the
+//!    voxels a drag of the teapot's spout tallies went the per-voxel path, half of them
+//!    only to find they were outside). Every other voxel takes the per-voxel path
+//!    ([`super::averaged_bounds`], [`super::splat`]) unchanged.
 //!
 //! Each voxel still adds to each cell at most once, voxels in row order, so every cell sums
 //! its contributions in the order the per-voxel path does.
@@ -130,8 +136,9 @@ pub(crate) struct Boxes<'a> {
     pub lo: &'a mut [f64],
     /// Overlaps with cells `a` and `a + 1`, interleaved (`w01[2m]`, `w01[2m + 1]`).
     pub w01: &'a mut [f64],
-    /// The coordinate's share of the buffer index of the box's first cell, or NaN where the
-    /// box does not take the two-cell path on this axis.
+    /// The coordinate's share of the buffer index of the box's first cell; −∞ where the
+    /// box is short and finite but has no cell in the region on this axis; NaN where it
+    /// takes neither the two-cell path nor that exit on this axis.
     pub share: &'a mut [f64],
 }
 
@@ -165,11 +172,20 @@ pub(crate) fn fill_one(f: &Flat<'_>, fit: &Fit, m: usize, axis: usize, out: &mut
     // At most two cells: a box longer than one cell reaches a third cell past `e1`.
     let two = one || h <= e1;
     let fits = ok && two && a >= fit.r0[axis] && a <= fit.last[axis] && t.is_finite();
+    // The box's last cell, as `short` counts its cells (`a + n − 1`).
+    let last_cell = if one {
+        a + if h > e { 1.0 } else { 0.0 }
+    } else {
+        a + if h > e1 { 2.0 } else { 1.0 }
+    };
+    let outside = ok && t.is_finite() && (last_cell < fit.r0[axis] || a > fit.last[axis] + 1.0);
     out.lo[m] = l;
     out.w01[2 * m] = v0;
     out.w01[2 * m + 1] = v1;
     out.share[m] = if fits {
         (a - fit.r0[axis]) * fit.stride[axis]
+    } else if outside {
+        f64::NEG_INFINITY
     } else {
         f64::NAN
     };
@@ -193,18 +209,41 @@ fn one_voxel<T, C: Cell>(row: &Row<'_, T>, n: usize, d: f64, t: &Target<'_>, buf
     }
 }
 
-/// The buffer index of voxel `n`'s first cell if it takes the two-cell path, from its three
-/// shares (a NaN share fails the test).
+/// How voxel `n` (value `d`) is tallied, read from its three shares.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub(crate) enum Path {
+    /// The two-cell path, from this buffer index of its first cell.
+    TwoCells(usize),
+    /// [`OUTSIDE`] with nothing to add: every axis is short and finite and one lies wholly
+    /// outside the region (a −∞ share; the sum is −∞ only when no share is NaN).
+    Outside,
+    /// The per-voxel path.
+    Voxel,
+}
+
+/// The [`Path`] of voxel `n` with value `d`, from its three shares. A non-finite `d` takes
+/// the per-voxel path (whose general branch handles it), as [`splat`] does.
 #[inline(always)]
-pub(crate) fn base_of(share: &[f64], n: usize, d: f64) -> Option<usize> {
-    let s = share.get(3 * n..3 * n + 3)?;
+pub(crate) fn path_of(share: &[f64], n: usize, d: f64) -> Path {
+    let Some(s) = share.get(3 * n..3 * n + 3) else {
+        return Path::Voxel;
+    };
     let base = s[0] + s[1] + s[2];
-    (base >= 0.0 && d.is_finite()).then_some(base as usize)
+    if !d.is_finite() {
+        Path::Voxel
+    } else if base >= 0.0 {
+        Path::TwoCells(base as usize)
+    } else if base == f64::NEG_INFINITY {
+        Path::Outside
+    } else {
+        Path::Voxel
+    }
 }
 
 /// The tally pass over `row`'s voxels in order, each outcome ([`MAPPED`], [`OUTSIDE`],
-/// [`NON_FINITE`]) written to `outcome`: a voxel with a buffer index from [`base_of`] goes
-/// to `two_cells(buf, n, base, d)` (its 2 × 2 × 2 cells), any other to the per-voxel path.
+/// [`NON_FINITE`]) written to `outcome`, by its [`path_of`]: a voxel with a buffer index goes
+/// to `two_cells(buf, n, base, d)` (its 2 × 2 × 2 cells), one known to lie outside the
+/// region is [`OUTSIDE`] at once, any other takes the per-voxel path.
 #[inline(always)]
 pub(crate) fn each_voxel<T: Voxel, C: Cell>(
     row: &Row<'_, T>,
@@ -216,12 +255,13 @@ pub(crate) fn each_voxel<T: Voxel, C: Cell>(
 ) {
     for (n, (v, o)) in row.values.iter().zip(outcome.iter_mut()).enumerate() {
         let d = v.to_f64();
-        *o = match base_of(share, n, d) {
-            Some(base) => {
+        *o = match path_of(share, n, d) {
+            Path::TwoCells(base) => {
                 two_cells(buf, n, base, d);
                 MAPPED
             }
-            None => one_voxel(row, n, d, t, buf),
+            Path::Outside => OUTSIDE,
+            Path::Voxel => one_voxel(row, n, d, t, buf),
         };
     }
 }
@@ -527,7 +567,7 @@ mod tests {
             },
         ];
         let mut boxes = RowBoxes::default();
-        let mut two_cell = 0;
+        let (mut two_cell, mut outside) = (0, 0);
         for case in 0..600 {
             let n = 1 + rng.index(30);
             let start = rng.point_in(DVec3::new(-2.0, -1.5, -1.5), DVec3::new(8.0, 9.5, 8.5));
@@ -562,11 +602,16 @@ mod tests {
                 }
             }
             two_cell += (0..n)
-                .filter(|&k| base_of(&boxes.share, k, 1.0).is_some())
+                .filter(|&k| matches!(path_of(&boxes.share, k, 1.0), Path::TwoCells(_)))
+                .count();
+            outside += (0..n)
+                .filter(|&k| path_of(&boxes.share, k, 1.0) == Path::Outside)
                 .count();
         }
-        // The two-cell path is taken (and so tested) often.
+        // The two-cell path and the early exit outside the region are taken (and so
+        // tested) often.
         assert!(two_cell > 500, "{two_cell} voxels on the two-cell path");
+        assert!(outside > 500, "{outside} voxels known outside at once");
     }
 
     /// The portable loops and (where the CPU has AVX2) the AVX2 kernels reproduce the

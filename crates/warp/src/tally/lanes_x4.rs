@@ -101,6 +101,8 @@ fn fill(f: &Flat<'_>, fit: &Fit, out: &mut Boxes<'_>) {
     );
     let limit = _mm256_set1_pd(1e15);
     let nan = _mm256_set1_pd(f64::NAN);
+    let minus_inf = _mm256_set1_pd(f64::NEG_INFINITY);
+    let end = [0, 1, 2].map(|j| _mm256_add_pd(last[j], one));
     let steps = n3 / 12;
     for step in 0..steps {
         for j in 0..3 {
@@ -156,8 +158,24 @@ fn fill(f: &Flat<'_>, fit: &Fit, out: &mut Boxes<'_>) {
             // `t − t` is 0 for a finite `t`, NaN otherwise.
             let finite = _mm256_cmp_pd::<_CMP_EQ_OQ>(_mm256_sub_pd(t, t), zero);
             let fits = _mm256_and_pd(_mm256_and_pd(ok, two_cells), _mm256_and_pd(inside, finite));
-            let share =
-                _mm256_blendv_pd(nan, _mm256_mul_pd(_mm256_sub_pd(a, r0[j]), stride[j]), fits);
+            // The box's last cell (`a + n − 1` of `short`) and whether it has no cell in
+            // the region along this axis.
+            let past_short = _mm256_and_pd(_mm256_cmp_pd::<_CMP_GT_OQ>(h, e), one);
+            let past_long =
+                _mm256_add_pd(one, _mm256_and_pd(_mm256_cmp_pd::<_CMP_GT_OQ>(h, e1), one));
+            let last_cell = _mm256_add_pd(a, _mm256_blendv_pd(past_long, past_short, short));
+            let outside = _mm256_and_pd(
+                _mm256_and_pd(ok, finite),
+                _mm256_or_pd(
+                    _mm256_cmp_pd::<_CMP_LT_OQ>(last_cell, r0[j]),
+                    _mm256_cmp_pd::<_CMP_GT_OQ>(a, end[j]),
+                ),
+            );
+            let share = _mm256_blendv_pd(
+                _mm256_blendv_pd(nan, minus_inf, outside),
+                _mm256_mul_pd(_mm256_sub_pd(a, r0[j]), stride[j]),
+                fits,
+            );
             store(out.lo, m, l);
             store(out.share, m, share);
             // [v0₀ v1₀ v0₁ v1₁] and [v0₂ v1₂ v0₃ v1₃].
