@@ -70,6 +70,7 @@
 //! # Ok::<(), Box<dyn std::error::Error>>(())
 //! ```
 
+pub mod by_handles;
 mod command;
 pub mod demo;
 mod derived;

@@ -6,23 +6,20 @@
 //! (`--handles pairs.txt`), or two point lists paired by order (`--from src.fcsv --to
 //! dst.fcsv`, Slicer markups or three-column text).
 //!
-//! Direction: the deformation sends every source handle to its target. A mesh is moved
-//! forward (each vertex `v` goes to `f(v)`). A volume is resampled by pull-back through the
-//! map built from the swapped handles (target → source), so the content found at each source
-//! handle appears at its target, and the output keeps the input's grid.
+//! Direction: the deformation sends every source handle to its target; `warp` moves a mesh
+//! forward and resamples a volume by pull-back, as `volmorph_scene::by_handles` states.
 
 use std::path::PathBuf;
 
 use anyhow::{Context, bail};
-use volmorph_deform::{SampledMap, SpaceMap};
+use volmorph_deform::SpaceMap;
 use volmorph_handles::TpsKernel;
 use volmorph_handles::Weighting;
 use volmorph_handles::handles::{HandleSet, read_point_list, write_point_list};
 use volmorph_maps::{HandleDirection, HandleMethod, HandleOptions, handle_map};
+use volmorph_scene::by_handles::{self, HandleSpec, VolumeWarp};
 use volmorph_scene::files::{FileKind, kind_of};
 use volmorph_volume_io as format;
-use volmorph_warp::apply::{WarpMethod, WarpOptions, warp_volume_with};
-use volmorph_warp::jacobian::FoldingReport;
 
 use crate::progress;
 
@@ -236,61 +233,40 @@ pub(crate) fn options(a: &MapArgs) -> anyhow::Result<HandleOptions> {
 fn warp(a: &WarpArgs) -> anyhow::Result<()> {
     let set = read_handle_set(&a.map)?;
     let opts = options(&a.map)?;
+    let spec = HandleSpec {
+        set: &set,
+        method: a.map.method.into(),
+        options: &opts,
+    };
     let pb = progress::spinner(format!("reading {}", a.input.display()));
     if kind_of(&a.input)? == FileKind::Mesh {
         let mut m = volmorph_mesh::read(&a.input).context("cannot read the mesh")?;
-        let map = handle_map(
-            &set,
-            a.map.method.into(),
-            &opts,
-            HandleDirection::SourcesToTargets,
-        )
-        .context("cannot build the deformation")?;
         pb.set_message("moving vertices");
-        let pts = m.positions().to_vec();
-        map.apply_batch(&pts, m.positions_mut())?;
-        let fold = match m.bounding_box() {
-            Some((lo, hi)) => Some(FoldingReport::over_box(&map, lo, hi, a.grid)?),
-            None => None,
-        };
+        let fold =
+            by_handles::deform_mesh(&mut m, spec, a.grid).context("cannot deform the mesh")?;
         pb.set_message(format!("writing {}", a.output.display()));
         volmorph_mesh::write(&a.output, &m).context("cannot write")?;
         pb.finish_and_clear();
-        say!("moved {} vertices by {} handles", pts.len(), set.len());
+        say!(
+            "moved {} vertices by {} handles",
+            m.positions().len(),
+            set.len()
+        );
         if let Some(f) = fold {
             say!("{f}");
         }
         return Ok(());
     }
     let vol = format::read(&a.input).context("cannot read the volume")?;
-    let grid = *vol.geometry();
-    // Pull-back: the map from target space to source space, so the content at each source
-    // appears at its target.
-    let map = handle_map(
-        &set,
-        a.map.method.into(),
-        &opts,
-        HandleDirection::TargetsToSources,
-    )
-    .context("cannot build the pull-back deformation (targets → sources)")?;
-    let options = WarpOptions {
+    let how = VolumeWarp {
         background: a.default,
-        mask: false,
-        sampled_nodes: (!a.exact).then_some(a.grid),
+        exact: a.exact,
+        grid: a.grid,
     };
-    let out = warp_volume_with(
-        &vol,
-        &map,
-        &grid,
-        WarpMethod::PullbackLinear,
-        &options,
-        &progress::Bar(&pb),
-    )
-    .with_context(|| format!("cannot warp {}", a.input.display()))?;
-    let coarse = SampledMap::covering(&grid, grid.dims.map(|d| a.grid.min(d).max(1)))?;
-    let report = FoldingReport::of_map(&map, &coarse)?;
+    let (out, report) = by_handles::warp_volume(&vol, spec, &how, &progress::Bar(&pb))
+        .with_context(|| format!("cannot warp {}", a.input.display()))?;
     progress::spin(&pb, format!("writing {}", a.output.display()));
-    format::write(&a.output, &out.volume).context("cannot write")?;
+    format::write(&a.output, &out).context("cannot write")?;
     pb.finish_and_clear();
     say!(
         "warped {} by {} handles ({})",
