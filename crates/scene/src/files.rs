@@ -131,6 +131,19 @@ pub(crate) fn file_name(path: &Path) -> String {
     )
 }
 
+/// The file of frame `n` (1-based, three digits at least) of a sequence written into `dir`,
+/// in the format of `like`: its full extension (`nii.gz`, `mha`, …), `nii.gz` when it has
+/// none. E.g. frame 7 like `out.nii.gz` is `dir/frame_007.nii.gz`.
+#[must_use]
+pub fn frame_path(dir: &Path, n: usize, like: &Path) -> std::path::PathBuf {
+    let ext = like
+        .file_name()
+        .and_then(|n| n.to_str())
+        .and_then(|n| n.split_once('.'))
+        .map_or("nii.gz", |(_, e)| e);
+    dir.join(format!("frame_{n:03}.{ext}"))
+}
+
 /// `true` for a `.step` / `.stp` path (any case): the accurate FFD's trimmed surfaces.
 #[must_use]
 pub fn is_step(path: &Path) -> bool {
@@ -295,4 +308,25 @@ pub(crate) fn write_text(path: &Path, text: &str) -> Result<(), SceneError> {
         w.write_all(text.as_bytes())
             .map_err(|e| SceneError::Io(volmorph_io::IoError::os(path, e)))
     })
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// Frames keep the output's whole extension (two-part ones included), default to
+    /// `nii.gz` without one, and number from three digits up.
+    #[test]
+    fn frame_paths_keep_the_whole_extension() {
+        let d = Path::new("frames");
+        let cases = [
+            (7, "out.nii.gz", "frames/frame_007.nii.gz"),
+            (12, "dir/warped.mha", "frames/frame_012.mha"),
+            (1, "bare", "frames/frame_001.nii.gz"),
+            (1234, "a.nrrd", "frames/frame_1234.nrrd"),
+        ];
+        for (n, like, want) in cases {
+            assert_eq!(frame_path(d, n, Path::new(like)), Path::new(want), "{like}");
+        }
+    }
 }

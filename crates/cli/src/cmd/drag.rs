@@ -167,14 +167,6 @@ pub fn run(a: &Args) -> anyhow::Result<()> {
         std::fs::create_dir_all(dir)
             .with_context(|| format!("cannot create the frame folder {}", dir.display()))?;
     }
-    // The output's full extension (nii.gz, mha, …) for the frames.
-    let ext = a
-        .output
-        .file_name()
-        .and_then(|n| n.to_str())
-        .and_then(|n| n.split_once('.'))
-        .map_or("nii.gz", |(_, e)| e)
-        .to_string();
     let t = Instant::now();
     let mut last = None;
     let bar = progress::Bar(&pb);
@@ -192,7 +184,7 @@ pub fn run(a: &Args) -> anyhow::Result<()> {
             bail!("cannot warp {}: {e}", a.input.display());
         }
         if let Some(dir) = &a.frames {
-            let frame = dir.join(format!("frame_{:03}.{ext}", n + 1));
+            let frame = volmorph_scene::files::frame_path(dir, n + 1, &a.output);
             scene.export(w, &frame).context("cannot write a frame")?;
         }
         last = change.drag;

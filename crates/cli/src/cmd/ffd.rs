@@ -2,7 +2,7 @@
 //! uniform or adaptive subdivision, or the accurate FFD as trimmed Bézier surfaces (Feng et
 //! al. 2002) written as STEP or tessellated.
 
-use std::path::{Path, PathBuf};
+use std::path::PathBuf;
 use std::sync::Arc;
 use std::time::Instant;
 
@@ -84,12 +84,6 @@ fn parse_mode(s: &str) -> anyhow::Result<Mode> {
     })
 }
 
-fn is_step(p: &Path) -> bool {
-    p.extension()
-        .and_then(|e| e.to_str())
-        .is_some_and(|e| e.eq_ignore_ascii_case("step") || e.eq_ignore_ascii_case("stp"))
-}
-
 /// Run `volmorph ffd`.
 pub fn run(a: &Args) -> anyhow::Result<()> {
     // The reported total runs from here to the output written (reading included).
@@ -111,7 +105,7 @@ pub fn run(a: &Args) -> anyhow::Result<()> {
         }
         (None, None) => bail!("give --lattice L or --init FORM"),
     };
-    let step_out = is_step(&a.output);
+    let step_out = volmorph_scene::files::is_step(&a.output);
     if step_out && !matches!(mode, Mode::Accurate) {
         bail!(
             "{}: STEP output holds trimmed surfaces and needs --mode accurate",
