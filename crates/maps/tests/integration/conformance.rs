@@ -4,10 +4,12 @@
 //! push-forward equal to the full one for each of those.
 //!
 //! The identity kind is exercised as the identity instance of the composition.
+//! Two map types outside [`AnyMap`] run the suite too: the generic pair `Compose(a, b)` and
+//! the live grid `LiveGrid` (each through the files it is written as).
 
 use glam::{DMat3, DVec3};
 use volmorph_deform::inverse::Inverse;
-use volmorph_deform::{Affine, InverseOptions, SampledMap};
+use volmorph_deform::{Affine, Compose, InverseOptions, LiveGrid, SampledMap};
 use volmorph_handles::{
     AffineMls, BumpMap, Frame, FrameMls, RigidMls, SimilarityMls, ThinPlateMap, Weighting,
     WendlandMap,
@@ -530,3 +532,57 @@ fn incremental_push_forward_equals_full_for_every_live_kind() {
         assert_eq!(e.stats(), full.stats, "{name}");
     }
 }
+
+/// The generic pair `Compose(a, b)` (`b` first, then `a`) of an affine map and a lattice. Its
+/// file form is the list composition `[b, a]`, which applies in list order.
+fn pair(identity: bool) -> Compose<AnyMap, AnyMap> {
+    Compose(
+        AnyMap::Affine(affine(identity)),
+        AnyMap::Lattice(lattice(if identity { 0.0 } else { 1.5 }, false)),
+    )
+}
+
+fn pair_round_trip(m: &Compose<AnyMap, AnyMap>) -> Compose<AnyMap, AnyMap> {
+    match round_trip(&AnyMap::Compose(vec![m.1.clone(), m.0.clone()])) {
+        AnyMap::Compose(ms) => match <[AnyMap; 2]>::try_from(ms) {
+            Ok([b, a]) => Compose(a, b),
+            Err(ms) => panic!("read back as a composition of {} maps", ms.len()),
+        },
+        _ => panic!("read back as another kind of map"),
+    }
+}
+
+space_map_conformance!(
+    compose_pair,
+    Conformance {
+        make: || pair(false),
+        identity: || pair(true),
+        domain: (LO, HI),
+        jacobian_tolerance: 1e-6,
+        round_trip: pair_round_trip,
+    }
+);
+
+/// A lattice's live grid (the coarse-grid mode of live editing: trilinear between nodes of
+/// the exact map), on the grid of [`sampled`]. Its file form is its map's and its grid.
+fn live_grid(moved: f64) -> LiveGrid<LiveMap> {
+    let grid = Geometry::new([12, 11, 10])
+        .with_origin(LO * 1.3)
+        .with_spacing((HI - LO) * 1.3 / DVec3::new(11.0, 10.0, 9.0));
+    LiveGrid::new(LiveMap::Lattice(lattice(moved, false)), grid).unwrap()
+}
+
+fn live_grid_round_trip(m: &LiveGrid<LiveMap>) -> LiveGrid<LiveMap> {
+    LiveGrid::new(live_round_trip(m.map()), *m.sampled().grid()).unwrap()
+}
+
+space_map_conformance!(
+    live_grid_of_a_lattice,
+    Conformance {
+        make: || live_grid(1.5),
+        identity: || live_grid(0.0),
+        domain: (LO, HI),
+        jacobian_tolerance: 1e-6,
+        round_trip: live_grid_round_trip,
+    }
+);
