@@ -1,13 +1,16 @@
 #!/usr/bin/env python3
 """ITK transform files written by volmorph, applied by SimpleITK: the same points come out.
 
-volmorph writes an affine map, a cubic B-spline lattice moved at random, and their
-composition (affine applied first, then the lattice; and the reverse) as ITK `.tfm` files
+volmorph writes an affine map, a cubic B-spline lattice moved at random, their
+composition (affine applied first, then the lattice; and the reverse) and interpolating
+thin-plate splines of 16 landmarks (kernels `r` and `r² ln r`, ITK's
+`ThinPlateSplineKernelTransform` and `ThinPlateR2LogRSplineKernelTransform`) as ITK `.tfm` files
 (`volmorph map compose … -o C.tfm`, `volmorph lattice convert … -o L.tfm`). Each file is read
 by SimpleITK (`ReadTransform`) and applied to points spread over the lattice box; volmorph
 applies the same file (`volmorph map apply`) and its own JSON form of the map. The largest
 distance between SimpleITK's and volmorph's mapped points must be at most 1e-9 of the box
-diagonal (rounding of the 17-digit text), for every file.
+diagonal (rounding of the 17-digit text) for every file, 1e-7 for the thin-plate splines
+(SimpleITK solves their landmark system again).
 
 Then the other transform files:
 
@@ -39,6 +42,10 @@ import numpy as np
 ROOT = Path(__file__).resolve().parent.parent
 #: Largest allowed distance between the peers' mapped points, relative to the box diagonal.
 REL_TOL = 1e-9
+#: The same for thin-plate splines: ITK solves the landmark system again when it reads the file
+#: (in the file's coordinates, volmorph in centred and scaled ones), so the two agree to the
+#: rounding of that solve, amplified by its condition number (16 landmarks here).
+TPS_REL_TOL = 1e-7
 #: The same for grids read from NIfTI: the header holds the geometry in f32 (pixdim, quatern_*,
 #: srow_*; NIfTI-1 standard), and its qform and sform round differently, so two readers that
 #: prefer different ones agree only to f32 rounding (about 1.2e-7 relative, times the few
@@ -91,6 +98,19 @@ def main() -> int:
         run(vm, "map", "compose", t / "a.json", t / "l.json", "-o", t / "al.json")
         run(vm, "map", "compose", t / "l.json", t / "a.json", "-o", t / "la.tfm")
         run(vm, "map", "compose", t / "l.json", t / "a.json", "-o", t / "la.json")
+        # Interpolating thin-plate splines (both kernels) written as ITK kernel transforms,
+        # inside a composite with the identity (`map compose` takes two maps or more).
+        (t / "id.json").write_text(json.dumps({"version": 1, "kind": "affine",
+                                               "matrix": np.eye(3).tolist(),
+                                               "offset": [0.0, 0.0, 0.0]}))
+        src = rng.uniform(lo, hi, (16, 3))
+        dst = src + rng.uniform(-0.05, 0.05, src.shape) * diag
+        for kernel in ("r", "r2logr"):
+            tps = {"version": 1, "kind": "thin-plate", "smoothing": 0.0, "kernel": kernel,
+                   "sources": src.tolist(), "targets": dst.tolist()}
+            (t / f"tps_{kernel}.json").write_text(json.dumps(tps))
+            run(vm, "map", "compose", t / f"tps_{kernel}.json", t / "id.json",
+                "-o", t / f"tps_{kernel}.tfm")
         inner = lo + 0.1 * (hi - lo), hi - 0.1 * (hi - lo)
         p = rng.uniform(inner[0], inner[1], (a.points, 3))
         np.savetxt(t / "p.txt", p, fmt="%.17g")
@@ -99,6 +119,8 @@ def main() -> int:
             ("affine then affine", "aa.tfm", None),
             ("composite: affine then B-spline", "al.tfm", "al.json"),
             ("composite: B-spline then affine", "la.tfm", "la.json"),
+            ("thin-plate spline, kernel r", "tps_r.tfm", "tps_r.json"),
+            ("thin-plate spline, kernel r² ln r", "tps_r2logr.tfm", "tps_r2logr.json"),
         ]
         for name, tfm, own in cases:
             tx = sitk.ReadTransform(str(t / tfm))
@@ -115,7 +137,8 @@ def main() -> int:
                 line += f", JSON form {err_own:.2e}"
                 err = max(err, err_own)
             line += f" (points moved up to {moved:.3g}, box diagonal {diag:.3g})"
-            good = err <= REL_TOL * diag and moved > 1e-3 * diag
+            tol = TPS_REL_TOL if tfm.startswith("tps") else REL_TOL
+            good = err <= tol * diag and moved > 1e-3 * diag
             print(("PASS  " if good else "FAIL  ") + line)
             ok &= good
         ok &= check_fields_and_mat(sitk, vm, t, rng, diag, lo, hi)

@@ -1,5 +1,6 @@
-//! Fuzz the ITK transform reader of the map layer (affine, B-spline, composite): any text must
-//! give a map or an error, never a panic, a hang or an unbounded allocation.
+//! Fuzz the ITK transform reader of the map layer (affine, B-spline, thin-plate kernel,
+//! composite): any text must give a map or an error, never a panic, a hang or an unbounded
+//! allocation.
 #![no_main]
 
 use libfuzzer_sys::fuzz_target;

@@ -1,7 +1,9 @@
 //! ITK text transform files (`.tfm`, `.txt`) for the maps ITK has: affine maps
 //! (`AffineTransform_double_3_3`, also read: `MatrixOffsetTransformBase`, `TranslationTransform`,
 //! `IdentityTransform`), cubic B-spline lattices (`BSplineTransform_double_3_3`, see
-//! `volmorph_lattice::formats::itk_tfm` for the conventions) and compositions of these
+//! `volmorph_lattice::formats::itk_tfm` for the conventions), interpolating thin-plate splines
+//! (`ThinPlateSplineKernelTransform_double_3_3` for the kernel `r`,
+//! `ThinPlateR2LogRSplineKernelTransform_double_3_3` for `r² ln r`) and compositions of these
 //! (`CompositeTransform_double_3_3`).
 //!
 //! # Conventions
@@ -9,6 +11,12 @@
 //! * ITK's affine transform with matrix `M`, translation `t` and centre `c` (the fixed
 //!   parameters) is `x ↦ M (x − c) + c + t`; it is read as the [`Affine`] with offset
 //!   `c + t − M c` and written with centre 0. Parameters are `M` row-major, then `t`.
+//! * ITK's kernel transforms send their source landmarks (`Parameters`, `x y z` per landmark)
+//!   to their target landmarks (`FixedParameters`) by the kernel's radial part plus an affine
+//!   part, solved from the landmarks when the transform is read: the interpolant a
+//!   [`ThinPlateMap`] with the same kernel and smoothing 0 is (it is unique; the two solve it
+//!   in different coordinates, so they agree to rounding). ITK keeps no stiffness, so a
+//!   smoothing spline is refused.
 //! * A `CompositeTransform` applies the transform listed **last** first (ITK applies its queue
 //!   from the back): a file listing `T1, T2` maps `x` to `T1(T2(x))`. An
 //!   [`AnyMap::Compose`] (list order, first first) is therefore written in reverse order, and
@@ -20,6 +28,7 @@
 
 use glam::{DMat3, DVec3};
 use volmorph_deform::Affine;
+use volmorph_handles::{ThinPlateMap, TpsKernel};
 use volmorph_io::fmt_f64;
 use volmorph_lattice::formats::itk_tfm::{ITK_TFM_HEADER, itk_tfm_to_string, parse_itk_tfm};
 
@@ -27,6 +36,13 @@ use crate::{AnyMap, MapError};
 
 /// Transform type written for affine maps.
 pub const ITK_AFFINE_TYPE: &str = "AffineTransform_double_3_3";
+
+/// Transform type written for thin-plate splines with the kernel `r` (ITK's 3-D thin-plate
+/// spline, `G(r) = r`).
+pub const ITK_TPS_TYPE: &str = "ThinPlateSplineKernelTransform_double_3_3";
+
+/// Transform type written for thin-plate splines with the kernel `r² ln r`.
+pub const ITK_TPS_R2LOGR_TYPE: &str = "ThinPlateR2LogRSplineKernelTransform_double_3_3";
 
 /// Transform type written for compositions.
 pub const ITK_COMPOSITE_TYPE: &str = "CompositeTransform_double_3_3";
@@ -46,9 +62,10 @@ pub(crate) struct Block {
 /// The ITK transform file of `map`.
 ///
 /// # Errors
-/// [`MapError::Unsupported`] for maps ITK has no transform for (handle maps, NURBS geometry,
-/// sampled maps, numerical inverses other than of affine maps) and for non-cubic or
-/// non-uniform lattices.
+/// [`MapError::Unsupported`] for maps ITK has no transform for (moving least squares and the
+/// other handle maps but interpolating thin-plate splines, NURBS geometry, sampled maps,
+/// numerical inverses other than of affine maps), for smoothing thin-plate splines and for
+/// non-cubic or non-uniform lattices.
 pub fn to_tfm_string(map: &AnyMap) -> Result<String, MapError> {
     let blocks: Vec<String> = match map {
         AnyMap::Compose(ms) => {
@@ -90,11 +107,39 @@ fn block_of(map: &AnyMap) -> Result<String, MapError> {
                 .map(|l| format!("{l}\n"))
                 .collect())
         }
+        AnyMap::ThinPlate(m) => thin_plate_block(m),
         other => Err(MapError::Unsupported(format!(
             "ITK has no transform for a {} map; write it as .json",
             other.kind()
         ))),
     }
+}
+
+/// The `Transform:` lines of an interpolating thin-plate spline: ITK's kernel transform of
+/// the same kernel, sources as `Parameters` and targets as `FixedParameters` (`x y z` per
+/// landmark), as ITK's `KernelTransform` reads and writes them.
+fn thin_plate_block(m: &ThinPlateMap) -> Result<String, MapError> {
+    let smoothing = m.system().smoothing();
+    if smoothing != 0.0 {
+        return Err(MapError::Unsupported(format!(
+            "a smoothing thin-plate spline (λ = {}) in an ITK file: ITK's kernel transforms \
+             interpolate their landmarks and keep no stiffness; write it as .json",
+            fmt_f64(smoothing)
+        )));
+    }
+    let kind = match m.kernel() {
+        TpsKernel::R => ITK_TPS_TYPE,
+        TpsKernel::R2LogR => ITK_TPS_R2LOGR_TYPE,
+    };
+    let flat = |ps: &[DVec3]| -> String {
+        let v: Vec<String> = ps.iter().flat_map(|p| p.to_array()).map(fmt_f64).collect();
+        v.join(" ")
+    };
+    Ok(format!(
+        "Transform: {kind}\nParameters: {}\nFixedParameters: {}\n",
+        flat(m.sources()),
+        flat(m.targets())
+    ))
 }
 
 /// ITK's 12 parameters of an affine map with centre 0: the matrix row-major, then the
@@ -266,6 +311,40 @@ pub(crate) fn map_of(b: &Block) -> Result<AnyMap, MapError> {
             offset: c + t - matrix * c,
         }));
     }
+    let tps_kernel = if is("ThinPlateSplineKernelTransform") {
+        Some(TpsKernel::R)
+    } else if is("ThinPlateR2LogRSplineKernelTransform") {
+        Some(TpsKernel::R2LogR)
+    } else {
+        None
+    };
+    if let Some(kernel) = tps_kernel {
+        let p = numbers(&b.params, "Parameters", b.line)?;
+        let f = numbers(&b.fixed, "FixedParameters", b.line)?;
+        if p.len() % 3 != 0 || p.len() != f.len() {
+            return Err(parse_err(
+                b.line,
+                format!(
+                    "a kernel transform lists its source landmarks (Parameters) and its target \
+                     landmarks (FixedParameters), x y z each, as many of one as of the other: \
+                     found {} and {} numbers",
+                    p.len(),
+                    f.len()
+                ),
+            ));
+        }
+        let points = |v: &[f64]| -> Vec<DVec3> {
+            v.chunks_exact(3)
+                .map(|c| DVec3::new(c[0], c[1], c[2]))
+                .collect()
+        };
+        return Ok(AnyMap::ThinPlate(ThinPlateMap::with_kernel(
+            &points(&p),
+            &points(&f),
+            0.0,
+            kernel,
+        )?));
+    }
     if kind.starts_with("BSplineTransform") {
         let mut text = format!("{ITK_TFM_HEADER}\n#Transform 0\nTransform: {kind}\n");
         for (name, field) in [("Parameters", &b.params), ("FixedParameters", &b.fixed)] {
@@ -285,7 +364,8 @@ pub(crate) fn map_of(b: &Block) -> Result<AnyMap, MapError> {
     }
     Err(MapError::Unsupported(format!(
         "line {}: transform type {kind}; volmorph reads Identity, Translation, Affine, \
-         MatrixOffsetTransformBase, BSpline and Composite transforms",
+         MatrixOffsetTransformBase, BSpline, ThinPlateSpline, ThinPlateR2LogRSpline and \
+         Composite transforms",
         b.line
     )))
 }

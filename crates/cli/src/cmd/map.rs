@@ -95,7 +95,8 @@ pub struct ComposeArgs {
     /// The maps, in the order they apply.
     #[arg(required = true, num_args = 2..)]
     pub maps: Vec<PathBuf>,
-    /// The composition (.json, or .tfm when every part is affine or a cubic B-spline).
+    /// The composition (.json, or .tfm when every part is affine, a cubic B-spline or an
+    /// interpolating thin-plate spline).
     #[arg(short, long)]
     pub output: PathBuf,
 }

@@ -3,3 +3,4 @@
 
 mod conformance;
 mod fields;
+mod itk_tps;
