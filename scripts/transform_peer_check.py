@@ -24,8 +24,8 @@ Then the other transform files:
   by volmorph, and the affine volmorph writes read by SimpleITK.
 
 Usage:  python3 scripts/transform_peer_check.py [--volmorph target/release/volmorph]
-Exits 0 with a SKIP message when SimpleITK is not installed or the binary is missing; 1 when a
-check fails.
+Exits 0 with a SKIP message when numpy or SimpleITK is not installed or the binary is
+missing; 1 when a check fails.
 """
 
 from __future__ import annotations
@@ -37,7 +37,10 @@ import sys
 import tempfile
 from pathlib import Path
 
-import numpy as np
+try:
+    import numpy as np
+except ImportError:  # main() skips
+    np = None
 
 ROOT = Path(__file__).resolve().parent.parent
 #: Largest allowed distance between the peers' mapped points, relative to the box diagonal.
@@ -64,6 +67,9 @@ def main() -> int:
     ap.add_argument("--volmorph", default=str(ROOT / "target/release/volmorph"))
     ap.add_argument("--points", type=int, default=500)
     a = ap.parse_args()
+    if np is None:
+        print("SKIP: numpy is not installed (pip install numpy SimpleITK)")
+        return 0
     try:
         import SimpleITK as sitk
     except ImportError:
