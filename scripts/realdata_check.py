@@ -30,7 +30,10 @@ import sys
 import tempfile
 from pathlib import Path
 
-import numpy as np
+try:
+    import numpy as np
+except ImportError:  # main() skips: every peer reader below needs it
+    np = None
 
 ROOT = Path(__file__).resolve().parent.parent
 RESULTS: list[tuple[str, str, str]] = []
@@ -327,6 +330,9 @@ def main() -> int:
     ap.add_argument("--volmorph", help="path of the volmorph binary")
     ap.add_argument("--max-files", type=int, default=200, help="most pydicom files to check")
     a = ap.parse_args()
+    if np is None:
+        print("SKIP: numpy is not installed (pip install numpy nibabel pydicom)")
+        return 0
     exe = find_volmorph(a.volmorph)
     if exe is None:
         print("SKIP: no volmorph binary (cargo build --release -p volmorph-cli)")
