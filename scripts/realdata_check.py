@@ -37,7 +37,8 @@ except ImportError:  # main() skips: every peer reader below needs it
 
 ROOT = Path(__file__).resolve().parent.parent
 RESULTS: list[tuple[str, str, str]] = []
-LPS = np.diag([-1.0, -1.0, 1.0, 1.0])
+#: RAS ↔ LPS (flip x and y), as a 4 × 4 matrix (None without numpy: main() skips).
+LPS = None if np is None else np.diag([-1.0, -1.0, 1.0, 1.0])
 
 
 def record(name: str, status: str, detail: str = "") -> None:
