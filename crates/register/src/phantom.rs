@@ -33,7 +33,7 @@
 //! through the inverse of the field, so the field maps fixed points to moving points like every
 //! map in this crate.
 
-use glam::DVec3;
+use glam::{DMat3, DVec3};
 use rayon::prelude::*;
 use volmorph_deform::SpaceMap;
 use volmorph_lattice::BSplineLattice;
@@ -121,16 +121,42 @@ pub struct BreathingMotion {
     pub envelope: [f64; 2],
 }
 
-impl SpaceMap for BreathingMotion {
-    fn apply(&self, p: DVec3) -> DVec3 {
+impl BreathingMotion {
+    /// The envelope `e = exp(−(x/a)² − (y/b)²)` and the base-to-apex fade
+    /// `s = 1 / (1 + exp((z − z_mid)/fade))` at `p`.
+    fn factors(&self, p: DVec3) -> (f64, f64) {
         let e = (-(p.x / self.envelope[0]).powi(2) - (p.y / self.envelope[1]).powi(2)).exp();
         let s = 1.0 / (1.0 + ((p.z - self.z_mid) / self.fade).exp());
+        (e, s)
+    }
+}
+
+impl SpaceMap for BreathingMotion {
+    fn apply(&self, p: DVec3) -> DVec3 {
+        let (e, s) = self.factors(p);
         let d = DVec3::new(
             -self.lateral * p.x * e * (0.5 + 0.5 * s),
             -self.ap * p.y * e * s,
             self.amplitude * e * s,
         );
         p + d
+    }
+
+    /// Analytic: with `∂e/∂x = −2x e/a²`, `∂e/∂y = −2y e/b²` and `∂s/∂z = −s(1 − s)/fade`
+    /// (the logistic's derivative; `0` where `s` saturates), the displacement's partial
+    /// derivatives added to the identity.
+    fn jacobian(&self, p: DVec3) -> DMat3 {
+        let (e, s) = self.factors(p);
+        let [a, b] = self.envelope;
+        let (ex, ey) = (-2.0 * p.x / (a * a) * e, -2.0 * p.y / (b * b) * e);
+        let sz = -s * (1.0 - s) / self.fade;
+        let h = 0.5 + 0.5 * s;
+        let (l, ap, amp) = (self.lateral, self.ap, self.amplitude);
+        // Columns ∂/∂x, ∂/∂y, ∂/∂z of (d_x, d_y, d_z).
+        let dx = DVec3::new(-l * h * (e + p.x * ex), -ap * p.y * s * ex, amp * s * ex);
+        let dy = DVec3::new(-l * p.x * h * ey, -ap * s * (e + p.y * ey), amp * s * ey);
+        let dz = DVec3::new(-l * p.x * e * 0.5 * sz, -ap * p.y * e * sz, amp * e * sz);
+        DMat3::IDENTITY + DMat3::from_cols(dx, dy, dz)
     }
 }
 

@@ -1,6 +1,7 @@
 //! [`Refined`] (a registration's exact result: an initial map plus a correction lattice,
-//! `φ(x) = base(x) + L(x) − x`) in the `SpaceMap` conformance suite. Its file form is the pair
-//! the registration writes: the initial map (`handle_map.json`) and the correction lattice
+//! `φ(x) = base(x) + L(x) − x`) and [`BreathingMotion`] (the lung phantom's known motion) in
+//! the `SpaceMap` conformance suite. `Refined`'s file form is the pair the registration
+//! writes: the initial map (`handle_map.json`) and the correction lattice
 //! (`correction.json`), map JSON each.
 
 use glam::{DMat3, DVec3};
@@ -8,6 +9,7 @@ use volmorph_deform::Affine;
 use volmorph_lattice::BSplineLattice;
 use volmorph_maps::{AnyMap, read_map, write_map};
 use volmorph_register::dense::Refined;
+use volmorph_register::phantom::BreathingMotion;
 use volmorph_testkit::{Conformance, space_map_conformance};
 
 const LO: DVec3 = DVec3::splat(-10.0);
@@ -87,3 +89,54 @@ space_map_conformance!(
         round_trip,
     }
 );
+
+/// The lung phantom's known breathing motion `φ` (shaped like the phantom's: a 20 mm
+/// superior motion of the base fading towards the apex, front-to-back and side-to-side
+/// contraction inside the thorax envelope); the identity when it does not move.
+fn breathing(moving: bool) -> BreathingMotion {
+    let k = if moving { 1.0 } else { 0.0 };
+    BreathingMotion {
+        amplitude: 20.0 * k,
+        z_mid: -2.0,
+        fade: 6.0,
+        ap: 0.04 * k,
+        lateral: 0.02 * k,
+        envelope: [14.0, 11.0],
+    }
+}
+
+/// `BreathingMotion` is the phantom's ground truth and has no file form: the suite's other
+/// properties run (its analytic Jacobian against central differences among them).
+fn no_file_form(_: &BreathingMotion) -> BreathingMotion {
+    unreachable!("the breathing motion has no file form; its round trip is not checked")
+}
+
+mod breathing_motion {
+    use super::*;
+    use volmorph_testkit::conformance::{check_batch_and_grid, check_identity, check_jacobian};
+
+    fn suite() -> Conformance<BreathingMotion> {
+        Conformance {
+            make: || breathing(true),
+            identity: || breathing(false),
+            domain: (LO, HI),
+            jacobian_tolerance: 1e-6,
+            round_trip: no_file_form,
+        }
+    }
+
+    #[test]
+    fn apply_batch_and_grid_agree() {
+        check_batch_and_grid(&suite());
+    }
+
+    #[test]
+    fn analytic_jacobian_matches_central_differences() {
+        check_jacobian(&suite());
+    }
+
+    #[test]
+    fn identity_parameters_give_the_identity() {
+        check_identity(&suite());
+    }
+}
