@@ -82,6 +82,16 @@ impl SampledMap {
         Ok(g)
     }
 
+    /// [`SampledMap::covering`] with `n` nodes per axis, but no more nodes on an axis than
+    /// `geometry` has voxels (and at least one): the coarse grid of a map sampled at most `n`
+    /// times per axis over `geometry`.
+    ///
+    /// # Errors
+    /// As [`SampledMap::covering`].
+    pub fn covering_at_most(geometry: &Geometry, n: usize) -> Result<Geometry, DeformError> {
+        Self::covering(geometry, geometry.dims.map(|d| n.min(d).max(1)))
+    }
+
     /// The sampling grid.
     #[must_use]
     pub fn grid(&self) -> &Geometry {

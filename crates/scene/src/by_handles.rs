@@ -103,7 +103,8 @@ pub fn warp_volume(
         &options,
         progress,
     )?;
-    let coarse = SampledMap::covering(&grid, grid.dims.map(|d| how.grid.min(d).max(1)))?;
+    // The grid the warp samples the map on (`sampled_nodes`), also for an exact warp.
+    let coarse = SampledMap::covering_at_most(&grid, how.grid)?;
     let report = FoldingReport::of_map(&map, &coarse)?;
     Ok((out.volume, report))
 }

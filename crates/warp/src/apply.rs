@@ -219,8 +219,7 @@ pub fn warp_volume_with<'a>(
     let sampled = match options.sampled_nodes {
         None => None,
         Some(n) if n >= 2 => {
-            let nodes = output.dims.map(|d| n.min(d).max(1));
-            let grid = SampledMap::covering(output, nodes).map_err(WarpError::Map)?;
+            let grid = SampledMap::covering_at_most(output, n).map_err(WarpError::Map)?;
             Some(SampledMap::from_map(map, grid).map_err(WarpError::Map)?)
         }
         Some(n) => {
