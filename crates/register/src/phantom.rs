@@ -129,23 +129,30 @@ impl BreathingMotion {
         let s = 1.0 / (1.0 + ((p.z - self.z_mid) / self.fade).exp());
         (e, s)
     }
+
+    /// The displacement at `p`, given its [`factors`](Self::factors) `(e, s)`.
+    fn displacement(&self, p: DVec3, (e, s): (f64, f64)) -> DVec3 {
+        DVec3::new(
+            -self.lateral * p.x * e * (0.5 + 0.5 * s),
+            -self.ap * p.y * e * s,
+            self.amplitude * e * s,
+        )
+    }
 }
 
 impl SpaceMap for BreathingMotion {
     fn apply(&self, p: DVec3) -> DVec3 {
-        let (e, s) = self.factors(p);
-        let d = DVec3::new(
-            -self.lateral * p.x * e * (0.5 + 0.5 * s),
-            -self.ap * p.y * e * s,
-            self.amplitude * e * s,
-        );
-        p + d
+        p + self.displacement(p, self.factors(p))
+    }
+
+    fn jacobian(&self, p: DVec3) -> DMat3 {
+        self.apply_with_jacobian(p).1
     }
 
     /// Analytic: with `∂e/∂x = −2x e/a²`, `∂e/∂y = −2y e/b²` and `∂s/∂z = −s(1 − s)/fade`
     /// (the logistic's derivative; `0` where `s` saturates), the displacement's partial
-    /// derivatives added to the identity.
-    fn jacobian(&self, p: DVec3) -> DMat3 {
+    /// derivatives added to the identity. The two exponentials are taken once for both.
+    fn apply_with_jacobian(&self, p: DVec3) -> (DVec3, DMat3) {
         let (e, s) = self.factors(p);
         let [a, b] = self.envelope;
         let (ex, ey) = (-2.0 * p.x / (a * a) * e, -2.0 * p.y / (b * b) * e);
@@ -156,7 +163,10 @@ impl SpaceMap for BreathingMotion {
         let dx = DVec3::new(-l * h * (e + p.x * ex), -ap * p.y * s * ex, amp * s * ex);
         let dy = DVec3::new(-l * p.x * h * ey, -ap * s * (e + p.y * ey), amp * s * ey);
         let dz = DVec3::new(-l * p.x * e * 0.5 * sz, -ap * p.y * e * sz, amp * e * sz);
-        DMat3::IDENTITY + DMat3::from_cols(dx, dy, dz)
+        (
+            p + self.displacement(p, (e, s)),
+            DMat3::IDENTITY + DMat3::from_cols(dx, dy, dz),
+        )
     }
 }
 
