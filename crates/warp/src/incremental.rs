@@ -1249,7 +1249,10 @@ fn swap_hood(
     all_sane: bool,
     h: &mut Hulls,
 ) {
-    let Some(row) = job.hood.and_then(|(a, b)| full.get_mut(a..b)) else {
+    let Some((a, b)) = job.hood else {
+        return;
+    };
+    let Some(row) = full.get_mut(a..b) else {
         return;
     };
     h.old.add_all(row);
@@ -1257,8 +1260,8 @@ fn swap_hood(
         return;
     };
     let dst = job
-        .hood
-        .and_then(|(a, _)| job.at.checked_sub(a))
+        .at
+        .checked_sub(a)
         .and_then(|x| row.get_mut(x..x + src.len()));
     let Some(dst) = dst else {
         return;
