@@ -131,10 +131,7 @@ fn thin_plate_block(m: &ThinPlateMap) -> Result<String, MapError> {
         TpsKernel::R => ITK_TPS_TYPE,
         TpsKernel::R2LogR => ITK_TPS_R2LOGR_TYPE,
     };
-    let flat = |ps: &[DVec3]| -> String {
-        let v: Vec<String> = ps.iter().flat_map(|p| p.to_array()).map(fmt_f64).collect();
-        v.join(" ")
-    };
+    let flat = |ps: &[DVec3]| numbers_text(ps.iter().flat_map(|p| p.to_array()));
     Ok(format!(
         "Transform: {kind}\nParameters: {}\nFixedParameters: {}\n",
         flat(m.sources()),
@@ -151,11 +148,16 @@ pub(crate) fn affine_parameters(a: &Affine) -> [f64; 12] {
     p
 }
 
+/// `values` as the text of a `Parameters` line: shortest round-trip numbers, one space apart.
+pub(crate) fn numbers_text(values: impl IntoIterator<Item = f64>) -> String {
+    let v: Vec<String> = values.into_iter().map(fmt_f64).collect();
+    v.join(" ")
+}
+
 fn affine_block(a: &Affine) -> String {
-    let params: Vec<String> = affine_parameters(a).iter().map(|v| fmt_f64(*v)).collect();
     format!(
         "Transform: {ITK_AFFINE_TYPE}\nParameters: {}\nFixedParameters: 0 0 0\n",
-        params.join(" ")
+        numbers_text(affine_parameters(a))
     )
 }
 
@@ -333,11 +335,8 @@ pub(crate) fn map_of(b: &Block) -> Result<AnyMap, MapError> {
                 ),
             ));
         }
-        let points = |v: &[f64]| -> Vec<DVec3> {
-            v.chunks_exact(3)
-                .map(|c| DVec3::new(c[0], c[1], c[2]))
-                .collect()
-        };
+        let points =
+            |v: &[f64]| -> Vec<DVec3> { v.chunks_exact(3).map(DVec3::from_slice).collect() };
         return Ok(AnyMap::ThinPlate(ThinPlateMap::with_kernel(
             &points(&p),
             &points(&f),

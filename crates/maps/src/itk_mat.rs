@@ -168,12 +168,7 @@ fn matrices(bytes: &[u8]) -> Result<Vec<Matrix>, MapError> {
 /// transforms, and the transform types [`crate::itk`] refuses.
 pub fn parse_mat(bytes: &[u8]) -> Result<AnyMap, MapError> {
     let ms = matrices(bytes)?;
-    let text = |v: &[f64]| {
-        v.iter()
-            .map(|x| volmorph_io::fmt_f64(*x))
-            .collect::<Vec<_>>()
-            .join(" ")
-    };
+    let text = |v: &[f64]| crate::itk::numbers_text(v.iter().copied());
     match ms.as_slice() {
         [] => Err(bad("no matrices")),
         [params, fixed] => {
