@@ -11,6 +11,7 @@ use volmorph_trivariate::GeometryMap;
 use volmorph_volume::{Geometry, IndexBox};
 
 use crate::field::DisplacementField;
+use crate::refined::Refined;
 
 /// Every kind of space map, as one value that can be stored, written to a file (JSON, and ITK
 /// `.tfm` where ITK has the same transform) and applied. Each variant keeps its own direction
@@ -57,6 +58,9 @@ pub enum AnyMap {
     Compose(Vec<AnyMap>),
     /// The numerical inverse (Newton) of a map.
     Inverse(Box<Inverse<AnyMap>>),
+    /// A map plus a lattice correction, `x ↦ base(x) + L(x) − x` (a dense registration's
+    /// result).
+    Refined(Box<Refined<AnyMap>>),
 }
 
 impl AnyMap {
@@ -77,6 +81,7 @@ impl AnyMap {
             AnyMap::DisplacementField(_) => "displacement-field",
             AnyMap::Compose(_) => "compose",
             AnyMap::Inverse(_) => "inverse",
+            AnyMap::Refined(_) => "refined",
         }
     }
 
@@ -137,6 +142,13 @@ impl AnyMap {
                 ms.iter().map(AnyMap::kind).collect::<Vec<_>>().join(" → ")
             ),
             AnyMap::Inverse(i) => format!("inverse of {}", i.map().summary()),
+            AnyMap::Refined(r) => {
+                let [cx, cy, cz] = r.correction.counts();
+                format!(
+                    "{} refined by a correction lattice of {cx}×{cy}×{cz} control points",
+                    r.base.summary()
+                )
+            }
         }
     }
 
@@ -212,6 +224,7 @@ impl AnyMap {
             AnyMap::DisplacementField(m) => m,
             AnyMap::Compose(_) => self,
             AnyMap::Inverse(m) => m.as_ref(),
+            AnyMap::Refined(m) => m.as_ref(),
         }
     }
 }
@@ -339,6 +352,12 @@ from_map!(
 impl From<Identity> for AnyMap {
     fn from(_: Identity) -> Self {
         AnyMap::Identity
+    }
+}
+
+impl From<Refined<AnyMap>> for AnyMap {
+    fn from(m: Refined<AnyMap>) -> Self {
+        AnyMap::Refined(Box::new(m))
     }
 }
 

@@ -1,7 +1,7 @@
 //! The JSON form of every map: one document per map, tagged by `"kind"`.
 //!
 //! A map file is a JSON object with `"version": 1` and a `"kind"`; nested maps (inside
-//! `compose` and `inverse`) are the same objects, where `version` may be left out. Numbers are
+//! `compose`, `inverse` and `refined`) are the same objects, where `version` may be left out. Numbers are
 //! written with the shortest text that reads back to the same `f64`, so a write/read round trip
 //! is exact. Points are `[x, y, z]` in physical units; matrices are lists of **rows**.
 //!
@@ -20,6 +20,7 @@
 //! | `displacement-field` | `grid` (as `sampled`), `displacements` (x fastest, physical units): `x ↦ x + d(x)`, zero beyond half a voxel outside the grid (ITK's `DisplacementFieldTransform`) |
 //! | `compose` | `maps`: applied in list order, the first first |
 //! | `inverse` | `map`, optional `tolerance` (physical units), `max_iterations` |
+//! | `refined` | `base` (a map), `correction` (a `bspline-lattice` map `L`): `x ↦ base(x) + L(x) − x` |
 //!
 //! `weighting` is `{"type": "inverse-distance", "alpha": α}` or `{"type": "gaussian",
 //! "sigma": σ}`. Handle maps send each source to its target (push-forward).
@@ -370,6 +371,11 @@ impl AnyMap {
                     "max_iterations": o.max_iterations,
                 })
             }
+            AnyMap::Refined(r) => json!({
+                "kind": "refined",
+                "base": r.base.to_json_value()?,
+                "correction": AnyMap::Lattice(r.correction.clone()).to_json_value()?,
+            }),
         })
     }
 
@@ -610,11 +616,32 @@ impl AnyMap {
                     options,
                 )))
             }
+            "refined" => {
+                if let Some(k) = obj
+                    .keys()
+                    .find(|k| !["kind", "version", "base", "correction"].contains(&k.as_str()))
+                {
+                    return Err(MapError::Invalid(format!("refined: unknown field {k:?}")));
+                }
+                let field = |name: &str| {
+                    obj.get(name)
+                        .ok_or_else(|| MapError::Invalid(format!("refined: missing \"{name}\"")))
+                };
+                let base = Self::from_json_value(field("base")?, depth + 1)?;
+                let AnyMap::Lattice(correction) =
+                    Self::from_json_value(field("correction")?, depth + 1)?
+                else {
+                    return Err(MapError::Invalid(
+                        "refined: \"correction\" must be a bspline-lattice map".into(),
+                    ));
+                };
+                AnyMap::Refined(Box::new(crate::Refined { base, correction }))
+            }
             other => {
                 return Err(MapError::Invalid(format!(
                     "unknown map kind {other:?} (known: identity, affine, bspline-lattice, mls, \
                      frame-mls, thin-plate, wendland, bump, nurbs-geometry, sampled, displacement-field, compose, \
-                     inverse)"
+                     inverse, refined)"
                 )));
             }
         })

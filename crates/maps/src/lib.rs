@@ -3,7 +3,8 @@
 //! * [`AnyMap`] — one value for every kind of map: identity, affine, B-spline lattices, MLS
 //!   (affine, similarity, rigid, frames), thin-plate splines, Wendland compact-support splines,
 //!   Bryson's bump, NURBS geometry,
-//!   sampled maps, compositions and numerical inverses. It is a
+//!   sampled maps, displacement fields, compositions, numerical inverses and refined maps
+//!   (a map plus a lattice correction, [`Refined`]). It is a
 //!   [`SpaceMap`](volmorph_deform::SpaceMap) that keeps each kind's fast paths.
 //! * [`json`] — the tagged, versioned JSON form of every kind; [`itk`] — ITK text transforms
 //!   for the kinds ITK has (affine, B-spline, composite); [`itk_mat`] — ITK/ANTs MATLAB `.mat`
@@ -41,6 +42,7 @@ pub mod itk;
 pub mod itk_mat;
 pub mod json;
 pub mod live;
+pub mod refined;
 
 pub use any::AnyMap;
 pub use error::MapError;
@@ -48,3 +50,4 @@ pub use field::DisplacementField;
 pub use file::{MapFormat, read_map, write_field, write_map};
 pub use from_handles::{HandleDirection, HandleMethod, HandleOptions, handle_map};
 pub use live::LiveMap;
+pub use refined::Refined;

@@ -5,7 +5,7 @@
 //! φ(x) = h(x) + (L(x) − x)
 //! ```
 //!
-//! with `h` the initial map and `L` a lattice that starts as the identity ([`Refined`] is this
+//! with `h` the initial map and `L` a lattice that starts as the identity ([`Refined`](volmorph_maps::Refined) is this
 //! sum as a map). The handle solution is kept exactly; the lattice adds what the intensities
 //! show beyond it.
 //!
@@ -164,41 +164,6 @@ pub struct DenseResult {
     pub correction: BSplineLattice,
     /// Per level, coarsest first.
     pub levels: Vec<DenseLevel>,
-}
-
-/// An initial map plus a lattice correction, `φ(x) = base(x) + L(x) − x` (see the
-/// [module docs](self)); `Dφ = D base + D L − I`.
-#[derive(Debug, Clone)]
-pub struct Refined<M> {
-    /// The initial map.
-    pub base: M,
-    /// The correction lattice.
-    pub correction: BSplineLattice,
-}
-
-impl<M: SpaceMap> SpaceMap for Refined<M> {
-    fn apply(&self, p: DVec3) -> DVec3 {
-        self.base.apply(p) + self.correction.apply(p) - p
-    }
-    fn jacobian(&self, p: DVec3) -> DMat3 {
-        self.base.jacobian(p) + self.correction.jacobian(p) - DMat3::IDENTITY
-    }
-    fn apply_grid(
-        &self,
-        grid: &Geometry,
-        out: &mut [DVec3],
-    ) -> Result<(), volmorph_deform::DeformError> {
-        self.base.apply_grid(grid, out)?;
-        let mut c = vec![DVec3::ZERO; out.len()];
-        self.correction.apply_grid(grid, &mut c)?;
-        out.par_iter_mut()
-            .zip(c.par_iter())
-            .enumerate()
-            .for_each(|(n, (o, l))| {
-                *o += *l - crate::image::voxel_position(grid, n);
-            });
-        Ok(())
-    }
 }
 
 /// A uniform cubic lattice with `regions` cells per axis on the voxel-centre box of `g`, the
@@ -874,7 +839,7 @@ pub fn refine_with(
         let mut base = vec![DVec3::ZERO; samples.grid.len()];
         initial.apply_grid(&samples.grid, &mut base)?;
         base.par_iter_mut().enumerate().for_each(|(n, b)| {
-            *b -= crate::image::voxel_position(&samples.grid, n);
+            *b -= samples.grid.voxel_position(n);
         });
         let identity = lattice_on(&g0, lat.counts().map(|n| n - 3))?.control_points();
         let counts = lat.counts();

@@ -327,18 +327,6 @@ pub fn same_grid(a: &Geometry, b: &Geometry, what: &str) -> Result<(), RegisterE
     }
 }
 
-/// Physical position of voxel `n` (linear index, x fastest) of `g`.
-#[inline]
-#[must_use]
-pub fn voxel_position(g: &Geometry, n: usize) -> DVec3 {
-    let [nx, ny, _] = g.dims;
-    g.index_to_physical(DVec3::new(
-        (n % nx) as f64,
-        (n / nx % ny) as f64,
-        (n / (nx * ny)) as f64,
-    ))
-}
-
 #[cfg(test)]
 mod tests {
     use super::*;

@@ -356,12 +356,8 @@ pub fn segment_lungs_with(
         ));
     }
     step()?;
-    let mean_x = |v: &Vec<usize>| {
-        v.iter()
-            .map(|&n| crate::image::voxel_position(&g, n).x)
-            .sum::<f64>()
-            / v.len() as f64
-    };
+    let mean_x =
+        |v: &Vec<usize>| v.iter().map(|&n| g.voxel_position(n).x).sum::<f64>() / v.len() as f64;
     if mean_x(&lungs[0]) > mean_x(&lungs[1]) {
         lungs.swap(0, 1);
     }

@@ -706,7 +706,7 @@ pub fn known_deformation(
             .par_iter_mut()
             .enumerate()
             .for_each(|(n, v)| {
-                let p = crate::image::voxel_position(&g, n);
+                let p = g.voxel_position(n);
                 let t = ((f64::from(*v) - lo) / range).clamp(0.0, 1.0);
                 let gamma = t.powf(0.8);
                 let bias =

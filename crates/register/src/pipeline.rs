@@ -11,8 +11,7 @@
 //! | `handles.json` | the used correspondences as a volmorph handle file (frames for `--method frames`) |
 //! | `correspondences.json` | every handle with its match, NCC, distinctness, confidence, residual, status |
 //! | `handle_map.json` | the handle map, exact, as volmorph map JSON |
-//! | `correction.json` | with `--dense`: the correction lattice `L` (map JSON); the exact map is `h + L − id` |
-//! | `map.json` | the result as one map JSON: the handle map, or (refined) the lattice of `map.tfm` |
+//! | `map.json` | the result, exact, as one map JSON: the handle map, or with `--dense` the handle map plus the correction lattice `L` (`"kind": "refined"`, `x ↦ h(x) + L(x) − x`) |
 //! | `map.tfm` | a cubic B-spline lattice fitted to the map as an ITK `BSplineTransform` (fit error in the report) |
 //! | `displacement.mha` | `φ(x) − x` on the fixed grid as a 3-component MetaImage (ITK's displacement field) |
 //! | `warped.<ext>` | the moving scan resampled on the fixed grid through the map |
@@ -33,14 +32,14 @@ use serde::Serialize;
 use serde_json::json;
 use volmorph_deform::{Identity, SampledMap, SpaceMap};
 use volmorph_lattice::BSplineLattice;
-use volmorph_maps::{AnyMap, HandleMethod, write_map};
+use volmorph_maps::{AnyMap, HandleMethod, Refined, write_map};
 use volmorph_volume::sample::Interpolation;
 use volmorph_volume::{AnyVolume, Geometry, Volume};
 use volmorph_warp::jacobian::FoldingReport;
 use volmorph_warp::pullback::{ResampleOptions, resample};
 
 use crate::RegisterError;
-use crate::dense::{DenseOptions, Refined, fit_to_map, lattice_on, refine_with};
+use crate::dense::{DenseOptions, fit_to_map, lattice_on, refine_with};
 use crate::matching::{Correspondence, MatchOptions, MatchStatus, match_handles_with};
 use crate::metrics::{ImageMetrics, compare};
 use crate::quality::{
@@ -504,7 +503,7 @@ pub fn write_displacement_field(
         w.write_all(header.as_bytes()).map_err(os)?;
         let mut buf = Vec::with_capacity(12 * 4096);
         for (n, p) in phi.iter().enumerate() {
-            let x = crate::image::voxel_position(grid, n);
+            let x = grid.voxel_position(n);
             for c in (*p - x).to_array() {
                 buf.extend_from_slice(&(c as f32).to_le_bytes());
             }
@@ -650,12 +649,11 @@ pub fn lattice_for_export(
 /// * `handles.json` — the used correspondences as a volmorph handle file (frames for the frame
 ///   method), `correspondences.json` — every handle with its match and scores;
 /// * `handle_map.json` — the handle map, exact, as volmorph map JSON (`volmorph_maps`);
-/// * `correction.json` — for a refined map, the correction lattice `L` (map JSON), so that the
-///   exact result is `φ(x) = h(x) + L(x) − x` ([`Refined`]);
-/// * `map.json` — the result as one map: the handle map itself when not refined, otherwise
-///   `export` (a cubic B-spline lattice fitted to `φ`, [`lattice_for_export`]);
-/// * `map.tfm` — `export` as an ITK `BSplineTransform` (what ITK, elastix's transformix and
-///   3D Slicer read).
+/// * `map.json` — the result, exact, as one map: the handle map itself when not refined,
+///   otherwise the [`Refined`] map `φ(x) = h(x) + L(x) − x` (`"kind": "refined"`);
+/// * `map.tfm` — `export` (a cubic B-spline lattice fitted to `φ`, [`lattice_for_export`]) as
+///   an ITK `BSplineTransform` (what ITK, elastix's transformix and 3D Slicer read; ITK has no
+///   transform that adds a correction to a kernel transform).
 ///
 /// # Errors
 /// [`RegisterError::Io`] / [`RegisterError::Maps`] naming the file that could not be written.
@@ -674,19 +672,11 @@ pub fn write_map_files(
     let mut files: Vec<String> = ["handles.json", "correspondences.json", "handle_map.json"]
         .map(String::from)
         .into();
-    let export = AnyMap::Lattice(export.clone());
     match &reg.refined {
-        Some(r) => {
-            write_map(
-                &path("correction.json"),
-                &AnyMap::Lattice(r.correction.clone()),
-            )?;
-            write_map(&path("map.json"), &export)?;
-            files.push("correction.json".into());
-        }
+        Some(r) => write_map(&path("map.json"), &AnyMap::from(r.clone()))?,
         None => write_map(&path("map.json"), &reg.handle_map)?,
     }
-    write_map(&path("map.tfm"), &export)?;
+    write_map(&path("map.tfm"), &AnyMap::Lattice(export.clone()))?;
     files.extend(["map.json".into(), "map.tfm".into()]);
     Ok(files)
 }

@@ -161,6 +161,21 @@ impl Geometry {
         self.origin + self.direction * (self.spacing * index)
     }
 
+    /// Physical position of the voxel at linear offset `n` (x fastest, as
+    /// [`Geometry::offset`]): the inverse of `offset` followed by
+    /// [`Geometry::index_to_physical`]. No bounds check: `n` beyond the grid gives a position
+    /// beyond its last plane.
+    #[inline]
+    #[must_use]
+    pub fn voxel_position(&self, n: usize) -> DVec3 {
+        let [nx, ny, _] = self.dims;
+        self.index_to_physical(DVec3::new(
+            (n % nx) as f64,
+            (n / nx % ny) as f64,
+            (n / (nx * ny)) as f64,
+        ))
+    }
+
     /// Continuous index of physical point `p` (inverse of [`Geometry::index_to_physical`]).
     /// Requires a valid (non-singular) geometry.
     #[inline]

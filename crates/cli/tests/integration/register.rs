@@ -211,10 +211,11 @@ fn every_register_step_runs_on_a_small_phantom() {
         "mi",
     ]);
     assert!(out.contains("dense"), "{out}");
-    all_exist(
-        &dir.path().join("all"),
-        &["report.json", "correction.json", "map.json"],
-    );
+    all_exist(&dir.path().join("all"), &["report.json", "map.json"]);
+    // The refined result is one exact map file: the handle map plus the correction lattice.
+    let info = ok(&["map", "info", &d("all/map.json")]);
+    assert!(info.contains("refined by a correction lattice"), "{info}");
+    assert!(!dir.path().join("all/correction.json").exists());
     ok(&[
         "register",
         "known-pair",

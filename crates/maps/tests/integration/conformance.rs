@@ -417,6 +417,61 @@ space_map_conformance!(
     )
 );
 
+space_map_conformance!(
+    refined_thin_plate_plus_lattice,
+    suite(
+        || {
+            AnyMap::from(volmorph_maps::Refined {
+                base: AnyMap::ThinPlate(tps(false)),
+                correction: lattice(1.2, true),
+            })
+        },
+        || {
+            AnyMap::from(volmorph_maps::Refined {
+                base: AnyMap::Identity,
+                correction: lattice(0.0, false),
+            })
+        },
+        1e-5
+    )
+);
+
+/// A refined map file names what is wrong with it: a correction that is not a lattice, a
+/// missing base, an unknown field.
+#[test]
+fn refined_map_files_name_what_is_wrong() {
+    let lattice = AnyMap::Lattice(lattice(0.0, false))
+        .to_json_value()
+        .unwrap();
+    let affine = AnyMap::Affine(affine(false)).to_json_value().unwrap();
+    let doc = |fields: serde_json::Value| {
+        let mut v = serde_json::json!({"version": 1, "kind": "refined"});
+        for (k, x) in fields.as_object().unwrap() {
+            v[k] = x.clone();
+        }
+        AnyMap::from_json(&v.to_string())
+    };
+    let ok = doc(serde_json::json!({"base": affine, "correction": lattice})).unwrap();
+    assert_eq!(ok.kind(), "refined");
+    for (fields, want) in [
+        (
+            serde_json::json!({"base": lattice, "correction": affine}),
+            "\"correction\" must be a bspline-lattice map",
+        ),
+        (
+            serde_json::json!({"correction": lattice}),
+            "refined: missing \"base\"",
+        ),
+        (
+            serde_json::json!({"base": affine, "correction": lattice, "scale": 2}),
+            "refined: unknown field \"scale\"",
+        ),
+    ] {
+        let e = doc(fields).unwrap_err().to_string();
+        assert!(e.contains(want), "{e}");
+    }
+}
+
 linear_map_conformance!(
     live_lattice,
     live_suite(
