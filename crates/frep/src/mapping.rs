@@ -20,10 +20,14 @@
 //! | mapping | formula | type |
 //! | --- | --- | --- |
 //! | coordinate space mapping (Eq. 15) | `f(φ⁻¹(x'))` with `φ⁻¹` given as a map | [`Pullback`] |
-//! | inverse displacement (Eq. 16) | `f(x' + s·d(x'))` with `d` given as a map | [`Displaced`] |
+//! | inverse displacement (Eq. 16) | `f(x' + s·d(x'))` with `d` a [`Displacement`] | [`Displaced`] |
 //! | combined mapping (Eq. 18) | `(1 − h₁(t)) f(x' + h₂(t) d₂(x')) + h₁(t) d₁(x')` | [`Combined`] |
 //!
 //! Schedules `h(t)` for metamorphosis and combined mappings are [`Schedule`]s.
+//!
+//! A displacement `d(x)` is a vector per point, not a moved point, so it is a
+//! [`Displacement`], not a [`SpaceMap`]; [`Displacing`] is the space map `x ↦ x + s·d(x)` it
+//! defines (what [`Displaced`] pulls the defining function back through).
 //!
 //! Control-point coordinate mappings (§4.2 with the Appendix's volume spline) are a
 //! [`Displaced`] field over a [`SplineDisplacement`], built by [`displace_by_handles`]. The
@@ -395,8 +399,65 @@ impl<F: Field, M: SpaceMap> Field for Pullback<F, M> {
     }
 }
 
-/// Inverse mapping by displacement (Eq. 16): `f(x' + scale · d(x'))`, where `displacement`
-/// is a map whose value **is** the displacement vector `d(x')` (not a moved point).
+/// A displacement field `d(x)`: the vector (physical units) by which the point `x` moves, not
+/// the moved point. [`Displacing`] turns it into the space map `x ↦ x + s·d(x)`.
+pub trait Displacement: Send + Sync {
+    /// The displacement `d(p)`.
+    fn displacement(&self, p: DVec3) -> DVec3;
+
+    /// `d(p)` and its Jacobian `∂d/∂x` (columns: derivatives along x, y, z).
+    fn displacement_with_jacobian(&self, p: DVec3) -> (DVec3, DMat3);
+}
+
+/// A constant displacement: every point moves by the same vector (zero Jacobian).
+impl Displacement for DVec3 {
+    fn displacement(&self, _: DVec3) -> DVec3 {
+        *self
+    }
+
+    fn displacement_with_jacobian(&self, _: DVec3) -> (DVec3, DMat3) {
+        (*self, DMat3::ZERO)
+    }
+}
+
+impl<D: Displacement + ?Sized> Displacement for &D {
+    fn displacement(&self, p: DVec3) -> DVec3 {
+        (**self).displacement(p)
+    }
+
+    fn displacement_with_jacobian(&self, p: DVec3) -> (DVec3, DMat3) {
+        (**self).displacement_with_jacobian(p)
+    }
+}
+
+/// The space map of a displacement, `x ↦ x + scale · d(x)`, with Jacobian
+/// `I + scale · ∂d/∂x`. Scale 0 is the identity; scale 1 moves every point by its
+/// displacement; scale −1 is Eq. 16's inverse mapping for the seed's handle splines.
+#[derive(Debug, Clone)]
+pub struct Displacing<D> {
+    /// `d(x)`.
+    pub displacement: D,
+    /// Factor on the displacement.
+    pub scale: f64,
+}
+
+impl<D: Displacement> SpaceMap for Displacing<D> {
+    fn apply(&self, p: DVec3) -> DVec3 {
+        p + self.scale * self.displacement.displacement(p)
+    }
+
+    fn jacobian(&self, p: DVec3) -> DMat3 {
+        self.apply_with_jacobian(p).1
+    }
+
+    fn apply_with_jacobian(&self, p: DVec3) -> (DVec3, DMat3) {
+        let (d, j) = self.displacement.displacement_with_jacobian(p);
+        (p + self.scale * d, DMat3::IDENTITY + j * self.scale)
+    }
+}
+
+/// Inverse mapping by displacement (Eq. 16): `f(x' + scale · d(x'))`, the defining function
+/// pulled back through [`Displacing`].
 #[derive(Debug, Clone)]
 pub struct Displaced<F, D> {
     /// The defining function `f`.
@@ -407,31 +468,69 @@ pub struct Displaced<F, D> {
     pub scale: f64,
 }
 
-impl<F: Field, D: SpaceMap> Field for Displaced<F, D> {
+impl<F, D> Displaced<F, D> {
+    /// The space map `x' ↦ x' + scale · d(x')` the field is pulled back through.
+    fn map(&self) -> Displacing<&D> {
+        Displacing {
+            displacement: &self.displacement,
+            scale: self.scale,
+        }
+    }
+}
+
+impl<F: Field, D: Displacement> Field for Displaced<F, D> {
     fn value(&self, p: DVec3) -> f64 {
-        self.field
-            .value(p + self.scale * self.displacement.apply(p))
+        self.field.value(self.map().apply(p))
     }
 
     fn gradient(&self, p: DVec3) -> (f64, DVec3) {
-        let (d, j) = self.displacement.apply_with_jacobian(p);
-        let (v, g) = self.field.gradient(p + self.scale * d);
-        let jac = DMat3::IDENTITY + j * self.scale;
+        let (q, jac) = self.map().apply_with_jacobian(p);
+        let (v, g) = self.field.gradient(q);
         (v, jac.transpose() * g)
     }
 }
 
 /// A displacement field interpolated by the Appendix's volume spline (`D = 3`, Green's
-/// function `G(r) = r` plus a linear polynomial, minimal bending energy): a [`SpaceMap`] whose
-/// value **is** the displacement vector `d(x)` (not a moved point), with `d(pᵢ) = δᵢ` at the
-/// centres `pᵢ` (or a smoothing fit for `smoothing > 0`). Plug it into [`Displaced`] or
-/// [`Combined`]; [`displace_by_handles`] builds the seed's §4.2 mapping with it.
+/// function `G(r) = r` plus a linear polynomial, minimal bending energy): a [`Displacement`]
+/// with `d(pᵢ) = δᵢ` at the centres `pᵢ` (or a smoothing fit for `smoothing > 0`). Plug it
+/// into [`Displaced`], [`Combined`] or [`Displacing`]; [`displace_by_handles`] builds the
+/// seed's §4.2 mapping with it.
 ///
 /// The Jacobian is the spline's analytic gradient (`G` has a cusp at each centre, where the
 /// one-sided gradient of the kernel term is taken as zero).
-#[derive(Debug, Clone)]
+///
+/// Its JSON form (serde) is its input, `{"centres": [[x, y, z], …], "displacements": […],
+/// "smoothing": s}`; reading it solves the spline again (the same bits, since the solve is
+/// deterministic) and validates as [`SplineDisplacement::new`].
+#[derive(Debug, Clone, serde::Serialize, serde::Deserialize)]
+#[serde(try_from = "SplineDisplacementInput", into = "SplineDisplacementInput")]
 pub struct SplineDisplacement {
+    input: SplineDisplacementInput,
     spline: VolumeSpline<3>,
+}
+
+/// What a [`SplineDisplacement`] is solved from (its file form).
+#[derive(Debug, Clone, serde::Serialize, serde::Deserialize)]
+#[serde(deny_unknown_fields)]
+struct SplineDisplacementInput {
+    centres: Vec<[f64; 3]>,
+    displacements: Vec<[f64; 3]>,
+    smoothing: f64,
+}
+
+impl TryFrom<SplineDisplacementInput> for SplineDisplacement {
+    type Error = FrepError;
+
+    fn try_from(i: SplineDisplacementInput) -> Result<Self, FrepError> {
+        let v = |a: &[[f64; 3]]| a.iter().map(|p| DVec3::from_array(*p)).collect::<Vec<_>>();
+        Self::new(&v(&i.centres), &v(&i.displacements), i.smoothing)
+    }
+}
+
+impl From<SplineDisplacement> for SplineDisplacementInput {
+    fn from(s: SplineDisplacement) -> Self {
+        s.input
+    }
 }
 
 impl SplineDisplacement {
@@ -469,6 +568,11 @@ impl SplineDisplacement {
         let values: Vec<f64> = displacements.iter().flat_map(|d| d.to_array()).collect();
         Ok(Self {
             spline: system.solve(&values, 3)?,
+            input: SplineDisplacementInput {
+                centres: c,
+                displacements: displacements.iter().map(|d| d.to_array()).collect(),
+                smoothing,
+            },
         })
     }
 
@@ -479,18 +583,14 @@ impl SplineDisplacement {
     }
 }
 
-impl SpaceMap for SplineDisplacement {
-    fn apply(&self, p: DVec3) -> DVec3 {
+impl Displacement for SplineDisplacement {
+    fn displacement(&self, p: DVec3) -> DVec3 {
         let mut d = [0.0; 3];
         self.spline.eval(p.to_array(), &mut d);
         DVec3::from_array(d)
     }
 
-    fn jacobian(&self, p: DVec3) -> DMat3 {
-        self.apply_with_jacobian(p).1
-    }
-
-    fn apply_with_jacobian(&self, p: DVec3) -> (DVec3, DMat3) {
+    fn displacement_with_jacobian(&self, p: DVec3) -> (DVec3, DMat3) {
         self.spline.eval_with_jacobian(p)
     }
 }
@@ -741,7 +841,7 @@ pub struct Combined<F, G, D> {
     pub initial: F,
     /// Target defining function `d₁`.
     pub target: G,
-    /// Displacement map `d₂` (its value is the displacement vector).
+    /// Displacement `d₂`.
     pub displacement: D,
     /// Metamorphosis schedule `h₁`.
     pub h1: Schedule,
@@ -751,10 +851,14 @@ pub struct Combined<F, G, D> {
     pub t: f64,
 }
 
-impl<F: Field, G: Field, D: SpaceMap> Field for Combined<F, G, D> {
+impl<F: Field, G: Field, D: Displacement> Field for Combined<F, G, D> {
     fn value(&self, p: DVec3) -> f64 {
         let (w1, w2) = (self.h1.at(self.t), self.h2.at(self.t));
-        let moved = p + w2 * self.displacement.apply(p);
+        let moved = Displacing {
+            displacement: &self.displacement,
+            scale: w2,
+        }
+        .apply(p);
         let a = if w1 < 1.0 {
             (1.0 - w1) * self.initial.value(moved)
         } else {
@@ -916,11 +1020,8 @@ mod tests {
         assert_eq!(pb.value(x), ft.eval(x + DVec3::new(0.5, 0.0, 0.0)));
         let (_, g) = pb.gradient(x);
         assert!((g - ft.gradient(x + DVec3::X * 0.5).1).length() < 1e-12);
-        // A constant displacement map: x + s·d.
-        let d = Affine {
-            matrix: DMat3::ZERO,
-            offset: DVec3::new(0.0, 0.2, 0.0),
-        };
+        // A constant displacement: x + s·d.
+        let d = DVec3::new(0.0, 0.2, 0.0);
         let dis = Displaced {
             field: &ft,
             displacement: d,
@@ -978,7 +1079,7 @@ mod tests {
         }
         // The displacement field interpolates δ = D − Q at D.
         for (q, t) in sources.iter().zip(&targets) {
-            assert!((d.displacement.apply(*t) - (*t - *q)).length() < 1e-9);
+            assert!((d.displacement.displacement(*t) - (*t - *q)).length() < 1e-9);
         }
         // Identical handles: the identity.
         let id = displace_by_handles(&ft, &sources, &sources, 0.0).unwrap();

@@ -374,7 +374,7 @@ impl MotionSetup {
             .zip(&hits.target)
             .filter(|&(&y, &gv)| {
                 let z = match &spline {
-                    Some(s) => y - volmorph_deform::SpaceMap::apply(s, y),
+                    Some(s) => y - crate::mapping::Displacement::displacement(s, y),
                     None => y,
                 };
                 let v = if w1 > 0.0 {

@@ -2,6 +2,7 @@
 //! (one link instead of one per file keeps the test build short).
 
 mod conformance;
+mod displacement_map;
 mod export;
 mod models;
 mod progress;

@@ -5,8 +5,7 @@
 use std::path::Path;
 
 use glam::{DMat3, DVec3};
-use volmorph_deform::SpaceMap;
-use volmorph_frep::mapping::{self, ControlPoint, Schedule};
+use volmorph_frep::mapping::{self, ControlPoint, Displacement, Schedule};
 use volmorph_frep::motion::{AvoidanceOptions, MotionSetup};
 use volmorph_frep::spec::{MappingSpec, SpecContext};
 use volmorph_frep::{CompileOptions, Field, Shape, Tape, compile_source};
@@ -223,7 +222,7 @@ fn metamorphosis_and_combined_through_the_spec() {
         let got = Tape::new(&through_spec(&json, t, d));
         let (w1, w2) = (Schedule::Delayed { t0: 0.3 }.at(t), t.sqrt());
         for p in test_points() {
-            let want = (1.0 - w1) * ft.eval(p - w2 * spline.apply(p)) + w1 * gt.eval(p);
+            let want = (1.0 - w1) * ft.eval(p - w2 * spline.displacement(p)) + w1 * gt.eval(p);
             assert!(
                 (got.eval(p) - want).abs() < 1e-9 * (1.0 + want.abs()),
                 "t = {t} at {p}: {} vs {want}",
