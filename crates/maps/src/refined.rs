@@ -32,16 +32,7 @@ impl<M: SpaceMap> SpaceMap for Refined<M> {
     }
 
     fn apply_grid(&self, grid: &Geometry, out: &mut [DVec3]) -> Result<(), DeformError> {
-        self.base.apply_grid(grid, out)?;
-        let mut c = vec![DVec3::ZERO; out.len()];
-        self.correction.apply_grid(grid, &mut c)?;
-        out.par_iter_mut()
-            .zip(c.par_iter())
-            .enumerate()
-            .for_each(|(n, (o, l))| {
-                *o += *l - grid.voxel_position(n);
-            });
-        Ok(())
+        self.apply_grid_part(grid, IndexBox::all(grid.dims), out)
     }
 
     fn apply_grid_part(
@@ -50,6 +41,7 @@ impl<M: SpaceMap> SpaceMap for Refined<M> {
         part: IndexBox,
         out: &mut [DVec3],
     ) -> Result<(), DeformError> {
+        // Both maps on the grid (their fast paths), then the sum less the grid point.
         self.base.apply_grid_part(grid, part, out)?;
         let mut c = vec![DVec3::ZERO; out.len()];
         self.correction.apply_grid_part(grid, part, &mut c)?;
