@@ -2,6 +2,10 @@
 //! `volmorph register select | match | solve | quality | segment-lungs | ventilation |
 //! phantom | known-pair`). [`crate::pipeline`] holds the whole registration and the `solve`
 //! step; this module the rest.
+//!
+//! Every step reports to a [`Progress`]: a stage per phase (reading, the computation, writing),
+//! counted where the library counts (handles per pyramid level, segmentation passes, lobe
+//! tracing), and stops with [`RegisterError::Cancelled`] between stages when asked to.
 
 use std::io::Write;
 use std::path::Path;
@@ -10,15 +14,16 @@ use glam::DVec3;
 use serde::Serialize;
 use volmorph_deform::{Identity, SpaceMap};
 use volmorph_handles::HandleSet;
+use volmorph_io::Progress;
 use volmorph_maps::AnyMap;
 use volmorph_volume::{AnyVolume, Volume};
 
 use crate::RegisterError;
 use crate::lungs::{
-    EnhanceOptions, LobeScript, LungOptions, dice, enhance_lobe_boundaries, segment_lungs,
-    trace_lobes,
+    EnhanceOptions, LobeScript, LungOptions, dice, enhance_lobe_boundaries_with,
+    segment_lungs_with, trace_lobes_with,
 };
-use crate::matching::{MatchOptions, MatchStatus, match_handles};
+use crate::matching::{MatchOptions, MatchStatus, match_handles_with};
 use crate::metrics::{ImageMetrics, compare};
 use crate::phantom::{
     KnownDeformationOptions, LungPhantomOptions, known_deformation, lobe, lung_phantom,
@@ -31,6 +36,13 @@ use crate::quality::{OverlayOptions, TreStats, slice_overlay, subcube_comparison
 use crate::select::{SelectOptions, select_handles};
 use crate::solve::{SolveOptions, handle_map};
 use crate::ventilation::{LobeVentilation, ventilation};
+
+/// Start the stage `label` of unknown length, unless `progress` asks to stop.
+fn stage(progress: &dyn Progress, label: impl AsRef<str>) -> Result<(), RegisterError> {
+    progress.check()?;
+    progress.start(label.as_ref(), 0);
+    Ok(())
+}
 
 fn io_err(path: &Path, e: std::io::Error) -> RegisterError {
     RegisterError::Io(volmorph_io::IoError::os(path, e))
@@ -65,16 +77,20 @@ fn points_text(header: &str, pts: &[DVec3]) -> String {
 /// `select`: handles of `fixed` (within `mask`) written as a point list; returns the count.
 ///
 /// # Errors
-/// Reading, selection and writing errors, naming the file.
+/// Reading, selection and writing errors, naming the file; [`RegisterError::Cancelled`].
 pub fn select_files(
     fixed: &Path,
     mask: Option<&Path>,
     out: &Path,
     o: &SelectOptions,
+    progress: &dyn Progress,
 ) -> Result<usize, RegisterError> {
+    stage(progress, format!("reading {}", fixed.display()))?;
     let f = read_scan(fixed)?;
     let m = mask.map(read_mask).transpose()?;
+    stage(progress, "selecting handles")?;
     let h = select_handles(&f, m.as_ref(), o)?;
+    stage(progress, format!("writing {}", out.display()))?;
     let pts: Vec<DVec3> = h.iter().map(|h| h.position).collect();
     write_text(
         out,
@@ -123,18 +139,21 @@ impl std::fmt::Display for MatchSummary {
 /// `correspondences.json`-style JSON to `out`.
 ///
 /// # Errors
-/// Reading, matching and writing errors, naming the file.
+/// Reading, matching and writing errors, naming the file; [`RegisterError::Cancelled`].
 pub fn match_files(
     fixed: &Path,
     moving: &Path,
     handles: &Path,
     out: &Path,
     o: &MatchOptions,
+    progress: &dyn Progress,
 ) -> Result<MatchSummary, RegisterError> {
+    stage(progress, "reading the scans")?;
     let f = read_scan(fixed)?;
     let m = read_scan(moving)?;
     let pts = volmorph_handles::handles::read_point_list(handles)?;
-    let corr = match_handles(&f, &m, &pts, None, o)?;
+    let corr = match_handles_with(&f, &m, &pts, None, o, progress)?;
+    stage(progress, format!("writing {}", out.display()))?;
     write_text(out, &correspondences_json(&corr))?;
     let n = |s: MatchStatus| corr.iter().filter(|c| c.status == s).count();
     let acc: Vec<f64> = corr
@@ -255,7 +274,8 @@ impl std::fmt::Display for QualityReport {
 ///
 /// # Errors
 /// Reading, evaluation and writing errors, naming the file; [`RegisterError::TooLittle`] for a
-/// sub-cube outside the images.
+/// sub-cube outside the images; [`RegisterError::Cancelled`].
+#[allow(clippy::too_many_arguments)]
 pub fn quality_files(
     fixed: &Path,
     moving: &Path,
@@ -264,16 +284,21 @@ pub fn quality_files(
     landmarks: Option<&LandmarkFiles>,
     subcube: Option<SubcubeRequest>,
     out_dir: &Path,
+    progress: &dyn Progress,
 ) -> Result<QualityReport, RegisterError> {
+    stage(progress, "reading the scans and the map")?;
     let f = read_scan(fixed)?;
     let m = read_scan(moving)?;
     let phi = load_map(map, solve)?;
     std::fs::create_dir_all(out_dir).map_err(|e| io_err(out_dir, e))?;
     let g = *f.geometry();
     let fill = crate::metrics::value_range(m.data(), None).0;
+    stage(progress, "resampling the moving scan")?;
     let id = warp_moving(&m, &Identity, &g, fill)?;
     let warped = warp_moving(&m, &phi, &g, fill)?;
+    stage(progress, "Jacobian map")?;
     let (jac, fold) = crate::quality::jacobian_report(&phi, &g)?;
+    stage(progress, format!("writing {}", out_dir.display()))?;
     write_volume(&out_dir.join("jacobian.nii.gz"), &jac)?;
     write_volume(&out_dir.join("warped.nii.gz"), &warped)?;
     write_overlays(out_dir, &f, &id, &warped)?;
@@ -358,16 +383,19 @@ impl std::fmt::Display for LungReport {
 /// `<out stem>_lobes`), and Dice against `reference` lobe labels if given.
 ///
 /// # Errors
-/// Reading, segmentation and writing errors, naming the file.
+/// Reading, segmentation and writing errors, naming the file; [`RegisterError::Cancelled`].
 pub fn segment_lungs_files(
     ct: &Path,
     out: &Path,
     script: Option<&Path>,
     reference: Option<&Path>,
     o: &LungOptions,
+    progress: &dyn Progress,
 ) -> Result<LungReport, RegisterError> {
+    stage(progress, format!("reading {}", ct.display()))?;
     let v = read_scan(ct)?;
-    let seg = segment_lungs(&v, o)?;
+    let seg = segment_lungs_with(&v, o, progress)?;
+    stage(progress, format!("writing {}", out.display()))?;
     write_volume(out, &seg.mask)?;
     let mut rep = LungReport {
         lung_voxels: seg.lung_voxels,
@@ -377,8 +405,9 @@ pub fn segment_lungs_files(
     };
     if let Some(sp) = script {
         let s = LobeScript::read(sp)?;
-        let e = enhance_lobe_boundaries(&v, &seg.mask, &EnhanceOptions::default())?;
-        let model = trace_lobes(&seg.mask, &e, &s)?;
+        let e = enhance_lobe_boundaries_with(&v, &seg.mask, &EnhanceOptions::default(), progress)?;
+        let model = trace_lobes_with(&seg.mask, &e, &s, progress)?;
+        stage(progress, "writing the lobes")?;
         let sibling = |suffix: &str| {
             let name = out
                 .file_name()
@@ -432,7 +461,7 @@ impl std::fmt::Display for VentilationReport {
 /// map inhale → exhale; maps written into `out_dir` with `ventilation.json`.
 ///
 /// # Errors
-/// Reading, evaluation and writing errors, naming the file.
+/// Reading, evaluation and writing errors, naming the file; [`RegisterError::Cancelled`].
 pub fn ventilation_files(
     inhale: &Path,
     exhale: &Path,
@@ -440,13 +469,18 @@ pub fn ventilation_files(
     labels: &Path,
     solve: &SolveOptions,
     out_dir: &Path,
+    progress: &dyn Progress,
 ) -> Result<VentilationReport, RegisterError> {
+    stage(progress, "reading the scans, the labels and the map")?;
     let i = read_scan(inhale)?;
     let e = read_scan(exhale)?;
     let l = read_scan(labels)?.map(|x| x.round().clamp(0.0, 255.0) as u8);
     let phi = load_map(map, solve)?;
+    stage(progress, "resampling the exhale scan")?;
     let warped = warp_moving(&e, &phi, i.geometry(), -1000.0)?;
+    stage(progress, "ventilation per region")?;
     let v = ventilation(&phi, &i, &warped, &l, 2)?;
+    stage(progress, format!("writing {}", out_dir.display()))?;
     std::fs::create_dir_all(out_dir).map_err(|e| io_err(out_dir, e))?;
     write_volume(&out_dir.join("jacobian.nii.gz"), &v.jacobian)?;
     write_volume(&out_dir.join("hu_volume_ratio.nii.gz"), &v.hu_ratio)?;
@@ -463,9 +497,15 @@ pub fn ventilation_files(
 /// `lobe_script.json`, `true_volume_change.json`. Returns the number of landmarks.
 ///
 /// # Errors
-/// Generation and writing errors.
-pub fn write_phantom(dir: &Path, o: &LungPhantomOptions) -> Result<usize, RegisterError> {
+/// Generation and writing errors; [`RegisterError::Cancelled`].
+pub fn write_phantom(
+    dir: &Path,
+    o: &LungPhantomOptions,
+    progress: &dyn Progress,
+) -> Result<usize, RegisterError> {
+    stage(progress, "generating the lung phantom")?;
     let p = lung_phantom(o)?;
+    stage(progress, format!("writing {}", dir.display()))?;
     std::fs::create_dir_all(dir).map_err(|e| io_err(dir, e))?;
     write_volume(&dir.join("inhale.nii.gz"), &p.inhale)?;
     write_volume(&dir.join("exhale.nii.gz"), &p.exhale)?;
@@ -499,15 +539,19 @@ pub fn write_phantom(dir: &Path, o: &LungPhantomOptions) -> Result<usize, Regist
 /// `landmarks_moving.txt`) into `dir`.
 ///
 /// # Errors
-/// Reading, generation and writing errors, naming the file.
+/// Reading, generation and writing errors, naming the file; [`RegisterError::Cancelled`].
 pub fn write_known_pair(
     input: &Path,
     dir: &Path,
     o: &KnownDeformationOptions,
     landmarks: usize,
+    progress: &dyn Progress,
 ) -> Result<(), RegisterError> {
+    stage(progress, format!("reading {}", input.display()))?;
     let v = read_scan(input)?;
+    stage(progress, "deforming by a known field")?;
     let (lat, moving) = known_deformation(&v, o)?;
+    stage(progress, format!("writing {}", dir.display()))?;
     std::fs::create_dir_all(dir).map_err(|e| io_err(dir, e))?;
     write_volume(&dir.join("fixed.nii.gz"), &v)?;
     write_volume(&dir.join("moving.nii.gz"), &moving)?;

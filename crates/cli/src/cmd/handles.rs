@@ -283,9 +283,11 @@ fn warp(a: &WarpArgs) -> anyhow::Result<()> {
 }
 
 fn apply(a: &ApplyArgs) -> anyhow::Result<()> {
+    let pb = progress::spinner("reading the handles and the points");
     let set = read_handle_set(&a.map)?;
     let pts = read_point_list(&a.input)
         .with_context(|| format!("cannot read the points {}", a.input.display()))?;
+    progress::spin(&pb, format!("building the map of {} handles", set.len()));
     let map = handle_map(
         &set,
         a.map.method.into(),
@@ -293,10 +295,12 @@ fn apply(a: &ApplyArgs) -> anyhow::Result<()> {
         HandleDirection::SourcesToTargets,
     )
     .context("cannot build the deformation")?;
+    progress::spin(&pb, format!("mapping {} points", pts.len()));
     let mut out = vec![glam::DVec3::ZERO; pts.len()];
     map.apply_batch(&pts, &mut out)?;
     write_point_list(&a.output, &out)
         .with_context(|| format!("cannot write {}", a.output.display()))?;
+    pb.finish_and_clear();
     say!("mapped {} points by {} handles", out.len(), set.len());
     Ok(())
 }

@@ -165,7 +165,9 @@ fn init(a: &InitArgs) -> anyhow::Result<()> {
         let Some(input) = &a.input else {
             bail!("give a volume or --mesh MESH");
         };
+        let pb = crate::progress::spinner(format!("reading {}", input.display()));
         let vol = format::read(input).context("cannot read the volume")?;
+        pb.finish_and_clear();
         let l = BSplineLattice::identity_on_voxels(vol.geometry(), a.counts)
             .with_context(|| format!("cannot place a lattice around {}", input.display()))?;
         (l, format!("identity lattice around {}", input.display()))

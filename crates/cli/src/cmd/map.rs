@@ -9,6 +9,8 @@ use volmorph_maps::{AnyMap, read_map, write_field, write_map};
 use volmorph_volume_io::vector::VectorPrecision;
 use volmorph_warp::output::parse_geometry;
 
+use crate::progress;
+
 /// Map subcommands.
 #[derive(Debug, clap::Subcommand)]
 pub enum Command {
@@ -123,11 +125,14 @@ fn boxed_geometry(s: &str) -> anyhow::Result<Box<volmorph_volume::Geometry>> {
 pub fn run(cmd: &Command) -> anyhow::Result<()> {
     match cmd {
         Command::Apply(a) => {
+            let pb = progress::spinner(format!("reading {}", a.map.display()));
             let map = read_map(&a.map).context("cannot read the map")?;
             let pts = read_point_list(&a.points)
                 .with_context(|| format!("cannot read the points {}", a.points.display()))?;
+            progress::spin(&pb, format!("mapping {} points", pts.len()));
             let mut out = vec![glam::DVec3::ZERO; pts.len()];
             map.apply_batch(&pts, &mut out)?;
+            pb.finish_and_clear();
             if let Some(i) = out.iter().position(|p| !p.is_finite()) {
                 anyhow::bail!(
                     "point {} ({}) has no image under the map (a numerical inverse found no \
@@ -148,24 +153,32 @@ pub fn run(cmd: &Command) -> anyhow::Result<()> {
             }
         }
         Command::Compose(a) => {
+            let pb = progress::spinner("reading the maps");
             let mut map = AnyMap::Identity;
             for path in &a.maps {
+                progress::spin(&pb, format!("reading {}", path.display()));
                 map = map.then(read_map(path).context("cannot read a map")?);
             }
+            progress::spin(&pb, format!("writing {}", a.output.display()));
             write_map(&a.output, &map).context("cannot write")?;
+            pb.finish_and_clear();
             say!("{}", map.summary());
         }
         Command::Invert(a) => {
+            let pb = progress::spinner(format!("reading {}", a.map.display()));
             let map = read_map(&a.map).context("cannot read the map")?;
             let options = InverseOptions {
                 tolerance: a.tolerance,
                 ..InverseOptions::default()
             };
             let inv = map.inverse(options).context("cannot invert the map")?;
+            progress::spin(&pb, format!("writing {}", a.output.display()));
             write_map(&a.output, &inv).context("cannot write")?;
+            pb.finish_and_clear();
             say!("{}", inv.summary());
         }
         Command::Field(a) => {
+            let pb = progress::spinner(format!("reading {}", a.map.display()));
             let map = read_map(&a.map).context("cannot read the map")?;
             let grid = match (&a.reference, &a.output_geometry) {
                 (_, Some(g)) => **g,
@@ -181,7 +194,16 @@ pub fn run(cmd: &Command) -> anyhow::Result<()> {
             } else {
                 VectorPrecision::F64
             };
+            let [nx, ny, nz] = grid.dims;
+            progress::spin(
+                &pb,
+                format!(
+                    "sampling the map on {nx}x{ny}x{nz} nodes and writing {}",
+                    a.output.display()
+                ),
+            );
             let field = write_field(&a.output, &map, grid, precision).context("cannot write")?;
+            pb.finish_and_clear();
             say!(
                 "{}: {}",
                 a.output.display(),

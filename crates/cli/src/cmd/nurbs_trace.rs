@@ -373,7 +373,9 @@ pub fn run_example(a: &ExampleArgs) -> anyhow::Result<()> {
 /// An unreadable or invalid recipe (the message names the file and the JSON path of the
 /// field), or an unwritable output.
 pub fn run_model(a: &ModelArgs) -> anyhow::Result<()> {
+    let pb = crate::progress::spinner(format!("building {}", a.recipe.display()));
     let model = build_recipe_file(&a.recipe)?;
+    pb.finish_and_clear();
     let (kind, attributes) = match &model {
         AnyAggregate::Curve(m) => ("curve", names(m.attributes())),
         AnyAggregate::Surface(m) => ("surface", names(m.attributes())),

@@ -11,7 +11,7 @@ use volmorph_render::{
 use volmorph_volume::slice::{self, Axis, SlicePosition};
 use volmorph_volume_io as format;
 
-use crate::args;
+use crate::{args, progress};
 
 /// Arguments of `volmorph slice`.
 #[derive(Debug, clap::Args)]
@@ -77,7 +77,9 @@ fn parse_axis(s: &str) -> Result<Axis, String> {
 
 /// Run `volmorph slice`.
 pub fn run(args: &Args) -> anyhow::Result<()> {
+    let pb = progress::spinner(format!("reading {}", args.input.display()));
     let vol = format::read(&args.input).context("cannot read volume")?;
+    progress::spin(&pb, "drawing the slice");
     let pos = match (args.index, args.position) {
         (Some(i), _) => SlicePosition::Index(i),
         (None, Some(p)) => SlicePosition::Physical(p),
@@ -121,6 +123,8 @@ pub fn run(args: &Args) -> anyhow::Result<()> {
         labels,
     };
     let img = render_slice(&s, &style)?;
+    progress::spin(&pb, format!("writing {}", args.output.display()));
     write_png_rgba(&args.output, &img).context("cannot write")?;
+    pb.finish_and_clear();
     Ok(())
 }

@@ -146,6 +146,7 @@ fn registration_reports_and_a_cancelled_run_writes_nothing() {
             spacing: DVec3::new(6.0, 6.0, 7.0),
             ..LungPhantomOptions::default()
         },
+        &volmorph_io::NoProgress,
     )
     .unwrap();
     let (f, m) = (
@@ -193,4 +194,109 @@ fn lung_model_steps_report_and_can_be_cancelled() {
     let with = progress::check(|pr| trace_lobes_with(&seg.mask, &e, &p.lobe_script, pr));
     assert_eq!(model.lobes.data(), with.lobes.data());
     assert_eq!(model.curves, with.curves);
+}
+
+/// Every step on files (`volmorph register select | match | quality | segment-lungs |
+/// ventilation | phantom | known-pair`) reports its stages: a cancelled run stops at its first
+/// stage with [`RegisterError::Cancelled`] and writes nothing, and the counted steps
+/// (matching, the lung segmentation) report exactly and give what they give without progress.
+#[test]
+fn file_steps_report_their_stages_and_a_cancelled_step_writes_nothing() {
+    use volmorph_io::progress::Counter;
+    use volmorph_register::lungs::LungOptions;
+    use volmorph_register::phantom::KnownDeformationOptions;
+    use volmorph_register::solve::SolveOptions;
+    use volmorph_register::steps;
+
+    let dir = tempfile::tempdir().unwrap();
+    let d = |name: &str| dir.path().join(name);
+    let small = LungPhantomOptions {
+        dims: [48, 40, 36],
+        spacing: DVec3::new(6.0, 6.0, 7.0),
+        ..LungPhantomOptions::default()
+    };
+    let stopped = || {
+        let c = Counter::new();
+        c.cancel();
+        c
+    };
+    let is_cancelled = |e: RegisterError| assert!(matches!(e, RegisterError::Cancelled(_)), "{e}");
+
+    is_cancelled(steps::write_phantom(&d("ph"), &small, &stopped()).unwrap_err());
+    assert!(!d("ph").exists());
+    steps::write_phantom(&d("ph"), &small, &volmorph_io::NoProgress).unwrap();
+    let (inh, exh) = (d("ph/inhale.nii.gz"), d("ph/exhale.nii.gz"));
+
+    let so = SelectOptions {
+        count: 30,
+        radius: 6.0,
+        ..SelectOptions::default()
+    };
+    is_cancelled(steps::select_files(&inh, None, &d("h.txt"), &so, &stopped()).unwrap_err());
+    assert!(!d("h.txt").exists());
+    steps::select_files(&inh, None, &d("h.txt"), &so, &volmorph_io::NoProgress).unwrap();
+
+    let mo = MatchOptions::default();
+    let run = |p: &dyn volmorph_io::Progress| {
+        steps::match_files(&inh, &exh, &d("h.txt"), &d("c.json"), &mo, p)
+    };
+    let plain = run(&volmorph_io::NoProgress).unwrap();
+    std::fs::remove_file(d("c.json")).unwrap();
+    let total = progress::total_steps(run);
+    std::fs::remove_file(d("c.json")).unwrap();
+    is_cancelled(progress::cancelled(run, 1, total));
+    assert!(!d("c.json").exists(), "a cancelled match wrote its output");
+    let with = progress::check(run);
+    assert_eq!(
+        (plain.handles, plain.accepted, plain.mean_ncc.to_bits()),
+        (with.handles, with.accepted, with.mean_ncc.to_bits())
+    );
+
+    let solve = SolveOptions::default();
+    let e = steps::quality_files(
+        &inh,
+        &exh,
+        &d("c.json"),
+        &solve,
+        None,
+        None,
+        &d("q"),
+        &stopped(),
+    );
+    is_cancelled(e.unwrap_err());
+    assert!(!d("q").exists());
+
+    let lo = LungOptions::default();
+    let seg = |p: &dyn volmorph_io::Progress| {
+        steps::segment_lungs_files(&inh, &d("lungs.nii.gz"), None, None, &lo, p)
+    };
+    is_cancelled(seg(&stopped()).unwrap_err());
+    assert!(!d("lungs.nii.gz").exists());
+    let counted = progress::check(seg);
+    assert_eq!(
+        counted.lung_voxels,
+        seg(&volmorph_io::NoProgress).unwrap().lung_voxels
+    );
+
+    let labels = d("ph/lobes.nii.gz");
+    let e = steps::ventilation_files(
+        &inh,
+        &exh,
+        &d("c.json"),
+        &labels,
+        &solve,
+        &d("v"),
+        &stopped(),
+    );
+    is_cancelled(e.unwrap_err());
+    assert!(!d("v").exists());
+
+    let ko = KnownDeformationOptions {
+        magnitude: 4.0,
+        spacing: 40.0,
+        seed: 1,
+        intensity_change: false,
+    };
+    is_cancelled(steps::write_known_pair(&inh, &d("kp"), &ko, 5, &stopped()).unwrap_err());
+    assert!(!d("kp").exists());
 }

@@ -54,7 +54,15 @@ pub fn run(c: &Command) -> anyhow::Result<()> {
         }
         Some(Step::Select(a)) => {
             let o = SelectOptions::with_count_radius(a.handles, a.radius);
-            let n = steps::select_files(&a.fixed, a.mask.as_deref(), &a.output, &o)?;
+            let pb = progress::spinner("selecting handles");
+            let n = steps::select_files(
+                &a.fixed,
+                a.mask.as_deref(),
+                &a.output,
+                &o,
+                &progress::Bar(&pb),
+            )?;
+            pb.finish_and_clear();
             say!("{n} handles written to {}", a.output.display());
         }
         Some(Step::Match(a)) => {
@@ -64,7 +72,16 @@ pub fn run(c: &Command) -> anyhow::Result<()> {
                 search: a.search,
                 ..MatchOptions::default()
             };
-            let s = steps::match_files(&a.fixed, &a.moving, &a.handles, &a.output, &o)?;
+            let pb = progress::spinner("matching handles");
+            let s = steps::match_files(
+                &a.fixed,
+                &a.moving,
+                &a.handles,
+                &a.output,
+                &o,
+                &progress::Bar(&pb),
+            )?;
+            pb.finish_and_clear();
             say!("{s}");
         }
         Some(Step::Solve(a)) => {
@@ -88,6 +105,7 @@ pub fn run(c: &Command) -> anyhow::Result<()> {
             );
         }
         Some(Step::Quality(a)) => {
+            let pb = progress::spinner("checking the map");
             let r = steps::quality_files(
                 &a.fixed,
                 &a.moving,
@@ -99,7 +117,9 @@ pub fn run(c: &Command) -> anyhow::Result<()> {
                     half: a.subcube_half,
                 }),
                 &a.output,
+                &progress::Bar(&pb),
             )?;
+            pb.finish_and_clear();
             say!("{r}");
         }
         Some(Step::SegmentLungs(a)) => {
@@ -108,16 +128,20 @@ pub fn run(c: &Command) -> anyhow::Result<()> {
                 majority_rounds: a.rounds,
                 ..LungOptions::default()
             };
+            let pb = progress::spinner("segmenting the lungs");
             let r = steps::segment_lungs_files(
                 &a.ct,
                 &a.output,
                 a.lobes.as_deref(),
                 a.reference.as_deref(),
                 &o,
+                &progress::Bar(&pb),
             )?;
+            pb.finish_and_clear();
             say!("{r}");
         }
         Some(Step::Ventilation(a)) => {
+            let pb = progress::spinner("ventilation");
             let r = steps::ventilation_files(
                 &a.inhale,
                 &a.exhale,
@@ -125,7 +149,9 @@ pub fn run(c: &Command) -> anyhow::Result<()> {
                 &a.labels,
                 &a.handles.solve(),
                 &a.output,
+                &progress::Bar(&pb),
             )?;
+            pb.finish_and_clear();
             say!("{r}");
         }
         Some(Step::Phantom(a)) => {
@@ -137,7 +163,9 @@ pub fn run(c: &Command) -> anyhow::Result<()> {
                 seed: a.seed,
                 ..LungPhantomOptions::default()
             };
-            let n = steps::write_phantom(&a.output, &o)?;
+            let pb = progress::spinner("lung phantom");
+            let n = steps::write_phantom(&a.output, &o, &progress::Bar(&pb))?;
+            pb.finish_and_clear();
             say!(
                 "phantom with {n} landmark pairs written to {}",
                 a.output.display()
@@ -150,7 +178,9 @@ pub fn run(c: &Command) -> anyhow::Result<()> {
                 seed: a.seed,
                 intensity_change: a.intensity_change,
             };
-            steps::write_known_pair(&a.input, &a.output, &o, a.landmarks)?;
+            let pb = progress::spinner("known pair");
+            steps::write_known_pair(&a.input, &a.output, &o, a.landmarks, &progress::Bar(&pb))?;
+            pb.finish_and_clear();
             say!("pair written to {}", a.output.display());
         }
     }
