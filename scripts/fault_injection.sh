@@ -1,5 +1,7 @@
 #!/usr/bin/env bash
-# Fault injection on every output format (volumes, meshes, lattices, maps, PNG, STEP, JSON):
+# Fault injection on every output format the command line writes (volumes of every format
+# including OME-Zarr stores, meshes, lattices, maps of every file form including displacement
+# fields, PNG pictures, GIF and APNG animations, STEP, model JSON):
 # a write that fails (EIO/ENOSPC on write, EIO on the committing rename or link) or is killed
 # (SIGKILL at a write or at the rename) must leave
 # the old output or the complete new one, never a mix, and the next write must leave no
@@ -45,6 +47,11 @@ RUN=""
 "$VM" lattice init --mesh ball.obj --degree 2,2,2 --size 4,4,4 -o mesh_lat.json >/dev/null
 "$VM" lattice init sphere.nii --counts 5,5,5 -o la.json >/dev/null
 "$VM" lattice init torus.nii --counts 6,6,6 -o lb.json >/dev/null
+echo '{"version": 1, "kind": "identity"}' >id.json
+echo '{"version": 1, "kind": "affine", "matrix": [[1, 0, 0], [0, 1, 0], [0, 0, 1]], "offset": [1, 2, 3]}' >aff_a.json
+echo '{"version": 1, "kind": "affine", "matrix": [[0.9, 0.1, 0], [0, 1.1, 0], [0, 0, 1]], "offset": [-1, 0, 2]}' >aff_b.json
+printf 'my_model(x[3], a[1])\n{\n  my_model = 1.0 - sqrt(x[1]*x[1] + x[2]*x[2] + x[3]*x[3]);\n}\n' >ball.hf
+printf 'my_model(x[3], a[1])\n{\n  my_model = 0.5 - max(abs(x[1]), max(abs(x[2]), abs(x[3])));\n}\n' >cube.hf
 python3 - <<'PY' 2>/dev/null || cp mesh_lat.json mesh_lat2.json
 import json
 d = json.load(open("mesh_lat.json"))
@@ -57,8 +64,11 @@ cmd_old() {
     local out="$1"
     # Matched on the file name: the reference outputs are written under ref/.
     case "$(basename "$out")" in
-    *.nii | *.nii.gz | *.mha | *.mhd | *.nrrd | *.nhdr | *.vtk | *.raw)
+    field_*.mha) $RUN "$VM" map field aff_a.json --reference sphere.nii -o "$out" ;;
+    *.nii | *.nii.gz | *.mha | *.mhd | *.nrrd | *.nhdr | *.vtk | *.vti | *.mgh | *.mgz | *.ome.zarr | *.raw)
         $RUN "$VM" phantom sphere --size 16 -o "$out" ;;
+    *.gif | *.apng) $RUN "$VM" frep morph ball.hf cube.hf --frames 3 --size 32 -o "$out" ;;
+    map_*.mat) $RUN "$VM" map compose aff_a.json id.json -o "$out" ;;
     *.obj | *.stl | *.ply | *.off) $RUN "$VM" isosurface sphere.nii --level 127 -o "$out" ;;
     lat_*.json | *.tfm | *.bxf) $RUN "$VM" lattice init sphere.nii --counts 5,5,5 -o "$out" ;;
     *.png) $RUN "$VM" slice sphere.nii --axis z -o "$out" ;;
@@ -71,8 +81,11 @@ cmd_new() {
     local out="$1"
     # Matched on the file name: the reference outputs are written under ref/.
     case "$(basename "$out")" in
-    *.nii | *.nii.gz | *.mha | *.mhd | *.nrrd | *.nhdr | *.vtk | *.raw)
+    field_*.mha) $RUN "$VM" map field aff_b.json --reference sphere.nii -o "$out" ;;
+    *.nii | *.nii.gz | *.mha | *.mhd | *.nrrd | *.nhdr | *.vtk | *.vti | *.mgh | *.mgz | *.ome.zarr | *.raw)
         $RUN "$VM" phantom torus --kind sdf --size 24 -o "$out" ;;
+    *.gif | *.apng) $RUN "$VM" frep morph cube.hf ball.hf --frames 4 --size 32 -o "$out" ;;
+    map_*.mat) $RUN "$VM" map compose aff_b.json id.json -o "$out" ;;
     *.obj | *.stl | *.ply | *.off) $RUN "$VM" isosurface torus.nii --level 0 --inside-below -o "$out" ;;
     lat_*.json | *.tfm | *.bxf) $RUN "$VM" lattice init torus.nii --counts 6,6,6 -o "$out" ;;
     *.png) $RUN "$VM" slice torus.nii --axis z -o "$out" ;;
@@ -93,13 +106,18 @@ fingerprint() {
         sha256sum <"fp_$$.nii" | cut -d' ' -f1
         rm -f "fp_$$.nii" ;;
     *.step) grep -v "FILE_NAME" "$f" | sha256sum | cut -d' ' -f1 ;;
+    *.ome.zarr)
+        # A store is a folder: the names and bytes of every file in it.
+        [ -d "$f" ] || { echo "missing"; return; }
+        (cd "$f" && find . -type f | LC_ALL=C sort | xargs -d '\n' sha256sum) | sha256sum | cut -d' ' -f1 ;;
     *) sha256sum <"$f" | cut -d' ' -f1 ;;
     esac
 }
 
 # FI_OUTPUTS="m.obj p.png" restricts the run to some formats.
-outputs="${FI_OUTPUTS:-v.nii v.nii.gz v.mha v.mhd v.nrrd v.nhdr v.vtk v.raw m.obj m.stl m.ply m.off
-lat_l.json l.tfm l.bxf p.png s.step model_n.json map_c.json map_c.tfm}"
+outputs="${FI_OUTPUTS:-v.nii v.nii.gz v.mha v.mhd v.nrrd v.nhdr v.vtk v.vti v.mgh v.mgz v.ome.zarr
+v.raw m.obj m.stl m.ply m.off lat_l.json l.tfm l.bxf p.png a.gif a.apng s.step model_n.json
+map_c.json map_c.tfm map_a.mat field_d.mha}"
 
 # Faults: failures and kills at the first, a middle and the committing system calls.
 faults="write:error=EIO:when=1
@@ -126,7 +144,8 @@ for out in $outputs; do
     while IFS= read -r fault; do
         sc="${fault%%:*}"
         dir="case_$$" && rm -rf "$dir" && mkdir "$dir" && cd "$dir" || exit 1
-        ln -s ../sphere.nii ../torus.nii ../ball.obj ../mesh_lat.json ../mesh_lat2.json ../la.json ../lb.json . 2>/dev/null
+        ln -s ../sphere.nii ../torus.nii ../ball.obj ../mesh_lat.json ../mesh_lat2.json ../la.json ../lb.json \
+            ../id.json ../aff_a.json ../aff_b.json ../ball.hf ../cube.hf . 2>/dev/null
         cmd_old "$out" >/dev/null 2>&1
         # Injected into the writing command only; syscalls this program never makes (e.g.
         # rename when it uses renameat) leave the write intact, which must then be complete.
