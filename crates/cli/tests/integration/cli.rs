@@ -3159,3 +3159,70 @@ fn tps_kernels_interpolate_differ_and_round_trip_through_map_json() {
     ]);
     assert!(err.contains("r² log r"), "{err}");
 }
+
+/// Sizes a user gives that no memory budget can hold are refused with an error (exit 1)
+/// before anything is allocated, never an abort in the allocator: the F-rep grids, the SDF
+/// phantom, lattices around a mesh or a volume, and the drag's lattice (each under a 256 MB
+/// budget).
+#[test]
+fn user_sizes_beyond_the_memory_budget_abort_in_the_allocator() {
+    let dir = tempfile::tempdir().unwrap();
+    let d = |name: &str| dir.path().join(name).to_string_lossy().into_owned();
+    let (hf, vol, mesh) = (d("ball.hf"), d("s.nii"), d("s.obj"));
+    std::fs::write(&hf, FREP_BALL).unwrap();
+    ok(&[&"phantom", &"sphere", &"-o", &vol, &"--size", &"16"]);
+    ok(&[&"isosurface", &vol, &"--level", &"127", &"-o", &mesh]);
+    let out = d("out.nii");
+    let cases: [&[&str]; 6] = [
+        &["frep", "eval", &hf, "--grid", "2000", "-o", &out],
+        &["frep", "mesh", &hf, "--grid", "2048", "-o", &d("m.obj")],
+        &[
+            "phantom", "sphere", "--kind", "sdf", "--size", "2000", "-o", &out,
+        ],
+        &[
+            "lattice",
+            "init",
+            "--mesh",
+            &mesh,
+            "--size",
+            "700,700,700",
+            "-o",
+            &d("a.json"),
+        ],
+        &[
+            "lattice",
+            "init",
+            &vol,
+            "--counts",
+            "1000,1000,1000",
+            "-o",
+            &d("b.json"),
+        ],
+        &[
+            "drag",
+            &vol,
+            "--from",
+            "0,0,0",
+            "--to",
+            "0.1,0,0",
+            "--counts",
+            "700,700,700",
+            "-o",
+            &out,
+        ],
+    ];
+    for case in cases {
+        let mut args: Vec<&dyn AsRef<std::ffi::OsStr>> = case
+            .iter()
+            .map(|a| a as &dyn AsRef<std::ffi::OsStr>)
+            .collect();
+        args.extend([&"--memory-limit" as &dyn AsRef<std::ffi::OsStr>, &"256M"]);
+        let err = fails(&args);
+        assert!(
+            err.contains("memory") || err.contains("limit") || err.contains("at most"),
+            "{case:?}: {err}"
+        );
+    }
+    let written = std::fs::read_dir(dir.path()).unwrap().count();
+    assert_eq!(written, 3, "only the inputs are in the folder");
+}
