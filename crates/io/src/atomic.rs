@@ -18,6 +18,17 @@
 //!   `.volmorph-*.partial` file that can be locked and is older than [`STALE_AGE`] belongs to
 //!   a process that is gone. Data files of a header whose write was killed before its commit
 //!   are removed by the next write of that header.
+//! * [`PartialDir`] (an output folder such as a Zarr store): the new store is built inside a
+//!   locked work folder `.volmorph-XXXXXX.partial/` next to the target. The commit swaps it
+//!   with the old store in one step where the system can (Linux `RENAME_EXCHANGE`), or else
+//!   moves the old store into the work folder and then the new one to the target; then it
+//!   removes the work folder. Under any single kill or failed rename the target is the old
+//!   store or the complete new one, except after a kill between the two renames of the
+//!   fallback, when it is missing and the old store is in the work folder. The next write to
+//!   the same folder cleans up a work folder whose lock is free and which is older than
+//!   [`STALE_AGE`]: it puts the old store back if the target is missing (the lock file names
+//!   the target), and removes everything else. Neither store is left behind, and a folder of
+//!   volmorph's naming is removed only if it holds the lock file or nothing at all.
 //!
 //! Written by hand because the commit protocol for two files, and the clean-up of a killed
 //! writer's files, are specific to volmorph's outputs; `tempfile` provides the temporary
@@ -81,8 +92,9 @@ fn create_partial(dir: &Path, target: &Path) -> Result<tempfile::NamedTempFile, 
     Ok(tmp)
 }
 
-/// Remove `.volmorph-*.partial` files in `dir` left by writers that no longer run (see the
-/// module documentation). Errors are ignored: clean-up never makes a write fail.
+/// Remove `.volmorph-*.partial` files and folders in `dir` left by writers that no longer run,
+/// and finish a [`PartialDir`] commit that was killed (see the module documentation). Errors
+/// are ignored: clean-up never makes a write fail.
 pub fn remove_stale_partials(dir: &Path) {
     let Ok(entries) = std::fs::read_dir(dir) else {
         return;
@@ -107,12 +119,19 @@ pub fn remove_stale_partials(dir: &Path) {
             continue;
         }
         if meta.is_dir() {
-            // A partial folder ([`PartialDir`]) is stale when its lock file is not held.
-            let Ok(f) = File::open(path.join(PARTIAL_DIR_LOCK)) else {
-                continue;
-            };
-            if f.try_lock().is_ok() {
-                let _ = std::fs::remove_dir_all(&path);
+            // A work folder ([`PartialDir`]) is stale when its lock file is not held.
+            match File::open(path.join(PARTIAL_DIR_LOCK)) {
+                Ok(lock) => {
+                    if lock.try_lock().is_ok() {
+                        recover_work_folder(dir, &path, lock);
+                    }
+                }
+                // Without its lock file a work folder is empty (killed before it made the
+                // lock file, or while removing itself after the lock file went); a folder
+                // that holds anything is not ours and stays (`remove_dir` fails on it).
+                Err(_) => {
+                    let _ = std::fs::remove_dir(&path);
+                }
             }
             continue;
         }
@@ -128,39 +147,183 @@ pub fn remove_stale_partials(dir: &Path) {
     }
 }
 
-/// Name of the lock file inside a [`PartialDir`]: held by the writer while it works, so a
-/// later writer can tell a folder left by a killed process from one still being written.
+/// Name of the lock file inside a [`PartialDir`]'s work folder: held by the writer while it
+/// works, so a later writer can tell a folder left by a killed process from one still being
+/// written. It holds the target's file name, so that a commit killed between its two renames
+/// can put the old store back.
 pub const PARTIAL_DIR_LOCK: &str = ".volmorph-lock";
 
-/// An output **folder** (a Zarr store) built under a hidden temporary name next to its
-/// target and committed by renaming it into place.
+/// The new store inside a [`PartialDir`]'s work folder.
+const NEW_STORE: &str = "new";
+/// The old store inside a [`PartialDir`]'s work folder, moved there by the commit.
+const OLD_STORE: &str = "old";
+
+/// The bytes of a file name as stored in a [`PARTIAL_DIR_LOCK`] file.
+fn name_bytes(name: &std::ffi::OsStr) -> Vec<u8> {
+    #[cfg(unix)]
+    {
+        use std::os::unix::ffi::OsStrExt;
+        name.as_bytes().to_vec()
+    }
+    #[cfg(not(unix))]
+    {
+        name.to_string_lossy().into_owned().into_bytes()
+    }
+}
+
+/// The target named by a [`PARTIAL_DIR_LOCK`] file's content, in `dir`: `None` unless the
+/// content is one plain file name (never `..`, never a path).
+fn target_from_lock(dir: &Path, content: Vec<u8>) -> Option<PathBuf> {
+    #[cfg(unix)]
+    let name = {
+        use std::os::unix::ffi::OsStringExt;
+        std::ffi::OsString::from_vec(content)
+    };
+    #[cfg(not(unix))]
+    let name = std::ffi::OsString::from(String::from_utf8(content).ok()?);
+    let plain = Path::new(&name).file_name() == Some(name.as_os_str());
+    (!name.is_empty() && plain).then(|| dir.join(name))
+}
+
+/// Clean up a stale work folder `work` in `dir` whose lock the caller holds (`lock`): if its
+/// commit was killed between the two renames (both stores inside, the target missing), put
+/// the old store back at the target; then remove the folder. The folder is kept if the old
+/// store should go back but cannot (a later clean-up tries again).
+fn recover_work_folder(dir: &Path, work: &Path, mut lock: File) {
+    let old = work.join(OLD_STORE);
+    let is_dir = |p: &Path| std::fs::symlink_metadata(p).is_ok_and(|m| m.is_dir());
+    // Only the state between the renames has both: after the second rename `new` is gone,
+    // and the removal takes `new` before `old`, so an `old` beside `new` is always whole.
+    if is_dir(&old) && is_dir(&work.join(NEW_STORE)) {
+        let mut content = Vec::new();
+        let Some(target) = io::Read::read_to_end(&mut lock, &mut content)
+            .ok()
+            .and_then(|_| target_from_lock(dir, content))
+        else {
+            // The commit wrote the name before its first rename; without it, the target
+            // cannot be known, and the old store is not ours to delete.
+            return;
+        };
+        match std::fs::symlink_metadata(&target) {
+            Err(e) if e.kind() == io::ErrorKind::NotFound => {
+                if std::fs::rename(&old, &target).is_err() {
+                    return;
+                }
+                sync_folder(dir);
+            }
+            // Something is at the target again (a later write committed): the old store
+            // is garbage.
+            Ok(_) => {}
+            Err(_) => return,
+        }
+    }
+    remove_work_folder(work);
+    drop(lock);
+}
+
+/// Remove a work folder so that a kill at any point leaves it recognisable: the new store
+/// first, then the old one, then anything else, the lock file last, then the (empty) folder.
+fn remove_work_folder(work: &Path) {
+    let _ = std::fs::remove_dir_all(work.join(NEW_STORE));
+    let _ = std::fs::remove_dir_all(work.join(OLD_STORE));
+    if let Ok(entries) = std::fs::read_dir(work) {
+        for entry in entries.flatten() {
+            if entry.file_name() == PARTIAL_DIR_LOCK {
+                continue;
+            }
+            let _ = match entry.file_type() {
+                Ok(t) if t.is_dir() => std::fs::remove_dir_all(entry.path()),
+                _ => std::fs::remove_file(entry.path()),
+            };
+        }
+    }
+    let _ = std::fs::remove_file(work.join(PARTIAL_DIR_LOCK));
+    let _ = std::fs::remove_dir(work);
+}
+
+/// What [`PartialDir::commit_with`] does at a step: go on, or (in tests) stop as a kill
+/// would, or fail the step.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+#[cfg_attr(not(test), allow(dead_code))]
+enum Hook {
+    Go,
+    Kill,
+    Fail,
+}
+
+/// The steps of [`PartialDir::commit_with`].
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+enum Step {
+    /// Swapping the new store and the existing target in one step (Linux).
+    Exchange,
+    /// Moving the existing target into the work folder (where the swap is unavailable).
+    FirstRename,
+    /// Moving the new store to the target.
+    SecondRename,
+    /// Putting the old store back after a failed second rename.
+    PutBack,
+    /// Removing the work folder (and the old store in it).
+    Removal,
+}
+
+/// Swap the folders `a` and `b` in one step (Linux `renameat2(RENAME_EXCHANGE)`).
 ///
-/// * [`PartialDir::create`] makes `.volmorph-XXXXXX.partial/` in the target's folder (after
-///   removing stale ones) holding a locked [`PARTIAL_DIR_LOCK`] file; the writer fills
-///   [`PartialDir::path`].
-/// * [`PartialDir::commit`] removes the lock file and renames the folder to the target. An
-///   existing target folder is first renamed aside and removed after the new one is in
-///   place, so at every instant the target is the old folder, the new one, or (for the
-///   instant between the two renames) absent; it is never a mixture of both.
-/// * Dropping an uncommitted `PartialDir` (an error on the way) removes it; one left by a
-///   kill is removed by the next write to the same folder.
+/// # Errors
+/// The system's error, e.g. `EINVAL` on a file system without the swap; every other system
+/// reports [`io::ErrorKind::Unsupported`]. On error nothing has changed.
+fn exchange(a: &Path, b: &Path) -> io::Result<()> {
+    #[cfg(target_os = "linux")]
+    {
+        use rustix::fs::{CWD, RenameFlags, renameat_with};
+        renameat_with(CWD, a, CWD, b, RenameFlags::EXCHANGE).map_err(io::Error::from)
+    }
+    #[cfg(not(target_os = "linux"))]
+    {
+        let _ = (a, b);
+        Err(io::ErrorKind::Unsupported.into())
+    }
+}
+
+/// An output **folder** (a Zarr store) built in a hidden work folder next to its target and
+/// committed by renaming it into place.
+///
+/// * [`PartialDir::create`] makes the work folder `.volmorph-XXXXXX.partial/` in the target's
+///   folder (after cleaning up stale ones), holding a locked [`PARTIAL_DIR_LOCK`] file that
+///   names the target, and the empty store `new/` that the writer fills
+///   ([`PartialDir::path`]).
+/// * [`PartialDir::commit`] puts `new/` at the target. Without an existing target that is
+///   one rename. With one, the two are swapped in one step where the system can
+///   (Linux `renameat2(RENAME_EXCHANGE)`), so the target is always the old store or the new
+///   one; elsewhere the old target is first renamed to `old/` inside the work folder, then
+///   `new/` to the target, so the target is the old store, the new one or (between the two
+///   renames) absent. Then the work folder, with the old store, is removed, its lock file
+///   last. Whatever is not at the target is inside the work folder.
+/// * A failed second rename puts the old store back before returning the error. Dropping an
+///   uncommitted `PartialDir` removes its work folder.
+/// * A work folder left by a kill is cleaned up by the next write to the same folder
+///   ([`remove_stale_partials`]): the old store goes back to the target if the target is
+///   missing and both `old/` and `new/` are inside (a kill between the two renames);
+///   otherwise the folder is removed.
 ///
 /// Written by hand for the same reason as the rest of this module: the commit protocol is
 /// volmorph's own (`tempfile` has no folder rename over an existing one).
 #[derive(Debug)]
 pub struct PartialDir {
+    work: PathBuf,
     path: PathBuf,
     target: PathBuf,
     lock: Option<File>,
-    committed: bool,
+    /// Leave the work folder in place on drop (it holds the only copy of the old store).
+    keep: bool,
 }
 
 impl PartialDir {
-    /// Create the temporary folder for `target`.
+    /// Create the work folder for `target`.
     ///
     /// # Errors
-    /// [`IoError::Os`] naming `target` if the folder cannot be created, or if `target` exists
-    /// and is not a folder (a folder output never replaces a file).
+    /// [`IoError::Os`] naming `target` if the folder cannot be created, if `target` has no
+    /// file name, or if `target` exists and is not a folder (a folder output never replaces a
+    /// file).
     pub fn create(target: &Path) -> Result<Self, IoError> {
         if let Ok(meta) = std::fs::symlink_metadata(target)
             && !meta.is_dir()
@@ -176,6 +339,12 @@ impl PartialDir {
                 ),
             ));
         }
+        let Some(name) = target.file_name() else {
+            return Err(IoError::os(
+                target,
+                io::Error::new(io::ErrorKind::InvalidInput, "not a folder name"),
+            ));
+        };
         let dir = folder_of(target);
         remove_stale_partials(dir);
         let tmp = tempfile::Builder::new()
@@ -192,19 +361,27 @@ impl PartialDir {
                 };
                 IoError::os(target, io::Error::new(e.kind(), why))
             })?;
-        let path = tmp.keep();
-        let lock_path = path.join(PARTIAL_DIR_LOCK);
-        let lock = File::create(&lock_path).map_err(|e| IoError::os(&lock_path, e))?;
-        let _ = lock.lock();
-        Ok(Self {
-            path,
+        let work = tmp.keep();
+        // From here on, an error drops `out`, which removes the work folder.
+        let mut out = Self {
+            path: work.join(NEW_STORE),
+            work,
             target: target.to_path_buf(),
-            lock: Some(lock),
-            committed: false,
-        })
+            lock: None,
+            keep: false,
+        };
+        let lock_path = out.work.join(PARTIAL_DIR_LOCK);
+        let mut lock = File::create(&lock_path).map_err(|e| IoError::os(&lock_path, e))?;
+        let _ = lock.lock();
+        lock.write_all(&name_bytes(name))
+            .and_then(|()| lock.sync_all())
+            .map_err(|e| IoError::os(&lock_path, e))?;
+        out.lock = Some(lock);
+        std::fs::create_dir(&out.path).map_err(|e| IoError::os(&out.path, e))?;
+        Ok(out)
     }
 
-    /// The temporary folder to write into.
+    /// The store folder to write into (inside the work folder).
     #[must_use]
     pub fn path(&self) -> &Path {
         &self.path
@@ -216,47 +393,88 @@ impl PartialDir {
         &self.target
     }
 
-    /// Rename the folder into place (see the type's documentation).
+    /// Put the store in place (see the type's documentation).
     ///
     /// # Errors
     /// [`IoError::Os`] naming the target if a rename fails; the old target is then put back
-    /// where possible and the new folder removed.
-    pub fn commit(mut self) -> Result<(), IoError> {
-        let os = |error| IoError::os(&self.target, error);
-        drop(self.lock.take());
-        let _ = std::fs::remove_file(self.path.join(PARTIAL_DIR_LOCK));
+    /// and the new store removed. If putting the old store back fails too, the error says
+    /// where it is, and the next write to the same folder puts it back.
+    pub fn commit(self) -> Result<(), IoError> {
+        self.commit_with(|_| Hook::Go)
+    }
+
+    /// [`PartialDir::commit`], asking `hook` before each step (tests make a step fail, or
+    /// stop as a kill would).
+    fn commit_with(mut self, mut hook: impl FnMut(Step) -> Hook) -> Result<(), IoError> {
         let dir = folder_of(&self.target).to_path_buf();
-        let aside = if self.target.is_dir() {
-            let aside = dir.join(format!(
-                "{PARTIAL_PREFIX}{:08x}.old{PARTIAL_SUFFIX}",
-                token()
-            ));
-            std::fs::rename(&self.target, &aside).map_err(os)?;
-            Some(aside)
-        } else {
-            None
+        let old = self.work.join(OLD_STORE);
+        // `Ok(false)`: killed before the step.
+        let mut step = |step: Step, from: &Path, to: &Path| match hook(step) {
+            Hook::Go if step == Step::Exchange => exchange(from, to).map(|()| true),
+            Hook::Go => std::fs::rename(from, to).map(|()| true),
+            Hook::Kill => Ok(false),
+            Hook::Fail => Err(io::Error::other("injected failure")),
         };
-        if let Err(e) = std::fs::rename(&self.path, &self.target) {
-            if let Some(aside) = &aside {
-                let _ = std::fs::rename(aside, &self.target);
+        let killed = |mut this: Self| {
+            // A kill: the lock goes with the process, everything on disk stays.
+            this.keep = true;
+            drop(this);
+            Ok(())
+        };
+        let had_old = self.target.is_dir();
+        // The swap leaves the old store in `new/`, removed with the work folder; if it fails,
+        // nothing has changed and the two renames follow.
+        let swapped = had_old
+            && match step(Step::Exchange, &self.path, &self.target) {
+                Ok(true) => true,
+                Ok(false) => return killed(self),
+                Err(_) => false,
+            };
+        if !swapped {
+            if had_old
+                && !step(Step::FirstRename, &self.target, &old)
+                    .map_err(|e| IoError::os(&self.target, e))?
+            {
+                return killed(self);
             }
-            return Err(os(e));
+            match step(Step::SecondRename, &self.path, &self.target) {
+                Ok(true) => {}
+                Ok(false) => return killed(self),
+                Err(e) => {
+                    if had_old && let Err(back) = step(Step::PutBack, &old, &self.target) {
+                        self.keep = true;
+                        return Err(IoError::os(
+                            &self.target,
+                            io::Error::new(
+                                e.kind(),
+                                format!(
+                                    "{e}; the old store could not be put back ({back}): it is \
+                                     at {}, and the next write to {} puts it back",
+                                    old.display(),
+                                    dir.display()
+                                ),
+                            ),
+                        ));
+                    }
+                    return Err(IoError::os(&self.target, e));
+                }
+            }
         }
-        self.committed = true;
         sync_folder(&dir);
-        if let Some(aside) = aside {
-            let _ = std::fs::remove_dir_all(aside);
+        if hook(Step::Removal) == Hook::Kill {
+            return killed(self);
         }
+        // Dropping removes the work folder with the old store.
         Ok(())
     }
 }
 
 impl Drop for PartialDir {
     fn drop(&mut self) {
-        if !self.committed {
-            drop(self.lock.take());
-            let _ = std::fs::remove_dir_all(&self.path);
+        if !self.keep {
+            remove_work_folder(&self.work);
         }
+        drop(self.lock.take());
     }
 }
 
@@ -601,7 +819,12 @@ mod tests {
         // A user's folder that merely looks like one, without the lock file, stays.
         let other = dir.path().join(".volmorph-user01.partial");
         std::fs::create_dir(&other).unwrap();
+        std::fs::write(other.join("data"), b"user's").unwrap();
         File::open(&other).unwrap().set_modified(past).unwrap();
+        // An empty one (a writer killed before it made its lock file) goes.
+        let empty = dir.path().join(".volmorph-empty1.partial");
+        std::fs::create_dir(&empty).unwrap();
+        File::open(&empty).unwrap().set_modified(past).unwrap();
         remove_stale_partials(dir.path());
         assert_eq!(
             names(dir.path()),
@@ -620,5 +843,193 @@ mod tests {
         std::fs::write(&fresh, b"x").unwrap();
         remove_stale_partials(dir.path());
         assert!(fresh.exists());
+    }
+
+    /// A store folder `p` holding one file.
+    fn store(p: &Path, content: &[u8]) {
+        std::fs::create_dir_all(p).unwrap();
+        std::fs::write(p.join("chunk"), content).unwrap();
+    }
+
+    fn content(p: &Path) -> Vec<u8> {
+        std::fs::read(p.join("chunk")).unwrap()
+    }
+
+    /// Make a file or folder older than [`STALE_AGE`].
+    fn backdate(p: &Path) {
+        let past = SystemTime::now() - Duration::from_secs(60);
+        File::open(p).unwrap().set_modified(past).unwrap();
+    }
+
+    /// Write a store holding `data` over `target`, asking `hook` before each commit step;
+    /// returns the work folder and the commit's result.
+    fn commit_hooked(
+        target: &Path,
+        data: &[u8],
+        hook: impl FnMut(Step) -> Hook,
+    ) -> (PathBuf, Result<(), IoError>) {
+        let p = PartialDir::create(target).unwrap();
+        store(p.path(), data);
+        let work = p.work.clone();
+        (work, p.commit_with(hook))
+    }
+
+    /// Another write to the same folder (which cleans up after killed ones).
+    fn next_write(dir: &Path) {
+        write_atomic::<IoError, _>(&dir.join("other.txt"), |w| {
+            w.write_all(b"x").map_err(|e| IoError::os(dir, e))
+        })
+        .unwrap();
+    }
+
+    #[test]
+    fn killed_zarr_commit_leaks_the_old_store() {
+        // (kill point, whether the swap is available, what the target holds after the kill)
+        let cases: [(Step, bool, &[u8]); 4] = [
+            (Step::Exchange, true, b"old"),
+            (Step::Removal, true, b"new"),
+            (Step::FirstRename, false, b"old"),
+            (Step::Removal, false, b"new"),
+        ];
+        for (kill_at, swap, after_kill) in cases {
+            let dir = tempfile::tempdir().unwrap();
+            let target = dir.path().join("out.zarr");
+            store(&target, b"old");
+            let (work, r) = commit_hooked(&target, b"new", |s| match s {
+                s if s == kill_at => Hook::Kill,
+                Step::Exchange if !swap => Hook::Fail,
+                _ => Hook::Go,
+            });
+            r.unwrap();
+            let case = format!("killed before {kill_at:?}, swap {swap}");
+            // The kill leaves the target whole and the other store in the work folder.
+            assert_eq!(content(&target), after_kill, "{case}");
+            assert!(work.join(PARTIAL_DIR_LOCK).is_file(), "{case}");
+            backdate(&work);
+            next_write(dir.path());
+            assert_eq!(
+                names(dir.path()),
+                vec!["other.txt".to_string(), "out.zarr".to_string()],
+                "{case}"
+            );
+            assert_eq!(names(&target), vec!["chunk".to_string()], "{case}");
+            assert_eq!(content(&target), after_kill, "{case}");
+        }
+    }
+
+    /// The fallback's kill point: the old store moved aside, the new one not yet in place.
+    fn kill_between_renames(s: Step) -> Hook {
+        match s {
+            Step::Exchange => Hook::Fail,
+            Step::SecondRename => Hook::Kill,
+            _ => Hook::Go,
+        }
+    }
+
+    #[test]
+    fn kill_between_zarr_renames_leaves_no_store() {
+        let dir = tempfile::tempdir().unwrap();
+        let target = dir.path().join("out.zarr");
+        store(&target, b"old");
+        let (work, r) = commit_hooked(&target, b"new", kill_between_renames);
+        r.unwrap();
+        assert!(!target.exists());
+        assert_eq!(content(&work.join(OLD_STORE)), b"old");
+        assert_eq!(content(&work.join(NEW_STORE)), b"new");
+        backdate(&work);
+        // While another process holds the lock (a commit still under way), nothing moves.
+        let lock = File::open(work.join(PARTIAL_DIR_LOCK)).unwrap();
+        lock.lock().unwrap();
+        remove_stale_partials(dir.path());
+        assert!(!target.exists());
+        assert!(work.join(OLD_STORE).is_dir());
+        drop(lock);
+        // The next write to the folder (of another file) puts the old store back.
+        next_write(dir.path());
+        assert_eq!(
+            names(dir.path()),
+            vec!["other.txt".to_string(), "out.zarr".to_string()]
+        );
+        assert_eq!(content(&target), b"old");
+
+        // The next write of the same store restores the old one, then replaces it.
+        let (work, r) = commit_hooked(&target, b"new", kill_between_renames);
+        r.unwrap();
+        backdate(&work);
+        let p = PartialDir::create(&target).unwrap();
+        assert_eq!(content(&target), b"old");
+        store(p.path(), b"newest");
+        p.commit().unwrap();
+        assert_eq!(
+            names(dir.path()),
+            vec!["other.txt".to_string(), "out.zarr".to_string()]
+        );
+        assert_eq!(content(&target), b"newest");
+
+        // A target made again since the kill is left as it is; the work folder goes.
+        let (work, r) = commit_hooked(&target, b"new", kill_between_renames);
+        r.unwrap();
+        store(&target, b"made since");
+        backdate(&work);
+        next_write(dir.path());
+        assert_eq!(
+            names(dir.path()),
+            vec!["other.txt".to_string(), "out.zarr".to_string()]
+        );
+        assert_eq!(content(&target), b"made since");
+    }
+
+    #[test]
+    fn failed_zarr_renames_keep_the_old_store() {
+        let dir = tempfile::tempdir().unwrap();
+        let target = dir.path().join("out.zarr");
+        store(&target, b"old");
+        // The second rename fails: the old store is put back at once.
+        let (_, r) = commit_hooked(&target, b"new", |s| match s {
+            Step::Exchange | Step::SecondRename => Hook::Fail,
+            _ => Hook::Go,
+        });
+        assert!(r.is_err());
+        assert_eq!(names(dir.path()), vec!["out.zarr".to_string()]);
+        assert_eq!(content(&target), b"old");
+        // Putting it back fails too: the error says where it is, and the next write puts
+        // it back.
+        let (work, r) = commit_hooked(&target, b"new", |s| match s {
+            Step::Exchange | Step::SecondRename | Step::PutBack => Hook::Fail,
+            _ => Hook::Go,
+        });
+        let e = r.unwrap_err().to_string();
+        assert!(e.contains("out.zarr") && e.contains("next write"), "{e}");
+        assert!(!target.exists());
+        backdate(&work);
+        next_write(dir.path());
+        assert_eq!(
+            names(dir.path()),
+            vec!["other.txt".to_string(), "out.zarr".to_string()]
+        );
+        assert_eq!(content(&target), b"old");
+        // The first rename fails: nothing has moved.
+        let (_, r) = commit_hooked(&target, b"new", |s| match s {
+            Step::Exchange | Step::FirstRename => Hook::Fail,
+            _ => Hook::Go,
+        });
+        assert!(r.is_err());
+        assert_eq!(
+            names(dir.path()),
+            vec!["other.txt".to_string(), "out.zarr".to_string()]
+        );
+        assert_eq!(content(&target), b"old");
+    }
+
+    #[test]
+    fn lock_files_name_only_plain_file_names() {
+        let d = Path::new("/d");
+        assert_eq!(
+            target_from_lock(d, b"out.zarr".to_vec()),
+            Some(d.join("out.zarr"))
+        );
+        for bad in [&b""[..], b"..", b".", b"a/b", b"/abs", b"../x"] {
+            assert_eq!(target_from_lock(d, bad.to_vec()), None, "{bad:?}");
+        }
     }
 }

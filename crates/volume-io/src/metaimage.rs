@@ -28,7 +28,10 @@
 //! `CompressedData = True` means a zlib stream (gzip also accepted), optionally bounded by
 //! `CompressedDataSize`. `BinaryData = False` means whitespace-separated decimal text.
 //! `HeaderSize` bytes (−1: "the data are the last bytes") are skipped at the start of a
-//! detached data file. `ElementDataFile = LIST` and file-name patterns are refused as
+//! detached data file. Uncompressed binary data must fill their file exactly: a detached
+//! data file holds `HeaderSize` bytes and the voxels (any length of at least the voxels'
+//! with `HeaderSize = -1`), a `.mha` the header and the voxels; a shorter or longer file is
+//! refused, naming the data file, the fields and both sizes. `ElementDataFile = LIST` and file-name patterns are refused as
 //! unsupported.
 //!
 //! # Writing
@@ -350,7 +353,10 @@ fn decode(meta: &Meta, input: Input<'_>, detached: bool) -> Result<AnyVolume, Vo
     text_header::decode(input, &data_spec(meta, detached), meta.geometry)
 }
 
-/// Where and how the data of `meta` are stored.
+/// Where and how the data of `meta` are stored. Uncompressed binary data fill their file
+/// exactly: a detached data file holds `HeaderSize` bytes and the voxels (unless
+/// `HeaderSize = -1`: the voxels are the last bytes of a longer file), an inline one the
+/// header and the voxels.
 fn data_spec(meta: &Meta, detached: bool) -> DataSpec {
     let start = if !detached {
         Start::Offset(meta.data_offset as u64)
@@ -358,6 +364,22 @@ fn data_spec(meta: &Meta, detached: bool) -> DataSpec {
         Start::FromEnd
     } else {
         Start::Offset(0)
+    };
+    let words = if detached {
+        text_header::SizeWords {
+            source: format!(
+                "ElementDataFile `{}`",
+                meta.data_file.as_deref().unwrap_or_default()
+            ),
+            fields: "DimSize, ElementType and HeaderSize",
+            at_end: Some("HeaderSize = -1"),
+        }
+    } else {
+        text_header::SizeWords {
+            source: "the data after the header (ElementDataFile = LOCAL)".into(),
+            fields: "DimSize and ElementType",
+            at_end: None,
+        }
     };
     let spec = DataSpec {
         fmt: FMT,
@@ -368,7 +390,8 @@ fn data_spec(meta: &Meta, detached: bool) -> DataSpec {
         line_skip: 0,
         decoded_skip: 0,
         encoded_len: meta.compressed_size,
-        exact: false,
+        exact: meta.encoding == Encoding::Raw,
+        words: Some(words),
     };
     if detached && meta.header_size > 0 {
         let skip = meta.header_size as u64;

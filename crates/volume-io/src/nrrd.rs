@@ -38,6 +38,10 @@
 //!   compressed file and the byte skip to the decompressed data, as teem does), and
 //!   `data file` — a single file name, relative to the header's directory; the `LIST` and
 //!   `format min max step` multi-file forms are refused as unsupported.
+//! * Raw data must fill their file exactly: the skipped lines and bytes, then the voxels
+//!   (after the header's blank line for attached data), or any length of at least the
+//!   voxels' with `byte skip: -1`. A shorter or longer file is refused, naming the data,
+//!   the fields and both sizes.
 //!
 //! # Writing
 //! `NRRD0004`, `space: left-posterior-superior`, `space directions` = columns of
@@ -566,11 +570,18 @@ fn parse_header(bytes: &[u8], complete: bool) -> Result<Nrrd, VolumeError> {
     })
 }
 
+/// Decode the voxels of `n` from `input`, starting at `base` (0 for a data file). Raw data
+/// fill their file exactly (the skipped lines and bytes, then the voxels) unless
+/// `byte skip: -1` puts them at the end of a longer file.
 fn decode(n: &Nrrd, input: Input<'_>, base: u64) -> Result<AnyVolume, VolumeError> {
     let (start, line_skip, skip) = if n.byte_skip == -1 {
         (Start::FromEnd, 0, 0)
     } else {
         (Start::Offset(base), n.line_skip, n.byte_skip as u64)
+    };
+    let source = match &n.data_file {
+        Some(name) => format!("data file `{name}`"),
+        None => "the data after the header".into(),
     };
     let spec = DataSpec {
         fmt: FMT,
@@ -581,7 +592,12 @@ fn decode(n: &Nrrd, input: Input<'_>, base: u64) -> Result<AnyVolume, VolumeErro
         line_skip,
         decoded_skip: skip,
         encoded_len: None,
-        exact: false,
+        exact: n.encoding == Encoding::Raw,
+        words: Some(text_header::SizeWords {
+            source,
+            fields: "sizes, type, line skip and byte skip",
+            at_end: Some("byte skip: -1"),
+        }),
     };
     text_header::decode(input, &spec, n.geometry)
 }

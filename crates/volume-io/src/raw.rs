@@ -125,6 +125,7 @@ fn read_inner(path: &Path, spec: &RawSpec) -> Result<AnyVolume, VolumeError> {
         decoded_skip: spec.header_bytes,
         encoded_len: None,
         exact: true,
+        words: None,
     };
     text_header::decode(Input::File(path), &data, geometry)
 }

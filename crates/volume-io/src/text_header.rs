@@ -291,8 +291,25 @@ pub(crate) struct DataSpec {
     /// Size of the encoded payload, if the header declares it (MetaImage
     /// `CompressedDataSize`); bounds the compressed stream.
     pub encoded_len: Option<u64>,
-    /// Require that nothing follows the voxels (headerless raw files).
+    /// Require that nothing follows the voxels (raw data: headerless raw files, and MetaImage
+    /// and NRRD data that do not lie at the end of a longer file).
     pub exact: bool,
+    /// How size errors name the data and the header fields that declare their size;
+    /// `None` for the generic wording.
+    pub words: Option<SizeWords>,
+}
+
+/// How a format's size errors name what they compare, e.g. for a MetaImage data file:
+/// `source` "ElementDataFile `ct.raw`", `fields` "DimSize, ElementType and HeaderSize",
+/// `at_end` `Some("HeaderSize = -1")`.
+#[derive(Debug, Clone)]
+pub(crate) struct SizeWords {
+    /// The data, as the header names them.
+    pub source: String,
+    /// The header fields that declare the data's size.
+    pub fields: &'static str,
+    /// What the header says for data at the end of a longer file, if the format can say it.
+    pub at_end: Option<&'static str>,
 }
 
 /// Open `input` at `start` and return a buffered reader plus the number of bytes from
@@ -446,24 +463,54 @@ fn decode_typed<T: AsciiVoxel>(
         Encoding::Raw => {
             let need = nbytes.saturating_add(spec.decoded_skip);
             if avail < need || (spec.exact && avail != need) {
-                let skipped = if spec.decoded_skip > 0 {
-                    format!(" (including {} skipped)", spec.decoded_skip)
-                } else {
-                    String::new()
-                };
-                let what = if avail < need {
+                let short = avail < need;
+                let what = if short {
                     "voxel data truncated"
                 } else {
                     "voxel data size mismatch"
                 };
-                return Err(VolumeError::format(
-                    fmt,
-                    format!(
-                        "{what}: {n} voxels of {} need {need} bytes{skipped}, but {avail} \
-                         bytes are present",
-                        T::TYPE
-                    ),
-                ));
+                let msg = match &spec.words {
+                    None => {
+                        let skipped = if spec.decoded_skip > 0 {
+                            format!(" (including {} skipped)", spec.decoded_skip)
+                        } else {
+                            String::new()
+                        };
+                        format!(
+                            "{what}: {n} voxels of {} need {need} bytes{skipped}, but {avail} \
+                             bytes are present",
+                            T::TYPE
+                        )
+                    }
+                    Some(w) => {
+                        let lines = if spec.line_skip > 0 {
+                            format!(" after {} skipped lines", spec.line_skip)
+                        } else {
+                            String::new()
+                        };
+                        let skipped = if spec.decoded_skip > 0 {
+                            format!(" and {} skipped bytes", spec.decoded_skip)
+                        } else {
+                            String::new()
+                        };
+                        let longer = match (short, w.at_end) {
+                            (true, _) => String::new(),
+                            (false, Some(e)) => format!(
+                                "; the data must fill it exactly unless the header says \
+                                 {e} (data at the end of a longer file)"
+                            ),
+                            (false, None) => "; the data must fill it exactly".into(),
+                        };
+                        format!(
+                            "{what}: {} holds {avail} bytes{lines}, but {} declare {need} \
+                             bytes ({n} voxels of {}{skipped}){longer}",
+                            w.source,
+                            w.fields,
+                            T::TYPE
+                        )
+                    }
+                };
+                return Err(VolumeError::format(fmt, msg));
             }
             if spec.decoded_skip > 0 {
                 skip_bytes(fmt, &mut *r, spec.decoded_skip, "raw")?;

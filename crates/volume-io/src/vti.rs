@@ -630,6 +630,7 @@ fn decode_array(bytes: &[u8], p: &Parsed) -> Result<AnyVolume, VolumeError> {
         decoded_skip: 0,
         encoded_len: None,
         exact: true,
+        words: None,
     };
     let raw = match &p.array.storage {
         Storage::Ascii(text) => {

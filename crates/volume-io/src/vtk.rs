@@ -324,6 +324,7 @@ fn decode(v: &Vtk, input: Input<'_>) -> Result<AnyVolume, VolumeError> {
         decoded_skip: 0,
         encoded_len: None,
         exact: false,
+        words: None,
     };
     text_header::decode(input, &spec, v.geometry)
 }

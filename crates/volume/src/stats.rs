@@ -6,7 +6,10 @@
 //!   Neumaier's compensated summation, its variance is taken by the corrected two-pass
 //!   formula around the block mean, and the blocks are merged in memory order with Chan's
 //!   pairwise update — so the result is deterministic (independent of thread scheduling) and a
-//!   256³ volume of values near 10⁷ keeps its standard deviation to ~10⁻¹⁰ relative.
+//!   256³ volume of values near 10⁷ keeps its standard deviation to ~10⁻¹⁰ relative. A block
+//!   holding a value above 2⁴⁴⁸ (whose square could overflow) takes its mean and variance of
+//!   the values scaled by 2⁻⁶⁰⁰, exactly, so every finite input gives a finite mean and
+//!   standard deviation; other blocks are computed unscaled, bit for bit as without it.
 //! * [`quantiles`] / [`quantiles_any`] — quantiles of the finite values by linear
 //!   interpolation between order statistics (the "type 7" definition, NumPy's and R's
 //!   default), computed **exactly** for every voxel type: order statistics are found by radix
@@ -21,6 +24,22 @@ use crate::{AnyVolume, Volume, VolumeError, Voxel, VoxelType};
 
 /// Voxels per parallel block.
 const BLOCK: usize = 1 << 16;
+
+/// Largest finite magnitude of a block whose variance is taken unscaled: 2⁴⁴⁸. The sum of
+/// `n` squared deviations, each at most `(2·max)²`, stays below `f64::MAX` (2¹⁰²⁴) for every
+/// count `n < 2⁶⁴` only if `max < 2⁴⁷⁹`; 2⁴⁴⁸ leaves room for rounding. Ordinary data stay
+/// below it and get the unscaled arithmetic, bit for bit.
+const SCALE_ABOVE: f64 = pow2(448);
+
+/// The exponent by which a block above [`SCALE_ABOVE`] is scaled down: its values are
+/// multiplied by 2⁻⁶⁰⁰ (exactly: a power of two), which takes every finite value below
+/// 2⁴²⁴ (< 2⁴⁷⁹, as above) and the block's largest one above 2⁻¹⁵², far from underflow.
+const SCALE_EXP: i32 = 600;
+
+/// `2^e` for `-1022 ≤ e ≤ 1023` (a normal number), built from its bits so that it is exact.
+const fn pow2(e: i32) -> f64 {
+    f64::from_bits(((e + 1023) as u64) << 52)
+}
 
 /// Summary statistics of a volume's values.
 ///
@@ -62,9 +81,12 @@ struct Partial {
     /// Neumaier sum: `sum + comp` is the compensated total.
     sum: f64,
     comp: f64,
+    /// The mean, in units of `2^exp`.
     mean: f64,
-    /// Σ(x − mean)².
+    /// Σ(x − mean)², in units of `2^(2·exp)`.
     m2: f64,
+    /// 0, or [`SCALE_EXP`] for values too large to square ([`SCALE_ABOVE`]).
+    exp: i32,
 }
 
 impl Partial {
@@ -79,9 +101,11 @@ impl Partial {
         comp: 0.0,
         mean: 0.0,
         m2: 0.0,
+        exp: 0,
     };
 
-    /// Statistics of one block: compensated sum, then the corrected two-pass variance.
+    /// Statistics of one block: compensated sum, then the corrected two-pass variance (of the
+    /// values scaled by `2^-SCALE_EXP` if any exceeds [`SCALE_ABOVE`]).
     fn of_block<T: Voxel>(block: &[T]) -> Self {
         let mut p = Self::EMPTY;
         for &v in block {
@@ -103,12 +127,27 @@ impl Partial {
             return p;
         }
         let n = p.n as f64;
-        let m0 = (p.sum + p.comp) / n;
+        let big = p.min.abs().max(p.max.abs()) > SCALE_ABOVE;
+        p.exp = if big { SCALE_EXP } else { 0 };
+        // Multiplying by 1 changes nothing: ordinary blocks get the unscaled arithmetic.
+        let k = pow2(-p.exp);
+        let m0 = if big {
+            let (mut sum, mut comp) = (0.0, 0.0);
+            for &v in block {
+                let x = v.to_f64();
+                if x.is_finite() {
+                    neumaier_add(&mut sum, &mut comp, x * k);
+                }
+            }
+            (sum + comp) / n
+        } else {
+            (p.sum + p.comp) / n
+        };
         let (mut d1, mut d2) = (0.0, 0.0);
         for &v in block {
             let x = v.to_f64();
             if x.is_finite() {
-                let d = x - m0;
+                let d = x * k - m0;
                 d1 += d;
                 d2 += d * d;
             }
@@ -116,6 +155,17 @@ impl Partial {
         p.mean = m0 + d1 / n;
         p.m2 = (d2 - d1 * d1 / n).max(0.0);
         p
+    }
+
+    /// Express `mean` and `m2` in units of `2^exp` (`exp ≥ self.exp`): exact unless they
+    /// fall below the normal range, where they are negligible beside values of that scale.
+    fn rescale(&mut self, exp: i32) {
+        if exp != self.exp {
+            let f = pow2(self.exp - exp);
+            self.mean *= f;
+            self.m2 = self.m2 * f * f;
+            self.exp = exp;
+        }
     }
 
     /// Append `b` (the values after `self`'s in memory order).
@@ -134,6 +184,10 @@ impl Partial {
                 ..*b
             };
         }
+        let mut b = *b;
+        let exp = self.exp.max(b.exp);
+        self.rescale(exp);
+        b.rescale(exp);
         let (na, nb) = (self.n as f64, b.n as f64);
         let n = na + nb;
         let delta = b.mean - self.mean;
@@ -173,7 +227,13 @@ impl Statistics {
         let (min, max, mean, std) = if p.n == 0 {
             (f64::NAN, f64::NAN, f64::NAN, f64::NAN)
         } else {
-            (p.min, p.max, p.mean, (p.m2 / p.n as f64).sqrt())
+            let unit = pow2(p.exp);
+            (
+                p.min,
+                p.max,
+                p.mean * unit,
+                (p.m2 / p.n as f64).sqrt() * unit,
+            )
         };
         Self {
             count: volume.len(),

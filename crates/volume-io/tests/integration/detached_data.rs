@@ -124,6 +124,106 @@ fn nhdr_naming(data: &str) -> String {
     )
 }
 
+/// Issue: a 10-voxel `.mhd` or `.nhdr` whose data file held 4096 bytes read without error
+/// (the first 10 bytes taken, the rest ignored). Uncompressed data must fill their data file
+/// exactly unless the header puts them at its end.
+#[test]
+fn detached_data_file_longer_than_declared_is_refused() {
+    let dir = tempfile::tempdir().unwrap();
+    let data = dir.path().join("big.raw");
+    for (ext, text, field) in [
+        ("mhd", mhd_naming("big.raw"), "ElementDataFile `big.raw`"),
+        ("nhdr", nhdr_naming("big.raw"), "data file `big.raw`"),
+    ] {
+        let h = dir.path().join(format!("big.{ext}"));
+        std::fs::write(&h, text).unwrap();
+        std::fs::write(&data, vec![7u8; 4096]).unwrap();
+        let msg = format::read(&h).unwrap_err().to_string();
+        for needle in [
+            &data.display().to_string(),
+            field,
+            "size mismatch",
+            "holds 4096 bytes",
+            "declare 10 bytes",
+        ] {
+            assert!(msg.contains(needle), "{ext}: `{msg}` lacks `{needle}`");
+        }
+        // One byte more is refused too, one less as truncated; the declared size reads.
+        std::fs::write(&data, [7u8; 11]).unwrap();
+        let msg = format::read(&h).unwrap_err().to_string();
+        assert!(msg.contains("holds 11 bytes"), "{ext}: {msg}");
+        std::fs::write(&data, [7u8; 9]).unwrap();
+        let msg = format::read(&h).unwrap_err().to_string();
+        assert!(
+            msg.contains("truncated") && msg.contains("holds 9 bytes"),
+            "{ext}: {msg}"
+        );
+        std::fs::write(&data, [7u8; 10]).unwrap();
+        assert_eq!(format::read(&h).unwrap().as_bytes(), [7u8; 10]);
+    }
+}
+
+/// The layouts where a data file is legitimately longer than the voxels (MetaImage
+/// `HeaderSize = -1`, NRRD `byte skip: -1`: the voxels are its last bytes) still read, and so
+/// do exact files with skipped bytes and lines before the voxels.
+#[test]
+fn data_at_the_end_of_a_longer_data_file_still_reads() {
+    let dir = tempfile::tempdir().unwrap();
+    let mut bytes = vec![0xEEu8; 4086];
+    bytes.extend(0..10u8);
+    std::fs::write(dir.path().join("tail.raw"), &bytes).unwrap();
+    let mhd = dir.path().join("tail.mhd");
+    std::fs::write(
+        &mhd,
+        mhd_naming("tail.raw").replace("ElementType", "HeaderSize = -1\nElementType"),
+    )
+    .unwrap();
+    let nhdr = dir.path().join("tail.nhdr");
+    std::fs::write(
+        &nhdr,
+        nhdr_naming("tail.raw").replace("data file", "byte skip: -1\ndata file"),
+    )
+    .unwrap();
+    let want: Vec<u8> = (0..10).collect();
+    for h in [&mhd, &nhdr] {
+        assert_eq!(format::read(h).unwrap().as_bytes(), want, "{}", h.display());
+    }
+    // HeaderSize / byte skip of 4086 bytes: the same file, exactly.
+    std::fs::write(
+        &mhd,
+        mhd_naming("tail.raw").replace("ElementType", "HeaderSize = 4086\nElementType"),
+    )
+    .unwrap();
+    std::fs::write(
+        &nhdr,
+        nhdr_naming("tail.raw").replace("data file", "byte skip: 4086\ndata file"),
+    )
+    .unwrap();
+    for h in [&mhd, &nhdr] {
+        assert_eq!(format::read(h).unwrap().as_bytes(), want, "{}", h.display());
+    }
+    // One skipped byte fewer leaves one byte over: refused, with the way out named.
+    std::fs::write(
+        &mhd,
+        mhd_naming("tail.raw").replace("ElementType", "HeaderSize = 4085\nElementType"),
+    )
+    .unwrap();
+    std::fs::write(
+        &nhdr,
+        nhdr_naming("tail.raw").replace("data file", "byte skip: 4085\ndata file"),
+    )
+    .unwrap();
+    for (h, way_out) in [(&mhd, "HeaderSize = -1"), (&nhdr, "byte skip: -1")] {
+        let msg = format::read(h).unwrap_err().to_string();
+        assert!(
+            msg.contains("holds 4096 bytes")
+                && msg.contains("declare 4095 bytes")
+                && msg.contains(way_out),
+            "{msg}"
+        );
+    }
+}
+
 fn expect_external(header: &Path) {
     match format::read(header) {
         Err(e) => {

@@ -191,12 +191,12 @@ fn detached_data_file_with_header_size() {
     // A hand-edited detached header whose last line has no newline.
     std::fs::write(
         &hdr,
-        "NDims = 3\nDimSize = 1 1 2\nElementType = MET_SHORT\nHeaderSize = 18\n\
+        "NDims = 3\nDimSize = 1 1 2\nElementType = MET_SHORT\nHeaderSize = 20\n\
          ElementDataFile = data/img.raw",
     )
     .unwrap();
     let v = format::read(&hdr).unwrap();
-    assert_eq!(v.to_typed::<i16>().data(), &[2, 3]);
+    assert_eq!(v.to_typed::<i16>().data(), &[3, 4]);
 }
 
 fn read_err(bytes: &[u8]) -> VolumeError {
@@ -299,6 +299,26 @@ fn malformed_headers_are_clear_errors() {
     assert_unsupported(
         b"NDims = 3\nDimSize = 2 2 2\nElementType = MET_UCHAR\nElementDataFile = s%03d.raw 1 2 1\n",
         "pattern",
+    );
+}
+
+/// Issue: `.mha` voxels followed by more bytes than the header declares read without error
+/// (the extra bytes ignored). Inline raw data fill the rest of the file exactly.
+#[test]
+fn inline_data_longer_than_declared_is_refused() {
+    let mut b =
+        b"NDims = 3\nDimSize = 2 2 2\nElementType = MET_UCHAR\nElementDataFile = LOCAL\n".to_vec();
+    b.extend_from_slice(&[1, 2, 3, 4, 5, 6, 7, 8]);
+    assert_eq!(
+        metaimage::read_bytes(&b).unwrap().0.as_bytes(),
+        &[1, 2, 3, 4, 5, 6, 7, 8]
+    );
+    b.push(9);
+    assert_format_err(&b, "voxel data size mismatch");
+    assert_format_err(
+        &b,
+        "the data after the header (ElementDataFile = LOCAL) holds 9 bytes, but DimSize and \
+         ElementType declare 8 bytes",
     );
 }
 

@@ -316,7 +316,9 @@ fn with(fields: &str) -> Vec<u8> {
 #[test]
 fn malformed_headers_are_clear_errors() {
     let ok = "type: uchar\ndimension: 3\nsizes: 2 2 2\nencoding: raw\n";
-    assert!(nrrd::read_bytes(&with(ok)).is_ok());
+    let mut exact = format!("NRRD0004\n{ok}\n").into_bytes();
+    exact.extend_from_slice(&[0u8; 8]);
+    assert!(nrrd::read_bytes(&exact).is_ok());
     assert_format_err(b"NRRX0004\n", "not a NRRD file");
     assert_format_err(b"", "magic");
     assert_unsupported(b"NRRD0007\ntype: uchar\n\n", "NRRD0007");
@@ -415,6 +417,40 @@ fn malformed_headers_are_clear_errors() {
         b"NRRD0004\ntype: uchar\ndimension: 1\nsizes: 4\nencoding: raw\n",
         "blank line",
     );
+}
+
+/// Issue: raw data followed by more bytes than the header declares read without error (the
+/// extra bytes ignored). Attached raw data fill the rest of the file exactly, unless
+/// `byte skip: -1` puts them at its end.
+#[test]
+fn inline_data_longer_than_declared_is_refused() {
+    let head = "NRRD0004\ntype: uchar\ndimension: 3\nsizes: 2 2 2\nencoding: raw\n";
+    let mut b = format!("{head}\n").into_bytes();
+    b.extend_from_slice(&[1, 2, 3, 4, 5, 6, 7, 8]);
+    assert_eq!(
+        nrrd::read_bytes(&b).unwrap().0.as_bytes(),
+        &[1, 2, 3, 4, 5, 6, 7, 8]
+    );
+    b.push(9);
+    assert_format_err(&b, "the data after the header holds 9 bytes");
+    assert_format_err(&b, "sizes, type, line skip and byte skip declare 8 bytes");
+    // byte skip -1: the last 8 bytes, whatever comes before.
+    let mut b = format!("{head}byte skip: -1\n\n").into_bytes();
+    b.extend_from_slice(&[0, 1, 2, 3, 4, 5, 6, 7, 8]);
+    assert_eq!(
+        nrrd::read_bytes(&b).unwrap().0.as_bytes(),
+        &[1, 2, 3, 4, 5, 6, 7, 8]
+    );
+    // line skip and byte skip count towards the exact size.
+    let mut b = format!("{head}line skip: 1\nbyte skip: 2\n\n").into_bytes();
+    b.extend_from_slice(b"junk\nxy");
+    b.extend_from_slice(&[1, 2, 3, 4, 5, 6, 7, 8]);
+    assert_eq!(
+        nrrd::read_bytes(&b).unwrap().0.as_bytes(),
+        &[1, 2, 3, 4, 5, 6, 7, 8]
+    );
+    b.push(9);
+    assert_format_err(&b, "after 1 skipped lines, but");
 }
 
 #[test]

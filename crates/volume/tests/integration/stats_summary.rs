@@ -127,6 +127,63 @@ fn large_values_on_256_cubed_stay_accurate() {
     assert_eq!((s.min, s.max), (1.0e7, 1.0e7 + 3.0));
 }
 
+/// Issue: for values near ±1e300 the squared deviations overflowed, the variance came out as
+/// ∞ − ∞ = NaN, was clamped to 0, and `info` reported std 0. Blocks of such values are now
+/// scaled by a power of two before squaring.
+#[test]
+fn std_of_values_near_1e300_is_reported_as_0() {
+    /// Mean and population std of `values` by the textbook two-pass formula on the values
+    /// divided by `unit` (no overflow), scaled back.
+    fn reference(values: &[f64], unit: f64) -> (f64, f64) {
+        let n = values.len() as f64;
+        let mean = values.iter().map(|x| x / unit).sum::<f64>() / n;
+        let var = values
+            .iter()
+            .map(|x| (x / unit - mean) * (x / unit - mean))
+            .sum::<f64>()
+            / n;
+        (mean * unit, var.sqrt() * unit)
+    }
+    let check = |values: Vec<f64>, unit: f64, what: &str| {
+        let (mean, std) = reference(&values, unit);
+        let s = Statistics::of(&line(values));
+        assert!(std > 0.0 && std.is_finite(), "{what}: reference std {std}");
+        assert!(
+            (s.std - std).abs() <= 1e-12 * std,
+            "{what}: std {} vs {std}",
+            s.std
+        );
+        assert!(
+            (s.mean - mean).abs() <= 1e-12 * std,
+            "{what}: mean {} vs {mean}",
+            s.mean
+        );
+    };
+    // 1e300 · (1 … 10): std 1e300 · √8.25.
+    let tens: Vec<f64> = (1..=10).map(|k| f64::from(k) * 1e300).collect();
+    let s = Statistics::of(&line(tens.clone()));
+    assert!(
+        (s.std - 8.25f64.sqrt() * 1e300).abs() <= 1e-14 * s.std,
+        "{}",
+        s.std
+    );
+    check(tens, 1e300, "1e300 · (1 … 10)");
+    // Random values of both signs over several blocks.
+    let mut rng = Rng::new(5);
+    let mixed: Vec<f64> = (0..200_000)
+        .map(|_| (rng.unit() * 2.0 - 0.5) * 1e300)
+        .collect();
+    check(mixed.clone(), 1e300, "random near ±1e300");
+    // Ordinary blocks followed by huge ones: the merge brings both to one scale.
+    let mut both: Vec<f64> = (0..150_000).map(|_| rng.unit()).collect();
+    both.extend(mixed.iter().take(70_000));
+    check(both, 1e300, "ordinary blocks, then huge ones");
+    // The ends of the range.
+    let ends = Statistics::of(&line(vec![f64::MAX, -f64::MAX]));
+    assert_eq!((ends.mean, ends.std), (0.0, f64::MAX));
+    check(vec![f64::MAX, f64::MAX, -f64::MAX], 1e300, "±f64::MAX");
+}
+
 #[test]
 fn integer_quantiles_are_exact() {
     // 0..=99 in scrambled order: the type-7 quantile at p is 99·p.
