@@ -5,3 +5,4 @@ mod handle_limits;
 mod picture_progress;
 mod realtime_grid;
 mod wendland;
+mod wendland_budget;
