@@ -16,8 +16,9 @@
 //!   [`MAX_DEPENDENT_ITERATIONS`] times with an *active* mask (`active ∧ cond` after every
 //!   pass) guarding each update; points still looping after the last pass evaluate to NaN,
 //!   and the loop is recorded in the shape ([`crate::Shape::unfinished_loops`]) with its
-//!   still-running mask, so the grid sampler fails with the loop's line and column
-//!   ([`crate::FrepError::LoopBudget`]) instead of returning NaN silently. The pass budget
+//!   still-running mask, so grid sampling and ray casting (every volume, mesh, picture and
+//!   animation) fail with the loop's line and column ([`crate::FrepError::LoopBudget`])
+//!   instead of returning NaN silently. The pass budget
 //!   is [`MAX_DEPENDENT_ITERATIONS`]; a loop that needs more at the sampled points must be
 //!   rewritten (for example with a closed form, or a loop counter bound known at compile
 //!   time, which unrolls up to [`MAX_ITERATIONS`]).

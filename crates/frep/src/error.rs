@@ -55,10 +55,12 @@ pub enum FrepError {
         /// Sampled points where the loop was still running.
         points: usize,
     },
-    /// Every sampled value is NaN: the function is undefined on the whole grid.
+    /// Every sampled value is NaN (on a grid, or along a picture's rays): the function is
+    /// undefined wherever it was sampled.
     #[error(
-        "every one of the {points} sampled values is NaN: the function is undefined on this \
-         grid (check the bounds, the parameters, and divisions or roots of negative numbers)"
+        "every one of the {points} sampled values is NaN: the function is undefined wherever \
+         it was sampled (check the bounds, the parameters, and divisions or roots of negative \
+         numbers)"
     )]
     AllNan {
         /// Number of samples.

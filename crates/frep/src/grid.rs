@@ -124,42 +124,124 @@ pub fn sample_with(
 }
 
 /// Refuse a sampled field that is NaN everywhere, or NaN where a data-dependent loop of the
-/// model had not ended (see [`crate::Shape::unfinished_loops`]).
+/// model had not ended (see [`crate::Shape::unfinished_loops`]): [`SampleTally::verdict`]
+/// of the grid's values.
 fn check_nan(field: &dyn Field, geometry: &Geometry, data: &[f32]) -> Result<(), FrepError> {
     let nan = data.par_iter().filter(|v| v.is_nan()).count();
-    if nan == 0 {
-        return Ok(());
-    }
-    if let Some(tape) = field.tape() {
+    let mut tally = SampleTally {
+        samples: data.len(),
+        nan,
+        running: Vec::new(),
+    };
+    if nan > 0 {
         let [nx, ny, _] = geometry.dims;
         let frame = Frame::new(geometry);
-        for guard in tape.shape().unfinished_loops() {
-            let active = Tape::new(&guard.active);
-            let points = data
-                .par_iter()
-                .enumerate()
-                .filter(|&(idx, v)| {
-                    v.is_nan() && {
-                        let (i, j, k) = (idx % nx, (idx / nx) % ny, idx / (nx * ny));
-                        let p = frame.point(frame.row(j, k), i);
-                        let a = active.eval(p);
-                        a != 0.0 && !a.is_nan()
-                    }
-                })
-                .count();
-            if points > 0 {
-                return Err(FrepError::LoopBudget {
-                    pos: guard.pos,
-                    passes: guard.passes,
-                    points,
-                });
-            }
+        tally.running = loop_masks(field)
+            .iter()
+            .map(|active| {
+                data.par_iter()
+                    .enumerate()
+                    .filter(|&(idx, v)| {
+                        v.is_nan() && {
+                            let (i, j, k) = (idx % nx, (idx / nx) % ny, idx / (nx * ny));
+                            loop_running(active.eval(frame.point(frame.row(j, k), i)))
+                        }
+                    })
+                    .count()
+            })
+            .collect();
+    }
+    tally.verdict(field)
+}
+
+/// The still-running masks of the model's data-dependent loops
+/// ([`crate::Shape::unfinished_loops`]), one tape each in the model's order; empty for a
+/// field without a tape.
+pub(crate) fn loop_masks(field: &dyn Field) -> Vec<Tape> {
+    field.tape().map_or_else(Vec::new, |tape| {
+        tape.shape()
+            .unfinished_loops()
+            .iter()
+            .map(|guard| Tape::new(&guard.active))
+            .collect()
+    })
+}
+
+/// Whether a loop's mask value (of [`loop_masks`]) says the loop was still running at the
+/// point.
+#[inline]
+pub(crate) fn loop_running(mask: f64) -> bool {
+    mask != 0.0 && !mask.is_nan()
+}
+
+/// What an output saw of a field's values, for the one rule every output that samples a
+/// field applies ([`SampleTally::verdict`]): grid sampling and ray casting.
+#[derive(Debug, Clone, Default, PartialEq, Eq)]
+pub(crate) struct SampleTally {
+    /// Values computed.
+    pub samples: usize,
+    /// Values that were NaN.
+    pub nan: usize,
+    /// Per loop of [`loop_masks`], the NaN values at points where it was still running.
+    pub running: Vec<usize>,
+}
+
+impl SampleTally {
+    /// An empty tally for a field with `loops` masks.
+    pub(crate) fn new(loops: usize) -> Self {
+        Self {
+            samples: 0,
+            nan: 0,
+            running: vec![0; loops],
         }
     }
-    if nan == data.len() {
-        return Err(FrepError::AllNan { points: nan });
+
+    /// The counts of `self` and `other` together.
+    pub(crate) fn merge(mut self, other: Self) -> Self {
+        self.samples += other.samples;
+        self.nan += other.nan;
+        if self.running.len() < other.running.len() {
+            self.running.resize(other.running.len(), 0);
+        }
+        for (a, b) in self.running.iter_mut().zip(other.running) {
+            *a += b;
+        }
+        self
     }
-    Ok(())
+
+    /// Whether some NaN value was at a point where a loop was still running (the verdict
+    /// will be [`FrepError::LoopBudget`] whatever else is sampled).
+    pub(crate) fn loop_failed(&self) -> bool {
+        self.running.iter().any(|&n| n > 0)
+    }
+
+    /// The rule for NaN values: [`FrepError::LoopBudget`] naming the first loop of `field`
+    /// (in the model's order) that was still running where a value was NaN, else
+    /// [`FrepError::AllNan`] when every value was NaN; NaN values elsewhere are accepted
+    /// (outside, for pictures and meshes).
+    ///
+    /// # Errors
+    /// As above.
+    pub(crate) fn verdict(&self, field: &dyn Field) -> Result<(), FrepError> {
+        if self.nan == 0 {
+            return Ok(());
+        }
+        if let Some(tape) = field.tape() {
+            for (guard, &points) in tape.shape().unfinished_loops().iter().zip(&self.running) {
+                if points > 0 {
+                    return Err(FrepError::LoopBudget {
+                        pos: guard.pos,
+                        passes: guard.passes,
+                        points,
+                    });
+                }
+            }
+        }
+        if self.nan == self.samples {
+            return Err(FrepError::AllNan { points: self.nan });
+        }
+        Ok(())
+    }
 }
 
 /// Reference sampler: the full tape at every voxel centre, one point at a time (parallel

@@ -393,7 +393,7 @@ struct Parser {
 
 fn describe(t: &Tok) -> String {
     match t {
-        Tok::Num(v) => format!("number {v}"),
+        Tok::Num(v) => format!("number {}", volmorph_io::Num(*v)),
         Tok::Str(t) => format!("string \"{t}\""),
         Tok::Ident(s) => format!("`{s}`"),
         Tok::Punct(p) => format!("`{p}`"),

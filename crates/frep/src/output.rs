@@ -17,9 +17,12 @@
 //! without a tape fall back to uniform stepping ([`RenderOptions::fallback_steps`]) and can
 //! miss features thinner than a step. Shading is the project's one model,
 //! [`Shading`] (Blinn–Phong, light fixed to the camera, in linear light), with the outward
-//! normal `−∇f/|∇f|`.
+//! normal `−∇f/|∇f|`. A NaN value is a miss, but the values sampled along the rays follow
+//! the rule of grid sampling: NaN where a data-dependent loop of the model had not ended
+//! fails the picture with the loop's position, and so does NaN at every sample.
 
 use std::path::{Path, PathBuf};
+use std::sync::atomic::{AtomicBool, Ordering};
 
 use glam::DVec3;
 use rayon::prelude::*;
@@ -32,7 +35,7 @@ use volmorph_volume::Geometry;
 
 use crate::error::FrepError;
 use crate::field::Field;
-use crate::grid;
+use crate::grid::{self, SampleTally};
 use crate::ops::Dual;
 use crate::tape::{BatchScratch, IntervalScratch, Tape};
 
@@ -250,9 +253,15 @@ const BISECTIONS: usize = 48;
 
 /// Ray-cast picture of the solid `f ≥ 0` (see the [module docs](self)).
 ///
+/// The values sampled along the rays follow the rule of grid sampling
+/// ([`grid::sample`]): a NaN value where a data-dependent loop of the model had not ended
+/// fails the picture (casting stops at the first), and so does a field NaN at every sample.
+///
 /// # Errors
 /// [`FrepError::InvalidArgument`] for options out of range; [`FrepError::Render`] for an
-/// invalid bounding box or image size.
+/// invalid bounding box or image size; [`FrepError::LoopBudget`] naming the loop when a
+/// data-dependent loop of the model had not ended at a sampled point (its value NaN);
+/// [`FrepError::AllNan`] when every sampled value is NaN.
 pub fn render(
     field: &dyn Field,
     camera: &Camera,
@@ -288,42 +297,57 @@ pub fn render_with(
     let mut img = RgbaImage::new(w, h, options.background)?;
     let lighting = options.shading.for_camera(camera)?;
     let color = options.color.map(srgb8_to_linear);
+    let masks = grid::loop_masks(field);
+    // Set once a NaN value is found where a loop had not ended: the picture fails then,
+    // so the remaining rows are skipped as when cancelled.
+    let failed = AtomicBool::new(false);
+    let stop = || progress.is_cancelled() || failed.load(Ordering::Relaxed);
     let Some(tape) = field.tape() else {
-        img.pixels_mut()
+        let tally = img
+            .pixels_mut()
             .par_chunks_mut(w as usize)
             .enumerate()
-            .for_each(|(y, row)| {
-                if progress.is_cancelled() {
-                    return;
+            .map(|(y, row)| {
+                let mut tally = SampleTally::new(0);
+                if stop() {
+                    return tally;
                 }
                 for (x, px) in row.iter_mut().enumerate() {
                     let ray = camera.ray(x as u32, y as u32);
                     let Some((t0, t1)) = bbox.intersect(&ray) else {
                         continue;
                     };
-                    if let Some(t) = march(field, &ray, t0.max(0.0), t1, options.fallback_steps) {
+                    let steps = options.fallback_steps;
+                    if let Some(t) = march(field, &ray, t0.max(0.0), t1, steps, &mut tally) {
                         *px = shade(field, ray.at(t), ray.dir, &lighting, color);
                     }
                 }
                 progress.advance(1);
-            });
+                tally
+            })
+            .reduce(SampleTally::default, SampleTally::merge);
         progress.check()?;
+        tally.verdict(field)?;
         return Ok(img);
     };
     let rows_per_band = TILE as usize * w as usize;
-    img.pixels_mut()
+    let tally = img
+        .pixels_mut()
         .par_chunks_mut(rows_per_band)
         .enumerate()
-        .for_each(|(band, pixels)| {
-            if progress.is_cancelled() {
-                return;
-            }
+        .map(|(band, pixels)| {
             let y0 = band as u32 * TILE;
             let rows = (pixels.len() / w as usize) as u32;
-            let mut caster = Caster::new(tape, &bbox, options.max_depth);
+            let mut caster = Caster::new(tape, &bbox, options.max_depth, &masks);
             for x0 in (0..w).step_by(TILE as usize) {
+                if stop() {
+                    return caster.tally;
+                }
                 let x1 = (x0 + TILE).min(w);
                 caster.tile(camera, x0, y0, x1, y0 + rows);
+                if caster.tally.loop_failed() {
+                    failed.store(true, Ordering::Relaxed);
+                }
                 for (k, hit) in caster.hits.iter().enumerate() {
                     let Some((_, g)) = *hit else {
                         continue;
@@ -334,8 +358,11 @@ pub fn render_with(
                 }
             }
             progress.advance(u64::from(rows));
-        });
+            caster.tally
+        })
+        .reduce(SampleTally::default, SampleTally::merge);
     progress.check()?;
+    tally.verdict(field)?;
     Ok(img)
 }
 
@@ -345,10 +372,11 @@ pub fn render_with(
 /// leaf with a sample `f ≥ 0` gives the hit — its start if that is the sample, else the
 /// boundary found by bisection between the sample and the one before it — shaded with the
 /// gradient there. No interval arithmetic: `2^(max_depth+1) + 1` evaluations per ray, for
-/// tests on small pictures.
+/// tests on small pictures. NaN values are not checked (they are misses, as in [`render`]).
 ///
 /// # Errors
-/// As [`render`].
+/// [`FrepError::InvalidArgument`] for options out of range; [`FrepError::Render`] for an
+/// invalid bounding box or image size.
 pub fn render_naive(
     tape: &Tape,
     camera: &Camera,
@@ -456,14 +484,23 @@ struct Caster<'a> {
     zs: Vec<f64>,
     vals: Vec<f64>,
     leaves: Vec<(f64, f64)>,
+    /// The still-running masks of the model's loops ([`grid::loop_masks`]).
+    masks: &'a [Tape],
+    /// Scratch of [`Caster::count_samples`]: x, y, z of the NaN samples, mask values.
+    nan_points: [Vec<f64>; 4],
+    /// The batch samples so far and their NaN values.
+    tally: SampleTally,
 }
 
 impl<'a> Caster<'a> {
-    fn new(tape: &'a Tape, bbox: &'a Aabb, max_depth: u32) -> Self {
+    fn new(tape: &'a Tape, bbox: &'a Aabb, max_depth: u32, masks: &'a [Tape]) -> Self {
         Self {
             tape,
             bbox,
             max_depth,
+            masks,
+            nan_points: Default::default(),
+            tally: SampleTally::new(masks.len()),
             rays: Vec::new(),
             segs: Vec::new(),
             hits: Vec::new(),
@@ -512,8 +549,12 @@ impl<'a> Caster<'a> {
         self.hits[k] = Some((t, g));
     }
 
-    /// Search the packet `live` (its rays' segments at `depth`) with `tape`.
+    /// Search the packet `live` (its rays' segments at `depth`) with `tape`; nothing once a
+    /// loop of the model is known not to have ended (the picture fails).
     fn node(&mut self, tape: &Tape, live: Vec<RayState>, w: usize, depth: u32) {
+        if self.tally.loop_failed() {
+            return;
+        }
         let live: Vec<RayState> = live
             .into_iter()
             .filter(|r| self.hits[r.k].is_none())
@@ -632,6 +673,7 @@ impl<'a> Caster<'a> {
             &mut self.vals,
             &mut self.batch,
         );
+        self.count_samples();
         for (n, r) in live.iter().enumerate() {
             let v = &self.vals[n * per_ray..(n + 1) * per_ray];
             // The first sample f ≥ 0 decides: a leaf start is taken as it is, a midpoint or
@@ -660,6 +702,39 @@ impl<'a> Caster<'a> {
             self.hit(tape, r.k, t);
         }
         self.leaves = leaves;
+    }
+
+    /// Add the batch just evaluated ([`Caster::vals`] at the points of `xs`, `ys`, `zs`) to
+    /// the tally, with the loops still running at its NaN values (the masks evaluated in one
+    /// batch at those points).
+    fn count_samples(&mut self) {
+        self.tally.samples += self.vals.len();
+        let nan = self.vals.iter().filter(|v| v.is_nan()).count();
+        if nan == 0 {
+            return;
+        }
+        self.tally.nan += nan;
+        if self.masks.is_empty() {
+            return;
+        }
+        let mut at = std::mem::take(&mut self.nan_points);
+        for c in &mut at {
+            c.clear();
+        }
+        for (n, v) in self.vals.iter().enumerate() {
+            if v.is_nan() {
+                at[0].push(self.xs[n]);
+                at[1].push(self.ys[n]);
+                at[2].push(self.zs[n]);
+            }
+        }
+        let [xs, ys, zs, out] = &mut at;
+        out.resize(xs.len(), 0.0);
+        for (m, count) in self.masks.iter().zip(&mut self.tally.running) {
+            m.eval_batch_with(xs, ys, zs, out, &mut self.batch);
+            *count += out.iter().filter(|&&a| grid::loop_running(a)).count();
+        }
+        self.nan_points = at;
     }
 
     fn bisect(&mut self, tape: &Tape, k: usize, lo: f64, hi: f64) -> f64 {
@@ -699,9 +774,21 @@ fn bisect(f: &mut dyn FnMut(f64) -> f64, mut lo: f64, mut hi: f64) -> f64 {
     hi
 }
 
-/// Uniform stepping for fields without a tape.
-fn march(field: &dyn Field, ray: &Ray, ta: f64, tb: f64, steps: usize) -> Option<f64> {
-    let mut f = |t: f64| field.value(ray.at(t));
+/// Uniform stepping for fields without a tape, every value counted in `tally`.
+fn march(
+    field: &dyn Field,
+    ray: &Ray,
+    ta: f64,
+    tb: f64,
+    steps: usize,
+    tally: &mut SampleTally,
+) -> Option<f64> {
+    let mut f = |t: f64| {
+        let v = field.value(ray.at(t));
+        tally.samples += 1;
+        tally.nan += usize::from(v.is_nan());
+        v
+    };
     if f(ta) >= 0.0 {
         return Some(ta);
     }

@@ -822,7 +822,10 @@ fn finite(path: &str, v: f64) -> Result<f64, FrepError> {
     if v.is_finite() {
         Ok(v)
     } else {
-        Err(spec_err(path, format!("must be a finite number, got {v}")))
+        Err(spec_err(
+            path,
+            format!("must be a finite number, got {}", volmorph_io::Num(v)),
+        ))
     }
 }
 
@@ -832,7 +835,7 @@ fn positive(path: &str, v: f64) -> Result<f64, FrepError> {
     } else {
         Err(spec_err(
             path,
-            format!("must be positive and finite, got {v}"),
+            format!("must be positive and finite, got {}", volmorph_io::Num(v)),
         ))
     }
 }
@@ -841,7 +844,10 @@ fn non_negative(path: &str, v: f64) -> Result<f64, FrepError> {
     if v >= 0.0 && v.is_finite() {
         Ok(v)
     } else {
-        Err(spec_err(path, format!("must be ≥ 0 and finite, got {v}")))
+        Err(spec_err(
+            path,
+            format!("must be ≥ 0 and finite, got {}", volmorph_io::Num(v)),
+        ))
     }
 }
 

@@ -33,6 +33,15 @@
 //! volume `V` with each edge at least 1 % of the diagonal, so flat handle sets get a finite
 //! radius). A larger radius gives smoother, more global corrections at more cost.
 //!
+//! # Memory
+//! Every size is checked against the memory budget ([`volmorph_io::budget`]) before it is
+//! allocated: the kernel matrix's entries are counted (through the same neighbour grid,
+//! stopping once the count passes what the budget holds) before any is computed, and the
+//! Cholesky factor's non-zeros, known from the symbolic factorisation (faer's fill-reducing
+//! ordering and column counts), are checked with the factorisation's workspace before the
+//! numeric factorisation. A support reaching most of the handles makes both dense (`N²/2`
+//! entries); the refusal names the `support`, the sizes and the default support.
+//!
 //! # Live edits
 //! The map is linear in its targets (the trend is a least-squares fit, the weights a linear
 //! solve), so it implements [`LinearMap`] with the targets as parameters: moving a target
@@ -49,10 +58,13 @@
 
 use std::sync::Arc;
 
-use faer::linalg::solvers::Solve;
-use faer::sparse::linalg::solvers::Llt;
-use faer::sparse::{SparseColMat, Triplet};
-use faer::{Mat, Side};
+use std::sync::atomic::{AtomicU64, Ordering};
+
+use faer::dyn_stack::{MemBuffer, MemStack};
+use faer::sparse::linalg::amd;
+use faer::sparse::linalg::cholesky::{LltRef, SymbolicCholesky, factorize_symbolic_cholesky};
+use faer::sparse::{SparseColMatRef, SymbolicSparseColMatRef};
+use faer::{Conj, Mat, Side};
 use glam::{DMat3, DVec3};
 use rayon::prelude::*;
 
@@ -69,9 +81,16 @@ pub const DEFAULT_NEIGHBOURS: f64 = 40.0;
 /// get a translation only, which any set determines.
 pub const MIN_AFFINE_CONDITION: f64 = 1e-8;
 
-/// Bytes of sparse storage counted per kernel entry for the memory check: the triplet, the
-/// assembled matrix, and the Cholesky factor's fill (taken as eight times the matrix).
-const BYTES_PER_ENTRY: u64 = 24 + 16 + 8 * 16;
+/// Bytes per kernel entry of the assembled lower triangle of `K + λI`: a `usize` row index
+/// and an `f64` value (faer's compressed-column `SparseColMatRef<usize, f64>`, built in place
+/// from the counted columns). Checked against the memory budget before the entries are
+/// computed.
+const MATRIX_BYTES_PER_ENTRY: u64 = 16;
+
+/// Bytes per non-zero of the Cholesky factor: an `f64` (faer's
+/// `SymbolicCholesky::len_val` values). Checked, with the factorisation's workspace, before
+/// the numeric factorisation.
+const FACTOR_BYTES_PER_ENTRY: u64 = 8;
 
 /// Wendland's `φ₃,₁(s) = (1 − s)⁴ (4s + 1)` for `s < 1`, 0 beyond.
 #[must_use]
@@ -177,6 +196,29 @@ fn bounds(points: &[DVec3]) -> (DVec3, DVec3) {
     )
 }
 
+/// Call `f(i, s)` for every source `i ≥ j` within the support of source `j`, with
+/// `s = ‖p_i − p_j‖ / ρ < 1`: the entries of column `j` of the kernel matrix's lower triangle.
+/// Counting and assembly both go through here, so they agree entry for entry.
+#[inline]
+fn for_each_in_column(
+    grid: &CellGrid,
+    sources: &[DVec3],
+    j: usize,
+    rho: f64,
+    mut f: impl FnMut(usize, f64),
+) {
+    let inv_rho = 1.0 / rho;
+    let pj = sources[j];
+    grid.for_each_near(pj, |i| {
+        if i >= j {
+            let s = (sources[i] - pj).length() * inv_rho;
+            if s < 1.0 {
+                f(i, s);
+            }
+        }
+    });
+}
+
 /// The default support radius for `sources` (see the module documentation).
 #[must_use]
 pub fn default_support(sources: &[DVec3]) -> f64 {
@@ -277,15 +319,26 @@ struct System {
     support: f64,
     smoothing: f64,
     grid: CellGrid,
-    /// Cholesky factor of `K + λI`.
-    llt: Llt<usize, f64>,
+    /// Structure (fill-reducing ordering, supernodes) of the Cholesky factor of `K + λI`.
+    symbolic: SymbolicCholesky<usize>,
+    /// The factor's values, `symbolic.len_val()` of them.
+    factor: Vec<f64>,
     trend: Trend,
 }
 
 impl System {
     /// `(K + λI)⁻¹ R` for the `c` columns of `rhs` (`n × c`, row-major by handle).
     fn solve(&self, rhs: &mut Mat<f64>) {
-        self.llt.solve_in_place(rhs.as_mut());
+        let par = faer::get_global_parallelism();
+        let scratch = self
+            .symbolic
+            .solve_in_place_scratch::<f64>(rhs.ncols(), par);
+        LltRef::new(&self.symbolic, &self.factor).solve_in_place_with_conj(
+            Conj::No,
+            rhs.as_mut(),
+            par,
+            MemStack::new(&mut MemBuffer::new(scratch)),
+        );
     }
 
     /// `Σ_i φ(‖x − p_i‖/ρ) w_i` for any per-handle values `w`.
@@ -332,12 +385,15 @@ impl WendlandMap {
     }
 
     /// The map with support radius `support` (physical units; `None` for the default), and
-    /// progress reported through `progress` (stages: assembly, factorisation).
+    /// progress reported through `progress` (stages: counting the entries, assembly,
+    /// factorisation).
     ///
     /// # Errors
     /// [`DeformError::InvalidHandles`] for no handles, mismatched counts, a non-positive
     /// support or negative smoothing; [`DeformError::NonFinite`] for a non-finite coordinate;
-    /// [`DeformError::Io`] when the sparse system would exceed the memory budget;
+    /// [`DeformError::Io`] when the kernel matrix, its fill-reducing ordering or its Cholesky
+    /// factor would exceed the memory budget (checked before each is allocated; the message
+    /// names the `support`, the sizes and the default support);
     /// [`DeformError::Singular`] when the factorisation fails (coincident sources);
     /// [`DeformError::Cancelled`] when cancelled.
     pub fn with_support(
@@ -371,59 +427,155 @@ impl WendlandMap {
             )));
         }
         let grid = CellGrid::new(sources, rho)?;
+        let default = default_support(sources);
+        let what = |entries: &str| {
+            format!(
+                "the compact-support system of {n} handles with `support` {} ({entries}; the \
+                 default support for these handles, {}, reaches about {DEFAULT_NEIGHBOURS} \
+                 others per handle)",
+                volmorph_io::Num(rho),
+                volmorph_io::Num(default),
+            )
+        };
 
-        // Assembly: the lower triangle, one column per source, in parallel.
-        progress.start("assembling the compact-support system", n as u64);
-        let inv_rho = 1.0 / rho;
-        let columns: Vec<Vec<(u32, f64)>> = (0..n)
+        // Count the lower triangle's entries, column by column, before computing any: a
+        // support reaching most of the handles makes the system dense, and counting stops
+        // as soon as the count passes what the budget can hold.
+        progress.start("counting the compact-support system's entries", n as u64);
+        let limit = volmorph_io::memory_limit();
+        let cap = limit / MATRIX_BYTES_PER_ENTRY;
+        let counted = AtomicU64::new(0);
+        let counts: Vec<usize> = (0..n)
             .into_par_iter()
             .map(|j| {
-                let pj = sources[j];
-                let mut col = Vec::new();
-                grid.for_each_near(pj, |i| {
-                    if i >= j {
-                        let s = (sources[i] - pj).length() * inv_rho;
-                        if s < 1.0 {
-                            let v = wendland_c2(s) + if i == j { smoothing } else { 0.0 };
-                            col.push((i as u32, v));
-                        }
-                    }
-                });
+                if counted.load(Ordering::Relaxed) > cap {
+                    return 0;
+                }
+                let mut c = 0usize;
+                for_each_in_column(&grid, sources, j, rho, |_, _| c += 1);
+                counted.fetch_add(c as u64, Ordering::Relaxed);
                 progress.advance(1);
-                col
+                c
             })
             .collect();
-        progress.check().map_err(cancelled)?;
-        let nnz: usize = columns.iter().map(Vec::len).sum();
-        volmorph_io::check_elems(
-            &format!("a compact-support system of {n} handles ({nnz} kernel entries)"),
-            nnz as u64,
-            BYTES_PER_ENTRY,
-        )?;
-        let mut triplets = volmorph_io::try_with_capacity("kernel entries", nnz)?;
-        for (j, col) in columns.into_iter().enumerate() {
-            for (i, v) in col {
-                triplets.push(Triplet::new(i as usize, j, v));
+        let nnz = counted.into_inner();
+        if nnz > cap {
+            // Counting stopped early: `nnz` is a lower bound.
+            return Err(volmorph_io::IoError::Budget {
+                what: what(&format!("at least {nnz} kernel entries")),
+                bytes: nnz.saturating_mul(MATRIX_BYTES_PER_ENTRY),
+                limit,
             }
+            .into());
         }
-        let k = SparseColMat::<usize, f64>::try_new_from_triplets(n, n, &triplets)
-            .map_err(|e| DeformError::Singular(format!("assembling the sparse system: {e:?}")))?;
-        drop(triplets);
+        progress.check().map_err(cancelled)?;
+        volmorph_io::check_elems(
+            &what(&format!("{nnz} kernel entries")),
+            nnz,
+            MATRIX_BYTES_PER_ENTRY,
+        )?;
 
+        // Assembly: the lower triangle in compressed columns (rows sorted), each column
+        // written in parallel into its own slice.
+        progress.start("assembling the compact-support system", n as u64);
+        let nnz = nnz as usize;
+        let mut col_ptr = volmorph_io::try_vec("kernel column starts", n + 1, 0usize)?;
+        for (j, &c) in counts.iter().enumerate() {
+            col_ptr[j + 1] = col_ptr[j] + c;
+        }
+        let mut row_idx = volmorph_io::try_vec("kernel row indices", nnz, 0usize)?;
+        let mut values = volmorph_io::try_vec("kernel entries", nnz, 0.0f64)?;
+        let mut columns = Vec::with_capacity(n);
+        let (mut rows_rest, mut values_rest) = (&mut row_idx[..], &mut values[..]);
+        for &c in &counts {
+            let (r, rr) = std::mem::take(&mut rows_rest).split_at_mut(c);
+            let (v, vr) = std::mem::take(&mut values_rest).split_at_mut(c);
+            columns.push((r, v));
+            (rows_rest, values_rest) = (rr, vr);
+        }
+        columns
+            .into_par_iter()
+            .enumerate()
+            .for_each(|(j, (rows, vals))| {
+                let mut col = Vec::with_capacity(rows.len());
+                for_each_in_column(&grid, sources, j, rho, |i, s| {
+                    col.push((i, wendland_c2(s) + if i == j { smoothing } else { 0.0 }));
+                });
+                col.sort_unstable_by_key(|&(i, _)| i);
+                for ((r, v), (i, x)) in rows.iter_mut().zip(vals.iter_mut()).zip(col) {
+                    *r = i;
+                    *v = x;
+                }
+                progress.advance(1);
+            });
+        progress.check().map_err(cancelled)?;
+        let k = SparseColMatRef::new(
+            SymbolicSparseColMatRef::new_checked(n, n, &col_ptr, None, &row_idx),
+            &values,
+        );
+
+        // The factor's size from the symbolic factorisation (fill-reducing ordering, column
+        // counts), checked with the numeric factorisation's workspace before allocating.
         progress.start("factorising (sparse Cholesky)", 1);
-        let llt = k.sp_cholesky(Side::Lower).map_err(|e| {
-            DeformError::Singular(format!(
-                "the compact-support system is not positive definite ({e}); two sources \
-                 coincide or nearly so"
-            ))
-        })?;
+        let ordering = amd::order_maybe_unsorted_scratch::<usize>(n, nnz);
+        volmorph_io::check_bytes(
+            &what(&format!(
+                "the fill-reducing ordering of {nnz} kernel entries"
+            )),
+            ordering.size_bytes() as u64,
+        )?;
+        let symbolic = factorize_symbolic_cholesky(
+            k.symbolic(),
+            Side::Lower,
+            Default::default(),
+            Default::default(),
+        )
+        .map_err(|e| DeformError::Singular(format!("ordering the sparse system: {e:?}")))?;
+        let par = faer::get_global_parallelism();
+        let workspace = symbolic.factorize_numeric_llt_scratch::<f64>(par, Default::default());
+        let fill = symbolic.len_val();
+        let factor_bytes = (fill as u64)
+            .saturating_mul(FACTOR_BYTES_PER_ENTRY)
+            .saturating_add(workspace.size_bytes() as u64);
+        volmorph_io::check_bytes(
+            &what(&format!(
+                "a Cholesky factor of {fill} non-zeros for {nnz} kernel entries, with its \
+                 workspace"
+            )),
+            factor_bytes,
+        )?;
+        let mut factor = volmorph_io::try_vec("the Cholesky factor", fill, 0.0f64)?;
+        let mut buffer =
+            MemBuffer::try_new(workspace).map_err(|_| volmorph_io::IoError::Alloc {
+                what: "the Cholesky factorisation's workspace".into(),
+                bytes: workspace.size_bytes() as u64,
+            })?;
+        symbolic
+            .factorize_numeric_llt(
+                &mut factor,
+                k,
+                Side::Lower,
+                Default::default(),
+                par,
+                MemStack::new(&mut buffer),
+                Default::default(),
+            )
+            .map_err(|e| {
+                DeformError::Singular(format!(
+                    "the compact-support system is not positive definite ({e}); two sources \
+                     coincide or nearly so"
+                ))
+            })?;
+        drop(buffer);
+        drop((col_ptr, row_idx, values));
         progress.advance(1);
         let system = Arc::new(System {
             sources: sources.to_vec(),
             support: rho,
             smoothing,
             grid,
-            llt,
+            symbolic,
+            factor,
             trend: Trend::of(sources),
         });
         Self::solved(system, targets.to_vec())

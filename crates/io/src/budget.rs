@@ -187,7 +187,9 @@ pub fn human_bytes(b: u64) -> String {
 
 /// An `f64` for messages: ordinary notation for magnitudes from 1e-4 to 1e9 (and 0), `{:e}`
 /// notation beyond, so that a value such as 1e308 prints as `1e308`, not as 309 digits.
-/// Non-finite values print as `NaN`, `inf`, `-inf`.
+/// Non-finite values print as `NaN`, `inf`, `-inf`. A precision applies in either notation
+/// (`{:.4}`: `0.1235`, `1.0000e300`), so a message may ask for a fixed number of digits and
+/// still stay short.
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct Num(pub f64);
 
@@ -195,11 +197,34 @@ impl std::fmt::Display for Num {
     fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
         let x = self.0;
         let a = x.abs();
-        if !x.is_finite() || x == 0.0 || (1e-4..1e9).contains(&a) {
-            write!(f, "{x}")
-        } else {
-            write!(f, "{x:e}")
+        let ordinary = !x.is_finite() || x == 0.0 || (1e-4..1e9).contains(&a);
+        match (ordinary, f.precision()) {
+            (true, None) => write!(f, "{x}"),
+            (true, Some(p)) => write!(f, "{x:.p$}"),
+            (false, None) => write!(f, "{x:e}"),
+            (false, Some(p)) => write!(f, "{x:.p$e}"),
         }
+    }
+}
+
+/// Several `f64`s for messages (a point, a vector, a matrix column) as `[a, b, c]`, each in
+/// [`Num`]'s notation and with the precision given, if any (`{:.4}`).
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Nums<'a>(pub &'a [f64]);
+
+impl std::fmt::Display for Nums<'_> {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.write_str("[")?;
+        for (i, &x) in self.0.iter().enumerate() {
+            if i > 0 {
+                f.write_str(", ")?;
+            }
+            match f.precision() {
+                Some(p) => write!(f, "{:.p$}", Num(x))?,
+                None => write!(f, "{}", Num(x))?,
+            }
+        }
+        f.write_str("]")
     }
 }
 
@@ -298,6 +323,19 @@ mod tests {
         assert_eq!(Num(0.0).to_string(), "0");
         assert_eq!(Num(f64::NAN).to_string(), "NaN");
         assert_eq!(Num(f64::NEG_INFINITY).to_string(), "-inf");
+        // A precision applies in both notations.
+        assert_eq!(format!("{:.4}", Num(0.123_456)), "0.1235");
+        assert_eq!(format!("{:.4}", Num(1e300)), "1.0000e300");
+        assert_eq!(format!("{:.2}", Num(f64::NAN)), "NaN");
+        assert_eq!(
+            format!("{:.3}", Nums(&[1.0, -1e300, 2.5e-7])),
+            "[1.000, -1.000e300, 2.500e-7]"
+        );
+        assert_eq!(
+            Nums(&[0.5, 1e20, f64::INFINITY]).to_string(),
+            "[0.5, 1e20, inf]"
+        );
+        assert_eq!(Nums(&[]).to_string(), "[]");
     }
 
     #[test]

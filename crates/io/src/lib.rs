@@ -25,8 +25,8 @@ use std::path::{Path, PathBuf};
 
 pub use atomic::{PartialDir, write_atomic, write_detached};
 pub use budget::{
-    MEMORY_LIMIT_ENV, Num, check_bytes, check_elems, human_bytes, memory_limit, set_memory_limit,
-    try_vec, try_with_capacity,
+    MEMORY_LIMIT_ENV, Num, Nums, check_bytes, check_elems, human_bytes, memory_limit,
+    set_memory_limit, try_vec, try_with_capacity,
 };
 pub use progress::{Cancelled, Counter, NoProgress, Progress, Within, is_cancelled_error};
 

@@ -66,6 +66,7 @@ use rayon::prelude::*;
 
 use volmorph_deform::DeformError;
 use volmorph_deform::map::{SpaceMap, apply_grid_pointwise};
+use volmorph_io::Nums;
 
 /// Points per parallel work item of [`BSplineLattice`]'s batch evaluation.
 const BATCH_CHUNK: usize = 4096;
@@ -119,7 +120,8 @@ impl LatticeFrame {
         }
         let axes = orthonormalize(axes).map_err(|e| {
             DeformError::InvalidFrame(format!(
-                "lattice axes {axes}: {e} (a skewed lattice is made by LatticeFrame::skewed)"
+                "lattice axes {}: {e} (a skewed lattice is made by LatticeFrame::skewed)",
+                columns_text(axes)
             ))
         })?;
         let to_param = DMat3::from_diagonal(spacing.recip()) * axes.transpose();
@@ -156,7 +158,7 @@ impl LatticeFrame {
             if !(len.is_finite() && len > 0.0) {
                 return Err(DeformError::InvalidFrame(format!(
                     "lattice axis {a} {} has no direction",
-                    axes.col(a)
+                    Nums(&axes.col(a).to_array())
                 )));
             }
             // Unit to rounding (as written by `to_json`): keep the bits, so a written frame
@@ -172,20 +174,23 @@ impl LatticeFrame {
         let volume = unit.determinant();
         if volume.is_nan() || volume.abs() < MIN_FRAME_VOLUME {
             return Err(DeformError::InvalidFrame(format!(
-                "lattice axes {unit} span a volume of {volume:.3e} (unit axes), below \
-                 {MIN_FRAME_VOLUME:e}: the parallelepiped is degenerate"
+                "lattice axes {} span a volume of {volume:.3e} (unit axes), below \
+                 {MIN_FRAME_VOLUME:e}: the parallelepiped is degenerate",
+                columns_text(unit)
             )));
         }
         let edges = unit * DMat3::from_diagonal(spacing);
         if !(edges.is_finite() && spacing.is_finite()) {
             return Err(DeformError::InvalidFrame(format!(
-                "lattice edges {edges} overflow"
+                "lattice edges {} overflow",
+                columns_text(edges)
             )));
         }
         let to_param = edges.inverse();
         if !to_param.is_finite() {
             return Err(DeformError::InvalidFrame(format!(
-                "lattice edges {edges} cannot be inverted"
+                "lattice edges {} cannot be inverted",
+                columns_text(edges)
             )));
         }
         Ok(Self {
@@ -287,15 +292,28 @@ impl LatticeFrame {
 fn check_origin_spacing(origin: DVec3, spacing: DVec3) -> Result<(), DeformError> {
     if !origin.is_finite() {
         return Err(DeformError::InvalidFrame(format!(
-            "origin {origin} is not finite"
+            "origin {} is not finite",
+            Nums(&origin.to_array())
         )));
     }
     if !(spacing.is_finite() && spacing.min_element() > 0.0) {
         return Err(DeformError::InvalidFrame(format!(
-            "spacing {spacing} must be finite and > 0"
+            "spacing {} must be finite and > 0",
+            Nums(&spacing.to_array())
         )));
     }
     Ok(())
+}
+
+/// A matrix for messages, column by column (`[[x0, y0, z0], [x1, …], …]`, as glam prints
+/// it) in [`Num`](volmorph_io::Num)'s notation, so a huge entry prints as `1e300`.
+fn columns_text(m: DMat3) -> String {
+    format!(
+        "[{}, {}, {}]",
+        Nums(&m.x_axis.to_array()),
+        Nums(&m.y_axis.to_array()),
+        Nums(&m.z_axis.to_array())
+    )
 }
 
 /// A trivariate B-spline (or Bézier) lattice map with physical control points. See the
@@ -490,7 +508,8 @@ impl BSplineLattice {
         }
         if !corner.is_finite() {
             return Err(DeformError::InvalidFrame(format!(
-                "corner {corner} is not finite"
+                "corner {} is not finite",
+                Nums(&corner.to_array())
             )));
         }
         let frame = LatticeFrame::parallelepiped(DVec3::ZERO, unit_edges)?;

@@ -197,7 +197,7 @@ pub enum DragError {
     #[error("no drags given")]
     NoDrags,
     /// A material point or target has a NaN or infinite coordinate.
-    #[error("drag {drag}: {what} {value} is not finite")]
+    #[error("drag {drag}: {what} {} is not finite", volmorph_io::Nums(&value.to_array()))]
     NonFinite {
         /// Index of the drag in the list.
         drag: usize,
@@ -208,8 +208,10 @@ pub enum DragError {
     },
     /// A material point lies outside the closed lattice box, where the map cannot move it.
     #[error(
-        "drag {drag}: material point {point:.6} lies outside the lattice box (lattice \
-         parameters {parameter:.4}, domain {domain:?}); the lattice moves only points of its box"
+        "drag {drag}: material point {:.6} lies outside the lattice box (lattice parameters \
+         {:.4}, domain {domain:?}); the lattice moves only points of its box",
+        volmorph_io::Nums(&point.to_array()),
+        volmorph_io::Nums(&parameter.to_array())
     )]
     MaterialOutsideBox {
         /// Index of the drag in the list.
@@ -223,8 +225,10 @@ pub enum DragError {
     },
     /// A target lies outside the closed lattice box.
     #[error(
-        "drag {drag}: target {target:.6} lies outside the lattice box (lattice parameters \
-         {parameter:.4}, domain {domain:?}); targets must stay inside the deformed region"
+        "drag {drag}: target {:.6} lies outside the lattice box (lattice parameters {:.4}, \
+         domain {domain:?}); targets must stay inside the deformed region",
+        volmorph_io::Nums(&target.to_array()),
+        volmorph_io::Nums(&parameter.to_array())
     )]
     TargetOutsideBox {
         /// Index of the drag in the list.
@@ -248,9 +252,10 @@ pub enum DragError {
     /// No control point that may move (within the tool shape and the realm, not frozen) has a
     /// basis weight of at least [`MIN_INFLUENCE`] at a dragged point.
     #[error(
-        "drag {drag}: no movable control point influences the material point {point:.6} \
-         (tool {tool}, realm {realm}, boundary {}); enlarge the tool or the realm, or free the \
+        "drag {drag}: no movable control point influences the material point {:.6} (tool \
+         {tool}, realm {realm}, boundary {}); enlarge the tool or the realm, or free the \
          boundary",
+        volmorph_io::Nums(&point.to_array()),
         if *.freeze_boundary { "frozen" } else { "free" }
     )]
     NoInfluence {
@@ -295,8 +300,9 @@ pub enum DragError {
     /// A grabbed point of the deformed model has no preimage the Newton iteration can find
     /// (it is not on the deformed model's space, or sits on a fold).
     #[error(
-        "drag {drag}: point {point:.4} is not on the deformed model's space: the lattice cannot \
-         be inverted there ({status:?}, residual {residual:.3e})"
+        "drag {drag}: point {:.4} is not on the deformed model's space: the lattice cannot be \
+         inverted there ({status:?}, residual {residual:.3e})",
+        volmorph_io::Nums(&point.to_array())
     )]
     NotInvertible {
         /// Index of the drag in the list.

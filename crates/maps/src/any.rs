@@ -92,11 +92,9 @@ impl AnyMap {
         match self {
             AnyMap::Identity => "identity".into(),
             AnyMap::Affine(a) => format!(
-                "affine, det {:.6}, translation ({:.4}, {:.4}, {:.4})",
-                a.matrix.determinant(),
-                a.offset.x,
-                a.offset.y,
-                a.offset.z
+                "affine, det {:.6}, translation {:.4}",
+                volmorph_io::Num(a.matrix.determinant()),
+                volmorph_io::Nums(&a.offset.to_array())
             ),
             AnyMap::Lattice(l) => {
                 let [cx, cy, cz] = l.counts();

@@ -71,7 +71,7 @@ pub(crate) fn positive(what: &'static str, v: f64) -> Result<f64, RegisterError>
     } else {
         Err(RegisterError::option(
             what,
-            format!("must be finite and > 0, got {v}"),
+            format!("must be finite and > 0, got {}", volmorph_io::Num(v)),
         ))
     }
 }
@@ -83,7 +83,7 @@ pub(crate) fn non_negative(what: &'static str, v: f64) -> Result<f64, RegisterEr
     } else {
         Err(RegisterError::option(
             what,
-            format!("must be finite and ≥ 0, got {v}"),
+            format!("must be finite and ≥ 0, got {}", volmorph_io::Num(v)),
         ))
     }
 }

@@ -97,7 +97,13 @@ pub enum TrivariateError {
         axis: usize,
     },
     /// Point inversion found no parameters mapping to the point within tolerance.
-    #[error("no parameters map to ({x}, {y}, {z}) within tolerance (best residual {residual})")]
+    #[error(
+        "no parameters map to ({}, {}, {}) within tolerance (best residual {})",
+        volmorph_io::Num(*x),
+        volmorph_io::Num(*y),
+        volmorph_io::Num(*z),
+        volmorph_io::Num(*residual)
+    )]
     InversionFailed {
         /// Physical x.
         x: f64,

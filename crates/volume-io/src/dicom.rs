@@ -939,7 +939,7 @@ fn assemble(
                  series holds several volumes (acquisitions, echoes or time points); split it",
                 name(&planes[w[0]]),
                 name(&planes[w[1]]),
-                d(w[0])
+                volmorph_io::Num(d(w[0]))
             )));
         }
     }
@@ -958,10 +958,12 @@ fn assemble(
             let gap = d(w[1]) - d(w[0]);
             if (gap - mean).abs() > SLICE_GAP_TOL * mean {
                 return Err(err(format!(
-                    "slices are not evenly spaced: {} → {} is {gap:.4} mm, the mean step is \
-                     {mean:.4} mm (a missing slice, or several stacks in one series)",
+                    "slices are not evenly spaced: {} → {} is {:.4} mm, the mean step is {:.4} \
+                     mm (a missing slice, or several stacks in one series)",
                     name(&planes[w[0]]),
-                    name(&planes[w[1]])
+                    name(&planes[w[1]]),
+                    volmorph_io::Num(gap),
+                    volmorph_io::Num(mean)
                 )));
             }
         }

@@ -1957,7 +1957,8 @@ fn to_f32(v: f64, what: &str) -> Result<f32, VolumeError> {
         Ok(f)
     } else {
         Err(VolumeError::Geometry(format!(
-            "{what} = {v} does not fit in the 32-bit floats of a NIfTI-1 header"
+            "{what} = {} does not fit in the 32-bit floats of a NIfTI-1 header",
+            volmorph_io::Num(v)
         )))
     }
 }
@@ -1976,8 +1977,9 @@ fn write_xform(g: &Geometry) -> Result<WriteXform, VolumeError> {
     let ortho = transpose33(&make_orthog33(transpose33(&dir)));
     let (quatern, qfac) = mat33_to_quatern(&ortho);
     let offset = [
-        to_f32(-g.origin.x, "origin x")?,
-        to_f32(-g.origin.y, "origin y")?,
+        // LPS → RAS after the check, so a message shows the origin as given.
+        -to_f32(g.origin.x, "origin x")?,
+        -to_f32(g.origin.y, "origin y")?,
         to_f32(g.origin.z, "origin z")?,
     ];
     let spacing = [

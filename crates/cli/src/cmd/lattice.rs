@@ -159,7 +159,10 @@ fn init(a: &InitArgs) -> anyhow::Result<()> {
         };
         (
             l,
-            format!("identity lattice on the {kind} parallelepiped at {corner}"),
+            format!(
+                "identity lattice on the {kind} parallelepiped at {}",
+                volmorph_io::Nums(&corner.to_array())
+            ),
         )
     } else {
         let Some(input) = &a.input else {

@@ -221,3 +221,84 @@ fn frames_go_to_one_file_or_a_folder() {
     .unwrap_err();
     assert!(e.to_string().contains("m.mp4"), "{e}");
 }
+
+/// A model whose `while` loop needs more passes than the budget of 64 where it is sampled
+/// (`limit` 100: up to 98), or fewer (`limit` 10).
+fn loop_model(limit: u32) -> Tape {
+    let src = format!(
+        "my_model(x[3], a[1])\n{{\n  array p[3];\n  n = 0;\n  t = x[1] + 2;\n  \
+         while (t < {limit}) loop\n    t = t + 1;\n    n = n + 1;\n  endloop;\n  \
+         my_model = 1 - n / 1000;\n}}\n"
+    );
+    Tape::new(&compile_source(&src, &Default::default()).unwrap())
+}
+
+/// Issue 14: `frep render loop.hf` of a model whose loop had not ended in its 64 passes
+/// exited 0 with "covers 0.0 %" (NaN values are misses to the ray caster) while grid
+/// sampling fails. Now the picture, a picture export and an animation fail with the loop's
+/// line and write nothing; a picture NaN at every sample is refused as a grid is; a picture
+/// NaN in part of the box (outside) is still drawn.
+#[test]
+fn frep_render_of_an_unfinished_loop_exits_0() {
+    let o = options(8);
+    let render_options = RenderOptions {
+        bounds_min: o.bounds.0,
+        bounds_max: o.bounds.1,
+        ..o.render
+    };
+    let long = loop_model(100);
+    let Err(e) = render(&long, &o.camera, &render_options) else {
+        panic!("the picture of an unfinished loop was drawn");
+    };
+    match &e {
+        FrepError::LoopBudget {
+            pos,
+            passes,
+            points,
+        } => assert!(pos.line == 6 && *passes == 64 && *points > 0, "{e}"),
+        other => panic!("a loop error was expected, got {other}"),
+    }
+    assert!(e.to_string().contains("line 6"), "{e}");
+
+    let dir = tempfile::tempdir().unwrap();
+    let png = dir.path().join("loop.png");
+    let e = export_with(&long, &png, &o, &NoProgress).unwrap_err();
+    assert!(matches!(e, FrepError::LoopBudget { .. }), "{e}");
+    assert!(!png.exists());
+    let gif = dir.path().join("loop.gif");
+    let field_at = |_: f64| -> Result<Box<dyn Field>, FrepError> { Ok(Box::new(loop_model(100))) };
+    let e =
+        write_frames_with(2, &field_at, &o.camera, &o.render, &gif, 50, &NoProgress).unwrap_err();
+    assert!(matches!(e, FrepError::LoopBudget { .. }), "{e}");
+    assert!(!gif.exists());
+
+    // A loop that ends within its passes: an ordinary picture (the box is inside the solid).
+    let img = render(&loop_model(10), &o.camera, &render_options).unwrap();
+    assert!(img.pixels().iter().any(|p| *p != render_options.background));
+
+    // NaN at every sample, compiled or not: refused as grid sampling refuses it.
+    let undefined = compile_source(
+        "m(x[3], a[1]) { m = sqrt(-1 - x[1] * x[1]); }",
+        &Default::default(),
+    )
+    .unwrap();
+    let e = render(&Tape::new(&undefined), &o.camera, &render_options).unwrap_err();
+    assert!(matches!(e, FrepError::AllNan { .. }), "{e}");
+    struct Opaque;
+    impl Field for Opaque {
+        fn value(&self, _: DVec3) -> f64 {
+            f64::NAN
+        }
+    }
+    let e = render(&Opaque, &o.camera, &render_options).unwrap_err();
+    assert!(matches!(e, FrepError::AllNan { .. }), "{e}");
+
+    // NaN on half of the box (x < 0) and a ball on the other half: drawn.
+    let half = compile_source(
+        "m(x[3], a[1]) { m = 1 - x[1]^2 - x[2]^2 - x[3]^2 + 0 * sqrt(x[1]); }",
+        &Default::default(),
+    )
+    .unwrap();
+    let img = render(&Tape::new(&half), &o.camera, &render_options).unwrap();
+    assert!(img.pixels().iter().any(|p| *p != render_options.background));
+}

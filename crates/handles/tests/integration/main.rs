@@ -6,3 +6,4 @@ mod handle_limits;
 mod picture_progress;
 mod realtime_grid;
 mod wendland;
+mod wendland_budget;

@@ -117,7 +117,14 @@ fn ints(v: &[f64], key: &str, line: usize) -> Result<[i64; 3], DeformError> {
     let mut out = [0i64; 3];
     for (o, &x) in out.iter_mut().zip(v) {
         if !(x.fract() == 0.0 && x.abs() <= f64::from(u32::MAX)) {
-            return Err(err(line, format!("{key} value {x} is not an integer")));
+            return Err(err(
+                line,
+                format!(
+                    "{key} value {} is not an integer of magnitude at most {}",
+                    volmorph_io::Num(x),
+                    u32::MAX
+                ),
+            ));
         }
         *o = x as i64;
     }

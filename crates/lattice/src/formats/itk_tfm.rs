@@ -205,7 +205,11 @@ pub fn parse_itk_tfm(text: &str) -> Result<BSplineLattice, DeformError> {
         if !(v.fract() == 0.0 && (0.0..=u32::MAX as f64).contains(&v)) {
             return Err(err(
                 fline,
-                format!("grid size {v} along axis {a} is not a non-negative integer"),
+                format!(
+                    "grid size {} along axis {a} is not an integer from 0 to {}",
+                    volmorph_io::Num(v),
+                    u32::MAX
+                ),
             ));
         }
         size[a] = v as usize;
@@ -214,7 +218,13 @@ pub fn parse_itk_tfm(text: &str) -> Result<BSplineLattice, DeformError> {
     let origin = DVec3::new(fp[3], fp[4], fp[5]);
     let spacing = DVec3::new(fp[6], fp[7], fp[8]);
     if spacing.min_element() <= 0.0 {
-        return Err(err(fline, format!("grid spacing {spacing} must be > 0")));
+        return Err(err(
+            fline,
+            format!(
+                "grid spacing {} must be > 0",
+                volmorph_io::Nums(&spacing.to_array())
+            ),
+        ));
     }
     let mut rows = [0.0; 9];
     rows.copy_from_slice(&fp[9..]);

@@ -734,3 +734,52 @@ fn frame_axes_do_not_matter_for_landing() {
     )];
     drag_and_check(&mut lat, &drags, &DragOptions::with_radius(6.0));
 }
+
+/// Issue 14: messages printed user-supplied numbers with `{}`/`{:.6}`, so a point at 1e300
+/// gave a 300-digit message. Drag errors and frame errors now print `1e300` (the project's
+/// `Num` notation), whatever precision they ask for.
+#[test]
+fn numbers_past_1e9_print_hundreds_of_digits() {
+    // 1e300 written out is 301 characters: a shorter message cannot hold it.
+    let short = |msg: String| {
+        assert!(
+            msg.len() < 300 && msg.contains("e300"),
+            "{} chars: {msg}",
+            msg.len()
+        );
+    };
+    let lat = cubic9();
+    let opts = DragOptions::default();
+    let ok = DVec3::splat(30.0);
+    let e = solve_drags(&lat, &[Drag::new(DVec3::new(1e300, 3.0, 3.0), ok)], &opts).unwrap_err();
+    assert!(matches!(e, DragError::MaterialOutsideBox { .. }), "{e}");
+    short(e.to_string());
+    let e = solve_drags(&lat, &[Drag::new(ok, DVec3::new(-1e300, 3.0, 3.0))], &opts).unwrap_err();
+    assert!(matches!(e, DragError::TargetOutsideBox { .. }), "{e}");
+    short(e.to_string());
+    let e = solve_drags(
+        &lat,
+        &[Drag::new(DVec3::new(1e300, f64::NAN, 0.0), ok)],
+        &opts,
+    )
+    .unwrap_err();
+    assert!(matches!(e, DragError::NonFinite { .. }), "{e}");
+    short(e.to_string());
+    // An axis whose length overflows, a negative spacing, a corner that is not finite.
+    let axes = DMat3::from_cols(DVec3::new(1e300, 1e300, 0.0), DVec3::Y, DVec3::Z);
+    short(
+        LatticeFrame::skewed(DVec3::ZERO, axes, DVec3::ONE)
+            .unwrap_err()
+            .to_string(),
+    );
+    short(
+        LatticeFrame::axis_aligned(DVec3::ZERO, DVec3::new(1.0, -1e300, 1.0))
+            .unwrap_err()
+            .to_string(),
+    );
+    short(
+        LatticeFrame::axis_aligned(DVec3::new(1e300, f64::INFINITY, 0.0), DVec3::ONE)
+            .unwrap_err()
+            .to_string(),
+    );
+}

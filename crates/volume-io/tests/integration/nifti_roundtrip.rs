@@ -303,3 +303,31 @@ fn every_voxel_type_maps_to_its_nifti_datatype() {
         assert_eq!(field(&h, "bitpix"), (8 * v.voxel_type().size()).to_string());
     }
 }
+
+/// Issue 14: a spacing or origin beyond the 32-bit floats of the header was reported with
+/// `{}`, so 1e300 printed as 301 digits. The message is short, names the field and prints
+/// the value as given (`1e300`, the origin in volmorph's LPS sign), and no file is written.
+#[test]
+fn numbers_past_1e9_print_hundreds_of_digits() {
+    let dir = tempfile::tempdir().unwrap();
+    for (name, g) in [
+        (
+            "spacing y",
+            Geometry::new([2, 2, 2]).with_spacing(DVec3::new(1.0, 1e300, 1.0)),
+        ),
+        (
+            "origin x",
+            Geometry::new([2, 2, 2]).with_origin(DVec3::new(1e300, 0.0, 0.0)),
+        ),
+    ] {
+        let p = dir.path().join("huge.nii");
+        let v: AnyVolume = Volume::new(g, vec![0u8; 8]).unwrap().into();
+        let msg = format::write(&p, &v).unwrap_err().to_string();
+        assert!(
+            msg.len() < 200 && msg.contains(&format!("{name} = 1e300")),
+            "{} chars: {msg}",
+            msg.len()
+        );
+        assert!(!p.exists());
+    }
+}

@@ -1,0 +1,190 @@
+//! The Wendland map's sparse system is checked against the memory budget before it is built:
+//! its entries are counted before any is computed, and the Cholesky factor's size (from the
+//! symbolic factorisation) before the numeric factorisation.
+//!
+//! Like `handle_limits`, these tests set the process's memory budget to 32 MiB (the same
+//! value, so the modules of this binary agree on it). The allocation test runs in a child
+//! process of this binary, alone, so that its peak counts only its own allocations.
+
+use std::alloc::{GlobalAlloc, Layout, System};
+use std::sync::atomic::{AtomicUsize, Ordering};
+
+use volmorph_deform::SpaceMap;
+use volmorph_handles::WendlandMap;
+use volmorph_handles::wendland::default_support;
+use volmorph_volume::DVec3;
+
+/// The budget of this test binary (as in `handle_limits`).
+const BUDGET: u64 = 32 << 20;
+
+/// The global allocator of this test binary: the system allocator, counting the bytes live
+/// and their peak.
+struct Counting;
+
+static LIVE: AtomicUsize = AtomicUsize::new(0);
+static PEAK: AtomicUsize = AtomicUsize::new(0);
+
+// A global allocator is an unsafe trait; this one only forwards to `System`.
+// SAFETY: every call is forwarded to `System` unchanged; the counters are only statistics.
+#[allow(unsafe_code)]
+unsafe impl GlobalAlloc for Counting {
+    unsafe fn alloc(&self, layout: Layout) -> *mut u8 {
+        // SAFETY: forwarded with the caller's layout.
+        let p = unsafe { System.alloc(layout) };
+        if !p.is_null() {
+            let now = LIVE.fetch_add(layout.size(), Ordering::Relaxed) + layout.size();
+            PEAK.fetch_max(now, Ordering::Relaxed);
+        }
+        p
+    }
+
+    unsafe fn dealloc(&self, ptr: *mut u8, layout: Layout) {
+        // SAFETY: forwarded with the caller's pointer and layout.
+        unsafe { System.dealloc(ptr, layout) };
+        LIVE.fetch_sub(layout.size(), Ordering::Relaxed);
+    }
+}
+
+#[global_allocator]
+static ALLOCATOR: Counting = Counting;
+
+/// Environment variable naming the test a child process of this binary runs.
+const CHILD: &str = "VOLMORPH_HANDLES_TEST_CHILD";
+
+/// Run `body` in a child process of this test binary running only the test `name` (this
+/// module's path), and fail if it fails; returns `true` in that child, where the caller runs
+/// the body itself.
+fn in_child(name: &str) -> bool {
+    if std::env::var(CHILD).as_deref() == Ok(name) {
+        return true;
+    }
+    let out = std::process::Command::new(std::env::current_exe().unwrap())
+        .args([name, "--exact", "--nocapture", "--test-threads=1"])
+        .env(CHILD, name)
+        .output()
+        .unwrap();
+    assert!(
+        out.status.success(),
+        "child test {name} failed:\n{}\n{}",
+        String::from_utf8_lossy(&out.stdout),
+        String::from_utf8_lossy(&out.stderr)
+    );
+    let stdout = String::from_utf8_lossy(&out.stdout);
+    assert!(
+        stdout.contains("1 passed"),
+        "the child ran no test:\n{stdout}"
+    );
+    false
+}
+
+fn lcg(s: &mut u64) -> f64 {
+    *s = s
+        .wrapping_mul(6_364_136_223_846_793_005)
+        .wrapping_add(1_442_695_040_888_963_407);
+    ((*s >> 11) as f64) / ((1u64 << 53) as f64)
+}
+
+/// `n` sources uniform in a 100³ cube and targets moved smoothly from them.
+fn cloud(n: usize, seed: u64) -> (Vec<DVec3>, Vec<DVec3>) {
+    let mut s = seed;
+    let src: Vec<DVec3> = (0..n)
+        .map(|_| DVec3::new(lcg(&mut s), lcg(&mut s), lcg(&mut s)) * 100.0)
+        .collect();
+    let dst = src
+        .iter()
+        .map(|&p| p + DVec3::new((p.y * 0.05).sin(), (p.z * 0.04).cos(), 0.5))
+        .collect();
+    (src, dst)
+}
+
+/// Issue 14: the columns of the kernel matrix were computed (16 bytes an entry, kept
+/// until the end of the assembly) before the memory check. With 6,000 handles and three
+/// times the default support the system has about 3 million entries (≈ 50 MB), beyond the
+/// 32 MiB budget: the refusal now comes from counting, allocating next to nothing.
+#[test]
+fn wendland_columns_built_before_the_budget_check() {
+    if !in_child("wendland_budget::wendland_columns_built_before_the_budget_check") {
+        return;
+    }
+    volmorph_io::set_memory_limit(BUDGET);
+    let (src, dst) = cloud(6000, 11);
+    let rho = 3.0 * default_support(&src);
+    let base = LIVE.load(Ordering::Relaxed);
+    PEAK.store(base, Ordering::Relaxed);
+    let e = WendlandMap::with_support(&src, &dst, Some(rho), 0.0, &volmorph_io::NoProgress)
+        .unwrap_err();
+    let grown = PEAK.load(Ordering::Relaxed) - base;
+    // The sources alone take 144 kB; the neighbour grid and the column counts as much again.
+    assert!(
+        grown < 2 << 20,
+        "refusing the system allocated {grown} bytes at its peak"
+    );
+    let msg = e.to_string();
+    assert!(
+        msg.contains("6000 handles")
+            && msg.contains("`support`")
+            && msg.contains("kernel entries")
+            && msg.contains("memory budget"),
+        "{msg}"
+    );
+}
+
+/// Issue 14: the Cholesky factor's fill-in was never checked (the check assumed eight
+/// times the matrix). 12,000 handles at 0.9 times the default support give a matrix of
+/// about 171,000 entries, which the old estimate (168 bytes an entry, 29 MB) let through,
+/// and a factor of about 5.6 million non-zeros (44 MB), beyond the 32 MiB budget.
+#[test]
+fn wendland_cholesky_fill_in_is_never_checked() {
+    volmorph_io::set_memory_limit(BUDGET);
+    let (src, dst) = cloud(12_000, 5);
+    let rho = 0.9 * default_support(&src);
+    let e = WendlandMap::with_support(&src, &dst, Some(rho), 0.0, &volmorph_io::NoProgress)
+        .unwrap_err();
+    let msg = e.to_string();
+    assert!(
+        msg.contains("12000 handles")
+            && msg.contains("`support`")
+            && msg.contains("Cholesky factor of")
+            && msg.contains("memory budget"),
+        "{msg}"
+    );
+    // The same handles at half the support fit: the refusal is the factor's size, not the
+    // handle count.
+    let w = WendlandMap::with_support(&src, &dst, Some(0.5 * rho), 0.0, &volmorph_io::NoProgress)
+        .unwrap();
+    let worst = src
+        .iter()
+        .zip(&dst)
+        .map(|(&p, &q)| (w.apply(p) - q).length())
+        .fold(0.0f64, f64::max);
+    assert!(worst < 1e-8, "interpolation error {worst}");
+}
+
+/// Issue 14: the support radius had no upper bound; one reaching every handle makes the
+/// system dense. 3,000 handles with a support of 10⁶ (the cloud is 100 across) need 4.5
+/// million entries: refused, naming the option, the handle count and the default support.
+/// A dense system that fits the budget is still solved.
+#[test]
+fn wendland_huge_support_builds_a_dense_unchecked_system() {
+    volmorph_io::set_memory_limit(BUDGET);
+    let (src, dst) = cloud(3000, 3);
+    let e = WendlandMap::with_support(&src, &dst, Some(1e6), 0.0, &volmorph_io::NoProgress)
+        .unwrap_err();
+    let msg = e.to_string();
+    let default = volmorph_io::Num(default_support(&src)).to_string();
+    assert!(
+        msg.contains("3000 handles")
+            && msg.contains("`support` 1000000")
+            && msg.contains(&default)
+            && msg.contains("at least")
+            && msg.contains("memory budget"),
+        "{msg}"
+    );
+    // 300 handles with a support reaching every one (the cloud's diagonal is 173).
+    let (src, dst) = cloud(300, 3);
+    let w =
+        WendlandMap::with_support(&src, &dst, Some(200.0), 0.0, &volmorph_io::NoProgress).unwrap();
+    for (&p, &q) in src.iter().zip(&dst) {
+        assert!((w.apply(p) - q).length() < 1e-6, "{p}");
+    }
+}
