@@ -67,7 +67,7 @@ seeds_of() {
     metaimage | nrrd | vtk) ls "$c/$1"/* ;;
     vti) ls "$c"/peers/*.vti ;;
     mgh) ls "$c"/peers/*.mgz ;;
-    dicom) ls "$c"/peers/*.dcm "$c"/peers/sitk_ct_series/* ;;
+    dicom | dicom_series) ls "$c"/peers/*.dcm "$c"/peers/sitk_ct_series/* ;;
     esac 2>/dev/null || true
 }
 
