@@ -7,17 +7,10 @@ use volmorph_deform::SpaceMap;
 use volmorph_handles::{ThinPlateMap, WendlandMap};
 use volmorph_volume::DVec3;
 
-fn lcg(s: &mut u64) -> f64 {
-    *s = s
-        .wrapping_mul(6_364_136_223_846_793_005)
-        .wrapping_add(1_442_695_040_888_963_407);
-    ((*s >> 11) as f64) / ((1u64 << 53) as f64)
-}
-
 fn cloud(n: usize, seed: u64) -> (Vec<DVec3>, Vec<DVec3>) {
-    let mut s = seed;
+    let mut r = volmorph_testkit::Rng::new(seed);
     let src: Vec<DVec3> = (0..n)
-        .map(|_| DVec3::new(lcg(&mut s), lcg(&mut s), lcg(&mut s)) * 100.0)
+        .map(|_| r.point_in(DVec3::ZERO, DVec3::splat(100.0)))
         .collect();
     let dst = src
         .iter()
@@ -26,7 +19,7 @@ fn cloud(n: usize, seed: u64) -> (Vec<DVec3>, Vec<DVec3>) {
                 3.0 * (p.y * 0.05).sin(),
                 2.0 * (p.z * 0.04).cos(),
                 1.5 * (p.x * 0.03).sin(),
-            ) + DVec3::new(lcg(&mut s), lcg(&mut s), lcg(&mut s)) * 0.5
+            ) + DVec3::new(r.unit(), r.unit(), r.unit()) * 0.5
         })
         .collect();
     (src, dst)

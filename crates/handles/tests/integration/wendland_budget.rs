@@ -77,18 +77,11 @@ fn in_child(name: &str) -> bool {
     false
 }
 
-fn lcg(s: &mut u64) -> f64 {
-    *s = s
-        .wrapping_mul(6_364_136_223_846_793_005)
-        .wrapping_add(1_442_695_040_888_963_407);
-    ((*s >> 11) as f64) / ((1u64 << 53) as f64)
-}
-
 /// `n` sources uniform in a 100³ cube and targets moved smoothly from them.
 fn cloud(n: usize, seed: u64) -> (Vec<DVec3>, Vec<DVec3>) {
-    let mut s = seed;
+    let mut r = volmorph_testkit::Rng::new(seed);
     let src: Vec<DVec3> = (0..n)
-        .map(|_| DVec3::new(lcg(&mut s), lcg(&mut s), lcg(&mut s)) * 100.0)
+        .map(|_| r.point_in(DVec3::ZERO, DVec3::splat(100.0)))
         .collect();
     let dst = src
         .iter()
