@@ -161,8 +161,29 @@ fn vec3(v: [f64; 3]) -> String {
     format!("({}, {}, {})", num(v[0]), num(v[1]), num(v[2]))
 }
 
+/// A geometry number for people: six decimals with trailing zeros dropped, and `Num`'s
+/// exponent form (shortest, e.g. `1e300`, `2.5e-7`) for magnitudes past 1e9 or under 1e-4,
+/// which six decimals would print as 301 digits or as 0.
 fn num(x: f64) -> String {
+    if x.is_finite() && x != 0.0 && !(1e-4..1e9).contains(&x.abs()) {
+        return volmorph_io::Num(x).to_string();
+    }
     let r = format!("{x:.6}");
     let r = r.trim_end_matches('0').trim_end_matches('.');
     if r == "-0" { "0".into() } else { r.into() }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::num;
+
+    /// `info` printed a 1e300 spacing as 301 digits, and a 1e-7 spacing as 0.
+    #[test]
+    fn numbers_past_1e9_print_hundreds_of_digits() {
+        assert_eq!(num(1e300), "1e300");
+        assert_eq!(num(-2.5e-7), "-2.5e-7");
+        assert_eq!(num(0.5), "0.5");
+        assert_eq!(num(-0.0), "0");
+        assert_eq!(num(123_456.25), "123456.25");
+    }
 }
