@@ -235,6 +235,8 @@ pub fn run(a: &Args) -> anyhow::Result<()> {
     Ok(())
 }
 
+/// A point as `(x, y, z)` with four decimals (exponent form past 1e9, through `Num`).
 fn fmt(p: DVec3) -> String {
-    format!("({:.4}, {:.4}, {:.4})", p.x, p.y, p.z)
+    let n = |v: f64| format!("{:.4}", volmorph_io::Num(v));
+    format!("({}, {}, {})", n(p.x), n(p.y), n(p.z))
 }

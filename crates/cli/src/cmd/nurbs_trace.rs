@@ -204,7 +204,7 @@ pub fn run_render(a: &RenderArgs) -> anyhow::Result<()> {
         names.push(format!(
             "{} ({attribute:?}, step {:.4})",
             path.display(),
-            options.step
+            volmorph_io::Num(options.step)
         ));
     }
     let scene = SceneRenderer::new(parts)?;
@@ -287,9 +287,13 @@ pub fn run_trace_optics(a: &TraceOpticsArgs) -> anyhow::Result<()> {
     let control = match opts.method {
         PathMethod::Rk45 => format!(
             "tolerance {:e}, steps ≤ {:.5}: {steps} steps ({rejected} rejected)",
-            opts.tolerance, opts.max_step
+            opts.tolerance,
+            volmorph_io::Num(opts.max_step)
         ),
-        _ => format!("step ≤ {:.5}: {steps} steps", opts.max_step),
+        _ => format!(
+            "step ≤ {:.5}: {steps} steps",
+            volmorph_io::Num(opts.max_step)
+        ),
     };
     say!(
         "traced {} rays through {:?} by {} ({control}) → {}",
