@@ -7,7 +7,9 @@ use volmorph_deform::SpaceMap;
 use volmorph_handles::{ThinPlateMap, WendlandMap};
 use volmorph_volume::DVec3;
 
-fn cloud(n: usize, seed: u64) -> (Vec<DVec3>, Vec<DVec3>) {
+/// `n` sources uniform in a 100³ cube and targets moved smoothly from them (by up to about
+/// 4.5 per axis).
+pub(crate) fn cloud(n: usize, seed: u64) -> (Vec<DVec3>, Vec<DVec3>) {
     let mut r = volmorph_testkit::Rng::new(seed);
     let src: Vec<DVec3> = (0..n)
         .map(|_| r.point_in(DVec3::ZERO, DVec3::splat(100.0)))

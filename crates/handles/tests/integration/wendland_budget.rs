@@ -12,7 +12,6 @@ use std::sync::atomic::{AtomicUsize, Ordering};
 use volmorph_deform::SpaceMap;
 use volmorph_handles::WendlandMap;
 use volmorph_handles::wendland::default_support;
-use volmorph_volume::DVec3;
 
 /// The budget of this test binary (as in `handle_limits`).
 const BUDGET: u64 = 32 << 20;
@@ -77,19 +76,6 @@ fn in_child(name: &str) -> bool {
     false
 }
 
-/// `n` sources uniform in a 100³ cube and targets moved smoothly from them.
-fn cloud(n: usize, seed: u64) -> (Vec<DVec3>, Vec<DVec3>) {
-    let mut r = volmorph_testkit::Rng::new(seed);
-    let src: Vec<DVec3> = (0..n)
-        .map(|_| r.point_in(DVec3::ZERO, DVec3::splat(100.0)))
-        .collect();
-    let dst = src
-        .iter()
-        .map(|&p| p + DVec3::new((p.y * 0.05).sin(), (p.z * 0.04).cos(), 0.5))
-        .collect();
-    (src, dst)
-}
-
 /// Issue 14: the columns of the kernel matrix were computed (16 bytes an entry, kept
 /// until the end of the assembly) before the memory check. With 6,000 handles and three
 /// times the default support the system has about 3 million entries (≈ 50 MB), beyond the
@@ -100,7 +86,7 @@ fn wendland_columns_built_before_the_budget_check() {
         return;
     }
     volmorph_io::set_memory_limit(BUDGET);
-    let (src, dst) = cloud(6000, 11);
+    let (src, dst) = crate::handle_limits::cloud(6000, 11);
     let rho = 3.0 * default_support(&src);
     let base = LIVE.load(Ordering::Relaxed);
     PEAK.store(base, Ordering::Relaxed);
@@ -129,7 +115,7 @@ fn wendland_columns_built_before_the_budget_check() {
 #[test]
 fn wendland_cholesky_fill_in_is_never_checked() {
     volmorph_io::set_memory_limit(BUDGET);
-    let (src, dst) = cloud(12_000, 5);
+    let (src, dst) = crate::handle_limits::cloud(12_000, 5);
     let rho = 0.9 * default_support(&src);
     let e = WendlandMap::with_support(&src, &dst, Some(rho), 0.0, &volmorph_io::NoProgress)
         .unwrap_err();
@@ -160,7 +146,7 @@ fn wendland_cholesky_fill_in_is_never_checked() {
 #[test]
 fn wendland_huge_support_builds_a_dense_unchecked_system() {
     volmorph_io::set_memory_limit(BUDGET);
-    let (src, dst) = cloud(3000, 3);
+    let (src, dst) = crate::handle_limits::cloud(3000, 3);
     let e = WendlandMap::with_support(&src, &dst, Some(1e6), 0.0, &volmorph_io::NoProgress)
         .unwrap_err();
     let msg = e.to_string();
@@ -174,7 +160,7 @@ fn wendland_huge_support_builds_a_dense_unchecked_system() {
         "{msg}"
     );
     // 300 handles with a support reaching every one (the cloud's diagonal is 173).
-    let (src, dst) = cloud(300, 3);
+    let (src, dst) = crate::handle_limits::cloud(300, 3);
     let w =
         WendlandMap::with_support(&src, &dst, Some(200.0), 0.0, &volmorph_io::NoProgress).unwrap();
     for (&p, &q) in src.iter().zip(&dst) {
