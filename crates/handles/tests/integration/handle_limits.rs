@@ -3,7 +3,8 @@
 //!
 //! The memory budget is one per process, and every module of this test binary shares the
 //! process: the tests that set it (here and in `wendland_budget`) all set the same 32 MiB, so
-//! their order does not matter. Nothing else in the binary allocates near that.
+//! their order does not matter. The other modules' tests run in the same process and must
+//! pass under that budget too.
 
 use volmorph_deform::SpaceMap;
 use volmorph_handles::{ThinPlateMap, WendlandMap};
