@@ -216,6 +216,43 @@ pub fn load_volume(path: &Path) -> Result<AggregateVolume, TrivariateError> {
     }
 }
 
+impl AnyAggregate {
+    /// The file's `"kind"`: `curve`, `surface` or `volume`.
+    #[must_use]
+    pub fn kind(&self) -> &'static str {
+        match self {
+            AnyAggregate::Curve(_) => "curve",
+            AnyAggregate::Surface(_) => "surface",
+            AnyAggregate::Volume(_) => "volume",
+        }
+    }
+
+    /// The names of the attributes, in the aggregate's order.
+    #[must_use]
+    pub fn attribute_names(&self) -> Vec<&str> {
+        fn names<const N: usize>(a: &Aggregate<N>) -> Vec<&str> {
+            a.attributes().iter().map(|a| a.name()).collect()
+        }
+        match self {
+            AnyAggregate::Curve(m) => names(m),
+            AnyAggregate::Surface(m) => names(m),
+            AnyAggregate::Volume(m) => names(m),
+        }
+    }
+
+    /// Write the aggregate as JSON, as [`save`] does.
+    ///
+    /// # Errors
+    /// As [`save`].
+    pub fn save(&self, path: &Path) -> Result<(), TrivariateError> {
+        match self {
+            AnyAggregate::Curve(m) => save(path, m),
+            AnyAggregate::Surface(m) => save(path, m),
+            AnyAggregate::Volume(m) => save(path, m),
+        }
+    }
+}
+
 /// Write an aggregate as JSON through a temporary file renamed over `path`.
 ///
 /// # Errors

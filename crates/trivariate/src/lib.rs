@@ -77,7 +77,10 @@ pub use optics::{
     OpticalPath, OpticsOptions, PathMethod, draw_paths, reference_options, refract,
     trace_optical_path, write_paths_obj,
 };
-pub use ray_fan::{FocusMeasurement, RayFan, measured_back_focal_distance, side_view};
+pub use ray_fan::{
+    FocusMeasurement, GrinLensCheck, RayFan, check_grin_lens, measured_back_focal_distance,
+    side_view,
+};
 pub use raytrace::{BoundaryHit, HitKind, RayTracer, TraceOptions, Tracked};
 pub use recipe::{Recipe, build_recipe_file, load_recipe};
 pub use space_map::GeometryMap;

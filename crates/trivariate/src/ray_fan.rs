@@ -13,8 +13,10 @@ use glam::DVec3;
 use volmorph_render::draw::draw_box_edges;
 use volmorph_render::{Framing, Projection, RgbaImage, view_camera};
 
-use crate::examples::GrinLensSpec;
-use crate::optics::{OpticalPath, OpticsOptions, draw_paths, trace_optical_path};
+use crate::examples::{
+    ExactFocus, GrinLensSpec, ParaxialFocus, exact_back_focal_distance, paraxial_focus,
+};
+use crate::optics::{OpticalPath, OpticsOptions, PathMethod, draw_paths, trace_optical_path};
 use crate::raytrace::RayTracer;
 use crate::{AggregateVolume, TrivariateError};
 
@@ -202,6 +204,98 @@ pub fn measured_back_focal_distance(
             rejected_steps: p.rejected_steps,
         })
     }))
+}
+
+/// The GRIN lens example checked by tracing ([`check_grin_lens`]): its paraxial focus, and
+/// the probe ray's measured back focal distance with the exact trace at the probe's height.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct GrinLensCheck {
+    /// The lens.
+    pub spec: GrinLensSpec,
+    /// The paraxial focus.
+    pub paraxial: ParaxialFocus,
+    /// The probe ray's measurement and the exact trace at its height; `None` when the probe
+    /// did not leave the lens towards the axis.
+    pub measured: Option<(FocusMeasurement, ExactFocus)>,
+    /// The method that traced the probe ([`OpticsOptions::method`]).
+    pub method: PathMethod,
+}
+
+impl GrinLensCheck {
+    /// The measured back focal distance's difference from `reference`, in percent of it.
+    fn percent_from(m: &FocusMeasurement, reference: f64) -> f64 {
+        100.0 * (m.back_focal_distance - reference) / reference
+    }
+}
+
+impl std::fmt::Display for GrinLensCheck {
+    /// Two lines: the lens and its paraxial focus; the measurement and its differences from
+    /// the exact trace and from the paraxial focus (percentages fixed point when large,
+    /// scientific when tiny), or that the probe did not leave the lens.
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        let (s, p) = (&self.spec, &self.paraxial);
+        writeln!(
+            f,
+            "GRIN lens R = {}, d = {}, n(r) = {}·(1 − {}·r²/2): paraxial back focal distance \
+             {:.5}, effective focal length {:.5}",
+            s.radius,
+            s.thickness,
+            s.n0,
+            s.gradient,
+            p.back_focal_distance,
+            p.effective_focal_length
+        )?;
+        let Some((m, exact)) = &self.measured else {
+            return write!(f, "the probe ray did not leave the lens towards the axis");
+        };
+        let rel = |reference: f64| {
+            let pc = Self::percent_from(m, reference);
+            if pc.abs() >= 1e-3 {
+                format!("{pc:+.4}")
+            } else {
+                format!("{pc:+.2e}")
+            }
+        };
+        write!(
+            f,
+            "measured back focal distance {:.8} (ray at height {:.4}, {} steps by {}): {} % \
+             from the exact trace {:.8}, {} % from paraxial",
+            m.back_focal_distance,
+            m.height,
+            m.steps,
+            self.method.name(),
+            rel(exact.back_focal_distance),
+            exact.back_focal_distance,
+            rel(p.back_focal_distance)
+        )
+    }
+}
+
+/// Check the GRIN lens `spec` (built by [`grin_lens`](crate::grin_lens) as `model`) by
+/// tracing: its [`paraxial_focus`], the probe ray's
+/// [`measured_back_focal_distance`] with `options`, and the
+/// [`exact_back_focal_distance`] at the probe's height.
+///
+/// # Errors
+/// As [`paraxial_focus`], [`measured_back_focal_distance`] and
+/// [`exact_back_focal_distance`].
+pub fn check_grin_lens(
+    model: &AggregateVolume,
+    tracer: &RayTracer,
+    attribute: &str,
+    spec: &GrinLensSpec,
+    options: &OpticsOptions,
+) -> Result<GrinLensCheck, TrivariateError> {
+    let paraxial = paraxial_focus(spec)?;
+    let measured = measured_back_focal_distance(model, tracer, attribute, spec, options)?
+        .map(|m| exact_back_focal_distance(spec, m.height).map(|e| (m, e)))
+        .transpose()?;
+    Ok(GrinLensCheck {
+        spec: *spec,
+        paraxial,
+        measured,
+        method: options.method,
+    })
 }
 
 /// A `width × height` picture of `paths` (red) and the model's box `bounds` (grey) on white,

@@ -9,8 +9,7 @@ use volmorph_render::{Shading, UpAxis, write_png_rgba};
 use volmorph_trivariate::{
     AggregateVolume, GRIN_ATTRIBUTE, GrinLensSpec, OpticsOptions, PathMethod, RayFan, RayTracer,
     RenderOptions, SceneRenderer, TraceOptions, TransferFunction, VolumeRenderer,
-    build_recipe_file, exact_back_focal_distance, format::AnyAggregate, grin_lens,
-    grin_lens_recipe, load_volume, measured_back_focal_distance, paraxial_focus, save, side_view,
+    build_recipe_file, check_grin_lens, grin_lens, grin_lens_recipe, load_volume, save, side_view,
     write_paths_obj,
 };
 
@@ -303,45 +302,9 @@ pub fn run_trace_optics(a: &TraceOpticsArgs) -> anyhow::Result<()> {
         a.output.display()
     );
     if example {
-        let focus = paraxial_focus(&spec)?;
-        let measured = measured_back_focal_distance(&model, &tracer, &a.attribute, &spec, &opts)
+        let check = check_grin_lens(&model, &tracer, &a.attribute, &spec, &opts)
             .context("cannot trace the paraxial probe ray")?;
-        say!(
-            "GRIN lens R = {}, d = {}, n(r) = {}·(1 − {}·r²/2): paraxial back focal distance \
-             {:.5}, effective focal length {:.5}",
-            spec.radius,
-            spec.thickness,
-            spec.n0,
-            spec.gradient,
-            focus.back_focal_distance,
-            focus.effective_focal_length
-        );
-        match measured {
-            Some(m) => {
-                let exact = exact_back_focal_distance(&spec, m.height)?;
-                let bfd = m.back_focal_distance;
-                // Percentages: fixed point when large, scientific when tiny.
-                let rel = |x: f64| {
-                    let p = 100.0 * (bfd - x) / x;
-                    if p.abs() >= 1e-3 {
-                        format!("{p:+.4}")
-                    } else {
-                        format!("{p:+.2e}")
-                    }
-                };
-                say!(
-                    "measured back focal distance {bfd:.8} (ray at height {:.4}, {} steps by \
-                     {}): {} % from the exact trace {:.8}, {} % from paraxial",
-                    m.height,
-                    m.steps,
-                    opts.method.name(),
-                    rel(exact.back_focal_distance),
-                    exact.back_focal_distance,
-                    rel(focus.back_focal_distance)
-                );
-            }
-            None => say!("the probe ray did not leave the lens towards the axis"),
-        }
+        say!("{check}");
     }
     Ok(())
 }
@@ -380,26 +343,20 @@ pub fn run_model(a: &ModelArgs) -> anyhow::Result<()> {
     let pb = crate::progress::spinner(format!("building {}", a.recipe.display()));
     let model = build_recipe_file(&a.recipe)?;
     pb.finish_and_clear();
-    let (kind, attributes) = match &model {
-        AnyAggregate::Curve(m) => ("curve", names(m.attributes())),
-        AnyAggregate::Surface(m) => ("surface", names(m.attributes())),
-        AnyAggregate::Volume(m) => ("volume", names(m.attributes())),
-    };
-    match &model {
-        AnyAggregate::Curve(m) => save(&a.output, m),
-        AnyAggregate::Surface(m) => save(&a.output, m),
-        AnyAggregate::Volume(m) => save(&a.output, m),
-    }
-    .with_context(|| format!("cannot write {}", a.output.display()))?;
+    model
+        .save(&a.output)
+        .with_context(|| format!("cannot write {}", a.output.display()))?;
+    let attributes: Vec<String> = model
+        .attribute_names()
+        .iter()
+        .map(|n| format!("{n:?}"))
+        .collect();
     say!(
-        "built a {kind} with attributes [{}] from {} → {}",
+        "built a {} with attributes [{}] from {} → {}",
+        model.kind(),
         attributes.join(", "),
         a.recipe.display(),
         a.output.display()
     );
     Ok(())
-}
-
-fn names<const N: usize>(attrs: &[volmorph_trivariate::Attribute<N>]) -> Vec<String> {
-    attrs.iter().map(|a| format!("{:?}", a.name())).collect()
 }

@@ -4,8 +4,8 @@
 
 use volmorph_trivariate::{
     GRIN_ATTRIBUTE, GrinLensSpec, OpticsOptions, PathMethod, RayTracer, TraceOptions,
-    exact_back_focal_distance, grin_lens, measured_back_focal_distance, paraxial_focus,
-    reference_options, trace_optical_path,
+    check_grin_lens, exact_back_focal_distance, grin_lens, paraxial_focus, reference_options,
+    trace_optical_path,
 };
 
 fn lens() -> (
@@ -22,11 +22,10 @@ fn lens() -> (
 /// Relative difference of the probe's measured back focal distance from the exact trace.
 fn probe_error(o: &OpticsOptions) -> (f64, usize) {
     let (spec, lens, tracer) = lens();
-    let exact = exact_back_focal_distance(&spec, 0.02 * spec.radius).unwrap();
-    let m = measured_back_focal_distance(&lens, &tracer, GRIN_ATTRIBUTE, &spec, o)
-        .unwrap()
-        .unwrap();
-    assert_eq!(m.height, exact.height);
+    let check = check_grin_lens(&lens, &tracer, GRIN_ATTRIBUTE, &spec, o).unwrap();
+    let (m, exact) = check.measured.unwrap();
+    assert_eq!(m.height, 0.02 * spec.radius);
+    assert_eq!(exact.height, m.height);
     (
         (m.back_focal_distance - exact.back_focal_distance) / exact.back_focal_distance,
         m.steps,
