@@ -74,11 +74,24 @@ fn points_text(header: &str, pts: &[DVec3]) -> String {
     s
 }
 
+/// [`select_files_with`] without progress.
+///
+/// # Errors
+/// As [`select_files_with`].
+pub fn select_files(
+    fixed: &Path,
+    mask: Option<&Path>,
+    out: &Path,
+    o: &SelectOptions,
+) -> Result<usize, RegisterError> {
+    select_files_with(fixed, mask, out, o, &volmorph_io::NoProgress)
+}
+
 /// `select`: handles of `fixed` (within `mask`) written as a point list; returns the count.
 ///
 /// # Errors
 /// Reading, selection and writing errors, naming the file; [`RegisterError::Cancelled`].
-pub fn select_files(
+pub fn select_files_with(
     fixed: &Path,
     mask: Option<&Path>,
     out: &Path,
@@ -135,12 +148,26 @@ impl std::fmt::Display for MatchSummary {
     }
 }
 
+/// [`match_files_with`] without progress.
+///
+/// # Errors
+/// As [`match_files_with`].
+pub fn match_files(
+    fixed: &Path,
+    moving: &Path,
+    handles: &Path,
+    out: &Path,
+    o: &MatchOptions,
+) -> Result<MatchSummary, RegisterError> {
+    match_files_with(fixed, moving, handles, out, o, &volmorph_io::NoProgress)
+}
+
 /// `match`: correspondences of the handles in `handles` (point list) written as
 /// `correspondences.json`-style JSON to `out`.
 ///
 /// # Errors
 /// Reading, matching and writing errors, naming the file; [`RegisterError::Cancelled`].
-pub fn match_files(
+pub fn match_files_with(
     fixed: &Path,
     moving: &Path,
     handles: &Path,
@@ -266,6 +293,31 @@ impl std::fmt::Display for QualityReport {
     }
 }
 
+/// [`quality_files_with`] without progress.
+///
+/// # Errors
+/// As [`quality_files_with`].
+pub fn quality_files(
+    fixed: &Path,
+    moving: &Path,
+    map: &Path,
+    solve: &SolveOptions,
+    landmarks: Option<&LandmarkFiles>,
+    subcube: Option<SubcubeRequest>,
+    out_dir: &Path,
+) -> Result<QualityReport, RegisterError> {
+    quality_files_with(
+        fixed,
+        moving,
+        map,
+        solve,
+        landmarks,
+        subcube,
+        out_dir,
+        &volmorph_io::NoProgress,
+    )
+}
+
 /// `quality`: overlays (before/after mid-sections), Jacobian map and fold report, global metrics
 /// and TRE of `map` written into `out_dir` (`quality.json`, `jacobian.nii.gz`, `warped.nii.gz`,
 /// `overlay_*.png`); with `subcube`, the local comparison of [`subcube_comparison`]
@@ -276,7 +328,7 @@ impl std::fmt::Display for QualityReport {
 /// Reading, evaluation and writing errors, naming the file; [`RegisterError::TooLittle`] for a
 /// sub-cube outside the images; [`RegisterError::Cancelled`].
 #[allow(clippy::too_many_arguments)]
-pub fn quality_files(
+pub fn quality_files_with(
     fixed: &Path,
     moving: &Path,
     map: &Path,
@@ -378,13 +430,27 @@ impl std::fmt::Display for LungReport {
     }
 }
 
+/// [`segment_lungs_files_with`] without progress.
+///
+/// # Errors
+/// As [`segment_lungs_files_with`].
+pub fn segment_lungs_files(
+    ct: &Path,
+    out: &Path,
+    script: Option<&Path>,
+    reference: Option<&Path>,
+    o: &LungOptions,
+) -> Result<LungReport, RegisterError> {
+    segment_lungs_files_with(ct, out, script, reference, o, &volmorph_io::NoProgress)
+}
+
 /// `segment-lungs`: the lung mask of `ct` (labels 1 right, 2 left) to `out`; with a lobe script,
 /// the enhanced lobe-boundary image and the lobe labels next to it (`<out stem>_enhanced`,
 /// `<out stem>_lobes`), and Dice against `reference` lobe labels if given.
 ///
 /// # Errors
 /// Reading, segmentation and writing errors, naming the file; [`RegisterError::Cancelled`].
-pub fn segment_lungs_files(
+pub fn segment_lungs_files_with(
     ct: &Path,
     out: &Path,
     script: Option<&Path>,
@@ -457,12 +523,35 @@ impl std::fmt::Display for VentilationReport {
     }
 }
 
+/// [`ventilation_files_with`] without progress.
+///
+/// # Errors
+/// As [`ventilation_files_with`].
+pub fn ventilation_files(
+    inhale: &Path,
+    exhale: &Path,
+    map: &Path,
+    labels: &Path,
+    solve: &SolveOptions,
+    out_dir: &Path,
+) -> Result<VentilationReport, RegisterError> {
+    ventilation_files_with(
+        inhale,
+        exhale,
+        map,
+        labels,
+        solve,
+        out_dir,
+        &volmorph_io::NoProgress,
+    )
+}
+
 /// `ventilation`: `jac` and the HU-based volume ratio per lobe of `labels` (inhale grid) for the
 /// map inhale → exhale; maps written into `out_dir` with `ventilation.json`.
 ///
 /// # Errors
 /// Reading, evaluation and writing errors, naming the file; [`RegisterError::Cancelled`].
-pub fn ventilation_files(
+pub fn ventilation_files_with(
     inhale: &Path,
     exhale: &Path,
     map: &Path,
@@ -492,13 +581,21 @@ pub fn ventilation_files(
     Ok(r)
 }
 
+/// [`write_phantom_with`] without progress.
+///
+/// # Errors
+/// As [`write_phantom_with`].
+pub fn write_phantom(dir: &Path, o: &LungPhantomOptions) -> Result<usize, RegisterError> {
+    write_phantom_with(dir, o, &volmorph_io::NoProgress)
+}
+
 /// `phantom`: write the lung phantom into `dir`: `inhale.nii.gz`, `exhale.nii.gz`,
 /// `lobes.nii.gz`, `landmarks_inhale.txt`, `landmarks_exhale.txt` (physical, mm),
 /// `lobe_script.json`, `true_volume_change.json`. Returns the number of landmarks.
 ///
 /// # Errors
 /// Generation and writing errors; [`RegisterError::Cancelled`].
-pub fn write_phantom(
+pub fn write_phantom_with(
     dir: &Path,
     o: &LungPhantomOptions,
     progress: &dyn Progress,
@@ -533,6 +630,19 @@ pub fn write_phantom(
     Ok(p.landmarks_inhale.len())
 }
 
+/// [`write_known_pair_with`] without progress.
+///
+/// # Errors
+/// As [`write_known_pair_with`].
+pub fn write_known_pair(
+    input: &Path,
+    dir: &Path,
+    o: &KnownDeformationOptions,
+    landmarks: usize,
+) -> Result<(), RegisterError> {
+    write_known_pair_with(input, dir, o, landmarks, &volmorph_io::NoProgress)
+}
+
 /// `known-pair`: deform `input` by a known random smooth B-spline field (see
 /// [`known_deformation`]) and write `fixed`, `moving` (same format as the input), the field
 /// (`truth.tfm`) and `landmarks` random foreground points in both (`landmarks_fixed.txt`,
@@ -540,7 +650,7 @@ pub fn write_phantom(
 ///
 /// # Errors
 /// Reading, generation and writing errors, naming the file; [`RegisterError::Cancelled`].
-pub fn write_known_pair(
+pub fn write_known_pair_with(
     input: &Path,
     dir: &Path,
     o: &KnownDeformationOptions,

@@ -146,7 +146,6 @@ fn registration_reports_and_a_cancelled_run_writes_nothing() {
             spacing: DVec3::new(6.0, 6.0, 7.0),
             ..LungPhantomOptions::default()
         },
-        &volmorph_io::NoProgress,
     )
     .unwrap();
     let (f, m) = (
@@ -222,9 +221,9 @@ fn file_steps_report_their_stages_and_a_cancelled_step_writes_nothing() {
     };
     let is_cancelled = |e: RegisterError| assert!(matches!(e, RegisterError::Cancelled(_)), "{e}");
 
-    is_cancelled(steps::write_phantom(&d("ph"), &small, &stopped()).unwrap_err());
+    is_cancelled(steps::write_phantom_with(&d("ph"), &small, &stopped()).unwrap_err());
     assert!(!d("ph").exists());
-    steps::write_phantom(&d("ph"), &small, &volmorph_io::NoProgress).unwrap();
+    steps::write_phantom(&d("ph"), &small).unwrap();
     let (inh, exh) = (d("ph/inhale.nii.gz"), d("ph/exhale.nii.gz"));
 
     let so = SelectOptions {
@@ -232,13 +231,13 @@ fn file_steps_report_their_stages_and_a_cancelled_step_writes_nothing() {
         radius: 6.0,
         ..SelectOptions::default()
     };
-    is_cancelled(steps::select_files(&inh, None, &d("h.txt"), &so, &stopped()).unwrap_err());
+    is_cancelled(steps::select_files_with(&inh, None, &d("h.txt"), &so, &stopped()).unwrap_err());
     assert!(!d("h.txt").exists());
-    steps::select_files(&inh, None, &d("h.txt"), &so, &volmorph_io::NoProgress).unwrap();
+    steps::select_files(&inh, None, &d("h.txt"), &so).unwrap();
 
     let mo = MatchOptions::default();
     let run = |p: &dyn volmorph_io::Progress| {
-        steps::match_files(&inh, &exh, &d("h.txt"), &d("c.json"), &mo, p)
+        steps::match_files_with(&inh, &exh, &d("h.txt"), &d("c.json"), &mo, p)
     };
     let plain = run(&volmorph_io::NoProgress).unwrap();
     std::fs::remove_file(d("c.json")).unwrap();
@@ -253,7 +252,7 @@ fn file_steps_report_their_stages_and_a_cancelled_step_writes_nothing() {
     );
 
     let solve = SolveOptions::default();
-    let e = steps::quality_files(
+    let e = steps::quality_files_with(
         &inh,
         &exh,
         &d("c.json"),
@@ -268,7 +267,7 @@ fn file_steps_report_their_stages_and_a_cancelled_step_writes_nothing() {
 
     let lo = LungOptions::default();
     let seg = |p: &dyn volmorph_io::Progress| {
-        steps::segment_lungs_files(&inh, &d("lungs.nii.gz"), None, None, &lo, p)
+        steps::segment_lungs_files_with(&inh, &d("lungs.nii.gz"), None, None, &lo, p)
     };
     is_cancelled(seg(&stopped()).unwrap_err());
     assert!(!d("lungs.nii.gz").exists());
@@ -279,7 +278,7 @@ fn file_steps_report_their_stages_and_a_cancelled_step_writes_nothing() {
     );
 
     let labels = d("ph/lobes.nii.gz");
-    let e = steps::ventilation_files(
+    let e = steps::ventilation_files_with(
         &inh,
         &exh,
         &d("c.json"),
@@ -297,6 +296,6 @@ fn file_steps_report_their_stages_and_a_cancelled_step_writes_nothing() {
         seed: 1,
         intensity_change: false,
     };
-    is_cancelled(steps::write_known_pair(&inh, &d("kp"), &ko, 5, &stopped()).unwrap_err());
+    is_cancelled(steps::write_known_pair_with(&inh, &d("kp"), &ko, 5, &stopped()).unwrap_err());
     assert!(!d("kp").exists());
 }

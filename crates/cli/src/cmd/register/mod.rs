@@ -55,7 +55,7 @@ pub fn run(c: &Command) -> anyhow::Result<()> {
         Some(Step::Select(a)) => {
             let o = SelectOptions::with_count_radius(a.handles, a.radius);
             let pb = progress::spinner("selecting handles");
-            let n = steps::select_files(
+            let n = steps::select_files_with(
                 &a.fixed,
                 a.mask.as_deref(),
                 &a.output,
@@ -73,7 +73,7 @@ pub fn run(c: &Command) -> anyhow::Result<()> {
                 ..MatchOptions::default()
             };
             let pb = progress::spinner("matching handles");
-            let s = steps::match_files(
+            let s = steps::match_files_with(
                 &a.fixed,
                 &a.moving,
                 &a.handles,
@@ -106,7 +106,7 @@ pub fn run(c: &Command) -> anyhow::Result<()> {
         }
         Some(Step::Quality(a)) => {
             let pb = progress::spinner("checking the map");
-            let r = steps::quality_files(
+            let r = steps::quality_files_with(
                 &a.fixed,
                 &a.moving,
                 &a.map,
@@ -129,7 +129,7 @@ pub fn run(c: &Command) -> anyhow::Result<()> {
                 ..LungOptions::default()
             };
             let pb = progress::spinner("segmenting the lungs");
-            let r = steps::segment_lungs_files(
+            let r = steps::segment_lungs_files_with(
                 &a.ct,
                 &a.output,
                 a.lobes.as_deref(),
@@ -142,7 +142,7 @@ pub fn run(c: &Command) -> anyhow::Result<()> {
         }
         Some(Step::Ventilation(a)) => {
             let pb = progress::spinner("ventilation");
-            let r = steps::ventilation_files(
+            let r = steps::ventilation_files_with(
                 &a.inhale,
                 &a.exhale,
                 &a.map,
@@ -164,7 +164,7 @@ pub fn run(c: &Command) -> anyhow::Result<()> {
                 ..LungPhantomOptions::default()
             };
             let pb = progress::spinner("lung phantom");
-            let n = steps::write_phantom(&a.output, &o, &progress::Bar(&pb))?;
+            let n = steps::write_phantom_with(&a.output, &o, &progress::Bar(&pb))?;
             pb.finish_and_clear();
             say!(
                 "phantom with {n} landmark pairs written to {}",
@@ -179,7 +179,13 @@ pub fn run(c: &Command) -> anyhow::Result<()> {
                 intensity_change: a.intensity_change,
             };
             let pb = progress::spinner("known pair");
-            steps::write_known_pair(&a.input, &a.output, &o, a.landmarks, &progress::Bar(&pb))?;
+            steps::write_known_pair_with(
+                &a.input,
+                &a.output,
+                &o,
+                a.landmarks,
+                &progress::Bar(&pb),
+            )?;
             pb.finish_and_clear();
             say!("pair written to {}", a.output.display());
         }
