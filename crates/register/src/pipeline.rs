@@ -231,8 +231,7 @@ pub fn solve_and_refine_with(
     progress: &dyn volmorph_io::Progress,
 ) -> Result<Registration, RegisterError> {
     let t0 = Instant::now();
-    progress.check()?;
-    progress.start("solving the handle map", 0);
+    crate::steps::stage(progress, "solving the handle map")?;
     let hm = handle_map(&correspondences, solve)?;
     progress.check()?;
     let t1 = Instant::now();
@@ -765,8 +764,7 @@ pub fn register_files_with(
     progress.start("reading the scans", 0);
     let (fixed, moving, mask) = read_inputs(fixed_path, moving_path, mask_path)?;
     let reg = register_with(&fixed, &moving, mask.as_ref(), o, progress)?;
-    progress.check()?;
-    progress.start(&format!("writing {}", out_dir.display()), 0);
+    crate::steps::stage(progress, format!("writing {}", out_dir.display()))?;
     let spacing = o.dense.map_or(10.0, |d| d.grid_spacing);
     let inputs = (fixed_path, &fixed, &moving, mask.as_ref());
     finish(inputs, landmarks, out_dir, &reg, spacing)
@@ -823,8 +821,7 @@ pub fn solve_files_with(
     let (fixed, moving, mask) = read_inputs(fixed_path, moving_path, mask_path)?;
     let corr = read_correspondences(correspondences)?;
     let reg = solve_and_refine_with(&fixed, &moving, mask.as_ref(), corr, solve, dense, progress)?;
-    progress.check()?;
-    progress.start(&format!("writing {}", out_dir.display()), 0);
+    crate::steps::stage(progress, format!("writing {}", out_dir.display()))?;
     let spacing = dense.map_or(10.0, |d| d.grid_spacing);
     let inputs = (fixed_path, &fixed, &moving, mask.as_ref());
     finish(inputs, landmarks, out_dir, &reg, spacing)

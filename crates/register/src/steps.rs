@@ -37,8 +37,9 @@ use crate::select::{SelectOptions, select_handles};
 use crate::solve::{SolveOptions, handle_map};
 use crate::ventilation::{LobeVentilation, ventilation};
 
-/// Start the stage `label` of unknown length, unless `progress` asks to stop.
-fn stage(progress: &dyn Progress, label: impl AsRef<str>) -> Result<(), RegisterError> {
+/// Start the stage `label` of unknown length, unless `progress` asks to stop (then
+/// [`RegisterError::Cancelled`]).
+pub(crate) fn stage(progress: &dyn Progress, label: impl AsRef<str>) -> Result<(), RegisterError> {
     progress.check()?;
     progress.start(label.as_ref(), 0);
     Ok(())
