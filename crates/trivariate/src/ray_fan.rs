@@ -171,7 +171,7 @@ pub struct FocusMeasurement {
 /// the axis at [`PROBE_HEIGHT`] of the radius, followed through the lens by `options`, and
 /// the distance from the exit face to where its exit line crosses the axis. `None` when the
 /// probe does not leave the lens or leaves parallel to the axis. Compare with
-/// [`exact_back_focal_distance`](crate::examples::exact_back_focal_distance) at the same
+/// [`exact_back_focal_distance`] at the same
 /// height.
 ///
 /// # Errors
