@@ -1,7 +1,7 @@
 #!/usr/bin/env bash
 # Fault injection on every output format the command line writes (volumes of every format
 # including OME-Zarr stores, meshes, lattices, maps of every file form including displacement
-# fields, PNG pictures, GIF and APNG animations, STEP, model JSON):
+# fields, PNG pictures, GIF and APNG animations, STEP, model JSON, scene projects):
 # a write that fails (EIO/ENOSPC on write, EIO on the committing rename or link) or is killed
 # (SIGKILL at a write or at the rename) must leave
 # the old output or the complete new one, never a mix, and the next write must leave no
@@ -75,6 +75,7 @@ cmd_old() {
     *.step) $RUN "$VM" ffd ball.obj --lattice mesh_lat.json --mode accurate -o "$out" ;;
     model_*.json) $RUN "$VM" nurbs fit sphere.nii --control-points 4 -o "$out" ;;
     map_*.json | map_*.tfm) $RUN "$VM" map compose la.json la.json -o "$out" ;;
+    *.vmproj) $RUN "$VM" project new --phantom sphere --size 16 --lattice 4 -o "$out" ;;
     esac
 }
 cmd_new() {
@@ -92,6 +93,7 @@ cmd_new() {
     *.step) $RUN "$VM" ffd ball.obj --lattice mesh_lat2.json --mode accurate -o "$out" ;;
     model_*.json) $RUN "$VM" nurbs fit torus.nii --control-points 5 -o "$out" ;;
     map_*.json | map_*.tfm) $RUN "$VM" map compose lb.json la.json -o "$out" ;;
+    *.vmproj) $RUN "$VM" project new --phantom torus --size 20 --lattice 5 -o "$out" ;;
     esac
 }
 
@@ -106,6 +108,17 @@ fingerprint() {
         sha256sum <"fp_$$.nii" | cut -d' ' -f1
         rm -f "fp_$$.nii" ;;
     *.step) grep -v "FILE_NAME" "$f" | sha256sum | cut -d' ' -f1 ;;
+    *.vmproj)
+        # A project is a manifest and its data files: what volmorph reads from them (the
+        # object list, and the volume, the lattice and the warped volume exported).
+        {
+            "$VM" project info "$f" 2>&1 | tail -n +2
+            for o in 1:nii 2:json 3:nii; do
+                "$VM" project export "$f" "${o%%:*}" -o "fp_$$.${o#*:}" >/dev/null 2>&1 &&
+                    sha256sum <"fp_$$.${o#*:}"
+                rm -f "fp_$$.${o#*:}"
+            done
+        } | sha256sum | cut -d' ' -f1 ;;
     *.ome.zarr)
         # A store is a folder: the names and bytes of every file in it.
         [ -d "$f" ] || { echo "missing"; return; }
@@ -117,7 +130,7 @@ fingerprint() {
 # FI_OUTPUTS="m.obj p.png" restricts the run to some formats.
 outputs="${FI_OUTPUTS:-v.nii v.nii.gz v.mha v.mhd v.nrrd v.nhdr v.vtk v.vti v.mgh v.mgz v.ome.zarr
 v.raw m.obj m.stl m.ply m.off lat_l.json l.tfm l.bxf p.png a.gif a.apng s.step model_n.json
-map_c.json map_c.tfm map_a.mat field_d.mha}"
+map_c.json map_c.tfm map_a.mat field_d.mha scene.vmproj}"
 
 # Faults: failures and kills at the first, a middle and the committing system calls.
 faults="write:error=EIO:when=1
@@ -140,6 +153,7 @@ for out in $outputs; do
     rm -rf ref && mkdir ref
     cmd_new "ref/$out" >/dev/null 2>&1 || { echo "FAIL $out: the new output cannot be written"; fail=$((fail + 1)); continue; }
     new_fp="$(fingerprint "ref/$out")"
+    new_data="$(ls -A "ref/$out.data" 2>/dev/null | wc -l)"
     rm -rf ref
     while IFS= read -r fault; do
         sc="${fault%%:*}"
@@ -163,6 +177,10 @@ for out in $outputs; do
             verdict="${verdict:+$verdict; }temporary files left after the next write: $left"
         fi
         case "$out" in
+        *.vmproj)
+            n="$(ls -A "$out.data" | wc -l)"
+            [ "$n" = "$new_data" ] || verdict="${verdict:+$verdict; }$n files in $out.data after the next write, $new_data expected"
+            ;;
         *.mhd | *.nhdr)
             n="$(ls -A | grep -c "^$out\.[0-9a-f]\{8\}\." || true)"
             [ "$n" = "1" ] || verdict="${verdict:+$verdict; }$n data files beside $out after the next write"

@@ -161,6 +161,10 @@ enum Command {
         after_help = "Examples:\n  volmorph register inhale.nii.gz exhale.nii.gz -o out --handles 300 --radius 10 --method frames --dense --landmarks lm_in.txt,lm_ex.txt\n  volmorph register inhale.nii.gz exhale.nii.gz -o out_tps --method tps --kernel r2logr   # thin-plate with the thesis's r² log r kernel (default r)\n  volmorph register select inhale.nii.gz -o handles.txt"
     )]
     Register(cmd::register::Command),
+    /// Scene projects (`.vmproj`, the studio's files): make one from files and built-in
+    /// set-ups, list its objects, export one.
+    #[command(subcommand)]
+    Project(cmd::project::Command),
     /// Time the warps and isosurface extractors on built-in inputs, against their targets.
     #[command(subcommand)]
     Bench(cmd::bench::Command),
@@ -202,6 +206,7 @@ fn main() -> ExitCode {
         Command::Render(a) => cmd::render::run(&a),
         Command::Sculpt(a) => cmd::sculpt::run(&a),
         Command::Register(c) => cmd::register::run(&c),
+        Command::Project(c) => cmd::project::run(&c),
         Command::Bench(c) => cmd::bench::run(&c),
     };
     match result {

@@ -28,6 +28,9 @@
 //! * [`Scene::save`] / [`Scene::load`] write and read a versioned project file ([`project`]);
 //!   [`Scene::export`] writes any object in any format volmorph writes; [`files::read_object`]
 //!   reads any file volmorph reads as a new object.
+//! * [`setup::Setup`] runs a built-in workflow (a phantom, True's direct manipulation,
+//!   McPhail's handles, sculpting, registration and lung model, Feng's mesh FFD) as one undo
+//!   step; the studio's set-up messages and `volmorph project new` both run it.
 //!
 //! ```
 //! use glam::DVec3;
@@ -79,6 +82,7 @@ pub mod files;
 mod object;
 pub mod project;
 mod scene;
+pub mod setup;
 pub mod teapot;
 
 pub use command::{Change, Command, DragSummary, NewObject};

@@ -241,6 +241,67 @@ impl Object {
         }
     }
 
+    /// A one-line description for listings (`volume 128×128×128 u8`, `mesh 2562 vertices,
+    /// 5120 faces`, `map bspline-lattice`, `derived warp of 1 and 2: volume …`): the kind,
+    /// then what defines its size.
+    #[must_use]
+    pub fn describe(&self) -> String {
+        fn volume(v: &AnyVolume) -> String {
+            let [x, y, z] = v.geometry().dims;
+            format!("volume {x}×{y}×{z} {}", v.voxel_type())
+        }
+        fn mesh(m: &Mesh) -> String {
+            format!(
+                "mesh {} vertices, {} faces",
+                m.vertex_count(),
+                m.face_count()
+            )
+        }
+        match self {
+            Object::Volume(v) => volume(v),
+            Object::Mesh(m) => mesh(m),
+            Object::Frep(f) => format!(
+                "frep model, {} lines, {} parameters set",
+                f.source().lines().count(),
+                f.params().len()
+            ),
+            Object::Nurbs(n) => format!("nurbs volume, {} attributes", n.attributes().len()),
+            Object::Map(MapObject::Fixed(m)) => format!("map {}", m.kind()),
+            Object::Map(MapObject::Handles(h)) => format!(
+                "map from {} handles ({:?})",
+                h.set().points.len(),
+                h.method()
+            ),
+            Object::Derived(d) => {
+                let r = d.recipe();
+                let ids = r.inputs();
+                let mut inputs = ids.iter().map(|i| i.0.to_string());
+                let mut text = format!(
+                    "derived {} of {}",
+                    r.name(),
+                    inputs.next().unwrap_or_default()
+                );
+                for i in inputs {
+                    text.push_str(" and ");
+                    text.push_str(&i);
+                }
+                match (d.volume(), d.mesh()) {
+                    (Some(v), _) => text.push_str(&format!(": {}", volume(v))),
+                    (_, Some(m)) => text.push_str(&format!(": {}", mesh(m))),
+                    _ => text.push_str(": not computed"),
+                }
+                if let Some(e) = d.error() {
+                    text.push_str(&format!(" (last update failed: {e})"));
+                }
+                text
+            }
+            Object::Sculpt(s) => match s.mesh() {
+                Some(m) => format!("sculpt {}", mesh(m)),
+                None => "sculpt (mesh beyond 32-bit indices)".into(),
+            },
+        }
+    }
+
     /// The volume this object is or holds (a volume, or a derived volume once computed).
     #[must_use]
     pub fn volume(&self) -> Option<&Arc<AnyVolume>> {

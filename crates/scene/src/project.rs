@@ -53,6 +53,9 @@ use crate::derived::{Derived, DerivedOutput, Recipe};
 use crate::object::{Entry, FrepModel, HandleMap, MapObject, Object, ObjectId, SculptObject};
 use crate::{Scene, SceneError};
 
+/// The extension of project files (`scene.vmproj`), without the dot.
+pub const PROJECT_EXTENSION: &str = "vmproj";
+
 /// Value of the manifest's `format` field.
 pub const PROJECT_FORMAT: &str = "volmorph-scene";
 

@@ -24,7 +24,7 @@ use crate::coalesce::{Coalesce, Queue};
 use crate::command_json::{Brush, SculptRequest};
 use crate::lobes::LobeRequest;
 use crate::protocol::{Frame, Kind};
-use crate::setup::Setup;
+use volmorph_scene::setup::Setup;
 
 /// Time after a job's start before its first [`Kind::Progress`] frame: jobs shorter than
 /// this (an interactive edit) send none.

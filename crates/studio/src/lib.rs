@@ -21,7 +21,6 @@ pub mod lobes;
 pub mod protocol;
 pub mod security;
 mod server;
-pub mod setup;
 pub mod views;
 
 pub use server::{Config, DEFAULT_UPLOAD_LIMIT, Studio, start};
@@ -29,7 +28,11 @@ pub use server::{Config, DEFAULT_UPLOAD_LIMIT, Studio, start};
 /// Why the studio cannot start.
 #[derive(Debug, thiserror::Error)]
 pub enum StudioError {
-    /// A file given at start cannot be read.
+    /// A file given at start cannot be read, or a set-up asked for at start failed (the
+    /// message names the file or the set-up's argument).
+    #[error("cannot start: {0}")]
+    Start(String),
+    /// A file or folder the studio needs cannot be made or read.
     #[error("cannot open {0}: {1}")]
     File(String, String),
     /// The server cannot start (port, randomness, threads).

@@ -1,5 +1,5 @@
 //! Lobe tracing from the page (McPhail §5.6.3): the messages that edit the fissure script of
-//! a `lobes` derived object (made by the `lungs` set-up, [`crate::setup::Setup::Lungs`]) and
+//! a `lobes` derived object (made by the `lungs` set-up, [`volmorph_scene::setup::Setup::Lungs`]) and
 //! the scene command each becomes.
 //!
 //! * `{"command": "trace-lobes", "id": LOBES, "fissure": F, "slice": K, "from": [i, j],
@@ -182,7 +182,7 @@ mod tests {
     use volmorph_register::phantom::{LungPhantom, LungPhantomOptions, lobe, lung_phantom};
     use volmorph_scene::{Change, NewObject};
 
-    use crate::setup::Setup;
+    use volmorph_scene::setup::Setup;
 
     /// A lung phantom's inhale scan in a scene and the lung set-up run on it: the phantom, the
     /// scene and the ids of the scan and of the set-up's lungs, boundaries and lobes.

@@ -21,14 +21,15 @@ use axum::response::{IntoResponse, Response};
 use axum::routing::{get, post};
 use serde_json::{Value, json};
 use tokio::sync::{broadcast, mpsc};
-use volmorph_scene::{Command, ObjectId, Scene};
+use volmorph_scene::{ObjectId, Scene};
 
 use crate::coalesce::Queue;
 use crate::jobs::{Editor, Job, JobProgress, Origin, Outgoing, Running, Work};
 use crate::protocol::{Frame, FrameError, Kind, MAX_CLIENT_FRAME, VERSION};
 use crate::security::{self, Roots};
 use crate::views::{self, Caches, QueryError, u64_field, vec3_field};
-use crate::{StudioError, assets, command_json, setup::Setup};
+use crate::{StudioError, assets, command_json};
+use volmorph_scene::setup::Setup;
 
 /// How the studio is started.
 #[derive(Debug, Clone)]
@@ -115,24 +116,9 @@ impl Drop for Studio {
 /// cannot be bound.
 pub async fn start(config: Config) -> Result<Studio, StudioError> {
     let token = security::new_token().map_err(|e| StudioError::Server(e.to_string()))?;
-    let mut scene = Scene::new();
-    for f in &config.files {
-        let object = volmorph_scene::files::read_object(f)
-            .map_err(|e| StudioError::File(f.display().to_string(), e.to_string()))?;
-        let name = f
-            .file_name()
-            .map(|n| n.to_string_lossy().into_owned())
-            .unwrap_or_default();
-        scene
-            .apply(Command::Add { name, object })
-            .map_err(|e| StudioError::File(f.display().to_string(), e.to_string()))?;
-    }
-    for s in &config.setups {
-        s.clone()
-            .run(&mut scene)
-            .map_err(|e| StudioError::Server(e.to_string()))?;
-    }
-    scene.clear_history();
+    let scene =
+        volmorph_scene::setup::start_with(&config.files, &config.setups, &volmorph_io::NoProgress)
+            .map_err(|e| StudioError::Start(e.to_string()))?;
     let mut roots = Roots::new(&config.roots).map_err(|e| StudioError::Server(e.to_string()))?;
     let upload_dir = std::env::temp_dir().join(format!("volmorph-studio-{}", &token[..12]));
     std::fs::create_dir_all(&upload_dir)

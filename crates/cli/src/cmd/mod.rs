@@ -17,6 +17,7 @@ pub mod nurbs;
 pub mod nurbs_trace;
 pub mod phantom;
 pub mod picture;
+pub mod project;
 pub mod register;
 pub mod render;
 pub mod sculpt;

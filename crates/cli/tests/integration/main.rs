@@ -6,6 +6,7 @@ mod common;
 mod cli;
 mod out_of_core_progress;
 mod pictures;
+mod project;
 mod realdata;
 mod register;
 mod scene_equals_cli;

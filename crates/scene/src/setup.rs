@@ -8,16 +8,14 @@
 //! registration workbench (handles selected on a fixed scan and matched in a moving one, the
 //! handle map through them and the moving scan registered onto the fixed grid), and his
 //! lobe-based lung model (the lungs of a CT segmented, its lobe boundaries enhanced, and the
-//! lobe labels traced from the fissure points the user clicks, [`crate::lobes`]).
+//! lobe labels traced from the fissure points the user clicks, in the studio).
 
+use crate::{Change, Command, NewObject, ObjectId, Recipe, Scene, SceneError, SurfaceMethod};
 use glam::DVec3;
 use serde::Deserialize;
 use volmorph_handles::HandleSet;
 use volmorph_lattice::{BSplineLattice, FengForm};
 use volmorph_maps::{AnyMap, HandleMethod, HandleOptions};
-use volmorph_scene::{
-    Change, Command, NewObject, ObjectId, Recipe, Scene, SceneError, SurfaceMethod,
-};
 use volmorph_volume::AnyVolume;
 use volmorph_volume::phantom::{self, Phantom};
 use volmorph_warp::apply::WarpMethod;
@@ -153,7 +151,7 @@ pub enum Setup {
     /// lungs", u8 labels 1 right, 2 left), the lobe boundaries enhanced (§5.6.2: "NAME lobe
     /// boundaries", f32), and the lobes added as a `lobes` derived object with no fissure yet
     /// ("NAME lobes", each lung labelled by height only). The page then clicks the fissures'
-    /// end points on axial sections (§5.6.3: `trace-lobes`, [`crate::lobes`]).
+    /// end points on axial sections (§5.6.3: the studio's `trace-lobes`).
     Lungs {
         /// The CT volume.
         ct: u64,
@@ -197,6 +195,52 @@ fn from_register(e: volmorph_register::RegisterError) -> SceneError {
         volmorph_register::RegisterError::Cancelled(c) => SceneError::Cancelled(c),
         e => SceneError::Invalid(e.to_string()),
     }
+}
+
+/// A new scene for a session (the studio's start, `volmorph project new`): the project
+/// `files[0]` when it is one (`.vmproj`, [`Scene::load_with`]), then each other file read as
+/// an object named after its file name ([`crate::files::read_object_with`]), in order (ids
+/// 1, 2, … in a new scene), then each of `setups` run in order ([`Setup::run_with`]), with an
+/// empty history: the starting state is not an undo step.
+///
+/// # Errors
+/// The first file that cannot be read or added (the error names it), a project that is not
+/// the first file, or the first set-up that fails; [`SceneError::Cancelled`] when `progress`
+/// asks to stop.
+pub fn start_with(
+    files: &[std::path::PathBuf],
+    setups: &[Setup],
+    progress: &dyn volmorph_io::Progress,
+) -> Result<Scene, SceneError> {
+    let is_project = |f: &std::path::Path| {
+        f.extension()
+            .is_some_and(|e| e.eq_ignore_ascii_case(crate::project::PROJECT_EXTENSION))
+    };
+    let (mut scene, files) = match files.split_first() {
+        Some((first, rest)) if is_project(first) => (Scene::load_with(first, progress)?, rest),
+        _ => (Scene::new(), files),
+    };
+    for f in files {
+        if is_project(f) {
+            return Err(SceneError::Invalid(format!(
+                "{}: a project opens only as the first file (it becomes the scene)",
+                f.display()
+            )));
+        }
+        let object = crate::files::read_object_with(f, progress)?;
+        let name = crate::files::file_name(f);
+        scene
+            .apply_with(Command::Add { name, object }, progress)
+            .map_err(|e| match e {
+                SceneError::Cancelled(c) => SceneError::Cancelled(c),
+                e => SceneError::Invalid(format!("{}: {e}", f.display())),
+            })?;
+    }
+    for s in setups {
+        s.clone().run_with(&mut scene, progress)?;
+    }
+    scene.clear_history();
+    Ok(scene)
 }
 
 impl Setup {
@@ -547,7 +591,7 @@ impl Setup {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use volmorph_scene::{MapObject, Object};
+    use crate::{MapObject, Object};
 
     fn teapot(scene: &mut Scene) {
         Setup::Phantom {
@@ -556,6 +600,59 @@ mod tests {
         }
         .run(scene)
         .unwrap();
+    }
+
+    /// A session starts from files and set-ups with no history; a saved project given first
+    /// becomes the scene (same objects, same ids), later files join it, and a project in
+    /// any other place is refused naming it.
+    #[test]
+    fn a_session_starts_from_a_project_first_and_files_after() {
+        let dir = tempfile::tempdir().unwrap();
+        let setups = [
+            Setup::Phantom {
+                model: "sphere".into(),
+                size: 12,
+            },
+            Setup::DirectManipulation {
+                volume: 1,
+                counts: 4,
+                level: 127.0,
+            },
+        ];
+        let first = start_with(&[], &setups, &volmorph_io::NoProgress).unwrap();
+        assert_eq!(first.undo_depth(), 0);
+        let listing = |s: &Scene| -> Vec<(u64, String, String)> {
+            s.objects()
+                .map(|(id, e)| (id.0, e.name.clone(), e.object.describe()))
+                .collect()
+        };
+        assert_eq!(listing(&first).len(), 4);
+        assert!(
+            listing(&first)[2]
+                .2
+                .starts_with("derived warp of 1 and 2: volume 12×12×12")
+        );
+        let project = dir.path().join("s.vmproj");
+        first.save(&project).unwrap();
+        let handles = dir.path().join("h.txt");
+        std::fs::write(
+            &handles,
+            "0 0 0 0 0 0\n0.5 0 0 0.5 0 0\n0 0.5 0 0 0.5 0\n0 0 0.5 0 0 0.5\n",
+        )
+        .unwrap();
+        let again = start_with(
+            &[project.clone(), handles.clone()],
+            &[],
+            &volmorph_io::NoProgress,
+        )
+        .unwrap();
+        let (a, b) = (listing(&first), listing(&again));
+        assert_eq!(b.len(), 5);
+        assert_eq!(a[..], b[..4]);
+        assert_eq!(b[4].1, "h.txt");
+        assert_eq!(again.undo_depth(), 0);
+        let e = start_with(&[handles, project], &[], &volmorph_io::NoProgress).unwrap_err();
+        assert!(e.to_string().contains("s.vmproj"), "{e}");
     }
 
     /// Handles placed where the page asks, sources = targets: the map is the identity, so
