@@ -3,7 +3,8 @@
 //!
 //! Parsing and pixel decoding are done by the `dicom-rs` crates (`dicom-object`,
 //! `dicom-pixeldata`; the decoders of compressed transfer syntaxes — JPEG, JPEG lossless,
-//! RLE, deflate — come with the default `dicom-codecs` feature). This module does what turns
+//! RLE, deflate — come with the default `dicom-codecs` feature; RLE of 32-bit samples, which
+//! that decoder does not read, is decoded by [`rle`]). This module does what turns
 //! files into a volume:
 //!
 //! # Finding the slices
@@ -66,6 +67,7 @@ use crate::Header;
 use volmorph_volume::{AnyVolume, Geometry, Volume, VolumeError, Voxel, VoxelType};
 
 mod lengths;
+mod rle;
 
 const FMT: &str = "DICOM";
 
@@ -725,13 +727,10 @@ fn read_multiframe_object(
         &format!("{what}: the volume and its decoded pixel data"),
         (out as u64 * vt.size() as u64).saturating_add(all_frames),
     )?;
-    check_decodable(obj, &format, &what)?;
-    let decoded = obj
-        .decode_pixel_data()
-        .map_err(|e| pixel_error(&what, &e.to_string()))?;
+    let pixels = Pixels::of(obj, &format, &what)?;
     let swapped = halves_swapped(obj, &format);
     let volume = fill(&format, &planes, &order, geometry, all_frames, |p, sink| {
-        sink(frame_bytes(&decoded, &format, p.frame, &what)?, swapped);
+        sink(&pixels.frame(&format, p.frame, &what)?, swapped);
         Ok(())
     })?;
     Ok((volume, header))
@@ -831,33 +830,66 @@ fn decode_frame(
     what: &str,
     sink: &mut dyn FnMut(&[u8], bool),
 ) -> Result<(), VolumeError> {
-    check_decodable(obj, format, what)?;
-    let decoded = obj
-        .decode_pixel_data()
-        .map_err(|e| pixel_error(what, &e.to_string()))?;
+    let pixels = Pixels::of(obj, format, what)?;
     sink(
-        frame_bytes(&decoded, format, frame, what)?,
+        &pixels.frame(format, frame, what)?,
         halves_swapped(obj, format),
     );
     Ok(())
 }
 
-/// Refuse, as unsupported, pixel data that the dicom-rs decoders do not decode: RLE Lossless
-/// with 32-bit samples (its decoder reads 8 and 16 bits; PS3.5 Annex G allows 32).
-fn check_decodable(
-    obj: &DefaultDicomObject,
-    format: &PixelFormat,
-    what: &str,
-) -> Result<(), VolumeError> {
-    const RLE_LOSSLESS: &str = "1.2.840.10008.1.2.5";
-    let syntax = obj.meta().transfer_syntax().trim_end_matches(['\0', ' ']);
-    if syntax == RLE_LOSSLESS && format.bits_allocated == 32 {
-        return Err(VolumeError::Unsupported(format!(
-            "{what}: RLE Lossless pixel data with BitsAllocated 32 (the RLE decoder reads 8 and \
-             16 bits); convert the file to an uncompressed transfer syntax"
-        )));
+/// The pixel data of an object, decoded by dicom-rs, or (RLE Lossless with 32-bit samples,
+/// which its RLE decoder does not read; PS3.5 Annex G allows it) the RLE fragments, one per
+/// frame, decoded frame by frame by [`rle`].
+enum Pixels<'a> {
+    Decoded(dicom_pixeldata::DecodedPixelData<'a>),
+    Rle32(&'a [Vec<u8>]),
+}
+
+impl<'a> Pixels<'a> {
+    fn of(
+        obj: &'a DefaultDicomObject,
+        format: &PixelFormat,
+        what: &str,
+    ) -> Result<Self, VolumeError> {
+        const RLE_LOSSLESS: &str = "1.2.840.10008.1.2.5";
+        let syntax = obj.meta().transfer_syntax().trim_end_matches(['\0', ' ']);
+        if syntax == RLE_LOSSLESS && format.bits_allocated == 32 {
+            let fragments = obj
+                .element(tags::PIXEL_DATA)
+                .ok()
+                .and_then(|e| e.value().fragments())
+                .ok_or_else(|| err(format!("{what}: RLE pixel data is not encapsulated")))?;
+            return Ok(Self::Rle32(fragments));
+        }
+        obj.decode_pixel_data()
+            .map(Self::Decoded)
+            .map_err(|e| pixel_error(what, &e.to_string()))
     }
-    Ok(())
+
+    /// The bytes of frame `frame`, checked to hold the whole frame.
+    fn frame(
+        &self,
+        format: &PixelFormat,
+        frame: u32,
+        what: &str,
+    ) -> Result<std::borrow::Cow<'_, [u8]>, VolumeError> {
+        match self {
+            Self::Decoded(d) => frame_bytes(d, format, frame, what).map(std::borrow::Cow::Borrowed),
+            Self::Rle32(fragments) => {
+                // PS3.5 A.4.2: each RLE frame is exactly one fragment.
+                let fragment = fragments.get(frame as usize).ok_or_else(|| {
+                    err(format!(
+                        "{what}: frame {} has no RLE fragment ({} fragments)",
+                        frame + 1,
+                        fragments.len()
+                    ))
+                })?;
+                rle::decode_u32_frame(fragment, format.rows * format.cols, what)
+                    .map(std::borrow::Cow::Owned)
+            }
+        }
+    }
 }
 
 /// Whether the decoded bytes of 32-bit pixels have their 16-bit halves swapped: an explicit VR
@@ -1232,6 +1264,64 @@ mod tests {
         let mut bytes = Vec::new();
         obj.write_all(&mut bytes).unwrap();
         bytes
+    }
+
+    /// pydicom's `rtdose_rle.dcm` (its RT Dose grid, 32-bit samples, stored RLE Lossless)
+    /// was refused: the dicom-rs RLE decoder reads 8 and 16 bits. The same dose re-encoded
+    /// as RLE, one fragment per frame (PS3.5 Annex G), reads as the uncompressed file does;
+    /// a frame without its fragment is refused naming it.
+    #[test]
+    fn rle_dose_of_32_bit_samples_is_refused() {
+        use dicom_core::value::{PixelFragmentSequence, Value};
+        use dicom_core::{DataElement, PrimitiveValue};
+        let (path, bytes) = corpus_file("pydicom_rtdose.dcm");
+        let (plain, _) = read_bytes(&bytes).unwrap();
+        let mut obj = OpenFileOptions::new().open_file(&path).unwrap();
+        let format = PixelFormat::of(&obj, "x").unwrap();
+        assert_eq!(format.bits_allocated, 32);
+        let frame_len = format.frame_bytes();
+        let raw = obj
+            .element(tags::PIXEL_DATA)
+            .unwrap()
+            .to_bytes()
+            .unwrap()
+            .into_owned();
+        let fragments: Vec<Vec<u8>> = raw
+            .chunks_exact(frame_len)
+            .map(|f| {
+                let samples: Vec<u32> = f
+                    .chunks_exact(4)
+                    .map(|c| u32::from_le_bytes([c[0], c[1], c[2], c[3]]))
+                    .collect();
+                rle::tests::rle_u32_fragment(&samples)
+            })
+            .collect();
+        assert_eq!(fragments.len(), plain.geometry().dims[2]);
+        let encode = |obj: &DefaultDicomObject, fragments: Vec<Vec<u8>>| {
+            let mut o = obj.clone();
+            o.put(DataElement::new(
+                tags::PIXEL_DATA,
+                VR::OB,
+                Value::from(PixelFragmentSequence::new(Vec::<u32>::new(), fragments)),
+            ));
+            o.meta_mut()
+                .set_transfer_syntax(&dicom_transfer_syntax_registry::entries::RLE_LOSSLESS);
+            let mut b = Vec::new();
+            o.write_all(&mut b).unwrap();
+            b
+        };
+        let (rle, _) = read_bytes(&encode(&obj, fragments.clone())).unwrap();
+        assert_eq!(rle, plain);
+        // One fragment short: the last frame has none.
+        let mut short = fragments;
+        short.pop();
+        obj.put(DataElement::new(
+            tags::NUMBER_OF_FRAMES,
+            VR::IS,
+            PrimitiveValue::from(format!("{}", short.len() + 1)),
+        ));
+        let e = read_bytes(&encode(&obj, short)).unwrap_err().to_string();
+        assert!(e.contains("fragment"), "{e}");
     }
 
     /// Regression (fuzzing, out of memory): a forged `NumberOfFrames` of two billion made the
