@@ -92,6 +92,7 @@ pub fn run(a: &Args) -> anyhow::Result<()> {
     let pb = progress::spinner(format!("reading {}", a.input.display()));
     let m =
         mesh::read(&a.input).with_context(|| format!("cannot read mesh {}", a.input.display()))?;
+    let read_s = start.elapsed().as_secs_f64();
     let lattice = match (&a.lattice, a.init) {
         (Some(path), _) => {
             read_lattice(path).with_context(|| format!("cannot read lattice {}", path.display()))?
@@ -127,7 +128,10 @@ pub fn run(a: &Args) -> anyhow::Result<()> {
             pb.set_message("interpolating surfaces");
             let model = plan.deform(&lattice).context("accurate FFD")?;
             let st = model.stats;
+            pb.set_message("measuring the surface area");
+            let area_start = Instant::now();
             let area = model.surface_area();
+            let area_s = area_start.elapsed().as_secs_f64();
             pb.set_message(format!("writing {}", a.output.display()));
             let write_start = Instant::now();
             if step_out {
@@ -162,8 +166,8 @@ pub fn run(a: &Args) -> anyhow::Result<()> {
             say!("Bézier patches: {}", st.patches);
             say!("trimmed faces:  {} ({} edges)", st.faces, st.edges);
             say!(
-                "time:           {total_s:.3} s in all (plan {:.3} s, surfaces {:.3} s, \
-                 writing {} {write_s:.3} s)",
+                "time:           {total_s:.3} s in all (reading {read_s:.3} s, plan {:.3} s, \
+                 surfaces {:.3} s, surface area {area_s:.3} s, writing {} {write_s:.3} s)",
                 st.plan_time.as_secs_f64(),
                 st.deform_time.as_secs_f64(),
                 if step_out { "STEP" } else { "the tessellation" }
@@ -180,6 +184,8 @@ pub fn run(a: &Args) -> anyhow::Result<()> {
             }
             json.insert("plan_s".into(), st.plan_time.as_secs_f64().into());
             json.insert("surfaces_s".into(), st.deform_time.as_secs_f64().into());
+            json.insert("read_s".into(), read_s.into());
+            json.insert("area_s".into(), area_s.into());
             json.insert("write_s".into(), write_s.into());
             json.insert("total_s".into(), total_s.into());
             json.insert("surface_area".into(), area.into());

@@ -956,6 +956,14 @@ fn ffd_accurate_cube_reports_table_2_counts_and_writes_step_and_meshes() {
     assert_eq!(r["patches"], 24);
     assert_eq!(r["closed_shell"], true);
     assert!(r["surface_area"].as_f64().unwrap() > 6.0);
+    // The phases are timed one after the other, so they add up to at most the total (the
+    // total left out the STEP writing once, and later the surface area and the reading).
+    let part = |k: &str| r[k].as_f64().unwrap_or_else(|| panic!("no {k} in {r}"));
+    let parts: f64 = ["read_s", "plan_s", "surfaces_s", "area_s", "write_s"]
+        .iter()
+        .map(|k| part(k))
+        .sum();
+    assert!(parts <= part("total_s") + 1e-6, "{r}");
     let s = std::fs::read_to_string(&step).unwrap();
     assert!(s.contains("CLOSED_SHELL") && s.contains("ADVANCED_FACE"));
     // Tessellated output in every mesh format, watertight.
