@@ -38,7 +38,8 @@
 //!
 //! # Values
 //!
-//! Stored values (`BitsAllocated` 8, 16 or 32; `PixelRepresentation` unsigned or two's
+//! Stored values (`BitsAllocated` 1 — uncompressed, as segmentation masks store them — 8, 16
+//! or 32; `PixelRepresentation` unsigned or two's
 //! complement; the bits above `BitsStored` masked off, or sign-extended from `BitsStored` for
 //! signed data) are mapped by each slice's `RescaleSlope`/`RescaleIntercept` (`v·slope +
 //! intercept`). When every slice has slope 1 and the same integral intercept, the volume keeps
@@ -210,9 +211,9 @@ impl PixelFormat {
         if rows <= 0 || cols <= 0 {
             return Err(err(format!("{what}: Rows {rows} × Columns {cols}")));
         }
-        if !matches!(bits_allocated, 8 | 16 | 32) {
+        if !matches!(bits_allocated, 1 | 8 | 16 | 32) {
             return Err(VolumeError::Unsupported(format!(
-                "{what}: BitsAllocated {bits_allocated} (8, 16 or 32 are read)"
+                "{what}: BitsAllocated {bits_allocated} (1, 8, 16 or 32 are read)"
             )));
         }
         if !(1..=bits_allocated).contains(&bits_stored) {
@@ -239,11 +240,25 @@ impl PixelFormat {
         }
     }
 
-    /// Bytes of one decoded frame: `rows · cols · BitsAllocated / 8` (saturating).
+    /// Bytes of one decoded frame: `rows · cols · BitsAllocated / 8` (saturating); for
+    /// 1-bit pixels one byte per pixel, as [`Pixels::frame`] unpacks them.
     fn frame_bytes(&self) -> usize {
         self.rows
             .saturating_mul(self.cols)
-            .saturating_mul(usize::from(self.bits_allocated / 8))
+            .saturating_mul(usize::from(self.bits_allocated.div_ceil(8)))
+    }
+
+    /// Bytes of native (uncompressed) `PixelData` holding `frames` frames: 1-bit frames
+    /// follow each other bit by bit (PS3.5 8.1.1), others byte-aligned.
+    fn native_bytes(&self, frames: u32) -> u64 {
+        let pixels = (self.rows as u64)
+            .saturating_mul(self.cols as u64)
+            .saturating_mul(u64::from(frames));
+        if self.bits_allocated == 1 {
+            pixels.div_ceil(8)
+        } else {
+            pixels.saturating_mul(u64::from(self.bits_allocated / 8))
+        }
     }
 
     /// Stored value `k` of a frame's little-endian bytes, masked / sign-extended to
@@ -251,7 +266,8 @@ impl PixelFormat {
     #[inline]
     fn value(&self, bytes: &[u8], k: usize) -> i64 {
         let raw: u64 = match self.bits_allocated {
-            8 => u64::from(bytes[k]),
+            // 1-bit pixels arrive unpacked, one byte each.
+            1 | 8 => u64::from(bytes[k]),
             16 => u64::from(u16::from_le_bytes([bytes[2 * k], bytes[2 * k + 1]])),
             _ => u64::from(u32::from_le_bytes([
                 bytes[4 * k],
@@ -766,7 +782,7 @@ fn check_frames_present(
         }
         Value::Primitive(p) => {
             let have = p.calculate_byte_len() as u64;
-            let need = (format.frame_bytes() as u64).saturating_mul(u64::from(frames));
+            let need = format.native_bytes(frames);
             if have < need {
                 return Err(err(format!(
                     "{what}: NumberOfFrames {frames} of {}×{} {}-bit pixels need {need} bytes \
@@ -840,10 +856,17 @@ fn decode_frame(
 
 /// The pixel data of an object, decoded by dicom-rs, or (RLE Lossless with 32-bit samples,
 /// which its RLE decoder does not read; PS3.5 Annex G allows it) the RLE fragments, one per
-/// frame, decoded frame by frame by [`rle`].
+/// frame, decoded frame by frame by [`rle`], or native 1-bit pixels (segmentation masks,
+/// PS3.5 8.1.1: packed least significant bit first, frames following each other bit by bit),
+/// unpacked frame by frame to one byte (0 or 1) per pixel.
 enum Pixels<'a> {
     Decoded(dicom_pixeldata::DecodedPixelData<'a>),
     Rle32(&'a [Vec<u8>]),
+    /// `OB` data as bytes.
+    Bits8(&'a [u8]),
+    /// `OW` data as the words the parser read (in either byte order of the file, the bits
+    /// run from the least significant of each word).
+    Bits16(&'a [u16]),
 }
 
 impl<'a> Pixels<'a> {
@@ -861,6 +884,21 @@ impl<'a> Pixels<'a> {
                 .and_then(|e| e.value().fragments())
                 .ok_or_else(|| err(format!("{what}: RLE pixel data is not encapsulated")))?;
             return Ok(Self::Rle32(fragments));
+        }
+        if format.bits_allocated == 1 {
+            use dicom_core::value::{PrimitiveValue, Value};
+            let e = obj
+                .element(tags::PIXEL_DATA)
+                .map_err(|_| err(format!("{what}: no PixelData")))?;
+            return match e.value() {
+                Value::Primitive(PrimitiveValue::U8(b)) => Ok(Self::Bits8(b)),
+                Value::Primitive(PrimitiveValue::U16(w)) => Ok(Self::Bits16(w)),
+                Value::PixelSequence(_) => Err(VolumeError::Unsupported(format!(
+                    "{what}: compressed 1-bit pixel data (transfer syntax {syntax}); 1-bit \
+                     images are read uncompressed"
+                ))),
+                _ => Err(err(format!("{what}: 1-bit PixelData is neither OB nor OW"))),
+            };
         }
         obj.decode_pixel_data()
             .map(Self::Decoded)
@@ -886,6 +924,19 @@ impl<'a> Pixels<'a> {
                     ))
                 })?;
                 rle::decode_u32_frame(fragment, format.rows * format.cols, what)
+                    .map(std::borrow::Cow::Owned)
+            }
+            Self::Bits8(_) | Self::Bits16(_) => {
+                let per = format.rows * format.cols;
+                let first = per * frame as usize;
+                let bit = |i: usize| match self {
+                    Self::Bits8(b) => b.get(i / 8).map(|v| (v >> (i % 8)) & 1),
+                    Self::Bits16(w) => w.get(i / 16).map(|v| ((v >> (i % 16)) & 1) as u8),
+                    _ => None,
+                };
+                (first..first + per)
+                    .map(|i| bit(i).ok_or_else(|| err(format!("{what}: pixel data truncated"))))
+                    .collect::<Result<Vec<u8>, _>>()
                     .map(std::borrow::Cow::Owned)
             }
         }
@@ -1322,6 +1373,73 @@ mod tests {
         ));
         let e = read_bytes(&encode(&obj, short)).unwrap_err().to_string();
         assert!(e.contains("fragment"), "{e}");
+    }
+
+    /// pydicom's `liver_1frame.dcm` (a segmentation, `BitsAllocated` 1) was refused. The RT
+    /// Dose's frames thresholded to a 1-bit mask (10 × 10 pixels: frames start in the middle
+    /// of a byte) read back as that mask, packed in bytes (`OB`) and in words (`OW`).
+    #[test]
+    fn one_bit_segmentation_is_refused() {
+        use dicom_core::{DataElement, PrimitiveValue};
+        let (path, bytes) = corpus_file("pydicom_rtdose.dcm");
+        let (plain, _) = read_bytes(&bytes).unwrap();
+        let plain = plain.to_typed::<f64>();
+        let mut obj = OpenFileOptions::new().open_file(&path).unwrap();
+        let scale = dose_scaling(&obj);
+        let raw = obj
+            .element(tags::PIXEL_DATA)
+            .unwrap()
+            .to_bytes()
+            .unwrap()
+            .into_owned();
+        let samples: Vec<u32> = raw
+            .chunks_exact(4)
+            .map(|c| u32::from_le_bytes([c[0], c[1], c[2], c[3]]))
+            .collect();
+        let mut sorted = samples.clone();
+        sorted.sort_unstable();
+        let t = sorted[sorted.len() / 2];
+        let mut packed = vec![0u8; samples.len().div_ceil(8)];
+        for (i, &v) in samples.iter().enumerate() {
+            if v > t {
+                packed[i / 8] |= 1 << (i % 8);
+            }
+        }
+        let [nx, ny, _] = plain.geometry().dims;
+        assert_ne!(nx * ny % 8, 0, "frames must start inside a byte");
+        for tag in [tags::BITS_ALLOCATED, tags::BITS_STORED] {
+            obj.put(DataElement::new(tag, VR::US, PrimitiveValue::from(1u16)));
+        }
+        obj.put(DataElement::new(
+            tags::HIGH_BIT,
+            VR::US,
+            PrimitiveValue::from(0u16),
+        ));
+        obj.remove_element(tags::DOSE_GRID_SCALING);
+        let words: Vec<u16> = packed
+            .chunks(2)
+            .map(|c| u16::from(c[0]) | (u16::from(*c.get(1).unwrap_or(&0)) << 8))
+            .collect();
+        for (vr, value) in [
+            (VR::OB, PrimitiveValue::U8(packed.clone().into())),
+            (VR::OW, PrimitiveValue::U16(words.into())),
+        ] {
+            let mut o = obj.clone();
+            o.put(DataElement::new(tags::PIXEL_DATA, vr, value));
+            let mut b = Vec::new();
+            o.write_all(&mut b).unwrap();
+            let (mask, _) = read_bytes(&b).unwrap();
+            assert_eq!(mask.voxel_type(), VoxelType::U8, "{vr:?}");
+            assert_eq!(mask.geometry(), plain.geometry());
+            let mask = mask.to_typed::<f64>();
+            // Stored values are integers: v > t ⟺ dose / scale > t + 0.5.
+            let want: Vec<f64> = plain
+                .data()
+                .iter()
+                .map(|&d| f64::from(u8::from(d / scale > f64::from(t) + 0.5)))
+                .collect();
+            assert_eq!(mask.data(), &want[..], "{vr:?}");
+        }
     }
 
     /// Regression (fuzzing, out of memory): a forged `NumberOfFrames` of two billion made the
