@@ -350,7 +350,20 @@ struct Scanned {
     path: PathBuf,
     series: String,
     description: String,
-    frames: u32,
+    /// Read as a multi-frame file ([`is_multiframe`]).
+    multiframe: bool,
+}
+
+/// Whether `obj` is read as a multi-frame file: more than one frame, or an enhanced file
+/// (segmentations, enhanced CT/MR) whose one frame is placed by the functional groups
+/// rather than by top-level `ImageOrientationPatient`.
+fn is_multiframe(obj: &InMemDicomObject) -> bool {
+    int(obj, tags::NUMBER_OF_FRAMES).unwrap_or(1) > 1
+        || (obj.element(tags::IMAGE_ORIENTATION_PATIENT).is_err()
+            && (obj
+                .element(tags::PER_FRAME_FUNCTIONAL_GROUPS_SEQUENCE)
+                .is_ok()
+                || obj.element(tags::SHARED_FUNCTIONAL_GROUPS_SEQUENCE).is_ok()))
 }
 
 /// [`lengths::check`] on the bytes of a DICOM stream held in memory.
@@ -402,10 +415,7 @@ fn scan(path: &Path) -> Option<Scanned> {
         path: path.to_path_buf(),
         series: text(&obj, tags::SERIES_INSTANCE_UID).unwrap_or_default(),
         description: text(&obj, tags::SERIES_DESCRIPTION).unwrap_or_default(),
-        frames: int(&obj, tags::NUMBER_OF_FRAMES)
-            .and_then(|f| u32::try_from(f).ok())
-            .unwrap_or(1)
-            .max(1),
+        multiframe: is_multiframe(&obj),
     })
 }
 
@@ -445,7 +455,7 @@ pub(crate) fn read(path: &Path) -> Result<(AnyVolume, Header), VolumeError> {
     } else {
         let me = scan(path)
             .ok_or_else(|| err(format!("{} is not a DICOM image file", path.display())))?;
-        if me.frames > 1 {
+        if me.multiframe {
             return read_multiframe(path);
         }
         let dir = path.parent().filter(|d| !d.as_os_str().is_empty());
@@ -482,10 +492,10 @@ pub(crate) fn read(path: &Path) -> Result<(AnyVolume, Header), VolumeError> {
             )));
         }
     };
-    if series.len() == 1 && series[0].frames > 1 {
+    if series.len() == 1 && series[0].multiframe {
         return read_multiframe(&series[0].path);
     }
-    if let Some(m) = series.iter().find(|s| s.frames > 1) {
+    if let Some(m) = series.iter().find(|s| s.multiframe) {
         return Err(VolumeError::Unsupported(format!(
             "series mixes multi-frame files ({}) with single slices",
             m.path.display()
@@ -599,7 +609,7 @@ pub fn read_bytes(bytes: &[u8]) -> Result<(AnyVolume, Header), VolumeError> {
     };
     let mut obj = open()?;
     retype_un(&mut obj);
-    if int(&obj, tags::NUMBER_OF_FRAMES).unwrap_or(1) > 1 {
+    if is_multiframe(&obj) {
         return read_multiframe_object(&obj, what);
     }
     // The pixel data is in memory already: refuse one too short for its frame before the
@@ -1440,6 +1450,46 @@ mod tests {
                 .collect();
             assert_eq!(mask.data(), &want[..], "{vr:?}");
         }
+    }
+
+    /// pydicom's `liver_1frame.dcm` (a one-frame segmentation) was refused for having no
+    /// top-level `ImageOrientationPatient`: a file with one frame was read as a classic
+    /// slice although its frame is placed by the functional groups. The enhanced CT cut to
+    /// its first frame reads as that frame of the whole file.
+    #[test]
+    fn one_frame_enhanced_file_has_no_image_orientation() {
+        use dicom_core::DataElement;
+        use dicom_core::value::DataSetSequence;
+        let (_, bytes) = corpus_file("pydicom_enhanced_ct.dcm");
+        let mut obj = OpenFileOptions::new()
+            .read_preamble(dicom_object::file::ReadPreamble::Auto)
+            .from_reader(&with_frame_count("pydicom_enhanced_ct.dcm", "1")[..])
+            .unwrap();
+        assert!(obj.element(tags::IMAGE_ORIENTATION_PATIENT).is_err());
+        let first_group = obj
+            .element(tags::PER_FRAME_FUNCTIONAL_GROUPS_SEQUENCE)
+            .unwrap()
+            .items()
+            .unwrap()[0]
+            .clone();
+        obj.put(DataElement::new(
+            tags::PER_FRAME_FUNCTIONAL_GROUPS_SEQUENCE,
+            VR::SQ,
+            DataSetSequence::from(vec![first_group]),
+        ));
+        let mut one = Vec::new();
+        obj.write_all(&mut one).unwrap();
+        let (all, _) = read_bytes(&bytes).unwrap();
+        let (first, _) = read_bytes(&one).unwrap();
+        assert_eq!(first.geometry().dims[2], 1);
+        let (all, first) = (all.to_typed::<f64>(), first.to_typed::<f64>());
+        let plane = first.data().len();
+        // The first frame is the first or the last slice along the normal.
+        let a = all.data();
+        assert!(
+            first.data() == &a[..plane] || first.data() == &a[a.len() - plane..],
+            "the one frame is not a slice of the whole file"
+        );
     }
 
     /// Regression (fuzzing, out of memory): a forged `NumberOfFrames` of two billion made the
