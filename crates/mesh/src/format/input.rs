@@ -335,7 +335,7 @@ impl<S: Source> Input<S> {
     // ------------------------------------------------------------------ text
 
     /// The next whitespace-separated token and its line, or `None` at the end of the input.
-    #[inline]
+    #[inline(always)]
     pub(crate) fn next_token(&mut self) -> Result<Option<(usize, &[u8])>, MeshError> {
         Ok(self
             .token_range()?
@@ -344,7 +344,7 @@ impl<S: Source> Input<S> {
 
     /// The next token and its line; at the end of the input, the error `missing` makes of
     /// the line there.
-    #[inline]
+    #[inline(always)]
     pub(crate) fn require_token(
         &mut self,
         missing: impl FnOnce(usize) -> MeshError,
@@ -355,9 +355,45 @@ impl<S: Source> Input<S> {
         }
     }
 
-    /// Where in the window the next token is, the cursor moved past it.
-    #[inline]
+    /// Where in the window the next token is, the cursor moved past it: here when the window
+    /// holds it whole, else by [`Input::token_range_slow`].
+    #[inline(always)]
     fn token_range(&mut self) -> Result<Option<(usize, usize)>, MeshError> {
+        let d = self.src.data();
+        let mut p = self.pos;
+        // Bytes above the space are word bytes: one comparison for most bytes.
+        while let Some(&b) = d.get(p) {
+            if b > b' ' {
+                break;
+            } else if b == b'\n' {
+                self.line += 1;
+            } else if !is_blank(b) {
+                break;
+            }
+            p += 1;
+        }
+        self.pos = p;
+        if p < d.len() {
+            let mut e = p + 1;
+            while let Some(&b) = d.get(e) {
+                if b <= b' ' && (b == b'\n' || is_blank(b)) {
+                    break;
+                }
+                e += 1;
+            }
+            if e < d.len() || self.eof {
+                self.pos = e;
+                return Ok(Some((p, e)));
+            }
+        }
+        self.token_range_slow()
+    }
+
+    /// [`Input::token_range`] where the window ends before the token does, or before one
+    /// starts.
+    #[cold]
+    #[inline(never)]
+    fn token_range_slow(&mut self) -> Result<Option<(usize, usize)>, MeshError> {
         let (start, end) = loop {
             let d = self.src.data();
             let mut p = self.pos;
@@ -422,7 +458,29 @@ impl<S: Source> Input<S> {
     /// its wanted bytes are (see [`Ignore`]; what is ignored may or may not be included; read
     /// them with [`Input::line_bytes`] before moving on) and whether it ended with a line
     /// break.
+    #[inline(always)]
     pub(crate) fn read_line(&mut self, ignore: Ignore) -> Result<Option<Line>, MeshError> {
+        let d = self.src.data();
+        let start = self.pos;
+        if let Some(i) = d[start..].iter().position(|&b| b == b'\n') {
+            let no = self.line;
+            self.line += 1;
+            self.pos = start + i + 1;
+            return Ok(Some(Line {
+                no,
+                start,
+                end: start + i,
+                in_scratch: false,
+                newline: true,
+            }));
+        }
+        self.read_line_slow(ignore)
+    }
+
+    /// [`Input::read_line`] where the window does not hold the rest of the line.
+    #[cold]
+    #[inline(never)]
+    fn read_line_slow(&mut self, ignore: Ignore) -> Result<Option<Line>, MeshError> {
         let no = self.line;
         // Bytes of the line already searched for the line break and for `ignore`.
         let mut searched = 0usize;
@@ -475,7 +533,7 @@ impl<S: Source> Input<S> {
     }
 
     /// The bytes of `line`, the line [`Input::read_line`] returned last.
-    #[inline]
+    #[inline(always)]
     pub(crate) fn line_bytes(&self, line: &Line) -> &[u8] {
         if line.in_scratch {
             &self.scratch[line.start..line.end]

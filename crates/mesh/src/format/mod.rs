@@ -380,17 +380,20 @@ impl Default for Builder {
     }
 }
 
-/// Check that a vector about to grow from `len` (at capacity) to twice that stays within the
-/// memory budget, so a hostile file is refused before the allocator is asked.
-#[inline]
-fn check_growth<T>(v: &Vec<T>, what: &str) -> Result<(), MeshError> {
-    if v.len() == v.capacity() && v.len() >= 1 << 16 {
-        volmorph_io::check_elems(
-            what,
-            (v.len() as u64).saturating_mul(2),
-            std::mem::size_of::<T>() as u64,
-        )?;
+/// Make room in `v` for `want` elements, growing it as `push` would (to at least twice its
+/// capacity), after checking the new capacity against the memory budget once the vector is
+/// large (2¹⁶ elements), so a hostile file is refused before the allocator is asked.
+#[cold]
+#[inline(never)]
+fn grow<T>(v: &mut Vec<T>, want: usize, what: &str) -> Result<(), MeshError> {
+    if v.capacity() >= want {
+        return Ok(());
     }
+    let cap = want.max(v.capacity().saturating_mul(2));
+    if v.len() >= 1 << 16 {
+        volmorph_io::check_elems(what, cap as u64, std::mem::size_of::<T>() as u64)?;
+    }
+    v.reserve_exact(cap - v.len());
     Ok(())
 }
 
@@ -405,30 +408,66 @@ impl Builder {
 
     /// Close the face whose indices were pushed since the previous call. The caller checked
     /// the indices and the face size.
-    #[inline]
+    #[inline(always)]
     pub(crate) fn end_face(&mut self) -> Result<(), MeshError> {
         let n = self.indices.len();
         crate::mesh::check_corner_count(n)?;
-        check_growth(&self.offsets, "mesh faces")?;
+        let len = self.offsets.len();
+        if len == self.offsets.capacity() {
+            grow(&mut self.offsets, len + 1, "mesh faces")?;
+        }
         self.offsets.push(n as u32);
         Ok(())
     }
 
-    #[inline]
+    /// Append a vertex, within the 32-bit limit and the memory budget.
+    #[inline(always)]
     pub(crate) fn push_vertex(&mut self, p: glam::DVec3) -> Result<(), MeshError> {
-        if self.positions.len() >= crate::mesh::MAX_ELEMENTS {
-            crate::mesh::check_vertex_count(self.positions.len() + 1)?;
+        let len = self.positions.len();
+        if len == self.positions.capacity() || len >= crate::mesh::MAX_ELEMENTS {
+            self.room_for_vertices(1)?;
         }
-        check_growth(&self.positions, "mesh vertices")?;
         self.positions.push(p);
         Ok(())
     }
 
+    /// Make room for `n` more vertices (pushed onto `positions` directly), within the 32-bit
+    /// limit and the memory budget.
+    #[inline(always)]
+    pub(crate) fn reserve_vertices(&mut self, n: usize) -> Result<(), MeshError> {
+        let len = self.positions.len();
+        if self.positions.capacity() - len < n || len + n > crate::mesh::MAX_ELEMENTS {
+            self.room_for_vertices(n)?;
+        }
+        Ok(())
+    }
+
+    #[cold]
+    fn room_for_vertices(&mut self, n: usize) -> Result<(), MeshError> {
+        let want = self.positions.len().saturating_add(n);
+        crate::mesh::check_vertex_count(want)?;
+        grow(&mut self.positions, want, "mesh vertices")
+    }
+
     /// Append one corner index of the current face, within the memory budget.
-    #[inline]
+    #[inline(always)]
     pub(crate) fn push_index(&mut self, i: u32) -> Result<(), MeshError> {
-        check_growth(&self.indices, "mesh face corners")?;
+        let len = self.indices.len();
+        if len == self.indices.capacity() {
+            grow(&mut self.indices, len + 1, "mesh face corners")?;
+        }
         self.indices.push(i);
+        Ok(())
+    }
+
+    /// Make room for `n` more corner indices (pushed onto `indices` directly), within the
+    /// memory budget; `n` must be justified by data already read.
+    #[inline(always)]
+    pub(crate) fn reserve_corners(&mut self, n: usize) -> Result<(), MeshError> {
+        if self.indices.capacity() - self.indices.len() < n {
+            let want = self.indices.len().saturating_add(n);
+            grow(&mut self.indices, want, "mesh face corners")?;
+        }
         Ok(())
     }
 

@@ -32,6 +32,7 @@ fn err(line: usize, message: impl Into<String>) -> MeshError {
 }
 
 /// The next line with content, without its comment, and its number; `None` at the end.
+#[inline(always)]
 fn content_line<S: Source>(input: &mut Input<S>) -> Result<Option<(usize, &[u8])>, MeshError> {
     loop {
         let Some(line) = input.read_line(Ignore::From(b'#'))? else {
@@ -179,6 +180,8 @@ pub(crate) fn read_off_input<S: Source>(input: &mut Input<S>) -> Result<Mesh, Me
                 format!("face {f} has {n} vertices; a polygon needs at least 3"),
             ));
         }
+        // The line holds at most one index per two bytes: room for the indices it can list.
+        b.reserve_corners((n as u64).min(line.len() as u64 / 2 + 1) as usize)?;
         for k in 0..n {
             let tok = w
                 .next()
@@ -191,7 +194,7 @@ pub(crate) fn read_off_input<S: Source>(input: &mut Input<S>) -> Result<Mesh, Me
                     format!("face {f} refers to vertex {i}, but there are {nv} vertices"),
                 ));
             }
-            b.push_index(i as u32)?;
+            b.indices.push(i as u32);
         }
         b.end_face()?;
     }

@@ -103,7 +103,7 @@ impl Scalar {
     }
 
     /// Decode a binary value; `b` holds at least `size()` bytes.
-    #[inline]
+    #[inline(always)]
     fn read_f64(self, b: &[u8], big: bool) -> f64 {
         macro_rules! get {
             ($t:ty, $n:literal) => {{
@@ -129,7 +129,7 @@ impl Scalar {
     }
 
     /// Decode a binary integer (floats must be integral and within ±2⁵³).
-    #[inline]
+    #[inline(always)]
     fn read_int(self, b: &[u8], big: bool) -> Option<i64> {
         let v = self.read_f64(b, big);
         if matches!(self, Self::F32 | Self::F64) {
@@ -576,20 +576,6 @@ fn read_binary<S: Source>(
     let mut vcol = ColorSink::new(roles.vertex_rgb);
     let mut fcol = ColorSink::new(roles.face_rgb);
     let nv = roles.vertex.map_or(0, |v| h.elements[v].count);
-    let bad_color = |at: u64, what: &str, item: usize| {
-        MeshError::parse(
-            MeshFormat::Ply,
-            at_byte(at),
-            format!("{what} {item} has a colour channel that is not a finite number"),
-        )
-    };
-    let trunc = |at: u64, what: String| {
-        MeshError::parse(
-            MeshFormat::Ply,
-            at_byte(at),
-            format!("data ends inside {what} (truncated file)"),
-        )
-    };
     for (ei, el) in h.elements.iter().enumerate() {
         let is_vertex = roles.vertex == Some(ei);
         let is_face = roles.face == Some(ei);
@@ -653,11 +639,44 @@ fn read_binary<S: Source>(
                     }
                     continue;
                 }
-                if bad.is_none() {
+                let items = &window[..k * stride];
+                if bad.is_none() && col.is_none() && tys == [Scalar::F64; 3] && offs == [0, 8, 16] {
+                    // The usual layouts, decoded directly.
+                    b.reserve_vertices(k)?;
+                    for item in items.chunks_exact(stride) {
+                        let c = |o: usize| {
+                            let a: [u8; 8] = item[o..o + 8].try_into().unwrap_or_default();
+                            if big {
+                                f64::from_be_bytes(a)
+                            } else {
+                                f64::from_le_bytes(a)
+                            }
+                        };
+                        b.positions.push(DVec3::new(c(0), c(8), c(16)));
+                    }
+                } else if bad.is_none()
+                    && col.is_none()
+                    && tys == [Scalar::F32; 3]
+                    && offs == [0, 4, 8]
+                {
+                    b.reserve_vertices(k)?;
+                    for item in items.chunks_exact(stride) {
+                        let c = |o: usize| {
+                            let a: [u8; 4] = item[o..o + 4].try_into().unwrap_or_default();
+                            f64::from(if big {
+                                f32::from_be_bytes(a)
+                            } else {
+                                f32::from_le_bytes(a)
+                            })
+                        };
+                        b.positions.push(DVec3::new(c(0), c(4), c(8)));
+                    }
+                } else if bad.is_none() {
                     let at = input.offset();
-                    for (j, item) in window[..k * stride].chunks_exact(stride).enumerate() {
+                    b.reserve_vertices(k)?;
+                    for (j, item) in items.chunks_exact(stride).enumerate() {
                         let c = |k: usize| tys[k].read_f64(&item[offs[k]..], big);
-                        b.push_vertex(DVec3::new(c(0), c(1), c(2)))?;
+                        b.positions.push(DVec3::new(c(0), c(1), c(2)));
                         if let (Some(sink), Some(col)) = (vcol.as_mut(), col) {
                             let mut rgb = [0u8; 3];
                             for (ch, &(off, t)) in col.iter().enumerate() {
@@ -688,7 +707,7 @@ fn read_binary<S: Source>(
             }
             continue;
         }
-        // Elements with lists: item by item.
+        // Elements with lists: item by item, straight from the window when it holds the item.
         let min_item: usize = el
             .props
             .iter()
@@ -708,107 +727,292 @@ fn read_binary<S: Source>(
                 input.capacity_hint(cap.saturating_mul(3), 1),
             );
         }
-        for item in 0..el.count {
-            let mut xyz = [0.0f64; 3];
-            for (pi, p) in el.props.iter().enumerate() {
-                match p.kind {
-                    Kind::Scalar(s) => {
-                        let at = input.offset();
-                        let bytes = input
-                            .take(s.size())?
-                            .ok_or_else(|| trunc(at, format!("{} {item}", el.name)))?;
-                        if is_vertex && let Some(k) = roles.xyz.iter().position(|&x| x == pi) {
-                            xyz[k] = s.read_f64(bytes, big);
-                        }
-                        let sink = if is_vertex {
-                            vcol.as_mut()
-                        } else if is_face {
-                            fcol.as_mut()
-                        } else {
-                            None
-                        };
-                        if let Some(sink) = sink
-                            && sink.wants(pi)
-                            && !sink.take(pi, s, s.read_f64(bytes, big))
-                        {
-                            return Err(bad_color(at, &el.name, item));
-                        }
-                    }
-                    Kind::List { count, item: it } => {
-                        let at = input.offset();
-                        let cb = input
-                            .take(count.size())?
-                            .ok_or_else(|| trunc(at, format!("{} {item}", el.name)))?;
-                        let n = count.read_int(cb, big).unwrap_or(-1);
-                        if n < 0 {
-                            return Err(MeshError::parse(
-                                MeshFormat::Ply,
-                                at_byte(at),
-                                format!("negative list length {n} in {} {item}", el.name),
-                            ));
-                        }
-                        let list_at = input.offset();
-                        let too_short =
-                            || trunc(list_at, format!("the {n}-item list of {} {item}", el.name));
-                        let remaining = input.remaining();
-                        let Some(len) = (n as usize)
-                            .checked_mul(it.size())
-                            .filter(|&l| remaining.is_none_or(|r| l as u64 <= r))
-                        else {
-                            return Err(too_short());
-                        };
-                        if !(is_face && pi == roles.face_list) {
-                            if input.skip(len as u64)? < len as u64 {
-                                return Err(too_short());
-                            }
-                            continue;
-                        }
-                        // The list must be whole before its length or indices are reported on.
-                        let window = input.window();
-                        if window.len() >= len {
-                            if n < 3 {
-                                return Err(face_len_error(at_byte(list_at), item, n));
-                            }
-                            for v in window[..len].chunks_exact(it.size()) {
-                                let i = it.read_int(v, big);
-                                match i {
-                                    Some(i) if i >= 0 && (i as u64) < nv as u64 => {
-                                        b.push_index(i as u32)?;
-                                    }
-                                    _ => return Err(index_error(at_byte(list_at), item, i, nv)),
-                                }
-                            }
-                            input.advance(len);
-                        } else {
-                            read_list_across(input, &mut b, it, n as usize, big, nv).map_err(
-                                |e| match e {
-                                    ListError::Short => too_short(),
-                                    ListError::Small => face_len_error(at_byte(list_at), item, n),
-                                    ListError::Index(i) => {
-                                        index_error(at_byte(list_at), item, i, nv)
-                                    }
-                                    ListError::Other(e) => e,
-                                },
-                            )?;
-                        }
-                    }
+        let r = ItemReader {
+            el,
+            roles,
+            is_vertex,
+            is_face,
+            big,
+            nv,
+        };
+        let mut item = 0usize;
+        while item < el.count {
+            // The items the window holds whole, read in place.
+            let window = input.window();
+            let at = input.offset();
+            let mut pos = 0usize;
+            while item < el.count {
+                let (start, corners) = (pos, b.indices.len());
+                let mut xyz = [0.0f64; 3];
+                let sink = if is_vertex {
+                    vcol.as_mut()
+                } else if is_face {
+                    fcol.as_mut()
+                } else {
+                    None
+                };
+                if !r.item_in(window, &mut pos, at, item, &mut xyz, &mut b, sink)? {
+                    // It goes on past the window: undone, and read with more care below.
+                    pos = start;
+                    b.indices.truncate(corners);
+                    break;
                 }
+                r.end_item(xyz, &mut b, &mut vcol, &mut fcol)?;
+                item += 1;
             }
-            if is_vertex {
-                b.push_vertex(DVec3::from_array(xyz))?;
-                if let Some(sink) = vcol.as_mut() {
-                    sink.end_item();
-                }
-            }
-            if is_face {
-                b.end_face()?;
-                if let Some(sink) = fcol.as_mut() {
-                    sink.end_item();
-                }
+            input.advance(pos);
+            if item < el.count {
+                let mut xyz = [0.0f64; 3];
+                let sink = if is_vertex {
+                    vcol.as_mut()
+                } else if is_face {
+                    fcol.as_mut()
+                } else {
+                    None
+                };
+                r.partial_item(input, item, &mut xyz, &mut b, sink)?;
+                r.end_item(xyz, &mut b, &mut vcol, &mut fcol)?;
+                item += 1;
             }
         }
     }
     Ok((b.finish(), pick_colors(vcol, fcol)))
+}
+
+fn bad_color(at: u64, what: &str, item: usize) -> MeshError {
+    MeshError::parse(
+        MeshFormat::Ply,
+        at_byte(at),
+        format!("{what} {item} has a colour channel that is not a finite number"),
+    )
+}
+
+fn truncated(at: u64, what: String) -> MeshError {
+    MeshError::parse(
+        MeshFormat::Ply,
+        at_byte(at),
+        format!("data ends inside {what} (truncated file)"),
+    )
+}
+
+/// Reads the items of a binary element that has lists.
+struct ItemReader<'a> {
+    el: &'a Element,
+    roles: &'a Roles,
+    is_vertex: bool,
+    is_face: bool,
+    big: bool,
+    /// Vertices in the file.
+    nv: usize,
+}
+
+impl ItemReader<'_> {
+    /// Scalar property `pi` of type `s` of item `item`, its bytes starting at `bytes`, at
+    /// offset `at`: a vertex coordinate or a colour channel is kept.
+    #[inline]
+    #[allow(clippy::too_many_arguments)]
+    fn scalar(
+        &self,
+        pi: usize,
+        s: Scalar,
+        bytes: &[u8],
+        at: u64,
+        item: usize,
+        xyz: &mut [f64; 3],
+        sink: Option<&mut ColorSink>,
+    ) -> Result<(), MeshError> {
+        if self.is_vertex
+            && let Some(k) = self.roles.xyz.iter().position(|&x| x == pi)
+        {
+            xyz[k] = s.read_f64(bytes, self.big);
+        }
+        if let Some(sink) = sink
+            && sink.wants(pi)
+            && !sink.take(pi, s, s.read_f64(bytes, self.big))
+        {
+            return Err(bad_color(at, &self.el.name, item));
+        }
+        Ok(())
+    }
+
+    /// The whole index list (`n` items of type `it`, at offset `at`) of face `item`.
+    #[inline(always)]
+    fn face_list(
+        &self,
+        b: &mut Builder,
+        list: &[u8],
+        it: Scalar,
+        n: i64,
+        at: u64,
+        item: usize,
+    ) -> Result<(), MeshError> {
+        if n < 3 {
+            return Err(face_len_error(at_byte(at), item, n));
+        }
+        // The list is in memory: its length is justified by the data.
+        b.reserve_corners(n as usize)?;
+        for v in list.chunks_exact(it.size()) {
+            match it.read_int(v, self.big) {
+                Some(i) if i >= 0 && (i as u64) < self.nv as u64 => b.indices.push(i as u32),
+                i => return Err(index_error(at_byte(at), item, i, self.nv)),
+            }
+        }
+        Ok(())
+    }
+
+    /// Item `item` from `w` at `*pos` (`w` starts at offset `at`), moving `*pos` past it:
+    /// `false` as soon as a property goes on past `w` (the item's corners pushed so far are
+    /// then the caller's to undo). Each property is used only once `w` holds it whole, so
+    /// errors are reported in the order of the file, as by [`ItemReader::partial_item`].
+    #[inline(always)]
+    #[allow(clippy::too_many_arguments)]
+    fn item_in(
+        &self,
+        w: &[u8],
+        pos: &mut usize,
+        at: u64,
+        item: usize,
+        xyz: &mut [f64; 3],
+        b: &mut Builder,
+        mut sink: Option<&mut ColorSink>,
+    ) -> Result<bool, MeshError> {
+        let mut p = *pos;
+        for (pi, prop) in self.el.props.iter().enumerate() {
+            match prop.kind {
+                Kind::Scalar(s) => {
+                    let Some(bytes) = w.get(p..p + s.size()) else {
+                        return Ok(false);
+                    };
+                    self.scalar(pi, s, bytes, at + p as u64, item, xyz, sink.as_deref_mut())?;
+                    p += s.size();
+                }
+                Kind::List { count, item: it } => {
+                    let Some(cb) = w.get(p..p + count.size()) else {
+                        return Ok(false);
+                    };
+                    let n = count.read_int(cb, self.big).unwrap_or(-1);
+                    if n < 0 {
+                        return Err(MeshError::parse(
+                            MeshFormat::Ply,
+                            at_byte(at + p as u64),
+                            format!("negative list length {n} in {} {item}", self.el.name),
+                        ));
+                    }
+                    p += count.size();
+                    let Some(list) = (n as usize)
+                        .checked_mul(it.size())
+                        .and_then(|len| w.get(p..p.checked_add(len)?))
+                    else {
+                        return Ok(false);
+                    };
+                    if self.is_face && pi == self.roles.face_list {
+                        self.face_list(b, list, it, n, at + p as u64, item)?;
+                    }
+                    p += list.len();
+                }
+            }
+        }
+        *pos = p;
+        Ok(true)
+    }
+
+    /// Finish item `item`: a vertex at `xyz`, or the face whose corners were pushed, and the
+    /// item's colour.
+    #[inline(always)]
+    fn end_item(
+        &self,
+        xyz: [f64; 3],
+        b: &mut Builder,
+        vcol: &mut Option<ColorSink>,
+        fcol: &mut Option<ColorSink>,
+    ) -> Result<(), MeshError> {
+        if self.is_vertex {
+            b.push_vertex(DVec3::from_array(xyz))?;
+            if let Some(sink) = vcol.as_mut() {
+                sink.end_item();
+            }
+        }
+        if self.is_face {
+            b.end_face()?;
+            if let Some(sink) = fcol.as_mut() {
+                sink.end_item();
+            }
+        }
+        Ok(())
+    }
+
+    /// Item `item` that the window does not hold whole (the end of a window or of the data):
+    /// property by property, reporting where the data ends.
+    #[cold]
+    fn partial_item<S: Source>(
+        &self,
+        input: &mut Input<S>,
+        item: usize,
+        xyz: &mut [f64; 3],
+        b: &mut Builder,
+        mut sink: Option<&mut ColorSink>,
+    ) -> Result<(), MeshError> {
+        let el = self.el;
+        for (pi, p) in el.props.iter().enumerate() {
+            match p.kind {
+                Kind::Scalar(s) => {
+                    let at = input.offset();
+                    let bytes = input
+                        .take(s.size())?
+                        .ok_or_else(|| truncated(at, format!("{} {item}", el.name)))?;
+                    self.scalar(pi, s, bytes, at, item, xyz, sink.as_deref_mut())?;
+                }
+                Kind::List { count, item: it } => {
+                    let at = input.offset();
+                    let cb = input
+                        .take(count.size())?
+                        .ok_or_else(|| truncated(at, format!("{} {item}", el.name)))?;
+                    let n = count.read_int(cb, self.big).unwrap_or(-1);
+                    if n < 0 {
+                        return Err(MeshError::parse(
+                            MeshFormat::Ply,
+                            at_byte(at),
+                            format!("negative list length {n} in {} {item}", el.name),
+                        ));
+                    }
+                    let list_at = input.offset();
+                    let too_short =
+                        || truncated(list_at, format!("the {n}-item list of {} {item}", el.name));
+                    let remaining = input.remaining();
+                    let Some(len) = (n as usize)
+                        .checked_mul(it.size())
+                        .filter(|&l| remaining.is_none_or(|r| l as u64 <= r))
+                    else {
+                        return Err(too_short());
+                    };
+                    if !(self.is_face && pi == self.roles.face_list) {
+                        if input.skip(len as u64)? < len as u64 {
+                            return Err(too_short());
+                        }
+                        continue;
+                    }
+                    // The list must be whole before its length or indices are reported on.
+                    let window = input.window();
+                    if window.len() >= len {
+                        self.face_list(b, &window[..len], it, n, list_at, item)?;
+                        input.advance(len);
+                    } else {
+                        read_list_across(input, b, it, n as usize, self.big, self.nv).map_err(
+                            |e| match e {
+                                ListError::Short => too_short(),
+                                ListError::Small => face_len_error(at_byte(list_at), item, n),
+                                ListError::Index(i) => {
+                                    index_error(at_byte(list_at), item, i, self.nv)
+                                }
+                                ListError::Other(e) => e,
+                            },
+                        )?;
+                    }
+                }
+            }
+        }
+        Ok(())
+    }
 }
 
 /// Why a face's index list was refused.
@@ -873,6 +1077,7 @@ fn read_list_across<S: Source>(
 }
 
 /// The next token of element `el`'s item `item`, with its line.
+#[inline(always)]
 fn need<'a, S: Source>(
     input: &'a mut Input<S>,
     el: &Element,

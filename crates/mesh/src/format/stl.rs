@@ -89,14 +89,8 @@ impl Welder {
 
     #[inline]
     fn corner(&mut self, p: DVec3) -> Result<(), MeshError> {
-        let len = self.map.len();
-        if len == self.map.capacity() && len >= 1 << 16 {
-            // The table is about to double (it holds at most 7/8 of its slots).
-            volmorph_io::check_elems(
-                "the map merging STL corners",
-                (len as u64).saturating_mul(16) / 7,
-                MAP_ENTRY,
-            )?;
+        if self.map.len() == self.map.capacity() {
+            self.check_map_growth()?;
         }
         let next = self.b.positions.len() as u32;
         let id = *self.map.entry(BitKey::new(p)).or_insert(next);
@@ -104,6 +98,21 @@ impl Welder {
             self.b.push_vertex(p)?;
         }
         self.b.push_index(id)
+    }
+
+    /// The corner map is full and may double (it holds at most 7/8 of its slots): check
+    /// that within the memory budget once it is large.
+    #[cold]
+    fn check_map_growth(&self) -> Result<(), MeshError> {
+        let len = self.map.len();
+        if len >= 1 << 16 {
+            volmorph_io::check_elems(
+                "the map merging STL corners",
+                (len as u64).saturating_mul(16) / 7,
+                MAP_ENTRY,
+            )?;
+        }
+        Ok(())
     }
 }
 
