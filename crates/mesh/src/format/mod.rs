@@ -11,13 +11,27 @@
 //! its gzip magic number whatever the name, and decompressed transparently. Writing always
 //! produces uncompressed files (a `.gz` output path is refused rather than mislabelled).
 //!
+//! **Streaming.** [`read`] and [`read_with_colors`] parse every format as the file is read —
+//! and inflated, for gzip input — so memory holds the mesh being built and a bounded window of
+//! input (a text line or word, a binary item), never the whole file: a file or gzip bomb of
+//! comments, whitespace or skipped elements costs reading time, not memory. Text lines
+//! (comments excluded) and words longer than [`obj::MAX_STREAM_LINE`] are refused. The
+//! mesh's arrays are checked against the memory budget ([`volmorph_io::memory_limit`]) as
+//! they grow, so input that would build a larger mesh fails with an error naming the budget.
+//! Counts a header declares are checked against the file's size when it is known (an
+//! uncompressed file), before reading, and otherwise where the data ends; either way they
+//! reserve no more than the data present, or a bounded amount, can justify. STL's ASCII /
+//! binary detection looks at the first 512 bytes ([`stl`]). Each format module has a
+//! `read_*_stream(&mut dyn BufRead)` entry point and a `read_*_bytes(&[u8])` one for
+//! uncompressed bytes in memory (for tests and fuzzing); both run the same parser.
+//! [`read_bytes`] inflates gzip bytes whole, within the memory budget.
+//!
 //! **Readers** return a mesh whose faces are all in range and have at least three vertices;
 //! an out-of-range or zero index, a face with fewer than three vertices, a truncated file, a
 //! bad token or an impossible count is a [`MeshError`] naming the format, the line (text) or
 //! byte offset (binary) and what is wrong — never a panic, and never an allocation larger than
-//! the data present can justify. Non-finite coordinates (`nan`, `inf`) are **accepted** as
-//! data: they are what the file says, and [`Mesh::validate`] reports them. Each reader has a
-//! `read_*_bytes(&[u8])` entry point working on uncompressed bytes (for tests and fuzzing).
+//! the data can justify. Non-finite coordinates (`nan`, `inf`) are **accepted** as
+//! data: they are what the file says, and [`Mesh::validate`] reports them.
 //!
 //! **Writers** refuse a mesh with out-of-range indices or faces of fewer than three vertices
 //! (possible only through [`Mesh::from_csr_unvalidated`]) and go through
@@ -30,15 +44,20 @@
 //! `f32`-representable coordinates round-trip exactly; PLY with
 //! [`MeshWriteOptions::single_precision`] likewise.
 
+mod input;
 pub mod obj;
 pub mod off;
 pub mod ply;
 pub mod stl;
+#[cfg(test)]
+mod stream_tests;
 pub(crate) mod text;
 
 use std::fmt;
-use std::io::Write;
+use std::io::{BufRead, BufReader, Write};
 use std::path::Path;
+
+use input::Input;
 
 use crate::{Mesh, MeshError};
 
@@ -150,33 +169,65 @@ impl MeshWriteOptions {
 }
 
 /// Read a mesh file, choosing the format by extension ([`MeshFormat::from_path`]) and
-/// decompressing gzip input transparently.
+/// decompressing gzip input transparently; the file is parsed as it is read (see the module
+/// documentation).
 ///
 /// # Errors
 /// [`MeshError::Unsupported`] for an unknown extension, [`MeshError::Io`] when the file cannot
-/// be read, and the format reader's errors; all carry the path ([`MeshError::File`]).
+/// be read or the mesh exceeds the memory budget, and the format reader's errors; all carry
+/// the path ([`MeshError::File`]).
 pub fn read(path: &Path) -> Result<Mesh, MeshError> {
     let run = || {
         let format = MeshFormat::from_path(path)?;
-        if format == MeshFormat::Obj {
-            // OBJ is parsed line by line as it is read (and inflated), never held whole.
-            let file = volmorph_io::open_regular(path)?;
-            let mut r = std::io::BufReader::with_capacity(1 << 16, file);
-            let gz = volmorph_io::is_gzip(
-                std::io::BufRead::fill_buf(&mut r)
-                    .map_err(|e| volmorph_io::IoError::os(path, e))?,
-            );
-            return if gz {
-                let dec = flate2::read::MultiGzDecoder::new(r);
-                obj::read_obj_stream(&mut std::io::BufReader::with_capacity(1 << 16, dec))
-            } else {
-                obj::read_obj_stream(&mut r)
-            };
-        }
-        let bytes = volmorph_io::read_maybe_gz(path)?;
-        read_bytes(&bytes, format)
+        with_stream(path, |r, len| read_stream(r, len, format, path, false)).map(|(m, _)| m)
     };
     run().map_err(|e| e.at(path))
+}
+
+/// Open `path` and call `f` with its content as a stream — inflated as it is read when the
+/// file is gzip data — and the content's size when it is known (an uncompressed file).
+fn with_stream<T>(
+    path: &Path,
+    f: impl FnOnce(&mut dyn BufRead, Option<u64>) -> Result<T, MeshError>,
+) -> Result<T, MeshError> {
+    let os = |e| volmorph_io::IoError::os(path, e);
+    let file = volmorph_io::open_regular(path)?;
+    let len = file.metadata().map_err(os)?.len();
+    let mut r = BufReader::with_capacity(1 << 16, file);
+    if volmorph_io::is_gzip(r.fill_buf().map_err(os)?) {
+        let dec = flate2::read::MultiGzDecoder::new(r);
+        let mut r = BufReader::with_capacity(1 << 16, dec);
+        let out = f(&mut r, None)?;
+        // A reader stops after the data it declares; inflate the rest (without keeping it)
+        // so that a corrupt or truncated gzip file is an error, as when it was inflated whole.
+        std::io::copy(&mut r, &mut std::io::sink()).map_err(os)?;
+        Ok(out)
+    } else {
+        f(&mut r, Some(len))
+    }
+}
+
+/// Parse the stream `r` of `len` bytes (if known) from `path` in `format`, with its colours
+/// when `colors`.
+fn read_stream(
+    r: &mut dyn BufRead,
+    len: Option<u64>,
+    format: MeshFormat,
+    path: &Path,
+    colors: bool,
+) -> Result<(Mesh, Option<MeshColors>), MeshError> {
+    let name = path.display().to_string();
+    match format {
+        MeshFormat::Obj => obj::read_obj_stream_named(r, &name)
+            .map(|(m, c)| (m, c.filter(|_| colors).map(MeshColors::PerVertex))),
+        MeshFormat::Ply => ply::read_ply_input(&mut Input::reader(r, len, format, name), colors),
+        MeshFormat::Stl => {
+            stl::read_stl_input(&mut Input::reader(r, len, format, name)).map(|m| (m, None))
+        }
+        MeshFormat::Off => {
+            off::read_off_input(&mut Input::reader(r, len, format, name)).map(|m| (m, None))
+        }
+    }
 }
 
 /// Colours a mesh file stores with its geometry (8-bit sRGB), as
@@ -218,39 +269,17 @@ impl MeshColors {
 pub fn read_with_colors(path: &Path) -> Result<(Mesh, Option<MeshColors>), MeshError> {
     let run = || {
         let format = MeshFormat::from_path(path)?;
-        match format {
-            MeshFormat::Obj => {
-                let file = volmorph_io::open_regular(path)?;
-                let mut r = std::io::BufReader::with_capacity(1 << 16, file);
-                let gz = volmorph_io::is_gzip(
-                    std::io::BufRead::fill_buf(&mut r)
-                        .map_err(|e| volmorph_io::IoError::os(path, e))?,
-                );
-                let (m, c) = if gz {
-                    let dec = flate2::read::MultiGzDecoder::new(r);
-                    obj::read_obj_stream_with_colors(&mut std::io::BufReader::with_capacity(
-                        1 << 16,
-                        dec,
-                    ))?
-                } else {
-                    obj::read_obj_stream_with_colors(&mut r)?
-                };
-                Ok((m, c.map(MeshColors::PerVertex)))
-            }
-            MeshFormat::Ply => {
-                let bytes = volmorph_io::read_maybe_gz(path)?;
-                ply::read_ply_bytes_with_colors(&bytes)
-            }
-            _ => read(path).map(|m| (m, None)),
-        }
+        with_stream(path, |r, len| read_stream(r, len, format, path, true))
     };
     run().map_err(|e| e.at(path))
 }
 
-/// Parse a mesh from bytes in `format`, decompressing them first if they are gzip data.
+/// Parse a mesh from bytes in `format`, decompressing them first if they are gzip data
+/// (whole, within the memory budget; [`read`] inflates files as it parses them).
 ///
 /// # Errors
-/// [`MeshError::Io`] for a corrupt gzip stream, and the format reader's errors.
+/// [`MeshError::Io`] for a corrupt gzip stream or one that inflates to more than the memory
+/// budget, and the format reader's errors.
 pub fn read_bytes(bytes: &[u8], format: MeshFormat) -> Result<Mesh, MeshError> {
     if volmorph_io::is_gzip(bytes) {
         let raw = volmorph_io::gunzip(bytes)?;
@@ -351,17 +380,20 @@ impl Default for Builder {
     }
 }
 
-/// Check that a vector about to grow from `len` (at capacity) to twice that stays within the
-/// memory budget, so a hostile file is refused before the allocator is asked.
-#[inline]
-fn check_growth<T>(v: &Vec<T>, what: &str) -> Result<(), MeshError> {
-    if v.len() == v.capacity() && v.len() >= 1 << 16 {
-        volmorph_io::check_elems(
-            what,
-            (v.len() as u64).saturating_mul(2),
-            std::mem::size_of::<T>() as u64,
-        )?;
+/// Make room in `v` for `want` elements, growing it as `push` would (to at least twice its
+/// capacity), after checking the new capacity against the memory budget once the vector is
+/// large (2¹⁶ elements), so a hostile file is refused before the allocator is asked.
+#[cold]
+#[inline(never)]
+fn grow<T>(v: &mut Vec<T>, want: usize, what: &str) -> Result<(), MeshError> {
+    if v.capacity() >= want {
+        return Ok(());
     }
+    let cap = want.max(v.capacity().saturating_mul(2));
+    if v.len() >= 1 << 16 {
+        volmorph_io::check_elems(what, cap as u64, std::mem::size_of::<T>() as u64)?;
+    }
+    v.reserve_exact(cap - v.len());
     Ok(())
 }
 
@@ -376,30 +408,66 @@ impl Builder {
 
     /// Close the face whose indices were pushed since the previous call. The caller checked
     /// the indices and the face size.
-    #[inline]
+    #[inline(always)]
     pub(crate) fn end_face(&mut self) -> Result<(), MeshError> {
         let n = self.indices.len();
         crate::mesh::check_corner_count(n)?;
-        check_growth(&self.offsets, "mesh faces")?;
+        let len = self.offsets.len();
+        if len == self.offsets.capacity() {
+            grow(&mut self.offsets, len + 1, "mesh faces")?;
+        }
         self.offsets.push(n as u32);
         Ok(())
     }
 
-    #[inline]
+    /// Append a vertex, within the 32-bit limit and the memory budget.
+    #[inline(always)]
     pub(crate) fn push_vertex(&mut self, p: glam::DVec3) -> Result<(), MeshError> {
-        if self.positions.len() >= crate::mesh::MAX_ELEMENTS {
-            crate::mesh::check_vertex_count(self.positions.len() + 1)?;
+        let len = self.positions.len();
+        if len == self.positions.capacity() || len >= crate::mesh::MAX_ELEMENTS {
+            self.room_for_vertices(1)?;
         }
-        check_growth(&self.positions, "mesh vertices")?;
         self.positions.push(p);
         Ok(())
     }
 
+    /// Make room for `n` more vertices (pushed onto `positions` directly), within the 32-bit
+    /// limit and the memory budget.
+    #[inline(always)]
+    pub(crate) fn reserve_vertices(&mut self, n: usize) -> Result<(), MeshError> {
+        let len = self.positions.len();
+        if self.positions.capacity() - len < n || len + n > crate::mesh::MAX_ELEMENTS {
+            self.room_for_vertices(n)?;
+        }
+        Ok(())
+    }
+
+    #[cold]
+    fn room_for_vertices(&mut self, n: usize) -> Result<(), MeshError> {
+        let want = self.positions.len().saturating_add(n);
+        crate::mesh::check_vertex_count(want)?;
+        grow(&mut self.positions, want, "mesh vertices")
+    }
+
     /// Append one corner index of the current face, within the memory budget.
-    #[inline]
+    #[inline(always)]
     pub(crate) fn push_index(&mut self, i: u32) -> Result<(), MeshError> {
-        check_growth(&self.indices, "mesh face corners")?;
+        let len = self.indices.len();
+        if len == self.indices.capacity() {
+            grow(&mut self.indices, len + 1, "mesh face corners")?;
+        }
         self.indices.push(i);
+        Ok(())
+    }
+
+    /// Make room for `n` more corner indices (pushed onto `indices` directly), within the
+    /// memory budget; `n` must be justified by data already read.
+    #[inline(always)]
+    pub(crate) fn reserve_corners(&mut self, n: usize) -> Result<(), MeshError> {
+        if self.indices.capacity() - self.indices.len() < n {
+            let want = self.indices.len().saturating_add(n);
+            grow(&mut self.indices, want, "mesh face corners")?;
+        }
         Ok(())
     }
 

@@ -83,12 +83,20 @@ pub fn read_obj_stream(r: &mut dyn std::io::BufRead) -> Result<Mesh, MeshError> 
 pub fn read_obj_stream_with_colors(
     r: &mut dyn std::io::BufRead,
 ) -> Result<MeshAndColors, MeshError> {
+    read_obj_stream_named(r, "OBJ stream")
+}
+
+/// [`read_obj_stream_with_colors`], naming the stream `name` (a path) in I/O errors.
+pub(crate) fn read_obj_stream_named(
+    r: &mut dyn std::io::BufRead,
+    name: &str,
+) -> Result<MeshAndColors, MeshError> {
     let mut p = ObjParser::default();
     let mut line: Vec<u8> = Vec::new();
     let mut line_no = 0usize;
     let io = |e: std::io::Error| {
         MeshError::Io(volmorph_io::IoError::Os {
-            path: "OBJ stream".into(),
+            path: name.to_string(),
             error: e,
         })
     };

@@ -10,17 +10,20 @@
 //! coordinates) is ignored. Then one face per line: `n i₁ … iₙ` with 0-based indices,
 //! optionally followed by a colour, which is ignored. `#` starts a comment anywhere on a
 //! line; blank lines are skipped. The format is read line by line as every common writer
-//! produces it; content after the declared faces is ignored.
+//! produces it; content after the declared faces is ignored. A stream ([`read_off_stream`],
+//! a gzip file) is parsed as it arrives: memory holds the mesh and one line, comments are
+//! dropped as they are read.
 //!
 //! **Write.** `OFF`, a comment, `V F 0`, vertices with shortest round-trip decimals (exact
 //! `f64` round trip), faces as `n i₁ … iₙ`.
 
-use std::io::Write;
+use std::io::{BufRead, Write};
 
 use glam::DVec3;
 
 use super::Builder;
-use super::text::{Lines, Words, parse_f64, parse_i64, show, write_face_indices, write_xyz};
+use super::input::{Ignore, Input, Source, reserve_within};
+use super::text::{Words, parse_f64, parse_i64, show, write_face_indices, write_xyz};
 use crate::error::Location;
 use crate::{Mesh, MeshError, MeshFormat};
 
@@ -28,15 +31,19 @@ fn err(line: usize, message: impl Into<String>) -> MeshError {
     MeshError::parse(MeshFormat::Off, Location::Line(line), message)
 }
 
-/// Non-blank lines with comments removed.
-fn content_lines(bytes: &[u8]) -> impl Iterator<Item = (usize, &[u8])> {
-    Lines::new(bytes, 1).filter_map(|(no, raw)| {
-        let line = match raw.iter().position(|&c| c == b'#') {
-            Some(n) => &raw[..n],
-            None => raw,
+/// The next line with content, without its comment, and its number; `None` at the end.
+#[inline(always)]
+fn content_line<S: Source>(input: &mut Input<S>) -> Result<Option<(usize, &[u8])>, MeshError> {
+    loop {
+        let Some(line) = input.read_line(Ignore::From(b'#'))? else {
+            return Ok(None);
         };
-        Words::new(line).next().is_some().then_some((no, line))
-    })
+        let raw = input.line_bytes(&line);
+        let len = raw.iter().position(|&c| c == b'#').unwrap_or(raw.len());
+        if Words::new(&raw[..len]).next().is_some() {
+            return Ok(Some((line.no, &input.line_bytes(&line)[..len])));
+        }
+    }
 }
 
 fn parse_count(tok: Option<&[u8]>, what: &str, line: usize) -> Result<usize, MeshError> {
@@ -54,12 +61,34 @@ fn parse_count(tok: Option<&[u8]>, what: &str, line: usize) -> Result<usize, Mes
 /// indices than it declares, or an index outside the vertices; [`MeshError::Unsupported`]
 /// for `4OFF`, `nOFF` and binary OFF.
 pub fn read_off_bytes(bytes: &[u8]) -> Result<Mesh, MeshError> {
-    let mut lines = content_lines(bytes);
-    let (mut line_no, first) = lines
-        .next()
-        .ok_or_else(|| err(1, "empty file (no OFF header or counts)"))?;
+    read_off_input(&mut Input::slice(bytes, MeshFormat::Off))
+}
+
+/// Parse an OFF file from a stream, line by line as it is read (for instance while a gzip
+/// file is inflated): memory holds the mesh and one line, never the whole text; comments
+/// are skipped as they are read. The mesh is checked against the memory budget as it grows.
+///
+/// # Errors
+/// As [`read_off_bytes`]; [`MeshError::Io`] when reading fails, and [`MeshError::Parse`]
+/// for a line longer than [`MAX_STREAM_LINE`](super::obj::MAX_STREAM_LINE) without its
+/// comment; [`volmorph_io::IoError::Budget`] (as [`MeshError::Io`]) when the mesh outgrows
+/// the memory budget.
+pub fn read_off_stream(r: &mut dyn BufRead) -> Result<Mesh, MeshError> {
+    read_off_input(&mut Input::reader(
+        r,
+        None,
+        MeshFormat::Off,
+        "OFF stream".into(),
+    ))
+}
+
+/// The OFF reader over any input.
+pub(crate) fn read_off_input<S: Source>(input: &mut Input<S>) -> Result<Mesh, MeshError> {
+    let (mut line_no, first) =
+        content_line(input)?.ok_or_else(|| err(1, "empty file (no OFF header or counts)"))?;
     let mut words = Words::new(first);
-    let mut head = words.clone().next().unwrap_or(b"");
+    let head = words.clone().next().unwrap_or(b"");
+    let mut counts_on_next_line = false;
     if let Some(prefix) = head.strip_suffix(b"OFF") {
         words.next();
         let mut p = prefix;
@@ -81,31 +110,37 @@ pub fn read_off_bytes(bytes: &[u8]) -> Result<Mesh, MeshError> {
         if !p.is_empty() {
             return Err(err(line_no, format!("unknown OFF header '{}'", show(head))));
         }
-        head = words.clone().next().unwrap_or(b"");
-        if head.eq_ignore_ascii_case(b"BINARY") {
+        let next = words.clone().next().unwrap_or(b"");
+        if next.eq_ignore_ascii_case(b"BINARY") {
             return Err(MeshError::Unsupported("binary OFF".into()));
         }
-        if head.is_empty() {
-            let (n, l) = lines
-                .next()
-                .ok_or_else(|| err(line_no, "file ends before the vertex and face counts"))?;
-            line_no = n;
-            words = Words::new(l);
-        }
+        counts_on_next_line = next.is_empty();
     }
-    let nv = parse_count(words.next(), "vertex", line_no)?;
-    let nf = parse_count(words.next(), "face", line_no)?;
+    let (nv, nf) = if counts_on_next_line {
+        let (n, l) = content_line(input)?
+            .ok_or_else(|| err(line_no, "file ends before the vertex and face counts"))?;
+        line_no = n;
+        let mut words = Words::new(l);
+        let nv = parse_count(words.next(), "vertex", line_no)?;
+        (nv, parse_count(words.next(), "face", line_no)?)
+    } else {
+        let nv = parse_count(words.next(), "vertex", line_no)?;
+        (nv, parse_count(words.next(), "face", line_no)?)
+    };
     crate::mesh::check_vertex_count(nv)?;
 
     let mut b = Builder::new();
     // Every vertex line holds at least "0 0 0\n" (6 bytes), every face line "3 0 0 0\n".
-    b.positions.reserve_exact(nv.min(bytes.len() / 6));
-    b.offsets.reserve(nf.min(bytes.len() / 8));
-    b.indices
-        .reserve((3 * nf.min(bytes.len() / 8)).min(bytes.len()));
+    reserve_within(&mut b.positions, input.capacity_hint(nv, 6));
+    let faces = input.capacity_hint(nf, 8);
+    reserve_within(&mut b.offsets, faces);
+    reserve_within(
+        &mut b.indices,
+        input.capacity_hint(faces.saturating_mul(3), 1),
+    );
     let mut last_line = line_no;
     for v in 0..nv {
-        let (no, line) = lines.next().ok_or_else(|| {
+        let (no, line) = content_line(input)?.ok_or_else(|| {
             err(
                 last_line,
                 format!("file ends after {v} of the {nv} declared vertices"),
@@ -121,10 +156,10 @@ pub fn read_off_bytes(bytes: &[u8]) -> Result<Mesh, MeshError> {
             *slot = parse_f64(tok)
                 .ok_or_else(|| err(no, format!("bad coordinate '{}' of vertex {v}", show(tok))))?;
         }
-        b.positions.push(DVec3::from_array(c));
+        b.push_vertex(DVec3::from_array(c))?;
     }
     for f in 0..nf {
-        let (no, line) = lines.next().ok_or_else(|| {
+        let (no, line) = content_line(input)?.ok_or_else(|| {
             err(
                 last_line,
                 format!("file ends after {f} of the {nf} declared faces"),
@@ -145,6 +180,8 @@ pub fn read_off_bytes(bytes: &[u8]) -> Result<Mesh, MeshError> {
                 format!("face {f} has {n} vertices; a polygon needs at least 3"),
             ));
         }
+        // The line holds at most one index per two bytes: room for the indices it can list.
+        b.reserve_corners((n as u64).min(line.len() as u64 / 2 + 1) as usize)?;
         for k in 0..n {
             let tok = w
                 .next()

@@ -14,9 +14,14 @@
 //! are ignored. A file without a `face` element is a point cloud (a mesh without faces).
 //! Data after the last declared element is ignored.
 //!
-//! Counts in the header are never trusted for allocation: memory is reserved only as far as
-//! the remaining data can hold, and a binary element of fixed size whose declared count does
-//! not fit in the file is refused before reading it.
+//! Counts in the header are never trusted for allocation. When the file's size is known (an
+//! uncompressed file, bytes in memory), memory is reserved only as far as the remaining data
+//! can hold, and a binary element of fixed size (or a list) whose declared length does not
+//! fit in the file is refused before reading it. A stream ([`read_ply_stream`], a gzip file)
+//! is parsed as it arrives, never held whole: memory is reserved in bounded steps and the
+//! mesh grows within the memory budget; a binary element or list longer than the data is
+//! refused where the data ends, with the same message, and nothing in such an element is
+//! reported on before it is known to be whole, so errors are those of the whole file.
 //!
 //! **Write.** `vertex` with `double` (or `float`, on request) `x y z`, and `face` with
 //! `property list uchar int vertex_indices` (wider count/index types only when a face has
@@ -28,13 +33,14 @@
 //! conventional `red green blue` colour channels), `float` ([`PlyValues::F32`]) or `double`
 //! ([`PlyValues::F64`]), one value per vertex or face. The reader skips such properties.
 
-use std::io::Write;
+use std::io::{BufRead, Write};
 
 use glam::DVec3;
 
 use super::Builder;
+use super::input::{Ignore, Input, Source, at_byte, reserve_within};
 use super::text::{
-    Tokens, parse_f32, parse_f64, parse_i64, show, write_f32, write_f64, write_face_indices,
+    parse_f32, parse_f64, parse_i64, show, write_f32, write_f64, write_face_indices,
 };
 use crate::error::Location;
 use crate::{Mesh, MeshColors, MeshError, MeshFormat};
@@ -97,7 +103,7 @@ impl Scalar {
     }
 
     /// Decode a binary value; `b` holds at least `size()` bytes.
-    #[inline]
+    #[inline(always)]
     fn read_f64(self, b: &[u8], big: bool) -> f64 {
         macro_rules! get {
             ($t:ty, $n:literal) => {{
@@ -123,7 +129,7 @@ impl Scalar {
     }
 
     /// Decode a binary integer (floats must be integral and within ±2⁵³).
-    #[inline]
+    #[inline(always)]
     fn read_int(self, b: &[u8], big: bool) -> Option<i64> {
         let v = self.read_f64(b, big);
         if matches!(self, Self::F32 | Self::F64) {
@@ -188,25 +194,24 @@ impl Element {
 struct Header {
     encoding: PlyEncoding,
     elements: Vec<Element>,
-    /// Byte offset of the data.
-    data_start: usize,
-    /// Line number of the first data line (for ASCII error messages).
-    data_line: usize,
 }
+
+/// Header keywords whose lines are ignored (and not held while reading a stream).
+const COMMENT_WORDS: &[&[u8]] = &[b"comment", b"obj_info"];
 
 fn herr(line: usize, m: impl Into<String>) -> MeshError {
     MeshError::parse(MeshFormat::Ply, Location::Line(line), m)
 }
 
-fn parse_header(bytes: &[u8]) -> Result<Header, MeshError> {
-    let mut pos = 0usize;
+/// Read the header, leaving `input` at the first byte of the data.
+fn parse_header<S: Source>(input: &mut Input<S>) -> Result<Header, MeshError> {
     let mut line_no = 0usize;
     let mut encoding = None;
     let mut elements: Vec<Element> = Vec::new();
     loop {
         line_no += 1;
-        let rest = &bytes[pos..];
-        let Some(nl) = rest.iter().position(|&c| c == b'\n') else {
+        let found = input.read_line(Ignore::AfterWord(COMMENT_WORDS))?;
+        let Some(found) = found.filter(|l| l.newline) else {
             return Err(herr(
                 line_no,
                 if line_no == 1 {
@@ -216,8 +221,7 @@ fn parse_header(bytes: &[u8]) -> Result<Header, MeshError> {
                 },
             ));
         };
-        let line = &rest[..nl];
-        pos += nl + 1;
+        let line = input.line_bytes(&found);
         let mut words = super::text::Words::new(line);
         let first = words.next();
         if line_no == 1 {
@@ -317,12 +321,7 @@ fn parse_header(bytes: &[u8]) -> Result<Header, MeshError> {
         }
     }
     let encoding = encoding.ok_or_else(|| herr(line_no, "header has no 'format' line"))?;
-    Ok(Header {
-        encoding,
-        elements,
-        data_start: pos,
-        data_line: line_no + 1,
-    })
+    Ok(Header { encoding, elements })
 }
 
 /// What the reader does with each element's properties.
@@ -474,9 +473,10 @@ fn find_roles(h: &Header) -> Result<Roles, MeshError> {
 /// [`MeshError::Parse`] for a malformed header (with its line), a missing `x`/`y`/`z` or face
 /// index list, truncated or malformed data (byte offset for binary, line for ASCII), a face
 /// with fewer than three vertices or an index outside the vertices;
-/// [`MeshError::TooLarge`] beyond the 32-bit limits.
+/// [`MeshError::TooLarge`] beyond the 32-bit limits; [`volmorph_io::IoError::Budget`] (as
+/// [`MeshError::Io`]) when the mesh outgrows the memory budget.
 pub fn read_ply_bytes(bytes: &[u8]) -> Result<Mesh, MeshError> {
-    read_ply(bytes, false).map(|(m, _)| m)
+    read_ply_input(&mut Input::slice(bytes, MeshFormat::Ply), false).map(|(m, _)| m)
 }
 
 /// Parse a PLY file as [`read_ply_bytes`] does, and also its colours: the vertex element's
@@ -487,13 +487,40 @@ pub fn read_ply_bytes(bytes: &[u8]) -> Result<Mesh, MeshError> {
 /// # Errors
 /// As [`read_ply_bytes`], and [`MeshError::Parse`] for a colour value that is not finite.
 pub fn read_ply_bytes_with_colors(bytes: &[u8]) -> Result<(Mesh, Option<MeshColors>), MeshError> {
-    read_ply(bytes, true)
+    read_ply_input(&mut Input::slice(bytes, MeshFormat::Ply), true)
 }
 
-/// The PLY reader; colour properties are read only when `colors` is set (otherwise they are
-/// skipped like any other property).
-fn read_ply(bytes: &[u8], colors: bool) -> Result<(Mesh, Option<MeshColors>), MeshError> {
-    let h = parse_header(bytes)?;
+/// Parse a PLY file from a stream, as it is read (for instance while a gzip file is
+/// inflated): memory holds the mesh and one window of input (a header line, a token, a
+/// binary item), never the whole file; header comments are skipped as they are read. The
+/// stream's size is not known, so a binary element longer than the data is found where the
+/// data ends, and the mesh is checked against the memory budget as it grows.
+///
+/// # Errors
+/// As [`read_ply_bytes`]; [`MeshError::Io`] when reading fails, and [`MeshError::Parse`] for
+/// a header line or ASCII word longer than [`MAX_STREAM_LINE`](super::obj::MAX_STREAM_LINE).
+pub fn read_ply_stream(r: &mut dyn BufRead) -> Result<Mesh, MeshError> {
+    read_ply_stream_with_colors(r).map(|(m, _)| m)
+}
+
+/// [`read_ply_stream`] with the colours of [`read_ply_bytes_with_colors`].
+///
+/// # Errors
+/// As [`read_ply_stream`], and [`MeshError::Parse`] for a colour value that is not finite.
+pub fn read_ply_stream_with_colors(
+    r: &mut dyn BufRead,
+) -> Result<(Mesh, Option<MeshColors>), MeshError> {
+    let mut input = Input::reader(r, None, MeshFormat::Ply, "PLY stream".into());
+    read_ply_input(&mut input, true)
+}
+
+/// The PLY reader over any input; colour properties are read only when `colors` is set
+/// (otherwise they are skipped like any other property).
+pub(crate) fn read_ply_input<S: Source>(
+    input: &mut Input<S>,
+    colors: bool,
+) -> Result<(Mesh, Option<MeshColors>), MeshError> {
+    let h = parse_header(input)?;
     let mut roles = find_roles(&h)?;
     if !colors {
         roles.vertex_rgb = None;
@@ -501,11 +528,10 @@ fn read_ply(bytes: &[u8], colors: bool) -> Result<(Mesh, Option<MeshColors>), Me
     }
     let nv = roles.vertex.map_or(0, |v| h.elements[v].count);
     crate::mesh::check_vertex_count(nv)?;
-    let data = &bytes[h.data_start..];
     match h.encoding {
-        PlyEncoding::Ascii => read_ascii(&h, &roles, data),
-        PlyEncoding::BinaryLittleEndian => read_binary(&h, &roles, data, h.data_start, false),
-        PlyEncoding::BinaryBigEndian => read_binary(&h, &roles, data, h.data_start, true),
+        PlyEncoding::Ascii => read_ascii(&h, &roles, input),
+        PlyEncoding::BinaryLittleEndian => read_binary(&h, &roles, input, false),
+        PlyEncoding::BinaryBigEndian => read_binary(&h, &roles, input, true),
     }
 }
 
@@ -528,32 +554,28 @@ fn index_error(loc: Location, face: usize, i: Option<i64>, nv: usize) -> MeshErr
     )
 }
 
-fn read_binary(
+/// Byte offset of property `pi` within an item of `el` (all of whose properties before it
+/// are scalars).
+fn scalar_offset(el: &Element, pi: usize) -> usize {
+    el.props[..pi]
+        .iter()
+        .map(|p| match p.kind {
+            Kind::Scalar(s) => s.size(),
+            Kind::List { .. } => 0,
+        })
+        .sum()
+}
+
+fn read_binary<S: Source>(
     h: &Header,
     roles: &Roles,
-    data: &[u8],
-    base: usize,
+    input: &mut Input<S>,
     big: bool,
 ) -> Result<(Mesh, Option<MeshColors>), MeshError> {
     let mut b = Builder::new();
     let mut vcol = ColorSink::new(roles.vertex_rgb);
     let mut fcol = ColorSink::new(roles.face_rgb);
     let nv = roles.vertex.map_or(0, |v| h.elements[v].count);
-    let mut pos = 0usize;
-    let bad_color = |pos: usize, what: &str, item: usize| {
-        MeshError::parse(
-            MeshFormat::Ply,
-            Location::Byte(base + pos),
-            format!("{what} {item} has a colour channel that is not a finite number"),
-        )
-    };
-    let trunc = |pos: usize, what: String| {
-        MeshError::parse(
-            MeshFormat::Ply,
-            Location::Byte(base + pos),
-            format!("data ends inside {what} (truncated file)"),
-        )
-    };
     for (ei, el) in h.elements.iter().enumerate() {
         let is_vertex = roles.vertex == Some(ei);
         let is_face = roles.face == Some(ei);
@@ -561,70 +583,131 @@ fn read_binary(
             continue; // occupies no bytes
         }
         if let Some(stride) = el.fixed_size() {
+            // The element must be whole before any of its items is reported on: checked here
+            // when the input's size is known, else where the data ends.
+            let start = input.offset();
             let need = (el.count as u128) * (stride as u128);
-            let avail = (data.len() - pos) as u128;
-            if need > avail {
-                return Err(MeshError::parse(
+            let short = |avail: u64| {
+                MeshError::parse(
                     MeshFormat::Ply,
-                    Location::Byte(base + pos),
+                    at_byte(start),
                     format!(
                         "element '{}' declares {} items of {stride} bytes ({need} bytes) but \
                          only {avail} bytes remain (truncated file or wrong count)",
                         el.name, el.count
                     ),
-                ));
+                )
+            };
+            if let Some(avail) = input.remaining()
+                && need > u128::from(avail)
+            {
+                return Err(short(avail));
             }
-            let need = need as usize;
-            if is_vertex {
-                let mut offs = [0usize; 3];
-                let mut tys = [Scalar::F32; 3];
-                for k in 0..3 {
-                    let pi = roles.xyz[k];
-                    offs[k] = el.props[..pi]
-                        .iter()
-                        .map(|p| match p.kind {
-                            Kind::Scalar(s) => s.size(),
-                            Kind::List { .. } => 0,
-                        })
-                        .sum();
-                    if let Kind::Scalar(s) = el.props[pi].kind {
-                        tys[k] = s;
-                    }
+            if !is_vertex {
+                let want = u64::try_from(need).unwrap_or(u64::MAX);
+                let got = input.skip(want)?;
+                if got < want {
+                    return Err(short(got));
                 }
-                // Offset and type of each colour channel.
-                let col = vcol.as_ref().map(|sink| {
-                    sink.props.map(|pi| {
-                        let off: usize = el.props[..pi]
-                            .iter()
-                            .map(|p| match p.kind {
-                                Kind::Scalar(s) => s.size(),
-                                Kind::List { .. } => 0,
+                continue;
+            }
+            let mut offs = [0usize; 3];
+            let mut tys = [Scalar::F32; 3];
+            for k in 0..3 {
+                let pi = roles.xyz[k];
+                offs[k] = scalar_offset(el, pi);
+                if let Kind::Scalar(s) = el.props[pi].kind {
+                    tys[k] = s;
+                }
+            }
+            // Offset and type of each colour channel.
+            let col = vcol.as_ref().map(|sink| {
+                sink.props.map(|pi| match el.props[pi].kind {
+                    Kind::Scalar(s) => (scalar_offset(el, pi), s),
+                    Kind::List { .. } => (scalar_offset(el, pi), Scalar::U8),
+                })
+            });
+            reserve_within(&mut b.positions, input.capacity_hint(el.count, stride));
+            let mut bad = None;
+            let mut done = 0usize;
+            while done < el.count {
+                let window = input.window();
+                let k = (el.count - done).min(window.len() / stride);
+                if k == 0 {
+                    if !input.ensure(stride)? {
+                        return Err(short(input.end() - start));
+                    }
+                    continue;
+                }
+                let items = &window[..k * stride];
+                if bad.is_none() && col.is_none() && tys == [Scalar::F64; 3] && offs == [0, 8, 16] {
+                    // The usual layouts, decoded directly.
+                    b.reserve_vertices(k)?;
+                    for item in items.chunks_exact(stride) {
+                        let c = |o: usize| {
+                            let a: [u8; 8] = item[o..o + 8].try_into().unwrap_or_default();
+                            if big {
+                                f64::from_be_bytes(a)
+                            } else {
+                                f64::from_le_bytes(a)
+                            }
+                        };
+                        b.positions.push(DVec3::new(c(0), c(8), c(16)));
+                    }
+                } else if bad.is_none()
+                    && col.is_none()
+                    && tys == [Scalar::F32; 3]
+                    && offs == [0, 4, 8]
+                {
+                    b.reserve_vertices(k)?;
+                    for item in items.chunks_exact(stride) {
+                        let c = |o: usize| {
+                            let a: [u8; 4] = item[o..o + 4].try_into().unwrap_or_default();
+                            f64::from(if big {
+                                f32::from_be_bytes(a)
+                            } else {
+                                f32::from_le_bytes(a)
                             })
-                            .sum();
-                        match el.props[pi].kind {
-                            Kind::Scalar(s) => (off, s),
-                            Kind::List { .. } => (off, Scalar::U8),
+                        };
+                        b.positions.push(DVec3::new(c(0), c(4), c(8)));
+                    }
+                } else if bad.is_none() {
+                    let at = input.offset();
+                    b.reserve_vertices(k)?;
+                    for (j, item) in items.chunks_exact(stride).enumerate() {
+                        let c = |k: usize| tys[k].read_f64(&item[offs[k]..], big);
+                        b.positions.push(DVec3::new(c(0), c(1), c(2)));
+                        if let (Some(sink), Some(col)) = (vcol.as_mut(), col) {
+                            let mut rgb = [0u8; 3];
+                            for (ch, &(off, t)) in col.iter().enumerate() {
+                                match channel(t, t.read_f64(&item[off..], big)) {
+                                    Some(v) => rgb[ch] = v,
+                                    None => {
+                                        bad = Some(bad_color(
+                                            at + (j * stride) as u64,
+                                            "vertex",
+                                            done + j,
+                                        ));
+                                        break;
+                                    }
+                                }
+                            }
+                            if bad.is_some() {
+                                break;
+                            }
+                            sink.colors.push(rgb);
                         }
-                    })
-                });
-                b.positions.reserve_exact(el.count);
-                for (n, item) in data[pos..pos + need].chunks_exact(stride).enumerate() {
-                    let c = |k: usize| tys[k].read_f64(&item[offs[k]..], big);
-                    b.positions.push(DVec3::new(c(0), c(1), c(2)));
-                    if let (Some(sink), Some(col)) = (vcol.as_mut(), col) {
-                        let mut rgb = [0u8; 3];
-                        for (k, &(off, t)) in col.iter().enumerate() {
-                            rgb[k] = channel(t, t.read_f64(&item[off..], big))
-                                .ok_or_else(|| bad_color(pos + n * stride, "vertex", n))?;
-                        }
-                        sink.colors.push(rgb);
                     }
                 }
+                input.advance(k * stride);
+                done += k;
             }
-            pos += need;
+            if let Some(e) = bad {
+                return Err(e);
+            }
             continue;
         }
-        // Elements with lists: item by item.
+        // Elements with lists: item by item, straight from the window when it holds the item.
         let min_item: usize = el
             .props
             .iter()
@@ -633,107 +716,377 @@ fn read_binary(
                 Kind::List { count, .. } => count.size(),
             })
             .sum();
-        let cap = el.count.min((data.len() - pos) / min_item.max(1));
+        let cap = input.capacity_hint(el.count, min_item);
         if is_vertex {
-            b.positions.reserve_exact(cap);
+            reserve_within(&mut b.positions, cap);
         }
         if is_face {
-            b.offsets.reserve(cap);
-            b.indices
-                .reserve(cap.saturating_mul(3).min(data.len() - pos));
+            reserve_within(&mut b.offsets, cap);
+            reserve_within(
+                &mut b.indices,
+                input.capacity_hint(cap.saturating_mul(3), 1),
+            );
         }
-        for item in 0..el.count {
-            let mut xyz = [0.0f64; 3];
-            for (pi, p) in el.props.iter().enumerate() {
-                match p.kind {
-                    Kind::Scalar(s) => {
-                        let bytes = data
-                            .get(pos..pos + s.size())
-                            .ok_or_else(|| trunc(pos, format!("{} {item}", el.name)))?;
-                        if is_vertex && let Some(k) = roles.xyz.iter().position(|&x| x == pi) {
-                            xyz[k] = s.read_f64(bytes, big);
-                        }
-                        let sink = if is_vertex {
-                            vcol.as_mut()
-                        } else if is_face {
-                            fcol.as_mut()
-                        } else {
-                            None
-                        };
-                        if let Some(sink) = sink
-                            && sink.wants(pi)
-                            && !sink.take(pi, s, s.read_f64(bytes, big))
-                        {
-                            return Err(bad_color(pos, &el.name, item));
-                        }
-                        pos += s.size();
-                    }
-                    Kind::List { count, item: it } => {
-                        let cb = data
-                            .get(pos..pos + count.size())
-                            .ok_or_else(|| trunc(pos, format!("{} {item}", el.name)))?;
-                        let n = count.read_int(cb, big).unwrap_or(-1);
-                        if n < 0 {
-                            return Err(MeshError::parse(
-                                MeshFormat::Ply,
-                                Location::Byte(base + pos),
-                                format!("negative list length {n} in {} {item}", el.name),
-                            ));
-                        }
-                        pos += count.size();
-                        let len = (n as usize)
-                            .checked_mul(it.size())
-                            .filter(|&l| l <= data.len() - pos)
-                            .ok_or_else(|| {
-                                trunc(pos, format!("the {n}-item list of {} {item}", el.name))
-                            })?;
-                        if is_face && pi == roles.face_list {
-                            if n < 3 {
-                                return Err(face_len_error(Location::Byte(base + pos), item, n));
-                            }
-                            for v in data[pos..pos + len].chunks_exact(it.size()) {
-                                let i = it.read_int(v, big);
-                                match i {
-                                    Some(i) if i >= 0 && (i as u64) < nv as u64 => {
-                                        b.indices.push(i as u32);
-                                    }
-                                    _ => {
-                                        return Err(index_error(
-                                            Location::Byte(base + pos),
-                                            item,
-                                            i,
-                                            nv,
-                                        ));
-                                    }
-                                }
-                            }
-                        }
-                        pos += len;
-                    }
+        let r = ItemReader {
+            el,
+            roles,
+            is_vertex,
+            is_face,
+            big,
+            nv,
+        };
+        let mut item = 0usize;
+        while item < el.count {
+            // The items the window holds whole, read in place.
+            let window = input.window();
+            let at = input.offset();
+            let mut pos = 0usize;
+            while item < el.count {
+                let (start, corners) = (pos, b.indices.len());
+                let mut xyz = [0.0f64; 3];
+                let sink = if is_vertex {
+                    vcol.as_mut()
+                } else if is_face {
+                    fcol.as_mut()
+                } else {
+                    None
+                };
+                if !r.item_in(window, &mut pos, at, item, &mut xyz, &mut b, sink)? {
+                    // It goes on past the window: undone, and read with more care below.
+                    pos = start;
+                    b.indices.truncate(corners);
+                    break;
                 }
+                r.end_item(xyz, &mut b, &mut vcol, &mut fcol)?;
+                item += 1;
             }
-            if is_vertex {
-                b.positions.push(DVec3::from_array(xyz));
-                if let Some(sink) = vcol.as_mut() {
-                    sink.end_item();
-                }
-            }
-            if is_face {
-                b.end_face()?;
-                if let Some(sink) = fcol.as_mut() {
-                    sink.end_item();
-                }
+            input.advance(pos);
+            if item < el.count {
+                let mut xyz = [0.0f64; 3];
+                let sink = if is_vertex {
+                    vcol.as_mut()
+                } else if is_face {
+                    fcol.as_mut()
+                } else {
+                    None
+                };
+                r.partial_item(input, item, &mut xyz, &mut b, sink)?;
+                r.end_item(xyz, &mut b, &mut vcol, &mut fcol)?;
+                item += 1;
             }
         }
     }
     Ok((b.finish(), pick_colors(vcol, fcol)))
 }
 
-fn need<'a>(t: &mut Tokens<'a>, el: &Element, item: usize) -> Result<&'a [u8], MeshError> {
-    t.next_token().ok_or_else(|| {
+fn bad_color(at: u64, what: &str, item: usize) -> MeshError {
+    MeshError::parse(
+        MeshFormat::Ply,
+        at_byte(at),
+        format!("{what} {item} has a colour channel that is not a finite number"),
+    )
+}
+
+fn truncated(at: u64, what: String) -> MeshError {
+    MeshError::parse(
+        MeshFormat::Ply,
+        at_byte(at),
+        format!("data ends inside {what} (truncated file)"),
+    )
+}
+
+/// Reads the items of a binary element that has lists.
+struct ItemReader<'a> {
+    el: &'a Element,
+    roles: &'a Roles,
+    is_vertex: bool,
+    is_face: bool,
+    big: bool,
+    /// Vertices in the file.
+    nv: usize,
+}
+
+impl ItemReader<'_> {
+    /// Scalar property `pi` of type `s` of item `item`, its bytes starting at `bytes`, at
+    /// offset `at`: a vertex coordinate or a colour channel is kept.
+    #[inline]
+    #[allow(clippy::too_many_arguments)]
+    fn scalar(
+        &self,
+        pi: usize,
+        s: Scalar,
+        bytes: &[u8],
+        at: u64,
+        item: usize,
+        xyz: &mut [f64; 3],
+        sink: Option<&mut ColorSink>,
+    ) -> Result<(), MeshError> {
+        if self.is_vertex
+            && let Some(k) = self.roles.xyz.iter().position(|&x| x == pi)
+        {
+            xyz[k] = s.read_f64(bytes, self.big);
+        }
+        if let Some(sink) = sink
+            && sink.wants(pi)
+            && !sink.take(pi, s, s.read_f64(bytes, self.big))
+        {
+            return Err(bad_color(at, &self.el.name, item));
+        }
+        Ok(())
+    }
+
+    /// The whole index list (`n` items of type `it`, at offset `at`) of face `item`.
+    #[inline(always)]
+    fn face_list(
+        &self,
+        b: &mut Builder,
+        list: &[u8],
+        it: Scalar,
+        n: i64,
+        at: u64,
+        item: usize,
+    ) -> Result<(), MeshError> {
+        if n < 3 {
+            return Err(face_len_error(at_byte(at), item, n));
+        }
+        // The list is in memory: its length is justified by the data.
+        b.reserve_corners(n as usize)?;
+        for v in list.chunks_exact(it.size()) {
+            match it.read_int(v, self.big) {
+                Some(i) if i >= 0 && (i as u64) < self.nv as u64 => b.indices.push(i as u32),
+                i => return Err(index_error(at_byte(at), item, i, self.nv)),
+            }
+        }
+        Ok(())
+    }
+
+    /// Item `item` from `w` at `*pos` (`w` starts at offset `at`), moving `*pos` past it:
+    /// `false` as soon as a property goes on past `w` (the item's corners pushed so far are
+    /// then the caller's to undo). Each property is used only once `w` holds it whole, so
+    /// errors are reported in the order of the file, as by [`ItemReader::partial_item`].
+    #[inline(always)]
+    #[allow(clippy::too_many_arguments)]
+    fn item_in(
+        &self,
+        w: &[u8],
+        pos: &mut usize,
+        at: u64,
+        item: usize,
+        xyz: &mut [f64; 3],
+        b: &mut Builder,
+        mut sink: Option<&mut ColorSink>,
+    ) -> Result<bool, MeshError> {
+        let mut p = *pos;
+        for (pi, prop) in self.el.props.iter().enumerate() {
+            match prop.kind {
+                Kind::Scalar(s) => {
+                    let Some(bytes) = w.get(p..p + s.size()) else {
+                        return Ok(false);
+                    };
+                    self.scalar(pi, s, bytes, at + p as u64, item, xyz, sink.as_deref_mut())?;
+                    p += s.size();
+                }
+                Kind::List { count, item: it } => {
+                    let Some(cb) = w.get(p..p + count.size()) else {
+                        return Ok(false);
+                    };
+                    let n = count.read_int(cb, self.big).unwrap_or(-1);
+                    if n < 0 {
+                        return Err(MeshError::parse(
+                            MeshFormat::Ply,
+                            at_byte(at + p as u64),
+                            format!("negative list length {n} in {} {item}", self.el.name),
+                        ));
+                    }
+                    p += count.size();
+                    let Some(list) = (n as usize)
+                        .checked_mul(it.size())
+                        .and_then(|len| w.get(p..p.checked_add(len)?))
+                    else {
+                        return Ok(false);
+                    };
+                    if self.is_face && pi == self.roles.face_list {
+                        self.face_list(b, list, it, n, at + p as u64, item)?;
+                    }
+                    p += list.len();
+                }
+            }
+        }
+        *pos = p;
+        Ok(true)
+    }
+
+    /// Finish item `item`: a vertex at `xyz`, or the face whose corners were pushed, and the
+    /// item's colour.
+    #[inline(always)]
+    fn end_item(
+        &self,
+        xyz: [f64; 3],
+        b: &mut Builder,
+        vcol: &mut Option<ColorSink>,
+        fcol: &mut Option<ColorSink>,
+    ) -> Result<(), MeshError> {
+        if self.is_vertex {
+            b.push_vertex(DVec3::from_array(xyz))?;
+            if let Some(sink) = vcol.as_mut() {
+                sink.end_item();
+            }
+        }
+        if self.is_face {
+            b.end_face()?;
+            if let Some(sink) = fcol.as_mut() {
+                sink.end_item();
+            }
+        }
+        Ok(())
+    }
+
+    /// Item `item` that the window does not hold whole (the end of a window or of the data):
+    /// property by property, reporting where the data ends.
+    #[cold]
+    fn partial_item<S: Source>(
+        &self,
+        input: &mut Input<S>,
+        item: usize,
+        xyz: &mut [f64; 3],
+        b: &mut Builder,
+        mut sink: Option<&mut ColorSink>,
+    ) -> Result<(), MeshError> {
+        let el = self.el;
+        for (pi, p) in el.props.iter().enumerate() {
+            match p.kind {
+                Kind::Scalar(s) => {
+                    let at = input.offset();
+                    let bytes = input
+                        .take(s.size())?
+                        .ok_or_else(|| truncated(at, format!("{} {item}", el.name)))?;
+                    self.scalar(pi, s, bytes, at, item, xyz, sink.as_deref_mut())?;
+                }
+                Kind::List { count, item: it } => {
+                    let at = input.offset();
+                    let cb = input
+                        .take(count.size())?
+                        .ok_or_else(|| truncated(at, format!("{} {item}", el.name)))?;
+                    let n = count.read_int(cb, self.big).unwrap_or(-1);
+                    if n < 0 {
+                        return Err(MeshError::parse(
+                            MeshFormat::Ply,
+                            at_byte(at),
+                            format!("negative list length {n} in {} {item}", el.name),
+                        ));
+                    }
+                    let list_at = input.offset();
+                    let too_short =
+                        || truncated(list_at, format!("the {n}-item list of {} {item}", el.name));
+                    let remaining = input.remaining();
+                    let Some(len) = (n as usize)
+                        .checked_mul(it.size())
+                        .filter(|&l| remaining.is_none_or(|r| l as u64 <= r))
+                    else {
+                        return Err(too_short());
+                    };
+                    if !(self.is_face && pi == self.roles.face_list) {
+                        if input.skip(len as u64)? < len as u64 {
+                            return Err(too_short());
+                        }
+                        continue;
+                    }
+                    // The list must be whole before its length or indices are reported on.
+                    let window = input.window();
+                    if window.len() >= len {
+                        self.face_list(b, &window[..len], it, n, list_at, item)?;
+                        input.advance(len);
+                    } else {
+                        read_list_across(input, b, it, n as usize, self.big, self.nv).map_err(
+                            |e| match e {
+                                ListError::Short => too_short(),
+                                ListError::Small => face_len_error(at_byte(list_at), item, n),
+                                ListError::Index(i) => {
+                                    index_error(at_byte(list_at), item, i, self.nv)
+                                }
+                                ListError::Other(e) => e,
+                            },
+                        )?;
+                    }
+                }
+            }
+        }
+        Ok(())
+    }
+}
+
+/// Why a face's index list was refused.
+enum ListError {
+    /// The data ends inside it.
+    Short,
+    /// It has fewer than three items.
+    Small,
+    /// It has this bad index (`None`: not an integer).
+    Index(Option<i64>),
+    /// Reading or the budget failed.
+    Other(MeshError),
+}
+
+/// Read a face's list of `n` indices of type `it` that the window does not hold whole (a
+/// stream): the first bad index is reported only once the list is known to be whole, as
+/// when the list is checked against the input's size first.
+#[cold]
+fn read_list_across<S: Source>(
+    input: &mut Input<S>,
+    b: &mut Builder,
+    it: Scalar,
+    n: usize,
+    big: bool,
+    nv: usize,
+) -> Result<(), ListError> {
+    let size = it.size();
+    let mut bad = None;
+    let mut left = n;
+    while left > 0 {
+        let window = input.window();
+        let k = left.min(window.len() / size);
+        if k == 0 {
+            if !input.ensure(size).map_err(ListError::Other)? {
+                return Err(ListError::Short);
+            }
+            continue;
+        }
+        if bad.is_none() && n >= 3 {
+            for v in window[..k * size].chunks_exact(size) {
+                match it.read_int(v, big) {
+                    Some(i) if i >= 0 && (i as u64) < nv as u64 => {
+                        b.push_index(i as u32).map_err(ListError::Other)?;
+                    }
+                    i => {
+                        bad = Some(i);
+                        break;
+                    }
+                }
+            }
+        }
+        input.advance(k * size);
+        left -= k;
+    }
+    if n < 3 {
+        return Err(ListError::Small);
+    }
+    match bad {
+        Some(i) => Err(ListError::Index(i)),
+        None => Ok(()),
+    }
+}
+
+/// The next token of element `el`'s item `item`, with its line.
+#[inline(always)]
+fn need<'a, S: Source>(
+    input: &'a mut Input<S>,
+    el: &Element,
+    item: usize,
+) -> Result<(usize, &'a [u8]), MeshError> {
+    input.require_token(|line| {
         MeshError::parse(
             MeshFormat::Ply,
-            Location::Line(t.line),
+            Location::Line(line),
             format!(
                 "data ends in {} {item} of {} (truncated file or wrong count)",
                 el.name, el.count
@@ -742,16 +1095,15 @@ fn need<'a>(t: &mut Tokens<'a>, el: &Element, item: usize) -> Result<&'a [u8], M
     })
 }
 
-fn read_ascii(
+fn read_ascii<S: Source>(
     h: &Header,
     roles: &Roles,
-    data: &[u8],
+    input: &mut Input<S>,
 ) -> Result<(Mesh, Option<MeshColors>), MeshError> {
     let mut b = Builder::new();
     let mut vcol = ColorSink::new(roles.vertex_rgb);
     let mut fcol = ColorSink::new(roles.face_rgb);
     let nv = roles.vertex.map_or(0, |v| h.elements[v].count);
-    let mut t = Tokens::new(data, h.data_line);
     let err = |line: usize, m: String| MeshError::parse(MeshFormat::Ply, Location::Line(line), m);
     for (ei, el) in h.elements.iter().enumerate() {
         let is_vertex = roles.vertex == Some(ei);
@@ -760,24 +1112,27 @@ fn read_ascii(
             continue;
         }
         // Each item takes at least one token of at least two bytes (value and separator).
-        let cap = el.count.min(data.len() / 2);
+        let cap = input.capacity_hint(el.count, 2);
         if is_vertex {
-            b.positions.reserve_exact(cap);
+            reserve_within(&mut b.positions, cap);
         }
         if is_face {
-            b.offsets.reserve(cap);
-            b.indices.reserve(cap.saturating_mul(3).min(data.len() / 2));
+            reserve_within(&mut b.offsets, cap);
+            reserve_within(
+                &mut b.indices,
+                input.capacity_hint(cap.saturating_mul(3), 2),
+            );
         }
         for item in 0..el.count {
             let mut xyz = [0.0f64; 3];
             for (pi, p) in el.props.iter().enumerate() {
                 match p.kind {
                     Kind::Scalar(s) => {
-                        let tok = need(&mut t, el, item)?;
+                        let (line, tok) = need(input, el, item)?;
                         if is_vertex && let Some(k) = roles.xyz.iter().position(|&x| x == pi) {
                             xyz[k] = s.parse_value(tok).ok_or_else(|| {
                                 err(
-                                    t.line,
+                                    line,
                                     format!(
                                         "bad {} value '{}' for vertex {item}",
                                         p.name,
@@ -798,42 +1153,37 @@ fn read_ascii(
                             && !s.parse_value(tok).is_some_and(|v| sink.take(pi, s, v))
                         {
                             return Err(err(
-                                t.line,
+                                line,
                                 format!("bad colour value '{}' for {} {item}", show(tok), el.name),
                             ));
                         }
                     }
                     Kind::List { count, item: it } => {
-                        let tok = need(&mut t, el, item)?;
+                        let (line, tok) = need(input, el, item)?;
                         let n = count.parse_int(tok).filter(|&n| n >= 0).ok_or_else(|| {
                             err(
-                                t.line,
+                                line,
                                 format!("bad list length '{}' in {} {item}", show(tok), el.name),
                             )
                         })?;
                         let wanted = is_face && pi == roles.face_list;
                         if wanted && n < 3 {
-                            return Err(face_len_error(Location::Line(t.line), item, n));
+                            return Err(face_len_error(Location::Line(line), item, n));
                         }
                         for _ in 0..n {
-                            let tok = need(&mut t, el, item)?;
+                            let (line, tok) = need(input, el, item)?;
                             if wanted {
                                 let i = it.parse_int(tok);
                                 match i {
                                     Some(i) if i >= 0 && (i as u64) < nv as u64 => {
-                                        b.indices.push(i as u32);
+                                        b.push_index(i as u32)?;
                                     }
                                     Some(_) => {
-                                        return Err(index_error(
-                                            Location::Line(t.line),
-                                            item,
-                                            i,
-                                            nv,
-                                        ));
+                                        return Err(index_error(Location::Line(line), item, i, nv));
                                     }
                                     None => {
                                         return Err(err(
-                                            t.line,
+                                            line,
                                             format!(
                                                 "bad vertex index '{}' in face {item}",
                                                 show(tok)
@@ -847,7 +1197,7 @@ fn read_ascii(
                 }
             }
             if is_vertex {
-                b.positions.push(DVec3::from_array(xyz));
+                b.push_vertex(DVec3::from_array(xyz))?;
                 if let Some(sink) = vcol.as_mut() {
                     sink.end_item();
                 }

@@ -73,63 +73,6 @@ impl<'a> Iterator for Words<'a> {
     }
 }
 
-/// Whitespace-separated tokens across lines, tracking the line of the last token returned.
-pub(crate) struct Tokens<'a> {
-    bytes: &'a [u8],
-    pos: usize,
-    /// 1-based line of the most recently returned token (or of the cursor).
-    pub(crate) line: usize,
-}
-
-impl<'a> Tokens<'a> {
-    pub(crate) fn new(bytes: &'a [u8], first_line: usize) -> Self {
-        Self {
-            bytes,
-            pos: 0,
-            line: first_line,
-        }
-    }
-
-    /// The next token, or `None` at end of input.
-    #[inline]
-    pub(crate) fn next_token(&mut self) -> Option<&'a [u8]> {
-        let bytes = self.bytes;
-        let mut p = self.pos;
-        loop {
-            match bytes.get(p) {
-                None => {
-                    self.pos = p;
-                    return None;
-                }
-                Some(b'\n') => self.line += 1,
-                Some(&b) if is_blank(b) => {}
-                Some(_) => break,
-            }
-            p += 1;
-        }
-        let start = p;
-        while let Some(&b) = bytes.get(p) {
-            if b == b'\n' || is_blank(b) {
-                break;
-            }
-            p += 1;
-        }
-        self.pos = p;
-        Some(&bytes[start..p])
-    }
-
-    /// Skip the rest of the current line (including its newline).
-    pub(crate) fn skip_line(&mut self) {
-        match self.bytes[self.pos..].iter().position(|&b| b == b'\n') {
-            Some(n) => {
-                self.pos += n + 1;
-                self.line += 1;
-            }
-            None => self.pos = self.bytes.len(),
-        }
-    }
-}
-
 /// A token for an error message: lossy UTF-8, shortened.
 pub(crate) fn show(tok: &[u8]) -> String {
     const MAX: usize = 40;
@@ -322,16 +265,7 @@ mod tests {
     }
 
     #[test]
-    fn tokens_track_lines() {
-        let mut t = Tokens::new(b"a b\n\n  c\r\nd", 1);
-        assert_eq!(t.next_token(), Some(&b"a"[..]));
-        assert_eq!(t.line, 1);
-        assert_eq!(t.next_token(), Some(&b"b"[..]));
-        assert_eq!(t.next_token(), Some(&b"c"[..]));
-        assert_eq!(t.line, 3);
-        assert_eq!(t.next_token(), Some(&b"d"[..]));
-        assert_eq!(t.line, 4);
-        assert_eq!(t.next_token(), None);
+    fn words_and_lines() {
         let words: Vec<_> = Words::new(b" f  1/2/3\t4//5 ").collect();
         assert_eq!(words, vec![&b"f"[..], b"1/2/3", b"4//5"]);
         let lines: Vec<_> = Lines::new(b"x\ny\n", 1).collect();

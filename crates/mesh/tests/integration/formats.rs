@@ -210,6 +210,107 @@ fn files_by_extension_with_gzip() {
     assert!(e.contains("bad.obj") && e.contains("OBJ line 2"), "{e}");
 }
 
+/// Every format and encoding, written, then gzipped (as one member, and split in two members
+/// at an odd place), reads through `read` and `read_with_colors` exactly as the uncompressed
+/// file does, and a truncated file gives the same error either way.
+#[test]
+fn gzipped_files_read_like_uncompressed_ones() {
+    use flate2::{Compression, write::GzEncoder};
+    use volmorph_mesh::format::ply::{PlyEncoding, PlyProperties, PlyProperty, PlyValues};
+    use volmorph_mesh::read_with_colors;
+    let gzip = |bytes: &[u8], split: usize| {
+        let mut out = Vec::new();
+        for part in [&bytes[..split], &bytes[split..]] {
+            let mut enc = GzEncoder::new(Vec::new(), Compression::fast());
+            enc.write_all(part).unwrap();
+            out.extend(enc.finish().unwrap());
+        }
+        out
+    };
+    let dir = tempfile::tempdir().unwrap();
+    let m = mixed();
+    let red: Vec<u8> = (0..m.vertex_count()).map(|i| (i * 29) as u8).collect();
+    let colored = {
+        let props = PlyProperties {
+            vertex: ["red", "green", "blue"]
+                .map(|name| PlyProperty {
+                    name,
+                    values: PlyValues::U8(&red),
+                })
+                .to_vec(),
+            face: Vec::new(),
+        };
+        let mut b = Vec::new();
+        volmorph_mesh::format::ply::write_ply_with_properties(
+            &mut b,
+            &m,
+            PlyEncoding::BinaryBigEndian,
+            false,
+            &props,
+        )
+        .unwrap();
+        b
+    };
+    let mut files: Vec<(String, Vec<u8>)> = vec![("colored.ply".into(), colored)];
+    for format in MeshFormat::ALL {
+        for (k, o) in [opts(false, false), opts(true, false), opts(true, true)]
+            .into_iter()
+            .enumerate()
+        {
+            let mesh = if format == MeshFormat::Stl {
+                f32_cube()
+            } else {
+                m.clone()
+            };
+            let name = format!("m{k}.{}", format.extension());
+            files.push((name, to_bytes(&mesh, format, &o).unwrap()));
+        }
+    }
+    for (name, bytes) in &files {
+        let plain = dir.path().join(name);
+        std::fs::write(&plain, bytes).unwrap();
+        let want = read(&plain).unwrap();
+        let want_colors = read_with_colors(&plain).unwrap();
+        assert_identical(
+            &want,
+            &read_bytes(bytes, MeshFormat::from_path(&plain).unwrap()).unwrap(),
+        );
+        for split in [0, 1, bytes.len() / 3, bytes.len()] {
+            let gz = dir.path().join(format!("{name}.gz"));
+            std::fs::write(&gz, gzip(bytes, split)).unwrap();
+            assert_identical(&want, &read(&gz).unwrap());
+            let (mesh, colors) = read_with_colors(&gz).unwrap();
+            assert_identical(&want_colors.0, &mesh);
+            assert_eq!(want_colors.1, colors, "{name}");
+        }
+        // A gzip file cut inside its trailer (the checksum after the data) is refused, as
+        // when it was inflated whole before parsing.
+        let gz = dir.path().join(format!("{name}.gz"));
+        let whole = gzip(bytes, bytes.len());
+        std::fs::write(&gz, &whole[..whole.len() - 3]).unwrap();
+        let e = read(&gz).unwrap_err();
+        assert!(
+            matches!(&e, MeshError::Io(_)) && e.to_string().contains(&format!("{name}.gz")),
+            "{name}: {e}"
+        );
+        // Truncated: the same error (naming each file) plain and gzipped (OBJ may read).
+        let cut = &bytes[..bytes.len() * 2 / 3];
+        std::fs::write(&plain, cut).unwrap();
+        let gz = dir.path().join(format!("{name}.gz"));
+        std::fs::write(&gz, gzip(cut, cut.len() / 2)).unwrap();
+        let outcome = |p: &std::path::Path| match read(p) {
+            Ok(m) => format!("{m:?}"),
+            Err(e) => e.to_string().replacen(&p.display().to_string(), "FILE", 1),
+        };
+        let (o_plain, o_gz) = (outcome(&plain), outcome(&gz));
+        assert_eq!(o_plain, o_gz, "{name}");
+        assert!(
+            o_plain.starts_with("FILE: ") || name.ends_with(".obj"),
+            "{name}: {o_plain}"
+        );
+    }
+}
+
 #[test]
 fn format_from_path() {
     use std::path::Path;
