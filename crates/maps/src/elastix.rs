@@ -7,14 +7,31 @@
 //!
 //! | entry | meaning |
 //! | --- | --- |
-//! | `Transform` | `"TranslationTransform"`, `"EulerTransform"`, `"SimilarityTransform"`, `"AffineTransform"` or `"BSplineTransform"` |
+//! | `Transform` | `"TranslationTransform"`, `"EulerTransform"`, `"SimilarityTransform"`, `"AffineTransform"`, `"BSplineTransform"` or `"RecursiveBSplineTransform"` |
 //! | `TransformParameters` | the parameters (count checked against `NumberOfParameters` when given) |
-//! | `CenterOfRotationPoint` | the centre `c` of the Euler, similarity and affine transforms (default 0) |
+//! | `CenterOfRotationPoint` | the centre `c` of the Euler, similarity and affine transforms (required, as elastix requires it) |
 //! | `ComputeZYX` | Euler angle order (default `"false"`) |
-//! | `GridSize`, `GridIndex`, `GridSpacing`, `GridOrigin`, `GridDirection`, `BSplineTransformSplineOrder` | the B-spline control grid |
-//! | `InitialTransformParametersFileName` | `"NoInitialTransform"`, or the file of the transform applied first |
+//! | `GridSize`, `GridIndex`, `GridSpacing`, `GridOrigin`, `GridDirection`, `BSplineTransformSplineOrder`, `UseCyclicTransform` | the B-spline control grid (order 3, index 0, not cyclic) |
+//! | `InitialTransformParameterFileName`, `InitialTransformParametersFileName` | `"NoInitialTransform"`, or the file of the transform applied first (see [Chains](#chains)) |
 //! | `HowToCombineTransforms` | `"Compose"` (the default; `"Add"` is refused) |
 //! | `FixedImageDimension`, `MovingImageDimension` | must be 3 when given |
+//! | `UseDirectionCosines` | must be `"true"` (the default since elastix 4.8) when given |
+//! | `UseBinaryFormatForTransformationParameters` | must be `"false"` when given |
+//!
+//! Flags are `"true"` or `"false"`, spelled so, as elastix reads them.
+//!
+//! The other entries elastix writes in a transform parameter file describe the fixed image's
+//! grid (`Size`, `Index`, `Spacing`, `Origin`, `Direction`, the `…InternalImagePixelType`s:
+//! where transformix samples a deformation field or resamples an image) and how an image is
+//! resampled (`Resampler`, `ResampleInterpolator`, `FinalBSplineInterpolationOrder`,
+//! `DefaultPixelValue`, `ResultImageFormat`, `ResultImagePixelType`, `CompressResultImage`);
+//! none changes where a point goes, and they are skipped. **Any other entry is refused**, with
+//! the file, line and entry named: an entry elastix reads and volmorph does not can change the
+//! transform, and skipping one is how a renamed chain entry once read an affine → B-spline
+//! chain as its B-spline alone. Refused so, among others: `ITKTransformParameters` and
+//! `ITKTransformFixedParameters` (parameters elastix takes instead of `TransformParameters`),
+//! `TransformFileName` (`(Transform "File")`: the transform kept in an ITK file), and
+//! `CenterOfRotation` (a centre as an image index, from elastix before 3.402).
 //!
 //! # Meaning
 //!
@@ -32,13 +49,23 @@
 //! domain (one spacing inside the first and last control points) it is the identity — read as
 //! the equivalent volmorph lattice ([`volmorph_lattice::formats::itk_tfm`]).
 //!
-//! A chain `InitialTransformParametersFileName` with `HowToCombineTransforms "Compose"` is
-//! `T(x) = T_this(T_initial(x))`: the initial transform first, read as
-//! [`AnyMap::Compose`]`([initial, this])`. The initial file is looked for where its name points
-//! (relative names from the folder of the file naming it), and, when that is missing, under its
-//! own file name in the folder of the file naming it (an elastix output folder moved
-//! elsewhere). A file outside the folder of the file naming it is refused unless external data
-//! are allowed ([`volmorph_volume_io::ReadOptions::allow_external_data`], the command line's
+//! # Chains
+//!
+//! The entry naming the initial transform changed its name: elastix up to 5.1 (and 4.x before
+//! it) writes `InitialTransformParametersFileName`; elastix 5.2.0 and later write
+//! `InitialTransformParameterFileName` (without the `s`: elastix commit 2170592, June 2023,
+//! elastix issue 900), and read the old name still, with a deprecation warning, preferring the
+//! new one when both are given. volmorph reads either; a file giving both with different values
+//! is refused, naming both.
+//!
+//! A chain with `HowToCombineTransforms "Compose"` is `T(x) = T_this(T_initial(x))`: the
+//! initial transform first, read as [`AnyMap::Compose`]`([initial, this])`. The initial file is
+//! looked for where its name points (relative names from the folder of the file naming it),
+//! and, when that is missing, under its own file name in the folder of the file naming it: an
+//! elastix output folder moved elsewhere, or named relative to the folder elastix ran in (run
+//! with the output folder `out`, elastix writes `"out/TransformParameters.0.txt"`). A file
+//! outside the folder of the file naming it is refused unless external data are allowed
+//! ([`volmorph_volume_io::ReadOptions::allow_external_data`], the command line's
 //! `--allow-external-data`), as for volume data files.
 
 use std::path::{Path, PathBuf};
@@ -54,6 +81,56 @@ pub const MAX_CHAIN: usize = 16;
 
 /// Longest entry value list read (a B-spline transform's 3·N parameters).
 const MAX_VALUES: usize = 1 << 24;
+
+/// The entry naming the initial transform, as elastix 5.2.0 and later write it.
+pub const INITIAL_KEY: &str = "InitialTransformParameterFileName";
+
+/// The same entry as elastix up to 5.1 writes it (still read by elastix, deprecated).
+pub const INITIAL_KEY_OLD: &str = "InitialTransformParametersFileName";
+
+/// The entries read (see the [module docs](self)).
+const READ: &[&str] = &[
+    "Transform",
+    "NumberOfParameters",
+    "TransformParameters",
+    "CenterOfRotationPoint",
+    "ComputeZYX",
+    "GridSize",
+    "GridIndex",
+    "GridSpacing",
+    "GridOrigin",
+    "GridDirection",
+    "BSplineTransformSplineOrder",
+    "UseCyclicTransform",
+    INITIAL_KEY,
+    INITIAL_KEY_OLD,
+    "HowToCombineTransforms",
+    "FixedImageDimension",
+    "MovingImageDimension",
+    "UseDirectionCosines",
+    "UseBinaryFormatForTransformationParameters",
+];
+
+/// The entries elastix writes that do not change where a point goes: the fixed image's grid
+/// and pixel types (where transformix samples or resamples) and the resampling of image
+/// intensities (elastix's `TransformBase::CreateTransformParameterMap` and
+/// `ResamplerBase::CreateTransformParameterMap`, and its resample interpolators).
+const SKIPPED: &[&str] = &[
+    "FixedInternalImagePixelType",
+    "MovingInternalImagePixelType",
+    "Size",
+    "Index",
+    "Spacing",
+    "Origin",
+    "Direction",
+    "Resampler",
+    "ResampleInterpolator",
+    "FinalBSplineInterpolationOrder",
+    "DefaultPixelValue",
+    "ResultImageFormat",
+    "ResultImagePixelType",
+    "CompressResultImage",
+];
 
 fn bad(line: usize, message: impl Into<String>) -> MapError {
     MapError::Deform(volmorph_deform::DeformError::Parse {
@@ -114,16 +191,69 @@ impl Entries {
         }
     }
 
-    fn flag(&self, name: &str) -> Result<bool, MapError> {
+    /// The flag `name` (`default` when absent): `"true"` or `"false"`, spelled so (elastix's
+    /// `Conversion::StringToValue` reads no other spelling).
+    fn flag(&self, name: &str, default: bool) -> Result<bool, MapError> {
         match self.text(name)? {
-            None => Ok(false),
-            Some((_, t)) if t.eq_ignore_ascii_case("true") => Ok(true),
-            Some((_, t)) if t.eq_ignore_ascii_case("false") => Ok(false),
+            None => Ok(default),
+            Some((_, "true")) => Ok(true),
+            Some((_, "false")) => Ok(false),
             Some((l, t)) => Err(bad(
                 l,
                 format!("({name} \"{t}\"): expected \"true\" or \"false\""),
             )),
         }
+    }
+
+    /// The initial transform's file name (`None` for `"NoInitialTransform"` or none given),
+    /// under either name of the entry.
+    fn initial(&self) -> Result<Option<String>, MapError> {
+        let name = match (self.text(INITIAL_KEY)?, self.text(INITIAL_KEY_OLD)?) {
+            (Some((l, new)), Some((lo, old))) if new != old => {
+                return Err(bad(
+                    l.max(lo),
+                    format!(
+                        "({INITIAL_KEY} \"{new}\") on line {l} and ({INITIAL_KEY_OLD} \"{old}\") \
+                         on line {lo} name different initial transforms"
+                    ),
+                ));
+            }
+            (Some((_, name)), _) | (None, Some((_, name))) => name,
+            (None, None) => return Ok(None),
+        };
+        Ok((!name.is_empty() && name != "NoInitialTransform").then(|| name.to_owned()))
+    }
+
+    /// Refuse an entry that is neither read nor known to leave the transform alone.
+    fn refuse_unknown(&self) -> Result<(), MapError> {
+        let Some((name, line, _)) = self
+            .0
+            .iter()
+            .find(|(n, _, _)| !READ.contains(&n.as_str()) && !SKIPPED.contains(&n.as_str()))
+        else {
+            return Ok(());
+        };
+        let why = match name.as_str() {
+            "ITKTransformParameters" | "ITKTransformFixedParameters" => {
+                "elastix takes the transform's parameters from it instead of \
+                 (TransformParameters …); volmorph does not read it"
+            }
+            "TransformFileName" => {
+                "the transform is kept in the ITK transform file it names ((Transform \"File\")); \
+                 volmorph does not read elastix files that delegate to one"
+            }
+            "CenterOfRotation" => {
+                "a centre given as an image index (elastix before 3.402); volmorph reads \
+                 (CenterOfRotationPoint …)"
+            }
+            _ => {
+                "volmorph does not know this entry, and an entry elastix reads that volmorph \
+                 skipped could change the transform; remove the line if it does not"
+            }
+        };
+        Err(MapError::Unsupported(format!(
+            "line {line}: ({name} …): {why}"
+        )))
     }
 }
 
@@ -234,10 +364,33 @@ fn versor_matrix(v: DVec3, line: usize) -> Result<DMat3, MapError> {
 ///
 /// # Errors
 /// [`MapError::Deform`] (a parse error with the line) for malformed text, missing or
-/// miscounted entries; [`MapError::Unsupported`] for other transform types, dimensions,
-/// spline orders and `HowToCombineTransforms "Add"`.
+/// miscounted entries, and both names of the initial transform entry naming different files;
+/// [`MapError::Unsupported`] for entries neither read nor known to leave the transform alone,
+/// other transform types, dimensions, spline orders, `HowToCombineTransforms "Add"`,
+/// `UseDirectionCosines "false"` and parameters in a binary file (see the
+/// [module docs](self)).
 pub fn parse_elastix(text: &str) -> Result<(AnyMap, Option<String>), MapError> {
     let e = entries(text)?;
+    e.refuse_unknown()?;
+    if !e.flag("UseDirectionCosines", true)? {
+        let l = e.get("UseDirectionCosines").map_or(0, |(l, _)| l);
+        return Err(MapError::Unsupported(format!(
+            "line {l}: (UseDirectionCosines \"false\"): elastix registered the images with \
+             their directions taken as the identity, so the transform maps points of those \
+             undirected images, not of the images themselves; volmorph reads transforms of \
+             (UseDirectionCosines \"true\")"
+        )));
+    }
+    if e.flag("UseBinaryFormatForTransformationParameters", false)? {
+        let l = e
+            .get("UseBinaryFormatForTransformationParameters")
+            .map_or(0, |(l, _)| l);
+        return Err(MapError::Unsupported(format!(
+            "line {l}: (UseBinaryFormatForTransformationParameters \"true\"): the parameters are \
+             in a separate binary file (elastix before 5.1); volmorph reads them written in \
+             (TransformParameters …)"
+        )));
+    }
     for dim in ["FixedImageDimension", "MovingImageDimension"] {
         if let Some((l, v)) = e.numbers(dim)?
             && v != [3.0]
@@ -282,7 +435,9 @@ pub fn parse_elastix(text: &str) -> Result<(AnyMap, Option<String>), MapError> {
         }
     };
     let centred = |m: DMat3, t: DVec3| -> Result<AnyMap, MapError> {
-        let c = e.vec3("CenterOfRotationPoint", Some(DVec3::ZERO))?;
+        // elastix refuses these transforms without their centre ("No center of rotation is
+        // specified in the transform parameter file").
+        let c = e.vec3("CenterOfRotationPoint", None)?;
         Ok(AnyMap::Affine(Affine {
             matrix: m,
             offset: c + t - m * c,
@@ -296,7 +451,7 @@ pub fn parse_elastix(text: &str) -> Result<(AnyMap, Option<String>), MapError> {
         "EulerTransform" => {
             count(6)?;
             let [rx, ry, rz] = [0, 1, 2].map(|a| rotation(a, p[a]));
-            let r = if e.flag("ComputeZYX")? {
+            let r = if e.flag("ComputeZYX", false)? {
                 rz * ry * rx
             } else {
                 rz * rx * ry
@@ -318,6 +473,13 @@ pub fn parse_elastix(text: &str) -> Result<(AnyMap, Option<String>), MapError> {
             )?
         }
         "BSplineTransform" | "RecursiveBSplineTransform" => bspline(&e, &p, pl)?,
+        "File" => {
+            return Err(MapError::Unsupported(format!(
+                "line {tl}: (Transform \"File\"): the transform is kept in the ITK transform \
+                 file TransformFileName names; volmorph does not read elastix files that \
+                 delegate to one"
+            )));
+        }
         other => {
             return Err(MapError::Unsupported(format!(
                 "line {tl}: elastix transform \"{other}\"; volmorph reads TranslationTransform, \
@@ -325,12 +487,7 @@ pub fn parse_elastix(text: &str) -> Result<(AnyMap, Option<String>), MapError> {
             )));
         }
     };
-    let initial = match e.text("InitialTransformParametersFileName")? {
-        None => None,
-        Some((_, "NoInitialTransform")) => None,
-        Some((_, name)) => Some(name.to_owned()),
-    };
-    Ok((map, initial))
+    Ok((map, e.initial()?))
 }
 
 fn bspline(e: &Entries, p: &[f64], pl: usize) -> Result<AnyMap, MapError> {
@@ -341,10 +498,11 @@ fn bspline(e: &Entries, p: &[f64], pl: usize) -> Result<AnyMap, MapError> {
             "line {l}: B-spline order {order:?}; volmorph reads cubic (3) B-spline transforms"
         )));
     }
-    if e.flag("UseCyclicTransform")? {
-        return Err(MapError::Unsupported(
-            "cyclic B-spline transforms (UseCyclicTransform \"true\")".into(),
-        ));
+    if e.flag("UseCyclicTransform", false)? {
+        let l = e.get("UseCyclicTransform").map_or(0, |(l, _)| l);
+        return Err(MapError::Unsupported(format!(
+            "line {l}: cyclic B-spline transforms (UseCyclicTransform \"true\")"
+        )));
     }
     let size = e.vec3("GridSize", None)?;
     let index = e.vec3("GridIndex", Some(DVec3::ZERO))?;
@@ -419,28 +577,30 @@ fn bspline(e: &Entries, p: &[f64], pl: usize) -> Result<AnyMap, MapError> {
 /// initial transforms (see the [module docs](self)).
 ///
 /// # Errors
-/// As [`parse_elastix`], for this file and every file of the chain (naming it); a chain
-/// longer than [`MAX_CHAIN`] or returning to a file already read; an initial file that is
-/// missing, or outside the folder of the file naming it without external data allowed.
+/// As [`parse_elastix`], for this file and every file of the chain; a chain longer than
+/// [`MAX_CHAIN`] or returning to a file already read; an initial file that is missing, or
+/// outside the folder of the file naming it without external data allowed. Every error is a
+/// [`MapError::File`] naming the file it is about (the file naming a missing initial file).
 pub fn read_elastix(path: &Path, text: &str) -> Result<AnyMap, MapError> {
     let allow = volmorph_volume_io::ReadOptions::default().allow_external_data;
     let mut seen: Vec<PathBuf> = vec![std::fs::canonicalize(path).unwrap_or(path.into())];
-    let (mut map, mut initial) = parse_elastix(text)?;
+    let (mut map, mut initial) = parse_elastix(text).map_err(|e| e.at(path))?;
     let mut here = path.to_path_buf();
     while let Some(name) = initial {
         if seen.len() > MAX_CHAIN {
             return Err(MapError::Invalid(format!(
                 "a chain of more than {MAX_CHAIN} initial transforms"
-            )));
+            ))
+            .at(&here));
         }
-        let next = locate_initial(&here, &name, allow)?;
+        let next = locate_initial(&here, &name, allow).map_err(|e| e.at(&here))?;
         let canon = std::fs::canonicalize(&next).unwrap_or(next.clone());
         if seen.contains(&canon) {
             return Err(MapError::Invalid(format!(
-                "{}: the chain of initial transforms returns to {}",
-                here.display(),
+                "the chain of initial transforms returns to {}",
                 next.display()
-            )));
+            ))
+            .at(&here));
         }
         seen.push(canon);
         let t = crate::file::read_text(&next).map_err(|e| e.at(&next))?;
@@ -452,7 +612,7 @@ pub fn read_elastix(path: &Path, text: &str) -> Result<AnyMap, MapError> {
     Ok(map)
 }
 
-/// The file an `InitialTransformParametersFileName` of the file `from` names.
+/// The file that the initial transform entry of the file `from` names.
 fn locate_initial(from: &Path, name: &str, allow_external: bool) -> Result<PathBuf, MapError> {
     let folder = from.parent().unwrap_or(Path::new("."));
     let named = Path::new(name);
@@ -481,15 +641,13 @@ fn locate_initial(from: &Path, name: &str, allow_external: bool) -> Result<PathB
     }
     Err(match outside {
         Some(c) => MapError::Invalid(format!(
-            "{}: the initial transform {} lies outside the folder of the file naming it; \
+            "the initial transform {} lies outside the folder of the file naming it; \
              allow it with --allow-external-data",
-            from.display(),
             c.display()
         )),
         None => MapError::Invalid(format!(
-            "{}: the initial transform \"{name}\" is not found (looked for as written and \
-             beside this file)",
-            from.display()
+            "the initial transform \"{name}\" is not found (looked for as written and \
+             beside this file)"
         )),
     })
 }
@@ -545,8 +703,10 @@ mod tests {
     fn similarity_and_affine_transforms_follow_itk() {
         // A versor of 90° about z: (0, 0, sin 45°).
         let s = std::f64::consts::FRAC_1_SQRT_2;
-        let text =
-            format!("(Transform \"SimilarityTransform\")\n(TransformParameters 0 0 {s} 1 0 0 2)\n");
+        let text = format!(
+            "(Transform \"SimilarityTransform\")\n(TransformParameters 0 0 {s} 1 0 0 2)\n\
+             (CenterOfRotationPoint 0 0 0)\n"
+        );
         let (m, _) = parse_elastix(&text).unwrap();
         assert!(close(m.apply(DVec3::X), DVec3::new(1.0, 2.0, 0.0)));
         let text = "(Transform \"AffineTransform\")\n\
@@ -598,6 +758,7 @@ mod tests {
         std::fs::write(
             &t0,
             "(Transform \"AffineTransform\")\n(TransformParameters 2 0 0 0 2 0 0 0 2 0 0 0)\n\
+             (CenterOfRotationPoint 0 0 0)\n\
              (InitialTransformParametersFileName \"NoInitialTransform\")\n",
         )
         .unwrap();
@@ -646,7 +807,119 @@ mod tests {
         ] {
             assert!(parse_elastix(text).is_err(), "{text}");
         }
+        // The centred transforms need their centre, as elastix requires.
+        let e =
+            parse_elastix("(Transform \"EulerTransform\")\n(TransformParameters 0 0 0 1 2 3)\n")
+                .unwrap_err()
+                .to_string();
+        assert!(e.contains("CenterOfRotationPoint"), "{e}");
         assert!(looks_like_elastix("// elastix\n\n(Transform \"X\")"));
         assert!(!looks_like_elastix("#Insight Transform File V1.0\n"));
+    }
+
+    const TRANSLATION: &str = "(Transform \"TranslationTransform\")\n(NumberOfParameters 3)\n\
+                               (TransformParameters 1 2 3)\n";
+
+    #[test]
+    fn both_names_of_the_initial_transform_entry_are_read() {
+        for key in [INITIAL_KEY, INITIAL_KEY_OLD] {
+            let text = format!("{TRANSLATION}({key} \"out/TransformParameters.0.txt\")\n");
+            let (_, initial) = parse_elastix(&text).unwrap();
+            assert_eq!(
+                initial.as_deref(),
+                Some("out/TransformParameters.0.txt"),
+                "{key}"
+            );
+            let none = format!("{TRANSLATION}({key} \"NoInitialTransform\")\n");
+            assert_eq!(parse_elastix(&none).unwrap().1, None);
+        }
+        // Both, naming the same file: read; naming different files: refused, naming both.
+        let same =
+            format!("{TRANSLATION}({INITIAL_KEY} \"a.txt\")\n({INITIAL_KEY_OLD} \"a.txt\")\n");
+        assert_eq!(parse_elastix(&same).unwrap().1.as_deref(), Some("a.txt"));
+        let differ = format!(
+            "{TRANSLATION}({INITIAL_KEY} \"a.txt\")\n({INITIAL_KEY_OLD} \"NoInitialTransform\")\n"
+        );
+        let e = parse_elastix(&differ).unwrap_err().to_string();
+        assert!(
+            e.contains(INITIAL_KEY) && e.contains(INITIAL_KEY_OLD) && e.contains("line 5"),
+            "{e}"
+        );
+    }
+
+    #[test]
+    fn entries_that_change_the_transform_unread_are_refused() {
+        // (entry added to a translation, what the error names)
+        for (entry, named) in [
+            (
+                "(InitialTransformParameterFilename \"a.txt\")",
+                "(InitialTransformParameterFilename …)",
+            ),
+            (
+                "(ITKTransformParameters 1 2 3)",
+                "instead of (TransformParameters",
+            ),
+            (
+                "(ITKTransformFixedParameters 0 0 0)",
+                "ITKTransformFixedParameters",
+            ),
+            ("(TransformFileName \"t.tfm\")", "ITK transform file"),
+            ("(CenterOfRotation 10 10 10)", "image index"),
+            ("(HowToCombineTransforms \"Add\")", "\"Compose\" chains"),
+            (
+                "(UseDirectionCosines \"false\")",
+                "UseDirectionCosines \"false\"",
+            ),
+            (
+                "(UseDirectionCosines \"False\")",
+                "expected \"true\" or \"false\"",
+            ),
+            (
+                "(UseBinaryFormatForTransformationParameters \"true\")",
+                "binary file",
+            ),
+            ("(FixedImageDimension 2)", "3-D transforms"),
+        ] {
+            let text = format!("{TRANSLATION}{entry}\n");
+            let e = parse_elastix(&text).unwrap_err().to_string();
+            assert!(e.contains(named), "{entry}: {e}");
+            assert!(e.contains("line 4"), "{entry}: {e}");
+        }
+        // The entries elastix writes that leave the transform alone are read past, and the
+        // flags spelled as elastix spells them are read.
+        let text = format!(
+            "{TRANSLATION}(UseDirectionCosines \"true\")\n\
+             (UseBinaryFormatForTransformationParameters \"false\")\n\
+             (Size 20 18 16)\n(Index 0 0 0)\n(Spacing 2 2 2.5)\n(Origin -20 -16 10)\n\
+             (Direction 1 0 0 0 1 0 0 0 1)\n(FixedInternalImagePixelType \"float\")\n\
+             (MovingInternalImagePixelType \"float\")\n\
+             (ResampleInterpolator \"FinalBSplineInterpolator\")\n\
+             (FinalBSplineInterpolationOrder 3)\n(Resampler \"DefaultResampler\")\n\
+             (DefaultPixelValue 0)\n(ResultImageFormat \"nii\")\n\
+             (ResultImagePixelType \"float32\")\n(CompressResultImage \"false\")\n"
+        );
+        let (m, _) = parse_elastix(&text).unwrap();
+        assert!(close(m.apply(DVec3::ZERO), DVec3::new(1.0, 2.0, 3.0)));
+        // (Transform "File"): the transform is in an ITK file.
+        let e = parse_elastix("(Transform \"File\")\n(TransformParameters 1)\n")
+            .unwrap_err()
+            .to_string();
+        assert!(e.contains("TransformFileName"), "{e}");
+        // B-spline orders other than 3, and cyclic grids.
+        let bs = |extra: &str| {
+            format!(
+                "(Transform \"BSplineTransform\")\n(TransformParameters {})\n(GridSize 4 4 4)\n\
+                 (GridSpacing 1 1 1)\n(GridOrigin 0 0 0)\n{extra}\n",
+                vec!["0"; 192].join(" ")
+            )
+        };
+        assert!(parse_elastix(&bs("")).is_ok());
+        for (extra, named) in [
+            ("(BSplineTransformSplineOrder 2)", "B-spline order"),
+            ("(UseCyclicTransform \"true\")", "cyclic"),
+        ] {
+            let e = parse_elastix(&bs(extra)).unwrap_err().to_string();
+            assert!(e.contains(named), "{extra}: {e}");
+        }
     }
 }

@@ -8,6 +8,7 @@
 use std::path::Path;
 
 use volmorph_lattice::formats::bxf;
+use volmorph_volume::VolumeError;
 
 use crate::field::DisplacementField;
 use crate::{AnyMap, MapError, elastix, itk, itk_mat};
@@ -130,8 +131,8 @@ pub fn read_map(path: &Path) -> Result<AnyMap, MapError> {
                 itk_mat::parse_mat(&bytes)
             }
             MapFormat::DisplacementField => {
-                let (image, _) = volmorph_volume_io::vector::read_vector(path)
-                    .map_err(|e| MapError::Invalid(e.to_string()))?;
+                let (image, _) =
+                    volmorph_volume_io::vector::read_vector(path).map_err(volume_error)?;
                 Ok(AnyMap::DisplacementField(DisplacementField::from_image(
                     image,
                 )?))
@@ -157,14 +158,24 @@ pub fn write_field(
     grid: volmorph_volume::Geometry,
     precision: volmorph_volume_io::vector::VectorPrecision,
 ) -> Result<DisplacementField, MapError> {
+    // The extension's error names `path` itself.
+    volmorph_volume_io::vector::vector_format(path).map_err(volume_error)?;
     let write = || -> Result<DisplacementField, MapError> {
-        volmorph_volume_io::vector::vector_format(path)
-            .map_err(|e| MapError::Unsupported(e.to_string()))?;
         let field = DisplacementField::from_map(map, grid)?;
         write_field_image(path, &field, precision)?;
         Ok(field)
     };
     write().map_err(|e| e.at(path))
+}
+
+/// A volume error as a map error: [`VolumeError::Unsupported`] as
+/// [`MapError::Unsupported`] (one "unsupported:" in the message, not two), the others as
+/// [`MapError::Invalid`].
+fn volume_error(e: VolumeError) -> MapError {
+    match e {
+        VolumeError::Unsupported(m) => MapError::Unsupported(m),
+        e => MapError::Invalid(e.to_string()),
+    }
 }
 
 fn write_field_image(
@@ -178,7 +189,7 @@ fn write_field_image(
         precision,
         &volmorph_volume_io::WriteOptions::default(),
     )
-    .map_err(|e| MapError::Invalid(e.to_string()))
+    .map_err(volume_error)
 }
 
 /// The text of `map` in `format`.

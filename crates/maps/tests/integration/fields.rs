@@ -212,3 +212,27 @@ fn mat_and_elastix_files_are_map_files() {
         worst(&chain, &want, &g)
     );
 }
+
+/// A field written to an extension that holds no vector image is refused as unsupported,
+/// said once (the message said "unsupported: unsupported:").
+#[test]
+fn field_to_an_unsupported_extension_says_unsupported_once() {
+    let dir = tempfile::tempdir().unwrap();
+    let path = dir.path().join("field.nrrd");
+    let e = write_field(
+        &path,
+        &AnyMap::Affine(affine()),
+        grid([4, 4, 4]),
+        VectorPrecision::F64,
+    )
+    .unwrap_err();
+    assert_eq!(
+        e.to_string(),
+        format!(
+            "unsupported: {}: vector images (displacement fields) are read and written as \
+             .nii, .nii.gz, .mha or .mhd",
+            path.display()
+        )
+    );
+    assert!(!path.exists());
+}

@@ -2,5 +2,6 @@
 //! (one link instead of one per file keeps the test build short).
 
 mod conformance;
+mod elastix;
 mod fields;
 mod itk_tps;
