@@ -4,7 +4,7 @@
 //! Parsing and pixel decoding are done by the `dicom-rs` crates (`dicom-object`,
 //! `dicom-pixeldata`; the decoders of compressed transfer syntaxes — JPEG, JPEG lossless,
 //! RLE, deflate — come with the default `dicom-codecs` feature; RLE of 32-bit samples, which
-//! that decoder does not read, is decoded by [`rle`]). This module does what turns
+//! that decoder does not read, is decoded here, in the private `rle` module). This module does what turns
 //! files into a volume:
 //!
 //! # Finding the slices
