@@ -34,7 +34,11 @@ fuzz_target!(|data: &[u8]| {
         write(root.join(".zgroup"), br#"{"zarr_format": 2}"#);
         write(
             root.join(".zattrs"),
-            format!(r#"{{"multiscales": [{{"version": "0.4", {}}}]}}"#, &MULTISCALE[1..]).as_bytes(),
+            format!(
+                r#"{{"multiscales": [{{"version": "0.4", {}}}]}}"#,
+                &MULTISCALE[1..]
+            )
+            .as_bytes(),
         );
         write(array.join(".zarray"), meta);
         write(array.join("0.0.0"), chunk);

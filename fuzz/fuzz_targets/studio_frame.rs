@@ -5,9 +5,9 @@
 #![no_main]
 
 use libfuzzer_sys::fuzz_target;
+use volmorph_scene::setup::Setup;
 use volmorph_studio::command_json::{MAX_SCULPT_POINTS, parse, sculpt};
 use volmorph_studio::protocol::{Frame, MAX_CLIENT_FRAME};
-use volmorph_studio::setup::Setup;
 
 fuzz_target!(|data: &[u8]| {
     volmorph_io::set_memory_limit(512 << 20);

@@ -15,7 +15,8 @@ fuzz_target!(|data: &[u8]| {
         return;
     };
     if let Ok(again) = recipe.to_json_string() {
-        let back = Recipe::from_json_str(&again, "again.json").expect("a written recipe reads back");
+        let back =
+            Recipe::from_json_str(&again, "again.json").expect("a written recipe reads back");
         assert_eq!(back.to_json_string().ok(), Some(again));
     }
     let _ = recipe.build("fuzz.json");
