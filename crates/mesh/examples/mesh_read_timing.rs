@@ -6,40 +6,15 @@
 //! Run with `cargo run --release -p volmorph-mesh --features examples --example
 //! mesh_read_timing -- [repetitions] [mesh files…]` (7 repetitions by default).
 
+mod common;
+
 use std::io::Write;
 use std::path::Path;
 use std::time::Instant;
 
 use flate2::Compression;
 use flate2::write::GzEncoder;
-use volmorph_mesh::{DVec3, Mesh, MeshFormat, MeshWriteOptions, read, read_bytes, to_bytes};
-
-fn torus(n: u32, m: u32) -> Mesh {
-    let mut p = Vec::with_capacity((n * m) as usize);
-    for i in 0..n {
-        for j in 0..m {
-            let u = f64::from(i) / f64::from(n) * std::f64::consts::TAU;
-            let v = f64::from(j) / f64::from(m) * std::f64::consts::TAU;
-            let r = 0.08 + 0.03 * v.cos();
-            // Round to f32 like a scanned model stored with `property float`.
-            p.push(
-                DVec3::new(r * u.cos(), r * u.sin(), 0.03 * v.sin())
-                    .as_vec3()
-                    .as_dvec3(),
-            );
-        }
-    }
-    let id = |i: u32, j: u32| (i % n) * m + (j % m);
-    let mut tris = Vec::with_capacity(2 * (n * m) as usize);
-    for i in 0..n {
-        for j in 0..m {
-            let (a, b, c, d) = (id(i, j), id(i + 1, j), id(i + 1, j + 1), id(i, j + 1));
-            tris.push([a, b, c]);
-            tris.push([a, c, d]);
-        }
-    }
-    Mesh::from_triangles(p, &tris).expect("valid torus")
-}
+use volmorph_mesh::{read, read_bytes, to_bytes};
 
 /// Median and minimum of `reps` runs of `f`, in milliseconds.
 fn median_ms<T>(reps: usize, mut f: impl FnMut() -> T) -> (f64, f64) {
@@ -65,28 +40,14 @@ fn main() {
         .map_or(7, |s| s.parse().expect("repetitions: a number"))
         .max(1);
     let extra: Vec<String> = args.collect();
-    let mesh = torus(660, 660);
+    let mesh = common::torus(660, 660);
     println!(
         "mesh: {} vertices, {} triangles; {reps} repetitions",
         mesh.vertex_count(),
         mesh.face_count()
     );
     let dir = tempfile::tempdir().expect("temporary folder");
-    let cases = [
-        (MeshFormat::Ply, "binary LE PLY, double", true, false),
-        (MeshFormat::Ply, "binary LE PLY, float", true, true),
-        (MeshFormat::Ply, "ASCII PLY, double", false, false),
-        (MeshFormat::Stl, "binary STL", true, false),
-        (MeshFormat::Stl, "ASCII STL", false, false),
-        (MeshFormat::Off, "OFF", false, false),
-        (MeshFormat::Obj, "OBJ", false, false),
-    ];
-    for (k, (format, label, binary, single_precision)) in cases.into_iter().enumerate() {
-        let o = MeshWriteOptions {
-            binary,
-            big_endian: false,
-            single_precision,
-        };
+    for (k, (format, label, o)) in common::format_cases().into_iter().enumerate() {
         let bytes = to_bytes(&mesh, format, &o).expect("write");
         let plain = dir.path().join(format!("m{k}.{}", format.extension()));
         std::fs::write(&plain, &bytes).expect("write file");

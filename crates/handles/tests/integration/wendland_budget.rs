@@ -6,75 +6,18 @@
 //! value, so the modules of this binary agree on it). The allocation test runs in a child
 //! process of this binary, alone, so that its peak counts only its own allocations.
 
-use std::alloc::{GlobalAlloc, Layout, System};
-use std::sync::atomic::{AtomicUsize, Ordering};
-
 use volmorph_deform::SpaceMap;
 use volmorph_handles::WendlandMap;
 use volmorph_handles::wendland::default_support;
+use volmorph_testkit::alloc_peak::{CountingAllocator, in_child};
 
 /// The budget of this test binary (as in `handle_limits`).
 const BUDGET: u64 = 32 << 20;
 
 /// The global allocator of this test binary: the system allocator, counting the bytes live
 /// and their peak.
-struct Counting;
-
-static LIVE: AtomicUsize = AtomicUsize::new(0);
-static PEAK: AtomicUsize = AtomicUsize::new(0);
-
-// A global allocator is an unsafe trait; this one only forwards to `System`.
-// SAFETY: every call is forwarded to `System` unchanged; the counters are only statistics.
-#[allow(unsafe_code)]
-unsafe impl GlobalAlloc for Counting {
-    unsafe fn alloc(&self, layout: Layout) -> *mut u8 {
-        // SAFETY: forwarded with the caller's layout.
-        let p = unsafe { System.alloc(layout) };
-        if !p.is_null() {
-            let now = LIVE.fetch_add(layout.size(), Ordering::Relaxed) + layout.size();
-            PEAK.fetch_max(now, Ordering::Relaxed);
-        }
-        p
-    }
-
-    unsafe fn dealloc(&self, ptr: *mut u8, layout: Layout) {
-        // SAFETY: forwarded with the caller's pointer and layout.
-        unsafe { System.dealloc(ptr, layout) };
-        LIVE.fetch_sub(layout.size(), Ordering::Relaxed);
-    }
-}
-
 #[global_allocator]
-static ALLOCATOR: Counting = Counting;
-
-/// Environment variable naming the test a child process of this binary runs.
-const CHILD: &str = "VOLMORPH_HANDLES_TEST_CHILD";
-
-/// Run `body` in a child process of this test binary running only the test `name` (this
-/// module's path), and fail if it fails; returns `true` in that child, where the caller runs
-/// the body itself.
-fn in_child(name: &str) -> bool {
-    if std::env::var(CHILD).as_deref() == Ok(name) {
-        return true;
-    }
-    let out = std::process::Command::new(std::env::current_exe().unwrap())
-        .args([name, "--exact", "--nocapture", "--test-threads=1"])
-        .env(CHILD, name)
-        .output()
-        .unwrap();
-    assert!(
-        out.status.success(),
-        "child test {name} failed:\n{}\n{}",
-        String::from_utf8_lossy(&out.stdout),
-        String::from_utf8_lossy(&out.stderr)
-    );
-    let stdout = String::from_utf8_lossy(&out.stdout);
-    assert!(
-        stdout.contains("1 passed"),
-        "the child ran no test:\n{stdout}"
-    );
-    false
-}
+static ALLOCATOR: CountingAllocator = CountingAllocator::new();
 
 /// Issue 14: the columns of the kernel matrix were computed (16 bytes an entry, kept
 /// until the end of the assembly) before the memory check. With 6,000 handles and three
@@ -88,11 +31,10 @@ fn wendland_columns_built_before_the_budget_check() {
     volmorph_io::set_memory_limit(BUDGET);
     let (src, dst) = crate::handle_limits::cloud(6000, 11);
     let rho = 3.0 * default_support(&src);
-    let base = LIVE.load(Ordering::Relaxed);
-    PEAK.store(base, Ordering::Relaxed);
-    let e = WendlandMap::with_support(&src, &dst, Some(rho), 0.0, &volmorph_io::NoProgress)
-        .unwrap_err();
-    let grown = PEAK.load(Ordering::Relaxed) - base;
+    let (r, grown) = ALLOCATOR.peak_during(|| {
+        WendlandMap::with_support(&src, &dst, Some(rho), 0.0, &volmorph_io::NoProgress)
+    });
+    let e = r.unwrap_err();
     // The sources alone take 144 kB; the neighbour grid and the column counts as much again.
     assert!(
         grown < 2 << 20,

@@ -5,76 +5,20 @@
 //! to 32 MiB; no other module depends on the budget. The allocation test runs in a child
 //! process of this binary, alone, so that its peak counts only its own allocations.
 
-use std::alloc::{GlobalAlloc, Layout, System};
 use std::io::Write;
 use std::path::Path;
-use std::sync::atomic::{AtomicUsize, Ordering};
 
 use flate2::Compression;
 use flate2::write::GzEncoder;
 use volmorph_mesh::{Mesh, MeshError, read};
+use volmorph_testkit::alloc_peak::{CountingAllocator, in_child};
 
 const BUDGET: u64 = 32 << 20;
 
 /// The global allocator of this test binary: the system allocator, counting the bytes live
 /// and their peak.
-struct Counting;
-
-static LIVE: AtomicUsize = AtomicUsize::new(0);
-static PEAK: AtomicUsize = AtomicUsize::new(0);
-
-// A global allocator is an unsafe trait; this one only forwards to `System`.
-// SAFETY: every call is forwarded to `System` unchanged; the counters are only statistics.
-#[allow(unsafe_code)]
-unsafe impl GlobalAlloc for Counting {
-    unsafe fn alloc(&self, layout: Layout) -> *mut u8 {
-        // SAFETY: forwarded with the caller's layout.
-        let p = unsafe { System.alloc(layout) };
-        if !p.is_null() {
-            let now = LIVE.fetch_add(layout.size(), Ordering::Relaxed) + layout.size();
-            PEAK.fetch_max(now, Ordering::Relaxed);
-        }
-        p
-    }
-
-    unsafe fn dealloc(&self, ptr: *mut u8, layout: Layout) {
-        // SAFETY: forwarded with the caller's pointer and layout.
-        unsafe { System.dealloc(ptr, layout) };
-        LIVE.fetch_sub(layout.size(), Ordering::Relaxed);
-    }
-}
-
 #[global_allocator]
-static ALLOCATOR: Counting = Counting;
-
-/// Environment variable naming the test a child process of this binary runs.
-const CHILD: &str = "VOLMORPH_MESH_TEST_CHILD";
-
-/// Run `body` in a child process of this test binary running only the test `name` (this
-/// module's path), and fail if it fails; returns `true` in that child, where the caller runs
-/// the body itself.
-fn in_child(name: &str) -> bool {
-    if std::env::var(CHILD).as_deref() == Ok(name) {
-        return true;
-    }
-    let out = std::process::Command::new(std::env::current_exe().unwrap())
-        .args([name, "--exact", "--nocapture", "--test-threads=1"])
-        .env(CHILD, name)
-        .output()
-        .unwrap();
-    assert!(
-        out.status.success(),
-        "child test {name} failed:\n{}\n{}",
-        String::from_utf8_lossy(&out.stdout),
-        String::from_utf8_lossy(&out.stderr)
-    );
-    let stdout = String::from_utf8_lossy(&out.stdout);
-    assert!(
-        stdout.contains("1 passed"),
-        "the child ran no test:\n{stdout}"
-    );
-    false
-}
+static ALLOCATOR: CountingAllocator = CountingAllocator::new();
 
 /// A gzip OBJ with `comment_mib` MiB of comment lines before one triangle.
 fn comment_bomb(comment_mib: usize) -> Vec<u8> {
@@ -152,10 +96,7 @@ fn mib_of(line: &str) -> Vec<u8> {
 /// Read `path` and return the result and the most memory allocated meanwhile beyond what was
 /// live before.
 fn read_measured(path: &Path) -> (Result<Mesh, MeshError>, usize) {
-    let base = LIVE.load(Ordering::Relaxed);
-    PEAK.store(base, Ordering::Relaxed);
-    let r = read(path);
-    (r, PEAK.load(Ordering::Relaxed) - base)
+    ALLOCATOR.peak_during(|| read(path))
 }
 
 const TRIANGLE_PLY_TAIL: &str = "element vertex 3\nproperty float x\nproperty float y\n\
