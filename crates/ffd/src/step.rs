@@ -452,8 +452,16 @@ pub fn step_string(model: &TrimmedModel, name: &str) -> Result<(String, StepSumm
             planes += 1;
             // No reference direction (`$`): planar faces carry no pcurves, so the plane's
             // in-plane parametrisation is the reader's choice, and one DIRECTION less per
-            // plane is written.
-            let (pp, nn) = (o.point3(p), o.direction(n));
+            // plane is written. The origin is a vertex of the face (within PLANAR_TOL of the
+            // plane, being on the surface), so its point is shared with the VERTEX_POINT.
+            let origin = f
+                .loops
+                .first()
+                .and_then(|l| l.first())
+                .map(|&v| model.images[v as usize])
+                .filter(|v| (*v - p).dot(n).abs() <= PLANAR_TOL)
+                .unwrap_or(p);
+            let (pp, nn) = (o.point3(origin), o.direction(n));
             let ax = o.shared(format!("AXIS2_PLACEMENT_3D('',#{pp},#{nn},$)"));
             (o.shared(format!("PLANE('',#{ax})")), true)
         } else {
