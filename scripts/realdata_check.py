@@ -187,12 +187,24 @@ def frame_rescales(ds) -> list[tuple[float, float]]:
     return out
 
 
-def dicom_expected(ds):
-    """Geometry and rescaled values pydicom gives for a single-frame greyscale slice."""
-    arr = ds.pixel_array.astype(np.float64)
-    slope = float(getattr(ds, "RescaleSlope", 1) or 1)
-    inter = float(getattr(ds, "RescaleIntercept", 0) or 0)
-    return (arr * slope + inter) * dose_scaling(ds)
+def frame_geometry(ds, f: int = 0):
+    """(ImagePositionPatient, ImageOrientationPatient, PixelSpacing) of frame `f`: the
+    per-frame functional group, then the shared one (PS3.3 C.7.6.16), then the top level."""
+    per = ds.get("PerFrameFunctionalGroupsSequence")
+    shared = ds.SharedFunctionalGroupsSequence[0] if "SharedFunctionalGroupsSequence" in ds else None
+    items = [per[f] if per is not None and f < len(per) else None, shared]
+
+    def find(seq, tag):
+        for it in items:
+            if it is not None and seq in it and tag in it[seq][0]:
+                return [float(v) for v in it[seq][0][tag].value]
+        return [float(v) for v in ds[tag].value] if tag in ds else None
+
+    return (
+        find("PlanePositionSequence", "ImagePositionPatient"),
+        find("PlaneOrientationSequence", "ImageOrientationPatient"),
+        find("PixelMeasuresSequence", "PixelSpacing"),
+    )
 
 
 # Transfer syntaxes whose decoders volmorph does not build in (README, File formats: DICOM):
@@ -265,16 +277,17 @@ def check_pydicom(vm: Volmorph, max_files: int) -> None:
             continue
         fails = []
         if frames == 1:
-            want = dicom_expected(ds).T[:, :, None]  # [i, j, 1]
+            (m, b), = frame_rescales(ds)
+            want = ((arr.astype(np.float64) * m + b) * dose_scaling(ds)).T[:, :, None]  # [i, j, 1]
             if ours.shape != want.shape or not np.allclose(ours, want, atol=1e-3):
                 fails.append(f"voxels differ (shape {ours.shape} vs {want.shape})")
-            iop = np.array(ds.ImageOrientationPatient, dtype=float)
-            ps = [float(v) for v in ds.PixelSpacing]
+            ipp, iop, ps = frame_geometry(ds)
+            iop = np.array(iop, dtype=float)
             rdir, cdir = iop[:3] / np.linalg.norm(iop[:3]), iop[3:] / np.linalg.norm(iop[3:])
             direction = np.column_stack([rdir, cdir, np.cross(rdir, cdir)])
             g = geometry_close(
                 info, [ps[1], ps[0], info["spacing"][2]],
-                np.array(ds.ImagePositionPatient, dtype=float), direction, 1e-4,
+                np.array(ipp, dtype=float), direction, 1e-4,
             )
             if g:
                 fails.append(g)

@@ -647,12 +647,21 @@ fn read_multiframe_object(
             })
     };
     let enhanced = !per_frame.is_empty() || shared.is_some();
-    if enhanced && per_frame.len() != frames as usize {
+    // Fewer groups than frames leave frames without a place: refused. More groups than
+    // frames (files cut down to their first frames, as pydicom's `liver_1frame.dcm`, keep the
+    // whole sequence) give frame `f` the group `f`, as GDCM and pydicom do; the header says
+    // how many were ignored.
+    if enhanced && per_frame.len() < frames as usize {
         return Err(err(format!(
             "{what}: {} per-frame functional groups for {frames} frames",
             per_frame.len()
         )));
     }
+    let extra_groups = if enhanced {
+        per_frame.len() - frames as usize
+    } else {
+        0
+    };
     let mut planes = Vec::with_capacity(frames as usize);
     let top_step =
         float(obj, tags::SPACING_BETWEEN_SLICES).or_else(|| float(obj, tags::SLICE_THICKNESS));
@@ -745,6 +754,15 @@ fn read_multiframe_object(
     })?;
     let mut header = summary(obj, &format, &planes, geometry);
     header.fields.push(("frames".into(), frames.to_string()));
+    if extra_groups > 0 {
+        header.fields.push((
+            "per-frame functional groups".into(),
+            format!(
+                "{} for {frames} frames: the last {extra_groups} (beyond NumberOfFrames) ignored",
+                per_frame.len()
+            ),
+        ));
+    }
     // Check the volume and every decoded frame together before decoding anything.
     let all_frames = (format.frame_bytes() as u64).saturating_mul(u64::from(frames));
     let (vt, _) = output_type(&format, &planes);
@@ -1490,6 +1508,66 @@ mod tests {
             first.data() == &a[..plane] || first.data() == &a[a.len() - plane..],
             "the one frame is not a slice of the whole file"
         );
+    }
+
+    /// Regression (pydicom's `liver_1frame.dcm`): a file cut down to its first frame keeps
+    /// every per-frame functional group; it was refused ("3 per-frame functional groups for 1
+    /// frames") though pydicom reads it. Frame `f` takes group `f`, the header names the
+    /// ignored groups, and fewer groups than frames is still refused.
+    #[test]
+    fn one_frame_cut_from_an_enhanced_file_keeps_every_functional_group() {
+        use dicom_core::DataElement;
+        use dicom_core::value::DataSetSequence;
+        let cut = with_frame_count("pydicom_enhanced_ct.dcm", "1");
+        let mut obj = OpenFileOptions::new()
+            .read_preamble(dicom_object::file::ReadPreamble::Auto)
+            .from_reader(&cut[..])
+            .unwrap();
+        let groups = obj
+            .element(tags::PER_FRAME_FUNCTIONAL_GROUPS_SEQUENCE)
+            .unwrap()
+            .items()
+            .unwrap()
+            .to_vec();
+        assert!(groups.len() > 1);
+        let (v, header) = read_bytes(&cut).unwrap();
+        assert_eq!(v.geometry().dims[2], 1);
+        let note = header
+            .fields
+            .iter()
+            .find(|(k, _)| k == "per-frame functional groups")
+            .map(|(_, v)| v.clone())
+            .expect("the ignored groups are named");
+        assert!(
+            note.contains(&format!("last {}", groups.len() - 1)),
+            "{note}"
+        );
+        // The same as the file whose sequence holds the first group only.
+        obj.put(DataElement::new(
+            tags::PER_FRAME_FUNCTIONAL_GROUPS_SEQUENCE,
+            VR::SQ,
+            DataSetSequence::from(vec![groups[0].clone()]),
+        ));
+        let mut one = Vec::new();
+        obj.write_all(&mut one).unwrap();
+        let (w, _) = read_bytes(&one).unwrap();
+        assert_eq!(v.geometry(), w.geometry());
+        assert_eq!(v.to_typed::<f64>().data(), w.to_typed::<f64>().data());
+        // Fewer groups than frames: refused.
+        let (_, bytes) = corpus_file("pydicom_enhanced_ct.dcm");
+        let mut all = OpenFileOptions::new()
+            .read_preamble(dicom_object::file::ReadPreamble::Auto)
+            .from_reader(&bytes[..])
+            .unwrap();
+        all.put(DataElement::new(
+            tags::PER_FRAME_FUNCTIONAL_GROUPS_SEQUENCE,
+            VR::SQ,
+            DataSetSequence::from(vec![groups[0].clone()]),
+        ));
+        let mut short = Vec::new();
+        all.write_all(&mut short).unwrap();
+        let e = read_bytes(&short).unwrap_err().to_string();
+        assert!(e.contains("1 per-frame functional groups for"), "{e}");
     }
 
     /// Regression (fuzzing, out of memory): a forged `NumberOfFrames` of two billion made the
