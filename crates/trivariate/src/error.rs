@@ -89,9 +89,12 @@ pub enum TrivariateError {
         /// Control points on that axis.
         controls: usize,
     },
-    /// A least-squares collocation matrix is rank deficient (samples leave a basis function
-    /// without support).
-    #[error("axis {axis}: least-squares collocation matrix is rank deficient")]
+    /// A least-squares collocation matrix is numerically rank deficient (the sites leave a
+    /// basis function without enough support; see `fit::RANK_TOLERANCE`).
+    #[error(
+        "axis {axis}: least-squares collocation matrix is rank deficient (the sample sites \
+         leave a basis function with too little support)"
+    )]
     RankDeficient {
         /// Parametric axis.
         axis: usize,

@@ -21,7 +21,7 @@ use crate::progress;
 pub enum Command {
     /// Fit a sampled volume as an attribute over a geometry volume and write the JSON model.
     #[command(
-        after_help = "Examples:\n  volmorph nurbs fit ct.nii.gz -o ct.json --order 4\n  volmorph nurbs fit ct.nii.gz -o ct.json --control-points 16 --name density\n\nThe geometry is the volume's physical box (trilinear, corners at the first and last voxel\ncentres), so voxel (i,j,k) sits at parameters (i,j,k)/(dims-1). With as many control points as\nsamples the attribute interpolates every voxel at its centre; with fewer it is the\nleast-squares fit over the voxel centres."
+        after_help = "Examples:\n  volmorph nurbs fit ct.nii.gz -o ct.json --order 4\n  volmorph nurbs fit ct.nii.gz -o ct.json --control-points 16 --name density\n\nParameters run over [0,1]^3; the geometry's corners are the corner voxel centres.\nDefault (one control point per sample): the attribute, on clamped uniform knots, interpolates\nevery voxel at the Greville abscissae xi_i = (t_{i+1}+...+t_{i+p})/p (cubic: 0, h/3, h, 2h, ...,\n1-h/3, 1 with h = 1/(n-3)), and the geometry is a spline on the same knots taking\n(xi_i, xi_j, xi_k) to the centre of voxel (i,j,k). With fewer control points on some axis the\ngeometry is the trilinear box, voxel (i,j,k) at parameters (i,j,k)/(dims-1), and the attribute\nis the least-squares fit over the voxel centres on knots averaged from uniform control-point\nparameters (The NURBS Book, eq. 9.8): well conditioned for every count up to the samples."
     )]
     Fit(FitArgs),
     /// Print the point, its partial derivatives and every attribute at parameters (u, v, w).

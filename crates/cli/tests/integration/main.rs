@@ -4,6 +4,7 @@
 mod common;
 
 mod cli;
+mod nurbs_fit;
 mod out_of_core_progress;
 mod pictures;
 mod project;
