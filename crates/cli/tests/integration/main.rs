@@ -5,6 +5,7 @@ mod common;
 
 mod cli;
 mod out_of_core_progress;
+mod output_extensions;
 mod pictures;
 mod project;
 mod realdata;
