@@ -85,7 +85,8 @@ impl OutputKind {
     pub fn for_output(path: &Path) -> Result<Self, FrepError> {
         let kind = Self::of(path);
         let fits = match kind {
-            Self::Mesh | Self::Picture => true,
+            Self::Mesh => volmorph_mesh::format::check_output(path).is_ok(),
+            Self::Picture => true,
             Self::Volume => volmorph_volume_io::check_output(path).is_ok(),
         };
         if fits {

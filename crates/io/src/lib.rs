@@ -141,7 +141,7 @@ impl IoError {
     #[must_use]
     pub fn path(&self) -> Option<&str> {
         match self {
-            Self::Os { path, .. } | Self::Extension { path, .. } => Some(path),
+            Self::Os { path, .. } | Self::Extension { path, .. } => Some(path.as_str()),
             _ => None,
         }
     }

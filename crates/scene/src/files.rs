@@ -166,8 +166,8 @@ pub fn export_extensions() -> Vec<&'static str> {
         volmorph_ffd::step::EXTENSIONS,
         FREP_EXTENSIONS,
     ] {
-        for e in list {
-            if !all.contains(e) {
+        for &e in list {
+            if !all.contains(&e) {
                 all.push(e);
             }
         }
