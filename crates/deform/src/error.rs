@@ -153,9 +153,7 @@ impl DeformError {
     pub fn at(self, path: &std::path::Path) -> Self {
         match self {
             e @ Self::File { .. } => e,
-            Self::Io(e) if e.path().is_some_and(|p| std::path::Path::new(p) == path) => {
-                Self::Io(e)
-            }
+            Self::Io(e) if e.path().is_some_and(|p| std::path::Path::new(p) == path) => Self::Io(e),
             e => Self::File {
                 path: path.display().to_string(),
                 error: Box::new(e),

@@ -180,7 +180,10 @@ mod tests {
         assert_eq!(matching(Path::new("ct.xnii.gz"), &vol), Some("gz"));
         assert_eq!(matching(Path::new("ct.xnii.gz"), &["nii.gz"]), None);
         assert_eq!(found(Path::new("mesh.PLY.gz")).as_deref(), Some(".ply.gz"));
-        assert_eq!(found(Path::new("cells.ome.zarr")).as_deref(), Some(".ome.zarr"));
+        assert_eq!(
+            found(Path::new("cells.ome.zarr")).as_deref(),
+            Some(".ome.zarr")
+        );
         assert_eq!(found(Path::new("a.b.jpg")).as_deref(), Some(".jpg"));
     }
 
@@ -200,12 +203,16 @@ mod tests {
 
     #[test]
     fn message_names_file_found_and_accepted() {
-        let e = OutputFormat::Step.check(Path::new("out/part.STL")).unwrap_err();
+        let e = OutputFormat::Step
+            .check(Path::new("out/part.STL"))
+            .unwrap_err();
         assert_eq!(
             e.to_string(),
             "out/part.STL: the extension .stl is not written here; use .step or .stp"
         );
-        let e = OutputFormat::Animation.check(Path::new("spin.mp4")).unwrap_err();
+        let e = OutputFormat::Animation
+            .check(Path::new("spin.mp4"))
+            .unwrap_err();
         assert!(e.to_string().ends_with("use .png, .apng or .gif"), "{e}");
         assert_eq!(e.path(), Some("spin.mp4"));
         match e {

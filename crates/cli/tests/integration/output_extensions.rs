@@ -288,11 +288,7 @@ fn outputs_with_the_wrong_extension_are_written_silently() {
     for case in CASES {
         let dir = tempfile::tempdir().unwrap();
         let d = dir.path().display().to_string();
-        let args: Vec<String> = case
-            .args
-            .split(' ')
-            .map(|a| a.replace("{d}", &d))
-            .collect();
+        let args: Vec<String> = case.args.split(' ').map(|a| a.replace("{d}", &d)).collect();
         let refs: Vec<&dyn AsRef<std::ffi::OsStr>> = args.iter().map(|a| a as _).collect();
         let out = volmorph(&refs);
         let err = String::from_utf8_lossy(&out.stderr).into_owned();
@@ -308,7 +304,10 @@ fn outputs_with_the_wrong_extension_are_written_silently() {
         };
         assert!(err.contains(&found), "the message says {found}: {what}");
         for accepted in case.accepted {
-            assert!(err.contains(accepted), "the message lists {accepted}: {what}");
+            assert!(
+                err.contains(accepted),
+                "the message lists {accepted}: {what}"
+            );
         }
         assert!(
             !err.contains("missing."),
@@ -318,7 +317,10 @@ fn outputs_with_the_wrong_extension_are_written_silently() {
             .unwrap()
             .map(|e| e.unwrap().file_name())
             .collect();
-        assert!(left.is_empty(), "nothing is written, found {left:?}: {what}");
+        assert!(
+            left.is_empty(),
+            "nothing is written, found {left:?}: {what}"
+        );
     }
 }
 
@@ -332,7 +334,10 @@ fn right_extensions_in_any_case_pass_the_check() {
         (vec!["slice", "missing.nii", "-o"], "x.PNG"),
         (vec!["nurbs", "fit", "missing.nii", "-o"], "x.Json"),
         (vec!["convert", "missing.nii"], "x.NII.GZ"),
-        (vec!["isosurface", "missing.nii", "--level", "1", "-o"], "x.Ply"),
+        (
+            vec!["isosurface", "missing.nii", "--level", "1", "-o"],
+            "x.Ply",
+        ),
         (vec!["project", "new", "missing.nii", "-o"], "x.VMPROJ"),
     ] {
         let mut all: Vec<String> = args

@@ -67,7 +67,10 @@ fn outputs_no_writer_takes_are_refused_before_sampling() {
         let e = OutputKind::for_output(std::path::Path::new(bad)).unwrap_err();
         let msg = e.to_string();
         assert!(msg.starts_with(bad), "{msg}");
-        assert!(msg.contains(".obj") && msg.contains(".png") && msg.contains(".nii.gz"), "{msg}");
+        assert!(
+            msg.contains(".obj") && msg.contains(".png") && msg.contains(".nii.gz"),
+            "{msg}"
+        );
     }
     assert_eq!(
         OutputKind::for_output(std::path::Path::new("a.NII.GZ")).unwrap(),
