@@ -441,7 +441,7 @@ mod tests {
             let msg = e.to_string();
             assert!(msg.contains(name) && msg.ends_with("use .png"), "{msg}");
             assert!(write_png_grey8(&p, 1, 1, &[0]).is_err());
-            assert!(write_apng(&p, &[img.clone()], 10).is_err());
+            assert!(write_apng(&p, std::slice::from_ref(&img), 10).is_err());
             assert!(!p.exists(), "{name} was created");
         }
         assert_eq!(std::fs::read_dir(dir.path()).unwrap().count(), 0);
