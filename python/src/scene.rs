@@ -145,7 +145,7 @@ impl PyScene {
         }
     }
 
-    /// Open a project file (`.volmorph.json` and its data folder).
+    /// Open a project file (`.vmproj` and its data folder).
     #[staticmethod]
     fn load(py: Python<'_>, path: PathBuf) -> PyResult<Self> {
         let s = py
@@ -156,7 +156,8 @@ impl PyScene {
         })
     }
 
-    /// Save the project file (and its data folder).
+    /// Save the project file (a `.vmproj` name, any case; another extension is refused
+    /// before anything is written) and its data folder.
     fn save(&self, py: Python<'_>, path: PathBuf) -> PyResult<()> {
         self.with(|s| {
             py.detach(|| s.save(&path))

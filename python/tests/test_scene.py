@@ -51,7 +51,7 @@ def test_drag_undo_redo_and_change_reports(tmp_path):
     s.redo()
     np.testing.assert_array_equal(s.volume(wid).array, after)
     # Save and load: the same objects and data.
-    path = tmp_path / "p.volmorph.json"
+    path = tmp_path / "p.vmproj"
     s.save(path)
     t = vm.Scene.load(path)
     assert [o[1:] for o in t.objects()] == [o[1:] for o in s.objects()]

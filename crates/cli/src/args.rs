@@ -100,16 +100,6 @@ pub fn view(s: &str, up: volmorph_render::UpAxis) -> anyhow::Result<volmorph_ren
     Ok(volmorph_render::Orbit::parse(s, up)?)
 }
 
-/// Refuse `path` as a folder of frames when its extension names a picture or video format
-/// that is not written (`.jpg`, `.mp4`, …); see [`volmorph_render::check_frames_folder`].
-///
-/// # Errors
-/// When the extension is one of those formats; the message names the path and the formats
-/// that are written.
-pub fn refuse_picture_extension(path: &std::path::Path) -> anyhow::Result<()> {
-    Ok(volmorph_render::check_frames_folder(path)?)
-}
-
 #[cfg(test)]
 mod tests {
     use super::*;

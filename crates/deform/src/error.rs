@@ -153,11 +153,7 @@ impl DeformError {
     pub fn at(self, path: &std::path::Path) -> Self {
         match self {
             e @ Self::File { .. } => e,
-            Self::Io(volmorph_io::IoError::Os { path: p, error })
-                if std::path::Path::new(&p) == path =>
-            {
-                Self::Io(volmorph_io::IoError::Os { path: p, error })
-            }
+            Self::Io(e) if e.path().is_some_and(|p| std::path::Path::new(p) == path) => Self::Io(e),
             e => Self::File {
                 path: path.display().to_string(),
                 error: Box::new(e),

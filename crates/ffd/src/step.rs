@@ -634,11 +634,26 @@ pub fn step_string(model: &TrimmedModel, name: &str) -> Result<(String, StepSumm
     Ok((text, summary))
 }
 
+/// The extensions of STEP files ([`write_step`]): `.step` and `.stp`, any case.
+pub const EXTENSIONS: &[&str] = volmorph_io::extension::OutputFormat::Step.extensions();
+
+/// Check that `path` ends in `.step` or `.stp` (any case) before any surface is computed.
+///
+/// # Errors
+/// [`FfdError::Io`] with [`volmorph_io::IoError::Extension`] naming the path, the extension
+/// found and [`EXTENSIONS`].
+pub fn check_output(path: &Path) -> Result<(), FfdError> {
+    Ok(volmorph_io::extension::check(path, EXTENSIONS)?)
+}
+
 /// Write `model` as a STEP file at `path` (atomically: temporary file, then rename).
 ///
 /// # Errors
-/// As [`step_string`], plus [`FfdError::Io`] / [`FfdError::Write`] for file errors.
+/// [`FfdError::Io`] with [`volmorph_io::IoError::Extension`] for a path not ending in `.step`
+/// or `.stp` ([`check_output`], nothing written); as [`step_string`], plus [`FfdError::Io`] /
+/// [`FfdError::Write`] for file errors.
 pub fn write_step(path: &Path, model: &TrimmedModel) -> Result<StepSummary, FfdError> {
+    check_output(path)?;
     let name = path
         .file_stem()
         .and_then(|s| s.to_str())

@@ -65,6 +65,36 @@ impl OutputKind {
             Self::Volume
         }
     }
+
+    /// The extensions an F-rep output file may have ([`OutputKind::for_output`]): the mesh
+    /// formats, `.png`, and the volume formats written.
+    #[must_use]
+    pub fn extensions() -> Vec<&'static str> {
+        let mut all: Vec<&'static str> = volmorph_mesh::format::WRITE_EXTENSIONS.to_vec();
+        all.extend_from_slice(volmorph_render::PNG_EXTENSIONS);
+        all.extend_from_slice(volmorph_volume_io::WRITE_EXTENSIONS);
+        all
+    }
+
+    /// The kind of output file `path` names, checked before anything is sampled or written:
+    /// a mesh format's extension, `.png`, or a volume format volmorph writes.
+    ///
+    /// # Errors
+    /// [`FrepError::Io`] with [`volmorph_io::IoError::Extension`] naming the path, the
+    /// extension found and [`OutputKind::extensions`].
+    pub fn for_output(path: &Path) -> Result<Self, FrepError> {
+        let kind = Self::of(path);
+        let fits = match kind {
+            Self::Mesh => volmorph_mesh::format::check_output(path).is_ok(),
+            Self::Picture => true,
+            Self::Volume => volmorph_volume_io::check_output(path).is_ok(),
+        };
+        if fits {
+            Ok(kind)
+        } else {
+            Err(volmorph_io::extension::refused(path, &Self::extensions()).into())
+        }
+    }
 }
 
 /// How [`export_with`] samples, meshes and pictures a field.
@@ -210,14 +240,16 @@ impl fmt::Display for VolumeSummary {
 /// Returns the volume's summary (the volume is moved into the writer, not copied).
 ///
 /// # Errors
-/// Errors of [`sample_with`] (including [`FrepError::Cancelled`]) and of the volume writer
-/// (an unknown extension, the file system), naming `path`.
+/// [`FrepError::Volume`] with [`volmorph_io::IoError::Extension`] for an extension no volume
+/// writer takes, before anything is sampled; errors of [`sample_with`] (including
+/// [`FrepError::Cancelled`]) and of the volume writer (the file system), naming `path`.
 pub fn write_volume_with(
     field: &dyn Field,
     g: &Geometry,
     path: &Path,
     progress: &dyn Progress,
 ) -> Result<VolumeSummary, FrepError> {
+    volmorph_volume_io::check_output(path)?;
     let t0 = Instant::now();
     let vol = sample_with(field, g, progress)?;
     let summary = VolumeSummary::of(&vol, t0.elapsed());
@@ -232,8 +264,9 @@ pub fn write_volume_with(
 /// summary.
 ///
 /// # Errors
-/// Errors of [`mesh_with`] (including [`FrepError::Cancelled`]) and of the mesh writer,
-/// naming `path`.
+/// [`FrepError::Mesh`] with [`volmorph_io::IoError::Extension`] for an extension no mesh
+/// writer takes, before anything is sampled; errors of [`mesh_with`] (including
+/// [`FrepError::Cancelled`]) and of the mesh writer, naming `path`.
 pub fn write_mesh_with(
     field: &dyn Field,
     g: &Geometry,
@@ -242,6 +275,7 @@ pub fn write_mesh_with(
     ascii: bool,
     progress: &dyn Progress,
 ) -> Result<SurfaceSummary, FrepError> {
+    volmorph_mesh::format::check_output(path)?;
     let surface = mesh_with(field, g, options, progress)?;
     progress.start(&format!("writing {}", path.display()), 0);
     progress.check()?;
@@ -257,8 +291,9 @@ pub fn write_mesh_with(
 /// `progress`. Returns the picture and its summary.
 ///
 /// # Errors
-/// Errors of [`render_with`] (including [`FrepError::Cancelled`]) and of the PNG writer,
-/// naming `path`.
+/// [`FrepError::Render`] with [`volmorph_io::IoError::Extension`] for a path not ending in
+/// `.png`, before anything is rendered; errors of [`render_with`] (including
+/// [`FrepError::Cancelled`]) and of the PNG writer, naming `path`.
 pub fn write_picture_with(
     field: &dyn Field,
     camera: &Camera,
@@ -266,6 +301,7 @@ pub fn write_picture_with(
     path: &Path,
     progress: &dyn Progress,
 ) -> Result<(RgbaImage, PictureSummary), FrepError> {
+    volmorph_render::check_png(path)?;
     let t0 = Instant::now();
     let img = render_with(field, camera, options, progress)?;
     let summary = PictureSummary::of(&img, options, t0.elapsed());
@@ -281,6 +317,8 @@ pub fn write_picture_with(
 /// meshed or written as a volume. Reports to `progress`.
 ///
 /// # Errors
+/// [`FrepError::Io`] with [`volmorph_io::IoError::Extension`] for an extension that names no
+/// output kind ([`OutputKind::for_output`]), before anything is computed;
 /// [`FrepError::InvalidArgument`] for a grid outside `2..=`[`MAX_GRID`] or an empty box;
 /// errors of [`write_picture_with`], [`write_mesh_with`] and [`write_volume_with`].
 pub fn export_with(
@@ -290,7 +328,7 @@ pub fn export_with(
     progress: &dyn Progress,
 ) -> Result<Written, FrepError> {
     let (lo, hi) = options.bounds;
-    match OutputKind::of(path) {
+    match OutputKind::for_output(path)? {
         OutputKind::Picture => {
             let render = RenderOptions {
                 bounds_min: lo,
@@ -373,7 +411,8 @@ impl fmt::Display for Frames {
 ///
 /// # Errors
 /// [`FrepError::InvalidArgument`] for `frames` outside `1..=`[`MAX_FRAMES`]; a refused
-/// folder name or a folder that cannot be created, naming `path`; errors of
+/// folder name ([`volmorph_render::check_animation_output`], checked before any frame is
+/// rendered) or a folder that cannot be created, naming `path`; errors of
 /// [`render_frames_with`], [`render_animation_with`] and the animation writer (including
 /// [`FrepError::Cancelled`]).
 pub fn write_frames_with(
@@ -390,6 +429,7 @@ pub fn write_frames_with(
             "{frames} frames: an animation has 1 to {MAX_FRAMES}"
         )));
     }
+    volmorph_render::check_animation_output(path)?;
     if let Some(format) = AnimationFormat::from_path(path) {
         let images = render_frames_with(frames, field_at, camera, options, progress)?;
         progress.start(&format!("writing {}", path.display()), 0);

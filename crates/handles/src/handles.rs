@@ -364,11 +364,17 @@ impl HandleSet {
         }
     }
 
+    /// The extension of handle JSON files ([`HandleSet::write_json`]): `.json`.
+    pub const JSON_EXTENSIONS: &'static [&'static str] =
+        volmorph_io::extension::OutputFormat::Json.extensions();
+
     /// Write the JSON form atomically.
     ///
     /// # Errors
-    /// [`DeformError::Io`] if the file cannot be written.
+    /// [`DeformError::Io`] with [`volmorph_io::IoError::Extension`] for a path not ending in
+    /// `.json` (nothing written); [`DeformError::Io`] if the file cannot be written.
     pub fn write_json(&self, path: &Path) -> Result<(), DeformError> {
+        volmorph_io::extension::check(path, Self::JSON_EXTENSIONS)?;
         let text = self.to_json();
         volmorph_io::write_atomic(path, |w| {
             use std::io::Write;
@@ -430,15 +436,31 @@ fn read_point_list_inner(path: &Path) -> Result<Vec<DVec3>, DeformError> {
     }
 }
 
+/// The extensions [`write_point_list`] writes (without the dot): Slicer `.fcsv`, `.csv` and
+/// the text forms `.txt`, `.xyz`, `.pts`.
+pub const POINT_LIST_EXTENSIONS: &[&str] = &["fcsv", "csv", "txt", "xyz", "pts"];
+
+/// Check that `path` ends in one of [`POINT_LIST_EXTENSIONS`] (any case) before the points
+/// are computed.
+///
+/// # Errors
+/// [`DeformError::Io`] with [`volmorph_io::IoError::Extension`] naming the path, the
+/// extension found and [`POINT_LIST_EXTENSIONS`].
+pub fn check_point_list_output(path: &Path) -> Result<(), DeformError> {
+    Ok(volmorph_io::extension::check(path, POINT_LIST_EXTENSIONS)?)
+}
+
 /// Write a point list, the format following the extension: `.fcsv` (3D Slicer markups, with
 /// `# CoordinateSystem = LPS`, so the points are stored as given), `.csv` (`x,y,z` per line) or
 /// `.txt`/`.xyz`/`.pts` (`x y z` per line). Numbers are written with every digit needed to
 /// read the same `f64` back. Written atomically.
 ///
 /// # Errors
-/// [`DeformError::Unsupported`] for another extension, [`DeformError::NonFinite`] for a NaN
-/// or infinite point, [`DeformError::Io`] if writing fails.
+/// [`DeformError::Io`] with [`volmorph_io::IoError::Extension`] for another extension
+/// ([`check_point_list_output`], nothing written), [`DeformError::NonFinite`] for a NaN or
+/// infinite point, [`DeformError::Io`] if writing fails.
 pub fn write_point_list(path: &Path, points: &[DVec3]) -> Result<(), DeformError> {
+    check_point_list_output(path)?;
     volmorph_deform::map::check_finite("point", points)?;
     let f = |v: f64| volmorph_io::fmt_f64(v);
     let mut text = String::with_capacity(points.len() * 64 + 128);

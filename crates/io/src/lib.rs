@@ -10,6 +10,8 @@
 //! * [`read_maybe_gz`] / [`is_gzip`] — transparent gzip detection by magic number.
 //! * [`ByteReader`] — a bounds-checked cursor over an in-memory byte buffer for binary
 //!   headers; every read returns a [`Truncated`] error instead of panicking.
+//! * [`extension`] — the check of an output path's extension every writer runs before
+//!   writing anything ([`extension::check`], [`IoError::Extension`]).
 //! * [`checked_len`] — size arithmetic for "dims × element size" that refuses overflow and
 //!   absurd sizes *before* anything is allocated.
 //!
@@ -18,6 +20,7 @@
 
 pub mod atomic;
 pub mod budget;
+pub mod extension;
 pub mod progress;
 
 use std::io::{self, Read};
@@ -87,6 +90,28 @@ pub enum IoError {
         /// Where it resolves to (after symbolic links).
         resolved: String,
     },
+    /// An output path does not end in an extension the writer writes ([`extension::check`]);
+    /// nothing was written.
+    ///
+    /// Displays as `path: the extension .jpg is not written here; use .png` (or `path: no
+    /// extension; use …`).
+    #[error("{path}: {}; use {}", found_text(found), extension::list(expected))]
+    Extension {
+        /// The output path as given.
+        path: String,
+        /// The extension it has, with its dot (`.jpg`, `.ply.gz`), or `None`.
+        found: Option<String>,
+        /// The extensions accepted, without the dot, lower case.
+        expected: Vec<String>,
+    },
+}
+
+/// The found part of an [`IoError::Extension`] message.
+fn found_text(found: &Option<String>) -> String {
+    match found {
+        Some(f) => format!("the extension {f} is not written here"),
+        None => "no extension".into(),
+    }
 }
 
 /// The input ended before `needed` bytes could be read at `offset`.
@@ -108,6 +133,16 @@ impl IoError {
         Self::Os {
             path: path.display().to_string(),
             error,
+        }
+    }
+
+    /// The path the error names itself ([`IoError::Os`], [`IoError::Extension`]), so that
+    /// callers attaching a path do not repeat it.
+    #[must_use]
+    pub fn path(&self) -> Option<&str> {
+        match self {
+            Self::Os { path, .. } | Self::Extension { path, .. } => Some(path.as_str()),
+            _ => None,
         }
     }
 }

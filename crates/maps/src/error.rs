@@ -43,7 +43,7 @@ impl MapError {
     #[must_use]
     pub fn at(self, path: &std::path::Path) -> Self {
         match self {
-            e @ MapError::File { .. } => e,
+            e @ (MapError::File { .. } | MapError::Io(volmorph_io::IoError::Extension { .. })) => e,
             e => MapError::File {
                 path: path.display().to_string(),
                 source: Box::new(e),

@@ -17,6 +17,35 @@ use crate::{AnyMap, MapError, elastix, itk, itk_mat};
 /// the file's size before reading it.
 pub const MAX_MAP_FILE_BYTES: u64 = 1 << 30;
 
+/// The extensions [`write_map`] writes (without the dot): map JSON, ITK text transforms,
+/// plastimatch, ITK/ANTs MATLAB and displacement fields ([`MapFormat::of`]).
+pub const WRITE_EXTENSIONS: &[&str] = &[
+    "json", "tfm", "txt", "bxf", "mat", "nii", "nii.gz", "mha", "mhd",
+];
+
+/// The extensions of displacement fields [`write_field`] writes (without the dot).
+pub const FIELD_EXTENSIONS: &[&str] = &["nii", "nii.gz", "mha", "mhd"];
+
+/// Check that `path` ends in an extension [`write_map`] writes ([`WRITE_EXTENSIONS`]),
+/// before anything is read or written.
+///
+/// # Errors
+/// [`MapError::Io`] with [`volmorph_io::IoError::Extension`] naming the path, the extension
+/// found and the accepted ones.
+pub fn check_output(path: &Path) -> Result<(), MapError> {
+    Ok(volmorph_io::extension::check(path, WRITE_EXTENSIONS)?)
+}
+
+/// Check that `path` ends in an extension [`write_field`] writes ([`FIELD_EXTENSIONS`]),
+/// before anything is read or sampled.
+///
+/// # Errors
+/// [`MapError::Io`] with [`volmorph_io::IoError::Extension`] naming the path, the extension
+/// found and [`FIELD_EXTENSIONS`].
+pub fn check_field_output(path: &Path) -> Result<(), MapError> {
+    Ok(volmorph_io::extension::check(path, FIELD_EXTENSIONS)?)
+}
+
 /// A map file format, chosen by extension.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 pub enum MapFormat {
@@ -150,7 +179,8 @@ pub const MAX_MAT_FILE_BYTES: u64 = 1 << 20;
 /// `.mha`, `.mhd`) of `precision`; returns the field written.
 ///
 /// # Errors
-/// [`MapError::Unsupported`] for another extension; the sampling errors of
+/// [`MapError::Io`] with [`volmorph_io::IoError::Extension`] for another extension
+/// ([`check_field_output`], nothing sampled or written); the sampling errors of
 /// [`DisplacementField::from_map`]; I/O errors; every error names `path`.
 pub fn write_field(
     path: &Path,
@@ -159,7 +189,7 @@ pub fn write_field(
     precision: volmorph_volume_io::vector::VectorPrecision,
 ) -> Result<DisplacementField, MapError> {
     // The extension's error names `path` itself.
-    volmorph_volume_io::vector::vector_format(path).map_err(volume_error)?;
+    check_field_output(path)?;
     let write = || -> Result<DisplacementField, MapError> {
         let field = DisplacementField::from_map(map, grid)?;
         write_field_image(path, &field, precision)?;
@@ -221,6 +251,7 @@ pub fn map_to_string(map: &AnyMap, format: MapFormat) -> Result<String, MapError
 /// # Errors
 /// As [`map_to_string`], and I/O errors, as [`MapError::File`] naming `path`.
 pub fn write_map(path: &Path, map: &AnyMap) -> Result<(), MapError> {
+    check_output(path)?;
     let write = || -> Result<(), MapError> {
         let format = MapFormat::of(path)?;
         match (format, map) {

@@ -469,12 +469,15 @@ fn volume_ext(path: &Path) -> String {
 /// scalar images only, so this one vector writer lives here.
 ///
 /// # Errors
-/// [`RegisterError::Map`] if the map fails on the grid, [`RegisterError::Io`] if writing fails.
+/// [`RegisterError::Io`] with [`volmorph_io::IoError::Extension`] for a path not ending in
+/// `.mha` (the one file this writer makes; nothing written); [`RegisterError::Map`] if the
+/// map fails on the grid, [`RegisterError::Io`] if writing fails.
 pub fn write_displacement_field(
     path: &Path,
     map: &dyn SpaceMap,
     grid: &Geometry,
 ) -> Result<(), RegisterError> {
+    volmorph_io::extension::check(path, &["mha"])?;
     let len = volmorph_io::checked_len(&grid.dims, 24)?;
     let mut phi = vec![DVec3::ZERO; len];
     map.apply_grid(grid, &mut phi)?;

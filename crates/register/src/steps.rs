@@ -88,10 +88,16 @@ pub fn select_files(
     select_files_with(fixed, mask, out, o, &volmorph_io::NoProgress)
 }
 
+/// The extensions of the handle point lists `select` writes (`x y z` text): `.txt`, `.xyz`,
+/// `.pts`.
+pub const SELECT_EXTENSIONS: &[&str] = &["txt", "xyz", "pts"];
+
 /// `select`: handles of `fixed` (within `mask`) written as a point list; returns the count.
+/// `out` must end in one of [`SELECT_EXTENSIONS`], checked before anything is read.
 ///
 /// # Errors
-/// Reading, selection and writing errors, naming the file; [`RegisterError::Cancelled`].
+/// [`RegisterError::Io`] with [`volmorph_io::IoError::Extension`] for another extension;
+/// reading, selection and writing errors, naming the file; [`RegisterError::Cancelled`].
 pub fn select_files_with(
     fixed: &Path,
     mask: Option<&Path>,
@@ -99,6 +105,7 @@ pub fn select_files_with(
     o: &SelectOptions,
     progress: &dyn Progress,
 ) -> Result<usize, RegisterError> {
+    volmorph_io::extension::check(out, SELECT_EXTENSIONS)?;
     stage(progress, format!("reading {}", fixed.display()))?;
     let f = read_scan(fixed)?;
     let m = mask.map(read_mask).transpose()?;
@@ -164,10 +171,12 @@ pub fn match_files(
 }
 
 /// `match`: correspondences of the handles in `handles` (point list) written as
-/// `correspondences.json`-style JSON to `out`.
+/// `correspondences.json`-style JSON to `out`, which must end in `.json` (checked before
+/// anything is read).
 ///
 /// # Errors
-/// Reading, matching and writing errors, naming the file; [`RegisterError::Cancelled`].
+/// [`RegisterError::Io`] with [`volmorph_io::IoError::Extension`] for another extension;
+/// reading, matching and writing errors, naming the file; [`RegisterError::Cancelled`].
 pub fn match_files_with(
     fixed: &Path,
     moving: &Path,
@@ -176,6 +185,7 @@ pub fn match_files_with(
     o: &MatchOptions,
     progress: &dyn Progress,
 ) -> Result<MatchSummary, RegisterError> {
+    volmorph_io::extension::OutputFormat::Json.check(out)?;
     stage(progress, "reading the scans")?;
     let f = read_scan(fixed)?;
     let m = read_scan(moving)?;
@@ -447,10 +457,13 @@ pub fn segment_lungs_files(
 
 /// `segment-lungs`: the lung mask of `ct` (labels 1 right, 2 left) to `out`; with a lobe script,
 /// the enhanced lobe-boundary image and the lobe labels next to it (`<out stem>_enhanced`,
-/// `<out stem>_lobes`), and Dice against `reference` lobe labels if given.
+/// `<out stem>_lobes`), and Dice against `reference` lobe labels if given. `out` must name a
+/// volume format volmorph writes ([`volmorph_volume_io::check_output`], checked before
+/// anything is read).
 ///
 /// # Errors
-/// Reading, segmentation and writing errors, naming the file; [`RegisterError::Cancelled`].
+/// [`RegisterError::Volume`] with [`volmorph_io::IoError::Extension`] for another extension;
+/// reading, segmentation and writing errors, naming the file; [`RegisterError::Cancelled`].
 pub fn segment_lungs_files_with(
     ct: &Path,
     out: &Path,
@@ -459,6 +472,7 @@ pub fn segment_lungs_files_with(
     o: &LungOptions,
     progress: &dyn Progress,
 ) -> Result<LungReport, RegisterError> {
+    volmorph_volume_io::check_output(out)?;
     stage(progress, format!("reading {}", ct.display()))?;
     let v = read_scan(ct)?;
     let seg = segment_lungs_with(&v, o, progress)?;

@@ -49,17 +49,31 @@ pub enum AnimationFormat {
     Gif,
 }
 
+/// The extensions of single-file animations ([`write_animation`]): `.png`, `.apng` (animated
+/// PNG) and `.gif`.
+pub const ANIMATION_EXTENSIONS: &[&str] =
+    volmorph_io::extension::OutputFormat::Animation.extensions();
+
 impl AnimationFormat {
-    /// The format named by `path`'s extension (case-insensitive), or `None` when it names
-    /// none of them (callers write a folder of frames then).
+    /// The format named by `path`'s extension (case-insensitive, one of
+    /// [`ANIMATION_EXTENSIONS`]), or `None` when it names none of them (callers write a folder
+    /// of frames then).
     #[must_use]
     pub fn from_path(path: &Path) -> Option<Self> {
-        let ext = path.extension()?.to_str()?.to_ascii_lowercase();
-        match ext.as_str() {
-            "png" | "apng" => Some(Self::Apng),
+        match volmorph_io::extension::matching(path, ANIMATION_EXTENSIONS)? {
             "gif" => Some(Self::Gif),
-            _ => None,
+            _ => Some(Self::Apng),
         }
+    }
+
+    /// The format of an animation output file, checked before any frame is rendered.
+    ///
+    /// # Errors
+    /// [`RenderError::Io`] with [`volmorph_io::IoError::Extension`] naming the path, the
+    /// extension found and [`ANIMATION_EXTENSIONS`].
+    pub fn for_output(path: &Path) -> Result<Self, RenderError> {
+        Self::from_path(path)
+            .ok_or_else(|| volmorph_io::extension::refused(path, ANIMATION_EXTENSIONS).into())
     }
 
     /// What the format is called in messages: "animated PNG" or "animated GIF".
@@ -85,22 +99,25 @@ pub const UNWRITABLE_ANIMATION_EXTENSIONS: [&str; 11] = [
 /// [`AnimationFormat::from_path`] knows are written as files and never reach this check.
 ///
 /// # Errors
-/// [`RenderError::InvalidArgument`] naming the path and the formats that are written.
+/// [`RenderError::Io`] with [`volmorph_io::IoError::Extension`] naming the path, the
+/// extension found and [`ANIMATION_EXTENSIONS`] (or a folder).
 pub fn check_frames_folder(path: &Path) -> Result<(), RenderError> {
-    let ext = path
-        .extension()
-        .and_then(|e| e.to_str())
-        .map(str::to_ascii_lowercase);
-    if let Some(ext) = ext
-        && UNWRITABLE_ANIMATION_EXTENSIONS.contains(&ext.as_str())
-    {
-        return Err(RenderError::invalid(format!(
-            "{}: .{ext} animations are not written; use .png or .apng (animated PNG), .gif, or a \
-             folder for numbered frames",
-            path.display()
-        )));
+    if volmorph_io::extension::matching(path, &UNWRITABLE_ANIMATION_EXTENSIONS).is_some() {
+        return Err(volmorph_io::extension::refused(path, ANIMATION_EXTENSIONS).into());
     }
     Ok(())
+}
+
+/// Check an animation output before any frame is rendered: a file whose extension is one of
+/// [`ANIMATION_EXTENSIONS`], or a folder for numbered frames ([`check_frames_folder`]).
+///
+/// # Errors
+/// As [`check_frames_folder`].
+pub fn check_animation_output(path: &Path) -> Result<(), RenderError> {
+    match AnimationFormat::from_path(path) {
+        Some(_) => Ok(()),
+        None => check_frames_folder(path),
+    }
 }
 
 /// Write `frames` (all the same size) as one animation file at `path` in the format its
@@ -108,20 +125,17 @@ pub fn check_frames_folder(path: &Path) -> Result<(), RenderError> {
 /// `delay_ms` milliseconds (a GIF rounds it to 1/100 s, at least 1/100 s).
 ///
 /// # Errors
-/// [`RenderError::InvalidArgument`] for an extension that is not `.png`, `.apng` or `.gif`,
-/// and as [`write_apng`] or [`write_gif`]. Errors name `path`; on error no file is left there.
+/// [`RenderError::Io`] with [`volmorph_io::IoError::Extension`] for an extension that is not
+/// `.png`, `.apng` or `.gif` ([`AnimationFormat::for_output`]), and as [`write_apng`] or
+/// [`write_gif`]. Errors name `path`; on error no file is left there.
 pub fn write_animation(
     path: &Path,
     frames: &[RgbaImage],
     delay_ms: u32,
 ) -> Result<(), RenderError> {
-    match AnimationFormat::from_path(path) {
-        Some(AnimationFormat::Apng) => write_apng(path, frames, delay_ms),
-        Some(AnimationFormat::Gif) => write_gif(path, frames, delay_ms),
-        None => Err(RenderError::invalid(
-            "an animation file must end in .png, .apng or .gif".to_string(),
-        )
-        .at(path)),
+    match AnimationFormat::for_output(path)? {
+        AnimationFormat::Apng => write_apng(path, frames, delay_ms),
+        AnimationFormat::Gif => write_gif(path, frames, delay_ms),
     }
 }
 
@@ -219,11 +233,14 @@ fn quantise(frames: &[Vec<[u8; 3]>]) -> (Vec<u8>, Vec<Vec<u8>>) {
 /// (at least 1/100 s), with one global palette (see the [module documentation](self)).
 ///
 /// # Errors
-/// [`RenderError::InvalidArgument`] for no frames, more than [`MAX_APNG_FRAMES`], frames of
-/// different sizes or larger than 65535 pixels a side, or a delay outside 1‥=65535 ms;
+/// [`RenderError::Io`] with [`volmorph_io::IoError::Extension`] for a path not ending in
+/// `.gif`; [`RenderError::InvalidArgument`] for no frames, more than [`MAX_APNG_FRAMES`],
+/// frames of different sizes or larger than 65535 pixels a side, or a delay outside
+/// 1‥=65535 ms;
 /// [`RenderError::GifEncode`] or [`RenderError::Io`] when encoding or writing fails. Errors
 /// name `path`; on error no file is left there.
 pub fn write_gif(path: &Path, frames: &[RgbaImage], delay_ms: u32) -> Result<(), RenderError> {
+    volmorph_io::extension::check(path, &["gif"])?;
     let check = || -> Result<(u16, u16), RenderError> {
         let (w, h) = check_frames(frames, delay_ms)?;
         match (u16::try_from(w), u16::try_from(h)) {
@@ -339,6 +356,12 @@ mod tests {
         let bad = dir.path().join("m.mp4");
         let e = write_animation(&bad, &f, 50).unwrap_err().to_string();
         assert!(e.contains("m.mp4") && e.contains(".gif"), "{e}");
+        assert!(!bad.exists());
+        // A GIF writer takes only .gif; a folder of frames no picture extension.
+        assert!(write_gif(&dir.path().join("m.png"), &f, 50).is_err());
+        assert!(check_frames_folder(&dir.path().join("frames.JPG")).is_err());
+        assert!(check_animation_output(&dir.path().join("frames")).is_ok());
+        assert!(check_animation_output(&dir.path().join("m.Gif")).is_ok());
         let p = dir.path().join("c.gif");
         assert!(write_gif(&p, &[], 50).is_err());
         assert!(write_gif(&p, &f, 0).is_err());

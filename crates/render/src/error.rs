@@ -68,7 +68,8 @@ impl RenderError {
     #[must_use]
     pub fn at(self, path: &std::path::Path) -> Self {
         match self {
-            e @ (Self::File { .. } | Self::Io(IoError::Os { .. })) => e,
+            e @ Self::File { .. } => e,
+            Self::Io(e) if e.path().is_some() => Self::Io(e),
             e => Self::File {
                 path: path.display().to_string(),
                 error: Box::new(e),

@@ -52,8 +52,8 @@ pub mod view;
 mod window;
 
 pub use animation::{
-    AnimationFormat, UNWRITABLE_ANIMATION_EXTENSIONS, check_frames_folder, write_animation,
-    write_gif,
+    ANIMATION_EXTENSIONS, AnimationFormat, UNWRITABLE_ANIMATION_EXTENSIONS, check_animation_output,
+    check_frames_folder, write_animation, write_gif,
 };
 pub use annotate::OrientationLabels;
 pub use camera::{BOX_FILL, Camera, FIT_MARGIN, Framing, Projection};
@@ -71,8 +71,8 @@ pub use picture::{
     CameraKind, ComparePictures, PictureMode, PictureSpec, TransferChoice, VolumePictures,
 };
 pub use png_file::{
-    MAX_APNG_FRAMES, decode_png, encode_png_rgba, read_png, write_apng, write_png_grey8,
-    write_png_grey16, write_png_rgb, write_png_rgba,
+    MAX_APNG_FRAMES, PNG_EXTENSIONS, check_png, decode_png, encode_png_rgba, read_png, write_apng,
+    write_png_grey8, write_png_grey16, write_png_rgb, write_png_rgba,
 };
 pub use quality::{QUALITY_UNITS_ACROSS, QualityOptions, render_quality};
 pub use raster::{

@@ -84,7 +84,9 @@ pub fn render_mesh(
 /// [`render_mesh`] with the default [`ShadeStyle`], written atomically as a PNG at `path`.
 ///
 /// # Errors
-/// As [`render_mesh`], and [`write_png_rgba`]'s; errors name `path`.
+/// [`RenderError::Io`] with [`volmorph_io::IoError::Extension`] for a path not ending in
+/// `.png` ([`crate::check_png`]), before anything is drawn; as [`render_mesh`], and
+/// [`write_png_rgba`]'s; errors name `path`.
 pub fn write_mesh_png(
     path: &Path,
     mesh: &Mesh,
@@ -92,6 +94,7 @@ pub fn write_mesh_png(
     colors: Option<&MeshColors>,
     camera: &Camera,
 ) -> Result<(), RenderError> {
+    crate::check_png(path)?;
     let img = render_mesh(camera, mesh, normals, colors, &ShadeStyle::default())
         .map_err(|e| e.at(path))?;
     write_png_rgba(path, &img).map_err(|e| e.at(path))

@@ -16,6 +16,19 @@ use volmorph_io::{IoError, write_atomic};
 use crate::error::RenderError;
 use crate::image::{RgbaImage, check_len, pixel_count};
 
+/// The extension of the PNG pictures written here (`.png`, any case): every writer of this
+/// module refuses another before writing anything ([`check_png`]).
+pub const PNG_EXTENSIONS: &[&str] = volmorph_io::extension::OutputFormat::Png.extensions();
+
+/// Check that `path` ends in `.png` (any case) before anything is rendered or written.
+///
+/// # Errors
+/// [`RenderError::Io`] with [`IoError::Extension`] naming the path, the extension found and
+/// `.png`.
+pub fn check_png(path: &Path) -> Result<(), RenderError> {
+    Ok(volmorph_io::extension::check(path, PNG_EXTENSIONS)?)
+}
+
 /// Encode one image into `w`. `data` holds the rows top to bottom, tightly packed.
 fn encode<W: Write>(
     w: W,
@@ -45,6 +58,7 @@ fn write_file(
     depth: BitDepth,
     data: &[u8],
 ) -> Result<(), RenderError> {
+    check_png(path)?;
     write_atomic(path, |w| encode(&mut *w, width, height, color, depth, data))
         .map_err(|e: RenderError| e.at(path))
 }
@@ -65,8 +79,9 @@ fn check_buffer(
 /// Write `img` as an 8-bit RGBA PNG (straight alpha, rows top to bottom).
 ///
 /// # Errors
-/// [`RenderError::PngEncode`] or [`RenderError::Io`] when encoding or writing fails; errors
-/// name `path`. On error no file is left at `path` (an existing file is untouched).
+/// [`RenderError::Io`] with [`IoError::Extension`] for a path not ending in `.png`
+/// ([`check_png`], nothing written); [`RenderError::PngEncode`] or [`RenderError::Io`] when
+/// encoding or writing fails; errors name `path`. On error no file is left at `path` (an existing file is untouched).
 pub fn write_png_rgba(path: &Path, img: &RgbaImage) -> Result<(), RenderError> {
     write_file(
         path,
@@ -82,8 +97,9 @@ pub fn write_png_rgba(path: &Path, img: &RgbaImage) -> Result<(), RenderError> {
 /// [`RgbaImage::to_rgb`] to flatten an RGBA picture onto a background first.
 ///
 /// # Errors
-/// [`RenderError::Size`] / [`RenderError::LengthMismatch`] when `rgb.len() != width × height`
-/// or the size is zero or oversized; [`RenderError::PngEncode`] or [`RenderError::Io`] when
+/// [`RenderError::Io`] with [`IoError::Extension`] for a path not ending in `.png`
+/// ([`check_png`]); [`RenderError::Size`] / [`RenderError::LengthMismatch`] when
+/// `rgb.len() != width × height` or the size is zero or oversized; [`RenderError::PngEncode`] or [`RenderError::Io`] when
 /// encoding or writing fails. Errors name `path`; on error no file is left at `path`.
 pub fn write_png_rgb(
     path: &Path,
@@ -171,11 +187,13 @@ pub const MAX_APNG_FRAMES: usize = 10_000;
 /// play it; others show the first frame.
 ///
 /// # Errors
+/// [`RenderError::Io`] with [`IoError::Extension`] for a path not ending in `.png` or `.apng`;
 /// [`RenderError::InvalidArgument`] for no frames, more than [`MAX_APNG_FRAMES`], frames of
 /// different sizes or a delay outside 1‥=65535 ms; [`RenderError::PngEncode`] or
 /// [`RenderError::Io`] when encoding or writing fails. Errors name `path`; on error no file
 /// is left there.
 pub fn write_apng(path: &Path, frames: &[RgbaImage], delay_ms: u32) -> Result<(), RenderError> {
+    volmorph_io::extension::check(path, &["png", "apng"])?;
     let check = || -> Result<(), RenderError> {
         let Some(first) = frames.first() else {
             return Err(RenderError::invalid(
@@ -405,6 +423,29 @@ mod tests {
         wr.write_image_data(data).unwrap();
         wr.finish().unwrap();
         out
+    }
+
+    /// Issue 15: `slice -o x.jpg` wrote PNG bytes. Every PNG writer refuses another
+    /// extension before writing, naming the file, what it found and `.png`.
+    #[test]
+    fn pictures_with_another_extension_are_refused_unwritten() {
+        let dir = tempfile::tempdir().unwrap();
+        let img = RgbaImage::new(2, 2, [9; 4]).unwrap();
+        for name in ["x.jpg", "x.tif", "x", "x.png.bak"] {
+            let p = dir.path().join(name);
+            let e = write_png_rgba(&p, &img).unwrap_err();
+            assert!(
+                matches!(e, RenderError::Io(IoError::Extension { .. })),
+                "{name}: {e}"
+            );
+            let msg = e.to_string();
+            assert!(msg.contains(name) && msg.ends_with("use .png"), "{msg}");
+            assert!(write_png_grey8(&p, 1, 1, &[0]).is_err());
+            assert!(write_apng(&p, std::slice::from_ref(&img), 10).is_err());
+            assert!(!p.exists(), "{name} was created");
+        }
+        assert_eq!(std::fs::read_dir(dir.path()).unwrap().count(), 0);
+        write_png_rgba(&dir.path().join("upper.PNG"), &img).unwrap();
     }
 
     #[test]

@@ -422,11 +422,18 @@ impl TransferFunction {
         read().map_err(|e| e.at(path))
     }
 
+    /// The extension of transfer-function files ([`TransferFunction::write`]): `.json`.
+    pub const EXTENSIONS: &'static [&'static str] =
+        volmorph_io::extension::OutputFormat::Json.extensions();
+
     /// Write the JSON file format, atomically.
     ///
     /// # Errors
-    /// [`RenderError::Io`] naming the path when it cannot be written.
+    /// [`RenderError::Io`] with [`volmorph_io::IoError::Extension`] for a path not ending in
+    /// `.json` (nothing written); [`RenderError::Io`] naming the path when it cannot be
+    /// written.
     pub fn write(&self, path: &Path) -> Result<(), RenderError> {
+        volmorph_io::extension::check(path, Self::EXTENSIONS)?;
         let text = self.to_json();
         volmorph_io::write_atomic(path, |w| {
             use std::io::Write;

@@ -144,12 +144,46 @@ pub fn frame_path(dir: &Path, n: usize, like: &Path) -> std::path::PathBuf {
     dir.join(format!("frame_{n:03}.{ext}"))
 }
 
-/// `true` for a `.step` / `.stp` path (any case): the accurate FFD's trimmed surfaces.
+/// `true` for a `.step` / `.stp` path (any case, [`volmorph_ffd::step::EXTENSIONS`]): the
+/// accurate FFD's trimmed surfaces.
 #[must_use]
 pub fn is_step(path: &Path) -> bool {
-    path.extension()
-        .and_then(|e| e.to_str())
-        .is_some_and(|e| e.eq_ignore_ascii_case("step") || e.eq_ignore_ascii_case("stp"))
+    volmorph_io::extension::matching(path, volmorph_ffd::step::EXTENSIONS).is_some()
+}
+
+/// The extension of F-rep model files [`Scene::export`] writes (HyperFun text).
+pub const FREP_EXTENSIONS: &[&str] = &["hf"];
+
+/// Every extension [`Scene::export`] writes some object as (volumes, meshes, maps and handle
+/// or NURBS JSON, STEP, HyperFun), without the dot; which one fits depends on the object.
+#[must_use]
+pub fn export_extensions() -> Vec<&'static str> {
+    let mut all: Vec<&'static str> = Vec::new();
+    for list in [
+        volmorph_volume_io::WRITE_EXTENSIONS,
+        &volmorph_mesh::format::WRITE_EXTENSIONS[..],
+        volmorph_maps::file::WRITE_EXTENSIONS,
+        volmorph_ffd::step::EXTENSIONS,
+        FREP_EXTENSIONS,
+    ] {
+        for &e in list {
+            if !all.contains(&e) {
+                all.push(e);
+            }
+        }
+    }
+    all
+}
+
+/// Check an export path before a project is read: its extension must be one
+/// [`Scene::export`] writes some object as ([`export_extensions`]); the object's own format is
+/// checked when it is written.
+///
+/// # Errors
+/// [`SceneError::Io`] with [`volmorph_io::IoError::Extension`] naming the path, the
+/// extension found and the accepted ones.
+pub fn check_export_path(path: &Path) -> Result<(), SceneError> {
+    Ok(volmorph_io::extension::check(path, &export_extensions())?)
 }
 
 fn read_any(path: &Path) -> Result<NewObject, SceneError> {
@@ -183,9 +217,11 @@ impl Scene {
     /// mesh gives a `MANIFOLD_SOLID_BREP`, an open one a shell-based surface model.
     ///
     /// # Errors
-    /// [`SceneError::NoObject`]; [`SceneError::Invalid`] for a derived object not computed or
-    /// a format that cannot hold the object (STEP for anything but a deformed mesh through a
-    /// B-spline lattice); the writer's errors.
+    /// [`SceneError::Io`] with [`volmorph_io::IoError::Extension`] for an extension no object
+    /// is written as ([`check_export_path`], checked first) or that the object's writer does
+    /// not write; [`SceneError::NoObject`]; [`SceneError::Invalid`] for a derived object not
+    /// computed or a format that cannot hold the object (STEP for anything but a deformed mesh
+    /// through a B-spline lattice); the writer's errors.
     pub fn export(&self, id: ObjectId, path: &Path) -> Result<(), SceneError> {
         self.export_with(id, path, &volmorph_io::NoProgress)
     }
@@ -203,6 +239,7 @@ impl Scene {
         path: &Path,
         progress: &dyn volmorph_io::Progress,
     ) -> Result<(), SceneError> {
+        check_export_path(path)?;
         progress.check()?;
         if is_step(path) {
             let model = self.accurate_ffd_with(id, progress)?;
@@ -290,7 +327,10 @@ impl Scene {
                 h.set().write_json(path)?;
             }
             Object::Map(m) => write_map(path, m.map())?,
-            Object::Frep(f) => write_text(path, f.source())?,
+            Object::Frep(f) => {
+                volmorph_io::extension::check(path, FREP_EXTENSIONS)?;
+                write_text(path, f.source())?;
+            }
             Object::Nurbs(a) => volmorph_trivariate::save(path, a)?,
             _ => {
                 return Err(SceneError::invalid(format!(

@@ -56,6 +56,16 @@ use crate::{Scene, SceneError};
 /// The extension of project files (`scene.vmproj`), without the dot.
 pub const PROJECT_EXTENSION: &str = "vmproj";
 
+/// Check that `path` ends in `.vmproj` ([`PROJECT_EXTENSION`], any case) before a project is
+/// built or saved there.
+///
+/// # Errors
+/// [`SceneError::Io`] with [`volmorph_io::IoError::Extension`] naming the path, the
+/// extension found and `.vmproj`.
+pub fn check_project_path(path: &Path) -> Result<(), SceneError> {
+    Ok(volmorph_io::extension::check(path, &[PROJECT_EXTENSION])?)
+}
+
 /// Value of the manifest's `format` field.
 pub const PROJECT_FORMAT: &str = "volmorph-scene";
 
@@ -245,7 +255,10 @@ impl Scene {
     /// place.
     ///
     /// # Errors
-    /// I/O errors naming the file; [`SceneError::Map`] if a map cannot be serialised.
+    /// [`SceneError::Io`] with [`volmorph_io::IoError::Extension`] when `path` does not end in
+    /// `.vmproj` ([`PROJECT_EXTENSION`], any case; checked before anything is written, see
+    /// [`check_project_path`]); I/O errors naming the file; [`SceneError::Map`] if a map
+    /// cannot be serialised.
     pub fn save(&self, path: &Path) -> Result<(), SceneError> {
         self.save_with(path, &volmorph_io::NoProgress)
     }
@@ -262,6 +275,7 @@ impl Scene {
         path: &Path,
         progress: &dyn volmorph_io::Progress,
     ) -> Result<(), SceneError> {
+        check_project_path(path)?;
         progress.check()?;
         let folder = data_folder(path);
         std::fs::create_dir_all(&folder).map_err(|e| volmorph_io::IoError::os(&folder, e))?;

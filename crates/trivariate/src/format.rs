@@ -253,11 +253,26 @@ impl AnyAggregate {
     }
 }
 
+/// The extension of trivariate model files ([`save`]): `.json`.
+pub const EXTENSIONS: &[&str] = volmorph_io::extension::OutputFormat::Json.extensions();
+
+/// Check that `path` ends in `.json` (any case) before a model is built or fitted for it.
+///
+/// # Errors
+/// [`TrivariateError::Io`] with [`volmorph_io::IoError::Extension`] naming the path, the
+/// extension found and `.json`.
+pub fn check_output(path: &Path) -> Result<(), TrivariateError> {
+    Ok(volmorph_io::extension::check(path, EXTENSIONS)?)
+}
+
 /// Write an aggregate as JSON through a temporary file renamed over `path`.
 ///
 /// # Errors
-/// [`TrivariateError::Io`] if the file cannot be written.
+/// [`TrivariateError::Io`] with [`volmorph_io::IoError::Extension`] for a path not ending in
+/// `.json` ([`check_output`], nothing written); [`TrivariateError::Io`] if the file cannot be
+/// written.
 pub fn save<const N: usize>(path: &Path, a: &Aggregate<N>) -> Result<(), TrivariateError> {
+    check_output(path)?;
     let text = to_json_string(a)?;
     volmorph_io::write_atomic(path, |w| {
         w.write_all(text.as_bytes())

@@ -158,6 +158,19 @@ pub enum Coloring {
 const RESERVED: [&str; 9] = ["x", "y", "z", "u", "v", "w", "red", "green", "blue"];
 
 impl ZeroSetMesh {
+    /// The extensions [`ZeroSetMesh::write`] writes: `.ply` and `.obj`, any case.
+    pub const EXTENSIONS: &'static [&'static str] = &["ply", "obj"];
+
+    /// Check that `path` ends in one of [`ZeroSetMesh::EXTENSIONS`] before the mesh is
+    /// computed.
+    ///
+    /// # Errors
+    /// [`TrivariateError::Io`] with [`volmorph_io::IoError::Extension`] naming the path, the
+    /// extension found and the accepted ones.
+    pub fn check_output(path: &std::path::Path) -> Result<(), TrivariateError> {
+        Ok(volmorph_io::extension::check(path, Self::EXTENSIONS)?)
+    }
+
     /// PLY property name of the attribute: its name with every byte that is not printable
     /// ASCII replaced by `_`, or `attribute` when that would clash with a standard property.
     fn property_name(&self) -> String {
@@ -188,7 +201,8 @@ impl ZeroSetMesh {
     /// range); it is used only when colouring.
     ///
     /// # Errors
-    /// [`TrivariateError::InvalidArgument`] for an extension other than `.ply`/`.obj`, for
+    /// [`TrivariateError::Io`] with [`volmorph_io::IoError::Extension`] for an extension other
+    /// than `.ply`/`.obj` (nothing written); [`TrivariateError::InvalidArgument`] for
     /// colouring without attribute values, or [`Coloring::PerPolygon`] with OBJ;
     /// [`TrivariateError::Io`] / [`TrivariateError::Mesh`] when writing fails.
     pub fn write(
@@ -197,16 +211,14 @@ impl ZeroSetMesh {
         coloring: Coloring,
         color: &dyn Fn(f64) -> [u8; 3],
     ) -> Result<(), TrivariateError> {
-        let ext = path
-            .extension()
-            .map(|e| e.to_string_lossy().to_ascii_lowercase())
-            .unwrap_or_default();
+        let ext = volmorph_io::extension::matching(path, Self::EXTENSIONS)
+            .ok_or_else(|| volmorph_io::extension::refused(path, Self::EXTENSIONS))?;
         if coloring != Coloring::None && self.values.is_empty() {
             return Err(TrivariateError::InvalidArgument(
                 "colouring needs attribute values; name an attribute".into(),
             ));
         }
-        match ext.as_str() {
+        match ext {
             "ply" => volmorph_io::write_atomic(path, |w| self.write_ply(w, coloring, color)),
             "obj" => {
                 let colors: Vec<[u8; 3]> = match coloring {
@@ -227,10 +239,7 @@ impl ZeroSetMesh {
                     Ok::<(), TrivariateError>(())
                 })
             }
-            _ => Err(TrivariateError::InvalidArgument(format!(
-                "{}: output must end in .ply or .obj",
-                path.display()
-            ))),
+            _ => unreachable!("matching returns one of EXTENSIONS"),
         }
     }
 

@@ -810,12 +810,18 @@ pub fn trace_optical_path(
     })
 }
 
+/// The extension of the polyline files [`write_paths_obj`] writes: `.obj`.
+pub const PATHS_EXTENSIONS: &[&str] = &["obj"];
+
 /// Write paths as a Wavefront OBJ file of polylines: all vertices (`v x y z`) followed by one
 /// `l i j k …` element per path (1-based indices). Written atomically.
 ///
 /// # Errors
-/// [`TrivariateError::Io`] when the file cannot be written.
+/// [`TrivariateError::Io`] with [`volmorph_io::IoError::Extension`] for a path not ending in
+/// `.obj` ([`PATHS_EXTENSIONS`], nothing written); [`TrivariateError::Io`] when the file
+/// cannot be written.
 pub fn write_paths_obj(path: &Path, paths: &[OpticalPath]) -> Result<(), TrivariateError> {
+    volmorph_io::extension::check(path, PATHS_EXTENSIONS)?;
     volmorph_io::write_atomic(path, |w| -> Result<(), TrivariateError> {
         use std::io::Write;
         let io = |e: std::io::Error| TrivariateError::Io(volmorph_io::IoError::os(path, e));

@@ -64,6 +64,44 @@ use std::path::Path;
 use volmorph_volume::direction::snap_direction;
 use volmorph_volume::{AnyVolume, Geometry, VolumeError, VoxelType};
 
+/// Every volume extension volmorph knows (without the dot) and its format; compared with
+/// the end of a file name case-insensitively, the longest match first
+/// ([`volmorph_io::extension::matching`]).
+pub const EXTENSIONS: [(&str, Format); 16] = [
+    ("nii", Format::Nifti),
+    ("nii.gz", Format::Nifti),
+    ("mha", Format::MetaImage),
+    ("mhd", Format::MetaImage),
+    ("nrrd", Format::Nrrd),
+    ("nhdr", Format::Nrrd),
+    ("vtk", Format::Vtk),
+    ("vti", Format::Vti),
+    ("mgh", Format::Mgh),
+    ("mgz", Format::Mgh),
+    ("dcm", Format::Dicom),
+    ("dicom", Format::Dicom),
+    ("ima", Format::Dicom),
+    ("raw", Format::Raw),
+    ("ome.zarr", Format::OmeZarr),
+    ("zarr", Format::OmeZarr),
+];
+
+/// The extensions of the volume formats volmorph writes ([`Format::for_output`]): every
+/// format of [`EXTENSIONS`] but DICOM.
+pub const WRITE_EXTENSIONS: &[&str] = &[
+    "nii", "nii.gz", "mha", "mhd", "nrrd", "nhdr", "vtk", "vti", "mgh", "mgz", "raw", "ome.zarr",
+    "zarr",
+];
+
+/// Check that `path` names a volume format volmorph writes, before reading or writing
+/// anything ([`Format::for_output`]).
+///
+/// # Errors
+/// As [`Format::for_output`].
+pub fn check_output(path: &Path) -> Result<(), VolumeError> {
+    Format::for_output(path).map(|_| ())
+}
+
 /// A volume file format, as chosen by extension.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Hash)]
 pub enum Format {
@@ -101,35 +139,37 @@ impl Format {
         if path.is_dir() {
             return Ok(Self::Dicom);
         }
-        let name = path
-            .file_name()
-            .map(|n| n.to_string_lossy().to_ascii_lowercase())
-            .unwrap_or_default();
-        let fmt = if name.ends_with(".nii") || name.ends_with(".nii.gz") {
-            Self::Nifti
-        } else if name.ends_with(".mha") || name.ends_with(".mhd") {
-            Self::MetaImage
-        } else if name.ends_with(".nrrd") || name.ends_with(".nhdr") {
-            Self::Nrrd
-        } else if name.ends_with(".vtk") {
-            Self::Vtk
-        } else if name.ends_with(".vti") {
-            Self::Vti
-        } else if name.ends_with(".mgh") || name.ends_with(".mgz") {
-            Self::Mgh
-        } else if name.ends_with(".dcm") || name.ends_with(".dicom") || name.ends_with(".ima") {
-            Self::Dicom
-        } else if name.ends_with(".raw") {
-            Self::Raw
-        } else {
-            return Err(VolumeError::Unsupported(format!(
+        let known: Vec<&str> = EXTENSIONS.iter().map(|(e, _)| *e).collect();
+        match volmorph_io::extension::matching(path, &known) {
+            Some(ext) => Ok(EXTENSIONS
+                .iter()
+                .find(|(e, _)| *e == ext)
+                .map(|(_, f)| *f)
+                .expect("a matched extension is in the table")),
+            None => Err(VolumeError::Unsupported(format!(
                 "cannot tell the volume format of {} from its extension \
                  (known: .nii .nii.gz .mha .mhd .nrrd .nhdr .vtk .vti .mgh .mgz .raw .ome.zarr, DICOM .dcm files or \
                  a folder of them)",
                 path.display()
-            )));
-        };
-        Ok(fmt)
+            ))),
+        }
+    }
+
+    /// The format an output path names, checked before anything is read or written (the
+    /// front-ends call it up front, [`write_with`] first thing): one of [`WRITE_EXTENSIONS`],
+    /// by name only (an existing folder at `path` is not taken for a DICOM series).
+    ///
+    /// # Errors
+    /// [`VolumeError::Io`] with [`volmorph_io::IoError::Extension`] naming the path, the
+    /// extension found and [`WRITE_EXTENSIONS`] (DICOM is read, not written).
+    pub fn for_output(path: &Path) -> Result<Self, VolumeError> {
+        let ext = volmorph_io::extension::matching(path, WRITE_EXTENSIONS)
+            .ok_or_else(|| volmorph_io::extension::refused(path, WRITE_EXTENSIONS))?;
+        Ok(EXTENSIONS
+            .iter()
+            .find(|(e, _)| *e == ext)
+            .map(|(_, f)| *f)
+            .expect("every written extension is in the table"))
     }
 
     /// Human-readable name.
@@ -465,7 +505,7 @@ pub fn write_with(
     volume: &AnyVolume,
     options: &WriteOptions,
 ) -> Result<(), VolumeError> {
-    let res = match Format::from_path(path)? {
+    let res = match Format::for_output(path)? {
         Format::Nifti => nifti::write(path, volume, options),
         Format::MetaImage => metaimage::write(path, volume, options),
         Format::Nrrd => nrrd::write(path, volume, options),
@@ -516,5 +556,23 @@ mod tests {
         }
         assert!(Format::from_path(Path::new("x.png")).is_err());
         assert!(Format::from_path(Path::new("noext")).is_err());
+        // Outputs: by name only, DICOM refused, the error naming what is written.
+        assert_eq!(
+            Format::for_output(Path::new("o.NII.GZ")).unwrap(),
+            Format::Nifti
+        );
+        assert_eq!(
+            Format::for_output(Path::new("o.ome.zarr")).unwrap(),
+            Format::OmeZarr
+        );
+        for bad in ["o.png", "o.dcm", "o", "o.nii.bak"] {
+            let e = check_output(Path::new(bad)).unwrap_err();
+            assert!(
+                matches!(e, VolumeError::Io(volmorph_io::IoError::Extension { .. })),
+                "{bad}: {e}"
+            );
+            assert!(e.to_string().starts_with(bad), "{e}");
+            assert!(e.to_string().contains(".nii.gz"), "{e}");
+        }
     }
 }

@@ -366,6 +366,10 @@ pub fn parse_attributes(bytes: &[u8], version: ZarrVersion) -> Result<Multiscale
     })
 }
 
+/// The extensions of OME-Zarr stores written ([`OmeZarrWriter::create`]): `.ome.zarr` and
+/// `.zarr`.
+pub const ZARR_EXTENSIONS: &[&str] = &["ome.zarr", "zarr"];
+
 /// `true` if `path` names an OME-Zarr store (`.ome.zarr` or `.zarr`, case-insensitive).
 #[must_use]
 pub fn is_ome_zarr_path(path: &Path) -> bool {
@@ -745,6 +749,8 @@ impl OmeZarrWriter {
     /// the group and array metadata of every pyramid level into a temporary folder.
     ///
     /// # Errors
+    /// [`VolumeError::Io`] with [`volmorph_io::IoError::Extension`] for a path not ending in
+    /// `.ome.zarr` or `.zarr` ([`ZARR_EXTENSIONS`], nothing written);
     /// [`VolumeError::Unsupported`] if `geometry.direction` is not the identity (NGFF has no
     /// direction); [`VolumeError::InvalidArgument`] for a zero chunk edge or level count;
     /// [`VolumeError::Geometry`] for an invalid geometry; I/O errors naming the path.
@@ -754,6 +760,7 @@ impl OmeZarrWriter {
         voxel_type: VoxelType,
         options: &ZarrWriteOptions,
     ) -> Result<Self, VolumeError> {
+        volmorph_io::extension::check(path, ZARR_EXTENSIONS)?;
         let go = || -> Result<Self, VolumeError> {
             geometry.validate_unbounded()?;
             if geometry.direction != DMat3::IDENTITY {

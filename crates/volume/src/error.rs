@@ -84,10 +84,8 @@ impl VolumeError {
     pub fn at(self, path: &Path) -> Self {
         match self {
             e @ Self::File { .. } => e,
-            // An OS error about this very file already names it.
-            Self::Io(IoError::Os { path: p, error }) if Path::new(&p) == path => {
-                Self::Io(IoError::Os { path: p, error })
-            }
+            // An OS or extension error about this very file already names it.
+            Self::Io(e) if e.path().is_some_and(|p| Path::new(p) == path) => Self::Io(e),
             e => Self::File {
                 path: path.display().to_string(),
                 error: Box::new(e),

@@ -69,6 +69,7 @@ pub struct Args {
 
 /// Run `volmorph convert`.
 pub fn run(args: &Args) -> anyhow::Result<()> {
+    format::check_output(&args.output)?;
     let pb = progress::bar(3);
     pb.set_message(format!("reading {}", args.input.display()));
     let input = read_input(args)?;

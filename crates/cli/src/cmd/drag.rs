@@ -87,6 +87,10 @@ pub struct Args {
 
 /// Run `volmorph drag`.
 pub fn run(a: &Args) -> anyhow::Result<()> {
+    volmorph_volume_io::check_output(&a.output)?;
+    if let Some(p) = &a.lattice_out {
+        volmorph_lattice::formats::check_output(p)?;
+    }
     if a.from.len() != a.to.len() {
         bail!(
             "{} --from points but {} --to points: give one target per dragged point",

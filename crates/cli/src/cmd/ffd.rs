@@ -89,6 +89,22 @@ pub fn run(a: &Args) -> anyhow::Result<()> {
     // The reported total runs from here to the output written (reading included).
     let start = Instant::now();
     let mode = parse_mode(&a.mode)?;
+    // Outputs before the input: a mesh, or STEP (accurate mode only), and the JSON report.
+    let formats: Vec<&str> = (volmorph_mesh::format::WRITE_EXTENSIONS.iter())
+        .chain(step::EXTENSIONS)
+        .copied()
+        .collect();
+    volmorph_io::extension::check(&a.output, &formats)?;
+    let step_out = volmorph_scene::files::is_step(&a.output);
+    if step_out && !matches!(mode, Mode::Accurate) {
+        bail!(
+            "{}: STEP output holds trimmed surfaces and needs --mode accurate",
+            a.output.display()
+        );
+    }
+    if let Some(r) = &a.report {
+        volmorph_io::extension::OutputFormat::Json.check(r)?;
+    }
     let pb = progress::spinner(format!("reading {}", a.input.display()));
     let m =
         mesh::read(&a.input).with_context(|| format!("cannot read mesh {}", a.input.display()))?;
@@ -106,13 +122,6 @@ pub fn run(a: &Args) -> anyhow::Result<()> {
         }
         (None, None) => bail!("give --lattice L or --init FORM"),
     };
-    let step_out = volmorph_scene::files::is_step(&a.output);
-    if step_out && !matches!(mode, Mode::Accurate) {
-        bail!(
-            "{}: STEP output holds trimmed surfaces and needs --mode accurate",
-            a.output.display()
-        );
-    }
     let mut json = serde_json::Map::new();
     json.insert("input_faces".into(), m.face_count().into());
     match mode {

@@ -231,6 +231,12 @@ pub(crate) fn options(a: &MapArgs) -> anyhow::Result<HandleOptions> {
 }
 
 fn warp(a: &WarpArgs) -> anyhow::Result<()> {
+    // The output is of the input's kind (a mesh by its extension, else a volume).
+    if volmorph_mesh::MeshFormat::from_path(&a.input).is_ok() {
+        volmorph_mesh::format::check_output(&a.output)?;
+    } else {
+        format::check_output(&a.output)?;
+    }
     let set = read_handle_set(&a.map)?;
     let opts = options(&a.map)?;
     let spec = HandleSpec {
@@ -283,6 +289,7 @@ fn warp(a: &WarpArgs) -> anyhow::Result<()> {
 }
 
 fn apply(a: &ApplyArgs) -> anyhow::Result<()> {
+    volmorph_handles::handles::check_point_list_output(&a.output)?;
     let pb = progress::spinner("reading the handles and the points");
     let set = read_handle_set(&a.map)?;
     let pts = read_point_list(&a.input)

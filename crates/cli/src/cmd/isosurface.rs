@@ -45,6 +45,7 @@ pub enum Algorithm {
 
 /// Run `volmorph isosurface`.
 pub fn run(args: &Args) -> anyhow::Result<()> {
+    mesh::format::check_output(&args.output)?;
     let pb = progress::spinner(format!("reading {}", args.input.display()));
     let vol = format::read(&args.input).context("cannot read volume")?;
     let bar = progress::Bar(&pb);

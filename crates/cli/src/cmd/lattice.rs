@@ -4,7 +4,7 @@ use std::path::PathBuf;
 
 use anyhow::{Context, bail};
 use glam::{DMat3, DVec3};
-use volmorph_lattice::formats::{read_lattice, write_lattice};
+use volmorph_lattice::formats::{check_output, read_lattice, write_lattice};
 use volmorph_lattice::{BSplineLattice, FengForm};
 use volmorph_volume_io as format;
 
@@ -109,6 +109,7 @@ pub fn run(cmd: &Command) -> anyhow::Result<()> {
 }
 
 fn convert(a: &ConvertArgs) -> anyhow::Result<()> {
+    check_output(&a.output)?;
     let lattice = read_lattice(&a.input).context("cannot read the lattice")?;
     write_lattice(&a.output, &lattice).context("cannot write")?;
     let [cx, cy, cz] = lattice.counts();
@@ -120,6 +121,7 @@ fn convert(a: &ConvertArgs) -> anyhow::Result<()> {
 }
 
 fn init(a: &InitArgs) -> anyhow::Result<()> {
+    check_output(&a.output)?;
     let (lattice, what) = if let Some(path) = &a.mesh {
         let m = volmorph_mesh::read(path).context("cannot read the mesh")?;
         let (lo, hi) = m

@@ -4,7 +4,8 @@ use std::path::PathBuf;
 
 use anyhow::Context;
 use volmorph_deform::{InverseOptions, SpaceMap};
-use volmorph_handles::handles::{read_point_list, write_point_list};
+use volmorph_handles::handles::{check_point_list_output, read_point_list, write_point_list};
+use volmorph_maps::file::{check_field_output, check_output};
 use volmorph_maps::{AnyMap, read_map, write_field, write_map};
 use volmorph_volume_io::vector::VectorPrecision;
 use volmorph_warp::output::parse_geometry;
@@ -125,6 +126,7 @@ fn boxed_geometry(s: &str) -> anyhow::Result<Box<volmorph_volume::Geometry>> {
 pub fn run(cmd: &Command) -> anyhow::Result<()> {
     match cmd {
         Command::Apply(a) => {
+            check_point_list_output(&a.output)?;
             let pb = progress::spinner(format!("reading {}", a.map.display()));
             let map = read_map(&a.map).context("cannot read the map")?;
             let pts = read_point_list(&a.points)
@@ -153,6 +155,7 @@ pub fn run(cmd: &Command) -> anyhow::Result<()> {
             }
         }
         Command::Compose(a) => {
+            check_output(&a.output)?;
             let pb = progress::spinner("reading the maps");
             let mut map = AnyMap::Identity;
             for path in &a.maps {
@@ -165,6 +168,7 @@ pub fn run(cmd: &Command) -> anyhow::Result<()> {
             say!("{}", map.summary());
         }
         Command::Invert(a) => {
+            check_output(&a.output)?;
             let pb = progress::spinner(format!("reading {}", a.map.display()));
             let map = read_map(&a.map).context("cannot read the map")?;
             let options = InverseOptions {
@@ -178,6 +182,7 @@ pub fn run(cmd: &Command) -> anyhow::Result<()> {
             say!("{}", inv.summary());
         }
         Command::Field(a) => {
+            check_field_output(&a.output)?;
             let pb = progress::spinner(format!("reading {}", a.map.display()));
             let map = read_map(&a.map).context("cannot read the map")?;
             let grid = match (&a.reference, &a.output_geometry) {

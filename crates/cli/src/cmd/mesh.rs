@@ -105,6 +105,7 @@ fn info(a: &InfoArgs) -> anyhow::Result<()> {
 }
 
 fn convert(a: &ConvertArgs) -> anyhow::Result<()> {
+    mesh::format::check_output(&a.output)?;
     let pb = progress::spinner(format!("reading {}", a.input.display()));
     let m = mesh::read(&a.input).context("cannot read mesh")?;
     pb.set_message(format!("writing {}", a.output.display()));
@@ -118,6 +119,7 @@ fn convert(a: &ConvertArgs) -> anyhow::Result<()> {
 }
 
 fn render(a: &RenderArgs) -> anyhow::Result<()> {
+    volmorph_render::check_png(&a.output)?;
     let pb = progress::spinner(format!("reading {}", a.input.display()));
     let (m, colors) = mesh::read_with_colors(&a.input).context("cannot read mesh")?;
     pb.set_message("drawing");

@@ -54,6 +54,7 @@ pub enum Kind2d {
 
 /// Run `volmorph mls2d`.
 pub fn run_mls2d(a: &Mls2dArgs) -> anyhow::Result<()> {
+    volmorph_render::check_png(&a.output)?;
     if a.kernel == Kernel::R {
         bail!(
             "--kernel r: in 2-D the thin-plate (biharmonic) kernel is r² log r (r2logr); r is \

@@ -212,6 +212,7 @@ fn numbers<const N: usize>(s: &str, what: &str) -> anyhow::Result<[f64; N]> {
 }
 
 fn fit_cmd(args: &FitArgs) -> anyhow::Result<()> {
+    volmorph_trivariate::format::check_output(&args.output)?;
     let pb = progress::spinner(format!("reading {}", args.input.display()));
     let vol = format::read(&args.input).context("cannot read the volume")?;
     let dims = vol.geometry().dims;
@@ -350,6 +351,7 @@ fn write_mesh(z: &ZeroSetMesh, m: &MeshOptions, colour: bool) -> anyhow::Result<
 }
 
 fn slice_cmd(args: &SliceArgs) -> anyhow::Result<()> {
+    ZeroSetMesh::check_output(&args.mesh.output)?;
     let plane: [f64; 4] = numbers(&args.plane, "--plane")?;
     let model = load(&args.model)?;
     let pb = progress::spinner("slicing".to_owned());
@@ -366,6 +368,7 @@ fn slice_cmd(args: &SliceArgs) -> anyhow::Result<()> {
 }
 
 fn isosurface_cmd(args: &IsosurfaceArgs) -> anyhow::Result<()> {
+    ZeroSetMesh::check_output(&args.mesh.output)?;
     let model = load(&args.model)?;
     let pb = progress::spinner("extracting the isosurface".to_owned());
     let opts = PolygonizeOptions {

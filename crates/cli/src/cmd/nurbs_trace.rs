@@ -159,6 +159,7 @@ fn per_model<'a>(
 /// Unreadable model, unknown attribute, bad transfer function, view or size, attribute or
 /// transfer lists that do not match the models, or an unwritable output.
 pub fn run_render(a: &RenderArgs) -> anyhow::Result<()> {
+    volmorph_render::check_png(&a.output)?;
     let (w, h) = crate::args::size(&a.size).context("--size")?;
     if let Some(step) = a.step
         && !(step.is_finite() && step > 0.0)
@@ -234,6 +235,10 @@ pub fn run_render(a: &RenderArgs) -> anyhow::Result<()> {
 /// No model or both a model and `--example`, unknown example or attribute, bad ray count,
 /// direction or size, tracing errors, or unwritable outputs.
 pub fn run_trace_optics(a: &TraceOpticsArgs) -> anyhow::Result<()> {
+    volmorph_render::check_png(&a.output)?;
+    if let Some(p) = &a.paths {
+        volmorph_io::extension::check(p, volmorph_trivariate::optics::PATHS_EXTENSIONS)?;
+    }
     if a.rays == 0 || a.rays > MAX_RAYS {
         bail!("--rays {}: must be 1 to {MAX_RAYS}", a.rays);
     }
@@ -314,6 +319,8 @@ pub fn run_trace_optics(a: &TraceOpticsArgs) -> anyhow::Result<()> {
 /// # Errors
 /// Unknown example name or an unwritable output.
 pub fn run_example(a: &ExampleArgs) -> anyhow::Result<()> {
+    // A model or a recipe: JSON either way.
+    volmorph_trivariate::format::check_output(&a.output)?;
     let spec = GrinLensSpec::default();
     match a.name.as_str() {
         "grin-lens" => save(&a.output, &grin_lens(&spec)?),
@@ -340,6 +347,7 @@ pub fn run_example(a: &ExampleArgs) -> anyhow::Result<()> {
 /// An unreadable or invalid recipe (the message names the file and the JSON path of the
 /// field), or an unwritable output.
 pub fn run_model(a: &ModelArgs) -> anyhow::Result<()> {
+    volmorph_trivariate::format::check_output(&a.output)?;
     let pb = crate::progress::spinner(format!("building {}", a.recipe.display()));
     let model = build_recipe_file(&a.recipe)?;
     pb.finish_and_clear();

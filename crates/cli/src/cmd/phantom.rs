@@ -39,6 +39,7 @@ pub struct Args {
 
 /// Run `volmorph phantom`.
 pub fn run(args: &Args) -> anyhow::Result<()> {
+    format::check_output(&args.output)?;
     let model: Phantom = args.model.parse().map_err(|e| anyhow::anyhow!("{e}"))?;
     let dims = match &args.dims {
         Some(d) => args::triple(d)?,

@@ -128,14 +128,8 @@ pub fn run(command: &Command) -> anyhow::Result<()> {
 }
 
 fn new(a: &NewArgs) -> anyhow::Result<()> {
-    anyhow::ensure!(
-        a.output
-            .extension()
-            .is_some_and(|e| e.eq_ignore_ascii_case(volmorph_scene::project::PROJECT_EXTENSION)),
-        "{}: a project file's name ends in .{} (its data go to a folder beside it)",
-        a.output.display(),
-        volmorph_scene::project::PROJECT_EXTENSION
-    );
+    // Before any file is read or set-up built (the data go to a folder beside the file).
+    volmorph_scene::project::check_project_path(&a.output)?;
     let setups = a.start.setups()?;
     let scene = progress::with_bar(|bar| -> anyhow::Result<Scene> {
         let scene = volmorph_scene::setup::start_with(&a.start.files, &setups, bar)?;
@@ -170,6 +164,9 @@ fn info(a: &InfoArgs) -> anyhow::Result<()> {
 }
 
 fn export(a: &ExportArgs) -> anyhow::Result<()> {
+    // An extension no object is written as fails before the project is read; the object's
+    // own format is checked when it is written.
+    volmorph_scene::files::check_export_path(&a.output)?;
     let scene = load(&a.project)?;
     let id = match scene.find(&a.object) {
         Some(id) => id,

@@ -190,11 +190,16 @@ fn read(path: &Path) -> anyhow::Result<DvrVolume> {
 /// Run `volmorph render`.
 pub fn run(a: &Args) -> anyhow::Result<()> {
     let many = a.frames > 1;
-    if !many && a.output.extension().and_then(|e| e.to_str()) != Some("png") {
-        bail!(
-            "output {} must be a .png file (or a folder with --frames N > 1)",
-            a.output.display()
-        );
+    // Outputs before the inputs: a .png picture, or with --frames N > 1 an animation file or
+    // a folder of frames; a transfer function to save as .json.
+    if many {
+        volmorph_render::check_animation_output(&a.output)?;
+    } else {
+        volmorph_render::check_png(&a.output)
+            .context("one picture is a .png file (or give --frames N > 1 for an animation)")?;
+    }
+    if let Some(p) = &a.save_transfer {
+        volmorph_io::extension::check(p, volmorph_render::TransferFunction::EXTENSIONS)?;
     }
     if a.repeat == 0 {
         bail!("--repeat must be at least 1");
@@ -264,7 +269,6 @@ pub fn run(a: &Args) -> anyhow::Result<()> {
     if many && AnimationFormat::from_path(&a.output).is_some() {
         write_animation(&a.output, &images, a.delay).context("cannot write the animation")?;
     } else if many {
-        crate::args::refuse_picture_extension(&a.output)?;
         std::fs::create_dir_all(&a.output)
             .with_context(|| format!("cannot create {}", a.output.display()))?;
         for (i, img) in images.iter().enumerate() {

@@ -61,6 +61,7 @@ pub enum OpArg {
 
 /// Run `volmorph sculpt`.
 pub fn run(args: &Args) -> anyhow::Result<()> {
+    mesh::format::check_output(&args.output)?;
     let pb = progress::spinner(format!("reading {}", args.mesh.display()));
     let t = std::time::Instant::now();
     let base = mesh::read(&args.mesh).context("cannot read the mesh")?;

@@ -77,6 +77,7 @@ fn parse_axis(s: &str) -> Result<Axis, String> {
 
 /// Run `volmorph slice`.
 pub fn run(args: &Args) -> anyhow::Result<()> {
+    volmorph_render::check_png(&args.output)?;
     let pb = progress::spinner(format!("reading {}", args.input.display()));
     let vol = format::read(&args.input).context("cannot read volume")?;
     progress::spin(&pb, "drawing the slice");

@@ -114,6 +114,11 @@ pub struct Args {
 
 /// Run `volmorph warp`.
 pub fn run(a: &Args) -> anyhow::Result<()> {
+    // Outputs first: a wrong extension fails before the input is read.
+    format::check_output(&a.output)?;
+    if let Some(p) = &a.nonconverged_mask {
+        format::check_output(p)?;
+    }
     if out_of_core(a) {
         return run_out_of_core(a);
     }
@@ -244,6 +249,10 @@ pub struct JacobianArgs {
 
 /// Run `volmorph jacobian`.
 pub fn run_jacobian(a: &JacobianArgs) -> anyhow::Result<()> {
+    format::check_output(&a.output)?;
+    if let Some(p) = &a.map_out {
+        volmorph_maps::file::check_output(p)?;
+    }
     let pb = progress::spinner(format!("reading {}", a.grid.display()));
     let grid = *format::read(&a.grid)
         .context("cannot read the grid volume")?

@@ -1068,8 +1068,16 @@ fn ffd_bad_inputs_fail_cleanly() {
     let o = volmorph(&[&"ffd", &nc, &"--lattice", &lat, &"-o", &out]);
     assert!(o.status.success());
     assert!(String::from_utf8_lossy(&o.stderr).contains("non-convex"));
+    let lattice_out = dir.path().join("too_few.json");
     let err = fails(&[
-        &"lattice", &"init", &"--mesh", &cube, &"--size", &"2,4,4", &"-o", &out,
+        &"lattice",
+        &"init",
+        &"--mesh",
+        &cube,
+        &"--size",
+        &"2,4,4",
+        &"-o",
+        &lattice_out,
     ]);
     assert!(err.contains("control points"), "{err}");
 }
@@ -3163,7 +3171,7 @@ fn tps_kernels_interpolate_differ_and_round_trip_through_map_json() {
         &"--kernel",
         &"r",
         &"-o",
-        &out,
+        &d.join("warped.png"),
     ]);
     assert!(err.contains("r² log r"), "{err}");
 }

@@ -6,6 +6,7 @@ mod common;
 mod cli;
 mod nurbs_fit;
 mod out_of_core_progress;
+mod output_extensions;
 mod pictures;
 mod project;
 mod realdata;

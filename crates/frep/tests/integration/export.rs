@@ -59,6 +59,30 @@ fn output_kind_follows_the_extension() {
     }
 }
 
+/// Issue 15: an output no writer takes is refused before anything is sampled, naming the
+/// file and every extension an F-rep output may have; nothing is written.
+#[test]
+fn outputs_no_writer_takes_are_refused_before_sampling() {
+    for bad in ["a.xyz", "a.jpg", "a", "a.ply.gz"] {
+        let e = OutputKind::for_output(std::path::Path::new(bad)).unwrap_err();
+        let msg = e.to_string();
+        assert!(msg.starts_with(bad), "{msg}");
+        assert!(
+            msg.contains(".obj") && msg.contains(".png") && msg.contains(".nii.gz"),
+            "{msg}"
+        );
+    }
+    assert_eq!(
+        OutputKind::for_output(std::path::Path::new("a.NII.GZ")).unwrap(),
+        OutputKind::Volume
+    );
+    let dir = tempfile::tempdir().unwrap();
+    let p = dir.path().join("s.jpg");
+    let e = export_with(&sphere(), &p, &options(24), &NoProgress).unwrap_err();
+    assert!(e.to_string().contains("s.jpg"), "{e}");
+    assert!(!p.exists());
+}
+
 #[test]
 fn each_kind_of_file_holds_what_the_in_memory_call_computes() {
     let t = sphere();

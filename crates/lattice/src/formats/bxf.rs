@@ -324,8 +324,10 @@ pub fn bxf_to_string(lattice: &BSplineLattice) -> Result<String, DeformError> {
 /// Write `lattice` as a plastimatch `.bxf` file, atomically (temporary file + rename).
 ///
 /// # Errors
-/// [`DeformError::Unsupported`] for a lattice the format cannot represent (see
-/// [`bxf_to_string`]), [`DeformError::Io`] if writing fails.
+/// [`DeformError::Io`] with [`volmorph_io::IoError::Extension`] for a path not ending in
+/// `.bxf` (nothing written); [`DeformError::Unsupported`] for a lattice the format cannot
+/// represent (see [`bxf_to_string`]), [`DeformError::Io`] if writing fails.
 pub fn write_bxf(path: &Path, lattice: &BSplineLattice) -> Result<(), DeformError> {
+    volmorph_io::extension::check(path, &["bxf"])?;
     write_text(path, &bxf_to_string(lattice)?)
 }

@@ -302,9 +302,12 @@ pub fn itk_tfm_to_string(lattice: &BSplineLattice) -> Result<String, DeformError
 /// # Errors
 /// [`DeformError::Unsupported`] for a lattice ITK cannot represent (see
 /// [`itk_tfm_to_string`]) or a binary transform extension (`.h5`, `.hdf5`, `.mat`: ITK would
-/// expect HDF5 / MATLAB content there), [`DeformError::Io`] if writing fails.
+/// expect HDF5 / MATLAB content there); [`DeformError::Io`] with
+/// [`volmorph_io::IoError::Extension`] for any other extension but `.tfm` and `.txt` (nothing
+/// written); [`DeformError::Io`] if writing fails.
 pub fn write_itk_tfm(path: &Path, lattice: &BSplineLattice) -> Result<(), DeformError> {
     check_extension(path)?;
+    volmorph_io::extension::OutputFormat::ItkTransform.check(path)?;
     write_text(path, &itk_tfm_to_string(lattice)?)
 }
 

@@ -285,12 +285,28 @@ pub fn read_lattice(path: &Path) -> Result<BSplineLattice, DeformError> {
     read().map_err(|e| e.at(path))
 }
 
+/// The extensions [`write_lattice`] writes (without the dot): lattice JSON, ITK text
+/// transforms (`.tfm`, `.txt`) and plastimatch `.bxf`.
+pub const WRITE_EXTENSIONS: &[&str] = &["json", "tfm", "txt", "bxf"];
+
+/// Check that `path` ends in one of [`WRITE_EXTENSIONS`] (any case) before a lattice is built
+/// for it.
+///
+/// # Errors
+/// [`DeformError::Io`] with [`volmorph_io::IoError::Extension`] naming the path, the
+/// extension found and [`WRITE_EXTENSIONS`].
+pub fn check_output(path: &Path) -> Result<(), DeformError> {
+    Ok(volmorph_io::extension::check(path, WRITE_EXTENSIONS)?)
+}
+
 /// Write a lattice file atomically; the format follows the extension as in [`read_lattice`].
 ///
 /// # Errors
-/// [`DeformError::Unsupported`] for another extension or a lattice the format cannot hold;
-/// I/O errors naming the path.
+/// [`DeformError::Io`] with [`volmorph_io::IoError::Extension`] for another extension
+/// ([`check_output`], nothing written); [`DeformError::Unsupported`] for a lattice the format
+/// cannot hold; I/O errors naming the path.
 pub fn write_lattice(path: &Path, lattice: &BSplineLattice) -> Result<(), DeformError> {
+    check_output(path)?;
     match lattice_extension(path)?.as_str() {
         "json" => write_text(path, &lattice.to_json()?),
         "bxf" => bxf::write_bxf(path, lattice),

@@ -61,6 +61,18 @@ use input::Input;
 
 use crate::{Mesh, MeshError};
 
+/// The extensions of the mesh formats written ([`MeshFormat::for_output`]), without the dot.
+pub const WRITE_EXTENSIONS: [&str; 4] = ["obj", "stl", "ply", "off"];
+
+/// Check that `path` names a mesh format volmorph writes ([`MeshFormat::for_output`]), before
+/// anything is read or written.
+///
+/// # Errors
+/// As [`MeshFormat::for_output`].
+pub fn check_output(path: &Path) -> Result<(), MeshError> {
+    MeshFormat::for_output(path).map(|_| ())
+}
+
 /// A mesh file format.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Hash)]
 pub enum MeshFormat {
@@ -101,6 +113,23 @@ impl MeshFormat {
                 path.display()
             ))),
         }
+    }
+
+    /// The format an output path names, checked before anything is written (front-ends call
+    /// it before reading their inputs; [`write_with`] calls it first): one of
+    /// [`WRITE_EXTENSIONS`], case-insensitive. Output is never compressed, so `mesh.ply.gz`
+    /// is refused rather than mislabelled.
+    ///
+    /// # Errors
+    /// [`MeshError::Io`] with [`volmorph_io::IoError::Extension`] naming the path, the
+    /// extension found and [`WRITE_EXTENSIONS`].
+    pub fn for_output(path: &Path) -> Result<Self, MeshError> {
+        let ext = volmorph_io::extension::matching(path, &WRITE_EXTENSIONS)
+            .ok_or_else(|| volmorph_io::extension::refused(path, &WRITE_EXTENSIONS))?;
+        Ok(Self::ALL
+            .into_iter()
+            .find(|f| f.extension() == ext)
+            .expect("every written extension is a format's"))
     }
 
     /// Human-readable name.
@@ -312,15 +341,7 @@ pub fn write(path: &Path, mesh: &Mesh) -> Result<(), MeshError> {
 /// the path.
 pub fn write_with(path: &Path, mesh: &Mesh, options: &MeshWriteOptions) -> Result<(), MeshError> {
     let run = || {
-        let format = MeshFormat::from_path(path)?;
-        if path
-            .file_name()
-            .is_some_and(|n| n.to_string_lossy().to_ascii_lowercase().ends_with(".gz"))
-        {
-            return Err(MeshError::Unsupported(
-                "writing gzip-compressed meshes; drop the .gz suffix".into(),
-            ));
-        }
+        let format = MeshFormat::for_output(path)?;
         volmorph_io::write_atomic(path, |w| write_to(w, mesh, format, options))
     };
     run().map_err(|e| e.at(path))

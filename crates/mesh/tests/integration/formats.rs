@@ -195,8 +195,16 @@ fn files_by_extension_with_gzip() {
     // Unknown extension, .gz output, missing file: errors naming the path.
     let e = write(&dir.path().join("x.vtk"), &m).unwrap_err();
     assert!(e.to_string().contains("x.vtk"), "{e}");
+    // Output is never compressed: `.ply.gz` is refused as an extension not written, naming
+    // the extension found and the ones written, and nothing is created.
     let e = write(&dir.path().join("x.ply.gz"), &m).unwrap_err();
-    assert!(e.to_string().contains("gzip"), "{e}");
+    assert!(e.to_string().contains("x.ply.gz"), "{e}");
+    assert!(
+        e.to_string()
+            .contains("extension .ply.gz is not written here; use .obj, .stl, .ply or .off"),
+        "{e}"
+    );
+    assert!(!dir.path().join("x.ply.gz").exists());
     let e = read(&dir.path().join("missing.obj")).unwrap_err();
     assert!(e.to_string().contains("missing.obj"), "{e}");
     assert!(matches!(e, MeshError::Io(_)));

@@ -84,6 +84,7 @@ fn grid_geometry(n: usize, bounds: (DVec3, DVec3)) -> anyhow::Result<volmorph_vo
 }
 
 fn eval(a: &EvalArgs) -> anyhow::Result<()> {
+    volmorph_volume_io::check_output(&a.output)?;
     let b = bounds(&a.common.bounds)?;
     let g = grid_geometry(a.grid, b)?;
     let shape = load(&a.model, &params(&a.common.params)?)?;
@@ -100,6 +101,7 @@ fn eval(a: &EvalArgs) -> anyhow::Result<()> {
 }
 
 fn mesh_cmd(a: &MeshArgs) -> anyhow::Result<()> {
+    meshio::format::check_output(&a.output)?;
     let b = bounds(&a.common.bounds)?;
     let g = grid_geometry(a.grid, b)?;
     let shape = load(&a.model, &params(&a.common.params)?)?;
@@ -115,6 +117,10 @@ fn mesh_cmd(a: &MeshArgs) -> anyhow::Result<()> {
 }
 
 fn sections_cmd(a: &SectionsArgs) -> anyhow::Result<()> {
+    // A mesh, or else the sampled function as a volume.
+    if OutputKind::of(&a.output) != OutputKind::Mesh {
+        volmorph_volume_io::check_output(&a.output)?;
+    }
     let blend = a.blend.map(|b| match b {
         Blend::Linear => SectionBlend::Linear,
         Blend::CatmullRom => SectionBlend::CatmullRom,
@@ -207,6 +213,7 @@ fn export_options(
 }
 
 fn render_cmd(a: &RenderArgs) -> anyhow::Result<()> {
+    volmorph_render::check_png(&a.output)?;
     let b = bounds(&a.common.bounds)?;
     let cam = camera(&a.view, b)?;
     let shape = load(&a.model, &params(&a.common.params)?)?;
@@ -219,6 +226,7 @@ fn render_cmd(a: &RenderArgs) -> anyhow::Result<()> {
 }
 
 fn morph_cmd(a: &MorphArgs) -> anyhow::Result<()> {
+    volmorph_render::check_animation_output(&a.output)?;
     let schedule = Schedule::parse(&a.schedule).context("--schedule")?;
     let b = bounds(&a.common.bounds)?;
     let cam = camera(&a.view, b)?;
@@ -237,6 +245,19 @@ fn morph_cmd(a: &MorphArgs) -> anyhow::Result<()> {
 }
 
 fn map_cmd(a: &MapArgs) -> anyhow::Result<()> {
+    // The output before the model: an animation with --frames, else one file by extension.
+    if a.frames.is_some() {
+        volmorph_render::check_animation_output(&a.output)?;
+    } else if AnimationFormat::from_path(&a.output).is_some()
+        && OutputKind::of(&a.output) != OutputKind::Picture
+    {
+        bail!(
+            "{}: an animation needs --frames N (or write a .png picture of one time with --t)",
+            a.output.display()
+        );
+    } else {
+        OutputKind::for_output(&a.output)?;
+    }
     let b = bounds(&a.common.bounds)?;
     if !(0.0..=1.0).contains(&a.t) {
         bail!("--t {}: the time must be between 0 and 1", a.t);
@@ -285,14 +306,6 @@ fn map_cmd(a: &MapArgs) -> anyhow::Result<()> {
         say!("{n} mappings over t = 0 … 1: {line}");
         return Ok(());
     }
-    if AnimationFormat::from_path(&a.output).is_some()
-        && OutputKind::of(&a.output) != OutputKind::Picture
-    {
-        bail!(
-            "{}: an animation needs --frames N (or write a .png picture of one time with --t)",
-            a.output.display()
-        );
-    }
     let tape = at(a.t)?;
     let options = export_options(&a.view, b, a.grid, a.method, a.close, a.ascii)?;
     let line = progress::with_bar(|p| export_with(&tape, &a.output, &options, p))?;
@@ -319,6 +332,7 @@ fn read_points(path: &Path) -> anyhow::Result<Vec<DVec3>> {
 }
 
 fn points_cmd(a: &PointsArgs) -> anyhow::Result<()> {
+    OutputKind::for_output(&a.output)?;
     let pts = read_points(&a.input)?;
     let pb = progress::spinner(format!("fitting {} points", pts.len()));
     let surface = PointSurface::fit(&pts, a.smoothing)
