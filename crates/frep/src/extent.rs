@@ -496,7 +496,10 @@ mod tests {
             panic!("{:?}", model_extent(&t));
         };
         // |x|, |y| ≤ 0.35 √2 and |z| ≤ 1.1.
-        assert!(lo.z > -1.2 && hi.z < 1.2 && lo.z < -1.09 && hi.z > 1.09, "{lo} {hi}");
+        assert!(
+            lo.z > -1.2 && hi.z < 1.2 && lo.z < -1.09 && hi.z > 1.09,
+            "{lo} {hi}"
+        );
         assert!(hi.x < 0.6 && hi.x > 0.45 && lo.y > -0.6, "{lo} {hi}");
         assert!(Framing::of(&[&t]).warning.is_none());
     }
@@ -514,7 +517,10 @@ mod tests {
             solid_extent(&half_space, SEARCH_WINDOW).unwrap(),
             Extent::Unbounded { .. }
         ));
-        assert!(matches!(model_extent(&half_space), Extent::Unbounded { .. }));
+        assert!(matches!(
+            model_extent(&half_space),
+            Extent::Unbounded { .. }
+        ));
         let f = Framing::of(&[&half_space]);
         assert_eq!(f.bounds, FALLBACK_BOUNDS);
         assert!(f.warning.unwrap().contains("unbounded"));
