@@ -310,13 +310,15 @@ pub fn solid_extent(field: &dyn Field, window: (DVec3, DVec3)) -> Result<Extent,
 pub const SEARCH_HALF_WIDTHS: [f64; 6] = [2.0, 16.0, 128.0, 1024.0, 8192.0, SEARCH_HALF_WIDTH];
 
 /// The extent of a model's solid: [`solid_extent`] over growing windows `±h` for `h` in
-/// [`SEARCH_HALF_WIDTHS`]. A window where the solid is empty, or reaches the edge, gives way
-/// to the next; the last [`Extent::Bounded`] result is kept as the windows grow (a larger
-/// window may find more solid further out) until a window is [`Extent::Undecided`] — large
-/// cells of a model whose enclosures are loose, such as a twisted bar, cannot be told empty
-/// within the budget — and is the answer. A solid that reaches the edge of the largest
-/// window is [`Extent::Unbounded`]; one empty in every window is [`Extent::Empty`]; one
-/// undecided before any window bounded it is [`Extent::Undecided`].
+/// [`SEARCH_HALF_WIDTHS`]. A window where the solid is empty, reaches the edge, or is
+/// undecided before any window bounded it (it may straddle the edge) gives way to the next;
+/// the last
+/// [`Extent::Bounded`] result is kept as the windows grow (a larger window may find more
+/// solid further out) until a window is [`Extent::Undecided`] — large cells of a model whose
+/// enclosures are loose, such as a twisted bar, cannot be told empty within the budget —
+/// and is the answer. A solid that reaches the edge of the largest window is
+/// [`Extent::Unbounded`]; one empty in every window is [`Extent::Empty`]; one never bounded
+/// is what the largest window says.
 #[must_use]
 pub fn model_extent(field: &dyn Field) -> Extent {
     let mut best: Option<Extent> = None;
@@ -329,7 +331,13 @@ pub fn model_extent(field: &dyn Field) -> Extent {
         };
         match e {
             Extent::Bounded { .. } => best = Some(e),
-            Extent::Undecided { .. } => return best.unwrap_or(e),
+            // Undecided after a bounded window: the loose enclosures of large cells (the
+            // bounded result stands). Before one: the solid may straddle the window's edge.
+            Extent::Undecided { .. } => {
+                if let Some(b) = best {
+                    return b;
+                }
+            }
             Extent::Empty | Extent::Unbounded { .. } => {}
         }
         last = e;
