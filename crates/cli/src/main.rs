@@ -44,8 +44,9 @@ struct Cli {
     /// memory). Default: 3/4 of physical memory, or the VOLMORPH_MEMORY_LIMIT variable.
     #[arg(long, global = true, value_name = "SIZE", value_parser = volmorph_io::budget::parse_limit)]
     memory_limit: Option<u64>,
-    /// Read a detached data file (MetaImage ElementDataFile, NRRD data file) even when it
-    /// lies outside its header's folder.
+    /// Read data a file names even when it lies outside that file's folder: a detached data
+    /// file (MetaImage ElementDataFile, NRRD data file), a `vmVolume` volume of a HyperFun
+    /// model, a model file of a mapping specification.
     #[arg(long, global = true)]
     allow_external_data: bool,
     /// The 3-D frame (0-based) of every 4-D volume the command reads (a NIfTI or MGH time

@@ -144,6 +144,35 @@ impl fmt::Display for Written {
     }
 }
 
+impl Written {
+    /// The warning a front-end prints when the output shows nothing of the model: a picture
+    /// where no ray hit the solid, a mesh without a triangle (no surface `f = 0` in the box),
+    /// a volume without a sample inside the solid. Names `bounds`, the box that was sampled
+    /// or ray-cast, since the usual cause is a box that misses the model. `None` otherwise.
+    ///
+    /// Such an output is still written — an empty picture is the true picture of a box where
+    /// the model is empty, and an animation may have empty frames — but never silently.
+    #[must_use]
+    pub fn empty_warning(&self, bounds: (DVec3, DVec3)) -> Option<String> {
+        let what = match self {
+            Self::Picture(p) if p.covered == 0.0 => {
+                "no ray hit the solid: the picture shows only the background"
+            }
+            Self::Mesh { surface, .. } if surface.triangles == 0 => {
+                "no surface f = 0 was found: the mesh is empty (the box lies wholly inside or \
+                 wholly outside the solid)"
+            }
+            Self::Volume(v) if v.inside == 0 => "no sample is inside the solid (f ≥ 0)",
+            _ => return None,
+        };
+        Some(format!(
+            "{what}; the box {} misses the model or the model is empty there (frame it with \
+             other bounds)",
+            crate::extent::bounds_text(bounds)
+        ))
+    }
+}
+
 /// A ray-cast picture: its size, how much of it the model covers and how long casting took.
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct PictureSummary {

@@ -19,6 +19,8 @@
 //!   shells, the maze; Eq. 17) and combined mappings with schedules (Eq. 18).
 //! * [`reconstruct`] — solids through scattered surface points (a defining function plus a
 //!   volume spline) and from stacks of planar cross-sections (metamorphosis along `z`).
+//! * [`extent`] — where a solid is (interval arithmetic on an octree) and the box front-ends
+//!   frame when the user names none ([`extent::Framing`]).
 //! * [`output`] — volumes, meshes (the project's marching cubes and dual contouring) and
 //!   ray-cast pictures (interval-bounded root finding) of shapes and animations.
 //!
@@ -38,6 +40,7 @@
 pub mod compile;
 mod error;
 pub mod export;
+pub mod extent;
 pub mod field;
 pub mod grid;
 pub mod lang;

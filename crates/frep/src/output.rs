@@ -806,7 +806,7 @@ fn march(
 
 /// The time `t = i/(frames − 1)` of frame `i` of an animation of `frames` (`t = 0` for a single
 /// frame).
-fn frame_time(i: usize, frames: usize) -> f64 {
+pub(crate) fn frame_time(i: usize, frames: usize) -> f64 {
     if frames == 1 {
         0.0
     } else {

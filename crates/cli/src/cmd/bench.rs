@@ -278,7 +278,10 @@ pub fn run(cmd: &Command) -> anyhow::Result<()> {
 fn frep_models(a: &FrepArgs) -> anyhow::Result<(frep::FrepConfig, Vec<frep::FrepModel>)> {
     let config = frep::FrepConfig {
         grid: a.grid,
-        bounds: crate::cmd::frep::bounds(&a.common.bounds)?,
+        bounds: match &a.common.bounds {
+            Some(b) => crate::cmd::frep::bounds(b)?,
+            None => frep::TARGET_BOUNDS,
+        },
         repeat: a.repeat,
         check: !a.no_check,
     };

@@ -4,6 +4,8 @@
 mod common;
 
 mod cli;
+mod frep_framing;
+mod jacobian;
 mod nurbs_fit;
 mod out_of_core_progress;
 mod output_extensions;

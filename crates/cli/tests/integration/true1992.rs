@@ -468,3 +468,115 @@ fn out_of_core_push_forward_equals_the_in_memory_warp() {
     assert!(err.contains("pushforward-antialiased"), "{err}");
     assert!(!d.join("x.ome.zarr").exists());
 }
+
+/// Components of the voxels above `level` connected through faces, within the index box
+/// `lo..hi` (exclusive) of `v`.
+fn components(
+    v: &volmorph_volume::Volume<f32>,
+    level: f32,
+    lo: [usize; 3],
+    hi: [usize; 3],
+) -> usize {
+    let [nx, ny, _] = v.dims();
+    let idx = |i: usize, j: usize, k: usize| i + nx * (j + ny * k);
+    let mut seen = vec![false; v.data().len()];
+    let mut count = 0;
+    let mut stack = Vec::new();
+    for k in lo[2]..hi[2] {
+        for j in lo[1]..hi[1] {
+            for i in lo[0]..hi[0] {
+                if seen[idx(i, j, k)] || v.data()[idx(i, j, k)] <= level {
+                    continue;
+                }
+                count += 1;
+                seen[idx(i, j, k)] = true;
+                stack.push([i, j, k]);
+                while let Some(p) = stack.pop() {
+                    for (a, d) in [(0, -1), (0, 1), (1, -1), (1, 1), (2, -1), (2, 1)] {
+                        let mut q = p;
+                        let moved = q[a] as isize + d;
+                        if moved < lo[a] as isize || moved >= hi[a] as isize {
+                            continue;
+                        }
+                        q[a] = moved as usize;
+                        let n = idx(q[0], q[1], q[2]);
+                        if !seen[n] && v.data()[n] > level {
+                            seen[n] = true;
+                            stack.push(q);
+                        }
+                    }
+                }
+            }
+        }
+    }
+    count
+}
+
+/// The tree of True & Hughes Figs. 13–14 from `volmorph phantom tree`: one connected solid
+/// whose horizontal cuts cross one trunk, three limbs and six twigs where the model says; a
+/// drag lifts a twig end to end (the grabbed point lands on its target, the tree stays one
+/// piece).
+#[test]
+fn tree_phantom_has_its_branches_and_drags_end_to_end() {
+    use common::{nearest, read_f32};
+    use glam::DVec3;
+    let dir = tempfile::tempdir().unwrap();
+    let d = dir.path();
+    let tree = d.join("tree.nii.gz");
+    ok(&[&"phantom", &"tree", &"-o", &tree, &"--size", &"48"]);
+    let j: serde_json::Value = serde_json::from_str(&ok(&[&"info", &"--json", &tree])).unwrap();
+    assert_eq!(j["dims"], serde_json::json!([48, 48, 48]));
+    assert_eq!(j["voxel_type"], "u8");
+    assert_eq!(j["stats"]["min"], 0.0);
+    assert_eq!(j["stats"]["max"], 255.0);
+    let v = read_f32(&tree);
+    let level = 127.0;
+    let solid = v.data().iter().filter(|&&x| x > level).count();
+    // Trunk, limbs and twigs: about 0.15 model units³ of 2.2³/47³ each.
+    assert!((900..2500).contains(&solid), "{solid} voxels");
+    let n = 48;
+    assert_eq!(components(&v, level, [0; 3], [n; 3]), 1);
+    let slice = |z: f64| {
+        let k = v
+            .geometry()
+            .physical_to_index(DVec3::new(0.0, 0.0, z))
+            .z
+            .round() as usize;
+        components(&v, level, [0, 0, k], [n, n, k + 1])
+    };
+    assert_eq!(slice(-0.4), 1, "the trunk");
+    assert_eq!(slice(0.075), 3, "the limbs");
+    assert_eq!(slice(0.5), 6, "the twigs");
+
+    // Lift a point near the tip of the first limb's second twig by 0.15.
+    let from = DVec3::new(0.56, 0.356, 0.655);
+    let to = from + DVec3::new(0.0, 0.0, 0.15);
+    assert!(nearest(&v, from).unwrap() > level);
+    assert!(nearest(&v, to).unwrap() < level);
+    let (out, lat) = (d.join("dragged.nii.gz"), d.join("lat.json"));
+    ok(&[
+        &"drag",
+        &tree,
+        &"--from",
+        &"0.56,0.356,0.655",
+        &"--to",
+        &"0.56,0.356,0.805",
+        &"-o",
+        &out,
+        &"--lattice-out",
+        &lat,
+    ]);
+    let w = read_f32(&out);
+    assert_eq!(w.dims(), [48, 48, 48]);
+    assert!(
+        nearest(&w, to).unwrap() > level,
+        "the twig reached its target"
+    );
+    assert_eq!(components(&w, level, [0; 3], [n; 3]), 1);
+    // The trunk's foot is far from the drag and stays solid, the space beside it empty.
+    let foot = DVec3::new(0.0, 0.0, -0.6);
+    assert!(nearest(&w, foot).unwrap() > level);
+    assert!(nearest(&w, foot + DVec3::new(0.3, 0.0, 0.0)).unwrap() < level);
+    let moved = control_points(&lat);
+    assert_eq!(moved.len(), 9 * 9 * 9);
+}

@@ -145,9 +145,13 @@ pub struct PointsArgs {
 /// Options shared by every frep command: model parameters and the box.
 #[derive(Debug, Clone, clap::Args)]
 pub struct Common {
-    /// Box of interest: `lo,hi` (a cube) or `x0,y0,z0,x1,y1,z1`.
-    #[arg(long, default_value = "-1.6,1.6", allow_hyphen_values = true)]
-    pub bounds: String,
+    /// Box of interest: `lo,hi` (a cube) or `x0,y0,z0,x1,y1,z1`. Default: the model's own
+    /// box, found by interval arithmetic within ±65536 and enlarged by 5 % of its largest
+    /// side on every side; a model with no solid there, or an unbounded one, gets
+    /// [-1.6, 1.6]³ and a warning (`volmorph bench frep`: [-1.6, 1.6]³, the published
+    /// scenes' box).
+    #[arg(long, allow_hyphen_values = true)]
+    pub bounds: Option<String>,
     /// Set a model parameter: `a1=0.5` sets the first element of the model's parameter
     /// array (repeatable).
     #[arg(long = "param", value_name = "aN=VALUE")]

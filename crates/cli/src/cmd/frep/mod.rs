@@ -11,9 +11,10 @@ use std::path::Path;
 use anyhow::{Context, bail};
 use glam::DVec3;
 use volmorph_frep::export::{
-    ExportOptions, MAX_GRID, OutputKind, export_with, write_frames_with, write_mesh_with,
+    ExportOptions, MAX_GRID, OutputKind, Written, export_with, write_frames_with, write_mesh_with,
     write_picture_with, write_volume_with,
 };
+use volmorph_frep::extent::Framing;
 use volmorph_frep::grid::{box_geometry, isotropic_box_geometry};
 use volmorph_frep::mapping::{Schedule, morph};
 use volmorph_frep::output::{MeshOptions, RenderOptions};
@@ -76,6 +77,30 @@ pub fn bounds(s: &str) -> anyhow::Result<(DVec3, DVec3)> {
     Ok((lo, hi))
 }
 
+/// The box of `--bounds`, or else the one that frames the solids of `fields`
+/// ([`Framing::of`]), printing its warning when it has one.
+fn frame(common: &Common, fields: &[&dyn Field]) -> anyhow::Result<(DVec3, DVec3)> {
+    match &common.bounds {
+        Some(s) => bounds(s),
+        None => Ok(framed(Framing::of(fields))),
+    }
+}
+
+/// The box of a framing, its warning printed.
+fn framed(f: Framing) -> (DVec3, DVec3) {
+    if let Some(w) = &f.warning {
+        eprintln!("volmorph: warning: {w}");
+    }
+    f.bounds
+}
+
+/// Print the warning of an output that shows nothing of the model ([`Written::empty_warning`]).
+fn warn_if_empty(written: &Written, b: (DVec3, DVec3)) {
+    if let Some(w) = written.empty_warning(b) {
+        eprintln!("volmorph: warning: {w}");
+    }
+}
+
 fn grid_geometry(n: usize, bounds: (DVec3, DVec3)) -> anyhow::Result<volmorph_volume::Geometry> {
     if !(2..=MAX_GRID).contains(&n) {
         bail!("--grid {n}: must be between 2 and {MAX_GRID}");
@@ -85,11 +110,12 @@ fn grid_geometry(n: usize, bounds: (DVec3, DVec3)) -> anyhow::Result<volmorph_vo
 
 fn eval(a: &EvalArgs) -> anyhow::Result<()> {
     volmorph_volume_io::check_output(&a.output)?;
-    let b = bounds(&a.common.bounds)?;
-    let g = grid_geometry(a.grid, b)?;
     let shape = load(&a.model, &params(&a.common.params)?)?;
     let tape = Tape::new(&shape);
+    let b = frame(&a.common, &[&tape])?;
+    let g = grid_geometry(a.grid, b)?;
     let summary = progress::with_bar(|p| write_volume_with(&tape, &g, &a.output, p))?;
+    warn_if_empty(&Written::Volume(summary), b);
     say!(
         "{} operations, {}³ samples in {:.1} ms, {}",
         tape.len(),
@@ -102,10 +128,10 @@ fn eval(a: &EvalArgs) -> anyhow::Result<()> {
 
 fn mesh_cmd(a: &MeshArgs) -> anyhow::Result<()> {
     meshio::format::check_output(&a.output)?;
-    let b = bounds(&a.common.bounds)?;
-    let g = grid_geometry(a.grid, b)?;
     let shape = load(&a.model, &params(&a.common.params)?)?;
     let tape = Tape::new(&shape);
+    let b = frame(&a.common, &[&tape])?;
+    let g = grid_geometry(a.grid, b)?;
     let options = MeshOptions {
         method: a.method.into(),
         close: a.close,
@@ -113,6 +139,13 @@ fn mesh_cmd(a: &MeshArgs) -> anyhow::Result<()> {
     let summary =
         progress::with_bar(|p| write_mesh_with(&tape, &g, &options, &a.output, a.ascii, p))?;
     say!("{summary}");
+    warn_if_empty(
+        &Written::Mesh {
+            dims: g.dims,
+            surface: summary,
+        },
+        b,
+    );
     Ok(())
 }
 
@@ -214,25 +247,27 @@ fn export_options(
 
 fn render_cmd(a: &RenderArgs) -> anyhow::Result<()> {
     volmorph_render::check_png(&a.output)?;
-    let b = bounds(&a.common.bounds)?;
-    let cam = camera(&a.view, b)?;
     let shape = load(&a.model, &params(&a.common.params)?)?;
     let tape = Tape::new(&shape);
+    let b = frame(&a.common, &[&tape])?;
+    let cam = camera(&a.view, b)?;
     let options = render_options(b);
     let (_, summary) =
         progress::with_bar(|p| write_picture_with(&tape, &cam, &options, &a.output, p))?;
     say!("{summary}");
+    warn_if_empty(&Written::Picture(summary), b);
     Ok(())
 }
 
 fn morph_cmd(a: &MorphArgs) -> anyhow::Result<()> {
     volmorph_render::check_animation_output(&a.output)?;
     let schedule = Schedule::parse(&a.schedule).context("--schedule")?;
-    let b = bounds(&a.common.bounds)?;
-    let cam = camera(&a.view, b)?;
     let p = params(&a.common.params)?;
     let f = load(&a.from, &p)?;
     let g = load(&a.to, &p)?;
+    // (1 − h) f + h g ≥ 0 needs f ≥ 0 or g ≥ 0: the box of both frames every frame.
+    let b = frame(&a.common, &[&Tape::new(&f), &Tape::new(&g)])?;
+    let cam = camera(&a.view, b)?;
     let field_at = |t: f64| -> Result<Box<dyn Field>, volmorph_frep::FrepError> {
         Ok(Box::new(Tape::new(&morph(&f, &g, t, schedule))))
     };
@@ -258,7 +293,7 @@ fn map_cmd(a: &MapArgs) -> anyhow::Result<()> {
     } else {
         OutputKind::for_output(&a.output)?;
     }
-    let b = bounds(&a.common.bounds)?;
+    let explicit = a.common.bounds.as_deref().map(bounds).transpose()?;
     if !(0.0..=1.0).contains(&a.t) {
         bail!("--t {}: the time must be between 0 and 1", a.t);
     }
@@ -295,10 +330,17 @@ fn map_cmd(a: &MapArgs) -> anyhow::Result<()> {
         if !mapped.time_dependent() {
             say!("note: no mapping has a schedule, so every frame is the same");
         }
-        let cam = camera(&a.view, b)?;
         let field_at = |t: f64| -> Result<Box<dyn Field>, volmorph_frep::FrepError> {
             Ok(Box::new(Tape::new(&mapped.shape_at(t)?)))
         };
+        let b = match explicit {
+            Some(b) => b,
+            None => framed(
+                Framing::over_time(frames, &field_at)
+                    .with_context(|| format!("{}", a.mapping.display()))?,
+            ),
+        };
+        let cam = camera(&a.view, b)?;
         let options = render_options(b);
         let line = progress::with_bar(|p| {
             write_frames_with(frames, &field_at, &cam, &options, &a.output, a.delay, p)
@@ -307,8 +349,10 @@ fn map_cmd(a: &MapArgs) -> anyhow::Result<()> {
         return Ok(());
     }
     let tape = at(a.t)?;
+    let b = explicit.unwrap_or_else(|| framed(Framing::of(&[&tape])));
     let options = export_options(&a.view, b, a.grid, a.method, a.close, a.ascii)?;
     let line = progress::with_bar(|p| export_with(&tape, &a.output, &options, p))?;
+    warn_if_empty(&line, b);
     say!(
         "{n} mappings{}, {} operations: {line}",
         if mapped.time_dependent() {
@@ -346,6 +390,7 @@ fn points_cmd(a: &PointsArgs) -> anyhow::Result<()> {
     let tape = Tape::new(&surface.shape);
     let options = export_options(&a.view, b, a.grid, a.method, true, a.ascii)?;
     let line = progress::with_bar(|p| export_with(&tape, &a.output, &options, p))?;
+    warn_if_empty(&line, b);
     say!(
         "{} points (largest |f| at a point {:.1e}): {line}",
         pts.len(),
