@@ -1330,19 +1330,55 @@ mod tests {
         (path, bytes)
     }
 
+    /// The DICOM file `bytes`, parsed.
+    fn open(bytes: &[u8]) -> DefaultDicomObject {
+        OpenFileOptions::new()
+            .read_preamble(dicom_object::file::ReadPreamble::Auto)
+            .from_reader(bytes)
+            .unwrap()
+    }
+
+    /// The DICOM file `bytes` with `element` put in (replacing one of its tag), as bytes.
+    fn with_element(bytes: &[u8], element: dicom_core::DataElement<InMemDicomObject>) -> Vec<u8> {
+        let mut obj = open(bytes);
+        obj.put(element);
+        let mut out = Vec::new();
+        obj.write_all(&mut out).unwrap();
+        out
+    }
+
     /// A corpus file with `NumberOfFrames` replaced by `frames`, as bytes.
     fn with_frame_count(name: &str, frames: &str) -> Vec<u8> {
         use dicom_core::{DataElement, PrimitiveValue};
-        let (path, _) = corpus_file(name);
-        let mut obj = OpenFileOptions::new().open_file(&path).unwrap();
-        obj.put(DataElement::new(
-            tags::NUMBER_OF_FRAMES,
-            VR::IS,
-            PrimitiveValue::from(frames),
-        ));
-        let mut bytes = Vec::new();
-        obj.write_all(&mut bytes).unwrap();
-        bytes
+        let (_, bytes) = corpus_file(name);
+        with_element(
+            &bytes,
+            DataElement::new(tags::NUMBER_OF_FRAMES, VR::IS, PrimitiveValue::from(frames)),
+        )
+    }
+
+    /// The per-frame functional groups of the DICOM file `bytes`.
+    fn per_frame_groups(bytes: &[u8]) -> Vec<InMemDicomObject> {
+        open(bytes)
+            .element(tags::PER_FRAME_FUNCTIONAL_GROUPS_SEQUENCE)
+            .unwrap()
+            .items()
+            .unwrap()
+            .to_vec()
+    }
+
+    /// The DICOM file `bytes` with its per-frame functional groups replaced by `groups`.
+    fn with_per_frame_groups(bytes: &[u8], groups: Vec<InMemDicomObject>) -> Vec<u8> {
+        use dicom_core::DataElement;
+        use dicom_core::value::DataSetSequence;
+        with_element(
+            bytes,
+            DataElement::new(
+                tags::PER_FRAME_FUNCTIONAL_GROUPS_SEQUENCE,
+                VR::SQ,
+                DataSetSequence::from(groups),
+            ),
+        )
     }
 
     /// pydicom's `rtdose_rle.dcm` (its RT Dose grid, 32-bit samples, stored RLE Lossless)
@@ -1476,27 +1512,11 @@ mod tests {
     /// its first frame reads as that frame of the whole file.
     #[test]
     fn one_frame_enhanced_file_has_no_image_orientation() {
-        use dicom_core::DataElement;
-        use dicom_core::value::DataSetSequence;
         let (_, bytes) = corpus_file("pydicom_enhanced_ct.dcm");
-        let mut obj = OpenFileOptions::new()
-            .read_preamble(dicom_object::file::ReadPreamble::Auto)
-            .from_reader(&with_frame_count("pydicom_enhanced_ct.dcm", "1")[..])
-            .unwrap();
-        assert!(obj.element(tags::IMAGE_ORIENTATION_PATIENT).is_err());
-        let first_group = obj
-            .element(tags::PER_FRAME_FUNCTIONAL_GROUPS_SEQUENCE)
-            .unwrap()
-            .items()
-            .unwrap()[0]
-            .clone();
-        obj.put(DataElement::new(
-            tags::PER_FRAME_FUNCTIONAL_GROUPS_SEQUENCE,
-            VR::SQ,
-            DataSetSequence::from(vec![first_group]),
-        ));
-        let mut one = Vec::new();
-        obj.write_all(&mut one).unwrap();
+        let cut = with_frame_count("pydicom_enhanced_ct.dcm", "1");
+        assert!(open(&cut).element(tags::IMAGE_ORIENTATION_PATIENT).is_err());
+        let first_group = per_frame_groups(&cut).swap_remove(0);
+        let one = with_per_frame_groups(&cut, vec![first_group]);
         let (all, _) = read_bytes(&bytes).unwrap();
         let (first, _) = read_bytes(&one).unwrap();
         assert_eq!(first.geometry().dims[2], 1);
@@ -1516,19 +1536,8 @@ mod tests {
     /// ignored groups, and fewer groups than frames is still refused.
     #[test]
     fn one_frame_cut_from_an_enhanced_file_keeps_every_functional_group() {
-        use dicom_core::DataElement;
-        use dicom_core::value::DataSetSequence;
         let cut = with_frame_count("pydicom_enhanced_ct.dcm", "1");
-        let mut obj = OpenFileOptions::new()
-            .read_preamble(dicom_object::file::ReadPreamble::Auto)
-            .from_reader(&cut[..])
-            .unwrap();
-        let groups = obj
-            .element(tags::PER_FRAME_FUNCTIONAL_GROUPS_SEQUENCE)
-            .unwrap()
-            .items()
-            .unwrap()
-            .to_vec();
+        let groups = per_frame_groups(&cut);
         assert!(groups.len() > 1);
         let (v, header) = read_bytes(&cut).unwrap();
         assert_eq!(v.geometry().dims[2], 1);
@@ -1543,29 +1552,13 @@ mod tests {
             "{note}"
         );
         // The same as the file whose sequence holds the first group only.
-        obj.put(DataElement::new(
-            tags::PER_FRAME_FUNCTIONAL_GROUPS_SEQUENCE,
-            VR::SQ,
-            DataSetSequence::from(vec![groups[0].clone()]),
-        ));
-        let mut one = Vec::new();
-        obj.write_all(&mut one).unwrap();
+        let one = with_per_frame_groups(&cut, vec![groups[0].clone()]);
         let (w, _) = read_bytes(&one).unwrap();
         assert_eq!(v.geometry(), w.geometry());
         assert_eq!(v.to_typed::<f64>().data(), w.to_typed::<f64>().data());
         // Fewer groups than frames: refused.
         let (_, bytes) = corpus_file("pydicom_enhanced_ct.dcm");
-        let mut all = OpenFileOptions::new()
-            .read_preamble(dicom_object::file::ReadPreamble::Auto)
-            .from_reader(&bytes[..])
-            .unwrap();
-        all.put(DataElement::new(
-            tags::PER_FRAME_FUNCTIONAL_GROUPS_SEQUENCE,
-            VR::SQ,
-            DataSetSequence::from(vec![groups[0].clone()]),
-        ));
-        let mut short = Vec::new();
-        all.write_all(&mut short).unwrap();
+        let short = with_per_frame_groups(&bytes, vec![groups[0].clone()]);
         let e = read_bytes(&short).unwrap_err().to_string();
         assert!(e.contains("1 per-frame functional groups for"), "{e}");
     }
