@@ -21,6 +21,20 @@ fn teapot_setups() -> Vec<Setup> {
     ]
 }
 
+/// `volmorph project new --phantom sphere --size 16 -o path`.
+fn sphere_project(path: &std::path::Path) {
+    ok(&[
+        &"project",
+        &"new",
+        &"--phantom",
+        &"sphere",
+        &"--size",
+        &"16",
+        &"-o",
+        &path,
+    ]);
+}
+
 #[test]
 fn project_new_holds_what_the_scene_builds() {
     let dir = tempfile::tempdir().unwrap();
@@ -78,16 +92,7 @@ fn a_project_opens_as_the_first_file_only() {
     let dir = tempfile::tempdir().unwrap();
     let d = dir.path();
     let p = d.join("a.vmproj");
-    ok(&[
-        &"project",
-        &"new",
-        &"--phantom",
-        &"sphere",
-        &"--size",
-        &"16",
-        &"-o",
-        &p,
-    ]);
+    sphere_project(&p);
     let vol = d.join("s.nii");
     let mesh = d.join("ball.obj");
     ok(&[&"phantom", &"sphere", &"--size", &"16", &"-o", &vol]);
@@ -122,16 +127,7 @@ fn project_requests_that_cannot_be_met_name_the_file_and_write_nothing() {
     assert!(!json.exists());
 
     let p = d.join("a.vmproj");
-    ok(&[
-        &"project",
-        &"new",
-        &"--phantom",
-        &"sphere",
-        &"--size",
-        &"16",
-        &"-o",
-        &p,
-    ]);
+    sphere_project(&p);
     let out = d.join("x.nii");
     let err = fails(&[&"project", &"export", &p, &"nothing", &"-o", &out]);
     assert!(
