@@ -162,6 +162,16 @@ def dose_scaling(ds) -> float:
     return float(getattr(ds, "DoseGridScaling", 1) or 1)
 
 
+def group_items(ds, f: int, seq: str) -> list:
+    """The `seq` macros that apply to frame `f` of an enhanced file, most specific first: the
+    per-frame functional group's, then the shared one's (PS3.3 C.7.6.16)."""
+    per = ds.get("PerFrameFunctionalGroupsSequence")
+    groups = [per[f] if per is not None and f < len(per) else None]
+    if "SharedFunctionalGroupsSequence" in ds:
+        groups.append(ds.SharedFunctionalGroupsSequence[0])
+    return [g[seq][0] for g in groups if g is not None and seq in g]
+
+
 def frame_rescales(ds) -> list[tuple[float, float]]:
     """(slope, intercept) of each frame: the per-frame or shared functional groups'
     PixelValueTransformationSequence of an enhanced file (PS3.3 C.7.6.16.2.9), else the
@@ -169,35 +179,21 @@ def frame_rescales(ds) -> list[tuple[float, float]]:
     top level and per-frame groups of some files, so the script reads them itself.)"""
     frames = int(getattr(ds, "NumberOfFrames", 1) or 1)
     top = (float(getattr(ds, "RescaleSlope", 1) or 1), float(getattr(ds, "RescaleIntercept", 0) or 0))
-    shared = None
-    if "SharedFunctionalGroupsSequence" in ds:
-        sh = ds.SharedFunctionalGroupsSequence[0]
-        if "PixelValueTransformationSequence" in sh:
-            t = sh.PixelValueTransformationSequence[0]
-            shared = (float(t.RescaleSlope), float(t.RescaleIntercept))
     out = []
-    per = ds.get("PerFrameFunctionalGroupsSequence")
     for f in range(frames):
-        item = per[f] if per is not None and f < len(per) else None
-        if item is not None and "PixelValueTransformationSequence" in item:
-            t = item.PixelValueTransformationSequence[0]
-            out.append((float(t.RescaleSlope), float(t.RescaleIntercept)))
-        else:
-            out.append(shared or top)
+        items = group_items(ds, f, "PixelValueTransformationSequence")
+        out.append((float(items[0].RescaleSlope), float(items[0].RescaleIntercept)) if items else top)
     return out
 
 
 def frame_geometry(ds, f: int = 0):
     """(ImagePositionPatient, ImageOrientationPatient, PixelSpacing) of frame `f`: the
     per-frame functional group, then the shared one (PS3.3 C.7.6.16), then the top level."""
-    per = ds.get("PerFrameFunctionalGroupsSequence")
-    shared = ds.SharedFunctionalGroupsSequence[0] if "SharedFunctionalGroupsSequence" in ds else None
-    items = [per[f] if per is not None and f < len(per) else None, shared]
 
     def find(seq, tag):
-        for it in items:
-            if it is not None and seq in it and tag in it[seq][0]:
-                return [float(v) for v in it[seq][0][tag].value]
+        for it in group_items(ds, f, seq):
+            if tag in it:
+                return [float(v) for v in it[tag].value]
         return [float(v) for v in ds[tag].value] if tag in ds else None
 
     return (
