@@ -216,6 +216,20 @@ pub fn warp_volume_with<'a>(
     options: &WarpOptions,
     progress: &dyn volmorph_io::Progress,
 ) -> Result<WarpOutput, WarpError> {
+    warp_any(input.into(), map, output, method, options, progress)
+}
+
+/// The body of [`warp_volume_with`], not generic so that it is compiled once, in this crate:
+/// the generic front only converts its input (each crate that called a generic body
+/// compiled its own copy of every voxel type's warp).
+fn warp_any(
+    input: AnyVolumeRef<'_>,
+    map: &dyn SpaceMap,
+    output: &Geometry,
+    method: WarpMethod,
+    options: &WarpOptions,
+    progress: &dyn volmorph_io::Progress,
+) -> Result<WarpOutput, WarpError> {
     let sampled = match options.sampled_nodes {
         None => None,
         Some(n) if n >= 2 => {
@@ -232,7 +246,6 @@ pub fn warp_volume_with<'a>(
         Some(s) => s,
         None => map,
     };
-    let input: AnyVolumeRef<'_> = input.into();
     let (mut inverse_report, mut mask, mut push_stats) = (None, None, None);
     let volume = match method {
         WarpMethod::PushforwardNearest => {

@@ -407,9 +407,9 @@ pub fn pullback_through_inverse_into_with<T: Voxel, U: Voxel, M: SpaceMap + ?Siz
 ///
 /// # Errors
 /// As [`pullback_through_inverse`].
-pub fn pullback_through_inverse_any<M: SpaceMap + ?Sized>(
+pub fn pullback_through_inverse_any(
     input: &AnyVolume,
-    map: &M,
+    map: &dyn SpaceMap,
     output: &Geometry,
     options: &InverseResampleOptions,
 ) -> Result<InverseResample<AnyVolume>, WarpError> {
@@ -421,16 +421,28 @@ pub fn pullback_through_inverse_any<M: SpaceMap + ?Sized>(
 ///
 /// # Errors
 /// As [`pullback_through_inverse_with`].
-pub fn pullback_through_inverse_any_with<'a, M: SpaceMap + ?Sized>(
+pub fn pullback_through_inverse_any_with<'a>(
     input: impl Into<AnyVolumeRef<'a>>,
-    map: &M,
+    map: &dyn SpaceMap,
     output: &Geometry,
     options: &InverseResampleOptions,
     progress: &dyn volmorph_io::Progress,
 ) -> Result<InverseResample<AnyVolume>, WarpError> {
-    fn same_type<T: Voxel, M: SpaceMap + ?Sized>(
+    inverse_dyn(input.into(), map, output, options, progress)
+}
+
+/// The body of [`pullback_through_inverse_any_with`], not generic so that its voxel types are
+/// compiled once, in this crate, rather than in every crate that calls it.
+fn inverse_dyn(
+    input: AnyVolumeRef<'_>,
+    map: &dyn SpaceMap,
+    output: &Geometry,
+    options: &InverseResampleOptions,
+    progress: &dyn volmorph_io::Progress,
+) -> Result<InverseResample<AnyVolume>, WarpError> {
+    fn same_type<T: Voxel>(
         v: &Volume<T, &[T]>,
-        map: &M,
+        map: &dyn SpaceMap,
         output: &Geometry,
         options: &InverseResampleOptions,
         progress: &dyn volmorph_io::Progress,
@@ -438,14 +450,15 @@ pub fn pullback_through_inverse_any_with<'a, M: SpaceMap + ?Sized>(
     where
         AnyVolume: From<Volume<T>>,
     {
-        let r = pullback_through_inverse_with::<T, T, M>(v, map, output, options, progress)?;
+        let r =
+            pullback_through_inverse_with::<T, T, dyn SpaceMap>(v, map, output, options, progress)?;
         Ok(InverseResample {
             volume: AnyVolume::from(r.volume),
             report: r.report,
             mask: r.mask,
         })
     }
-    volmorph_volume::with_volume_ref!(input.into(), v => same_type(&v, map, output, options, progress))
+    volmorph_volume::with_volume_ref!(input, v => same_type(&v, map, output, options, progress))
 }
 
 /// Everything one z-slice task needs.

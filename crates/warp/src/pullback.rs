@@ -297,9 +297,9 @@ fn pull_band<M: SpaceMap + ?Sized, U: Voxel>(
 ///
 /// # Errors
 /// As [`resample`].
-pub fn resample_any<M: SpaceMap + ?Sized>(
+pub fn resample_any(
     input: &AnyVolume,
-    map: &M,
+    map: &dyn SpaceMap,
     output: &Geometry,
     options: &ResampleOptions,
 ) -> Result<AnyVolume, WarpError> {
@@ -310,9 +310,9 @@ pub fn resample_any<M: SpaceMap + ?Sized>(
 ///
 /// # Errors
 /// As [`resample_with`].
-pub fn resample_any_with<'a, M: SpaceMap + ?Sized>(
+pub fn resample_any_with<'a>(
     input: impl Into<AnyVolumeRef<'a>>,
-    map: &M,
+    map: &dyn SpaceMap,
     output: &Geometry,
     options: &ResampleOptions,
     progress: &dyn volmorph_io::Progress,
@@ -326,9 +326,9 @@ pub fn resample_any_with<'a, M: SpaceMap + ?Sized>(
 ///
 /// # Errors
 /// As [`resample`].
-pub fn resample_any_to<M: SpaceMap + ?Sized>(
+pub fn resample_any_to(
     input: &AnyVolume,
-    map: &M,
+    map: &dyn SpaceMap,
     output: &Geometry,
     options: &ResampleOptions,
     to: VoxelType,
@@ -340,16 +340,29 @@ pub fn resample_any_to<M: SpaceMap + ?Sized>(
 ///
 /// # Errors
 /// As [`resample_with`].
-pub fn resample_any_to_with<'a, M: SpaceMap + ?Sized>(
+pub fn resample_any_to_with<'a>(
     input: impl Into<AnyVolumeRef<'a>>,
-    map: &M,
+    map: &dyn SpaceMap,
     output: &Geometry,
     options: &ResampleOptions,
     to: VoxelType,
     progress: &dyn volmorph_io::Progress,
 ) -> Result<AnyVolume, WarpError> {
-    volmorph_volume::with_voxel_type!(to, U => volmorph_volume::with_volume_ref!(input.into(), v => {
-        resample_with::<_, U, M>(&v, map, output, options, progress).map(AnyVolume::from)
+    resample_dyn(input.into(), map, output, options, to, progress)
+}
+
+/// The body of the run-time-typed pull-backs, not generic so that its voxel-type pairs are
+/// compiled once, in this crate, rather than in every crate that calls them.
+fn resample_dyn(
+    input: AnyVolumeRef<'_>,
+    map: &dyn SpaceMap,
+    output: &Geometry,
+    options: &ResampleOptions,
+    to: VoxelType,
+    progress: &dyn volmorph_io::Progress,
+) -> Result<AnyVolume, WarpError> {
+    volmorph_volume::with_voxel_type!(to, U => volmorph_volume::with_volume_ref!(input, v => {
+        resample_with::<_, U, dyn SpaceMap>(&v, map, output, options, progress).map(AnyVolume::from)
     }))
 }
 
