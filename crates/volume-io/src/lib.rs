@@ -102,6 +102,15 @@ pub fn check_output(path: &Path) -> Result<(), VolumeError> {
     Format::for_output(path).map(|_| ())
 }
 
+/// The error for a DICOM output: the extension error `refused` with the reason volmorph
+/// writes no DICOM.
+fn dicom_output_refused(refused: &volmorph_io::IoError) -> VolumeError {
+    VolumeError::Unsupported(format!(
+        "{refused} (volmorph reads DICOM but does not write it: a DICOM file needs patient \
+         and study identity that a volume does not carry)"
+    ))
+}
+
 /// A volume file format, as chosen by extension.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Hash)]
 pub enum Format {
@@ -161,10 +170,21 @@ impl Format {
     ///
     /// # Errors
     /// [`VolumeError::Io`] with [`volmorph_io::IoError::Extension`] naming the path, the
-    /// extension found and [`WRITE_EXTENSIONS`] (DICOM is read, not written).
+    /// extension found and [`WRITE_EXTENSIONS`]; [`VolumeError::Unsupported`] with the same
+    /// words and the reason for a DICOM extension (DICOM is read, not written).
     pub fn for_output(path: &Path) -> Result<Self, VolumeError> {
-        let ext = volmorph_io::extension::matching(path, WRITE_EXTENSIONS)
-            .ok_or_else(|| volmorph_io::extension::refused(path, WRITE_EXTENSIONS))?;
+        let Some(ext) = volmorph_io::extension::matching(path, WRITE_EXTENSIONS) else {
+            let refused = volmorph_io::extension::refused(path, WRITE_EXTENSIONS);
+            let dicom: Vec<&str> = EXTENSIONS
+                .iter()
+                .filter(|(_, f)| *f == Self::Dicom)
+                .map(|(e, _)| *e)
+                .collect();
+            return Err(match volmorph_io::extension::matching(path, &dicom) {
+                Some(_) => dicom_output_refused(&refused),
+                None => refused.into(),
+            });
+        };
         Ok(EXTENSIONS
             .iter()
             .find(|(e, _)| *e == ext)
@@ -512,11 +532,10 @@ pub fn write_with(
         Format::Vtk => vtk::write(path, volume, options),
         Format::Vti => vti::write(path, volume, options),
         Format::Mgh => mgh::write(path, volume, options),
-        Format::Dicom => Err(VolumeError::Unsupported(
-            "volmorph reads DICOM but does not write it (a DICOM file needs patient and study \
-             identity a volume does not carry): write .nii.gz, .nrrd, .mha or .vti"
-                .into(),
-        )),
+        Format::Dicom => Err(dicom_output_refused(&volmorph_io::extension::refused(
+            path,
+            WRITE_EXTENSIONS,
+        ))),
         Format::Raw => raw::write(path, volume, options),
         Format::OmeZarr => omezarr::write(
             path,
@@ -565,7 +584,7 @@ mod tests {
             Format::for_output(Path::new("o.ome.zarr")).unwrap(),
             Format::OmeZarr
         );
-        for bad in ["o.png", "o.dcm", "o", "o.nii.bak"] {
+        for bad in ["o.png", "o", "o.nii.bak"] {
             let e = check_output(Path::new(bad)).unwrap_err();
             assert!(
                 matches!(e, VolumeError::Io(volmorph_io::IoError::Extension { .. })),
@@ -573,6 +592,12 @@ mod tests {
             );
             assert!(e.to_string().starts_with(bad), "{e}");
             assert!(e.to_string().contains(".nii.gz"), "{e}");
+        }
+        // DICOM: the same words, and why.
+        for bad in ["o.dcm", "o.IMA", "o.dicom"] {
+            let e = check_output(Path::new(bad)).unwrap_err().to_string();
+            assert!(e.contains(&format!("{bad}: the extension")), "{e}");
+            assert!(e.contains(".nii.gz") && e.contains("reads DICOM but does not write it"));
         }
     }
 }
