@@ -26,6 +26,9 @@ use crate::error::{FileError, InputError, ModelError, WarpError, input, to_py};
 use crate::maps::{PyMap, points, points_out};
 use crate::volume::{PyGeometry, PyVolume};
 
+/// A physical point `(x, y, z)` as Python sees it.
+type Xyz = (f64, f64, f64);
+
 /// `(vertices, faces)` of a mesh, triangulated.
 pub fn mesh_out<'py>(
     py: Python<'py>,
@@ -371,6 +374,41 @@ impl PyFrep {
             out
         });
         Ok(PyArray1::from_vec(py, out).into_any())
+    }
+
+    /// The box `((x0, y0, z0), (x1, y1, z1))` that frames the model's solid, the one the
+    /// command line samples, meshes and renders when given no bounds
+    /// (`volmorph_frep::extent::Framing`): the solid's box by interval arithmetic, enlarged on
+    /// every side by 5 % of its largest side. A model with no solid, or one that reaches the
+    /// edge of the search window, gets the fallback box `[-1.6, 1.6]³` and a `UserWarning`
+    /// saying why.
+    fn bounds(&self, py: Python<'_>) -> PyResult<(Xyz, Xyz)> {
+        let framing = py.detach(|| {
+            volmorph_frep::extent::Framing::of(&[
+                &Tape::new(&self.shape) as &dyn volmorph_frep::Field
+            ])
+        });
+        if let Some(w) = framing.warning {
+            let message = std::ffi::CString::new(w).unwrap_or_default();
+            let category = py.get_type::<pyo3::exceptions::PyUserWarning>();
+            PyErr::warn(py, category.as_any(), &message, 1)?;
+        }
+        let (lo, hi) = framing.bounds;
+        Ok((lo.into(), hi.into()))
+    }
+
+    /// A grid of `shape` `(nz, ny, nx)` voxel centres whose first and last centres are the
+    /// corners of [`bounds`](Self::bounds) (identity direction), ready for `sample` and `mesh`.
+    fn grid(&self, py: Python<'_>, shape: (usize, usize, usize)) -> PyResult<PyGeometry> {
+        let ((x0, y0, z0), (x1, y1, z1)) = self.bounds(py)?;
+        let (nz, ny, nx) = shape;
+        let inner = volmorph_frep::grid::box_geometry(
+            DVec3::new(x0, y0, z0),
+            DVec3::new(x1, y1, z1),
+            [nx, ny, nz],
+        )
+        .map_err(|e| input(format!("grid {shape:?}: {e}")))?;
+        Ok(PyGeometry { inner })
     }
 
     /// The field sampled at the voxel centres of `geometry` (a float32 Volume).

@@ -57,6 +57,47 @@ def test_frep_evaluates_the_hyperfun_formula():
     np.testing.assert_allclose(np.linalg.norm(verts, axis=1), 0.5, atol=0.02)
 
 
+OFF_CENTRE = """
+ball(x[3], a[1])
+{
+  array c[3];
+  c = [3, -2, 0.5];
+  ball = hfSphere(x, c, a[1]);
+}
+"""
+
+
+@pytest.mark.parametrize("source,centre", [(SPHERE, (0, 0, 0)), (OFF_CENTRE, (3, -2, 0.5))])
+def test_frep_bounds_frame_the_solid_as_the_command_line_does(source, centre):
+    s = vm.Frep(source, {1: 0.5})
+    lo, hi = (np.array(b) for b in s.bounds())
+    c = np.array(centre, dtype=float)
+    # The solid's box [c - 0.5, c + 0.5] with a margin of 5 % of its side (0.05), which
+    # interval arithmetic may widen a little but never narrow.
+    assert np.all(lo <= c - 0.55 + 1e-9) and np.all(lo >= c - 0.65)
+    assert np.all(hi >= c + 0.55 - 1e-9) and np.all(hi <= c + 0.65)
+    g = s.grid((21, 22, 23))
+    assert g.shape == (21, 22, 23) and g.direction == [[1, 0, 0], [0, 1, 0], [0, 0, 1]]
+    np.testing.assert_allclose(g.origin, lo)
+    corner = g.index_to_physical(np.array([[22.0, 21.0, 20.0]]))[0]
+    np.testing.assert_allclose(corner, hi, atol=1e-12)
+    # The framed grid holds the whole solid: inside points, and none on the box's faces.
+    f = s.sample(g).array
+    assert (f > 0).any()
+    faces = [f[0], f[-1], f[:, 0], f[:, -1], f[:, :, 0], f[:, :, -1]]
+    assert all((face < 0).all() for face in faces)
+
+
+def test_frep_bounds_of_a_model_with_no_solid_warn_and_fall_back():
+    s = vm.Frep("none(x[3]) { none = -1; }")
+    with pytest.warns(UserWarning, match="no solid"):
+        lo, hi = s.bounds()
+    assert lo == (-1.6, -1.6, -1.6) and hi == (1.6, 1.6, 1.6)
+    with pytest.raises(vm.InputError, match="at least 2"):
+        with pytest.warns(UserWarning):
+            s.grid((1, 5, 5))
+
+
 def test_frep_errors_are_model_errors(tmp_path):
     with pytest.raises(vm.ModelError):
         vm.Frep("ball(x[3]) { ball = hfSphere(x, ; }")
