@@ -148,20 +148,21 @@ impl Format {
         if path.is_dir() {
             return Ok(Self::Dicom);
         }
-        let known: Vec<&str> = EXTENSIONS.iter().map(|(e, _)| *e).collect();
-        match volmorph_io::extension::matching(path, &known) {
-            Some(ext) => Ok(EXTENSIONS
-                .iter()
-                .find(|(e, _)| *e == ext)
-                .map(|(_, f)| *f)
-                .expect("a matched extension is in the table")),
-            None => Err(VolumeError::Unsupported(format!(
+        Self::by_name(path, &EXTENSIONS.map(|(e, _)| e)).ok_or_else(|| {
+            VolumeError::Unsupported(format!(
                 "cannot tell the volume format of {} from its extension \
                  (known: .nii .nii.gz .mha .mhd .nrrd .nhdr .vtk .vti .mgh .mgz .raw .ome.zarr, DICOM .dcm files or \
                  a folder of them)",
                 path.display()
-            ))),
-        }
+            ))
+        })
+    }
+
+    /// The format of the entry of [`EXTENSIONS`] that `path`'s file name ends in, looking only
+    /// at the extensions `among` (the longest match; by name only).
+    fn by_name(path: &Path, among: &[&str]) -> Option<Self> {
+        let ext = volmorph_io::extension::matching(path, among)?;
+        EXTENSIONS.iter().find(|(e, _)| *e == ext).map(|(_, f)| *f)
     }
 
     /// The format an output path names, checked before anything is read or written (the
@@ -173,23 +174,14 @@ impl Format {
     /// extension found and [`WRITE_EXTENSIONS`]; [`VolumeError::Unsupported`] with the same
     /// words and the reason for a DICOM extension (DICOM is read, not written).
     pub fn for_output(path: &Path) -> Result<Self, VolumeError> {
-        let Some(ext) = volmorph_io::extension::matching(path, WRITE_EXTENSIONS) else {
-            let refused = volmorph_io::extension::refused(path, WRITE_EXTENSIONS);
-            let dicom: Vec<&str> = EXTENSIONS
-                .iter()
-                .filter(|(_, f)| *f == Self::Dicom)
-                .map(|(e, _)| *e)
-                .collect();
-            return Err(match volmorph_io::extension::matching(path, &dicom) {
-                Some(_) => dicom_output_refused(&refused),
-                None => refused.into(),
-            });
-        };
-        Ok(EXTENSIONS
-            .iter()
-            .find(|(e, _)| *e == ext)
-            .map(|(_, f)| *f)
-            .expect("every written extension is in the table"))
+        if let Some(format) = Self::by_name(path, WRITE_EXTENSIONS) {
+            return Ok(format);
+        }
+        let refused = volmorph_io::extension::refused(path, WRITE_EXTENSIONS);
+        Err(match Self::by_name(path, &EXTENSIONS.map(|(e, _)| e)) {
+            Some(Self::Dicom) => dicom_output_refused(&refused),
+            _ => refused.into(),
+        })
     }
 
     /// Human-readable name.
@@ -593,6 +585,13 @@ mod tests {
             assert!(e.to_string().starts_with(bad), "{e}");
             assert!(e.to_string().contains(".nii.gz"), "{e}");
         }
+        // The written extensions are the table's, DICOM's left out.
+        let table: Vec<&str> = EXTENSIONS
+            .iter()
+            .filter(|(_, f)| *f != Format::Dicom)
+            .map(|(e, _)| *e)
+            .collect();
+        assert_eq!(table, WRITE_EXTENSIONS);
         // DICOM: the same words, and why.
         for bad in ["o.dcm", "o.IMA", "o.dicom"] {
             let e = check_output(Path::new(bad)).unwrap_err().to_string();
