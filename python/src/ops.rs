@@ -323,6 +323,20 @@ impl PyFrep {
         let shape = compile_source(source, &options).map_err(|e| to_py(ModelError::new_err, &e))?;
         Ok(Self { shape })
     }
+
+    /// The box that frames the model's solid ([`volmorph_frep::extent::Framing`]), its
+    /// warning, if any, issued as a Python `UserWarning`.
+    fn framed(&self, py: Python<'_>) -> PyResult<(DVec3, DVec3)> {
+        let tape = Tape::new(&self.shape);
+        let framing =
+            py.detach(|| volmorph_frep::extent::Framing::of(&[&tape as &dyn volmorph_frep::Field]));
+        if let Some(w) = framing.warning {
+            let message = std::ffi::CString::new(w).unwrap_or_default();
+            let category = py.get_type::<pyo3::exceptions::PyUserWarning>();
+            PyErr::warn(py, category.as_any(), &message, 1)?;
+        }
+        Ok(framing.bounds)
+    }
 }
 
 #[pymethods]
@@ -383,31 +397,17 @@ impl PyFrep {
     /// edge of the search window, gets the fallback box `[-1.6, 1.6]³` and a `UserWarning`
     /// saying why.
     fn bounds(&self, py: Python<'_>) -> PyResult<(Xyz, Xyz)> {
-        let framing = py.detach(|| {
-            volmorph_frep::extent::Framing::of(&[
-                &Tape::new(&self.shape) as &dyn volmorph_frep::Field
-            ])
-        });
-        if let Some(w) = framing.warning {
-            let message = std::ffi::CString::new(w).unwrap_or_default();
-            let category = py.get_type::<pyo3::exceptions::PyUserWarning>();
-            PyErr::warn(py, category.as_any(), &message, 1)?;
-        }
-        let (lo, hi) = framing.bounds;
+        let (lo, hi) = self.framed(py)?;
         Ok((lo.into(), hi.into()))
     }
 
     /// A grid of `shape` `(nz, ny, nx)` voxel centres whose first and last centres are the
     /// corners of [`bounds`](Self::bounds) (identity direction), ready for `sample` and `mesh`.
     fn grid(&self, py: Python<'_>, shape: (usize, usize, usize)) -> PyResult<PyGeometry> {
-        let ((x0, y0, z0), (x1, y1, z1)) = self.bounds(py)?;
+        let (lo, hi) = self.framed(py)?;
         let (nz, ny, nx) = shape;
-        let inner = volmorph_frep::grid::box_geometry(
-            DVec3::new(x0, y0, z0),
-            DVec3::new(x1, y1, z1),
-            [nx, ny, nz],
-        )
-        .map_err(|e| input(format!("grid {shape:?}: {e}")))?;
+        let inner = volmorph_frep::grid::box_geometry(lo, hi, [nx, ny, nz])
+            .map_err(|e| input(format!("grid {shape:?}: {e}")))?;
         Ok(PyGeometry { inner })
     }
 
