@@ -318,7 +318,7 @@ pub fn resample_any_with<'a>(
     progress: &dyn volmorph_io::Progress,
 ) -> Result<AnyVolume, WarpError> {
     let input = input.into();
-    resample_any_to_with(input, map, output, options, input.voxel_type(), progress)
+    resample_dyn(input, map, output, options, input.voxel_type(), progress)
 }
 
 /// Pull-back resampling of a run-time-typed volume into voxel type `to` (values convert with
